@@ -1,0 +1,3 @@
+//! rackd: a warehouse control system.
+
+pub mod protocols;
