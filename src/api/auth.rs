@@ -1,0 +1,115 @@
+//! The API key check: who is calling, and may they?
+//!
+//! The role a request needs follows from its method: reads (`GET`, `HEAD`) need `viewer`,
+//! everything else `operator`; routes registered under [`admin_paths`] need `admin`. With no
+//! keys configured every request is let through (the server then only listens on loopback,
+//! see [`crate::app`]).
+
+use axum::extract::{Request, State};
+use axum::http::{Method, StatusCode, header};
+use axum::middleware::Next;
+use axum::response::Response;
+
+use super::error::ApiError;
+use super::state::AppState;
+use crate::auth::Role;
+
+/// Path prefixes (under `/api/v1`) whose writes are admin only.
+pub fn admin_paths() -> &'static [&'static str] {
+    &["/api/v1/devices/", "/api/v1/registers"]
+}
+
+/// The role a request needs.
+pub fn required_role(method: &Method, path: &str) -> Role {
+    if method == Method::GET || method == Method::HEAD {
+        Role::Viewer
+    } else if admin_paths().iter().any(|p| path.starts_with(p))
+        && !path.ends_with("/pause")
+        && !path.ends_with("/resume")
+    {
+        Role::Admin
+    } else {
+        Role::Operator
+    }
+}
+
+/// The key a request presents: `Authorization: Bearer KEY`, `X-Api-Key: KEY`, or (for
+/// browsers opening a WebSocket, which cannot set headers) `?token=KEY`.
+fn presented_key(req: &Request) -> Option<&str> {
+    let headers = req.headers();
+    if let Some(v) = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+    {
+        return v.strip_prefix("Bearer ").map(str::trim);
+    }
+    if let Some(v) = headers.get("x-api-key").and_then(|v| v.to_str().ok()) {
+        return Some(v.trim());
+    }
+    req.uri()
+        .query()?
+        .split('&')
+        .find_map(|kv| kv.strip_prefix("token="))
+}
+
+/// Middleware: answers 401 without a known key and 403 when the key's role is too low.
+pub async fn require_key(
+    State(app): State<AppState>,
+    req: Request,
+    next: Next,
+) -> Result<Response, ApiError> {
+    if app.keys.is_empty() {
+        return Ok(next.run(req).await);
+    }
+    let needed = required_role(req.method(), req.uri().path());
+    let Some(key) = presented_key(&req) else {
+        return Err(ApiError::new(
+            StatusCode::UNAUTHORIZED,
+            "unauthorized",
+            "an API key is required (Authorization: Bearer KEY)",
+        ));
+    };
+    let Some(who) = app.keys.identify(key) else {
+        return Err(ApiError::new(
+            StatusCode::UNAUTHORIZED,
+            "unauthorized",
+            "the API key is not known",
+        ));
+    };
+    if who.role < needed {
+        return Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            "forbidden",
+            format!(
+                "this needs the {} role; key {:?} is {}",
+                needed.as_str(),
+                who.name,
+                who.role.as_str()
+            ),
+        ));
+    }
+    Ok(next.run(req).await)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn roles_by_method_and_path() {
+        assert_eq!(required_role(&Method::GET, "/api/v1/jobs"), Role::Viewer);
+        assert_eq!(required_role(&Method::POST, "/api/v1/jobs"), Role::Operator);
+        assert_eq!(
+            required_role(&Method::PATCH, "/api/v1/jobs/1"),
+            Role::Operator
+        );
+        assert_eq!(
+            required_role(&Method::POST, "/api/v1/devices/shelf1/registers"),
+            Role::Admin
+        );
+        assert_eq!(
+            required_role(&Method::POST, "/api/v1/devices/shelf1/pause"),
+            Role::Operator
+        );
+    }
+}

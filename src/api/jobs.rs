@@ -1,0 +1,311 @@
+//! `/api/v1/jobs`: submit, list, read, cancel and re-prioritise jobs.
+
+use axum::extract::State;
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+use time::OffsetDateTime;
+use utoipa::{IntoParams, ToSchema};
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::error::{ApiError, ErrorBody};
+use super::extract::{Json, Path, Query};
+use super::state::AppState;
+use crate::domain::{JobKind, JobState, Priority, Transition};
+use crate::service::intake::{JobRequest, MAX_BATCH};
+use crate::store::jobs::{self, Job, JobEvent, JobFilter};
+use crate::store::time::to_ms;
+use crate::store::writer::{Change, Outcome};
+
+/// The routes of this resource.
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(create_job, list_jobs))
+        .routes(routes!(create_batch))
+        .routes(routes!(get_job, patch_job))
+        .routes(routes!(job_history))
+        .routes(routes!(cancel_job))
+}
+
+/// Submit one job. Answers once the job is on disk.
+#[utoipa::path(post, path = "/jobs", tag = "jobs", request_body = JobRequest,
+    responses(
+        (status = 201, description = "Stored, queued", body = Job, headers(("Location" = String, description = "The job's URL"))),
+        (status = 200, description = "A job with this reference and the same request already exists", body = Job),
+        (status = 400, description = "Malformed JSON", body = ErrorBody),
+        (status = 409, description = "The reference is used by a different request", body = ErrorBody),
+        (status = 413, description = "Body too large", body = ErrorBody),
+        (status = 415, description = "Not `application/json`", body = ErrorBody),
+        (status = 422, description = "Unknown or missing field, wrong type, location outside the layout", body = ErrorBody),
+    ))]
+async fn create_job(
+    State(app): State<AppState>,
+    Json(req): Json<JobRequest>,
+) -> Result<Response, ApiError> {
+    let job = app
+        .rules
+        .check(req)
+        .map_err(|e| ApiError::invalid("invalid_job", e.0))?;
+    let started = std::time::Instant::now();
+    let outcome = app.writer.submit(vec![job]).await?;
+    app.metrics
+        .intake_seconds
+        .observe(started.elapsed().as_secs_f64());
+    Ok(match outcome.into_iter().next() {
+        Some(Outcome::Created(job)) => {
+            let location = HeaderValue::from_str(&format!("/api/v1/jobs/{}", job.id)).ok();
+            let mut headers = HeaderMap::new();
+            headers.extend(location.map(|l| (header::LOCATION, l)));
+            (StatusCode::CREATED, headers, Json(job)).into_response()
+        }
+        Some(Outcome::Existing(job)) => (StatusCode::OK, Json(job)).into_response(),
+        None => return Err(ApiError::unavailable("writer returned no outcome")),
+    })
+}
+
+/// A batch of jobs to submit together.
+#[derive(Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[schema(example = json!({"jobs": [
+    {"kind": "store", "reference": "WMS-2001", "barcode": "BOX-0002", "to": {"aisle": 1, "row": 2, "bay": 4, "level": 1, "position": 2}},
+    {"kind": "light", "reference": "WMS-2002", "location": {"aisle": 1, "row": 2, "bay": 4, "level": 1, "position": 2}, "color": "green", "on": true}
+]}))]
+pub struct BatchRequest {
+    /// 1..=1000 jobs, stored all or nothing.
+    pub jobs: Vec<JobRequest>,
+}
+
+/// The jobs of a batch, in request order.
+#[derive(Serialize, ToSchema)]
+pub struct BatchResponse {
+    /// One job per requested job, in order (existing ones for repeated references).
+    pub jobs: Vec<Job>,
+}
+
+/// Submit up to 1000 jobs at once, all or nothing.
+#[utoipa::path(post, path = "/jobs/batch", tag = "jobs", request_body = BatchRequest,
+    responses(
+        (status = 201, description = "All stored (or already there)", body = BatchResponse),
+        (status = 200, description = "Every job already existed with the same request", body = BatchResponse),
+        (status = 400, description = "Malformed JSON", body = ErrorBody),
+        (status = 409, description = "A reference is used by a different request; nothing stored", body = ErrorBody),
+        (status = 413, description = "Body too large", body = ErrorBody),
+        (status = 415, description = "Not `application/json`", body = ErrorBody),
+        (status = 422, description = "A job is invalid (its index is named); nothing stored", body = ErrorBody),
+    ))]
+async fn create_batch(
+    State(app): State<AppState>,
+    Json(req): Json<BatchRequest>,
+) -> Result<Response, ApiError> {
+    if req.jobs.is_empty() || req.jobs.len() > MAX_BATCH {
+        return Err(ApiError::invalid(
+            "invalid_batch",
+            format!("a batch holds 1..={MAX_BATCH} jobs, got {}", req.jobs.len()),
+        ));
+    }
+    let jobs = req
+        .jobs
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| {
+            app.rules
+                .check(r)
+                .map_err(|e| ApiError::invalid("invalid_job", format!("jobs[{i}]: {}", e.0)))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let started = std::time::Instant::now();
+    let outcomes = app.writer.submit(jobs).await?;
+    app.metrics
+        .intake_seconds
+        .observe(started.elapsed().as_secs_f64());
+    let created = outcomes.iter().any(|o| matches!(o, Outcome::Created(_)));
+    let jobs = outcomes
+        .into_iter()
+        .map(|o| match o {
+            Outcome::Created(j) | Outcome::Existing(j) => j,
+        })
+        .collect();
+    let status = if created {
+        StatusCode::CREATED
+    } else {
+        StatusCode::OK
+    };
+    Ok((status, Json(BatchResponse { jobs })).into_response())
+}
+
+/// Filters and paging for the job list.
+#[derive(Deserialize, IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct ListParams {
+    /// Only jobs in this state.
+    state: Option<JobState>,
+    /// Only jobs of this kind.
+    kind: Option<JobKind>,
+    /// Only jobs on this device.
+    device: Option<String>,
+    /// Only the job with this WMS reference.
+    reference: Option<String>,
+    /// Only jobs accepted at or after this time (RFC 3339).
+    #[serde(default, with = "time::serde::rfc3339::option")]
+    #[param(value_type = Option<String>, format = DateTime)]
+    created_from: Option<OffsetDateTime>,
+    /// Only jobs accepted before this time (RFC 3339).
+    #[serde(default, with = "time::serde::rfc3339::option")]
+    #[param(value_type = Option<String>, format = DateTime)]
+    created_to: Option<OffsetDateTime>,
+    /// Continue after this cursor (the `next_cursor` of the previous page).
+    cursor: Option<String>,
+    /// Jobs per page, 1..=1000 (default 100).
+    #[param(minimum = 1, maximum = 1000)]
+    limit: Option<u32>,
+}
+
+/// A page of jobs.
+#[derive(Serialize, ToSchema)]
+pub struct JobPage {
+    /// Jobs in acceptance order.
+    pub jobs: Vec<Job>,
+    /// Pass as `cursor` for the next page; absent when this page was the last one so far.
+    /// Jobs accepted later always come after it, so paging never skips or repeats a job.
+    pub next_cursor: Option<String>,
+}
+
+/// List jobs, oldest first, with filters and cursor paging.
+#[utoipa::path(get, path = "/jobs", tag = "jobs", params(ListParams),
+    responses(
+        (status = 200, description = "A page of jobs", body = JobPage),
+        (status = 400, description = "Bad filter or cursor", body = ErrorBody),
+    ))]
+async fn list_jobs(
+    State(app): State<AppState>,
+    Query(p): Query<ListParams>,
+) -> Result<Json<JobPage>, ApiError> {
+    let limit = p.limit.unwrap_or(100);
+    if !(1..=1000).contains(&limit) {
+        return Err(ApiError::bad_request(
+            "bad_query",
+            format!("limit must be 1..=1000, got {limit}"),
+        ));
+    }
+    let after_id = p
+        .cursor
+        .map(|c| {
+            c.parse::<i64>().ok().filter(|&id| id >= 0).ok_or_else(|| {
+                ApiError::bad_request(
+                    "bad_cursor",
+                    format!("cursor {c:?} is not one this server gave"),
+                )
+            })
+        })
+        .transpose()?;
+    let filter = JobFilter {
+        state: p.state,
+        kind: p.kind,
+        device: p.device,
+        reference: p.reference,
+        created_from: p.created_from.map(to_ms),
+        created_to: p.created_to.map(to_ms),
+        after_id,
+        limit,
+    };
+    let jobs = jobs::list(&app.pool, &filter).await?;
+    let next_cursor = (jobs.len() == limit as usize)
+        .then(|| jobs.last().map(|j| j.id.to_string()))
+        .flatten();
+    Ok(Json(JobPage { jobs, next_cursor }))
+}
+
+/// Read one job.
+#[utoipa::path(get, path = "/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job", body = Job),
+        (status = 400, description = "The id is not a number", body = ErrorBody),
+        (status = 404, description = "No such job", body = ErrorBody),
+    ))]
+async fn get_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<Json<Job>, ApiError> {
+    jobs::get(&app.pool, id)
+        .await?
+        .map(Json)
+        .ok_or_else(|| ApiError::not_found(format!("job {id} does not exist")))
+}
+
+/// A change of priority.
+#[derive(Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[schema(example = json!({"priority": 2}))]
+pub struct PatchJob {
+    /// The new priority, 0..=20 (lower first).
+    #[schema(value_type = u8, minimum = 0, maximum = 20)]
+    pub priority: Priority,
+}
+
+/// Change a queued job's priority.
+#[utoipa::path(patch, path = "/jobs/{id}", tag = "jobs", request_body = PatchJob,
+    params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job with its new priority", body = Job),
+        (status = 404, description = "No such job", body = ErrorBody),
+        (status = 409, description = "The job is no longer queued", body = ErrorBody),
+        (status = 422, description = "Priority outside 0..=20 or unknown field", body = ErrorBody),
+    ))]
+async fn patch_job(
+    State(app): State<AppState>,
+    Path(id): Path<i64>,
+    Json(p): Json<PatchJob>,
+) -> Result<Json<Job>, ApiError> {
+    Ok(Json(
+        app.writer.change(id, Change::Priority(p.priority)).await?,
+    ))
+}
+
+/// A job's history, oldest first.
+#[utoipa::path(get, path = "/jobs/{id}/history", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "Every state change with its time and cause", body = Vec<JobEvent>),
+        (status = 404, description = "No such job", body = ErrorBody),
+    ))]
+async fn job_history(
+    State(app): State<AppState>,
+    Path(id): Path<i64>,
+) -> Result<Json<Vec<JobEvent>>, ApiError> {
+    let history = jobs::history(&app.pool, id).await?;
+    if history.is_empty() {
+        return Err(ApiError::not_found(format!("job {id} does not exist")));
+    }
+    Ok(Json(history))
+}
+
+/// Cancel a job. A queued job is cancelled at once.
+#[utoipa::path(post, path = "/jobs/{id}/cancel", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "Cancelled", body = Job),
+        (status = 404, description = "No such job", body = ErrorBody),
+        (status = 409, description = "The job has ended, or is on a device and cannot be withdrawn", body = ErrorBody),
+    ))]
+async fn cancel_job(
+    State(app): State<AppState>,
+    Path(id): Path<i64>,
+) -> Result<Json<Job>, ApiError> {
+    let change = Change::Transition {
+        transition: Transition::Cancel,
+        cause: "cancelled through the API".into(),
+        expect: Some(vec![JobState::Queued]),
+        failure: None,
+        forced: false,
+    };
+    match app.writer.change(id, change).await {
+        Ok(job) => Ok(Json(job)),
+        Err(crate::store::writer::WriteError::Unexpected { state, .. }) if state.is_terminal() => {
+            Err(ApiError::conflict(
+                "job_ended",
+                format!("job {id} is already {state}"),
+            ))
+        }
+        Err(crate::store::writer::WriteError::Unexpected { state, .. }) => Err(ApiError::conflict(
+            "job_on_device",
+            format!("job {id} is {state} on its device and cannot be withdrawn by rackd"),
+        )),
+        Err(e) => Err(e.into()),
+    }
+}

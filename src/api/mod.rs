@@ -1,0 +1,144 @@
+//! The HTTP API: routes, OpenAPI, auth, errors.
+//!
+//! Public without a key: `/healthz`, `/readyz`, `/openapi.json`, `/docs`. Everything under
+//! `/api/v1` and `/metrics` needs a key once keys are configured (see [`auth`]).
+
+pub mod auth;
+pub mod error;
+pub mod extract;
+pub mod jobs;
+pub mod metrics;
+pub mod ops;
+pub mod state;
+
+use std::time::Duration;
+
+use axum::error_handling::HandleErrorLayer;
+use axum::extract::DefaultBodyLimit;
+use axum::http::StatusCode;
+use axum::{Router, middleware};
+use tower::ServiceBuilder;
+use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::trace::TraceLayer;
+use utoipa::openapi::security::{ApiKey, ApiKeyValue, HttpAuthScheme, HttpBuilder, SecurityScheme};
+use utoipa::{Modify, OpenApi};
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+use utoipa_swagger_ui::SwaggerUi;
+
+pub use error::ApiError;
+pub use state::AppState;
+
+/// The OpenAPI document's fixed parts; paths come from the routers.
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "rackd",
+        description = "rackd is a warehouse control system (WCS). A WMS posts jobs (store, retrieve, move, \
+clear, light, travel); rackd stores them durably, runs them on the store's machines and reports their \
+progress.\n\nEvery error is JSON `{\"error\": {\"code\", \"message\"}}` with the matching status. \
+Authenticate with `Authorization: Bearer KEY` (or `X-Api-Key`); roles: `viewer` reads, `operator` \
+also submits and changes jobs, `admin` may do everything. A `201` means the job is on disk.",
+        license(name = "MIT OR Apache-2.0"),
+    ),
+    servers((url = "/", description = "This server")),
+    tags(
+        (name = "jobs", description = "Submit and follow jobs"),
+        (name = "operations", description = "Health, readiness and metrics"),
+    ),
+    modifiers(&Security),
+)]
+struct ApiDoc;
+
+struct Security;
+
+impl Modify for Security {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        let components = openapi.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            "bearer",
+            SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
+        );
+        components.add_security_scheme(
+            "api_key",
+            SecurityScheme::ApiKey(ApiKey::Header(ApiKeyValue::new("X-Api-Key"))),
+        );
+        openapi.security = Some(vec![
+            utoipa::openapi::security::SecurityRequirement::new("bearer", Vec::<String>::new()),
+            utoipa::openapi::security::SecurityRequirement::new("api_key", Vec::<String>::new()),
+        ]);
+    }
+}
+
+/// `/metrics`, documented.
+#[utoipa::path(get, path = "/metrics", tag = "operations",
+    responses((status = 200, description = "Prometheus text: rackd_http_requests_total, rackd_jobs, rackd_intake_seconds", content_type = "text/plain")))]
+async fn metrics_route(
+    state: axum::extract::State<AppState>,
+) -> Result<axum::response::Response, ApiError> {
+    metrics::metrics(state).await
+}
+
+/// Routes that need a key once keys are configured.
+fn protected_routes() -> OpenApiRouter<AppState> {
+    OpenApiRouter::with_openapi(ApiDoc::openapi())
+        .nest("/api/v1", jobs::router())
+        .routes(routes!(metrics_route))
+}
+
+/// Routes open to anyone (probes).
+fn public_routes() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(ops::healthz))
+        .routes(routes!(ops::readyz))
+}
+
+/// The OpenAPI document, as `GET /openapi.json` serves it and `rackd openapi` prints it.
+pub fn openapi() -> utoipa::openapi::OpenApi {
+    let mut doc = protected_routes().into_openapi();
+    doc.merge(public_routes().into_openapi());
+    doc
+}
+
+/// The whole HTTP service.
+pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
+    let (protected, mut doc) = protected_routes().split_for_parts();
+    let (public, public_doc) = public_routes().split_for_parts();
+    doc.merge(public_doc);
+    let protected = protected.layer(middleware::from_fn_with_state(
+        state.clone(),
+        auth::require_key,
+    ));
+    Router::new()
+        .merge(protected)
+        .merge(public)
+        .merge(SwaggerUi::new("/docs").url("/openapi.json", doc))
+        .fallback(ops::not_found)
+        .method_not_allowed_fallback(ops::method_not_allowed)
+        .layer(middleware::from_fn_with_state(
+            state.clone(),
+            metrics::count_requests,
+        ))
+        .layer(DefaultBodyLimit::max(body_limit))
+        .layer(
+            ServiceBuilder::new()
+                .layer(CatchPanicLayer::custom(|_| {
+                    tracing::error!("a handler panicked");
+                    axum::response::IntoResponse::into_response(ApiError::new(
+                        StatusCode::INTERNAL_SERVER_ERROR,
+                        "internal",
+                        "internal error",
+                    ))
+                }))
+                .layer(TraceLayer::new_for_http())
+                .layer(HandleErrorLayer::new(|_: tower::BoxError| async {
+                    ApiError::new(
+                        StatusCode::SERVICE_UNAVAILABLE,
+                        "timeout",
+                        "the request took too long",
+                    )
+                }))
+                .timeout(timeout),
+        )
+        .with_state(state)
+}

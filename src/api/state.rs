@@ -1,0 +1,25 @@
+//! The state every handler shares.
+
+use std::sync::Arc;
+
+use sqlx::SqlitePool;
+
+use super::metrics::Metrics;
+use crate::auth::KeyRing;
+use crate::service::intake::Rules;
+use crate::store::writer::Writer;
+
+/// Everything a handler may need, cloned cheaply into each request.
+#[derive(Clone)]
+pub struct AppState {
+    /// The database, for reads.
+    pub pool: SqlitePool,
+    /// The one writer of jobs.
+    pub writer: Writer,
+    /// What job requests are checked against.
+    pub rules: Arc<Rules>,
+    /// The API keys.
+    pub keys: Arc<KeyRing>,
+    /// Prometheus metrics.
+    pub metrics: Arc<Metrics>,
+}

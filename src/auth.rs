@@ -1,0 +1,144 @@
+//! API keys and roles.
+//!
+//! Keys are long random tokens, so they are stored as a plain SHA-256 hash (`sha256:<hex>`):
+//! a slow password hash would protect nothing more for a 32-byte random key and would cost
+//! milliseconds on every request. `rackd hash-key` prints the hash of a key, and with
+//! `--generate` makes a new random key first.
+
+use std::collections::HashMap;
+
+use rand::RngCore;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+/// What a key may do. Each role includes the ones before it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Role {
+    /// Reads: jobs, devices, locations, alarms, metrics, the WebSocket.
+    Viewer,
+    /// Viewer, plus submitting, changing and cancelling jobs.
+    Operator,
+    /// Everything, device maintenance included.
+    Admin,
+}
+
+impl Role {
+    /// The role's name as the configuration writes it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Role::Viewer => "viewer",
+            Role::Operator => "operator",
+            Role::Admin => "admin",
+        }
+    }
+}
+
+/// The stored form of a key: `sha256:` followed by 64 hex digits.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Deserialize)]
+#[serde(try_from = "String")]
+pub struct KeyHash([u8; 32]);
+
+impl KeyHash {
+    /// The hash of a key as presented by a client.
+    pub fn of(key: &str) -> KeyHash {
+        KeyHash(Sha256::digest(key.as_bytes()).into())
+    }
+}
+
+impl std::fmt::Display for KeyHash {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "sha256:{}", hex::encode(self.0))
+    }
+}
+
+impl TryFrom<String> for KeyHash {
+    type Error = String;
+    fn try_from(text: String) -> Result<Self, String> {
+        let hex_part = text
+            .strip_prefix("sha256:")
+            .ok_or_else(|| "a key hash starts with `sha256:` (see `rackd hash-key`)".to_string())?;
+        let mut bytes = [0u8; 32];
+        hex::decode_to_slice(hex_part, &mut bytes)
+            .map_err(|_| "a key hash is `sha256:` and 64 hex digits".to_string())?;
+        Ok(KeyHash(bytes))
+    }
+}
+
+/// A new random key: 32 random bytes, hex-encoded, prefixed `rk_` so it is easy to spot.
+pub fn generate_key() -> String {
+    let mut bytes = [0u8; 32];
+    rand::rng().fill_bytes(&mut bytes);
+    format!("rk_{}", hex::encode(bytes))
+}
+
+/// The holder of a key, once recognised.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Principal {
+    /// The key's name from the configuration.
+    pub name: String,
+    /// What it may do.
+    pub role: Role,
+}
+
+/// The configured keys, by hash.
+#[derive(Clone, Debug, Default)]
+pub struct KeyRing {
+    keys: HashMap<KeyHash, Principal>,
+}
+
+impl KeyRing {
+    /// A key ring from the configuration's keys.
+    pub fn new(keys: &[crate::config::KeyConfig]) -> Self {
+        let keys = keys
+            .iter()
+            .map(|k| {
+                (
+                    k.hash.clone(),
+                    Principal {
+                        name: k.name.clone(),
+                        role: k.role,
+                    },
+                )
+            })
+            .collect();
+        KeyRing { keys }
+    }
+
+    /// Whether no key is configured (then the server only serves loopback, unauthenticated).
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+
+    /// Who holds `key`, if anyone.
+    pub fn identify(&self, key: &str) -> Option<&Principal> {
+        self.keys.get(&KeyHash::of(key))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hash_round_trips_through_text() {
+        let h = KeyHash::of("secret");
+        assert_eq!(KeyHash::try_from(h.to_string()).unwrap(), h);
+        assert!(
+            h.to_string()
+                .ends_with("2bb80d537b1da3e38bd30361aa855686bde0eacd7162fef6a25fe97bf527a25b")
+        );
+        assert!(KeyHash::try_from("md5:00".to_string()).is_err());
+        assert!(KeyHash::try_from("sha256:zz".to_string()).is_err());
+    }
+
+    #[test]
+    fn roles_are_ordered() {
+        assert!(Role::Admin > Role::Operator && Role::Operator > Role::Viewer);
+    }
+
+    #[test]
+    fn generated_keys_differ() {
+        assert_ne!(generate_key(), generate_key());
+    }
+}

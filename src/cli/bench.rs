@@ -1,0 +1,185 @@
+//! `rackd bench intake`: job intake throughput and latency against a trivial route.
+//!
+//! Starts a real server on a temporary database, then drives it over loopback HTTP with
+//! N concurrent keep-alive clients in three phases of equal length: `GET /healthz` (the
+//! ceiling: what this machine's HTTP stack does with no work), single-job POSTs, and batch
+//! POSTs of 1000 jobs. Figures are printed as rates and as ratios to the ceiling measured
+//! in the same run, since absolute numbers swing on a shared machine.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use hdrhistogram::Histogram;
+use tokio::sync::oneshot;
+
+use crate::app::Application;
+use crate::config::Config;
+
+/// The benchmarks.
+#[derive(clap::Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Intake: single POSTs, batch POSTs and a trivial route, at N concurrent clients.
+    Intake {
+        /// Concurrent clients.
+        #[arg(long, default_value_t = 64)]
+        clients: usize,
+        /// Seconds per phase.
+        #[arg(long, default_value_t = 5)]
+        seconds: u64,
+        /// Jobs per batch request.
+        #[arg(long, default_value_t = 1000)]
+        batch: usize,
+    },
+}
+
+struct Phase {
+    name: &'static str,
+    requests: u64,
+    jobs_per_request: u64,
+    elapsed: Duration,
+    latency_us: Histogram<u64>,
+}
+
+impl Phase {
+    fn requests_per_sec(&self) -> f64 {
+        self.requests as f64 / self.elapsed.as_secs_f64()
+    }
+}
+
+/// Runs a benchmark and prints its figures.
+pub async fn run(cmd: BenchCommand) -> anyhow::Result<()> {
+    let BenchCommand::Intake {
+        clients,
+        seconds,
+        batch,
+    } = cmd;
+    let dir = tempfile::tempdir()?;
+    let mut config = Config::demo();
+    config.server.listen = "127.0.0.1:0".parse()?;
+    config.database.path = dir.path().join("bench.db");
+    let app = Application::build(&config, false).await?;
+    let base = format!("http://{}", app.local_addr());
+    let (stop, stopped) = oneshot::channel::<()>();
+    let server = tokio::spawn(app.run_until(async {
+        let _ = stopped.await;
+    }));
+    let duration = Duration::from_secs(seconds);
+    let client = reqwest::Client::builder()
+        .pool_max_idle_per_host(clients)
+        .build()?;
+    println!(
+        "rackd bench intake: {clients} clients, {seconds} s per phase, batches of {batch}, {} cores",
+        num_cpus()
+    );
+    let trivial = phase("GET /healthz (ceiling)", &client, clients, duration, 1, {
+        let url = format!("{base}/healthz");
+        move |c, _| c.get(&url)
+    })
+    .await?;
+    let single = phase("POST /api/v1/jobs", &client, clients, duration, 1, {
+        let url = format!("{base}/api/v1/jobs");
+        move |c, n| {
+            c.post(&url)
+                .header("content-type", "application/json")
+                .body(job(n).to_string())
+        }
+    })
+    .await?;
+    let batch_phase = phase(
+        "POST /api/v1/jobs/batch",
+        &client,
+        clients,
+        duration,
+        batch as u64,
+        {
+            let url = format!("{base}/api/v1/jobs/batch");
+            move |c, n| {
+                let jobs: Vec<_> = (0..batch as u64)
+                    .map(|i| job(n * batch as u64 + i + (1 << 40)))
+                    .collect();
+                c.post(&url)
+                    .header("content-type", "application/json")
+                    .body(serde_json::json!({ "jobs": jobs }).to_string())
+            }
+        },
+    )
+    .await?;
+    println!(
+        "{:<26} {:>12} {:>12} {:>10} {:>10} {:>9}",
+        "phase", "requests/s", "jobs/s", "p50 ms", "p99 ms", "vs ceiling"
+    );
+    for p in [&trivial, &single, &batch_phase] {
+        println!(
+            "{:<26} {:>12.0} {:>12.0} {:>10.2} {:>10.2} {:>8.0}%",
+            p.name,
+            p.requests_per_sec(),
+            p.requests_per_sec() * p.jobs_per_request as f64,
+            p.latency_us.value_at_quantile(0.5) as f64 / 1000.0,
+            p.latency_us.value_at_quantile(0.99) as f64 / 1000.0,
+            100.0 * p.requests_per_sec() / trivial.requests_per_sec(),
+        );
+    }
+    let _ = stop.send(());
+    server.await??;
+    Ok(())
+}
+
+fn num_cpus() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// A valid store job for the demo site, unique by reference.
+fn job(n: u64) -> serde_json::Value {
+    serde_json::json!({
+        "kind": "store", "reference": format!("bench-{n}"), "barcode": format!("B{n:08}"),
+        "to": {"aisle": 1, "row": 1 + n % 2, "bay": 1 + n % 10, "level": 1 + n % 6, "position": 1 + n % 4},
+    })
+}
+
+async fn phase<F>(
+    name: &'static str,
+    client: &reqwest::Client,
+    clients: usize,
+    duration: Duration,
+    jobs_per_request: u64,
+    request: F,
+) -> anyhow::Result<Phase>
+where
+    F: Fn(&reqwest::Client, u64) -> reqwest::RequestBuilder + Send + Sync + 'static,
+{
+    let request = Arc::new(request);
+    let started = Instant::now();
+    let deadline = started + duration;
+    let tasks: Vec<_> = (0..clients as u64)
+        .map(|worker| {
+            let (client, request) = (client.clone(), request.clone());
+            tokio::spawn(async move {
+                let mut hist = Histogram::<u64>::new(3).expect("valid histogram");
+                let mut n = worker << 32;
+                while Instant::now() < deadline {
+                    let t = Instant::now();
+                    let response = request(&client, n).send().await?;
+                    let status = response.status();
+                    response.bytes().await?;
+                    anyhow::ensure!(status.is_success(), "{name}: status {status}");
+                    hist.saturating_record(t.elapsed().as_micros() as u64);
+                    n += 1;
+                }
+                Ok::<_, anyhow::Error>(hist)
+            })
+        })
+        .collect();
+    let mut latency_us = Histogram::<u64>::new(3)?;
+    for t in tasks {
+        latency_us.add(t.await.context("bench client")??)?;
+    }
+    let elapsed = started.elapsed();
+    Ok(Phase {
+        name,
+        requests: latency_us.len(),
+        jobs_per_request,
+        elapsed,
+        latency_us,
+    })
+}

@@ -1,0 +1,175 @@
+//! The command line: `rackd serve`, `openapi`, `check-config`, `hash-key`, `healthcheck`,
+//! `bench`.
+
+pub mod bench;
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand, ValueEnum};
+
+use crate::app::{Application, shutdown_signal};
+use crate::config::Config;
+
+/// rackd: a warehouse control system.
+#[derive(Parser, Debug)]
+#[command(version, about)]
+pub struct Cli {
+    /// Log format.
+    #[arg(long, global = true, value_enum, default_value_t = LogFormat::Text)]
+    pub log_format: LogFormat,
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+/// Log output format.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum LogFormat {
+    /// Human-readable lines.
+    Text,
+    /// One JSON object per line.
+    Json,
+}
+
+/// The subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Run the service (the default). Without a config, the demo site.
+    Serve(ServeArgs),
+    /// Print the OpenAPI document.
+    Openapi,
+    /// Check a configuration file and report the first error with its key and line.
+    CheckConfig {
+        /// The file.
+        file: PathBuf,
+    },
+    /// Print the hash of an API key for `[[auth.keys]]` (key from the argument or stdin).
+    HashKey {
+        /// The key; read from standard input when absent.
+        key: Option<String>,
+        /// Make a new random key, print it and its hash.
+        #[arg(long, conflicts_with = "key")]
+        generate: bool,
+    },
+    /// Exit 0 if the server at URL answers /healthz (for container health checks).
+    Healthcheck {
+        /// The server's base URL.
+        #[arg(
+            long,
+            env = "RACKD_HEALTHCHECK_URL",
+            default_value = "http://127.0.0.1:8080"
+        )]
+        url: String,
+    },
+    /// Benchmarks (see README).
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
+
+/// `rackd serve` options.
+#[derive(clap::Args, Debug, Default)]
+pub struct ServeArgs {
+    /// Configuration file; without one rackd runs the demo site.
+    #[arg(long, env = "RACKD_CONFIG")]
+    pub config: Option<PathBuf>,
+    /// Listen address, overriding the config's server.listen.
+    #[arg(long, env = "RACKD_LISTEN")]
+    pub listen: Option<SocketAddr>,
+    /// Database file, overriding the config's database.path.
+    #[arg(long, env = "RACKD_DATABASE")]
+    pub database: Option<PathBuf>,
+    /// Allow serving without API keys on a non-loopback address.
+    #[arg(long)]
+    pub insecure: bool,
+}
+
+impl ServeArgs {
+    /// The configuration these options select.
+    pub fn config(&self) -> anyhow::Result<Config> {
+        let mut config = match &self.config {
+            Some(path) => Config::load(path)?,
+            None => Config::demo(),
+        };
+        if let Some(listen) = self.listen {
+            config.server.listen = listen;
+        }
+        if let Some(db) = &self.database {
+            config.database.path = db.clone();
+        }
+        Ok(config)
+    }
+}
+
+/// Runs the command line.
+pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command.unwrap_or(Command::Serve(ServeArgs::default())) {
+        Command::Serve(args) => {
+            let config = args.config()?;
+            if args.config.is_none() {
+                tracing::info!("no --config: running the demo site");
+            }
+            Application::build(&config, args.insecure)
+                .await?
+                .run_until(shutdown_signal())
+                .await?;
+        }
+        Command::Openapi => {
+            println!(
+                "{}",
+                crate::api::openapi()
+                    .to_pretty_json()
+                    .context("encoding OpenAPI")?
+            );
+        }
+        Command::CheckConfig { file } => match Config::load(&file) {
+            Ok(_) => println!("{}: ok", file.display()),
+            Err(e) => {
+                eprintln!("{e}");
+                return Ok(ExitCode::FAILURE);
+            }
+        },
+        Command::HashKey { key, generate } => {
+            let key = match (key, generate) {
+                (Some(k), _) => k,
+                (None, true) => {
+                    let k = crate::auth::generate_key();
+                    println!("key:  {k}");
+                    k
+                }
+                (None, false) => {
+                    let mut line = String::new();
+                    std::io::stdin().read_line(&mut line)?;
+                    line.trim().to_owned()
+                }
+            };
+            anyhow::ensure!(!key.is_empty(), "an empty key");
+            println!(
+                "{}{}",
+                if generate { "hash: " } else { "" },
+                crate::auth::KeyHash::of(&key)
+            );
+        }
+        Command::Healthcheck { url } => {
+            let url = format!("{}/healthz", url.trim_end_matches('/'));
+            let client = reqwest::Client::builder()
+                .timeout(std::time::Duration::from_secs(3))
+                .build()?;
+            match client.get(&url).send().await {
+                Ok(r) if r.status().is_success() => println!("{url}: ok"),
+                Ok(r) => {
+                    eprintln!("{url}: {}", r.status());
+                    return Ok(ExitCode::FAILURE);
+                }
+                Err(e) => {
+                    eprintln!("{url}: {e}");
+                    return Ok(ExitCode::FAILURE);
+                }
+            }
+        }
+        Command::Bench(b) => bench::run(b).await?,
+    }
+    Ok(ExitCode::SUCCESS)
+}

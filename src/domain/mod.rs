@@ -1,0 +1,19 @@
+//! The words of the warehouse: locations, jobs and their states.
+//!
+//! Parse, don't validate: each type here can only hold a valid value, and its constructor
+//! says in one place what valid means.
+
+pub mod job;
+pub mod location;
+pub mod state;
+pub mod values;
+
+pub use job::{JobKind, JobSpec, LightColor};
+pub use location::{AisleLayout, Layout, Location};
+pub use state::{Failure, JobState, Transition};
+pub use values::{Barcode, Priority};
+
+/// A value that failed its constructor's checks, with a message that says why.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct Invalid(pub String);

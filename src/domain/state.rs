@@ -1,0 +1,180 @@
+//! The job state machine: one type, one transition function.
+//!
+//! ```text
+//! queued ──dispatch──▶ dispatched ──start──▶ running ──complete──▶ completed
+//!   │                      │                    │      └─fail────▶ failed
+//!   └─cancel──▶ cancelled ◀┴─cancel             └─request_cancel─▶ cancelling ──▶ cancelled
+//! ```
+//! Any non-terminal state may fail; a device may report completion of work it had already
+//! finished before a poll saw it running (dispatched → completed) or before a cancel reached
+//! it (cancelling → completed). Terminal states never change.
+
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+/// Where a job is in its life.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum JobState {
+    /// Accepted and stored, waiting for its device.
+    Queued,
+    /// Handed to the device, which confirmed it.
+    Dispatched,
+    /// The device reports the job under way.
+    Running,
+    /// A cancel is under way on the device.
+    Cancelling,
+    /// Finished (possibly forced; see the job's `forced`).
+    Completed,
+    /// Ended without doing its work; see the job's `failure`.
+    Failed,
+    /// Cancelled before or while running.
+    Cancelled,
+}
+
+/// What happened to a job.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Transition {
+    /// The device confirmed it took the job.
+    Dispatch,
+    /// The device reports the job running.
+    Start,
+    /// The device reports the job finished.
+    Complete,
+    /// The job could not be done.
+    Fail,
+    /// A cancel was sent to the device.
+    RequestCancel,
+    /// The job is cancelled (at once while queued, or confirmed by the device).
+    Cancel,
+}
+
+/// Why a job failed: who failed it, the device's own code if any, and a text.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+pub struct Failure {
+    /// The class of failure: `device_fault`, `rejected`, `alarm`, `offline`, ...
+    pub kind: String,
+    /// The device's own code (PLC failure kind, crane alarm code), if it gave one.
+    pub code: Option<i64>,
+    /// What happened, for people.
+    pub text: String,
+}
+
+/// An illegal transition, rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("a {from} job cannot {transition:?}")]
+pub struct IllegalTransition {
+    /// The state the job was in.
+    pub from: JobState,
+    /// The transition that was refused.
+    pub transition: Transition,
+}
+
+impl JobState {
+    /// All states, in life order.
+    pub const ALL: [JobState; 7] = [
+        Self::Queued,
+        Self::Dispatched,
+        Self::Running,
+        Self::Cancelling,
+        Self::Completed,
+        Self::Failed,
+        Self::Cancelled,
+    ];
+
+    /// The state's name as the API writes it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Queued => "queued",
+            Self::Dispatched => "dispatched",
+            Self::Running => "running",
+            Self::Cancelling => "cancelling",
+            Self::Completed => "completed",
+            Self::Failed => "failed",
+            Self::Cancelled => "cancelled",
+        }
+    }
+
+    /// Parses a state from its API name.
+    pub fn parse(text: &str) -> Option<JobState> {
+        Self::ALL.into_iter().find(|s| s.as_str() == text)
+    }
+
+    /// Whether the job is over; a terminal state never changes.
+    pub fn is_terminal(self) -> bool {
+        matches!(self, Self::Completed | Self::Failed | Self::Cancelled)
+    }
+
+    /// The one transition function: the state after `t`, or why `t` is illegal here.
+    pub fn apply(self, t: Transition) -> Result<JobState, IllegalTransition> {
+        use JobState::*;
+        use Transition::*;
+        let next = match (self, t) {
+            (s, _) if s.is_terminal() => None,
+            (Queued, Dispatch) => Some(Dispatched),
+            (Dispatched, Start) => Some(Running),
+            (Dispatched | Running | Cancelling, Complete) => Some(Completed),
+            (_, Fail) => Some(Failed),
+            (Dispatched | Running, RequestCancel) => Some(Cancelling),
+            (Queued | Dispatched | Cancelling, Cancel) => Some(Cancelled),
+            _ => None,
+        };
+        next.ok_or(IllegalTransition {
+            from: self,
+            transition: t,
+        })
+    }
+}
+
+impl std::fmt::Display for JobState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::JobState::*;
+    use super::Transition::*;
+    use super::*;
+
+    const ALL_T: [Transition; 6] = [Dispatch, Start, Complete, Fail, RequestCancel, Cancel];
+
+    #[test]
+    fn the_normal_life() {
+        let s = Queued
+            .apply(Dispatch)
+            .unwrap()
+            .apply(Start)
+            .unwrap()
+            .apply(Complete)
+            .unwrap();
+        assert_eq!(s, Completed);
+    }
+
+    #[test]
+    fn terminal_states_never_change() {
+        for s in [Completed, Failed, Cancelled] {
+            for t in ALL_T {
+                assert!(s.apply(t).is_err(), "{s} accepted {t:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn illegal_transitions_are_rejected() {
+        assert!(Queued.apply(Start).is_err());
+        assert!(Queued.apply(Complete).is_err());
+        assert!(Queued.apply(RequestCancel).is_err());
+        assert!(Running.apply(Dispatch).is_err());
+        assert!(Running.apply(Cancel).is_err());
+        assert!(Cancelling.apply(Start).is_err());
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for s in JobState::ALL {
+            assert_eq!(JobState::parse(s.as_str()), Some(s));
+        }
+    }
+}

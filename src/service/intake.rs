@@ -1,0 +1,224 @@
+//! Job intake: turns what a WMS posts into validated [`NewJob`]s.
+//!
+//! A request is a flat object (`kind` plus the fields that kind needs); each kind takes
+//! exactly its own fields, so a `store` with a `from` is an error, not a silently ignored
+//! field. Locations are checked against the site layout, and a named device must exist.
+
+use std::collections::BTreeSet;
+
+use serde::Deserialize;
+use utoipa::ToSchema;
+
+use crate::domain::{Barcode, Invalid, JobKind, JobSpec, Layout, LightColor, Location, Priority};
+use crate::store::jobs::NewJob;
+
+/// Longest accepted WMS reference.
+pub const MAX_REFERENCE_LEN: usize = 100;
+
+/// Most jobs in one batch.
+pub const MAX_BATCH: usize = 1000;
+
+/// A job as the WMS posts it.
+#[derive(Clone, Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[schema(example = json!({"kind": "store", "reference": "WMS-1001", "priority": 10, "barcode": "BOX-0001",
+    "to": {"aisle": 1, "row": 1, "bay": 2, "level": 3, "position": 1}}))]
+pub struct JobRequest {
+    /// What the job does; decides which of `from`, `to`, `location`, `color`, `on` are required
+    /// (store: to; retrieve: from; move: from, to; clear: location; light: location, color, on;
+    /// travel: to) and that the others are absent.
+    pub kind: JobKind,
+    /// The WMS's own id for the job (1..=100 printable characters), unique: a repeated POST
+    /// with the same reference and body returns the existing job; a different body is a 409.
+    pub reference: Option<String>,
+    /// 0..=20, lower first; 0 jumps the queue. Default 10.
+    #[schema(minimum = 0, maximum = 20, default = 10)]
+    pub priority: Option<i64>,
+    /// The box's barcode: 1..=20 printable ASCII characters.
+    pub barcode: Option<String>,
+    /// Source location (retrieve, move).
+    pub from: Option<Location>,
+    /// Target location (store, move, travel).
+    pub to: Option<Location>,
+    /// The location (clear, light).
+    pub location: Option<Location>,
+    /// Which light (light).
+    pub color: Option<LightColor>,
+    /// Switch it on (true) or off (false) (light).
+    pub on: Option<bool>,
+    /// Run on this device instead of the one that serves the locations.
+    pub device: Option<String>,
+}
+
+/// What intake checks requests against.
+#[derive(Clone, Debug, Default)]
+pub struct Rules {
+    /// The site layout.
+    pub layout: Layout,
+    /// The configured device ids.
+    pub devices: BTreeSet<String>,
+}
+
+impl Rules {
+    /// Validates one request into a job to store.
+    pub fn check(&self, req: JobRequest) -> Result<NewJob, Invalid> {
+        let kind = req.kind;
+        let present = [
+            ("from", req.from.is_some()),
+            ("to", req.to.is_some()),
+            ("location", req.location.is_some()),
+            ("color", req.color.is_some()),
+            ("on", req.on.is_some()),
+        ];
+        for (field, is_present) in present {
+            let wanted = kind.fields().contains(&field);
+            if is_present && !wanted {
+                return Err(Invalid(format!(
+                    "a {} job takes no `{field}`",
+                    kind.as_str()
+                )));
+            }
+            if !is_present && wanted {
+                return Err(Invalid(format!("a {} job needs `{field}`", kind.as_str())));
+            }
+        }
+        let missing = || Invalid("internal: field checked above".into());
+        let spec = match kind {
+            JobKind::Store => JobSpec::Store {
+                to: req.to.ok_or_else(missing)?,
+            },
+            JobKind::Retrieve => JobSpec::Retrieve {
+                from: req.from.ok_or_else(missing)?,
+            },
+            JobKind::Move => JobSpec::Move {
+                from: req.from.ok_or_else(missing)?,
+                to: req.to.ok_or_else(missing)?,
+            },
+            JobKind::Clear => JobSpec::Clear {
+                location: req.location.ok_or_else(missing)?,
+            },
+            JobKind::Light => JobSpec::Light {
+                location: req.location.ok_or_else(missing)?,
+                color: req.color.ok_or_else(missing)?,
+                on: req.on.ok_or_else(missing)?,
+            },
+            JobKind::Travel => JobSpec::Travel {
+                to: req.to.ok_or_else(missing)?,
+            },
+        };
+        for loc in spec.locations() {
+            self.layout.check(&loc)?;
+        }
+        if let JobSpec::Move { from, to } = spec
+            && from == to
+        {
+            return Err(Invalid(format!(
+                "a move needs two different locations, got {from} twice"
+            )));
+        }
+        let priority = req
+            .priority
+            .map(Priority::try_from)
+            .transpose()?
+            .unwrap_or_default();
+        let barcode = req.barcode.map(Barcode::try_from).transpose()?;
+        if let Some(r) = &req.reference {
+            check_reference(r)?;
+        }
+        if let Some(d) = &req.device
+            && !self.devices.contains(d)
+        {
+            let known: Vec<_> = self.devices.iter().map(String::as_str).collect();
+            return Err(Invalid(format!(
+                "device {d:?} is not configured (devices: [{}])",
+                known.join(", ")
+            )));
+        }
+        Ok(NewJob {
+            spec,
+            reference: req.reference,
+            priority,
+            barcode,
+            device: req.device,
+        })
+    }
+}
+
+fn check_reference(r: &str) -> Result<(), Invalid> {
+    let printable = r.chars().all(|c| !c.is_control());
+    if r.trim().is_empty() || r.chars().count() > MAX_REFERENCE_LEN || !printable {
+        return Err(Invalid(format!(
+            "reference must be 1..={MAX_REFERENCE_LEN} printable characters, not blank"
+        )));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use super::*;
+    use crate::domain::AisleLayout;
+
+    fn rules() -> Rules {
+        let aisle = AisleLayout {
+            rows: 2,
+            bays: 10,
+            levels: 6,
+            positions: 4,
+        };
+        Rules {
+            layout: Layout::new(BTreeMap::from([(1, aisle)])),
+            devices: BTreeSet::new(),
+        }
+    }
+
+    fn req(json: serde_json::Value) -> JobRequest {
+        serde_json::from_value(json).unwrap()
+    }
+
+    const LOC: fn() -> serde_json::Value =
+        || serde_json::json!({"aisle":1,"row":1,"bay":1,"level":1,"position":1});
+
+    #[test]
+    fn each_kind_takes_its_fields() {
+        let ok = rules()
+            .check(req(serde_json::json!({"kind": "store", "to": LOC()})))
+            .unwrap();
+        assert_eq!(ok.priority, Priority::DEFAULT);
+        let err = rules().check(req(
+            serde_json::json!({"kind": "store", "to": LOC(), "from": LOC()}),
+        ));
+        assert!(err.unwrap_err().0.contains("takes no `from`"));
+        let err = rules().check(req(
+            serde_json::json!({"kind": "light", "location": LOC(), "color": "red"}),
+        ));
+        assert!(err.unwrap_err().0.contains("needs `on`"));
+    }
+
+    #[test]
+    fn moves_need_two_places_and_devices_must_exist() {
+        let err = rules().check(req(
+            serde_json::json!({"kind": "move", "from": LOC(), "to": LOC()}),
+        ));
+        assert!(err.unwrap_err().0.contains("two different"));
+        let err = rules().check(req(
+            serde_json::json!({"kind": "clear", "location": LOC(), "device": "x"}),
+        ));
+        assert!(err.unwrap_err().0.contains("not configured"));
+    }
+
+    #[test]
+    fn references_are_checked() {
+        let long = "r".repeat(101);
+        let err = rules().check(req(
+            serde_json::json!({"kind": "store", "to": LOC(), "reference": long}),
+        ));
+        assert!(err.is_err());
+        let err = rules().check(req(
+            serde_json::json!({"kind": "store", "to": LOC(), "reference": "  "}),
+        ));
+        assert!(err.is_err());
+    }
+}

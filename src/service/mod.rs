@@ -1,0 +1,3 @@
+//! The service layer: job intake, and later scheduling, dispatch and the event bus.
+
+pub mod intake;

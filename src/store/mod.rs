@@ -1,0 +1,57 @@
+//! SQLite storage through sqlx: jobs, job history, locations and the event log.
+//!
+//! The database runs in WAL mode with `synchronous=FULL`, so a commit is on disk when it
+//! returns: a 201 means the job survives a power cut. Every change to jobs goes through one
+//! writer task ([`writer::Writer`]) that commits many requests per transaction.
+
+pub mod jobs;
+pub mod time;
+pub mod writer;
+
+use std::path::Path;
+use std::str::FromStr;
+use std::time::Duration;
+
+use sqlx::SqlitePool;
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
+
+pub use jobs::{Job, JobEvent, JobFilter};
+
+/// The migrations in `migrations/`, embedded in the binary.
+pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
+
+/// Opens (creating if needed) the database at `path` and applies pending migrations.
+pub async fn open(path: &Path, busy_timeout: Duration) -> Result<SqlitePool, sqlx::Error> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    let options = SqliteConnectOptions::from_str("sqlite:")?
+        .filename(path)
+        .create_if_missing(true)
+        .journal_mode(SqliteJournalMode::Wal)
+        .synchronous(SqliteSynchronous::Full)
+        .busy_timeout(busy_timeout)
+        .foreign_keys(true);
+    let pool = SqlitePoolOptions::new()
+        .max_connections(8)
+        .connect_with(options)
+        .await?;
+    MIGRATOR.run(&pool).await?;
+    Ok(pool)
+}
+
+/// Whether the database answers and every embedded migration is applied.
+pub async fn ready(pool: &SqlitePool) -> Result<(), String> {
+    let applied: Vec<i64> =
+        sqlx::query_scalar("SELECT version FROM _sqlx_migrations WHERE success = 1")
+            .fetch_all(pool)
+            .await
+            .map_err(|e| format!("database unreachable: {e}"))?;
+    match MIGRATOR.iter().find(|m| !applied.contains(&m.version)) {
+        Some(m) => Err(format!(
+            "migration {} ({}) not applied",
+            m.version, m.description
+        )),
+        None => Ok(()),
+    }
+}
