@@ -44,47 +44,30 @@ impl Application {
         let pool = store::open(&db.path, Duration::from_millis(db.busy_timeout_ms))
             .await
             .with_context(|| format!("opening database {}", db.path.display()))?;
-        let (writer, writer_task) =
-            Writer::start(pool.clone(), config.intake.max_group, config.intake.queue);
+        let (writer, writer_task) = Writer::start(pool.clone(), config.intake.max_group, config.intake.queue);
         let state = AppState {
             pool,
             writer,
-            rules: Arc::new(Rules {
-                layout: config.layout(),
-                devices: Default::default(),
-            }),
+            rules: Arc::new(Rules { layout: config.layout(), devices: Default::default() }),
             keys: Arc::new(keys),
             metrics: Arc::new(Metrics::default()),
         };
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);
-        let listener = TcpListener::bind(listen)
-            .await
-            .with_context(|| format!("binding {listen}"))?;
-        Ok(Application {
-            listener,
-            router,
-            writer_task,
-        })
+        let listener = TcpListener::bind(listen).await.with_context(|| format!("binding {listen}"))?;
+        Ok(Application { listener, router, writer_task })
     }
 
     /// The address actually bound (useful with port 0).
     pub fn local_addr(&self) -> SocketAddr {
-        self.listener
-            .local_addr()
-            .expect("a bound listener has an address")
+        self.listener.local_addr().expect("a bound listener has an address")
     }
 
     /// Serves until `shutdown` completes, then finishes in-flight requests and pending
     /// commits before returning.
-    pub async fn run_until(
-        self,
-        shutdown: impl Future<Output = ()> + Send + 'static,
-    ) -> anyhow::Result<()> {
+    pub async fn run_until(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
         tracing::info!(addr = %self.local_addr(), "rackd listening");
-        axum::serve(self.listener, self.router)
-            .with_graceful_shutdown(shutdown)
-            .await?;
+        axum::serve(self.listener, self.router).with_graceful_shutdown(shutdown).await?;
         // The router (and with it the last writer handle) is gone: the writer drains and stops.
         self.writer_task.await.context("job writer")?;
         tracing::info!("rackd stopped");

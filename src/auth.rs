@@ -90,18 +90,8 @@ pub struct KeyRing {
 impl KeyRing {
     /// A key ring from the configuration's keys.
     pub fn new(keys: &[crate::config::KeyConfig]) -> Self {
-        let keys = keys
-            .iter()
-            .map(|k| {
-                (
-                    k.hash.clone(),
-                    Principal {
-                        name: k.name.clone(),
-                        role: k.role,
-                    },
-                )
-            })
-            .collect();
+        let keys =
+            keys.iter().map(|k| (k.hash.clone(), Principal { name: k.name.clone(), role: k.role })).collect();
         KeyRing { keys }
     }
 
@@ -124,10 +114,7 @@ mod tests {
     fn hash_round_trips_through_text() {
         let h = KeyHash::of("secret");
         assert_eq!(KeyHash::try_from(h.to_string()).unwrap(), h);
-        assert!(
-            h.to_string()
-                .ends_with("2bb80d537b1da3e38bd30361aa855686bde0eacd7162fef6a25fe97bf527a25b")
-        );
+        assert!(h.to_string().ends_with("2bb80d537b1da3e38bd30361aa855686bde0eacd7162fef6a25fe97bf527a25b"));
         assert!(KeyHash::try_from("md5:00".to_string()).is_err());
         assert!(KeyHash::try_from("sha256:zz".to_string()).is_err());
     }

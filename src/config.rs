@@ -107,12 +107,7 @@ pub struct AisleConfig {
 impl AisleConfig {
     /// The aisle's size as the domain sees it.
     pub fn layout(&self) -> AisleLayout {
-        AisleLayout {
-            rows: self.rows,
-            bays: self.bays,
-            levels: self.levels,
-            positions: self.positions,
-        }
+        AisleLayout { rows: self.rows, bays: self.bays, levels: self.levels, positions: self.positions }
     }
 }
 
@@ -153,23 +148,16 @@ impl Config {
 
     /// Loads and checks a configuration file.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ConfigError::Read { path: path.to_owned(), source })?;
         Self::parse(&text, path)
     }
 
     /// Parses and checks configuration text; `path` is only used in messages.
     pub fn parse(text: &str, path: &Path) -> Result<Config, ConfigError> {
-        let config: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            path: path.to_owned(),
-            message: e.to_string(),
-        })?;
-        config.check().map_err(|message| ConfigError::Invalid {
-            path: path.to_owned(),
-            message,
-        })?;
+        let config: Config = toml::from_str(text)
+            .map_err(|e| ConfigError::Parse { path: path.to_owned(), message: e.to_string() })?;
+        config.check().map_err(|message| ConfigError::Invalid { path: path.to_owned(), message })?;
         Ok(config)
     }
 
@@ -177,10 +165,7 @@ impl Config {
         let mut seen = std::collections::BTreeSet::new();
         for a in &self.site.aisles {
             if a.aisle == 0 || !seen.insert(a.aisle) {
-                return Err(format!(
-                    "site.aisles: aisle {} is zero or listed twice",
-                    a.aisle
-                ));
+                return Err(format!("site.aisles: aisle {} is zero or listed twice", a.aisle));
             }
             let l = a.layout();
             if !(1..=2).contains(&l.rows) || l.bays == 0 || l.levels == 0 || l.positions == 0 {
@@ -201,13 +186,7 @@ impl Config {
 
     /// The site layout that locations are checked against.
     pub fn layout(&self) -> Layout {
-        Layout::new(
-            self.site
-                .aisles
-                .iter()
-                .map(|a| (a.aisle, a.layout()))
-                .collect::<BTreeMap<_, _>>(),
-        )
+        Layout::new(self.site.aisles.iter().map(|a| (a.aisle, a.layout())).collect::<BTreeMap<_, _>>())
     }
 }
 
@@ -235,33 +214,19 @@ impl Default for ServerConfig {
 
 impl Default for DatabaseConfig {
     fn default() -> Self {
-        DatabaseConfig {
-            path: PathBuf::from("data/rackd.db"),
-            busy_timeout_ms: 5000,
-        }
+        DatabaseConfig { path: PathBuf::from("data/rackd.db"), busy_timeout_ms: 5000 }
     }
 }
 
 impl Default for IntakeConfig {
     fn default() -> Self {
-        IntakeConfig {
-            max_group: 2048,
-            queue: 16384,
-        }
+        IntakeConfig { max_group: 2048, queue: 16384 }
     }
 }
 
 impl Default for SiteConfig {
     fn default() -> Self {
-        SiteConfig {
-            aisles: vec![AisleConfig {
-                aisle: 1,
-                rows: 2,
-                bays: 10,
-                levels: 6,
-                positions: 4,
-            }],
-        }
+        SiteConfig { aisles: vec![AisleConfig { aisle: 1, rows: 2, bays: 10, levels: 6, positions: 4 }] }
     }
 }
 
@@ -271,31 +236,23 @@ mod tests {
 
     #[test]
     fn the_example_file_loads() {
-        let path = Path::new(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/config/rackd.example.toml"
-        ));
+        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/rackd.example.toml"));
         let config = Config::load(path).unwrap();
         assert_eq!(config.auth.keys.len(), 3);
     }
 
     #[test]
     fn unknown_key_is_named_with_its_line() {
-        let err = Config::parse(
-            "[server]\nlisten = \"127.0.0.1:1\"\nlissen = 3\n",
-            Path::new("x.toml"),
-        )
-        .unwrap_err()
-        .to_string();
+        let err = Config::parse("[server]\nlisten = \"127.0.0.1:1\"\nlissen = 3\n", Path::new("x.toml"))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("lissen") && err.contains("line 3"), "{err}");
     }
 
     #[test]
     fn bad_layout_is_refused() {
         let text = "[[site.aisles]]\naisle = 1\nrows = 3\nbays = 1\nlevels = 1\npositions = 1\n";
-        let err = Config::parse(text, Path::new("x.toml"))
-            .unwrap_err()
-            .to_string();
+        let err = Config::parse(text, Path::new("x.toml")).unwrap_err().to_string();
         assert!(err.contains("rows"), "{err}");
     }
 }

@@ -37,19 +37,13 @@ pub fn required_role(method: &Method, path: &str) -> Role {
 /// browsers opening a WebSocket, which cannot set headers) `?token=KEY`.
 fn presented_key(req: &Request) -> Option<&str> {
     let headers = req.headers();
-    if let Some(v) = headers
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-    {
+    if let Some(v) = headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()) {
         return v.strip_prefix("Bearer ").map(str::trim);
     }
     if let Some(v) = headers.get("x-api-key").and_then(|v| v.to_str().ok()) {
         return Some(v.trim());
     }
-    req.uri()
-        .query()?
-        .split('&')
-        .find_map(|kv| kv.strip_prefix("token="))
+    req.uri().query()?.split('&').find_map(|kv| kv.strip_prefix("token="))
 }
 
 /// Middleware: answers 401 without a known key and 403 when the key's role is too low.
@@ -70,22 +64,13 @@ pub async fn require_key(
         ));
     };
     let Some(who) = app.keys.identify(key) else {
-        return Err(ApiError::new(
-            StatusCode::UNAUTHORIZED,
-            "unauthorized",
-            "the API key is not known",
-        ));
+        return Err(ApiError::new(StatusCode::UNAUTHORIZED, "unauthorized", "the API key is not known"));
     };
     if who.role < needed {
         return Err(ApiError::new(
             StatusCode::FORBIDDEN,
             "forbidden",
-            format!(
-                "this needs the {} role; key {:?} is {}",
-                needed.as_str(),
-                who.name,
-                who.role.as_str()
-            ),
+            format!("this needs the {} role; key {:?} is {}", needed.as_str(), who.name, who.role.as_str()),
         ));
     }
     Ok(next.run(req).await)
@@ -99,17 +84,8 @@ mod tests {
     fn roles_by_method_and_path() {
         assert_eq!(required_role(&Method::GET, "/api/v1/jobs"), Role::Viewer);
         assert_eq!(required_role(&Method::POST, "/api/v1/jobs"), Role::Operator);
-        assert_eq!(
-            required_role(&Method::PATCH, "/api/v1/jobs/1"),
-            Role::Operator
-        );
-        assert_eq!(
-            required_role(&Method::POST, "/api/v1/devices/shelf1/registers"),
-            Role::Admin
-        );
-        assert_eq!(
-            required_role(&Method::POST, "/api/v1/devices/shelf1/pause"),
-            Role::Operator
-        );
+        assert_eq!(required_role(&Method::PATCH, "/api/v1/jobs/1"), Role::Operator);
+        assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/registers"), Role::Admin);
+        assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/pause"), Role::Operator);
     }
 }

@@ -38,19 +38,11 @@ pub fn router() -> OpenApiRouter<AppState> {
         (status = 415, description = "Not `application/json`", body = ErrorBody),
         (status = 422, description = "Unknown or missing field, wrong type, location outside the layout", body = ErrorBody),
     ))]
-async fn create_job(
-    State(app): State<AppState>,
-    Json(req): Json<JobRequest>,
-) -> Result<Response, ApiError> {
-    let job = app
-        .rules
-        .check(req)
-        .map_err(|e| ApiError::invalid("invalid_job", e.0))?;
+async fn create_job(State(app): State<AppState>, Json(req): Json<JobRequest>) -> Result<Response, ApiError> {
+    let job = app.rules.check(req).map_err(|e| ApiError::invalid("invalid_job", e.0))?;
     let started = std::time::Instant::now();
     let outcome = app.writer.submit(vec![job]).await?;
-    app.metrics
-        .intake_seconds
-        .observe(started.elapsed().as_secs_f64());
+    app.metrics.intake_seconds.observe(started.elapsed().as_secs_f64());
     Ok(match outcome.into_iter().next() {
         Some(Outcome::Created(job)) => {
             let location = HeaderValue::from_str(&format!("/api/v1/jobs/{}", job.id)).ok();
@@ -108,16 +100,12 @@ async fn create_batch(
         .into_iter()
         .enumerate()
         .map(|(i, r)| {
-            app.rules
-                .check(r)
-                .map_err(|e| ApiError::invalid("invalid_job", format!("jobs[{i}]: {}", e.0)))
+            app.rules.check(r).map_err(|e| ApiError::invalid("invalid_job", format!("jobs[{i}]: {}", e.0)))
         })
         .collect::<Result<Vec<_>, _>>()?;
     let started = std::time::Instant::now();
     let outcomes = app.writer.submit(jobs).await?;
-    app.metrics
-        .intake_seconds
-        .observe(started.elapsed().as_secs_f64());
+    app.metrics.intake_seconds.observe(started.elapsed().as_secs_f64());
     let created = outcomes.iter().any(|o| matches!(o, Outcome::Created(_)));
     let jobs = outcomes
         .into_iter()
@@ -125,11 +113,7 @@ async fn create_batch(
             Outcome::Created(j) | Outcome::Existing(j) => j,
         })
         .collect();
-    let status = if created {
-        StatusCode::CREATED
-    } else {
-        StatusCode::OK
-    };
+    let status = if created { StatusCode::CREATED } else { StatusCode::OK };
     Ok((status, Json(BatchResponse { jobs })).into_response())
 }
 
@@ -183,19 +167,13 @@ async fn list_jobs(
 ) -> Result<Json<JobPage>, ApiError> {
     let limit = p.limit.unwrap_or(100);
     if !(1..=1000).contains(&limit) {
-        return Err(ApiError::bad_request(
-            "bad_query",
-            format!("limit must be 1..=1000, got {limit}"),
-        ));
+        return Err(ApiError::bad_request("bad_query", format!("limit must be 1..=1000, got {limit}")));
     }
     let after_id = p
         .cursor
         .map(|c| {
             c.parse::<i64>().ok().filter(|&id| id >= 0).ok_or_else(|| {
-                ApiError::bad_request(
-                    "bad_cursor",
-                    format!("cursor {c:?} is not one this server gave"),
-                )
+                ApiError::bad_request("bad_cursor", format!("cursor {c:?} is not one this server gave"))
             })
         })
         .transpose()?;
@@ -210,9 +188,7 @@ async fn list_jobs(
         limit,
     };
     let jobs = jobs::list(&app.pool, &filter).await?;
-    let next_cursor = (jobs.len() == limit as usize)
-        .then(|| jobs.last().map(|j| j.id.to_string()))
-        .flatten();
+    let next_cursor = (jobs.len() == limit as usize).then(|| jobs.last().map(|j| j.id.to_string())).flatten();
     Ok(Json(JobPage { jobs, next_cursor }))
 }
 
@@ -254,9 +230,7 @@ async fn patch_job(
     Path(id): Path<i64>,
     Json(p): Json<PatchJob>,
 ) -> Result<Json<Job>, ApiError> {
-    Ok(Json(
-        app.writer.change(id, Change::Priority(p.priority)).await?,
-    ))
+    Ok(Json(app.writer.change(id, Change::Priority(p.priority)).await?))
 }
 
 /// A job's history, oldest first.
@@ -283,10 +257,7 @@ async fn job_history(
         (status = 404, description = "No such job", body = ErrorBody),
         (status = 409, description = "The job has ended, or is on a device and cannot be withdrawn", body = ErrorBody),
     ))]
-async fn cancel_job(
-    State(app): State<AppState>,
-    Path(id): Path<i64>,
-) -> Result<Json<Job>, ApiError> {
+async fn cancel_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<Json<Job>, ApiError> {
     let change = Change::Transition {
         transition: Transition::Cancel,
         cause: "cancelled through the API".into(),
@@ -297,10 +268,7 @@ async fn cancel_job(
     match app.writer.change(id, change).await {
         Ok(job) => Ok(Json(job)),
         Err(crate::store::writer::WriteError::Unexpected { state, .. }) if state.is_terminal() => {
-            Err(ApiError::conflict(
-                "job_ended",
-                format!("job {id} is already {state}"),
-            ))
+            Err(ApiError::conflict("job_ended", format!("job {id} is already {state}")))
         }
         Err(crate::store::writer::WriteError::Unexpected { state, .. }) => Err(ApiError::conflict(
             "job_on_device",

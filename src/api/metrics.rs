@@ -45,40 +45,19 @@ impl Default for Metrics {
         let requests = Family::<RequestLabels, Counter>::default();
         let jobs = Family::<StateLabels, Gauge>::default();
         let intake_seconds = Histogram::new(exponential_buckets(0.0001, 2.0, 16));
-        registry.register(
-            "http_requests",
-            "HTTP requests by method, route and status",
-            requests.clone(),
-        );
+        registry.register("http_requests", "HTTP requests by method, route and status", requests.clone());
         registry.register("jobs", "Jobs by state", jobs.clone());
-        registry.register(
-            "intake_seconds",
-            "Time from submission to durable commit",
-            intake_seconds.clone(),
-        );
-        Metrics {
-            registry,
-            requests,
-            jobs,
-            intake_seconds,
-        }
+        registry.register("intake_seconds", "Time from submission to durable commit", intake_seconds.clone());
+        Metrics { registry, requests, jobs, intake_seconds }
     }
 }
 
 /// Middleware: counts every request by method, matched route and status.
 pub async fn count_requests(State(app): State<AppState>, req: Request, next: Next) -> Response {
     let method = req.method().to_string();
-    let route = req
-        .extensions()
-        .get::<MatchedPath>()
-        .map_or("unmatched", |p| p.as_str())
-        .to_owned();
+    let route = req.extensions().get::<MatchedPath>().map_or("unmatched", |p| p.as_str()).to_owned();
     let response = next.run(req).await;
-    let labels = RequestLabels {
-        method,
-        route,
-        status: response.status().as_u16(),
-    };
+    let labels = RequestLabels { method, route, status: response.status().as_u16() };
     app.metrics.requests.get_or_create(&labels).inc();
     response
 }
@@ -87,26 +66,11 @@ pub async fn count_requests(State(app): State<AppState>, req: Request, next: Nex
 pub async fn metrics(State(app): State<AppState>) -> Result<Response, ApiError> {
     let counts = jobs::count_by_state(&app.pool).await?;
     for state in JobState::ALL {
-        let n = counts
-            .iter()
-            .find(|(s, _)| s == state.as_str())
-            .map_or(0, |(_, n)| *n);
-        app.metrics
-            .jobs
-            .get_or_create(&StateLabels {
-                state: state.as_str(),
-            })
-            .set(n);
+        let n = counts.iter().find(|(s, _)| s == state.as_str()).map_or(0, |(_, n)| *n);
+        app.metrics.jobs.get_or_create(&StateLabels { state: state.as_str() }).set(n);
     }
     let mut text = String::new();
     prometheus_client::encoding::text::encode(&mut text, &app.metrics.registry)
         .map_err(|e| ApiError::unavailable(format!("metrics encoding: {e}")))?;
-    Ok((
-        [(
-            header::CONTENT_TYPE,
-            "text/plain; version=0.0.4; charset=utf-8",
-        )],
-        text,
-    )
-        .into_response())
+    Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4; charset=utf-8")], text).into_response())
 }

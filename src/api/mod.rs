@@ -73,9 +73,7 @@ impl Modify for Security {
 /// `/metrics`, documented.
 #[utoipa::path(get, path = "/metrics", tag = "operations",
     responses((status = 200, description = "Prometheus text: rackd_http_requests_total, rackd_jobs, rackd_intake_seconds", content_type = "text/plain")))]
-async fn metrics_route(
-    state: axum::extract::State<AppState>,
-) -> Result<axum::response::Response, ApiError> {
+async fn metrics_route(state: axum::extract::State<AppState>) -> Result<axum::response::Response, ApiError> {
     metrics::metrics(state).await
 }
 
@@ -88,9 +86,7 @@ fn protected_routes() -> OpenApiRouter<AppState> {
 
 /// Routes open to anyone (probes).
 fn public_routes() -> OpenApiRouter<AppState> {
-    OpenApiRouter::new()
-        .routes(routes!(ops::healthz))
-        .routes(routes!(ops::readyz))
+    OpenApiRouter::new().routes(routes!(ops::healthz)).routes(routes!(ops::readyz))
 }
 
 /// The OpenAPI document, as `GET /openapi.json` serves it and `rackd openapi` prints it.
@@ -105,20 +101,14 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
     let (protected, mut doc) = protected_routes().split_for_parts();
     let (public, public_doc) = public_routes().split_for_parts();
     doc.merge(public_doc);
-    let protected = protected.layer(middleware::from_fn_with_state(
-        state.clone(),
-        auth::require_key,
-    ));
+    let protected = protected.layer(middleware::from_fn_with_state(state.clone(), auth::require_key));
     Router::new()
         .merge(protected)
         .merge(public)
         .merge(SwaggerUi::new("/docs").url("/openapi.json", doc))
         .fallback(ops::not_found)
         .method_not_allowed_fallback(ops::method_not_allowed)
-        .layer(middleware::from_fn_with_state(
-            state.clone(),
-            metrics::count_requests,
-        ))
+        .layer(middleware::from_fn_with_state(state.clone(), metrics::count_requests))
         .layer(DefaultBodyLimit::max(body_limit))
         .layer(
             ServiceBuilder::new()
@@ -132,11 +122,7 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
                 }))
                 .layer(TraceLayer::new_for_http())
                 .layer(HandleErrorLayer::new(|_: tower::BoxError| async {
-                    ApiError::new(
-                        StatusCode::SERVICE_UNAVAILABLE,
-                        "timeout",
-                        "the request took too long",
-                    )
+                    ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "timeout", "the request took too long")
                 }))
                 .timeout(timeout),
         )

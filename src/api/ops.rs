@@ -31,13 +31,9 @@ pub async fn healthz() -> Json<Health> {
         (status = 503, description = "Not ready, with the reason", body = ErrorBody),
     ))]
 pub async fn readyz(State(app): State<AppState>) -> Result<Json<Health>, ApiError> {
-    crate::store::ready(&app.pool).await.map_err(|reason| {
-        ApiError::new(
-            axum::http::StatusCode::SERVICE_UNAVAILABLE,
-            "not_ready",
-            reason,
-        )
-    })?;
+    crate::store::ready(&app.pool)
+        .await
+        .map_err(|reason| ApiError::new(axum::http::StatusCode::SERVICE_UNAVAILABLE, "not_ready", reason))?;
     Ok(Json(Health { status: "ok" }))
 }
 

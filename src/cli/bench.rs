@@ -49,11 +49,7 @@ impl Phase {
 
 /// Runs a benchmark and prints its figures.
 pub async fn run(cmd: BenchCommand) -> anyhow::Result<()> {
-    let BenchCommand::Intake {
-        clients,
-        seconds,
-        batch,
-    } = cmd;
+    let BenchCommand::Intake { clients, seconds, batch } = cmd;
     let dir = tempfile::tempdir()?;
     let mut config = Config::demo();
     config.server.listen = "127.0.0.1:0".parse()?;
@@ -65,9 +61,7 @@ pub async fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         let _ = stopped.await;
     }));
     let duration = Duration::from_secs(seconds);
-    let client = reqwest::Client::builder()
-        .pool_max_idle_per_host(clients)
-        .build()?;
+    let client = reqwest::Client::builder().pool_max_idle_per_host(clients).build()?;
     println!(
         "rackd bench intake: {clients} clients, {seconds} s per phase, batches of {batch}, {} cores",
         num_cpus()
@@ -79,31 +73,18 @@ pub async fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     .await?;
     let single = phase("POST /api/v1/jobs", &client, clients, duration, 1, {
         let url = format!("{base}/api/v1/jobs");
-        move |c, n| {
-            c.post(&url)
-                .header("content-type", "application/json")
-                .body(job(n).to_string())
-        }
+        move |c, n| c.post(&url).header("content-type", "application/json").body(job(n).to_string())
     })
     .await?;
-    let batch_phase = phase(
-        "POST /api/v1/jobs/batch",
-        &client,
-        clients,
-        duration,
-        batch as u64,
-        {
-            let url = format!("{base}/api/v1/jobs/batch");
-            move |c, n| {
-                let jobs: Vec<_> = (0..batch as u64)
-                    .map(|i| job(n * batch as u64 + i + (1 << 40)))
-                    .collect();
-                c.post(&url)
-                    .header("content-type", "application/json")
-                    .body(serde_json::json!({ "jobs": jobs }).to_string())
-            }
-        },
-    )
+    let batch_phase = phase("POST /api/v1/jobs/batch", &client, clients, duration, batch as u64, {
+        let url = format!("{base}/api/v1/jobs/batch");
+        move |c, n| {
+            let jobs: Vec<_> = (0..batch as u64).map(|i| job(n * batch as u64 + i + (1 << 40))).collect();
+            c.post(&url)
+                .header("content-type", "application/json")
+                .body(serde_json::json!({ "jobs": jobs }).to_string())
+        }
+    })
     .await?;
     println!(
         "{:<26} {:>12} {:>12} {:>10} {:>10} {:>9}",
@@ -175,11 +156,5 @@ where
         latency_us.add(t.await.context("bench client")??)?;
     }
     let elapsed = started.elapsed();
-    Ok(Phase {
-        name,
-        requests: latency_us.len(),
-        jobs_per_request,
-        elapsed,
-        latency_us,
-    })
+    Ok(Phase { name, requests: latency_us.len(), jobs_per_request, elapsed, latency_us })
 }

@@ -57,11 +57,7 @@ pub enum Command {
     /// Exit 0 if the server at URL answers /healthz (for container health checks).
     Healthcheck {
         /// The server's base URL.
-        #[arg(
-            long,
-            env = "RACKD_HEALTHCHECK_URL",
-            default_value = "http://127.0.0.1:8080"
-        )]
+        #[arg(long, env = "RACKD_HEALTHCHECK_URL", default_value = "http://127.0.0.1:8080")]
         url: String,
     },
     /// Benchmarks (see README).
@@ -111,18 +107,10 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             if args.config.is_none() {
                 tracing::info!("no --config: running the demo site");
             }
-            Application::build(&config, args.insecure)
-                .await?
-                .run_until(shutdown_signal())
-                .await?;
+            Application::build(&config, args.insecure).await?.run_until(shutdown_signal()).await?;
         }
         Command::Openapi => {
-            println!(
-                "{}",
-                crate::api::openapi()
-                    .to_pretty_json()
-                    .context("encoding OpenAPI")?
-            );
+            println!("{}", crate::api::openapi().to_pretty_json().context("encoding OpenAPI")?);
         }
         Command::CheckConfig { file } => match Config::load(&file) {
             Ok(_) => println!("{}: ok", file.display()),
@@ -146,17 +134,11 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 }
             };
             anyhow::ensure!(!key.is_empty(), "an empty key");
-            println!(
-                "{}{}",
-                if generate { "hash: " } else { "" },
-                crate::auth::KeyHash::of(&key)
-            );
+            println!("{}{}", if generate { "hash: " } else { "" }, crate::auth::KeyHash::of(&key));
         }
         Command::Healthcheck { url } => {
             let url = format!("{}/healthz", url.trim_end_matches('/'));
-            let client = reqwest::Client::builder()
-                .timeout(std::time::Duration::from_secs(3))
-                .build()?;
+            let client = reqwest::Client::builder().timeout(std::time::Duration::from_secs(3)).build()?;
             match client.get(&url).send().await {
                 Ok(r) if r.status().is_success() => println!("{url}: ok"),
                 Ok(r) => {

@@ -25,14 +25,8 @@ pub enum JobKind {
 
 impl JobKind {
     /// Every kind, in documentation order.
-    pub const ALL: [JobKind; 6] = [
-        Self::Store,
-        Self::Retrieve,
-        Self::Move,
-        Self::Clear,
-        Self::Light,
-        Self::Travel,
-    ];
+    pub const ALL: [JobKind; 6] =
+        [Self::Store, Self::Retrieve, Self::Move, Self::Clear, Self::Light, Self::Travel];
 
     /// The kind's name as the API writes it.
     pub fn as_str(self) -> &'static str {
@@ -153,18 +147,8 @@ mod tests {
 
     #[test]
     fn spec_serialises_with_its_kind() {
-        let loc = Location {
-            aisle: 1,
-            row: 1,
-            bay: 1,
-            level: 1,
-            position: 1,
-        };
-        let spec = JobSpec::Light {
-            location: loc,
-            color: LightColor::Green,
-            on: true,
-        };
+        let loc = Location { aisle: 1, row: 1, bay: 1, level: 1, position: 1 };
+        let spec = JobSpec::Light { location: loc, color: LightColor::Green, on: true };
         let json = serde_json::to_value(&spec).unwrap();
         assert_eq!(json["kind"], "light");
         assert_eq!(json["color"], "green");

@@ -10,9 +10,7 @@ use super::Invalid;
 /// A place in the store. All numbers count from 1, except `bay` 0, which is the aisle's
 /// station (pick-and-drop point). `row` 1 is A (left), 2 is B (right); `position` is the
 /// box position along a shelf level (shelf PLC) or the depth, 1 near / 2 far (crane).
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, ToSchema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 #[schema(example = json!({"aisle": 1, "row": 1, "bay": 2, "level": 3, "position": 1}))]
 pub struct Location {
@@ -30,11 +28,7 @@ pub struct Location {
 
 impl std::fmt::Display for Location {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{}-{}-{}-{}-{}",
-            self.aisle, self.row, self.bay, self.level, self.position
-        )
+        write!(f, "{}-{}-{}-{}-{}", self.aisle, self.row, self.bay, self.level, self.position)
     }
 }
 
@@ -102,13 +96,7 @@ impl Layout {
             (1..=a.rows).flat_map(move |row| {
                 (1..=a.bays).flat_map(move |bay| {
                     (1..=a.levels).flat_map(move |level| {
-                        (1..=a.positions).map(move |position| Location {
-                            aisle,
-                            row,
-                            bay,
-                            level,
-                            position,
-                        })
+                        (1..=a.positions).map(move |position| Location { aisle, row, bay, level, position })
                     })
                 })
             })
@@ -121,25 +109,11 @@ mod tests {
     use super::*;
 
     fn layout() -> Layout {
-        Layout::new(BTreeMap::from([(
-            1,
-            AisleLayout {
-                rows: 2,
-                bays: 10,
-                levels: 6,
-                positions: 4,
-            },
-        )]))
+        Layout::new(BTreeMap::from([(1, AisleLayout { rows: 2, bays: 10, levels: 6, positions: 4 })]))
     }
 
     fn loc(aisle: u16, row: u16, bay: u16, level: u16, position: u16) -> Location {
-        Location {
-            aisle,
-            row,
-            bay,
-            level,
-            position,
-        }
+        Location { aisle, row, bay, level, position }
     }
 
     #[test]

@@ -119,10 +119,7 @@ impl JobState {
             (Queued | Dispatched | Cancelling, Cancel) => Some(Cancelled),
             _ => None,
         };
-        next.ok_or(IllegalTransition {
-            from: self,
-            transition: t,
-        })
+        next.ok_or(IllegalTransition { from: self, transition: t })
     }
 }
 
@@ -142,13 +139,7 @@ mod tests {
 
     #[test]
     fn the_normal_life() {
-        let s = Queued
-            .apply(Dispatch)
-            .unwrap()
-            .apply(Start)
-            .unwrap()
-            .apply(Complete)
-            .unwrap();
+        let s = Queued.apply(Dispatch).unwrap().apply(Start).unwrap().apply(Complete).unwrap();
         assert_eq!(s, Completed);
     }
 

@@ -29,9 +29,7 @@ impl TryFrom<i64> for Priority {
         if (0..=Self::LEAST_URGENT as i64).contains(&value) {
             Ok(Priority(value as u8))
         } else {
-            Err(Invalid(format!(
-                "priority must be 0..=20 (lower first), got {value}"
-            )))
+            Err(Invalid(format!("priority must be 0..=20 (lower first), got {value}")))
         }
     }
 }
@@ -67,15 +65,10 @@ impl TryFrom<String> for Barcode {
     type Error = Invalid;
     fn try_from(text: String) -> Result<Self, Invalid> {
         if text.is_empty() || text.len() > Self::MAX_LEN {
-            return Err(Invalid(format!(
-                "barcode must be 1..=20 characters, got {}",
-                text.chars().count()
-            )));
+            return Err(Invalid(format!("barcode must be 1..=20 characters, got {}", text.chars().count())));
         }
         if let Some(c) = text.chars().find(|c| !(' '..='~').contains(c)) {
-            return Err(Invalid(format!(
-                "barcode must be printable ASCII, found {c:?}"
-            )));
+            return Err(Invalid(format!("barcode must be printable ASCII, found {c:?}")));
         }
         Ok(Barcode(text))
     }

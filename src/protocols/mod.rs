@@ -51,10 +51,7 @@ pub struct Address {
 impl Address {
     /// The address `offset` items further on in the same area.
     pub fn offset(&self, offset: u32) -> Address {
-        Address {
-            area: self.area.clone(),
-            index: self.index + offset,
-        }
+        Address { area: self.area.clone(), index: self.index + offset }
     }
 }
 

@@ -70,41 +70,27 @@ impl Rules {
             ("color", req.color.is_some()),
             ("on", req.on.is_some()),
         ];
-        for (field, is_present) in present {
-            let wanted = kind.fields().contains(&field);
-            if is_present && !wanted {
-                return Err(Invalid(format!(
-                    "a {} job takes no `{field}`",
-                    kind.as_str()
-                )));
-            }
-            if !is_present && wanted {
-                return Err(Invalid(format!("a {} job needs `{field}`", kind.as_str())));
-            }
+        let wanted = |field: &str| kind.fields().contains(&field);
+        if let Some((field, _)) = present.iter().find(|(f, p)| *p && !wanted(f)) {
+            return Err(Invalid(format!("a {} job takes no `{field}`", kind.as_str())));
+        }
+        if let Some((field, _)) = present.iter().find(|(f, p)| !*p && wanted(f)) {
+            return Err(Invalid(format!("a {} job needs `{field}`", kind.as_str())));
         }
         let missing = || Invalid("internal: field checked above".into());
         let spec = match kind {
-            JobKind::Store => JobSpec::Store {
-                to: req.to.ok_or_else(missing)?,
-            },
-            JobKind::Retrieve => JobSpec::Retrieve {
-                from: req.from.ok_or_else(missing)?,
-            },
-            JobKind::Move => JobSpec::Move {
-                from: req.from.ok_or_else(missing)?,
-                to: req.to.ok_or_else(missing)?,
-            },
-            JobKind::Clear => JobSpec::Clear {
-                location: req.location.ok_or_else(missing)?,
-            },
+            JobKind::Store => JobSpec::Store { to: req.to.ok_or_else(missing)? },
+            JobKind::Retrieve => JobSpec::Retrieve { from: req.from.ok_or_else(missing)? },
+            JobKind::Move => {
+                JobSpec::Move { from: req.from.ok_or_else(missing)?, to: req.to.ok_or_else(missing)? }
+            }
+            JobKind::Clear => JobSpec::Clear { location: req.location.ok_or_else(missing)? },
             JobKind::Light => JobSpec::Light {
                 location: req.location.ok_or_else(missing)?,
                 color: req.color.ok_or_else(missing)?,
                 on: req.on.ok_or_else(missing)?,
             },
-            JobKind::Travel => JobSpec::Travel {
-                to: req.to.ok_or_else(missing)?,
-            },
+            JobKind::Travel => JobSpec::Travel { to: req.to.ok_or_else(missing)? },
         };
         for loc in spec.locations() {
             self.layout.check(&loc)?;
@@ -112,15 +98,9 @@ impl Rules {
         if let JobSpec::Move { from, to } = spec
             && from == to
         {
-            return Err(Invalid(format!(
-                "a move needs two different locations, got {from} twice"
-            )));
+            return Err(Invalid(format!("a move needs two different locations, got {from} twice")));
         }
-        let priority = req
-            .priority
-            .map(Priority::try_from)
-            .transpose()?
-            .unwrap_or_default();
+        let priority = req.priority.map(Priority::try_from).transpose()?.unwrap_or_default();
         let barcode = req.barcode.map(Barcode::try_from).transpose()?;
         if let Some(r) = &req.reference {
             check_reference(r)?;
@@ -129,18 +109,9 @@ impl Rules {
             && !self.devices.contains(d)
         {
             let known: Vec<_> = self.devices.iter().map(String::as_str).collect();
-            return Err(Invalid(format!(
-                "device {d:?} is not configured (devices: [{}])",
-                known.join(", ")
-            )));
+            return Err(Invalid(format!("device {d:?} is not configured (devices: [{}])", known.join(", "))));
         }
-        Ok(NewJob {
-            spec,
-            reference: req.reference,
-            priority,
-            barcode,
-            device: req.device,
-        })
+        Ok(NewJob { spec, reference: req.reference, priority, barcode, device: req.device })
     }
 }
 
@@ -162,16 +133,8 @@ mod tests {
     use crate::domain::AisleLayout;
 
     fn rules() -> Rules {
-        let aisle = AisleLayout {
-            rows: 2,
-            bays: 10,
-            levels: 6,
-            positions: 4,
-        };
-        Rules {
-            layout: Layout::new(BTreeMap::from([(1, aisle)])),
-            devices: BTreeSet::new(),
-        }
+        let aisle = AisleLayout { rows: 2, bays: 10, levels: 6, positions: 4 };
+        Rules { layout: Layout::new(BTreeMap::from([(1, aisle)])), devices: BTreeSet::new() }
     }
 
     fn req(json: serde_json::Value) -> JobRequest {
@@ -183,42 +146,28 @@ mod tests {
 
     #[test]
     fn each_kind_takes_its_fields() {
-        let ok = rules()
-            .check(req(serde_json::json!({"kind": "store", "to": LOC()})))
-            .unwrap();
+        let ok = rules().check(req(serde_json::json!({"kind": "store", "to": LOC()}))).unwrap();
         assert_eq!(ok.priority, Priority::DEFAULT);
-        let err = rules().check(req(
-            serde_json::json!({"kind": "store", "to": LOC(), "from": LOC()}),
-        ));
+        let err = rules().check(req(serde_json::json!({"kind": "store", "to": LOC(), "from": LOC()})));
         assert!(err.unwrap_err().0.contains("takes no `from`"));
-        let err = rules().check(req(
-            serde_json::json!({"kind": "light", "location": LOC(), "color": "red"}),
-        ));
+        let err = rules().check(req(serde_json::json!({"kind": "light", "location": LOC(), "color": "red"})));
         assert!(err.unwrap_err().0.contains("needs `on`"));
     }
 
     #[test]
     fn moves_need_two_places_and_devices_must_exist() {
-        let err = rules().check(req(
-            serde_json::json!({"kind": "move", "from": LOC(), "to": LOC()}),
-        ));
+        let err = rules().check(req(serde_json::json!({"kind": "move", "from": LOC(), "to": LOC()})));
         assert!(err.unwrap_err().0.contains("two different"));
-        let err = rules().check(req(
-            serde_json::json!({"kind": "clear", "location": LOC(), "device": "x"}),
-        ));
+        let err = rules().check(req(serde_json::json!({"kind": "clear", "location": LOC(), "device": "x"})));
         assert!(err.unwrap_err().0.contains("not configured"));
     }
 
     #[test]
     fn references_are_checked() {
         let long = "r".repeat(101);
-        let err = rules().check(req(
-            serde_json::json!({"kind": "store", "to": LOC(), "reference": long}),
-        ));
+        let err = rules().check(req(serde_json::json!({"kind": "store", "to": LOC(), "reference": long})));
         assert!(err.is_err());
-        let err = rules().check(req(
-            serde_json::json!({"kind": "store", "to": LOC(), "reference": "  "}),
-        ));
+        let err = rules().check(req(serde_json::json!({"kind": "store", "to": LOC(), "reference": "  "})));
         assert!(err.is_err());
     }
 }

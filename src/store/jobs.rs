@@ -65,18 +65,9 @@ impl Job {
         Some(match self.kind {
             JobKind::Store => JobSpec::Store { to: self.to? },
             JobKind::Retrieve => JobSpec::Retrieve { from: self.from? },
-            JobKind::Move => JobSpec::Move {
-                from: self.from?,
-                to: self.to?,
-            },
-            JobKind::Clear => JobSpec::Clear {
-                location: self.location?,
-            },
-            JobKind::Light => JobSpec::Light {
-                location: self.location?,
-                color: self.color?,
-                on: self.on?,
-            },
+            JobKind::Move => JobSpec::Move { from: self.from?, to: self.to? },
+            JobKind::Clear => JobSpec::Clear { location: self.location? },
+            JobKind::Light => JobSpec::Light { location: self.location?, color: self.color?, on: self.on? },
             JobKind::Travel => JobSpec::Travel { to: self.to? },
         })
     }
@@ -133,11 +124,9 @@ impl NewJob {
             JobSpec::Retrieve { from } => job.from = Some(from),
             JobSpec::Move { from, to } => (job.from, job.to) = (Some(from), Some(to)),
             JobSpec::Clear { location } => job.location = Some(location),
-            JobSpec::Light {
-                location,
-                color,
-                on,
-            } => (job.location, job.color, job.on) = (Some(location), Some(color), Some(on)),
+            JobSpec::Light { location, color, on } => {
+                (job.location, job.color, job.on) = (Some(location), Some(color), Some(on))
+            }
         }
         job
     }
@@ -201,18 +190,11 @@ const COLUMNS: &str = "id, reference, priority, barcode, spec, device, state, fo
 impl TryFrom<JobRow> for Job {
     type Error = sqlx::Error;
     fn try_from(row: JobRow) -> Result<Job, sqlx::Error> {
-        let corrupt =
-            |what: &str| sqlx::Error::Decode(format!("job {}: bad {what}", row.id).into());
+        let corrupt = |what: &str| sqlx::Error::Decode(format!("job {}: bad {what}", row.id).into());
         let spec: JobSpec = serde_json::from_str(&row.spec).map_err(|_| corrupt("spec"))?;
         let priority = Priority::try_from(row.priority).map_err(|_| corrupt("priority"))?;
         let state = JobState::parse(&row.state).ok_or_else(|| corrupt("state"))?;
-        let new = NewJob {
-            spec,
-            reference: row.reference,
-            priority,
-            barcode: None,
-            device: row.device,
-        };
+        let new = NewJob { spec, reference: row.reference, priority, barcode: None, device: row.device };
         let mut job = new.accepted(row.id, row.created_at);
         job.barcode = row.barcode;
         job.state = state;
@@ -230,10 +212,7 @@ impl TryFrom<JobRow> for Job {
 /// One job by id.
 pub async fn get(db: impl SqliteExecutor<'_>, id: i64) -> Result<Option<Job>, sqlx::Error> {
     let sql = format!("SELECT {COLUMNS} FROM jobs WHERE id = ?");
-    let row: Option<JobRow> = sqlx::query_as(sqlx::AssertSqlSafe(sql))
-        .bind(id)
-        .fetch_optional(db)
-        .await?;
+    let row: Option<JobRow> = sqlx::query_as(sqlx::AssertSqlSafe(sql)).bind(id).fetch_optional(db).await?;
     row.map(Job::try_from).transpose()
 }
 
@@ -245,9 +224,8 @@ pub async fn by_references(
     if references.is_empty() {
         return Ok(Vec::new());
     }
-    let mut q = QueryBuilder::<Sqlite>::new(format!(
-        "SELECT request, {COLUMNS} FROM jobs WHERE reference IN ("
-    ));
+    let mut q =
+        QueryBuilder::<Sqlite>::new(format!("SELECT request, {COLUMNS} FROM jobs WHERE reference IN ("));
     let mut list = q.separated(", ");
     for r in references {
         list.push_bind(*r);
@@ -260,16 +238,11 @@ pub async fn by_references(
         row: JobRow,
     }
     let rows: Vec<WithRequest> = q.build_query_as().fetch_all(db).await?;
-    rows.into_iter()
-        .map(|r| Ok((r.request, Job::try_from(r.row)?)))
-        .collect()
+    rows.into_iter().map(|r| Ok((r.request, Job::try_from(r.row)?))).collect()
 }
 
 /// Jobs matching `filter`, in id order.
-pub async fn list(
-    db: impl SqliteExecutor<'_>,
-    filter: &JobFilter,
-) -> Result<Vec<Job>, sqlx::Error> {
+pub async fn list(db: impl SqliteExecutor<'_>, filter: &JobFilter) -> Result<Vec<Job>, sqlx::Error> {
     let mut q = QueryBuilder::<Sqlite>::new(format!("SELECT {COLUMNS} FROM jobs WHERE 1 = 1"));
     if let Some(s) = filter.state {
         q.push(" AND state = ").push_bind(s.as_str());
@@ -306,23 +279,14 @@ pub async fn history(db: impl SqliteExecutor<'_>, id: i64) -> Result<Vec<JobEven
             .await?;
     rows.into_iter()
         .map(|(state, cause, at)| {
-            let state = JobState::parse(&state).ok_or_else(|| {
-                sqlx::Error::Decode(format!("job {id}: bad history state").into())
-            })?;
-            Ok(JobEvent {
-                state,
-                cause,
-                at: from_ms(at),
-            })
+            let state = JobState::parse(&state)
+                .ok_or_else(|| sqlx::Error::Decode(format!("job {id}: bad history state").into()))?;
+            Ok(JobEvent { state, cause, at: from_ms(at) })
         })
         .collect()
 }
 
 /// How many jobs are in each state.
-pub async fn count_by_state(
-    db: impl SqliteExecutor<'_>,
-) -> Result<Vec<(String, i64)>, sqlx::Error> {
-    sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state")
-        .fetch_all(db)
-        .await
+pub async fn count_by_state(db: impl SqliteExecutor<'_>) -> Result<Vec<(String, i64)>, sqlx::Error> {
+    sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetch_all(db).await
 }

@@ -32,26 +32,19 @@ pub async fn open(path: &Path, busy_timeout: Duration) -> Result<SqlitePool, sql
         .synchronous(SqliteSynchronous::Full)
         .busy_timeout(busy_timeout)
         .foreign_keys(true);
-    let pool = SqlitePoolOptions::new()
-        .max_connections(8)
-        .connect_with(options)
-        .await?;
+    let pool = SqlitePoolOptions::new().max_connections(8).connect_with(options).await?;
     MIGRATOR.run(&pool).await?;
     Ok(pool)
 }
 
 /// Whether the database answers and every embedded migration is applied.
 pub async fn ready(pool: &SqlitePool) -> Result<(), String> {
-    let applied: Vec<i64> =
-        sqlx::query_scalar("SELECT version FROM _sqlx_migrations WHERE success = 1")
-            .fetch_all(pool)
-            .await
-            .map_err(|e| format!("database unreachable: {e}"))?;
+    let applied: Vec<i64> = sqlx::query_scalar("SELECT version FROM _sqlx_migrations WHERE success = 1")
+        .fetch_all(pool)
+        .await
+        .map_err(|e| format!("database unreachable: {e}"))?;
     match MIGRATOR.iter().find(|m| !applied.contains(&m.version)) {
-        Some(m) => Err(format!(
-            "migration {} ({}) not applied",
-            m.version, m.description
-        )),
+        Some(m) => Err(format!("migration {} ({}) not applied", m.version, m.description)),
         None => Ok(()),
     }
 }

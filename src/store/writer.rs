@@ -77,15 +77,8 @@ pub enum WriteError {
 }
 
 enum Command {
-    Submit {
-        jobs: Vec<NewJob>,
-        reply: oneshot::Sender<Result<Vec<Outcome>, WriteError>>,
-    },
-    Change {
-        id: i64,
-        change: Change,
-        reply: oneshot::Sender<Result<Job, WriteError>>,
-    },
+    Submit { jobs: Vec<NewJob>, reply: oneshot::Sender<Result<Vec<Outcome>, WriteError>> },
+    Change { id: i64, change: Change, reply: oneshot::Sender<Result<Job, WriteError>> },
 }
 
 /// The handle callers use to send commands to the writer task.
@@ -106,20 +99,14 @@ impl Writer {
     /// Stores `jobs` all or nothing, answering once they are on disk.
     pub async fn submit(&self, jobs: Vec<NewJob>) -> Result<Vec<Outcome>, WriteError> {
         let (reply, answer) = oneshot::channel();
-        self.tx
-            .send(Command::Submit { jobs, reply })
-            .await
-            .map_err(|_| WriteError::Closed)?;
+        self.tx.send(Command::Submit { jobs, reply }).await.map_err(|_| WriteError::Closed)?;
         answer.await.map_err(|_| WriteError::Closed)?
     }
 
     /// Applies `change` to job `id`, answering with the job once it is on disk.
     pub async fn change(&self, id: i64, change: Change) -> Result<Job, WriteError> {
         let (reply, answer) = oneshot::channel();
-        self.tx
-            .send(Command::Change { id, change, reply })
-            .await
-            .map_err(|_| WriteError::Closed)?;
+        self.tx.send(Command::Change { id, change, reply }).await.map_err(|_| WriteError::Closed)?;
         answer.await.map_err(|_| WriteError::Closed)?
     }
 }
@@ -157,15 +144,12 @@ enum Answer {
 async fn commit(pool: &SqlitePool, group: &[Command]) -> Result<Vec<Answer>, sqlx::Error> {
     let mut tx = pool.begin().await?;
     let now = now_ms();
-    let mut next_id: i64 = sqlx::query_scalar("SELECT COALESCE(MAX(id), 0) + 1 FROM jobs")
-        .fetch_one(&mut *tx)
-        .await?;
+    let mut next_id: i64 =
+        sqlx::query_scalar("SELECT COALESCE(MAX(id), 0) + 1 FROM jobs").fetch_one(&mut *tx).await?;
     let references: Vec<&str> = group
         .iter()
         .flat_map(|c| match c {
-            Command::Submit { jobs, .. } => {
-                jobs.iter().filter_map(|j| j.reference.as_deref()).collect()
-            }
+            Command::Submit { jobs, .. } => jobs.iter().filter_map(|j| j.reference.as_deref()).collect(),
             Command::Change { .. } => Vec::new(),
         })
         .collect();
@@ -207,10 +191,7 @@ fn plan(
     for new in jobs {
         let request = new.canonical();
         if let Some(reference) = new.reference.as_deref() {
-            let seen = local
-                .get(reference)
-                .map(|&i| &created[i])
-                .or_else(|| known.get(reference));
+            let seen = local.get(reference).map(|&i| &created[i]).or_else(|| known.get(reference));
             if let Some((stored, job)) = seen {
                 if *stored != request {
                     return Err(WriteError::Conflict(reference.to_owned()));
@@ -229,14 +210,8 @@ fn plan(
         if let Some(r) = &job.reference {
             known.insert(r.clone(), (request.clone(), job.clone()));
         }
-        pending
-            .history
-            .push((job.id, JobState::Queued, "accepted".to_owned(), now));
-        pending.events.push((
-            "job.updated",
-            serde_json::to_string(&job).unwrap_or_default(),
-            now,
-        ));
+        pending.history.push((job.id, JobState::Queued, "accepted".to_owned(), now));
+        pending.events.push(("job.updated", serde_json::to_string(&job).unwrap_or_default(), now));
         pending.jobs.push((request, job));
     }
     Ok(outcomes)
@@ -253,21 +228,9 @@ async fn apply(
         return Ok(Err(WriteError::NotFound(id)));
     };
     let cause = match change {
-        Change::Transition {
-            transition,
-            cause,
-            expect,
-            failure,
-            forced,
-        } => {
-            if expect
-                .as_ref()
-                .is_some_and(|states| !states.contains(&job.state))
-            {
-                return Ok(Err(WriteError::Unexpected {
-                    id,
-                    state: job.state,
-                }));
+        Change::Transition { transition, cause, expect, failure, forced } => {
+            if expect.as_ref().is_some_and(|states| !states.contains(&job.state)) {
+                return Ok(Err(WriteError::Unexpected { id, state: job.state }));
             }
             job.state = match job.state.apply(*transition) {
                 Ok(state) => state,
@@ -281,10 +244,7 @@ async fn apply(
         }
         Change::Priority(p) => {
             if job.state != JobState::Queued {
-                return Ok(Err(WriteError::Unexpected {
-                    id,
-                    state: job.state,
-                }));
+                return Ok(Err(WriteError::Unexpected { id, state: job.state }));
             }
             let cause = format!("priority {} -> {}", job.priority, p.get());
             job.priority = p.get();
@@ -309,11 +269,7 @@ async fn apply(
     .await?;
     let mut pending = Pending::default();
     pending.history.push((id, job.state, cause, now));
-    pending.events.push((
-        "job.updated",
-        serde_json::to_string(&job).unwrap_or_default(),
-        now,
-    ));
+    pending.events.push(("job.updated", serde_json::to_string(&job).unwrap_or_default(), now));
     pending.flush(tx).await?;
     Ok(Ok(job))
 }
@@ -354,13 +310,9 @@ impl Pending {
             q.build().execute(&mut **tx).await?;
         }
         for chunk in self.history.chunks(ROWS_PER_INSERT) {
-            let mut q =
-                QueryBuilder::<Sqlite>::new("INSERT INTO job_history (job_id, state, cause, at) ");
+            let mut q = QueryBuilder::<Sqlite>::new("INSERT INTO job_history (job_id, state, cause, at) ");
             q.push_values(chunk, |mut row, (id, state, cause, at)| {
-                row.push_bind(*id)
-                    .push_bind(state.as_str())
-                    .push_bind(cause.clone())
-                    .push_bind(*at);
+                row.push_bind(*id).push_bind(state.as_str()).push_bind(cause.clone()).push_bind(*at);
             });
             q.build().execute(&mut **tx).await?;
         }

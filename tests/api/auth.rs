@@ -1,0 +1,78 @@
+//! The auth matrix: each role against each route group, missing and wrong keys, and the
+//! loopback rule without keys.
+
+use rackd::app::Application;
+use rackd::auth::{KeyHash, Role};
+use rackd::config::{Config, KeyConfig};
+use serde_json::json;
+
+use crate::helpers::*;
+
+fn key(name: &str, role: Role) -> KeyConfig {
+    KeyConfig { name: name.into(), role, hash: KeyHash::of(&format!("key-{name}")) }
+}
+
+#[tokio::test]
+async fn each_role_reaches_exactly_its_routes() {
+    let app = spawn_with(|c| {
+        c.auth.keys = vec![key("v", Role::Viewer), key("o", Role::Operator), key("a", Role::Admin)];
+    })
+    .await;
+    // (method, path, body, lowest role allowed); None = public.
+    let routes: Vec<(&str, &str, Option<serde_json::Value>, Option<Role>)> = vec![
+        ("GET", "/healthz", None, None),
+        ("GET", "/readyz", None, None),
+        ("GET", "/openapi.json", None, None),
+        ("GET", "/api/v1/jobs", None, Some(Role::Viewer)),
+        ("GET", "/metrics", None, Some(Role::Viewer)),
+        ("POST", "/api/v1/jobs", Some(store("AUTH-1")), Some(Role::Operator)),
+        ("POST", "/api/v1/jobs/batch", Some(json!({"jobs": [store("AUTH-2")]})), Some(Role::Operator)),
+        ("PATCH", "/api/v1/jobs/1", Some(json!({"priority": 1})), Some(Role::Operator)),
+        ("POST", "/api/v1/jobs/1/cancel", None, Some(Role::Operator)),
+    ];
+    let callers: [(Option<&str>, Option<Role>); 5] = [
+        (None, None),
+        (Some("wrong"), None),
+        (Some("key-v"), Some(Role::Viewer)),
+        (Some("key-o"), Some(Role::Operator)),
+        (Some("key-a"), Some(Role::Admin)),
+    ];
+    for (method, path, body, needed) in &routes {
+        for (presented, role) in &callers {
+            let mut req = app.client.request(method.parse().unwrap(), app.url(path));
+            if let Some(k) = presented {
+                req = req.bearer_auth(k);
+            }
+            if let Some(b) = body {
+                req = req.json(b);
+            }
+            let got = split(req.send().await.unwrap()).await;
+            match (needed, role) {
+                (None, _) => assert_eq!(got.0, 200, "{method} {path} is public"),
+                (Some(_), None) => assert_error(&got, 401, "unauthorized"),
+                (Some(n), Some(r)) if r < n => assert_error(&got, 403, "forbidden"),
+                (Some(_), Some(_)) => assert!(
+                    ![401, 403].contains(&got.0) && got.0 < 500,
+                    "{method} {path} as {presented:?}: {got:?}"
+                ),
+            }
+        }
+    }
+    let r = app.client.get(app.url("/api/v1/jobs")).header("x-api-key", "key-v").send().await.unwrap();
+    assert_eq!(r.status(), 200, "X-Api-Key works too");
+    let r = app.client.get(app.url("/api/v1/jobs")).send().await.unwrap();
+    assert_eq!(r.headers()["www-authenticate"], "Bearer");
+}
+
+#[tokio::test]
+async fn without_keys_only_loopback_is_served() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = Config::demo();
+    config.database.path = dir.path().join("db");
+    config.server.listen = "0.0.0.0:0".parse().unwrap();
+    let err = Application::build(&config, false).await.err().expect("refused");
+    assert!(err.to_string().contains("--insecure"), "{err}");
+    assert!(Application::build(&config, true).await.is_ok(), "--insecure allows it");
+    config.auth.keys = vec![key("a", Role::Admin)];
+    assert!(Application::build(&config, false).await.is_ok(), "keys allow it");
+}

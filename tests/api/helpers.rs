@@ -1,0 +1,98 @@
+//! Starting and stopping a real rackd for a test.
+
+use std::path::PathBuf;
+
+use rackd::app::Application;
+use rackd::config::Config;
+use serde_json::{Value, json};
+use tokio::sync::oneshot;
+use tokio::task::JoinHandle;
+
+/// A running server and a client for it.
+pub struct TestApp {
+    pub base: String,
+    pub client: reqwest::Client,
+    pub db: PathBuf,
+    stop: Option<oneshot::Sender<()>>,
+    task: Option<JoinHandle<anyhow::Result<()>>>,
+    _dir: Option<tempfile::TempDir>,
+}
+
+/// Starts the demo site on a fresh temporary database.
+pub async fn spawn_app() -> TestApp {
+    spawn_with(|_| {}).await
+}
+
+/// Starts a server with the demo config changed by `edit`, on a fresh temporary database.
+pub async fn spawn_with(edit: impl FnOnce(&mut Config)) -> TestApp {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("rackd.db");
+    let mut app = spawn_on(db, edit).await;
+    app._dir = Some(dir);
+    app
+}
+
+/// Starts a server on an existing database file.
+pub async fn spawn_on(db: PathBuf, edit: impl FnOnce(&mut Config)) -> TestApp {
+    let mut config = Config::demo();
+    config.server.listen = "127.0.0.1:0".parse().unwrap();
+    config.database.path = db.clone();
+    edit(&mut config);
+    let app = Application::build(&config, false).await.expect("server starts");
+    let base = format!("http://{}", app.local_addr());
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(app.run_until(async {
+        let _ = stopped.await;
+    }));
+    TestApp { base, client: reqwest::Client::new(), db, stop: Some(stop), task: Some(task), _dir: None }
+}
+
+impl TestApp {
+    /// Stops the server gracefully and waits until it has finished; keeps the database.
+    pub async fn stop(mut self) -> (PathBuf, Option<tempfile::TempDir>) {
+        let _ = self.stop.take().unwrap().send(());
+        self.task.take().unwrap().await.unwrap().unwrap();
+        (self.db.clone(), self._dir.take())
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("{}{path}", self.base)
+    }
+
+    pub async fn post(&self, path: &str, body: &Value) -> (u16, Value) {
+        let r = self.client.post(self.url(path)).json(body).send().await.unwrap();
+        split(r).await
+    }
+
+    pub async fn get(&self, path: &str) -> (u16, Value) {
+        split(self.client.get(self.url(path)).send().await.unwrap()).await
+    }
+
+    pub async fn patch(&self, path: &str, body: &Value) -> (u16, Value) {
+        split(self.client.patch(self.url(path)).json(body).send().await.unwrap()).await
+    }
+}
+
+/// Status and JSON body of a response (Null when the body is not JSON).
+pub async fn split(r: reqwest::Response) -> (u16, Value) {
+    let status = r.status().as_u16();
+    let text = r.text().await.unwrap();
+    (status, serde_json::from_str(&text).unwrap_or(Value::Null))
+}
+
+/// Asserts an error answer: its status and code, with a non-empty message.
+pub fn assert_error(got: &(u16, Value), status: u16, code: &str) {
+    assert_eq!(got.0, status, "{got:?}");
+    assert_eq!(got.1["error"]["code"], code, "{got:?}");
+    assert!(got.1["error"]["message"].as_str().is_some_and(|m| !m.is_empty()), "{got:?}");
+}
+
+/// A location of the demo site.
+pub fn loc(row: u16, bay: u16, level: u16, position: u16) -> Value {
+    json!({"aisle": 1, "row": row, "bay": bay, "level": level, "position": position})
+}
+
+/// A valid store job.
+pub fn store(reference: &str) -> Value {
+    json!({"kind": "store", "reference": reference, "barcode": "BOX-1", "to": loc(1, 2, 3, 1)})
+}

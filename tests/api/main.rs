@@ -1,0 +1,11 @@
+//! Integration tests of the HTTP API: the real server on 127.0.0.1:0 with a temporary
+//! SQLite file, spoken to over real HTTP.
+
+mod auth;
+mod cli;
+mod errors;
+mod helpers;
+mod jobs;
+mod lifecycle;
+mod openapi;
+mod paging;

@@ -1,0 +1,46 @@
+//! The committed OpenAPI document matches the code, and every request example in it is a
+//! valid request against the demo site.
+
+use crate::helpers::*;
+
+#[test]
+fn committed_openapi_matches_the_code() {
+    let generated = rackd::api::openapi().to_pretty_json().unwrap();
+    let committed =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.json")).unwrap();
+    assert!(
+        committed.trim_end() == generated.trim_end(),
+        "openapi/openapi.json is stale: run `cargo run -- openapi > openapi/openapi.json`"
+    );
+}
+
+#[tokio::test]
+async fn every_request_example_is_accepted_by_the_demo_site() {
+    let app = spawn_app().await;
+    let doc: serde_json::Value = serde_json::from_str(&rackd::api::openapi().to_json().unwrap()).unwrap();
+    let mut tried = 0;
+    for (path, item) in doc["paths"].as_object().unwrap() {
+        for (method, op) in item.as_object().unwrap() {
+            let Some(schema_ref) = op.pointer("/requestBody/content/application~1json/schema/$ref") else {
+                continue;
+            };
+            let name = schema_ref.as_str().unwrap().rsplit('/').next().unwrap();
+            let example = &doc["components"]["schemas"][name]["example"];
+            assert!(!example.is_null(), "{method} {path}: schema {name} has no example");
+            // Make sure a job exists for the example's path parameters.
+            let (_, job) = app.post("/api/v1/jobs", &store(&format!("example-{tried}"))).await;
+            let path = path.replace("{id}", &job["id"].to_string());
+            let r = app
+                .client
+                .request(method.to_uppercase().parse().unwrap(), app.url(&path))
+                .json(example)
+                .send()
+                .await
+                .unwrap();
+            let (status, body) = split(r).await;
+            assert!((200..300).contains(&status), "{method} {path} with {example}: {status} {body}");
+            tried += 1;
+        }
+    }
+    assert!(tried >= 3, "request bodies found: {tried}");
+}
