@@ -44,7 +44,8 @@ impl Application {
         let pool = store::open(&db.path, Duration::from_millis(db.busy_timeout_ms))
             .await
             .with_context(|| format!("opening database {}", db.path.display()))?;
-        let (writer, writer_task) = Writer::start(pool.clone(), config.intake.max_group, config.intake.queue);
+        let (writer, writer_task) =
+            Writer::start(pool.clone(), config.intake.max_group, config.intake.queue, None);
         let state = AppState {
             pool,
             writer,

@@ -1,3 +1,4 @@
 //! The service layer: job intake, and later scheduling, dispatch and the event bus.
 
+pub mod dispatch;
 pub mod intake;

@@ -290,3 +290,13 @@ pub async fn history(db: impl SqliteExecutor<'_>, id: i64) -> Result<Vec<JobEven
 pub async fn count_by_state(db: impl SqliteExecutor<'_>) -> Result<Vec<(String, i64)>, sqlx::Error> {
     sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetch_all(db).await
 }
+
+/// Every job of `device` that has not ended, oldest first.
+pub async fn unfinished(db: impl SqliteExecutor<'_>, device: &str) -> Result<Vec<Job>, sqlx::Error> {
+    let sql = format!(
+        "SELECT {COLUMNS} FROM jobs WHERE device = ? \
+         AND state IN ('queued', 'dispatched', 'running', 'cancelling') ORDER BY id"
+    );
+    let rows: Vec<JobRow> = sqlx::query_as(sqlx::AssertSqlSafe(sql)).bind(device).fetch_all(db).await?;
+    rows.into_iter().map(Job::try_from).collect()
+}

@@ -5,6 +5,7 @@
 //! writer task ([`writer::Writer`]) that commits many requests per transaction.
 
 pub mod jobs;
+pub mod locations;
 pub mod time;
 pub mod writer;
 

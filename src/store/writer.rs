@@ -15,6 +15,7 @@ use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
 
 use super::jobs::{self, Job, NewJob};
+use super::locations;
 use super::time::{from_ms, now_ms};
 use crate::domain::state::IllegalTransition;
 use crate::domain::{Failure, JobState, Priority, Transition};
@@ -81,6 +82,10 @@ enum Command {
     Change { id: i64, change: Change, reply: oneshot::Sender<Result<Job, WriteError>> },
 }
 
+/// Called after each commit with every job the commit created or changed (dispatchers use
+/// it to hear of new work within milliseconds instead of polling the database).
+pub type Wake = Arc<dyn Fn(&Job) + Send + Sync>;
+
 /// The handle callers use to send commands to the writer task.
 #[derive(Clone)]
 pub struct Writer {
@@ -90,9 +95,9 @@ pub struct Writer {
 impl Writer {
     /// Starts the writer task. It stops once every handle is dropped and what was sent
     /// before is committed; await the returned handle to know when.
-    pub fn start(pool: SqlitePool, max_group: usize, queue: usize) -> (Writer, JoinHandle<()>) {
+    pub fn start(pool: SqlitePool, max_group: usize, queue: usize, wake: Option<Wake>) -> (Writer, JoinHandle<()>) {
         let (tx, rx) = mpsc::channel(queue);
-        let task = tokio::spawn(run(pool, rx, max_group));
+        let task = tokio::spawn(run(pool, rx, max_group, wake));
         (Writer { tx }, task)
     }
 
@@ -111,7 +116,7 @@ impl Writer {
     }
 }
 
-async fn run(pool: SqlitePool, mut rx: mpsc::Receiver<Command>, max_group: usize) {
+async fn run(pool: SqlitePool, mut rx: mpsc::Receiver<Command>, max_group: usize, wake: Option<Wake>) {
     let mut group = Vec::with_capacity(max_group);
     while rx.recv_many(&mut group, max_group).await > 0 {
         let results = match commit(&pool, &group).await {
@@ -122,6 +127,19 @@ async fn run(pool: SqlitePool, mut rx: mpsc::Receiver<Command>, max_group: usize
                 group.iter().map(|_| Answer::Failed(e.clone())).collect()
             }
         };
+        if let Some(wake) = &wake {
+            for answer in &results {
+                match answer {
+                    Answer::Submitted(Ok(outcomes)) => outcomes.iter().for_each(|o| {
+                        if let Outcome::Created(job) = o {
+                            wake(job)
+                        }
+                    }),
+                    Answer::Changed(Ok(job)) => wake(job),
+                    _ => {}
+                }
+            }
+        }
         for (cmd, result) in group.drain(..).zip(results) {
             match (cmd, result) {
                 (Command::Submit { reply, .. }, Answer::Submitted(r)) => drop(reply.send(r)),
@@ -252,6 +270,21 @@ async fn apply(
         }
     };
     job.updated_at = from_ms(now);
+    let mut pending = Pending::default();
+    if let (Change::Transition { transition: Transition::Dispatch, .. }, Some(spec)) = (change, job.spec()) {
+        locations::reserve(&mut **tx, id, &spec.locations(), true).await?;
+    }
+    if job.state.is_terminal() {
+        if let (JobState::Completed, Some(spec)) = (job.state, job.spec()) {
+            for l in locations::complete(&mut **tx, &spec, job.barcode.as_deref(), now).await? {
+                if let Some(state) = locations::get(&mut **tx, l).await? {
+                    let data = serde_json::to_string(&state).unwrap_or_default();
+                    pending.events.push(("location.updated", data, now));
+                }
+            }
+        }
+        locations::reserve(&mut **tx, id, &[], false).await?;
+    }
     let f = job.failure.as_ref();
     sqlx::query(
         "UPDATE jobs SET state = ?, priority = ?, forced = ?, failure_kind = ?, failure_code = ?, \
@@ -267,7 +300,6 @@ async fn apply(
     .bind(id)
     .execute(&mut **tx)
     .await?;
-    let mut pending = Pending::default();
     pending.history.push((id, job.state, cause, now));
     pending.events.push(("job.updated", serde_json::to_string(&job).unwrap_or_default(), now));
     pending.flush(tx).await?;

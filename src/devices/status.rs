@@ -1,0 +1,56 @@
+//! A device's status as the API shows it.
+
+use serde::Serialize;
+use time::OffsetDateTime;
+use utoipa::ToSchema;
+
+/// What rackd knows of a device right now.
+#[derive(Clone, Debug, Serialize, ToSchema)]
+#[schema(example = json!({"id": "shelf1", "kind": "shelf", "protocol": "modbus-udp", "address": "127.0.0.1:1502",
+    "online": true, "paused": false, "last_contact": "2026-11-21T08:00:00.000Z", "slots_total": 60,
+    "slots_in_use": 3, "consecutive_failures": 0, "last_error": null}))]
+pub struct DeviceStatus {
+    /// The device's id from the configuration.
+    pub id: String,
+    /// What kind of machine it is.
+    pub kind: super::DeviceKind,
+    /// How rackd talks to it.
+    pub protocol: String,
+    /// Where it is.
+    pub address: String,
+    /// It answered recently (fewer than the configured number of consecutive failures).
+    pub online: bool,
+    /// Paused by an operator: gets no new work.
+    pub paused: bool,
+    /// When it last answered.
+    #[serde(with = "time::serde::rfc3339::option")]
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub last_contact: Option<OffsetDateTime>,
+    /// Task slots (shelf PLC) or task places it has.
+    pub slots_total: u16,
+    /// Slots holding rackd's work.
+    pub slots_in_use: u16,
+    /// Requests in a row that failed.
+    pub consecutive_failures: u32,
+    /// The last error, if any.
+    pub last_error: Option<String>,
+}
+
+impl DeviceStatus {
+    /// The status of a device not yet heard from.
+    pub fn new(id: &str, kind: super::DeviceKind, protocol: &str, address: &str, slots_total: u16) -> Self {
+        DeviceStatus {
+            id: id.to_owned(),
+            kind,
+            protocol: protocol.to_owned(),
+            address: address.to_owned(),
+            online: false,
+            paused: false,
+            last_contact: None,
+            slots_total,
+            slots_in_use: 0,
+            consecutive_failures: 0,
+            last_error: None,
+        }
+    }
+}

@@ -1,0 +1,88 @@
+//! Opening a PLC connection from configuration: protocol name, address and the protocol's
+//! settings, to a [`PlcMemory`] that device adapters use without knowing the protocol.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use super::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
+use super::{PlcError, PlcMemory};
+
+/// The protocols a device can be reached with.
+pub const PROTOCOLS: &[&str] = &["modbus-udp", "modbus-tcp", "modbus-rtu", "modbus-rtu-tcp"];
+
+/// How to reach one PLC.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinkConfig {
+    /// One of [`PROTOCOLS`].
+    pub protocol: String,
+    /// `HOST:PORT`, or a serial device path for serial protocols.
+    pub address: String,
+    /// Unit / station number.
+    pub unit: u8,
+    /// Serial settings (`9600,8E1`) for serial protocols.
+    pub serial: Option<String>,
+    /// Reply timeout per attempt.
+    pub timeout: Duration,
+    /// Resends after a timeout or bad reply.
+    pub retries: u32,
+    /// Protocol quirks by name (`length0`, `no-transaction-id`).
+    pub quirks: Vec<String>,
+}
+
+/// Why a link configuration cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// The protocol name is not known.
+    #[error("unknown protocol {0:?} (known: {known})", known = PROTOCOLS.join(", "))]
+    UnknownProtocol(String),
+    /// A setting is wrong for the protocol.
+    #[error("{0}")]
+    Setting(String),
+    /// The connection could not be set up.
+    #[error(transparent)]
+    Plc(#[from] PlcError),
+}
+
+impl LinkConfig {
+    /// Checks the settings without connecting (for `rackd check-config`).
+    pub fn check(&self) -> Result<(), LinkError> {
+        self.modbus().map(|_| ())
+    }
+
+    fn modbus(&self) -> Result<ModbusConfig, LinkError> {
+        let transport = match self.protocol.as_str() {
+            "modbus-udp" => Transport::Udp,
+            "modbus-tcp" => Transport::Tcp,
+            "modbus-rtu" => Transport::RtuSerial,
+            "modbus-rtu-tcp" => Transport::RtuOverTcp,
+            other => return Err(LinkError::UnknownProtocol(other.to_owned())),
+        };
+        let mut config = ModbusConfig::new(transport, self.address.clone());
+        config.unit = self.unit;
+        config.timeout = self.timeout;
+        config.retries = self.retries;
+        if let Some(serial) = &self.serial {
+            config.serial = serial.parse().map_err(|e: super::serial::SerialSettingsError| LinkError::Setting(e.to_string()))?;
+        }
+        let mut quirks = Quirks::default();
+        for q in &self.quirks {
+            match q.as_str() {
+                "length0" => quirks.length0 = true,
+                "no-transaction-id" => quirks.ignore_transaction_id = true,
+                other => {
+                    return Err(LinkError::Setting(format!(
+                        "unknown quirk {other:?} (known: length0, no-transaction-id)"
+                    )));
+                }
+            }
+        }
+        config.quirks = quirks;
+        Ok(config)
+    }
+}
+
+/// Opens the PLC connection a configuration describes. Connection-oriented transports
+/// connect lazily, so a PLC that is down at start does not stop rackd.
+pub async fn connect(config: &LinkConfig) -> Result<Arc<dyn PlcMemory>, LinkError> {
+    Ok(Arc::new(ModbusClient::connect(config.modbus()?).await?))
+}
