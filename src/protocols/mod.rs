@@ -10,6 +10,8 @@
 //! [`Address`] with [`PlcMemory::parse_address`].
 
 pub mod error;
+pub mod modbus;
+pub mod serial;
 
 use async_trait::async_trait;
 
