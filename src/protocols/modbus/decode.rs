@@ -244,3 +244,7 @@ pub fn response_pdu_len(prefix: &[u8]) -> Result<Option<usize>, DecodeError> {
         other => Err(DecodeError::UnknownFunction(other)),
     }
 }
+
+#[cfg(test)]
+#[path = "decode_tests.rs"]
+mod tests;
