@@ -1,3 +1,4 @@
 //! rackd: a warehouse control system.
 
+pub mod cli;
 pub mod protocols;

@@ -1,0 +1,4 @@
+//! Command-line subcommands; `src/main.rs` only parses and dispatches.
+
+pub mod plc;
+pub mod sim_modbus;
