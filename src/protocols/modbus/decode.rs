@@ -101,6 +101,9 @@ impl Request {
     /// Decodes a request PDU (function code first), as a server receives it.
     pub fn decode(pdu: &[u8]) -> Result<Request, DecodeError> {
         let (&f, d) = pdu.split_first().ok_or(DecodeError::Empty)?;
+        if request_pdu_len(pdu).is_err() {
+            return Err(DecodeError::UnknownFunction(f));
+        }
         let (a, n) = (word(d, 0)?, word(d, 2)?);
         let req = match f {
             fc::READ_COILS => Request::ReadCoils { address: a, count: count_in(n, pdu::MAX_READ_BITS)? },
