@@ -115,6 +115,7 @@ fn malformed_requests() {
         ("01 00 00 07 D1", DecodeError::BadCount),
         ("05 00 AC 12 34", DecodeError::BadCoilValue),
         ("07 00 00 00 00", DecodeError::UnknownFunction(7)),
+        ("2B", DecodeError::UnknownFunction(0x2B)),
         ("08 00 01 00 00", DecodeError::UnknownSubFunction),
         ("0F 00 13 00 0A 01 CD", DecodeError::ByteCountMismatch),
         ("0F 00 13 00 0A 02 CD", DecodeError::Truncated),
