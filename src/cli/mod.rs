@@ -1,7 +1,10 @@
 //! The command line: `rackd serve`, `openapi`, `check-config`, `hash-key`, `healthcheck`,
-//! `bench`.
+//! `plc`, `sim`, `bench`.
 
 pub mod bench;
+pub mod plc;
+pub mod sim;
+pub mod sim_modbus;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -60,6 +63,11 @@ pub enum Command {
         #[arg(long, env = "RACKD_HEALTHCHECK_URL", default_value = "http://127.0.0.1:8080")]
         url: String,
     },
+    /// Read or write a PLC's memory by hand (commissioning).
+    Plc(plc::PlcArgs),
+    /// Run a device simulator alone.
+    #[command(subcommand)]
+    Sim(sim::SimCommand),
     /// Benchmarks (see README).
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -151,6 +159,8 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 }
             }
         }
+        Command::Plc(args) => plc::run(args).await?,
+        Command::Sim(s) => sim::run(s).await?,
         Command::Bench(b) => bench::run(b).await?,
     }
     Ok(ExitCode::SUCCESS)

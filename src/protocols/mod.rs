@@ -10,6 +10,9 @@
 //! [`Address`] with [`PlcMemory::parse_address`].
 
 pub mod error;
+pub mod link;
+pub mod modbus;
+pub mod serial;
 
 use async_trait::async_trait;
 

@@ -1,0 +1,81 @@
+//! `rackd sim <machine>`: one simulator alone, for commissioning and tests.
+
+use std::time::Duration;
+
+use crate::protocols::modbus::server::Faults;
+use crate::sim::shelf::{ShelfSim, ShelfSimOptions};
+
+/// The simulators.
+#[derive(clap::Subcommand, Debug)]
+pub enum SimCommand {
+    /// A Modbus server with a full register bank (all four tables, 0..65535).
+    Modbus(super::sim_modbus::SimModbusArgs),
+    /// The shelf storage PLC: task slots over Modbus UDP, answering with MBAP length 0.
+    Shelf(SimShelfArgs),
+}
+
+/// Options of `rackd sim shelf`.
+#[derive(clap::Args, Debug)]
+pub struct SimShelfArgs {
+    /// UDP address to answer on.
+    #[arg(long, default_value = "127.0.0.1:1502")]
+    pub listen: String,
+    /// Number of task slots.
+    #[arg(long, default_value_t = 60)]
+    pub slots: u16,
+    /// Holding register of slot 1's task id.
+    #[arg(long, default_value_t = 4000)]
+    pub base: u16,
+    /// Registers from one slot to the next.
+    #[arg(long, default_value_t = 100)]
+    pub stride: u16,
+    /// Modbus unit id.
+    #[arg(long, default_value_t = 1)]
+    pub unit: u8,
+    /// Milliseconds each task takes.
+    #[arg(long, default_value_t = 500)]
+    pub task_ms: u64,
+    /// Fraction (0..1) of datagrams ignored.
+    #[arg(long, default_value_t = 0.0)]
+    pub drop: f64,
+    /// Milliseconds before each reply.
+    #[arg(long, default_value_t = 0)]
+    pub delay_ms: u64,
+    /// Fraction (0..1) of tasks failing with kind 1 (PLC fault).
+    #[arg(long, default_value_t = 0.0)]
+    pub fail: f64,
+}
+
+impl SimShelfArgs {
+    /// The simulator options these arguments select.
+    pub fn options(&self) -> anyhow::Result<ShelfSimOptions> {
+        for (name, p) in [("--drop", self.drop), ("--fail", self.fail)] {
+            anyhow::ensure!((0.0..=1.0).contains(&p), "{name} must be between 0 and 1, got {p}");
+        }
+        Ok(ShelfSimOptions {
+            slots: self.slots,
+            base: self.base,
+            stride: self.stride,
+            unit: self.unit,
+            task_time: Duration::from_millis(self.task_ms),
+            fail_rate: self.fail,
+            faults: Faults { drop_rate: self.drop, delay: Duration::from_millis(self.delay_ms), ..Faults::default() },
+        })
+    }
+}
+
+/// Runs a simulator until Ctrl-C.
+pub async fn run(cmd: SimCommand) -> anyhow::Result<()> {
+    match cmd {
+        SimCommand::Modbus(args) => super::sim_modbus::run(args).await,
+        SimCommand::Shelf(args) => {
+            let sim = ShelfSim::start(&args.listen, args.options()?).await?;
+            println!("shelf PLC simulator on udp://{} ({} slots from MW{})", sim.local_addr(), args.slots, args.base);
+            tokio::signal::ctrl_c().await?;
+            let (done, failed) = sim.finished();
+            println!("tasks finished {done}, failed {failed}; busy-slot violations {}", sim.violations());
+            sim.shutdown().await;
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,162 @@
+//! The Modbus client (master): one device, any transport, retries in one place.
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+
+use tokio::sync::Mutex;
+
+use super::config::{ModbusConfig, Transport};
+use super::pdu::{self, Request, Response};
+use super::rtu;
+use super::transport::{AttemptError, ByteStream, Connection, Counters, Endpoint, Exchange, Link, RtuLink, TcpLink, UdpLink};
+use crate::protocols::PlcError;
+
+/// Counters of a client's traffic, for diagnostics and tests.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ClientStats {
+    /// Requests asked of the client (after splitting).
+    pub requests: u64,
+    /// Frames sent, retries included.
+    pub sends: u64,
+    /// Frames or datagrams received and dropped as not answering the current request
+    /// (stale transaction id, other unit, broken datagram, leftover input).
+    pub dropped: u64,
+}
+
+/// A Modbus master for one device. Requests from concurrent callers are sent one at a
+/// time. Implements [`crate::protocols::PlcMemory`] (see `memory.rs`).
+pub struct ModbusClient {
+    config: ModbusConfig,
+    link: Mutex<Link>,
+    counters: Arc<Counters>,
+}
+
+impl ModbusClient {
+    /// A client for `config`. Nothing is sent yet: a UDP socket is bound, a TCP connection or
+    /// serial port is opened on the first request (and reopened after it is lost), so a
+    /// device that is down when the client is built does not fail construction.
+    pub async fn connect(config: ModbusConfig) -> Result<Self, PlcError> {
+        check_unit(config.unit)?;
+        let counters = Arc::new(Counters::default());
+        let link = match config.transport {
+            Transport::Udp => Link::Udp(UdpLink::connect(&config.address, config.quirks, counters.clone()).await?),
+            Transport::Tcp => {
+                Link::Tcp(TcpLink::new(Connection::new(Endpoint::Tcp(config.address.clone())), config.quirks, counters.clone()))
+            }
+            Transport::RtuOverTcp => {
+                let conn = Connection::new(Endpoint::Tcp(config.address.clone()));
+                Link::Rtu(RtuLink::new(conn, rtu::silence(0), counters.clone()))
+            }
+            Transport::RtuSerial => {
+                let conn = Connection::new(Endpoint::Serial(config.address.clone(), config.serial));
+                Link::Rtu(RtuLink::new(conn, rtu::silence(config.serial.baud), counters.clone()))
+            }
+        };
+        Ok(ModbusClient { config, link: Mutex::new(link), counters })
+    }
+
+    /// An RTU client over a stream the caller already opened (a pty in tests, a port
+    /// opened with special settings). The stream cannot be reopened if it fails.
+    pub fn rtu_over_stream(config: ModbusConfig, stream: impl ByteStream + 'static) -> Result<Self, PlcError> {
+        check_unit(config.unit)?;
+        let counters = Arc::new(Counters::default());
+        let conn = Connection::new(Endpoint::Given(Some(Box::new(stream))));
+        let link = Link::Rtu(RtuLink::new(conn, rtu::silence(config.serial.baud), counters.clone()));
+        Ok(ModbusClient { config, link: Mutex::new(link), counters })
+    }
+
+    /// The configuration this client was built with.
+    pub fn config(&self) -> &ModbusConfig {
+        &self.config
+    }
+
+    /// Traffic counters so far.
+    pub fn stats(&self) -> ClientStats {
+        ClientStats {
+            requests: self.counters.requests.load(Ordering::Relaxed),
+            sends: self.counters.sends.load(Ordering::Relaxed),
+            dropped: self.counters.dropped.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Sends one request (within the per-function limits) to the configured unit, with the
+    /// configured timeout and retries. Exception replies are returned at once as
+    /// [`PlcError::Device`]; timeouts, lost connections and malformed replies are retried.
+    /// A write to unit 0 is broadcast: nothing is awaited and the expected echo is returned.
+    pub async fn call(&self, request: &Request) -> Result<Response, PlcError> {
+        request.check().map_err(PlcError::OutOfRange)?;
+        let unit = self.config.unit;
+        let mut pdu_bytes = Vec::with_capacity(260);
+        request.encode(&mut pdu_bytes);
+        Counters::bump(&self.counters.requests);
+        let mut link = self.link.lock().await;
+        let timeout = self.config.timeout;
+        if unit == 0 {
+            if !request.is_write() {
+                return Err(PlcError::OutOfRange("unit 0 (broadcast) is for writes only"));
+            }
+            let ex = Exchange { unit, request, pdu: &pdu_bytes, first: true };
+            return match link.send_only(&ex, timeout).await {
+                Ok(()) => Ok(echo_of(request)),
+                Err(e) => Err(attempt_error(e, 1, timeout)),
+            };
+        }
+        let attempts = self.config.retries + 1;
+        let mut last = AttemptError::Timeout;
+        for attempt in 0..attempts {
+            let ex = Exchange { unit, request, pdu: &pdu_bytes, first: attempt == 0 };
+            match link.attempt(&ex, timeout).await {
+                Ok(Ok(response)) => return Ok(response),
+                Ok(Err(exception)) => return Err(exception.into()),
+                Err(e) => {
+                    tracing::debug!(unit, attempt, error = ?e, "modbus attempt failed");
+                    last = e;
+                }
+            }
+        }
+        Err(attempt_error(last, attempts, timeout))
+    }
+
+    /// A link check: diagnostics 08 sub-function 0000 (return query data), which the
+    /// device must echo.
+    pub async fn link_check(&self) -> Result<(), PlcError> {
+        let data = rand::random();
+        let request = Request::Diagnostics { sub_function: pdu::DIAG_RETURN_QUERY_DATA, data };
+        self.call(&request).await.map(|_| ())
+    }
+}
+
+fn check_unit(unit: u8) -> Result<(), PlcError> {
+    if unit > 247 {
+        return Err(PlcError::OutOfRange("unit must be 0 (broadcast) or 1..247"));
+    }
+    Ok(())
+}
+
+fn attempt_error(e: AttemptError, attempts: u32, timeout: std::time::Duration) -> PlcError {
+    match e {
+        AttemptError::Timeout => PlcError::Timeout { attempts, timeout },
+        AttemptError::Io(e) => PlcError::Connection(e),
+        AttemptError::Malformed(msg) => PlcError::Malformed(msg),
+    }
+}
+
+/// The reply a device would have sent to a write; used for broadcasts, which get none.
+fn echo_of(request: &Request) -> Response {
+    match request {
+        Request::WriteSingleCoil { address, value } => Response::WriteSingleCoil { address: *address, value: *value },
+        Request::WriteSingleRegister { address, value } => Response::WriteSingleRegister { address: *address, value: *value },
+        Request::WriteMultipleCoils { address, values } => {
+            Response::WriteMultipleCoils { address: *address, count: values.len() as u16 }
+        }
+        Request::WriteMultipleRegisters { address, values } => {
+            Response::WriteMultipleRegisters { address: *address, count: values.len() as u16 }
+        }
+        Request::Diagnostics { sub_function, data } => Response::Diagnostics { sub_function: *sub_function, data: *data },
+        // Reads are refused before broadcasting; an empty answer keeps this total.
+        Request::ReadCoils { .. } | Request::ReadDiscreteInputs { .. } => Response::ReadCoils(Vec::new()),
+        Request::ReadHoldingRegisters { .. } | Request::ReadInputRegisters { .. } => {
+            Response::ReadHoldingRegisters(Vec::new())
+        }
+    }
+}

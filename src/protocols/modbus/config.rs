@@ -1,0 +1,72 @@
+//! How to reach one Modbus device: transport, address, unit, timing and quirks.
+
+use std::time::Duration;
+
+use crate::protocols::serial::SerialSettings;
+
+/// The framing and carrier of a Modbus link.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Transport {
+    /// Modbus TCP: MBAP frames on a TCP connection.
+    Tcp,
+    /// Modbus UDP: one MBAP frame per datagram.
+    Udp,
+    /// Modbus RTU on a serial port.
+    RtuSerial,
+    /// Modbus RTU frames carried in raw TCP (serial-to-Ethernet gateways).
+    RtuOverTcp,
+}
+
+/// Deviations from the standard that a particular device needs tolerated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Quirks {
+    /// The device answers with an MBAP length field of 0 (the shelf PLC): take the PDU
+    /// length from the datagram (UDP) or from the PDU itself (TCP). Requests stay standard.
+    pub length0: bool,
+    /// The device does not echo the transaction id: match replies by unit, function and
+    /// write echo only. Stale input is flushed before each request and, over TCP, the
+    /// connection is dropped after a timeout so a late reply cannot be mistaken.
+    pub ignore_transaction_id: bool,
+}
+
+/// Everything a [`super::ModbusClient`] needs to talk to one device.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModbusConfig {
+    /// Framing and carrier.
+    pub transport: Transport,
+    /// `HOST:PORT` for TCP, UDP and RTU over TCP; the device path (`/dev/ttyUSB0`) for serial.
+    pub address: String,
+    /// Serial line settings, for [`Transport::RtuSerial`] (also sets the RTU frame gap).
+    pub serial: SerialSettings,
+    /// Unit (station) id 1..247; 0 broadcasts writes and awaits no reply.
+    pub unit: u8,
+    /// How long to wait for each reply.
+    pub timeout: Duration,
+    /// How many times to resend after a timeout or a bad reply (0 = send once).
+    pub retries: u32,
+    /// Quirks of this device.
+    pub quirks: Quirks,
+}
+
+impl ModbusConfig {
+    /// A configuration with the usual defaults: unit 1, 1 s timeout, 2 retries (as the
+    /// S7-1200's Modbus_Master), serial 9600,8E1, no quirks.
+    pub fn new(transport: Transport, address: impl Into<String>) -> Self {
+        ModbusConfig {
+            transport,
+            address: address.into(),
+            serial: SerialSettings::default(),
+            unit: 1,
+            timeout: Duration::from_secs(1),
+            retries: 2,
+            quirks: Quirks::default(),
+        }
+    }
+
+    /// The shelf PLC of the seed: Modbus UDP, unit 1, length-0 replies.
+    pub fn shelf_plc(address: impl Into<String>) -> Self {
+        let mut config = ModbusConfig::new(Transport::Udp, address);
+        config.quirks.length0 = true;
+        config
+    }
+}

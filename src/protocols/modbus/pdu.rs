@@ -1,0 +1,229 @@
+//! Modbus PDUs (function code + data) as plain Rust values, and their encoding to bytes.
+//!
+//! The PDU is the same in every framing (TCP, UDP, RTU); [`super::frame`] and
+//! [`super::rtu`] wrap it. Decoding lives in [`super::decode`]. Nothing here does I/O.
+
+/// Function codes this crate speaks.
+pub mod fc {
+    /// 01 read coils.
+    pub const READ_COILS: u8 = 0x01;
+    /// 02 read discrete inputs.
+    pub const READ_DISCRETE_INPUTS: u8 = 0x02;
+    /// 03 read holding registers.
+    pub const READ_HOLDING_REGISTERS: u8 = 0x03;
+    /// 04 read input registers.
+    pub const READ_INPUT_REGISTERS: u8 = 0x04;
+    /// 05 write single coil.
+    pub const WRITE_SINGLE_COIL: u8 = 0x05;
+    /// 06 write single register.
+    pub const WRITE_SINGLE_REGISTER: u8 = 0x06;
+    /// 08 diagnostics (sub-function 0000 echoes its data: a link check).
+    pub const DIAGNOSTICS: u8 = 0x08;
+    /// 15 (0x0F) write multiple coils.
+    pub const WRITE_MULTIPLE_COILS: u8 = 0x0F;
+    /// 16 (0x10) write multiple registers.
+    pub const WRITE_MULTIPLE_REGISTERS: u8 = 0x10;
+    /// Set in the function code of an exception reply.
+    pub const EXCEPTION_FLAG: u8 = 0x80;
+}
+
+/// Most bits one read (01, 02) may ask for.
+pub const MAX_READ_BITS: u16 = 2000;
+/// Most registers one read (03, 04) may ask for.
+pub const MAX_READ_REGISTERS: u16 = 125;
+/// Most coils one write multiple (15) may carry.
+pub const MAX_WRITE_BITS: u16 = 1968;
+/// Most registers one write multiple (16) may carry.
+pub const MAX_WRITE_REGISTERS: u16 = 123;
+
+/// Diagnostics sub-function 0000: return query data (echo).
+pub const DIAG_RETURN_QUERY_DATA: u16 = 0x0000;
+/// Diagnostics sub-function 000A: clear counters and diagnostic register.
+pub const DIAG_CLEAR_COUNTERS: u16 = 0x000A;
+
+/// A request PDU. Addresses are PDU addresses (0-based, as on the wire).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Request {
+    /// 01: read `count` coils from `address`.
+    ReadCoils { address: u16, count: u16 },
+    /// 02: read `count` discrete inputs from `address`.
+    ReadDiscreteInputs { address: u16, count: u16 },
+    /// 03: read `count` holding registers from `address`.
+    ReadHoldingRegisters { address: u16, count: u16 },
+    /// 04: read `count` input registers from `address`.
+    ReadInputRegisters { address: u16, count: u16 },
+    /// 05: set one coil.
+    WriteSingleCoil { address: u16, value: bool },
+    /// 06: set one holding register.
+    WriteSingleRegister { address: u16, value: u16 },
+    /// 15: set consecutive coils.
+    WriteMultipleCoils { address: u16, values: Vec<bool> },
+    /// 16: set consecutive holding registers.
+    WriteMultipleRegisters { address: u16, values: Vec<u16> },
+    /// 08: diagnostics with one data word (sub-function 0000 echoes it back).
+    Diagnostics { sub_function: u16, data: u16 },
+}
+
+/// A normal (non-exception) response PDU.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Response {
+    /// 01: coil states, as many as requested.
+    ReadCoils(Vec<bool>),
+    /// 02: discrete input states, as many as requested.
+    ReadDiscreteInputs(Vec<bool>),
+    /// 03: holding register values.
+    ReadHoldingRegisters(Vec<u16>),
+    /// 04: input register values.
+    ReadInputRegisters(Vec<u16>),
+    /// 05: echo of the request.
+    WriteSingleCoil { address: u16, value: bool },
+    /// 06: echo of the request.
+    WriteSingleRegister { address: u16, value: u16 },
+    /// 15: start address and count written.
+    WriteMultipleCoils { address: u16, count: u16 },
+    /// 16: start address and count written.
+    WriteMultipleRegisters { address: u16, count: u16 },
+    /// 08: echo of sub-function and data.
+    Diagnostics { sub_function: u16, data: u16 },
+}
+
+impl Request {
+    /// The request's function code.
+    pub fn function(&self) -> u8 {
+        match self {
+            Request::ReadCoils { .. } => fc::READ_COILS,
+            Request::ReadDiscreteInputs { .. } => fc::READ_DISCRETE_INPUTS,
+            Request::ReadHoldingRegisters { .. } => fc::READ_HOLDING_REGISTERS,
+            Request::ReadInputRegisters { .. } => fc::READ_INPUT_REGISTERS,
+            Request::WriteSingleCoil { .. } => fc::WRITE_SINGLE_COIL,
+            Request::WriteSingleRegister { .. } => fc::WRITE_SINGLE_REGISTER,
+            Request::WriteMultipleCoils { .. } => fc::WRITE_MULTIPLE_COILS,
+            Request::WriteMultipleRegisters { .. } => fc::WRITE_MULTIPLE_REGISTERS,
+            Request::Diagnostics { .. } => fc::DIAGNOSTICS,
+        }
+    }
+
+    /// True for the writes (05, 06, 15, 16): the only requests that may be broadcast.
+    pub fn is_write(&self) -> bool {
+        matches!(
+            self,
+            Request::WriteSingleCoil { .. }
+                | Request::WriteSingleRegister { .. }
+                | Request::WriteMultipleCoils { .. }
+                | Request::WriteMultipleRegisters { .. }
+        )
+    }
+
+    /// Checks counts against the per-function limits and the 16-bit address space, so that
+    /// [`Request::encode`] produces a frame a device can accept.
+    pub fn check(&self) -> Result<(), &'static str> {
+        let (address, count, max) = match self {
+            Request::ReadCoils { address, count } | Request::ReadDiscreteInputs { address, count } => {
+                (*address, *count as usize, MAX_READ_BITS)
+            }
+            Request::ReadHoldingRegisters { address, count }
+            | Request::ReadInputRegisters { address, count } => (*address, *count as usize, MAX_READ_REGISTERS),
+            Request::WriteMultipleCoils { address, values } => (*address, values.len(), MAX_WRITE_BITS),
+            Request::WriteMultipleRegisters { address, values } => (*address, values.len(), MAX_WRITE_REGISTERS),
+            _ => return Ok(()),
+        };
+        if count == 0 || count > max as usize {
+            return Err("count outside the per-function limit");
+        }
+        if address as usize + count > 0x1_0000 {
+            return Err("address + count beyond 65535");
+        }
+        Ok(())
+    }
+
+    /// Appends the PDU bytes to `buf`. Counts must be within limits (see [`Request::check`]).
+    pub fn encode(&self, buf: &mut Vec<u8>) {
+        buf.push(self.function());
+        match self {
+            Request::ReadCoils { address, count }
+            | Request::ReadDiscreteInputs { address, count }
+            | Request::ReadHoldingRegisters { address, count }
+            | Request::ReadInputRegisters { address, count } => put_words(buf, &[*address, *count]),
+            Request::WriteSingleCoil { address, value } => put_words(buf, &[*address, coil_word(*value)]),
+            Request::WriteSingleRegister { address, value } => put_words(buf, &[*address, *value]),
+            Request::WriteMultipleCoils { address, values } => {
+                put_words(buf, &[*address, values.len() as u16]);
+                buf.push(values.len().div_ceil(8) as u8);
+                pack_bits(values, buf);
+            }
+            Request::WriteMultipleRegisters { address, values } => {
+                put_words(buf, &[*address, values.len() as u16]);
+                buf.push((values.len() * 2) as u8);
+                put_words(buf, values);
+            }
+            Request::Diagnostics { sub_function, data } => put_words(buf, &[*sub_function, *data]),
+        }
+    }
+}
+
+impl Response {
+    /// The response's function code.
+    pub fn function(&self) -> u8 {
+        match self {
+            Response::ReadCoils(_) => fc::READ_COILS,
+            Response::ReadDiscreteInputs(_) => fc::READ_DISCRETE_INPUTS,
+            Response::ReadHoldingRegisters(_) => fc::READ_HOLDING_REGISTERS,
+            Response::ReadInputRegisters(_) => fc::READ_INPUT_REGISTERS,
+            Response::WriteSingleCoil { .. } => fc::WRITE_SINGLE_COIL,
+            Response::WriteSingleRegister { .. } => fc::WRITE_SINGLE_REGISTER,
+            Response::WriteMultipleCoils { .. } => fc::WRITE_MULTIPLE_COILS,
+            Response::WriteMultipleRegisters { .. } => fc::WRITE_MULTIPLE_REGISTERS,
+            Response::Diagnostics { .. } => fc::DIAGNOSTICS,
+        }
+    }
+
+    /// Appends the PDU bytes to `buf`.
+    pub fn encode(&self, buf: &mut Vec<u8>) {
+        buf.push(self.function());
+        match self {
+            Response::ReadCoils(bits) | Response::ReadDiscreteInputs(bits) => {
+                buf.push(bits.len().div_ceil(8) as u8);
+                pack_bits(bits, buf);
+            }
+            Response::ReadHoldingRegisters(words) | Response::ReadInputRegisters(words) => {
+                buf.push((words.len() * 2) as u8);
+                put_words(buf, words);
+            }
+            Response::WriteSingleCoil { address, value } => put_words(buf, &[*address, coil_word(*value)]),
+            Response::WriteSingleRegister { address, value } => put_words(buf, &[*address, *value]),
+            Response::WriteMultipleCoils { address, count } | Response::WriteMultipleRegisters { address, count } => {
+                put_words(buf, &[*address, *count])
+            }
+            Response::Diagnostics { sub_function, data } => put_words(buf, &[*sub_function, *data]),
+        }
+    }
+}
+
+/// Appends an exception reply PDU for `function`.
+pub fn encode_exception(function: u8, code: u8, buf: &mut Vec<u8>) {
+    buf.push(function | fc::EXCEPTION_FLAG);
+    buf.push(code);
+}
+
+/// The value of a coil in 05 requests and replies: FF00 on, 0000 off.
+fn coil_word(on: bool) -> u16 {
+    if on { 0xFF00 } else { 0x0000 }
+}
+
+fn put_words(buf: &mut Vec<u8>, words: &[u16]) {
+    for w in words {
+        buf.extend_from_slice(&w.to_be_bytes());
+    }
+}
+
+/// Packs bits LSB first, eight to a byte, the last byte padded with zeros.
+pub(crate) fn pack_bits(bits: &[bool], buf: &mut Vec<u8>) {
+    for chunk in bits.chunks(8) {
+        buf.push(chunk.iter().enumerate().fold(0u8, |b, (i, &on)| b | (u8::from(on) << i)));
+    }
+}
+
+/// Unpacks the first `count` bits (LSB first) of `bytes`; `bytes` must hold at least `count` bits.
+pub(crate) fn unpack_bits(bytes: &[u8], count: usize) -> Vec<bool> {
+    (0..count).map(|i| bytes[i / 8] & (1 << (i % 8)) != 0).collect()
+}

@@ -1,0 +1,226 @@
+//! A Modbus server (slave) for simulators and tests, over UDP, TCP, RTU over TCP and RTU
+//! on any byte stream (serial port, pty).
+//!
+//! ```no_run
+//! # async fn demo() -> std::io::Result<()> {
+//! use std::sync::Arc;
+//! use rackd::protocols::modbus::server::{Bank, Faults, ModbusServer, ServerOptions};
+//!
+//! let bank = Bank::new();
+//! bank.set_holding(4700, &[10000]);
+//! // Answer like the shelf PLC: unit 1, MBAP length 0 in replies.
+//! let options = ServerOptions { unit: 1, length0: true, ..ServerOptions::default() };
+//! let server = ModbusServer::new(Arc::new(bank.clone()), options).serve_udp("127.0.0.1:0").await?;
+//! println!("listening on {:?}", server.local_addr());
+//! server.set_faults(Faults { drop_rate: 0.2, ..Faults::default() });
+//! assert_eq!(bank.holding(4700, 1), vec![10000]);
+//! server.shutdown().await;
+//! # Ok(()) }
+//! ```
+//!
+//! The bank is shared: whoever holds a [`Bank`] clone sees and changes what clients see. To
+//! observe or veto requests, pass your own [`Handler`] that delegates to the bank.
+
+mod bank;
+mod faults;
+mod handler;
+mod rtu;
+mod tcp;
+mod udp;
+
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+pub use bank::{Bank, RegisterBank, TABLE_SIZE};
+pub use faults::Faults;
+pub use handler::Handler;
+
+use faults::Plan;
+
+use super::pdu::{encode_exception, Request};
+use super::ByteStream;
+
+/// How a server presents itself.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ServerOptions {
+    /// The unit id it answers (requests to other units are ignored; unit 0 broadcasts are
+    /// performed without reply).
+    pub unit: u8,
+    /// Answer with an MBAP length field of 0, like the shelf PLC.
+    pub length0: bool,
+    /// Answer with transaction id 0 instead of echoing it (a PLC that does not echo).
+    pub zero_transaction_id: bool,
+    /// Faults to inject from the start.
+    pub faults: Faults,
+}
+
+impl Default for ServerOptions {
+    fn default() -> Self {
+        ServerOptions { unit: 1, length0: false, zero_transaction_id: false, faults: Faults::default() }
+    }
+}
+
+/// Counters of a server's traffic.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ServerStats {
+    /// Frames received that decoded as Modbus requests to any unit.
+    pub requests: u64,
+    /// Replies sent (duplicates counted once).
+    pub replies: u64,
+    /// Requests ignored by the `drop_rate` fault.
+    pub dropped: u64,
+}
+
+/// A server not yet listening: a handler and options.
+pub struct ModbusServer {
+    shared: Arc<Shared>,
+}
+
+/// What all connections of one server share.
+pub(crate) struct Shared {
+    handler: Arc<dyn Handler>,
+    options: ServerOptions,
+    faults: Mutex<Faults>,
+    requests: AtomicU64,
+    replies: AtomicU64,
+    dropped: AtomicU64,
+}
+
+/// A reply to send, and the faults to apply while sending it.
+pub(crate) struct Outcome {
+    pub unit: u8,
+    pub pdu: Vec<u8>,
+    pub plan: Plan,
+}
+
+impl Shared {
+    /// Handles one request PDU sent to `unit`; `None` if no reply is due (another unit, a
+    /// broadcast, a dropped request, a frame too short to answer).
+    pub fn process(&self, unit: u8, pdu: &[u8]) -> Option<Outcome> {
+        self.requests.fetch_add(1, Ordering::Relaxed);
+        let broadcast = unit == 0;
+        if unit != self.options.unit && !broadcast {
+            return None;
+        }
+        let plan = self.faults.lock().unwrap_or_else(|p| p.into_inner()).plan();
+        if plan.drop {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+            return None;
+        }
+        let function = *pdu.first()?;
+        let result = match Request::decode(pdu) {
+            Ok(req) if broadcast && !req.is_write() => return None,
+            Ok(req) => match plan.exception {
+                Some(e) => Err(e),
+                None => self.handler.handle(unit, &req),
+            },
+            Err(e) => Err(e.exception()),
+        };
+        if broadcast {
+            return None;
+        }
+        let mut out = Vec::with_capacity(260);
+        match result {
+            Ok(response) => response.encode(&mut out),
+            Err(e) => encode_exception(function, e.0, &mut out),
+        }
+        Some(Outcome { unit: plan.reply_unit.unwrap_or(unit), pdu: out, plan })
+    }
+
+    pub fn replied(&self) {
+        self.replies.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+impl ModbusServer {
+    /// A server that answers with `handler` (usually a [`Bank`]).
+    pub fn new(handler: Arc<dyn Handler>, options: ServerOptions) -> Self {
+        let faults = Mutex::new(options.faults.clone());
+        let shared = Shared {
+            handler,
+            options,
+            faults,
+            requests: AtomicU64::new(0),
+            replies: AtomicU64::new(0),
+            dropped: AtomicU64::new(0),
+        };
+        ModbusServer { shared: Arc::new(shared) }
+    }
+
+    /// Serves Modbus UDP on `address` (`127.0.0.1:0` picks a free port).
+    pub async fn serve_udp(self, address: &str) -> std::io::Result<ServerHandle> {
+        let socket = tokio::net::UdpSocket::bind(address).await?;
+        let local = socket.local_addr()?;
+        let task = tokio::spawn(udp::serve(socket, self.shared.clone()));
+        Ok(ServerHandle { local_addr: Some(local), shared: self.shared, task })
+    }
+
+    /// Serves Modbus TCP on `address`.
+    pub async fn serve_tcp(self, address: &str) -> std::io::Result<ServerHandle> {
+        let listener = tokio::net::TcpListener::bind(address).await?;
+        let local = listener.local_addr()?;
+        let task = tokio::spawn(tcp::serve(listener, self.shared.clone(), tcp::Framing::Mbap));
+        Ok(ServerHandle { local_addr: Some(local), shared: self.shared, task })
+    }
+
+    /// Serves Modbus RTU frames over raw TCP on `address` (as a serial-to-Ethernet gateway).
+    pub async fn serve_rtu_over_tcp(self, address: &str) -> std::io::Result<ServerHandle> {
+        let listener = tokio::net::TcpListener::bind(address).await?;
+        let local = listener.local_addr()?;
+        let task = tokio::spawn(tcp::serve(listener, self.shared.clone(), tcp::Framing::Rtu));
+        Ok(ServerHandle { local_addr: Some(local), shared: self.shared, task })
+    }
+
+    /// Serves Modbus RTU on a stream already open (a serial port, one end of a pty pair);
+    /// `baud` sets the inter-frame silence (0 for the 1.75 ms floor).
+    pub fn serve_rtu_stream(self, stream: impl ByteStream + 'static, baud: u32) -> ServerHandle {
+        let task = tokio::spawn(rtu::serve(Box::new(stream), self.shared.clone(), baud));
+        ServerHandle { local_addr: None, shared: self.shared, task }
+    }
+}
+
+/// A running server. Dropping it stops the server (and closes its connections).
+pub struct ServerHandle {
+    local_addr: Option<SocketAddr>,
+    shared: Arc<Shared>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl ServerHandle {
+    /// The bound socket address (`None` for a stream server).
+    pub fn local_addr(&self) -> Option<SocketAddr> {
+        self.local_addr
+    }
+
+    /// Replaces the injected faults; applies from the next request on.
+    pub fn set_faults(&self, faults: Faults) {
+        *self.shared.faults.lock().unwrap_or_else(|p| p.into_inner()) = faults;
+    }
+
+    /// Traffic counters so far.
+    pub fn stats(&self) -> ServerStats {
+        ServerStats {
+            requests: self.shared.requests.load(Ordering::Relaxed),
+            replies: self.shared.replies.load(Ordering::Relaxed),
+            dropped: self.shared.dropped.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Stops the server, closes its socket and every connection, and waits until it has.
+    pub async fn shutdown(mut self) {
+        self.task.abort();
+        let _ = (&mut self.task).await;
+    }
+
+    /// Runs until the server stops by itself (a stream server whose stream closed).
+    pub async fn wait(mut self) {
+        let _ = (&mut self.task).await;
+    }
+}
+
+impl Drop for ServerHandle {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}

@@ -1,0 +1,129 @@
+//! The client side of each transport: send one request, wait for its reply.
+//!
+//! A [`Link`] performs single *attempts*; retries live in [`super::ModbusClient`], so every
+//! transport shares one retry policy. Each attempt either returns the decoded reply that
+//! answers this request, or says why not ([`AttemptError`]). Datagrams or frames that do not
+//! answer this request (stale transaction id, other unit) are dropped and counted.
+
+mod stream;
+mod tcp;
+mod udp;
+mod rtu;
+
+use std::io;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+pub use stream::ByteStream;
+pub(crate) use stream::{Connection, Endpoint};
+pub(crate) use rtu::RtuLink;
+pub(crate) use tcp::TcpLink;
+pub(crate) use udp::UdpLink;
+
+use super::decode::{decode_response, DecodeError};
+use super::exception::Exception;
+use super::frame::MbapHeader;
+use super::pdu::{Request, Response};
+
+/// A decoded reply: data, or the device's exception.
+pub(crate) type Reply = Result<Response, Exception>;
+
+/// Why one attempt produced no reply.
+#[derive(Debug)]
+pub(crate) enum AttemptError {
+    /// Nothing that answers the request arrived in time.
+    Timeout,
+    /// The carrier failed (connection refused or lost, port gone).
+    Io(io::Error),
+    /// Something arrived that claims to answer the request but is wrong.
+    Malformed(&'static str),
+}
+
+/// One request as the links see it.
+pub(crate) struct Exchange<'a> {
+    /// Unit id addressed.
+    pub unit: u8,
+    /// The request, for matching and decoding the reply.
+    pub request: &'a Request,
+    /// The request's encoded PDU.
+    pub pdu: &'a [u8],
+    /// True for the first attempt of this request (later ones are retries).
+    pub first: bool,
+}
+
+/// Counters shared by a client and its link.
+#[derive(Debug, Default)]
+pub(crate) struct Counters {
+    pub requests: AtomicU64,
+    pub sends: AtomicU64,
+    pub dropped: AtomicU64,
+}
+
+impl Counters {
+    pub fn bump(counter: &AtomicU64) {
+        counter.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// The transport a client owns.
+pub(crate) enum Link {
+    Udp(UdpLink),
+    Tcp(TcpLink),
+    Rtu(RtuLink),
+}
+
+impl Link {
+    /// Sends the request and waits up to `timeout` for its reply.
+    pub async fn attempt(&mut self, ex: &Exchange<'_>, timeout: Duration) -> Result<Reply, AttemptError> {
+        match self {
+            Link::Udp(l) => l.attempt(ex, timeout).await,
+            Link::Tcp(l) => l.attempt(ex, timeout).await,
+            Link::Rtu(l) => l.attempt(ex, timeout).await,
+        }
+    }
+
+    /// Sends the request without awaiting a reply (broadcast).
+    pub async fn send_only(&mut self, ex: &Exchange<'_>, timeout: Duration) -> Result<(), AttemptError> {
+        match self {
+            Link::Udp(l) => l.send(ex).await,
+            Link::Tcp(l) => l.send(ex, timeout).await,
+            Link::Rtu(l) => l.send(ex, timeout).await,
+        }
+    }
+}
+
+/// What to do with a frame that arrived while waiting for a reply.
+pub(crate) enum Verdict {
+    /// It answers the request.
+    Take(Reply),
+    /// It is not ours: drop it and keep waiting; the reason is kept for the timeout report.
+    Drop(Option<&'static str>),
+    /// It claims to answer the request but is wrong.
+    Fail(&'static str),
+}
+
+/// Judges an MBAP frame against the request and the transaction ids of its attempts.
+pub(crate) fn judge_mbap(header: &MbapHeader, pdu: &[u8], ex: &Exchange<'_>, tids: &[u16], ignore_tid: bool) -> Verdict {
+    if !ignore_tid && !tids.contains(&header.transaction) {
+        return Verdict::Drop(None);
+    }
+    judge(header.unit, pdu, ex, ignore_tid)
+}
+
+/// Judges a frame's unit and PDU against the request. Without a transaction id to go by
+/// (`loose`), a reply to another function is taken for a stale one and dropped.
+pub(crate) fn judge(unit: u8, pdu: &[u8], ex: &Exchange<'_>, loose: bool) -> Verdict {
+    if unit != ex.unit {
+        return Verdict::Drop(Some("reply from the wrong unit"));
+    }
+    match decode_response(pdu, ex.request) {
+        Ok(reply) => Verdict::Take(reply),
+        Err(DecodeError::FunctionMismatch) if loose => Verdict::Drop(Some("function code in the reply differs from the request")),
+        Err(e) => Verdict::Fail(e.message()),
+    }
+}
+
+/// The error for an attempt that timed out after dropping frames for `reason`.
+pub(crate) fn timed_out(reason: Option<&'static str>) -> AttemptError {
+    reason.map_or(AttemptError::Timeout, AttemptError::Malformed)
+}
