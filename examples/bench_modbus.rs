@@ -15,9 +15,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use rackd::protocols::PlcMemory;
 use rackd::protocols::modbus::server::{Bank, ModbusServer, ServerOptions};
 use rackd::protocols::modbus::{ModbusClient, ModbusConfig, Transport};
-use rackd::protocols::PlcMemory;
 use tokio::net::UdpSocket;
 
 /// Runs `op` repeatedly for `secs` seconds (after a short warm-up); returns operations/s.
@@ -76,7 +76,8 @@ async fn modbus(transport: Transport, secs: f64) -> f64 {
     }
     .expect("serve");
     let address = handle.local_addr().expect("server address").to_string();
-    let client = Arc::new(ModbusClient::connect(ModbusConfig::new(transport, address)).await.expect("client"));
+    let client =
+        Arc::new(ModbusClient::connect(ModbusConfig::new(transport, address)).await.expect("client"));
     let start = client.parse_address("4x4700").expect("address");
     let r = rate(secs, || {
         let (client, start) = (client.clone(), start.clone());
@@ -95,7 +96,9 @@ async fn main() {
     let secs: f64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(3.0);
     let ping = udp_ping_pong(secs).await;
     println!("raw UDP ping-pong     {ping:>9.0} round trips/s  (baseline)");
-    for (name, transport) in [("Modbus UDP 2-reg read", Transport::Udp), ("Modbus TCP 2-reg read", Transport::Tcp)] {
+    for (name, transport) in
+        [("Modbus UDP 2-reg read", Transport::Udp), ("Modbus TCP 2-reg read", Transport::Tcp)]
+    {
         let r = modbus(transport, secs).await;
         println!("{name} {r:>9.0} requests/s     {:>5.1}% of ping-pong", 100.0 * r / ping);
     }

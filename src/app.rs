@@ -1,4 +1,5 @@
-//! Building and running the service: bind, serve, shut down gracefully.
+//! Building and running the service: open the store, start the devices, bind, serve, and
+//! shut down gracefully.
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -13,18 +14,23 @@ use crate::api::metrics::Metrics;
 use crate::api::{self, AppState};
 use crate::auth::KeyRing;
 use crate::config::Config;
+use crate::devices::{self, Devices};
 use crate::service::intake::Rules;
-use crate::store::{self, writer::Writer};
+use crate::store::{self, locations, time::now_ms, writer::Writer};
 
 /// A bound, ready-to-run rackd.
 pub struct Application {
     listener: TcpListener,
     router: axum::Router,
     writer_task: JoinHandle<()>,
+    device_tasks: Vec<JoinHandle<()>>,
+    devices: Devices,
+    keep: Vec<Box<dyn std::any::Any + Send>>,
 }
 
 impl Application {
-    /// Opens the database, applies migrations and binds the listen address.
+    /// Opens the database, applies migrations, starts the devices and binds the listen
+    /// address.
     ///
     /// Without API keys, rackd refuses to listen on anything but loopback unless
     /// `insecure` is set: an open WCS on a plant network would let anyone move boxes.
@@ -44,19 +50,33 @@ impl Application {
         let pool = store::open(&db.path, Duration::from_millis(db.busy_timeout_ms))
             .await
             .with_context(|| format!("opening database {}", db.path.display()))?;
-        let (writer, writer_task) =
-            Writer::start(pool.clone(), config.intake.max_group, config.intake.queue, None);
+        let layout = config.layout();
+        locations::seed(&mut *pool.acquire().await?, &layout, now_ms()).await.context("seeding locations")?;
+        let wakers = devices::wakers(&config.devices);
+        let (writer, writer_task) = Writer::start(
+            pool.clone(),
+            config.intake.max_group,
+            config.intake.queue,
+            Some(devices::wake_hook(wakers.clone())),
+        );
+        let (devices, device_tasks) = devices::start(&config.devices, wakers, &writer, &pool).await?;
+        let rules = Rules {
+            layout,
+            devices: config.devices.iter().map(|d| (d.id.clone(), d.kind.job_kinds())).collect(),
+            routes: config.devices.iter().flat_map(|d| d.aisles.iter().map(|&a| (a, d.id.clone()))).collect(),
+        };
         let state = AppState {
             pool,
             writer,
-            rules: Arc::new(Rules { layout: config.layout(), devices: Default::default() }),
+            rules: Arc::new(rules),
             keys: Arc::new(keys),
             metrics: Arc::new(Metrics::default()),
+            devices: devices.clone(),
         };
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);
         let listener = TcpListener::bind(listen).await.with_context(|| format!("binding {listen}"))?;
-        Ok(Application { listener, router, writer_task })
+        Ok(Application { listener, router, writer_task, device_tasks, devices, keep: Vec::new() })
     }
 
     /// The address actually bound (useful with port 0).
@@ -64,13 +84,34 @@ impl Application {
         self.listener.local_addr().expect("a bound listener has an address")
     }
 
-    /// Serves until `shutdown` completes, then finishes in-flight requests and pending
-    /// commits before returning.
+    /// The running devices.
+    pub fn devices(&self) -> &Devices {
+        &self.devices
+    }
+
+    /// Keeps `thing` (an in-process simulator, say) alive as long as the service runs.
+    pub fn keep(&mut self, thing: impl std::any::Any + Send) {
+        self.keep.push(Box::new(thing));
+    }
+
+    /// Serves until `shutdown` completes, then finishes in-flight requests, stops the
+    /// devices between two steps and commits what is pending before returning.
     pub async fn run_until(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
         tracing::info!(addr = %self.local_addr(), "rackd listening");
         axum::serve(self.listener, self.router).with_graceful_shutdown(shutdown).await?;
-        // The router (and with it the last writer handle) is gone: the writer drains and stops.
+        // A device stopped between two PLC requests is the same as a crash, which the
+        // hand-over order and recovery make safe.
+        for task in &self.device_tasks {
+            task.abort();
+        }
+        for task in self.device_tasks {
+            let _ = task.await;
+        }
+        drop(self.devices);
+        // The router and devices (and with them the last writer handles) are gone: the
+        // writer drains and stops.
         self.writer_task.await.context("job writer")?;
+        drop(self.keep);
         tracing::info!("rackd stopped");
         Ok(())
     }

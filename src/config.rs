@@ -26,6 +26,8 @@ pub struct Config {
     pub auth: AuthConfig,
     /// The site's layout.
     pub site: SiteConfig,
+    /// The machines, one `[[devices]]` entry each.
+    pub devices: Vec<crate::devices::DeviceConfig>,
 }
 
 /// `[server]`
@@ -178,6 +180,22 @@ impl Config {
         if self.site.aisles.is_empty() {
             return Err("site.aisles: at least one aisle is needed".into());
         }
+        let mut ids = std::collections::BTreeSet::new();
+        let mut served = std::collections::BTreeMap::new();
+        for d in &self.devices {
+            d.check()?;
+            if !ids.insert(d.id.as_str()) {
+                return Err(format!("devices: id {:?} is used twice", d.id));
+            }
+            for &aisle in &d.aisles {
+                if !seen.contains(&aisle) {
+                    return Err(format!("devices {:?}: aisle {aisle} is not in site.aisles", d.id));
+                }
+                if let Some(other) = served.insert(aisle, d.id.as_str()) {
+                    return Err(format!("devices {:?}: aisle {aisle} is already served by {other:?}", d.id));
+                }
+            }
+        }
         if self.intake.max_group == 0 || self.intake.queue == 0 {
             return Err("intake.max_group and intake.queue must be at least 1".into());
         }
@@ -198,6 +216,7 @@ impl Default for Config {
             intake: IntakeConfig::default(),
             auth: AuthConfig::default(),
             site: SiteConfig::default(),
+            devices: Vec::new(),
         }
     }
 }

@@ -15,7 +15,7 @@ use crate::domain::{JobKind, JobState, Priority, Transition};
 use crate::service::intake::{JobRequest, MAX_BATCH};
 use crate::store::jobs::{self, Job, JobEvent, JobFilter};
 use crate::store::time::to_ms;
-use crate::store::writer::{Change, Outcome};
+use crate::store::writer::{Change, Outcome, WriteError};
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
@@ -258,6 +258,19 @@ async fn job_history(
         (status = 409, description = "The job has ended, or is on a device and cannot be withdrawn", body = ErrorBody),
     ))]
 async fn cancel_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<Json<Job>, ApiError> {
+    let job = jobs::get(&app.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found(format!("job {id} does not exist")))?;
+    if job.state.is_terminal() {
+        return Err(ApiError::conflict("job_ended", format!("job {id} is already {}", job.state)));
+    }
+    // A job of a device is cancelled by the device task, which alone hands jobs over, so a
+    // cancel can never race a hand-over of the same job.
+    if let Some(device) = job.device.as_ref().and_then(|d| app.devices.get(d)) {
+        device.cancel(id).await.map_err(|reason| ApiError::conflict("job_on_device", reason))?;
+        let job = jobs::get(&app.pool, id).await?;
+        return job.map(Json).ok_or_else(|| ApiError::not_found(format!("job {id} does not exist")));
+    }
     let change = Change::Transition {
         transition: Transition::Cancel,
         cause: "cancelled through the API".into(),
@@ -267,12 +280,12 @@ async fn cancel_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<
     };
     match app.writer.change(id, change).await {
         Ok(job) => Ok(Json(job)),
-        Err(crate::store::writer::WriteError::Unexpected { state, .. }) if state.is_terminal() => {
+        Err(WriteError::Unexpected { state, .. }) if state.is_terminal() => {
             Err(ApiError::conflict("job_ended", format!("job {id} is already {state}")))
         }
-        Err(crate::store::writer::WriteError::Unexpected { state, .. }) => Err(ApiError::conflict(
+        Err(WriteError::Unexpected { state, .. }) => Err(ApiError::conflict(
             "job_on_device",
-            format!("job {id} is {state} on its device and cannot be withdrawn by rackd"),
+            format!("job {id} is {state} and its device is not configured; it cannot be withdrawn"),
         )),
         Err(e) => Err(e.into()),
     }

@@ -4,9 +4,11 @@
 //! `/api/v1` and `/metrics` needs a key once keys are configured (see [`auth`]).
 
 pub mod auth;
+pub mod devices;
 pub mod error;
 pub mod extract;
 pub mod jobs;
+pub mod locations;
 pub mod metrics;
 pub mod ops;
 pub mod state;
@@ -44,6 +46,8 @@ also submits and changes jobs, `admin` may do everything. A `201` means the job 
     servers((url = "/", description = "This server")),
     tags(
         (name = "jobs", description = "Submit and follow jobs"),
+        (name = "devices", description = "The machines: status, pause and resume"),
+        (name = "locations", description = "What rackd knows of each location"),
         (name = "operations", description = "Health, readiness and metrics"),
     ),
     modifiers(&Security),
@@ -79,9 +83,8 @@ async fn metrics_route(state: axum::extract::State<AppState>) -> Result<axum::re
 
 /// Routes that need a key once keys are configured.
 fn protected_routes() -> OpenApiRouter<AppState> {
-    OpenApiRouter::with_openapi(ApiDoc::openapi())
-        .nest("/api/v1", jobs::router())
-        .routes(routes!(metrics_route))
+    let v1 = jobs::router().merge(devices::router()).merge(locations::router());
+    OpenApiRouter::with_openapi(ApiDoc::openapi()).nest("/api/v1", v1).routes(routes!(metrics_route))
 }
 
 /// Routes open to anyone (probes).

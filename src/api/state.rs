@@ -22,4 +22,6 @@ pub struct AppState {
     pub keys: Arc<KeyRing>,
     /// Prometheus metrics.
     pub metrics: Arc<Metrics>,
+    /// The running devices.
+    pub devices: crate::devices::Devices,
 }

@@ -2,6 +2,7 @@
 //! `plc`, `sim`, `bench`.
 
 pub mod bench;
+pub mod demo;
 pub mod plc;
 pub mod sim;
 pub mod sim_modbus;
@@ -111,11 +112,16 @@ impl ServeArgs {
 pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command.unwrap_or(Command::Serve(ServeArgs::default())) {
         Command::Serve(args) => {
-            let config = args.config()?;
-            if args.config.is_none() {
-                tracing::info!("no --config: running the demo site");
+            let mut config = args.config()?;
+            let sim = match args.config {
+                Some(_) => None,
+                None => Some(demo::start(&mut config).await?),
+            };
+            let mut app = Application::build(&config, args.insecure).await?;
+            if let Some(sim) = sim {
+                app.keep(sim);
             }
-            Application::build(&config, args.insecure).await?.run_until(shutdown_signal()).await?;
+            app.run_until(shutdown_signal()).await?;
         }
         Command::Openapi => {
             println!("{}", crate::api::openapi().to_pretty_json().context("encoding OpenAPI")?);

@@ -10,7 +10,7 @@
 
 use std::time::Duration;
 
-use anyhow::{anyhow, bail, Context};
+use anyhow::{Context, anyhow, bail};
 
 use crate::protocols::modbus::address::{self as modbus_address, Table};
 use crate::protocols::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
@@ -106,24 +106,28 @@ pub async fn connect(args: &PlcArgs) -> Result<Box<dyn PlcMemory>, PlcError> {
 /// Whether an address names a bit area, and how to print an address, per protocol.
 fn is_bit_area(protocol: PlcProtocol, address: &Address) -> bool {
     match protocol {
-        PlcProtocol::ModbusTcp | PlcProtocol::ModbusUdp | PlcProtocol::ModbusRtu | PlcProtocol::ModbusRtuTcp => {
-            Table::from_area(&address.area).is_some_and(|t| !t.holds_words())
-        }
+        PlcProtocol::ModbusTcp
+        | PlcProtocol::ModbusUdp
+        | PlcProtocol::ModbusRtu
+        | PlcProtocol::ModbusRtuTcp => Table::from_area(&address.area).is_some_and(|t| !t.holds_words()),
     }
 }
 
 fn format_address(protocol: PlcProtocol, address: &Address) -> String {
     match protocol {
-        PlcProtocol::ModbusTcp | PlcProtocol::ModbusUdp | PlcProtocol::ModbusRtu | PlcProtocol::ModbusRtuTcp => {
-            modbus_address::format(address)
-        }
+        PlcProtocol::ModbusTcp
+        | PlcProtocol::ModbusUdp
+        | PlcProtocol::ModbusRtu
+        | PlcProtocol::ModbusRtuTcp => modbus_address::format(address),
     }
 }
 
 /// A failure in words an operator understands.
 pub fn describe(error: &PlcError) -> String {
     match error {
-        PlcError::Device { protocol: "modbus", code, meaning } => format!("exception {code:02X} \"{meaning}\""),
+        PlcError::Device { protocol: "modbus", code, meaning } => {
+            format!("exception {code:02X} \"{meaning}\"")
+        }
         PlcError::Timeout { attempts, timeout } => {
             format!("timeout: no reply after {attempts} tries of {} ms", timeout.as_millis())
         }
@@ -151,7 +155,9 @@ fn parse_bit(text: &str) -> anyhow::Result<bool> {
 /// clear message otherwise.
 pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
     let plc = connect(&args).await.map_err(|e| anyhow!(describe(&e)))?;
-    let name = clap::ValueEnum::to_possible_value(&args.protocol).map(|v| v.get_name().to_string()).unwrap_or_default();
+    let name = clap::ValueEnum::to_possible_value(&args.protocol)
+        .map(|v| v.get_name().to_string())
+        .unwrap_or_default();
     let target = format!("{name} {}", args.address);
     let (start, values): (Address, Vec<u32>) = match &args.op {
         PlcOp::Read { address, count } => {
@@ -161,29 +167,39 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
             } else {
                 plc.read_words(&start, *count).await.map(|w| w.into_iter().map(u32::from).collect())
             };
-            let values = values.map_err(|e| anyhow!(describe(&e))).with_context(|| format!("read {address} x{count} from {target}"))?;
+            let values = values
+                .map_err(|e| anyhow!(describe(&e)))
+                .with_context(|| format!("read {address} x{count} from {target}"))?;
             (start, values)
         }
         PlcOp::Write { address, values } => {
             let start = plc.parse_address(address).map_err(|e| anyhow!(describe(&e)))?;
             let written: Vec<u32> = if is_bit_area(args.protocol, &start) {
                 let bits = values.iter().map(|v| parse_bit(v)).collect::<anyhow::Result<Vec<_>>>()?;
-                plc.write_bits(&start, &bits).await.map_err(|e| anyhow!(describe(&e)))
+                plc.write_bits(&start, &bits)
+                    .await
+                    .map_err(|e| anyhow!(describe(&e)))
                     .with_context(|| format!("write {address} on {target}"))?;
                 bits.into_iter().map(u32::from).collect()
             } else {
                 let words = values.iter().map(|v| parse_word(v)).collect::<anyhow::Result<Vec<_>>>()?;
-                plc.write_words(&start, &words).await.map_err(|e| anyhow!(describe(&e)))
+                plc.write_words(&start, &words)
+                    .await
+                    .map_err(|e| anyhow!(describe(&e)))
                     .with_context(|| format!("write {address} on {target}"))?;
                 words.into_iter().map(u32::from).collect()
             };
             (start, written)
         }
     };
-    let items: Vec<(String, u32)> =
-        values.iter().enumerate().map(|(i, v)| (format_address(args.protocol, &start.offset(i as u32)), *v)).collect();
+    let items: Vec<(String, u32)> = values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (format_address(args.protocol, &start.offset(i as u32)), *v))
+        .collect();
     if args.json {
-        let json: Vec<_> = items.iter().map(|(a, v)| serde_json::json!({ "address": a, "value": v })).collect();
+        let json: Vec<_> =
+            items.iter().map(|(a, v)| serde_json::json!({ "address": a, "value": v })).collect();
         println!("{}", serde_json::Value::Array(json));
     } else {
         for (address, value) in items {

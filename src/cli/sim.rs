@@ -59,7 +59,11 @@ impl SimShelfArgs {
             unit: self.unit,
             task_time: Duration::from_millis(self.task_ms),
             fail_rate: self.fail,
-            faults: Faults { drop_rate: self.drop, delay: Duration::from_millis(self.delay_ms), ..Faults::default() },
+            faults: Faults {
+                drop_rate: self.drop,
+                delay: Duration::from_millis(self.delay_ms),
+                ..Faults::default()
+            },
         })
     }
 }
@@ -70,7 +74,12 @@ pub async fn run(cmd: SimCommand) -> anyhow::Result<()> {
         SimCommand::Modbus(args) => super::sim_modbus::run(args).await,
         SimCommand::Shelf(args) => {
             let sim = ShelfSim::start(&args.listen, args.options()?).await?;
-            println!("shelf PLC simulator on udp://{} ({} slots from MW{})", sim.local_addr(), args.slots, args.base);
+            println!(
+                "shelf PLC simulator on udp://{} ({} slots from MW{})",
+                sim.local_addr(),
+                args.slots,
+                args.base
+            );
             tokio::signal::ctrl_c().await?;
             let (done, failed) = sim.finished();
             println!("tasks finished {done}, failed {failed}; busy-slot violations {}", sim.violations());

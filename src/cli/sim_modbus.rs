@@ -6,8 +6,8 @@ use std::time::Duration;
 
 use anyhow::Context;
 
-use crate::protocols::modbus::server::{Bank, Faults, ModbusServer, ServerOptions};
 use crate::protocols::modbus::Exception;
+use crate::protocols::modbus::server::{Bank, Faults, ModbusServer, ServerOptions};
 use crate::protocols::serial::SerialSettings;
 
 /// The transports the simulator can listen on.
@@ -88,7 +88,9 @@ pub async fn run(args: SimModbusArgs) -> anyhow::Result<()> {
         SimTransport::Udp => server.serve_udp(listen).await,
         SimTransport::Tcp => server.serve_tcp(listen).await,
         SimTransport::RtuOverTcp => server.serve_rtu_over_tcp(listen).await,
-        SimTransport::Rtu => args.serial.open(listen).map(|port| server.serve_rtu_stream(port, args.serial.baud)),
+        SimTransport::Rtu => {
+            args.serial.open(listen).map(|port| server.serve_rtu_stream(port, args.serial.baud))
+        }
     }
     .with_context(|| format!("cannot listen on {listen}"))?;
     let at = handle.local_addr().map_or(listen.to_string(), |a| a.to_string());

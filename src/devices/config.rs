@@ -15,6 +15,23 @@ pub enum DeviceKind {
     Shelf,
 }
 
+impl DeviceKind {
+    /// The job kinds this kind of machine runs.
+    pub fn job_kinds(self) -> &'static [crate::domain::JobKind] {
+        use crate::domain::JobKind::*;
+        match self {
+            DeviceKind::Shelf => &[Store, Retrieve, Move, Clear, Light],
+        }
+    }
+
+    /// The kind's name as the configuration writes it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            DeviceKind::Shelf => "shelf",
+        }
+    }
+}
+
 /// One `[[devices]]` entry. Every key but `id`, `kind`, `address` and `aisles` has a default.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -101,7 +118,9 @@ fn yes() -> bool {
 impl DeviceConfig {
     /// A shelf PLC on the given address with every default (as in the seed).
     pub fn shelf(id: &str, address: &str, aisles: Vec<u16>) -> Self {
-        let text = format!("id = {id:?}\nkind = \"shelf\"\naddress = {address:?}\naisles = {aisles:?}\nquirks = [\"length0\"]\n");
+        let text = format!(
+            "id = {id:?}\nkind = \"shelf\"\naddress = {address:?}\naisles = {aisles:?}\nquirks = [\"length0\"]\n"
+        );
         toml::from_str(&text).expect("a valid shelf entry")
     }
 

@@ -86,7 +86,9 @@ mod tests {
         assert_eq!(path(Dispatched, &Reported::Failed(fail)), vec![Fail]);
         // Every path is legal in the state machine.
         for from in JobState::ALL {
-            for to in [Reported::Taken, Reported::Running, Reported::Finished { forced: true }, Reported::Cancelled] {
+            for to in
+                [Reported::Taken, Reported::Running, Reported::Finished { forced: true }, Reported::Cancelled]
+            {
                 let mut s = from;
                 for t in path(from, &to) {
                     s = s.apply(t).unwrap_or_else(|e| panic!("{from} -> {to:?}: {e}"));

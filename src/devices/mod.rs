@@ -67,3 +67,44 @@ impl DeviceHandle {
 
 /// Every configured device, by id.
 pub type Devices = Arc<BTreeMap<String, DeviceHandle>>;
+
+/// A wake-up per configured device, made before the job writer so that the writer can wake
+/// a device the moment a job for it is committed.
+pub fn wakers(configs: &[DeviceConfig]) -> BTreeMap<String, Arc<Notify>> {
+    configs.iter().map(|c| (c.id.clone(), Arc::new(Notify::new()))).collect()
+}
+
+/// The writer hook that wakes a job's device when queued work for it is committed.
+pub fn wake_hook(wakers: BTreeMap<String, Arc<Notify>>) -> crate::store::writer::Wake {
+    Arc::new(move |job: &crate::store::Job| {
+        if job.state == crate::domain::JobState::Queued
+            && let Some(n) = job.device.as_ref().and_then(|d| wakers.get(d))
+        {
+            n.notify_one();
+        }
+    })
+}
+
+/// Connects to every device and starts its task.
+pub async fn start(
+    configs: &[DeviceConfig],
+    mut wakers: BTreeMap<String, Arc<Notify>>,
+    writer: &crate::store::writer::Writer,
+    pool: &sqlx::SqlitePool,
+) -> anyhow::Result<(Devices, Vec<tokio::task::JoinHandle<()>>)> {
+    use anyhow::Context;
+    let mut devices = BTreeMap::new();
+    let mut tasks = Vec::new();
+    for c in configs {
+        let plc =
+            crate::protocols::link::connect(&c.link()).await.with_context(|| format!("device {:?}", c.id))?;
+        let status = Arc::new(Mutex::new(DeviceStatus::new(&c.id, c.kind, &c.protocol, &c.address, c.slots)));
+        let (requests, inbox) = mpsc::channel(16);
+        let wake = wakers.remove(&c.id).unwrap_or_default();
+        let shelf = shelf::Shelf::new(c.clone(), plc, writer.clone(), pool.clone(), status.clone())
+            .with_context(|| format!("device {:?}", c.id))?;
+        tasks.push(tokio::spawn(shelf.run(wake.clone(), inbox)));
+        devices.insert(c.id.clone(), DeviceHandle { wake, status, requests });
+    }
+    Ok((Arc::new(devices), tasks))
+}

@@ -62,7 +62,9 @@ impl LinkConfig {
         config.timeout = self.timeout;
         config.retries = self.retries;
         if let Some(serial) = &self.serial {
-            config.serial = serial.parse().map_err(|e: super::serial::SerialSettingsError| LinkError::Setting(e.to_string()))?;
+            config.serial = serial
+                .parse()
+                .map_err(|e: super::serial::SerialSettingsError| LinkError::Setting(e.to_string()))?;
         }
         let mut quirks = Quirks::default();
         for q in &self.quirks {

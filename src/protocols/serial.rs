@@ -21,7 +21,12 @@ pub struct SerialSettings {
 impl Default for SerialSettings {
     /// 9600,8E1: the Modbus RTU default (even parity).
     fn default() -> Self {
-        SerialSettings { baud: 9600, data_bits: DataBits::Eight, parity: Parity::Even, stop_bits: StopBits::One }
+        SerialSettings {
+            baud: 9600,
+            data_bits: DataBits::Eight,
+            parity: Parity::Even,
+            stop_bits: StopBits::One,
+        }
     }
 }
 
@@ -92,13 +97,18 @@ mod tests {
         let s: SerialSettings = "9600,8E1".parse().unwrap();
         assert_eq!(s, SerialSettings::default());
         let s: SerialSettings = "19200,7o2".parse().unwrap();
-        assert_eq!((s.baud, s.data_bits, s.parity, s.stop_bits), (19200, DataBits::Seven, Parity::Odd, StopBits::Two));
+        assert_eq!(
+            (s.baud, s.data_bits, s.parity, s.stop_bits),
+            (19200, DataBits::Seven, Parity::Odd, StopBits::Two)
+        );
         assert_eq!("115200,8N1".parse::<SerialSettings>().unwrap().parity, Parity::None);
     }
 
     #[test]
     fn rejects_bad_settings() {
-        for text in ["", "9600", "9600,8E", "9600,9E1", "9600,8X1", "9600,8E3", "fast,8E1", "0,8N1", "9600,8E1x"] {
+        for text in
+            ["", "9600", "9600,8E", "9600,9E1", "9600,8X1", "9600,8E3", "fast,8E1", "0,8N1", "9600,8E1x"]
+        {
             assert!(text.parse::<SerialSettings>().is_err(), "{text}");
         }
     }

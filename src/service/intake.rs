@@ -4,7 +4,7 @@
 //! exactly its own fields, so a `store` with a `from` is an error, not a silently ignored
 //! field. Locations are checked against the site layout, and a named device must exist.
 
-use std::collections::BTreeSet;
+use std::collections::BTreeMap;
 
 use serde::Deserialize;
 use utoipa::ToSchema;
@@ -55,8 +55,10 @@ pub struct JobRequest {
 pub struct Rules {
     /// The site layout.
     pub layout: Layout,
-    /// The configured device ids.
-    pub devices: BTreeSet<String>,
+    /// The configured devices and the job kinds each can run.
+    pub devices: BTreeMap<String, &'static [JobKind]>,
+    /// Which device serves each aisle.
+    pub routes: BTreeMap<u16, String>,
 }
 
 impl Rules {
@@ -105,13 +107,45 @@ impl Rules {
         if let Some(r) = &req.reference {
             check_reference(r)?;
         }
-        if let Some(d) = &req.device
-            && !self.devices.contains(d)
-        {
-            let known: Vec<_> = self.devices.iter().map(String::as_str).collect();
-            return Err(Invalid(format!("device {d:?} is not configured (devices: [{}])", known.join(", "))));
+        let device = self.route(&spec, req.device)?;
+        Ok(NewJob { spec, reference: req.reference, priority, barcode, device })
+    }
+
+    /// The device a job runs on: the one named, or the one serving its locations' aisle.
+    /// With no devices configured jobs have none and stay queued.
+    fn route(&self, spec: &JobSpec, named: Option<String>) -> Result<Option<String>, Invalid> {
+        if self.devices.is_empty() && named.is_none() {
+            return Ok(None);
         }
-        Ok(NewJob { spec, reference: req.reference, priority, barcode, device: req.device })
+        let device = match named {
+            Some(d) if self.devices.contains_key(&d) => d,
+            Some(d) => {
+                let known: Vec<_> = self.devices.keys().map(String::as_str).collect();
+                return Err(Invalid(format!(
+                    "device {d:?} is not configured (devices: [{}])",
+                    known.join(", ")
+                )));
+            }
+            None => {
+                let mut aisles = spec.locations().into_iter().map(|l| l.aisle).collect::<Vec<_>>();
+                aisles.dedup();
+                let routed: Vec<_> = aisles.iter().map(|a| self.routes.get(a)).collect();
+                match routed.as_slice() {
+                    [Some(d)] => (*d).clone(),
+                    [Some(a), Some(b)] if a == b => (*a).clone(),
+                    _ => {
+                        return Err(Invalid(format!(
+                            "no single device serves aisle(s) {aisles:?}; name one with `device`"
+                        )));
+                    }
+                }
+            }
+        };
+        let kinds = self.devices.get(&device).copied().unwrap_or(&[]);
+        if !kinds.contains(&spec.kind()) {
+            return Err(Invalid(format!("device {device:?} cannot run {} jobs", spec.kind().as_str())));
+        }
+        Ok(Some(device))
     }
 }
 
@@ -134,7 +168,7 @@ mod tests {
 
     fn rules() -> Rules {
         let aisle = AisleLayout { rows: 2, bays: 10, levels: 6, positions: 4 };
-        Rules { layout: Layout::new(BTreeMap::from([(1, aisle)])), devices: BTreeSet::new() }
+        Rules { layout: Layout::new(BTreeMap::from([(1, aisle)])), ..Rules::default() }
     }
 
     fn req(json: serde_json::Value) -> JobRequest {

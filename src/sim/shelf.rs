@@ -94,10 +94,18 @@ impl ShelfSim {
         let bank = Bank::new();
         let world = Arc::new(Mutex::new(World::default()));
         let wake = Arc::new(Notify::new());
-        let handler =
-            ShelfHandler { bank: bank.clone(), world: world.clone(), options: options.clone(), wake: wake.clone() };
-        let server_options =
-            ServerOptions { unit: options.unit, length0: true, faults: options.faults.clone(), ..Default::default() };
+        let handler = ShelfHandler {
+            bank: bank.clone(),
+            world: world.clone(),
+            options: options.clone(),
+            wake: wake.clone(),
+        };
+        let server_options = ServerOptions {
+            unit: options.unit,
+            length0: true,
+            faults: options.faults.clone(),
+            ..Default::default()
+        };
         let server = ModbusServer::new(Arc::new(handler), server_options).serve_udp(listen).await?;
         let engine = tokio::spawn(run_engine(bank.clone(), world.clone(), options, wake));
         Ok(ShelfSim { world, bank, server, engine })
@@ -195,7 +203,12 @@ impl ShelfHandler {
                     (true, 3) => {}
                     _ => {
                         world.violations += 1;
-                        tracing::warn!(slot = slot + 1, task = id, state, "VIOLATION: write into a busy slot");
+                        tracing::warn!(
+                            slot = slot + 1,
+                            task = id,
+                            state,
+                            "VIOLATION: write into a busy slot"
+                        );
                     }
                 }
             }
@@ -291,7 +304,11 @@ fn perform(world: &mut World, task: &Task) -> Result<(), &'static str> {
         (Some(Command::Clear), Some(at), _) => {
             inv.remove(&at);
         }
-        (Some(c @ (Command::GreenOn | Command::GreenOff | Command::RedOn | Command::RedOff)), Some(at), None) => {
+        (
+            Some(c @ (Command::GreenOn | Command::GreenOff | Command::RedOn | Command::RedOff)),
+            Some(at),
+            None,
+        ) => {
             let color = if matches!(c, Command::RedOn | Command::RedOff) { "red" } else { "green" };
             world.lights.insert((at, color), matches!(c, Command::GreenOn | Command::RedOn));
         }

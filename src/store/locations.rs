@@ -97,7 +97,10 @@ pub async fn seed(db: &mut SqliteConnection, layout: &Layout, now: i64) -> Resul
 }
 
 /// Every location, optionally of one aisle, in order.
-pub async fn list(db: impl SqliteExecutor<'_>, aisle: Option<u16>) -> Result<Vec<LocationState>, sqlx::Error> {
+pub async fn list(
+    db: impl SqliteExecutor<'_>,
+    aisle: Option<u16>,
+) -> Result<Vec<LocationState>, sqlx::Error> {
     let rows: Vec<Row> = sqlx::query_as(
         "SELECT * FROM locations WHERE (?1 IS NULL OR aisle = ?1) ORDER BY aisle, row, bay, level, position",
     )
@@ -110,19 +113,32 @@ pub async fn list(db: impl SqliteExecutor<'_>, aisle: Option<u16>) -> Result<Vec
 /// One location, if the layout has it.
 pub async fn get(db: impl SqliteExecutor<'_>, l: Location) -> Result<Option<LocationState>, sqlx::Error> {
     let q = sqlx::query_as::<_, Row>(sqlx::AssertSqlSafe(format!("SELECT * FROM locations WHERE {KEY}")));
-    let q = q.bind(l.aisle as i64).bind(l.row as i64).bind(l.bay as i64).bind(l.level as i64).bind(l.position as i64);
+    let q = q
+        .bind(l.aisle as i64)
+        .bind(l.row as i64)
+        .bind(l.bay as i64)
+        .bind(l.level as i64)
+        .bind(l.position as i64);
     Ok(q.fetch_optional(db).await?.map(LocationState::from))
 }
 
 /// Marks `locations` reserved by `job` (`hold`), or releases everything `job` holds.
-pub async fn reserve(db: &mut SqliteConnection, job: i64, locations: &[Location], hold: bool) -> Result<(), sqlx::Error> {
+pub async fn reserve(
+    db: &mut SqliteConnection,
+    job: i64,
+    locations: &[Location],
+    hold: bool,
+) -> Result<(), sqlx::Error> {
     if hold {
         for &l in locations {
             let sql = format!("UPDATE locations SET reserved_by = ? WHERE {KEY}");
             bind_key(sqlx::query(sqlx::AssertSqlSafe(sql)).bind(job), l).execute(&mut *db).await?;
         }
     } else {
-        sqlx::query("UPDATE locations SET reserved_by = NULL WHERE reserved_by = ?").bind(job).execute(&mut *db).await?;
+        sqlx::query("UPDATE locations SET reserved_by = NULL WHERE reserved_by = ?")
+            .bind(job)
+            .execute(&mut *db)
+            .await?;
     }
     Ok(())
 }

@@ -95,7 +95,12 @@ pub struct Writer {
 impl Writer {
     /// Starts the writer task. It stops once every handle is dropped and what was sent
     /// before is committed; await the returned handle to know when.
-    pub fn start(pool: SqlitePool, max_group: usize, queue: usize, wake: Option<Wake>) -> (Writer, JoinHandle<()>) {
+    pub fn start(
+        pool: SqlitePool,
+        max_group: usize,
+        queue: usize,
+        wake: Option<Wake>,
+    ) -> (Writer, JoinHandle<()>) {
         let (tx, rx) = mpsc::channel(queue);
         let task = tokio::spawn(run(pool, rx, max_group, wake));
         (Writer { tx }, task)

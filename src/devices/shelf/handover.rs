@@ -25,8 +25,9 @@ pub enum DispatchError {
 impl Shelf {
     /// Fills free slots with the best eligible queued jobs.
     pub(super) async fn dispatch(&mut self) -> Result<(), DispatchError> {
-        let unfinished =
-            jobs::unfinished(&self.pool, &self.config.id).await.map_err(|e| DispatchError::Store(e.to_string()))?;
+        let unfinished = jobs::unfinished(&self.pool, &self.config.id)
+            .await
+            .map_err(|e| DispatchError::Store(e.to_string()))?;
         let held: HashSet<i64> = self
             .slots
             .iter()
@@ -36,8 +37,11 @@ impl Shelf {
             })
             .collect();
         let free: Vec<usize> = (0..self.slots.len()).filter(|&k| self.slots[k] == Slot::Free).collect();
-        let candidates: Vec<_> =
-            next_jobs(&unfinished, usize::MAX).into_iter().filter(|j| !held.contains(&j.id)).take(free.len()).collect();
+        let candidates: Vec<_> = next_jobs(&unfinished, usize::MAX)
+            .into_iter()
+            .filter(|j| !held.contains(&j.id))
+            .take(free.len())
+            .collect();
         for (k, job) in free.into_iter().zip(candidates) {
             self.hand_over(k, job).await?;
         }
@@ -83,7 +87,10 @@ impl Shelf {
         to: Reported,
         cause: &str,
     ) -> Result<(), DispatchError> {
-        advance(&self.writer, job, to, cause).await.map(|_| ()).map_err(|e| DispatchError::Store(e.to_string()))
+        advance(&self.writer, job, to, cause)
+            .await
+            .map(|_| ())
+            .map_err(|e| DispatchError::Store(e.to_string()))
     }
 
     /// Cancels a job of this device: at once while queued; a task in a slot only if the
@@ -108,7 +115,10 @@ impl Shelf {
             return self.writer.change(id, change).await.map(|_| ()).map_err(|e| e.to_string());
         };
         if !self.config.withdraw {
-            return Err(format!("job {id} is in slot {} and withdrawing tasks is disabled for this device", k + 1));
+            return Err(format!(
+                "job {id} is in slot {} and withdrawing tasks is disabled for this device",
+                k + 1
+            ));
         }
         let Slot::Held { task, .. } = self.slots[k] else { return Err("slot state changed".into()) };
         let at = self.slot_address(k);
@@ -117,8 +127,12 @@ impl Shelf {
         match view.state {
             _ if view.task_id != task => return Err(format!("slot {} no longer holds task {task}", k + 1)),
             ExecState::NotStarted => {}
-            ExecState::Running => return Err(format!("the PLC is running job {id}; a shelf PLC cannot stop a running task")),
-            _ => return Err(format!("job {id} has already ended on the PLC; it is recorded at the next poll")),
+            ExecState::Running => {
+                return Err(format!("the PLC is running job {id}; a shelf PLC cannot stop a running task"));
+            }
+            _ => {
+                return Err(format!("job {id} has already ended on the PLC; it is recorded at the next poll"));
+            }
         }
         self.write(&at, &[0]).await.map_err(|e| format!("clearing slot {}: {e}", k + 1))?;
         let back = self.read(&at, SLOT_WORDS as u16).await.map_err(|e| e.to_string())?;

@@ -33,9 +33,9 @@ use sqlx::SqlitePool;
 use tokio::sync::{Notify, mpsc};
 use tokio::time::{Instant, sleep_until};
 
+use super::DeviceRequest;
 use super::config::DeviceConfig;
 use super::status::DeviceStatus;
-use super::DeviceRequest;
 use crate::protocols::{Address, PlcError, PlcMemory};
 use crate::store::time::from_ms;
 use crate::store::writer::Writer;

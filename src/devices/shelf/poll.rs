@@ -68,7 +68,9 @@ impl Shelf {
         }
         self.slots[k] = Slot::Held { job: id, task, confirmed: true };
         match view.state {
-            ExecState::NotStarted => self.record(&job, Reported::Taken, &format!("found in slot {slot_no}")).await,
+            ExecState::NotStarted => {
+                self.record(&job, Reported::Taken, &format!("found in slot {slot_no}")).await
+            }
             ExecState::Running => self.record(&job, Reported::Running, "the PLC runs it").await,
             ExecState::Finished => {
                 self.record(&job, Reported::Finished { forced: false }, "the PLC finished it").await?;
@@ -81,7 +83,9 @@ impl Shelf {
                 self.release(k, true).await
             }
             ExecState::Unknown(v) => {
-                self.update_status(|s| s.last_error = Some(format!("slot {slot_no}: unknown execution state {v}")));
+                self.update_status(|s| {
+                    s.last_error = Some(format!("slot {slot_no}: unknown execution state {v}"))
+                });
                 Ok(())
             }
         }
@@ -115,7 +119,9 @@ impl Shelf {
                     self.slots[k] = Slot::Held { job, task: view.task_id, confirmed: false };
                     self.follow(k, words).await?;
                 }
-                None if view.state == ExecState::Finished => self.release(k, self.config.clear_finished).await?,
+                None if view.state == ExecState::Finished => {
+                    self.release(k, self.config.clear_finished).await?
+                }
                 None if view.state == ExecState::Failed => self.release(k, true).await?,
                 None => {
                     tracing::warn!(device = %self.config.id, slot = k + 1, task = view.task_id, "slot holds unknown work");

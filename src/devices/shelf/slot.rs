@@ -50,7 +50,9 @@ impl Command {
     /// The command for a code word, if it is one.
     pub fn from_code(code: u16) -> Option<Command> {
         use Command::*;
-        [Store, Retrieve, Move, Clear, GreenOn, GreenOff, RedOn, RedOff].into_iter().find(|c| *c as u16 == code)
+        [Store, Retrieve, Move, Clear, GreenOn, GreenOff, RedOn, RedOff]
+            .into_iter()
+            .find(|c| *c as u16 == code)
     }
 }
 
@@ -140,7 +142,11 @@ pub fn command_for(spec: &JobSpec) -> Result<Positions, &'static str> {
 
 /// The words 1..35 of a slot (everything but the task id, which is written last) for a job;
 /// see [`command_for`] for what goes into "from" and "to".
-pub fn encode_body(spec: &JobSpec, priority: u8, barcode: Option<&str>) -> Result<[u16; SLOT_WORDS - 1], &'static str> {
+pub fn encode_body(
+    spec: &JobSpec,
+    priority: u8,
+    barcode: Option<&str>,
+) -> Result<[u16; SLOT_WORDS - 1], &'static str> {
     let (command, from, to) = command_for(spec)?;
     let mut w = [0u16; SLOT_WORDS];
     w[1] = priority as u16;
@@ -167,8 +173,13 @@ fn put_location(w: &mut [u16], l: Location) {
 /// Reads a location from 5 words; `None` when all are zero.
 pub fn location_at(words: &[u16], offset: usize) -> Option<Location> {
     let w = words.get(offset..offset + 5)?;
-    (w.iter().any(|&x| x != 0))
-        .then(|| Location { aisle: w[0], row: w[1], bay: w[2], level: w[3], position: w[4] })
+    (w.iter().any(|&x| x != 0)).then(|| Location {
+        aisle: w[0],
+        row: w[1],
+        bay: w[2],
+        level: w[3],
+        position: w[4],
+    })
 }
 
 /// A task as decoded from a full slot (the simulator's view).
@@ -271,7 +282,10 @@ mod tests {
         assert_eq!(cmd(JobSpec::Store { to: l }), Ok(Command::Store));
         assert_eq!(cmd(JobSpec::Retrieve { from: l }), Ok(Command::Retrieve));
         assert_eq!(cmd(JobSpec::Clear { location: l }), Ok(Command::Clear));
-        assert_eq!(cmd(JobSpec::Light { location: l, color: LightColor::Red, on: false }), Ok(Command::RedOff));
+        assert_eq!(
+            cmd(JobSpec::Light { location: l, color: LightColor::Red, on: false }),
+            Ok(Command::RedOff)
+        );
         assert!(cmd(JobSpec::Travel { to: l }).is_err());
     }
 

@@ -53,7 +53,8 @@ impl Table {
 pub fn parse(text: &str) -> Result<Address, PlcError> {
     let bad = |reason| PlcError::BadAddress { text: text.to_string(), reason };
     let t = text.trim();
-    let (prefix, number) = t.split_at_checked(2).ok_or_else(|| bad("expected 0x, 1x, 3x or 4x and a number"))?;
+    let (prefix, number) =
+        t.split_at_checked(2).ok_or_else(|| bad("expected 0x, 1x, 3x or 4x and a number"))?;
     let area = Area::new(prefix);
     Table::from_area(&area).ok_or_else(|| bad("the area must be 0x, 1x, 3x or 4x"))?;
     if number.is_empty() || !number.bytes().all(|b| b.is_ascii_digit()) {
@@ -74,7 +75,8 @@ pub fn format(address: &Address) -> String {
 /// Checks that `count` items from `start` fit in the 16-bit address space; returns the
 /// table and the first PDU address.
 pub fn resolve(start: &Address, count: usize) -> Result<(Table, u16), PlcError> {
-    let table = Table::from_area(&start.area).ok_or(PlcError::OutOfRange("not a Modbus area (0x, 1x, 3x, 4x)"))?;
+    let table =
+        Table::from_area(&start.area).ok_or(PlcError::OutOfRange("not a Modbus area (0x, 1x, 3x, 4x)"))?;
     if count == 0 {
         return Err(PlcError::OutOfRange("count must be at least 1"));
     }

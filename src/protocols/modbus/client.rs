@@ -1,14 +1,16 @@
 //! The Modbus client (master): one device, any transport, retries in one place.
 
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 
 use tokio::sync::Mutex;
 
 use super::config::{ModbusConfig, Transport};
 use super::pdu::{self, Request, Response};
 use super::rtu;
-use super::transport::{AttemptError, ByteStream, Connection, Counters, Endpoint, Exchange, Link, RtuLink, TcpLink, UdpLink};
+use super::transport::{
+    AttemptError, ByteStream, Connection, Counters, Endpoint, Exchange, Link, RtuLink, TcpLink, UdpLink,
+};
 use crate::protocols::PlcError;
 
 /// Counters of a client's traffic, for diagnostics and tests.
@@ -39,10 +41,14 @@ impl ModbusClient {
         check_unit(config.unit)?;
         let counters = Arc::new(Counters::default());
         let link = match config.transport {
-            Transport::Udp => Link::Udp(UdpLink::connect(&config.address, config.quirks, counters.clone()).await?),
-            Transport::Tcp => {
-                Link::Tcp(TcpLink::new(Connection::new(Endpoint::Tcp(config.address.clone())), config.quirks, counters.clone()))
+            Transport::Udp => {
+                Link::Udp(UdpLink::connect(&config.address, config.quirks, counters.clone()).await?)
             }
+            Transport::Tcp => Link::Tcp(TcpLink::new(
+                Connection::new(Endpoint::Tcp(config.address.clone())),
+                config.quirks,
+                counters.clone(),
+            )),
             Transport::RtuOverTcp => {
                 let conn = Connection::new(Endpoint::Tcp(config.address.clone()));
                 Link::Rtu(RtuLink::new(conn, rtu::silence(0), counters.clone()))
@@ -57,7 +63,10 @@ impl ModbusClient {
 
     /// An RTU client over a stream the caller already opened (a pty in tests, a port
     /// opened with special settings). The stream cannot be reopened if it fails.
-    pub fn rtu_over_stream(config: ModbusConfig, stream: impl ByteStream + 'static) -> Result<Self, PlcError> {
+    pub fn rtu_over_stream(
+        config: ModbusConfig,
+        stream: impl ByteStream + 'static,
+    ) -> Result<Self, PlcError> {
         check_unit(config.unit)?;
         let counters = Arc::new(Counters::default());
         let conn = Connection::new(Endpoint::Given(Some(Box::new(stream))));
@@ -144,15 +153,21 @@ fn attempt_error(e: AttemptError, attempts: u32, timeout: std::time::Duration) -
 /// The reply a device would have sent to a write; used for broadcasts, which get none.
 fn echo_of(request: &Request) -> Response {
     match request {
-        Request::WriteSingleCoil { address, value } => Response::WriteSingleCoil { address: *address, value: *value },
-        Request::WriteSingleRegister { address, value } => Response::WriteSingleRegister { address: *address, value: *value },
+        Request::WriteSingleCoil { address, value } => {
+            Response::WriteSingleCoil { address: *address, value: *value }
+        }
+        Request::WriteSingleRegister { address, value } => {
+            Response::WriteSingleRegister { address: *address, value: *value }
+        }
         Request::WriteMultipleCoils { address, values } => {
             Response::WriteMultipleCoils { address: *address, count: values.len() as u16 }
         }
         Request::WriteMultipleRegisters { address, values } => {
             Response::WriteMultipleRegisters { address: *address, count: values.len() as u16 }
         }
-        Request::Diagnostics { sub_function, data } => Response::Diagnostics { sub_function: *sub_function, data: *data },
+        Request::Diagnostics { sub_function, data } => {
+            Response::Diagnostics { sub_function: *sub_function, data: *data }
+        }
         // Reads are refused before broadcasting; an empty answer keeps this total.
         Request::ReadCoils { .. } | Request::ReadDiscreteInputs { .. } => Response::ReadCoils(Vec::new()),
         Request::ReadHoldingRegisters { .. } | Request::ReadInputRegisters { .. } => {

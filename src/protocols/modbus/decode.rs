@@ -5,7 +5,7 @@
 //! what was wrong ([`DecodeError`]).
 
 use super::exception::Exception;
-use super::pdu::{self, fc, Request, Response};
+use super::pdu::{self, Request, Response, fc};
 
 /// What is wrong with a PDU.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -230,7 +230,9 @@ pub fn request_pdu_len(prefix: &[u8]) -> Result<Option<usize>, DecodeError> {
     let Some(&f) = prefix.first() else { return Ok(None) };
     match f {
         fc::READ_COILS..=fc::WRITE_SINGLE_REGISTER | fc::DIAGNOSTICS => Ok(Some(5)),
-        fc::WRITE_MULTIPLE_COILS | fc::WRITE_MULTIPLE_REGISTERS => Ok(prefix.get(5).map(|&bc| 6 + bc as usize)),
+        fc::WRITE_MULTIPLE_COILS | fc::WRITE_MULTIPLE_REGISTERS => {
+            Ok(prefix.get(5).map(|&bc| 6 + bc as usize))
+        }
         other => Err(DecodeError::UnknownFunction(other)),
     }
 }

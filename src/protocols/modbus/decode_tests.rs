@@ -164,12 +164,18 @@ fn pdu_lengths_from_prefixes() {
 
 fn request_strategy() -> impl Strategy<Value = Request> {
     prop_oneof![
-        (any::<u16>(), 1..=pdu::MAX_READ_BITS).prop_map(|(address, count)| Request::ReadCoils { address, count }),
-        (any::<u16>(), 1..=pdu::MAX_READ_BITS).prop_map(|(address, count)| Request::ReadDiscreteInputs { address, count }),
-        (any::<u16>(), 1..=pdu::MAX_READ_REGISTERS).prop_map(|(address, count)| Request::ReadHoldingRegisters { address, count }),
-        (any::<u16>(), 1..=pdu::MAX_READ_REGISTERS).prop_map(|(address, count)| Request::ReadInputRegisters { address, count }),
-        (any::<u16>(), any::<bool>()).prop_map(|(address, value)| Request::WriteSingleCoil { address, value }),
-        (any::<u16>(), any::<u16>()).prop_map(|(address, value)| Request::WriteSingleRegister { address, value }),
+        (any::<u16>(), 1..=pdu::MAX_READ_BITS)
+            .prop_map(|(address, count)| Request::ReadCoils { address, count }),
+        (any::<u16>(), 1..=pdu::MAX_READ_BITS)
+            .prop_map(|(address, count)| Request::ReadDiscreteInputs { address, count }),
+        (any::<u16>(), 1..=pdu::MAX_READ_REGISTERS)
+            .prop_map(|(address, count)| Request::ReadHoldingRegisters { address, count }),
+        (any::<u16>(), 1..=pdu::MAX_READ_REGISTERS)
+            .prop_map(|(address, count)| Request::ReadInputRegisters { address, count }),
+        (any::<u16>(), any::<bool>())
+            .prop_map(|(address, value)| Request::WriteSingleCoil { address, value }),
+        (any::<u16>(), any::<u16>())
+            .prop_map(|(address, value)| Request::WriteSingleRegister { address, value }),
         (any::<u16>(), prop::collection::vec(any::<bool>(), 1..=pdu::MAX_WRITE_BITS as usize))
             .prop_map(|(address, values)| Request::WriteMultipleCoils { address, values }),
         (any::<u16>(), prop::collection::vec(any::<u16>(), 1..=pdu::MAX_WRITE_REGISTERS as usize))
@@ -187,15 +193,21 @@ fn exchange_strategy() -> impl Strategy<Value = (Request, Response)> {
                 prop::collection::vec(any::<bool>(), *count as usize).prop_map(Response::ReadCoils).boxed()
             }
             Request::ReadDiscreteInputs { count, .. } => {
-                prop::collection::vec(any::<bool>(), *count as usize).prop_map(Response::ReadDiscreteInputs).boxed()
+                prop::collection::vec(any::<bool>(), *count as usize)
+                    .prop_map(Response::ReadDiscreteInputs)
+                    .boxed()
             }
             Request::ReadHoldingRegisters { count, .. } => {
-                prop::collection::vec(any::<u16>(), *count as usize).prop_map(Response::ReadHoldingRegisters).boxed()
+                prop::collection::vec(any::<u16>(), *count as usize)
+                    .prop_map(Response::ReadHoldingRegisters)
+                    .boxed()
             }
-            Request::ReadInputRegisters { count, .. } => {
-                prop::collection::vec(any::<u16>(), *count as usize).prop_map(Response::ReadInputRegisters).boxed()
+            Request::ReadInputRegisters { count, .. } => prop::collection::vec(any::<u16>(), *count as usize)
+                .prop_map(Response::ReadInputRegisters)
+                .boxed(),
+            Request::WriteSingleCoil { address, value } => {
+                Just(Response::WriteSingleCoil { address: *address, value: *value }).boxed()
             }
-            Request::WriteSingleCoil { address, value } => Just(Response::WriteSingleCoil { address: *address, value: *value }).boxed(),
             Request::WriteSingleRegister { address, value } => {
                 Just(Response::WriteSingleRegister { address: *address, value: *value }).boxed()
             }
@@ -203,7 +215,8 @@ fn exchange_strategy() -> impl Strategy<Value = (Request, Response)> {
                 Just(Response::WriteMultipleCoils { address: *address, count: values.len() as u16 }).boxed()
             }
             Request::WriteMultipleRegisters { address, values } => {
-                Just(Response::WriteMultipleRegisters { address: *address, count: values.len() as u16 }).boxed()
+                Just(Response::WriteMultipleRegisters { address: *address, count: values.len() as u16 })
+                    .boxed()
             }
             Request::Diagnostics { sub_function, data } => {
                 Just(Response::Diagnostics { sub_function: *sub_function, data: *data }).boxed()

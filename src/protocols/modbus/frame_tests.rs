@@ -44,7 +44,10 @@ fn seed_write_single_register() {
     assert_eq!(request_frame(0, 1, &req), hex("00 00 00 00 00 06 01 06 12 5C 27 10"));
     let seed_reply = hex("00 00 00 00 00 00 01 06 12 5C 27 10");
     let (_, pdu) = split_datagram(&seed_reply, true).unwrap();
-    assert_eq!(decode_response(pdu, &req), Ok(Ok(Response::WriteSingleRegister { address: 4700, value: 10000 })));
+    assert_eq!(
+        decode_response(pdu, &req),
+        Ok(Ok(Response::WriteSingleRegister { address: 4700, value: 10000 }))
+    );
     let resp = Response::WriteSingleRegister { address: 4700, value: 10000 };
     assert_eq!(response_frame(0, 1, &resp, LengthField::Zero), seed_reply);
 }
@@ -63,7 +66,10 @@ fn seed_write_multiple_registers() {
     assert_eq!(Request::decode(&seed_request[MBAP_LEN..]), Ok(req.clone()));
     let seed_reply = hex("00 00 00 00 00 00 01 10 12 5C 00 03");
     let (_, pdu) = split_datagram(&seed_reply, true).unwrap();
-    assert_eq!(decode_response(pdu, &req), Ok(Ok(Response::WriteMultipleRegisters { address: 4700, count: 3 })));
+    assert_eq!(
+        decode_response(pdu, &req),
+        Ok(Ok(Response::WriteMultipleRegisters { address: 4700, count: 3 }))
+    );
     let resp = Response::WriteMultipleRegisters { address: 4700, count: 3 };
     assert_eq!(response_frame(0, 1, &resp, LengthField::Zero), seed_reply);
 }

@@ -122,9 +122,13 @@ impl Request {
                 (*address, *count as usize, MAX_READ_BITS)
             }
             Request::ReadHoldingRegisters { address, count }
-            | Request::ReadInputRegisters { address, count } => (*address, *count as usize, MAX_READ_REGISTERS),
+            | Request::ReadInputRegisters { address, count } => {
+                (*address, *count as usize, MAX_READ_REGISTERS)
+            }
             Request::WriteMultipleCoils { address, values } => (*address, values.len(), MAX_WRITE_BITS),
-            Request::WriteMultipleRegisters { address, values } => (*address, values.len(), MAX_WRITE_REGISTERS),
+            Request::WriteMultipleRegisters { address, values } => {
+                (*address, values.len(), MAX_WRITE_REGISTERS)
+            }
             _ => return Ok(()),
         };
         if count == 0 || count > max as usize {
@@ -191,9 +195,8 @@ impl Response {
             }
             Response::WriteSingleCoil { address, value } => put_words(buf, &[*address, coil_word(*value)]),
             Response::WriteSingleRegister { address, value } => put_words(buf, &[*address, *value]),
-            Response::WriteMultipleCoils { address, count } | Response::WriteMultipleRegisters { address, count } => {
-                put_words(buf, &[*address, *count])
-            }
+            Response::WriteMultipleCoils { address, count }
+            | Response::WriteMultipleRegisters { address, count } => put_words(buf, &[*address, *count]),
             Response::Diagnostics { sub_function, data } => put_words(buf, &[*sub_function, *data]),
         }
     }

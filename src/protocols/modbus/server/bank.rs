@@ -51,16 +51,18 @@ impl RegisterBank {
     /// Performs one request on the tables, as a device would.
     pub fn apply(&mut self, request: &Request) -> Result<Response, Exception> {
         Ok(match request {
-            Request::ReadCoils { address, count } => Response::ReadCoils(range(&self.coils, *address, *count as usize)?.to_vec()),
-            Request::ReadDiscreteInputs { address, count } => {
-                Response::ReadDiscreteInputs(range(&self.discrete_inputs, *address, *count as usize)?.to_vec())
+            Request::ReadCoils { address, count } => {
+                Response::ReadCoils(range(&self.coils, *address, *count as usize)?.to_vec())
             }
-            Request::ReadHoldingRegisters { address, count } => {
-                Response::ReadHoldingRegisters(range(&self.holding_registers, *address, *count as usize)?.to_vec())
-            }
-            Request::ReadInputRegisters { address, count } => {
-                Response::ReadInputRegisters(range(&self.input_registers, *address, *count as usize)?.to_vec())
-            }
+            Request::ReadDiscreteInputs { address, count } => Response::ReadDiscreteInputs(
+                range(&self.discrete_inputs, *address, *count as usize)?.to_vec(),
+            ),
+            Request::ReadHoldingRegisters { address, count } => Response::ReadHoldingRegisters(
+                range(&self.holding_registers, *address, *count as usize)?.to_vec(),
+            ),
+            Request::ReadInputRegisters { address, count } => Response::ReadInputRegisters(
+                range(&self.input_registers, *address, *count as usize)?.to_vec(),
+            ),
             Request::WriteSingleCoil { address, value } => {
                 range_mut(&mut self.coils, *address, 1)?[0] = *value;
                 Response::WriteSingleCoil { address: *address, value: *value }
@@ -77,7 +79,9 @@ impl RegisterBank {
                 range_mut(&mut self.holding_registers, *address, values.len())?.copy_from_slice(values);
                 Response::WriteMultipleRegisters { address: *address, count: values.len() as u16 }
             }
-            Request::Diagnostics { sub_function, data } => Response::Diagnostics { sub_function: *sub_function, data: *data },
+            Request::Diagnostics { sub_function, data } => {
+                Response::Diagnostics { sub_function: *sub_function, data: *data }
+            }
         })
     }
 }
@@ -135,7 +139,10 @@ mod tests {
         let r = Request::ReadHoldingRegisters { address: 65535, count: 2 };
         assert_eq!(bank.apply(&r), Err(Exception::ILLEGAL_DATA_ADDRESS));
         bank.apply(&Request::WriteSingleCoil { address: 9, value: true }).unwrap();
-        assert_eq!(bank.apply(&Request::ReadCoils { address: 8, count: 3 }), Ok(Response::ReadCoils(vec![false, true, false])));
+        assert_eq!(
+            bank.apply(&Request::ReadCoils { address: 8, count: 3 }),
+            Ok(Response::ReadCoils(vec![false, true, false]))
+        );
     }
 
     #[test]

@@ -38,8 +38,8 @@ pub use handler::Handler;
 
 use faults::Plan;
 
-use super::pdu::{encode_exception, Request};
 use super::ByteStream;
+use super::pdu::{Request, encode_exception};
 
 /// How a server presents itself.
 #[derive(Clone, Debug, PartialEq)]

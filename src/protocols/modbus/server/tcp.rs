@@ -12,7 +12,7 @@ use tokio::task::JoinSet;
 
 use super::{Outcome, Shared};
 use crate::protocols::modbus::decode::request_pdu_len;
-use crate::protocols::modbus::frame::{self, LengthField, MBAP_LEN, MAX_PDU_LEN};
+use crate::protocols::modbus::frame::{self, LengthField, MAX_PDU_LEN, MBAP_LEN};
 
 /// What runs over the TCP connections.
 #[derive(Clone, Copy, Debug)]

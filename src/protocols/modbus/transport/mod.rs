@@ -5,22 +5,22 @@
 //! answers this request, or says why not ([`AttemptError`]). Datagrams or frames that do not
 //! answer this request (stale transaction id, other unit) are dropped and counted.
 
+mod rtu;
 mod stream;
 mod tcp;
 mod udp;
-mod rtu;
 
 use std::io;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
+pub(crate) use rtu::RtuLink;
 pub use stream::ByteStream;
 pub(crate) use stream::{Connection, Endpoint};
-pub(crate) use rtu::RtuLink;
 pub(crate) use tcp::TcpLink;
 pub(crate) use udp::UdpLink;
 
-use super::decode::{decode_response, DecodeError};
+use super::decode::{DecodeError, decode_response};
 use super::exception::Exception;
 use super::frame::MbapHeader;
 use super::pdu::{Request, Response};
@@ -103,7 +103,13 @@ pub(crate) enum Verdict {
 }
 
 /// Judges an MBAP frame against the request and the transaction ids of its attempts.
-pub(crate) fn judge_mbap(header: &MbapHeader, pdu: &[u8], ex: &Exchange<'_>, tids: &[u16], ignore_tid: bool) -> Verdict {
+pub(crate) fn judge_mbap(
+    header: &MbapHeader,
+    pdu: &[u8],
+    ex: &Exchange<'_>,
+    tids: &[u16],
+    ignore_tid: bool,
+) -> Verdict {
     if !ignore_tid && !tids.contains(&header.transaction) {
         return Verdict::Drop(None);
     }
@@ -118,7 +124,9 @@ pub(crate) fn judge(unit: u8, pdu: &[u8], ex: &Exchange<'_>, loose: bool) -> Ver
     }
     match decode_response(pdu, ex.request) {
         Ok(reply) => Verdict::Take(reply),
-        Err(DecodeError::FunctionMismatch) if loose => Verdict::Drop(Some("function code in the reply differs from the request")),
+        Err(DecodeError::FunctionMismatch) if loose => {
+            Verdict::Drop(Some("function code in the reply differs from the request"))
+        }
         Err(e) => Verdict::Fail(e.message()),
     }
 }

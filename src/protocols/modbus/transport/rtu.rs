@@ -14,7 +14,7 @@ use futures::FutureExt;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::time::Instant;
 
-use super::{judge, timed_out, AttemptError, Connection, Counters, Exchange, Reply, Verdict};
+use super::{AttemptError, Connection, Counters, Exchange, Reply, Verdict, judge, timed_out};
 use crate::protocols::modbus::rtu::{self, Direction};
 
 /// An RTU link to one device (or one bus).
@@ -96,7 +96,9 @@ impl RtuLink {
             let stream = self.conn.get(timeout).await?;
             match tokio::time::timeout_at(deadline, stream.read_buf(&mut self.rx)).await {
                 Err(_) if !self.rx.is_empty() && reason.is_none() => {
-                    return Err(AttemptError::Malformed("no frame with a valid CRC (CRC error or noise on the line)"));
+                    return Err(AttemptError::Malformed(
+                        "no frame with a valid CRC (CRC error or noise on the line)",
+                    ));
                 }
                 Err(_) => return Err(timed_out(reason)),
                 Ok(Ok(0)) => return Err(self.lost(std::io::ErrorKind::UnexpectedEof.into())),

@@ -51,8 +51,12 @@ impl Connection {
         if self.stream.is_none() {
             if let Some(at) = self.retry_at {
                 if at > Instant::now() + timeout {
-                    let (kind, msg) = self.last_error.clone().unwrap_or((io::ErrorKind::NotConnected, String::new()));
-                    return Err(AttemptError::Io(io::Error::new(kind, format!("{msg} (waiting to reconnect)"))));
+                    let (kind, msg) =
+                        self.last_error.clone().unwrap_or((io::ErrorKind::NotConnected, String::new()));
+                    return Err(AttemptError::Io(io::Error::new(
+                        kind,
+                        format!("{msg} (waiting to reconnect)"),
+                    )));
                 }
                 tokio::time::sleep_until(at).await;
             }
@@ -63,7 +67,9 @@ impl Connection {
                     self.retry_at = None;
                 }
                 Ok(Err(e)) => return Err(self.failed(e)),
-                Err(_) => return Err(self.failed(io::Error::new(io::ErrorKind::TimedOut, "connect timed out"))),
+                Err(_) => {
+                    return Err(self.failed(io::Error::new(io::ErrorKind::TimedOut, "connect timed out")));
+                }
             }
         }
         self.stream.as_mut().ok_or(AttemptError::Timeout)
@@ -89,9 +95,12 @@ impl Connection {
                 Ok(Box::new(stream))
             }
             Endpoint::Serial(path, settings) => Ok(Box::new(settings.open(path)?)),
-            Endpoint::Given(stream) => stream
-                .take()
-                .ok_or_else(|| io::Error::new(io::ErrorKind::NotConnected, "the given stream was closed and cannot be reopened")),
+            Endpoint::Given(stream) => stream.take().ok_or_else(|| {
+                io::Error::new(
+                    io::ErrorKind::NotConnected,
+                    "the given stream was closed and cannot be reopened",
+                )
+            }),
         }
     }
 }

@@ -11,7 +11,7 @@ use std::time::Duration;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::time::Instant;
 
-use super::{judge_mbap, timed_out, AttemptError, Connection, Counters, Exchange, Reply, Verdict};
+use super::{AttemptError, Connection, Counters, Exchange, Reply, Verdict, judge_mbap, timed_out};
 use crate::protocols::modbus::config::Quirks;
 use crate::protocols::modbus::decode::response_pdu_len;
 use crate::protocols::modbus::frame::{self, FrameError, LengthField, MBAP_LEN};
@@ -30,7 +30,15 @@ pub(crate) struct TcpLink {
 impl TcpLink {
     /// A link that connects on first use.
     pub fn new(conn: Connection, quirks: Quirks, counters: Arc<Counters>) -> Self {
-        TcpLink { conn, quirks, counters, next_tid: rand::random(), tids: Vec::new(), tx: Vec::new(), rx: Vec::new() }
+        TcpLink {
+            conn,
+            quirks,
+            counters,
+            next_tid: rand::random(),
+            tids: Vec::new(),
+            tx: Vec::new(),
+            rx: Vec::new(),
+        }
     }
 
     /// Sends the request with a new transaction id.
@@ -83,12 +91,20 @@ impl TcpLink {
     }
 
     /// Reads until one whole frame is buffered; returns its length and verdict.
-    async fn next_frame(&mut self, ex: &Exchange<'_>, deadline: Instant) -> Result<(usize, Verdict), AttemptError> {
+    async fn next_frame(
+        &mut self,
+        ex: &Exchange<'_>,
+        deadline: Instant,
+    ) -> Result<(usize, Verdict), AttemptError> {
         loop {
             if let Some(len) = self.buffered_frame_len()? {
-                let header = frame::decode_header(&self.rx).map_err(|e| AttemptError::Malformed(e.message()))?;
+                let header =
+                    frame::decode_header(&self.rx).map_err(|e| AttemptError::Malformed(e.message()))?;
                 let pdu = &self.rx[MBAP_LEN..len];
-                return Ok((len, judge_mbap(&header, pdu, ex, &self.tids, self.quirks.ignore_transaction_id)));
+                return Ok((
+                    len,
+                    judge_mbap(&header, pdu, ex, &self.tids, self.quirks.ignore_transaction_id),
+                ));
             }
             let stream = self.conn.get(Duration::ZERO).await?;
             match tokio::time::timeout_at(deadline, stream.read_buf(&mut self.rx)).await {

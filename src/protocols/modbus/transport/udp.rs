@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use tokio::net::UdpSocket;
 
-use super::{judge_mbap, timed_out, AttemptError, Counters, Exchange, Reply, Verdict};
+use super::{AttemptError, Counters, Exchange, Reply, Verdict, judge_mbap, timed_out};
 use crate::protocols::modbus::config::Quirks;
 use crate::protocols::modbus::frame::{self, LengthField};
 
@@ -81,7 +81,9 @@ impl UdpLink {
                 Ok(Ok(n)) => n,
             };
             let verdict = match frame::split_datagram(&self.rx[..n], self.quirks.length0) {
-                Ok((header, pdu)) => judge_mbap(&header, pdu, ex, &self.tids, self.quirks.ignore_transaction_id),
+                Ok((header, pdu)) => {
+                    judge_mbap(&header, pdu, ex, &self.tids, self.quirks.ignore_transaction_id)
+                }
                 // Datagrams are independent: a broken one is dropped, the right one may follow.
                 Err(e) => Verdict::Drop(Some(e.message())),
             };

@@ -1,0 +1,70 @@
+//! `/api/v1/devices`: device status, pause and resume.
+
+use axum::extract::State;
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::error::{ApiError, ErrorBody};
+use super::extract::{Json, Path};
+use super::state::AppState;
+use crate::devices::{DeviceHandle, DeviceStatus};
+
+/// The routes of this resource.
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(list_devices))
+        .routes(routes!(get_device))
+        .routes(routes!(pause_device))
+        .routes(routes!(resume_device))
+}
+
+fn device<'a>(app: &'a AppState, id: &str) -> Result<&'a DeviceHandle, ApiError> {
+    app.devices.get(id).ok_or_else(|| ApiError::not_found(format!("device {id:?} is not configured")))
+}
+
+/// Every device with its status.
+#[utoipa::path(get, path = "/devices", tag = "devices",
+    responses((status = 200, description = "Every configured device", body = Vec<DeviceStatus>)))]
+async fn list_devices(State(app): State<AppState>) -> Json<Vec<DeviceStatus>> {
+    Json(app.devices.values().map(DeviceHandle::status).collect())
+}
+
+/// One device's status: online, last contact, slots in use, last error.
+#[utoipa::path(get, path = "/devices/{id}", tag = "devices", params(("id" = String, Path, description = "Device id")),
+    responses(
+        (status = 200, description = "The device", body = DeviceStatus),
+        (status = 404, description = "No such device", body = ErrorBody),
+    ))]
+async fn get_device(
+    State(app): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<DeviceStatus>, ApiError> {
+    Ok(Json(device(&app, &id)?.status()))
+}
+
+/// Pause a device: it gets no new work; what it runs goes on and is followed.
+#[utoipa::path(post, path = "/devices/{id}/pause", tag = "devices", params(("id" = String, Path, description = "Device id")),
+    responses(
+        (status = 200, description = "Paused", body = DeviceStatus),
+        (status = 404, description = "No such device", body = ErrorBody),
+    ))]
+async fn pause_device(
+    State(app): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<DeviceStatus>, ApiError> {
+    tracing::info!(device = %id, "paused through the API");
+    Ok(Json(device(&app, &id)?.set_paused(true)))
+}
+
+/// Resume a paused device: queued work is handed over at once.
+#[utoipa::path(post, path = "/devices/{id}/resume", tag = "devices", params(("id" = String, Path, description = "Device id")),
+    responses(
+        (status = 200, description = "Resumed", body = DeviceStatus),
+        (status = 404, description = "No such device", body = ErrorBody),
+    ))]
+async fn resume_device(
+    State(app): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<DeviceStatus>, ApiError> {
+    tracing::info!(device = %id, "resumed through the API");
+    Ok(Json(device(&app, &id)?.set_paused(false)))
+}
