@@ -26,7 +26,9 @@ use crate::devices::shelf::slot::{Command, EXEC_STATE, FAILURE_KIND, SLOT_WORDS,
 use crate::domain::Location;
 use crate::protocols::modbus::exception::Exception;
 use crate::protocols::modbus::pdu::{Request, Response};
-use crate::protocols::modbus::server::{Bank, Faults, Handler, ModbusServer, ServerHandle, ServerOptions};
+use crate::protocols::modbus::server::{
+    Bank, Faults, Handler, ModbusServer, RegisterBank, ServerHandle, ServerOptions,
+};
 
 /// How the simulated PLC is set up.
 #[derive(Clone, Debug)]
@@ -91,6 +93,13 @@ struct ShelfHandler {
 impl ShelfSim {
     /// Starts the simulator on a UDP address (`127.0.0.1:0` for any free port).
     pub async fn start(listen: &str, options: ShelfSimOptions) -> std::io::Result<ShelfSim> {
+        let end = options.base as usize + options.slots as usize * options.stride as usize;
+        if options.slots == 0 || (options.stride as usize) < SLOT_WORDS || end > 0x1_0000 {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "the slots must fit the holding registers: slots >= 1, stride >= 35, base + slots * stride <= 65536",
+            ));
+        }
         let bank = Bank::new();
         let world = Arc::new(Mutex::new(World::default()));
         let wake = Arc::new(Notify::new());
@@ -183,7 +192,8 @@ impl ShelfHandler {
     }
 
     /// Checks a write of `values` at `address` against rule 1 before it is applied.
-    fn watch_write(&self, address: u16, values: &[u16]) {
+    /// Called with the bank locked; locks are always taken bank first, then world.
+    fn watch_write(&self, bank: &RegisterBank, address: u16, values: &[u16]) {
         let mut touched: BTreeMap<u16, Vec<(u16, u16)>> = BTreeMap::new();
         for (i, &v) in values.iter().enumerate() {
             if let Some((slot, offset)) = self.slot_of(address as u32 + i as u32) {
@@ -192,8 +202,8 @@ impl ShelfHandler {
         }
         let mut world = self.world.lock().unwrap_or_else(|p| p.into_inner());
         for (slot, writes) in touched {
-            let start = self.options.base + slot * self.options.stride;
-            let words = self.bank.holding(start, SLOT_WORDS);
+            let start = self.options.base as usize + slot as usize * self.options.stride as usize;
+            let words = &bank.holding_registers[start..start + SLOT_WORDS];
             let (id, state) = (words[0], words[EXEC_STATE]);
             let busy = id != 0 && state != 2;
             let only_clears_id = writes.iter().all(|&(o, v)| o == 0 && v == 0);
@@ -223,12 +233,14 @@ impl ShelfHandler {
 
 impl Handler for ShelfHandler {
     fn handle(&self, _unit: u8, request: &Request) -> Result<Response, Exception> {
+        let mut bank = self.bank.lock();
         match request {
-            Request::WriteSingleRegister { address, value } => self.watch_write(*address, &[*value]),
-            Request::WriteMultipleRegisters { address, values } => self.watch_write(*address, values),
+            Request::WriteSingleRegister { address, value } => self.watch_write(&bank, *address, &[*value]),
+            Request::WriteMultipleRegisters { address, values } => self.watch_write(&bank, *address, values),
             _ => {}
         }
-        let response = self.bank.lock().apply(request);
+        let response = bank.apply(request);
+        drop(bank);
         if matches!(request, Request::WriteSingleRegister { .. } | Request::WriteMultipleRegisters { .. }) {
             self.wake.notify_one();
         }
@@ -243,7 +255,7 @@ async fn run_engine(bank: Bank, world: Arc<Mutex<World>>, o: ShelfSimOptions, wa
             let mut bank = bank.lock();
             let regs = &mut bank.holding_registers;
             let waiting = (0..o.slots).filter_map(|k| {
-                let start = (o.base + k * o.stride) as usize;
+                let start = o.base as usize + k as usize * o.stride as usize;
                 let (id, state) = (regs[start], regs[start + EXEC_STATE]);
                 (id != 0 && state == 0).then_some((regs[start + 1], k, start))
             });

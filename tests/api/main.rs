@@ -4,6 +4,7 @@
 mod auth;
 mod cli;
 mod errors;
+#[path = "../common/helpers.rs"]
 mod helpers;
 mod jobs;
 mod lifecycle;

@@ -131,7 +131,9 @@ impl Shelf {
                 return Err(format!("the PLC is running job {id}; a shelf PLC cannot stop a running task"));
             }
             _ => {
-                return Err(format!("job {id} has already ended on the PLC; it is recorded at the next poll"));
+                return Err(format!(
+                    "job {id} has already ended on the PLC; it is recorded at the next poll"
+                ));
             }
         }
         self.write(&at, &[0]).await.map_err(|e| format!("clearing slot {}: {e}", k + 1))?;

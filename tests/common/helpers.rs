@@ -96,3 +96,35 @@ pub fn loc(row: u16, bay: u16, level: u16, position: u16) -> Value {
 pub fn store(reference: &str) -> Value {
     json!({"kind": "store", "reference": reference, "barcode": "BOX-1", "to": loc(1, 2, 3, 1)})
 }
+
+/// Lists every job, following the cursor.
+pub async fn all_jobs(app: &TestApp) -> Vec<Value> {
+    let mut jobs = Vec::new();
+    let mut cursor = String::new();
+    loop {
+        let (status, page) = app.get(&format!("/api/v1/jobs?limit=1000{cursor}")).await;
+        assert_eq!(status, 200, "{page}");
+        jobs.extend(page["jobs"].as_array().unwrap().iter().cloned());
+        match page["next_cursor"].as_str() {
+            Some(c) => cursor = format!("&cursor={c}"),
+            None => return jobs,
+        }
+    }
+}
+
+/// Waits until `n` jobs have ended (bounded: fails after `secs` seconds), returning all jobs.
+pub async fn wait_ended(app: &TestApp, n: usize, secs: u64) -> Vec<Value> {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(secs);
+    loop {
+        let jobs = all_jobs(app).await;
+        let ended = jobs
+            .iter()
+            .filter(|j| ["completed", "failed", "cancelled"].contains(&j["state"].as_str().unwrap()))
+            .count();
+        if ended >= n {
+            return jobs;
+        }
+        assert!(std::time::Instant::now() < deadline, "only {ended} of {n} jobs ended in {secs} s");
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+}

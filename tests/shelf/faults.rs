@@ -1,0 +1,101 @@
+//! Datagram loss, PLC failures of both kinds, and a PLC that stops answering.
+
+use std::time::Duration;
+
+use rackd::devices::shelf::slot::task_id_for;
+use rackd::protocols::modbus::server::Faults;
+use rackd::sim::shelf::ShelfSimOptions;
+use serde_json::json;
+
+use crate::helpers::*;
+use crate::workload::{Model, mixed_jobs, rackd_store, submit};
+use crate::{shelf_app, sim};
+
+async fn online(app: &TestApp) -> bool {
+    app.get("/api/v1/devices/shelf1").await.1["online"].as_bool().unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn with_twenty_percent_loss_every_job_completes_exactly_once() {
+    let mut options = sim(0);
+    options.faults = Faults { drop_rate: 0.2, ..Faults::default() };
+    let (app, sim) = shelf_app(options, |d| {
+        d.timeout_ms = 40;
+        d.retries = 8;
+        d.offline_after = 20;
+    })
+    .await;
+    let mut model = Model::default();
+    let jobs = mixed_jobs(200, 11, &mut model);
+    submit(&app, &jobs).await;
+    let done = wait_ended(&app, 200, 180).await;
+    for j in &done {
+        assert_eq!(j["state"], "completed", "{j}");
+        let (_, history) = app.get(&format!("/api/v1/jobs/{}/history", j["id"])).await;
+        let ends = history.as_array().unwrap().iter().filter(|h| h["state"] == "completed").count();
+        assert_eq!(ends, 1, "job {} ended once: {history}", j["id"]);
+        assert_eq!(sim.received(task_id_for(j["id"].as_i64().unwrap())), 1, "job {} sent once", j["id"]);
+    }
+    assert_eq!(rackd_store(&app).await.0, sim.inventory());
+    assert_eq!(sim.violations(), 0);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn plc_faults_and_rejections_fail_jobs_with_the_reason() {
+    let options = ShelfSimOptions { fail_rate: 1.0, ..sim(0) };
+    let (app, _sim) = shelf_app(options, |_| {}).await;
+    let (_, job) = app.post("/api/v1/jobs", &store("FAULT")).await;
+    let done = wait_ended(&app, 1, 30).await;
+    assert_eq!(done[0]["id"], job["id"]);
+    assert_eq!(done[0]["state"], "failed");
+    assert_eq!(done[0]["failure"]["kind"], "device_fault");
+    assert_eq!(done[0]["failure"]["code"], 1);
+
+    let (app, sim) = shelf_app(sim(0), |_| {}).await;
+    let empty = loc(2, 9, 6, 4);
+    let (_, job) = app.post("/api/v1/jobs", &json!({"kind": "retrieve", "from": empty})).await;
+    let done = wait_ended(&app, 1, 30).await;
+    assert_eq!(done[0]["id"], job["id"]);
+    assert_eq!(done[0]["state"], "failed");
+    assert_eq!(done[0]["failure"]["kind"], "rejected");
+    assert_eq!(done[0]["failure"]["code"], 2);
+    assert!(done[0]["failure"]["text"].as_str().unwrap().contains("check the location"));
+    // Store into a place the PLC knows is full (a box put there by hand).
+    let full = rackd::domain::Location { aisle: 1, row: 1, bay: 1, level: 1, position: 1 };
+    sim.place(full, "BY-HAND");
+    app.post("/api/v1/jobs", &json!({"kind": "store", "to": loc(1, 1, 1, 1)})).await;
+    let done = wait_ended(&app, 2, 30).await;
+    assert_eq!(done[1]["failure"]["code"], 2, "{}", done[1]);
+    assert_eq!(sim.violations(), 0);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_silent_plc_goes_offline_and_comes_back_by_itself() {
+    let (app, sim) = shelf_app(sim(0), |d| {
+        d.timeout_ms = 20;
+        d.retries = 0;
+        d.offline_after = 3;
+    })
+    .await;
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while !online(&app).await {
+        assert!(std::time::Instant::now() < deadline, "never came online");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    sim.set_faults(Faults { drop_rate: 1.0, ..Faults::default() });
+    while online(&app).await {
+        assert!(std::time::Instant::now() < deadline, "never went offline");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let (_, device) = app.get("/api/v1/devices/shelf1").await;
+    assert!(device["consecutive_failures"].as_u64().unwrap() >= 3);
+    assert!(device["last_error"].as_str().unwrap().contains("no reply"), "{device}");
+    // No new work while offline.
+    let (_, job) = app.post("/api/v1/jobs", &store("WAITS")).await;
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    assert_eq!(app.get(&format!("/api/v1/jobs/{}", job["id"])).await.1["state"], "queued");
+    sim.set_faults(Faults::default());
+    let done = wait_ended(&app, 1, 30).await;
+    assert_eq!(done[0]["state"], "completed");
+    assert!(online(&app).await);
+}

@@ -1,0 +1,41 @@
+//! The shelf PLC end to end: the real server on 127.0.0.1:0 with a temporary database,
+//! driving the real shelf simulator over real UDP.
+
+#[path = "../common/helpers.rs"]
+mod helpers;
+
+mod control;
+mod faults;
+mod restart;
+mod workload;
+
+use rackd::devices::DeviceConfig;
+use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
+
+use helpers::{TestApp, spawn_with};
+
+/// A simulated shelf PLC and a rackd driving it (device `shelf1`, aisle 1, fast polling).
+pub async fn shelf_app(
+    options: ShelfSimOptions,
+    edit: impl FnOnce(&mut DeviceConfig),
+) -> (TestApp, ShelfSim) {
+    let sim = ShelfSim::start("127.0.0.1:0", options).await.unwrap();
+    let device = device_for(&sim, edit);
+    let app = spawn_with(|c| c.devices = vec![device]).await;
+    (app, sim)
+}
+
+/// The device entry for a simulator.
+pub fn device_for(sim: &ShelfSim, edit: impl FnOnce(&mut DeviceConfig)) -> DeviceConfig {
+    let mut device = DeviceConfig::shelf("shelf1", &sim.local_addr().to_string(), vec![1]);
+    device.poll_ms = 20;
+    device.timeout_ms = 100;
+    device.retries = 3;
+    edit(&mut device);
+    device
+}
+
+/// Simulator options with tasks taking `ms` milliseconds.
+pub fn sim(ms: u64) -> ShelfSimOptions {
+    ShelfSimOptions { task_time: std::time::Duration::from_millis(ms), ..ShelfSimOptions::default() }
+}

@@ -1,0 +1,84 @@
+//! rackd stopped abruptly mid-run and started again on the same database: every job ends
+//! exactly once, and the PLC received each task once.
+
+use std::path::Path;
+use std::time::Duration;
+
+use rackd::app::Application;
+use rackd::config::Config;
+use rackd::devices::shelf::slot::task_id_for;
+use serde_json::json;
+
+use crate::device_for;
+use crate::helpers::*;
+use crate::workload::{Model, mixed_jobs, rackd_store};
+
+/// Runs rackd on its own runtime in its own thread; sending on the returned channel drops
+/// that runtime, killing every task of it mid-step, as a crash would.
+fn start_crashable(config: Config) -> (String, std::sync::mpsc::Sender<()>, std::thread::JoinHandle<()>) {
+    let (addr_tx, addr_rx) = std::sync::mpsc::channel();
+    let (kill_tx, kill_rx) = std::sync::mpsc::channel::<()>();
+    let thread = std::thread::spawn(move || {
+        let runtime =
+            tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build().unwrap();
+        let app = runtime.block_on(Application::build(&config, false)).unwrap();
+        addr_tx.send(format!("http://{}", app.local_addr())).unwrap();
+        runtime.spawn(app.run_until(std::future::pending()));
+        let _ = kill_rx.recv();
+        runtime.shutdown_background();
+    });
+    (addr_rx.recv().unwrap(), kill_tx, thread)
+}
+
+fn config(db: &Path, device: rackd::devices::DeviceConfig) -> Config {
+    let mut c = Config::demo();
+    c.server.listen = "127.0.0.1:0".parse().unwrap();
+    c.database.path = db.to_owned();
+    c.devices = vec![device];
+    c
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_crash_mid_run_loses_and_repeats_nothing() {
+    let sim = rackd::sim::shelf::ShelfSim::start("127.0.0.1:0", crate::sim(3)).await.unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("rackd.db");
+    let device = device_for(&sim, |_| {});
+
+    let (base, kill, thread) = start_crashable(config(&db, device.clone()));
+    let client = reqwest::Client::new();
+    let mut model = Model::default();
+    let jobs = mixed_jobs(300, 23, &mut model);
+    for chunk in jobs.chunks(100) {
+        let r = client
+            .post(format!("{base}/api/v1/jobs/batch"))
+            .json(&json!({"jobs": chunk}))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 201);
+    }
+    // Let part of the work finish, then pull the plug.
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    while sim.finished().0 < 60 {
+        assert!(std::time::Instant::now() < deadline, "the PLC never got going");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    kill.send(()).unwrap();
+    tokio::task::spawn_blocking(move || thread.join()).await.unwrap().unwrap();
+    let (done_at_crash, _) = sim.finished();
+    assert!(done_at_crash < 300, "the crash came mid-run");
+
+    let app = spawn_on(db.clone(), |c| c.devices = vec![device]).await;
+    let done = wait_ended(&app, 300, 120).await;
+    for j in &done {
+        assert_eq!(j["state"], "completed", "{j}");
+        let (_, history) = app.get(&format!("/api/v1/jobs/{}/history", j["id"])).await;
+        let ends = history.as_array().unwrap().iter().filter(|h| h["state"] == "completed").count();
+        assert_eq!(ends, 1, "job {} ended once: {history}", j["id"]);
+        assert_eq!(sim.received(task_id_for(j["id"].as_i64().unwrap())), 1, "job {} sent once", j["id"]);
+    }
+    assert_eq!(rackd_store(&app).await.0, sim.inventory());
+    assert_eq!(sim.inventory(), model.boxes);
+    assert_eq!(sim.violations(), 0);
+}
