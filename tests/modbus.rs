@@ -120,8 +120,8 @@ async fn a_late_reply_is_never_taken_for_a_newer_request() {
         let (server, bank, address) = serve(transport, ServerOptions::default()).await;
         bank.set_holding(10, &[111]);
         bank.set_holding(20, &[222]);
-        let plc = client(transport, &address, 200, 0).await;
-        server.set_faults(Faults { delay: Duration::from_millis(250), ..Faults::default() });
+        let plc = client(transport, &address, 300, 0).await;
+        server.set_faults(Faults { delay: Duration::from_millis(400), ..Faults::default() });
         let first = plc.read_words(&plc.parse_address("4x10").unwrap(), 1).await;
         assert!(matches!(first, Err(PlcError::Timeout { attempts: 1, .. })), "{first:?}");
         server.set_faults(Faults::default());
@@ -166,12 +166,12 @@ async fn a_reply_from_the_wrong_unit_is_not_taken() {
     let options = || ServerOptions { faults: Faults { reply_unit: Some(2), ..Faults::default() }, ..ServerOptions::default() };
     for transport in [Transport::Udp, Transport::Tcp, Transport::RtuOverTcp] {
         let (server, _bank, address) = serve(transport, options()).await;
-        let plc = client(transport, &address, 100, 1).await;
+        let plc = client(transport, &address, 300, 1).await;
         let err = plc.read_words(&plc.parse_address("4x0").unwrap(), 1).await.unwrap_err();
         assert!(matches!(err, PlcError::Malformed("reply from the wrong unit")), "{transport:?}: {err:?}");
         assert_eq!(server.stats().replies, 2);
     }
-    let (_server, _bank, plc) = pty(options(), 100, 0);
+    let (_server, _bank, plc) = pty(options(), 300, 0);
     let err = plc.read_words(&plc.parse_address("4x0").unwrap(), 1).await.unwrap_err();
     assert!(matches!(err, PlcError::Malformed("reply from the wrong unit")), "pty: {err:?}");
 }
@@ -251,7 +251,7 @@ async fn closed_connections_and_garbage_are_recovered_by_retries() {
 async fn timeouts_count_every_attempt() {
     let faults = Faults { drop_rate: 1.0, ..Faults::default() };
     let (server, _bank, address) = serve(Transport::Udp, ServerOptions { faults, ..ServerOptions::default() }).await;
-    let plc = client(Transport::Udp, &address, 30, 2).await;
+    let plc = client(Transport::Udp, &address, 100, 2).await;
     let err = plc.read_words(&plc.parse_address("4x0").unwrap(), 1).await.unwrap_err();
     assert!(matches!(err, PlcError::Timeout { attempts: 3, .. }), "{err:?}");
     assert_eq!(server.stats().requests, 3);
