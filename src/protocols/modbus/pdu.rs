@@ -45,23 +45,68 @@ pub const DIAG_CLEAR_COUNTERS: u16 = 0x000A;
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Request {
     /// 01: read `count` coils from `address`.
-    ReadCoils { address: u16, count: u16 },
+    ReadCoils {
+        /// First PDU address.
+        address: u16,
+        /// Number of items.
+        count: u16,
+    },
     /// 02: read `count` discrete inputs from `address`.
-    ReadDiscreteInputs { address: u16, count: u16 },
+    ReadDiscreteInputs {
+        /// First PDU address.
+        address: u16,
+        /// Number of items.
+        count: u16,
+    },
     /// 03: read `count` holding registers from `address`.
-    ReadHoldingRegisters { address: u16, count: u16 },
+    ReadHoldingRegisters {
+        /// First PDU address.
+        address: u16,
+        /// Number of items.
+        count: u16,
+    },
     /// 04: read `count` input registers from `address`.
-    ReadInputRegisters { address: u16, count: u16 },
+    ReadInputRegisters {
+        /// First PDU address.
+        address: u16,
+        /// Number of items.
+        count: u16,
+    },
     /// 05: set one coil.
-    WriteSingleCoil { address: u16, value: bool },
+    WriteSingleCoil {
+        /// First PDU address.
+        address: u16,
+        /// The value.
+        value: bool,
+    },
     /// 06: set one holding register.
-    WriteSingleRegister { address: u16, value: u16 },
+    WriteSingleRegister {
+        /// First PDU address.
+        address: u16,
+        /// The value.
+        value: u16,
+    },
     /// 15: set consecutive coils.
-    WriteMultipleCoils { address: u16, values: Vec<bool> },
+    WriteMultipleCoils {
+        /// First PDU address.
+        address: u16,
+        /// The values, in address order.
+        values: Vec<bool>,
+    },
     /// 16: set consecutive holding registers.
-    WriteMultipleRegisters { address: u16, values: Vec<u16> },
+    WriteMultipleRegisters {
+        /// First PDU address.
+        address: u16,
+        /// The values, in address order.
+        values: Vec<u16>,
+    },
     /// 08: diagnostics with one data word (sub-function 0000 echoes it back).
-    Diagnostics { sub_function: u16, data: u16 },
+    Diagnostics {
+        /// Diagnostics sub-function.
+        sub_function: u16,
+        /// Data word (echoed by sub-function 0000).
+        data: u16,
+    },
 }
 
 /// A normal (non-exception) response PDU.
@@ -76,15 +121,40 @@ pub enum Response {
     /// 04: input register values.
     ReadInputRegisters(Vec<u16>),
     /// 05: echo of the request.
-    WriteSingleCoil { address: u16, value: bool },
+    WriteSingleCoil {
+        /// First PDU address.
+        address: u16,
+        /// The value.
+        value: bool,
+    },
     /// 06: echo of the request.
-    WriteSingleRegister { address: u16, value: u16 },
+    WriteSingleRegister {
+        /// First PDU address.
+        address: u16,
+        /// The value.
+        value: u16,
+    },
     /// 15: start address and count written.
-    WriteMultipleCoils { address: u16, count: u16 },
+    WriteMultipleCoils {
+        /// First PDU address.
+        address: u16,
+        /// Number of items.
+        count: u16,
+    },
     /// 16: start address and count written.
-    WriteMultipleRegisters { address: u16, count: u16 },
+    WriteMultipleRegisters {
+        /// First PDU address.
+        address: u16,
+        /// Number of items.
+        count: u16,
+    },
     /// 08: echo of sub-function and data.
-    Diagnostics { sub_function: u16, data: u16 },
+    Diagnostics {
+        /// Diagnostics sub-function.
+        sub_function: u16,
+        /// Data word (echoed by sub-function 0000).
+        data: u16,
+    },
 }
 
 impl Request {

@@ -5,7 +5,9 @@
 //! away and the line must have been quiet for 3.5 characters. While waiting, the buffer is
 //! scanned for the first frame with a valid CRC ([`rtu::scan`]), so garbage before a reply
 //! is skipped. RTU has no transaction id: a reply is matched by unit, function, byte count
-//! and write echo.
+//! and write echo. A reply so late that it arrives after the *next* request has gone out
+//! cannot be told from that request's answer when function and size agree: RTU itself has
+//! no way to tell, so keep the timeout above the device's worst reply time on such links.
 
 use std::sync::Arc;
 use std::time::Duration;
