@@ -10,6 +10,7 @@
 //! [`Address`] with [`PlcMemory::parse_address`].
 
 pub mod error;
+pub mod mc3e;
 
 use async_trait::async_trait;
 
