@@ -155,3 +155,6 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     }
     Ok(ExitCode::SUCCESS)
 }
+
+pub mod plc_mc3e;
+pub mod sim_mc3e;

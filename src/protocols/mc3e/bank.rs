@@ -63,7 +63,11 @@ impl Bank {
 
     /// Number of points (words or bits) of a device.
     pub fn size(&self, device: Device) -> u32 {
-        let len = if device.is_bit() { self.bits.get(&device).map(Vec::len) } else { self.words.get(&device).map(Vec::len) };
+        let len = if device.is_bit() {
+            self.bits.get(&device).map(Vec::len)
+        } else {
+            self.words.get(&device).map(Vec::len)
+        };
         len.unwrap_or(0) as u32
     }
 
@@ -83,7 +87,10 @@ impl Bank {
     pub fn read_words(&self, device: Device, start: u32, count: u16) -> Result<Vec<u16>, u16> {
         if let Some(bits) = self.bits.get(&device) {
             let r = self.range(device, start, 16 * usize::from(count))?;
-            return Ok(bits[r].chunks(16).map(|c| c.iter().rev().fold(0, |w, &b| (w << 1) | u16::from(b))).collect());
+            return Ok(bits[r]
+                .chunks(16)
+                .map(|c| c.iter().rev().fold(0, |w, &b| (w << 1) | u16::from(b)))
+                .collect());
         }
         let r = self.range(device, start, usize::from(count))?;
         Ok(self.words[&device][r].to_vec())

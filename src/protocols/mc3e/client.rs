@@ -58,17 +58,27 @@ pub struct Mc3eClient {
 impl Mc3eClient {
     /// A client for `config`; it connects on the first request.
     pub fn new(config: Mc3eConfig) -> Mc3eClient {
-        Mc3eClient { route: config.route, monitor_timer: config.monitor_timer, link: Mutex::new(Link::new(config.link)) }
+        Mc3eClient {
+            route: config.route,
+            monitor_timer: config.monitor_timer,
+            link: Mutex::new(Link::new(config.link)),
+        }
     }
 
     async fn send(&self, command: Command) -> Result<Vec<u8>, PlcError> {
-        let expect = Expect { route: self.route, command: command.numbers(), data_len: command.reply_data_len() };
+        let expect =
+            Expect { route: self.route, command: command.numbers(), data_len: command.reply_data_len() };
         let frame = Request { route: self.route, monitor_timer: self.monitor_timer, command }.encode();
         self.link.lock().await.exchange(&frame, &expect).await
     }
 
     /// Reads `count` words of `device` from `start`, split into batches of 960.
-    pub async fn read_device_words(&self, device: Device, start: u32, count: usize) -> Result<Vec<u16>, PlcError> {
+    pub async fn read_device_words(
+        &self,
+        device: Device,
+        start: u32,
+        count: usize,
+    ) -> Result<Vec<u16>, PlcError> {
         check_range(device, start, count, if device.is_bit() { 16 } else { 1 })?;
         let mut words = Vec::with_capacity(count);
         for (offset, n) in batches(count, MAX_WORD_POINTS) {
@@ -80,7 +90,12 @@ impl Mc3eClient {
     }
 
     /// Writes words of `device` from `start`, split into batches of 960.
-    pub async fn write_device_words(&self, device: Device, start: u32, values: &[u16]) -> Result<(), PlcError> {
+    pub async fn write_device_words(
+        &self,
+        device: Device,
+        start: u32,
+        values: &[u16],
+    ) -> Result<(), PlcError> {
         let unit: u32 = if device.is_bit() { 16 } else { 1 };
         check_range(device, start, values.len(), u64::from(unit))?;
         for (offset, n) in batches(values.len(), MAX_WORD_POINTS) {
@@ -91,19 +106,32 @@ impl Mc3eClient {
     }
 
     /// Reads `count` bits of a bit device from `start`, split into batches of 7168.
-    pub async fn read_device_bits(&self, device: Device, start: u32, count: usize) -> Result<Vec<bool>, PlcError> {
+    pub async fn read_device_bits(
+        &self,
+        device: Device,
+        start: u32,
+        count: usize,
+    ) -> Result<Vec<bool>, PlcError> {
         bit_device(device)?;
         check_range(device, start, count, 1)?;
         let mut bits = Vec::with_capacity(count);
         for (offset, n) in batches(count, MAX_BIT_POINTS) {
             let data = self.send(Command::ReadBits { device, start: start + offset, count: n }).await?;
-            bits.extend(frame::unpack_bits(&data, usize::from(n)).ok_or(PlcError::Malformed("bit data not 0 or 1"))?);
+            bits.extend(
+                frame::unpack_bits(&data, usize::from(n))
+                    .ok_or(PlcError::Malformed("bit data not 0 or 1"))?,
+            );
         }
         Ok(bits)
     }
 
     /// Writes bits of a bit device from `start`, split into batches of 7168.
-    pub async fn write_device_bits(&self, device: Device, start: u32, values: &[bool]) -> Result<(), PlcError> {
+    pub async fn write_device_bits(
+        &self,
+        device: Device,
+        start: u32,
+        values: &[bool],
+    ) -> Result<(), PlcError> {
         bit_device(device)?;
         check_range(device, start, values.len(), 1)?;
         for (offset, n) in batches(values.len(), MAX_BIT_POINTS) {

@@ -92,7 +92,11 @@ impl Device {
 
     /// The address text for device number `number` (`X1A`, `D200`).
     pub fn format(self, number: u32) -> String {
-        if self.radix() == 16 { format!("{}{:X}", self.name(), number) } else { format!("{}{}", self.name(), number) }
+        if self.radix() == 16 {
+            format!("{}{:X}", self.name(), number)
+        } else {
+            format!("{}{}", self.name(), number)
+        }
     }
 
     /// The device an [`Address`]'s area names.

@@ -205,6 +205,9 @@ mod tests {
         let frame = [0x54, 0x00, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x00, 0x00];
         assert_eq!(parse_header(&frame, REQUEST_SUBHEADER), Err(FrameError::Subheader([0x54, 0x00])));
         let frame = [0x50, 0x00, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x03, 0x00, 0x01];
-        assert_eq!(split_frame(&frame, REQUEST_SUBHEADER), Err(FrameError::Length { declared: 3, actual: 1 }));
+        assert_eq!(
+            split_frame(&frame, REQUEST_SUBHEADER),
+            Err(FrameError::Length { declared: 3, actual: 1 })
+        );
     }
 }

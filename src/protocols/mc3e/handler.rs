@@ -54,25 +54,32 @@ pub fn answer(bank: &Mutex<Bank>, bytes: &[u8], forced: Option<u16>) -> Option<A
         Err(Refusal::Frame(_)) => {
             // A 3E header whose length or body is short: answer if the route is readable.
             let (route, _) = frame::parse_header(bytes, frame::REQUEST_SUBHEADER).ok()?;
-            return Some(Answer { bytes: error_response(route, end_code::LENGTH_MISMATCH, None), write: None });
+            return Some(Answer {
+                bytes: error_response(route, end_code::LENGTH_MISMATCH, None),
+                write: None,
+            });
         }
     };
     let (command, subcommand) = request.command.numbers();
-    let fail = |code| Answer { bytes: error_response(request.route, code, Some((command, subcommand))), write: None };
+    let fail = |code| Answer {
+        bytes: error_response(request.route, code, Some((command, subcommand))),
+        write: None,
+    };
     if let Some(code) = forced {
         return Some(fail(code));
     }
-    let ok = |data, write| Answer { bytes: Response { route: request.route, outcome: Outcome::Ok(data) }.encode(), write };
+    let ok = |data, write| Answer {
+        bytes: Response { route: request.route, outcome: Outcome::Ok(data) }.encode(),
+        write,
+    };
     let mut bank = match bank.lock() {
         Ok(bank) => bank,
         Err(poisoned) => poisoned.into_inner(),
     };
     let result = match &request.command {
-        Command::ReadWords { device, start, count } => {
-            check_count(*count, MAX_WORD_POINTS).and_then(|_| bank.read_words(*device, *start, *count)).map(|w| {
-                (w.iter().flat_map(|v| v.to_le_bytes()).collect(), None)
-            })
-        }
+        Command::ReadWords { device, start, count } => check_count(*count, MAX_WORD_POINTS)
+            .and_then(|_| bank.read_words(*device, *start, *count))
+            .map(|w| (w.iter().flat_map(|v| v.to_le_bytes()).collect(), None)),
         Command::ReadBits { device, start, count } => check_count(*count, MAX_BIT_POINTS)
             .and_then(|_| bank.read_bits(*device, *start, *count))
             .map(|bits| {
@@ -80,18 +87,18 @@ pub fn answer(bank: &Mutex<Bank>, bytes: &[u8], forced: Option<u16>) -> Option<A
                 frame::pack_bits(&bits, &mut data);
                 (data, None)
             }),
-        Command::WriteWords { device, start, values } => {
-            check_count(values.len() as u16, MAX_WORD_POINTS)
-                .and_then(|_| bank.write_words(*device, *start, values))
-                .map(|_| {
-                    let unit = if device.is_bit() { 16 } else { 1 };
-                    let points = values.len() as u32 * unit;
-                    (vec![], Some(WriteEvent { device: *device, start: *start, points }))
-                })
-        }
+        Command::WriteWords { device, start, values } => check_count(values.len() as u16, MAX_WORD_POINTS)
+            .and_then(|_| bank.write_words(*device, *start, values))
+            .map(|_| {
+                let unit = if device.is_bit() { 16 } else { 1 };
+                let points = values.len() as u32 * unit;
+                (vec![], Some(WriteEvent { device: *device, start: *start, points }))
+            }),
         Command::WriteBits { device, start, values } => check_count(values.len() as u16, MAX_BIT_POINTS)
             .and_then(|_| bank.write_bits(*device, *start, values))
-            .map(|_| (vec![], Some(WriteEvent { device: *device, start: *start, points: values.len() as u32 }))),
+            .map(|_| {
+                (vec![], Some(WriteEvent { device: *device, start: *start, points: values.len() as u32 }))
+            }),
     };
     Some(match result {
         Ok((data, write)) => ok(data, write),
@@ -135,7 +142,10 @@ mod tests {
         assert_eq!(r.outcome, Outcome::Ok(vec![0x34, 0x12, 0x02, 0x00]));
         assert_eq!(code(&run(&bank, Command::ReadWords { device: Device::D, start: 0, count: 961 })), 0xC051);
         assert_eq!(code(&run(&bank, Command::ReadWords { device: Device::D, start: 0, count: 0 })), 0xC051);
-        assert_eq!(code(&run(&bank, Command::ReadWords { device: Device::D, start: 1999, count: 2 })), 0xC056);
+        assert_eq!(
+            code(&run(&bank, Command::ReadWords { device: Device::D, start: 1999, count: 2 })),
+            0xC056
+        );
         assert_eq!(code(&run(&bank, Command::ReadBits { device: Device::X, start: 0x3F, count: 2 })), 0xC056);
         run(&bank, Command::WriteBits { device: Device::X, start: 0x1A, values: vec![true, false, true] });
         let r = run(&bank, Command::ReadBits { device: Device::X, start: 0x19, count: 4 });
@@ -145,13 +155,12 @@ mod tests {
     #[test]
     fn unknown_command_echoes_error_info() {
         let bank = Mutex::new(Bank::default());
-        let mut bytes =
-            Request { route: Route::default(), monitor_timer: 4, command: Command::ReadWords {
-                device: Device::D,
-                start: 0,
-                count: 1,
-            } }
-            .encode();
+        let mut bytes = Request {
+            route: Route::default(),
+            monitor_timer: 4,
+            command: Command::ReadWords { device: Device::D, start: 0, count: 1 },
+        }
+        .encode();
         bytes[11..13].copy_from_slice(&0x0619u16.to_le_bytes());
         let r = Response::decode(&answer(&bank, &bytes, None).unwrap().bytes).unwrap();
         let info = ErrorInfo { route: Route::default(), command: 0x0619, subcommand: 0 };
@@ -165,11 +174,11 @@ mod tests {
     #[test]
     fn forced_end_code_and_write_event() {
         let bank = Mutex::new(Bank::default());
-        let bytes = Request { route: Route::default(), monitor_timer: 4, command: Command::WriteWords {
-            device: Device::D,
-            start: 21,
-            values: vec![1],
-        } }
+        let bytes = Request {
+            route: Route::default(),
+            monitor_timer: 4,
+            command: Command::WriteWords { device: Device::D, start: 21, values: vec![1] },
+        }
         .encode();
         let a = answer(&bank, &bytes, Some(0xC05F)).unwrap();
         assert_eq!(a.write, None);

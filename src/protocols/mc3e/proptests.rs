@@ -13,12 +13,8 @@ use super::request::{Command, Request};
 use super::response::{ErrorInfo, Outcome, Response};
 
 fn route() -> impl Strategy<Value = Route> {
-    (any::<u8>(), any::<u8>(), any::<u16>(), any::<u8>()).prop_map(|(network, pc, module_io, station)| Route {
-        network,
-        pc,
-        module_io,
-        station,
-    })
+    (any::<u8>(), any::<u8>(), any::<u16>(), any::<u8>())
+        .prop_map(|(network, pc, module_io, station)| Route { network, pc, module_io, station })
 }
 
 fn device() -> impl Strategy<Value = Device> {
@@ -57,7 +53,8 @@ fn outcome() -> impl Strategy<Value = Outcome> {
     });
     prop_oneof![
         prop::collection::vec(any::<u8>(), 0..2000).prop_map(Outcome::Ok),
-        (1..=u16::MAX, prop::option::of(info)).prop_map(|(end_code, info)| Outcome::Failed { end_code, info }),
+        (1..=u16::MAX, prop::option::of(info))
+            .prop_map(|(end_code, info)| Outcome::Failed { end_code, info }),
     ]
 }
 

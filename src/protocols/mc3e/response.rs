@@ -84,7 +84,12 @@ impl Response {
             let info = match rest {
                 [] => None,
                 [n, p, i0, i1, s, c0, c1, s0, s1] => Some(ErrorInfo {
-                    route: Route { network: *n, pc: *p, module_io: u16::from_le_bytes([*i0, *i1]), station: *s },
+                    route: Route {
+                        network: *n,
+                        pc: *p,
+                        module_io: u16::from_le_bytes([*i0, *i1]),
+                        station: *s,
+                    },
                     command: u16::from_le_bytes([*c0, *c1]),
                     subcommand: u16::from_le_bytes([*s0, *s1]),
                 }),
@@ -123,8 +128,8 @@ mod tests {
     #[test]
     fn seed_c051_with_error_info() {
         let bytes = [
-            0xD0, 0x00, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x0B, 0x00, 0x51, 0xC0, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x01,
-            0x04, 0x00, 0x00,
+            0xD0, 0x00, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x0B, 0x00, 0x51, 0xC0, 0x00, 0xFF, 0xFF, 0x03, 0x00,
+            0x01, 0x04, 0x00, 0x00,
         ];
         let r = Response::decode(&bytes).unwrap();
         let info = ErrorInfo { route: Route::default(), command: 0x0401, subcommand: 0x0000 };

@@ -115,7 +115,12 @@ impl Link {
         Err(last)
     }
 
-    async fn tcp_attempt(&mut self, frame: &[u8], expect: &Expect, deadline: Instant) -> Result<Outcome, Failure> {
+    async fn tcp_attempt(
+        &mut self,
+        frame: &[u8],
+        expect: &Expect,
+        deadline: Instant,
+    ) -> Result<Outcome, Failure> {
         let stream = match self.tcp.take() {
             Some(stream) => stream,
             None => self.connect(deadline).await?,
@@ -168,7 +173,12 @@ impl Link {
         }
     }
 
-    async fn udp_attempt(&mut self, frame: &[u8], expect: &Expect, deadline: Instant) -> Result<Outcome, Failure> {
+    async fn udp_attempt(
+        &mut self,
+        frame: &[u8],
+        expect: &Expect,
+        deadline: Instant,
+    ) -> Result<Outcome, Failure> {
         let socket = match self.udp.take() {
             Some(socket) => socket,
             None => {
@@ -194,7 +204,10 @@ impl Link {
         }
         socket.send(frame).await.map_err(Failure::Io)?;
         loop {
-            let len = timeout_at(deadline, socket.recv(&mut buf)).await.map_err(|_| Failure::Timeout)?.map_err(Failure::Io)?;
+            let len = timeout_at(deadline, socket.recv(&mut buf))
+                .await
+                .map_err(|_| Failure::Timeout)?
+                .map_err(Failure::Io)?;
             match check(&buf[..len], expect) {
                 Ok(outcome) => return Ok(outcome),
                 Err(why) => tracing::debug!(why, "mc3e udp: discarded a datagram that is not this reply"),
