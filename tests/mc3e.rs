@@ -168,6 +168,17 @@ async fn a_late_reply_is_never_taken_for_the_next_answer() {
         assert!(matches!(plc.read_words(&d10, 1).await, Err(PlcError::Timeout { .. })));
         srv.bank().lock().unwrap().set_word(Device::D, 10, 2);
         assert_eq!(plc.read_words(&d10, 1).await.unwrap(), [2], "{kind:?}: took the stale reply");
+        // The same when the caller gives up (drops the request) before the client times out.
+        srv.faults().lock().unwrap().push(Fault::Delay(Duration::from_millis(300)));
+        let abandoned = tokio::time::timeout(Duration::from_millis(100), plc.read_words(&d10, 1)).await;
+        assert!(abandoned.is_err());
+        srv.bank().lock().unwrap().set_word(Device::D, 10, 3);
+        srv.faults().lock().unwrap().push(Fault::Delay(Duration::from_millis(400)));
+        assert_eq!(
+            plc.read_words(&d10, 1).await.unwrap(),
+            [3],
+            "{kind:?}: took an abandoned request's reply"
+        );
         srv.shutdown().await;
     }
 }

@@ -55,7 +55,7 @@ impl Faults {
     }
 
     /// The fault for the request just received, if any (counts the request).
-    pub fn next(&mut self) -> Option<Fault> {
+    pub fn take_next(&mut self) -> Option<Fault> {
         self.requests_seen += 1;
         if let Some(fault) = self.script.pop_front() {
             return Some(fault);
@@ -78,13 +78,13 @@ mod tests {
     fn script_first_then_standing_settings() {
         let mut f = Faults { end_code: Some(0xC059), ..Faults::default() };
         f.push(Fault::Drop).push(Fault::Delay(Duration::from_millis(5)));
-        assert_eq!(f.next(), Some(Fault::Drop));
-        assert_eq!(f.next(), Some(Fault::Delay(Duration::from_millis(5))));
-        assert_eq!(f.next(), Some(Fault::EndCode(0xC059)));
+        assert_eq!(f.take_next(), Some(Fault::Drop));
+        assert_eq!(f.take_next(), Some(Fault::Delay(Duration::from_millis(5))));
+        assert_eq!(f.take_next(), Some(Fault::EndCode(0xC059)));
         f.end_code = None;
-        assert_eq!(f.next(), None);
+        assert_eq!(f.take_next(), None);
         f.drop_ratio = 1.0;
-        assert_eq!(f.next(), Some(Fault::Drop));
+        assert_eq!(f.take_next(), Some(Fault::Drop));
         assert_eq!(f.requests_seen, 5);
     }
 }

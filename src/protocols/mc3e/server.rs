@@ -58,7 +58,7 @@ impl ServerState {
 
     /// The fault to apply and the answer to give to one frame.
     fn process(&self, bytes: &[u8]) -> (Option<Fault>, Option<Answer>) {
-        let fault = self.faults.lock().unwrap_or_else(|p| p.into_inner()).next();
+        let fault = self.faults.lock().unwrap_or_else(|p| p.into_inner()).take_next();
         let answer = match fault {
             Some(Fault::Drop | Fault::Close) => None,
             Some(Fault::EndCode(code)) => handler::answer(&self.bank, bytes, Some(code)),
@@ -182,8 +182,14 @@ async fn serve_connection(mut stream: TcpStream, peer: SocketAddr, state: Server
 
 async fn serve_udp(socket: Arc<UdpSocket>, state: ServerState) {
     let mut buf = vec![0u8; 65_536];
+    // Delayed replies live in the set, so stopping the server cancels them too.
+    let mut delayed = JoinSet::new();
     loop {
-        let (len, peer) = match socket.recv_from(&mut buf).await {
+        let received = tokio::select! {
+            received = socket.recv_from(&mut buf) => received,
+            Some(_) = delayed.join_next(), if !delayed.is_empty() => continue,
+        };
+        let (len, peer) = match received {
             Ok(received) => received,
             Err(e) => {
                 // ICMP "port unreachable" from an earlier reply surfaces here on some systems.
@@ -196,7 +202,7 @@ async fn serve_udp(socket: Arc<UdpSocket>, state: ServerState) {
         match fault {
             Some(Fault::Delay(delay)) => {
                 let socket = socket.clone();
-                tokio::spawn(async move {
+                delayed.spawn(async move {
                     tokio::time::sleep(delay).await;
                     let _ = socket.send_to(&answer.bytes, peer).await;
                 });

@@ -101,10 +101,8 @@ impl Link {
                 Ok(Outcome::Failed { end_code, .. }) => return Err(end_code::to_error(end_code)),
                 Err(failure) => failure,
             };
-            // Whatever went wrong, the old connection or socket may still deliver a late
-            // reply: never reuse it.
-            self.tcp = None;
-            self.udp = None;
+            // Whatever went wrong, the attempt dropped its connection or socket (it may
+            // still deliver a late reply); the next attempt opens a new one.
             last = match failure {
                 Failure::Timeout => PlcError::Timeout { attempts: attempt, timeout: self.config.timeout },
                 Failure::Io(e) => PlcError::Connection(e),
@@ -121,31 +119,18 @@ impl Link {
         expect: &Expect,
         deadline: Instant,
     ) -> Result<Outcome, Failure> {
-        let stream = match self.tcp.take() {
+        // The stream stays out of `self` until a valid reply is read: if this future is
+        // dropped mid-exchange, the stream is dropped (closed) with it and a reply still in
+        // flight can never be read by the next request.
+        let mut stream = match self.tcp.take() {
             Some(stream) => stream,
             None => self.connect(deadline).await?,
         };
-        let stream = self.tcp.insert(stream);
-        let io = async {
-            stream.write_all(frame).await?;
-            let mut header = [0u8; frame::HEADER_LEN];
-            stream.read_exact(&mut header).await?;
-            Ok::<_, std::io::Error>(header)
-        };
-        let header = timeout_at(deadline, io).await.map_err(|_| Failure::Timeout)?.map_err(Failure::Io)?;
-        let (_, len) = frame::parse_header(&header, RESPONSE_SUBHEADER)
-            .map_err(|_| Failure::Malformed("reply does not start with a 3E response header"))?;
-        // Never trust the length field: read no more than the longest valid reply.
-        if len > 2 + expect.data_len.max(ErrorInfo::LEN) {
-            return Err(Failure::Malformed("reply length field exceeds what the request allows"));
-        }
-        let mut bytes = header.to_vec();
-        bytes.resize(frame::HEADER_LEN + len, 0);
-        timeout_at(deadline, stream.read_exact(&mut bytes[frame::HEADER_LEN..]))
+        let outcome = timeout_at(deadline, tcp_exchange(&mut stream, frame, expect))
             .await
-            .map_err(|_| Failure::Timeout)?
-            .map_err(Failure::Io)?;
-        check(&bytes, expect).map_err(Failure::Malformed)
+            .map_err(|_| Failure::Timeout)??;
+        self.tcp = Some(stream);
+        Ok(outcome)
     }
 
     async fn connect(&mut self, deadline: Instant) -> Result<TcpStream, Failure> {
@@ -179,25 +164,11 @@ impl Link {
         expect: &Expect,
         deadline: Instant,
     ) -> Result<Outcome, Failure> {
+        // As for TCP, the socket is put back only after a valid reply.
         let socket = match self.udp.take() {
             Some(socket) => socket,
-            None => {
-                let peer = tokio::net::lookup_host(self.config.address.as_str())
-                    .await
-                    .map_err(Failure::Io)?
-                    .next()
-                    .ok_or(Failure::Malformed("address resolves to nothing"))?;
-                let local = self.config.udp_local.unwrap_or_else(|| match peer {
-                    SocketAddr::V4(_) => SocketAddr::from(([0, 0, 0, 0], 0)),
-                    SocketAddr::V6(_) => SocketAddr::from(([0u16; 8], 0)),
-                });
-                let socket = UdpSocket::bind(local).await.map_err(Failure::Io)?;
-                // A connected socket only receives datagrams from the PLC's address.
-                socket.connect(peer).await.map_err(Failure::Io)?;
-                socket
-            }
+            None => self.udp_socket().await?,
         };
-        let socket = self.udp.insert(socket);
         let mut buf = vec![0u8; 8192];
         while let Ok(stale) = socket.try_recv(&mut buf) {
             tracing::debug!(bytes = stale, "mc3e udp: discarded a stale datagram");
@@ -209,11 +180,47 @@ impl Link {
                 .map_err(|_| Failure::Timeout)?
                 .map_err(Failure::Io)?;
             match check(&buf[..len], expect) {
-                Ok(outcome) => return Ok(outcome),
+                Ok(outcome) => {
+                    self.udp = Some(socket);
+                    return Ok(outcome);
+                }
                 Err(why) => tracing::debug!(why, "mc3e udp: discarded a datagram that is not this reply"),
             }
         }
     }
+
+    async fn udp_socket(&self) -> Result<UdpSocket, Failure> {
+        let peer = tokio::net::lookup_host(self.config.address.as_str())
+            .await
+            .map_err(Failure::Io)?
+            .next()
+            .ok_or(Failure::Malformed("address resolves to nothing"))?;
+        let local = self.config.udp_local.unwrap_or_else(|| match peer {
+            SocketAddr::V4(_) => SocketAddr::from(([0, 0, 0, 0], 0)),
+            SocketAddr::V6(_) => SocketAddr::from(([0u16; 8], 0)),
+        });
+        let socket = UdpSocket::bind(local).await.map_err(Failure::Io)?;
+        // A connected socket only receives datagrams from the PLC's address.
+        socket.connect(peer).await.map_err(Failure::Io)?;
+        Ok(socket)
+    }
+}
+
+/// One request and its reply over a TCP stream.
+async fn tcp_exchange(stream: &mut TcpStream, frame: &[u8], expect: &Expect) -> Result<Outcome, Failure> {
+    stream.write_all(frame).await.map_err(Failure::Io)?;
+    let mut header = [0u8; frame::HEADER_LEN];
+    stream.read_exact(&mut header).await.map_err(Failure::Io)?;
+    let (_, len) = frame::parse_header(&header, RESPONSE_SUBHEADER)
+        .map_err(|_| Failure::Malformed("reply does not start with a 3E response header"))?;
+    // Never trust the length field: read no more than the longest valid reply.
+    if len > 2 + expect.data_len.max(ErrorInfo::LEN) {
+        return Err(Failure::Malformed("reply length field exceeds what the request allows"));
+    }
+    let mut bytes = header.to_vec();
+    bytes.resize(frame::HEADER_LEN + len, 0);
+    stream.read_exact(&mut bytes[frame::HEADER_LEN..]).await.map_err(Failure::Io)?;
+    check(&bytes, expect).map_err(Failure::Malformed)
 }
 
 /// Decodes a reply and checks it answers the expected request.
