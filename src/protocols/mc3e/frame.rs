@@ -177,7 +177,8 @@ mod tests {
 
     #[test]
     fn bits_pack_high_nibble_first() {
-        // The manual's bit-unit example: M100..M107 = 0,0,0,1,0,0,1,1 is `00 01 00 11`.
+        // The MC Protocol Reference Manual's (SH-080008) bit-unit read example: M100..M107 =
+        // 0,0,0,1,0,0,1,1 is `00 01 00 11`.
         let bits = [false, false, false, true, false, false, true, true];
         let mut out = Vec::new();
         pack_bits(&bits, &mut out);

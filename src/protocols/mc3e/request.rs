@@ -269,7 +269,8 @@ mod tests {
 
     #[test]
     fn manual_bit_examples() {
-        // Batch read M100..M107 in bit units (the manual's binary example).
+        // Batch read M100..M107 in bit units: the binary-code example of the MELSEC-Q/L MC
+        // Protocol Reference Manual (SH-080008), batch read in bit units.
         let bytes = req(Command::ReadBits { device: Device::M, start: 100, count: 8 }).encode();
         assert_eq!(&bytes[11..], [0x01, 0x04, 0x01, 0x00, 0x64, 0x00, 0x00, 0x90, 0x08, 0x00]);
         // Batch write M100..M107 = 1,1,0,0,1,1,0,0 in bit units.
