@@ -100,7 +100,8 @@ async fn requests_are_split_at_the_limits() {
 #[tokio::test]
 async fn udp_survives_20_percent_loss_without_mixing_up_replies() {
     let faults = Faults { drop_rate: 0.2, duplicate: true, ..Faults::default() };
-    let (server, bank, address) = serve(Transport::Udp, ServerOptions { faults, ..ServerOptions::default() }).await;
+    let (server, bank, address) =
+        serve(Transport::Udp, ServerOptions { faults, ..ServerOptions::default() }).await;
     let values: Vec<u16> = (0..400).map(|i| i * 7 + 1).collect();
     bank.set_holding(0, &values);
     let plc = client(Transport::Udp, &address, 40, 12).await;
@@ -136,7 +137,8 @@ async fn a_late_reply_is_never_taken_for_a_newer_request() {
 async fn exceptions_surface_with_their_code_and_are_not_retried() {
     for transport in [Transport::Udp, Transport::Tcp, Transport::RtuOverTcp] {
         let faults = Faults { exception: Some(Exception::ILLEGAL_DATA_ADDRESS), ..Faults::default() };
-        let (server, bank, address) = serve(transport, ServerOptions { faults, ..ServerOptions::default() }).await;
+        let (server, bank, address) =
+            serve(transport, ServerOptions { faults, ..ServerOptions::default() }).await;
         let plc = client(transport, &address, 500, 2).await;
         let err = plc.write_words(&plc.parse_address("4x4000").unwrap(), &[1, 2]).await.unwrap_err();
         match err {
@@ -163,7 +165,10 @@ async fn the_server_answers_unknown_functions_with_exception_01() {
 
 #[tokio::test]
 async fn a_reply_from_the_wrong_unit_is_not_taken() {
-    let options = || ServerOptions { faults: Faults { reply_unit: Some(2), ..Faults::default() }, ..ServerOptions::default() };
+    let options = || ServerOptions {
+        faults: Faults { reply_unit: Some(2), ..Faults::default() },
+        ..ServerOptions::default()
+    };
     for transport in [Transport::Udp, Transport::Tcp, Transport::RtuOverTcp] {
         let (server, _bank, address) = serve(transport, options()).await;
         let plc = client(transport, &address, 300, 1).await;
@@ -179,7 +184,8 @@ async fn a_reply_from_the_wrong_unit_is_not_taken() {
 #[tokio::test]
 async fn length0_replies_are_read_with_the_quirk() {
     for transport in [Transport::Udp, Transport::Tcp] {
-        let (_server, bank, address) = serve(transport, ServerOptions { length0: true, ..ServerOptions::default() }).await;
+        let (_server, bank, address) =
+            serve(transport, ServerOptions { length0: true, ..ServerOptions::default() }).await;
         let mut c = config(transport, &address, 300, 0);
         c.quirks.length0 = true;
         exercise(&ModbusClient::connect(c.clone()).await.unwrap(), &bank).await;
@@ -192,12 +198,16 @@ async fn length0_replies_are_read_with_the_quirk() {
 
 #[tokio::test]
 async fn the_seed_frames_on_the_wire() {
-    let (_server, bank, address) = serve(Transport::Udp, ServerOptions { length0: true, ..ServerOptions::default() }).await;
+    let (_server, bank, address) =
+        serve(Transport::Udp, ServerOptions { length0: true, ..ServerOptions::default() }).await;
     let socket = UdpSocket::bind("127.0.0.1:0").await.unwrap();
     socket.connect(&address).await.unwrap();
     let mut buf = [0u8; 64];
     let seed: [(&[u8], &[u8]); 3] = [
-        (&[0, 0, 0, 0, 0, 6, 1, 6, 0x12, 0x5C, 0x27, 0x10], &[0, 0, 0, 0, 0, 0, 1, 6, 0x12, 0x5C, 0x27, 0x10]),
+        (
+            &[0, 0, 0, 0, 0, 6, 1, 6, 0x12, 0x5C, 0x27, 0x10],
+            &[0, 0, 0, 0, 0, 0, 1, 6, 0x12, 0x5C, 0x27, 0x10],
+        ),
         (&[0, 0, 0, 0, 0, 6, 1, 3, 0x12, 0x5C, 0, 1], &[0, 0, 0, 0, 0, 0, 1, 3, 2, 0x27, 0x10]),
         (
             &[0, 0, 0, 0, 0, 6, 1, 0x10, 0x12, 0x5C, 0, 3, 6, 0x27, 0x10, 0x27, 0x11, 0x27, 0x12],
@@ -222,7 +232,8 @@ async fn tcp_reconnects_after_the_server_restarts() {
     server.shutdown().await;
     let bank = Bank::new();
     bank.set_holding(1, &[2]);
-    let _server = ModbusServer::new(Arc::new(bank), ServerOptions::default()).serve_tcp(&address).await.unwrap();
+    let _server =
+        ModbusServer::new(Arc::new(bank), ServerOptions::default()).serve_tcp(&address).await.unwrap();
     assert_eq!(plc.read_words(&at, 1).await.unwrap(), vec![2]);
 }
 
@@ -230,7 +241,8 @@ async fn tcp_reconnects_after_the_server_restarts() {
 async fn closed_connections_and_garbage_are_recovered_by_retries() {
     let faults = Faults { close_rate: 0.3, garbage_rate: 0.3, ..Faults::default() };
     for transport in [Transport::Tcp, Transport::RtuOverTcp, Transport::Udp] {
-        let (server, bank, address) = serve(transport, ServerOptions { faults: faults.clone(), ..ServerOptions::default() }).await;
+        let (server, bank, address) =
+            serve(transport, ServerOptions { faults: faults.clone(), ..ServerOptions::default() }).await;
         bank.set_holding(0, &(0..64).collect::<Vec<u16>>());
         let plc = client(transport, &address, 100, 15).await;
         for i in 0..40u16 {
@@ -239,7 +251,14 @@ async fn closed_connections_and_garbage_are_recovered_by_retries() {
         }
         assert!(server.stats().requests > 40, "{transport:?}: faults must have caused retries");
     }
-    let (_server, bank, plc) = pty(ServerOptions { faults: Faults { garbage_rate: 0.5, ..Faults::default() }, ..ServerOptions::default() }, 300, 5);
+    let (_server, bank, plc) = pty(
+        ServerOptions {
+            faults: Faults { garbage_rate: 0.5, ..Faults::default() },
+            ..ServerOptions::default()
+        },
+        300,
+        5,
+    );
     bank.set_holding(0, &(0..64).collect::<Vec<u16>>());
     for i in 0..30u16 {
         let got = plc.read_words(&plc.parse_address(&format!("4x{i}")).unwrap(), 2).await.unwrap();
@@ -250,7 +269,8 @@ async fn closed_connections_and_garbage_are_recovered_by_retries() {
 #[tokio::test]
 async fn timeouts_count_every_attempt() {
     let faults = Faults { drop_rate: 1.0, ..Faults::default() };
-    let (server, _bank, address) = serve(Transport::Udp, ServerOptions { faults, ..ServerOptions::default() }).await;
+    let (server, _bank, address) =
+        serve(Transport::Udp, ServerOptions { faults, ..ServerOptions::default() }).await;
     let plc = client(Transport::Udp, &address, 100, 2).await;
     let err = plc.read_words(&plc.parse_address("4x0").unwrap(), 1).await.unwrap_err();
     assert!(matches!(err, PlcError::Timeout { attempts: 3, .. }), "{err:?}");
@@ -264,7 +284,10 @@ async fn broadcasts_are_written_without_awaiting_a_reply() {
     c.unit = 0;
     let plc = ModbusClient::connect(c).await.unwrap();
     plc.write_words(&plc.parse_address("4x5").unwrap(), &[5, 6]).await.unwrap();
-    assert!(matches!(plc.read_words(&plc.parse_address("4x5").unwrap(), 1).await, Err(PlcError::OutOfRange(_))));
+    assert!(matches!(
+        plc.read_words(&plc.parse_address("4x5").unwrap(), 1).await,
+        Err(PlcError::OutOfRange(_))
+    ));
     for _ in 0..200 {
         if bank.holding(5, 2) == [5, 6] {
             break;

@@ -4,7 +4,9 @@
 pub mod bench;
 pub mod demo;
 pub mod plc;
+pub mod plc_mc3e;
 pub mod sim;
+pub mod sim_mc3e;
 pub mod sim_modbus;
 
 use std::net::SocketAddr;

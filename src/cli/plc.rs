@@ -12,6 +12,7 @@ use std::time::Duration;
 
 use anyhow::{Context, anyhow, bail};
 
+use crate::protocols::mc3e::Device;
 use crate::protocols::modbus::address::{self as modbus_address, Table};
 use crate::protocols::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use crate::protocols::serial::SerialSettings;
@@ -28,6 +29,10 @@ pub enum PlcProtocol {
     ModbusRtu,
     /// Modbus RTU frames over raw TCP (serial-to-Ethernet gateway).
     ModbusRtuTcp,
+    /// Mitsubishi MC protocol 3E binary over TCP.
+    Mc3e,
+    /// Mitsubishi MC protocol 3E binary over UDP.
+    Mc3eUdp,
 }
 
 /// Arguments of `rackd plc`.
@@ -88,16 +93,28 @@ pub enum PlcOp {
 
 /// Builds the PLC memory for the arguments.
 pub async fn connect(args: &PlcArgs) -> Result<Box<dyn PlcMemory>, PlcError> {
+    let timeout = Duration::from_millis(args.timeout_ms);
     let transport = match args.protocol {
         PlcProtocol::ModbusTcp => Transport::Tcp,
         PlcProtocol::ModbusUdp => Transport::Udp,
         PlcProtocol::ModbusRtu => Transport::RtuSerial,
         PlcProtocol::ModbusRtuTcp => Transport::RtuOverTcp,
+        PlcProtocol::Mc3e | PlcProtocol::Mc3eUdp => {
+            let name = if args.protocol == PlcProtocol::Mc3e { "mc3e" } else { "mc3e-udp" };
+            // The PLC's own monitoring timer (units of 250 ms) stays below our timeout so
+            // the module gives up first and answers with an end code.
+            let monitor = (args.timeout_ms / 250).saturating_sub(1).clamp(1, u16::MAX as u64) as u16;
+            return super::plc_mc3e::build_client(name, &args.address, timeout, args.retries, monitor)
+                .map_err(|_| PlcError::BadAddress {
+                    text: args.address.clone(),
+                    reason: "not an MC 3E protocol",
+                });
+        }
     };
     let mut config = ModbusConfig::new(transport, args.address.clone());
     config.serial = args.serial;
     config.unit = args.unit;
-    config.timeout = Duration::from_millis(args.timeout_ms);
+    config.timeout = timeout;
     config.retries = args.retries;
     config.quirks = Quirks { length0: args.length0, ignore_transaction_id: args.ignore_transaction_id };
     Ok(Box::new(ModbusClient::connect(config).await?))
@@ -110,6 +127,7 @@ fn is_bit_area(protocol: PlcProtocol, address: &Address) -> bool {
         | PlcProtocol::ModbusUdp
         | PlcProtocol::ModbusRtu
         | PlcProtocol::ModbusRtuTcp => Table::from_area(&address.area).is_some_and(|t| !t.holds_words()),
+        PlcProtocol::Mc3e | PlcProtocol::Mc3eUdp => Device::of_area(&address.area).is_ok_and(Device::is_bit),
     }
 }
 
@@ -119,6 +137,8 @@ fn format_address(protocol: PlcProtocol, address: &Address) -> String {
         | PlcProtocol::ModbusUdp
         | PlcProtocol::ModbusRtu
         | PlcProtocol::ModbusRtuTcp => modbus_address::format(address),
+        PlcProtocol::Mc3e | PlcProtocol::Mc3eUdp => Device::of_area(&address.area)
+            .map_or_else(|_| format!("{}{}", address.area, address.index), |d| d.format(address.index)),
     }
 }
 
@@ -128,6 +148,7 @@ pub fn describe(error: &PlcError) -> String {
         PlcError::Device { protocol: "modbus", code, meaning } => {
             format!("exception {code:02X} \"{meaning}\"")
         }
+        PlcError::Device { protocol: "mc3e", code, meaning } => format!("end code {code:04X} \"{meaning}\""),
         PlcError::Timeout { attempts, timeout } => {
             format!("timeout: no reply after {attempts} tries of {} ms", timeout.as_millis())
         }

@@ -12,6 +12,8 @@ pub enum SimCommand {
     Modbus(super::sim_modbus::SimModbusArgs),
     /// The shelf storage PLC: task slots over Modbus UDP, answering with MBAP length 0.
     Shelf(SimShelfArgs),
+    /// A Mitsubishi MC protocol 3E (binary) server over the whole device range.
+    Mc3e(super::sim_mc3e::SimMc3eArgs),
 }
 
 /// Options of `rackd sim shelf`.
@@ -72,6 +74,7 @@ impl SimShelfArgs {
 pub async fn run(cmd: SimCommand) -> anyhow::Result<()> {
     match cmd {
         SimCommand::Modbus(args) => super::sim_modbus::run(args).await,
+        SimCommand::Mc3e(args) => super::sim_mc3e::run(args).await,
         SimCommand::Shelf(args) => {
             let sim = ShelfSim::start(&args.listen, args.options()?).await?;
             println!(

@@ -11,6 +11,7 @@
 
 pub mod error;
 pub mod link;
+pub mod mc3e;
 pub mod modbus;
 pub mod serial;
 

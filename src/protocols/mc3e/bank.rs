@@ -1,0 +1,181 @@
+//! The device memory a simulated PLC serves: word areas D, W, R, ZR and bit areas M, X, Y,
+//! B, L, each with its own size.
+//!
+//! The server shares one bank as a [`SharedBank`] (`Arc<Mutex<Bank>>`): a simulator keeps a
+//! clone, reads and changes registers between requests, and never holds the lock across an
+//! `.await`. Errors are the end codes a PLC would answer.
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+
+use super::device::Device;
+use super::end_code;
+
+/// A bank shared between the server and whoever simulates the machine.
+pub type SharedBank = Arc<Mutex<Bank>>;
+
+/// Device memory: words for word devices, bits for bit devices.
+#[derive(Clone, Debug)]
+pub struct Bank {
+    words: BTreeMap<Device, Vec<u16>>,
+    bits: BTreeMap<Device, Vec<bool>>,
+}
+
+impl Default for Bank {
+    /// Sizes of a Q-series CPU's default device assignment (X/Y/M/L/B 8192 points, D 12288,
+    /// W 8192), R one block of 32768 and ZR 1,048,576 words.
+    fn default() -> Self {
+        let sizes = [
+            (Device::D, 12_288),
+            (Device::W, 0x2000),
+            (Device::R, 32_768),
+            (Device::ZR, 1 << 20),
+            (Device::M, 8_192),
+            (Device::X, 0x2000),
+            (Device::Y, 0x2000),
+            (Device::B, 0x2000),
+            (Device::L, 8_192),
+        ];
+        Bank::with_sizes(&sizes)
+    }
+}
+
+impl Bank {
+    /// A zeroed bank with the given number of points per device; devices not listed have
+    /// none (every access to them is out of range).
+    pub fn with_sizes(sizes: &[(Device, u32)]) -> Bank {
+        let mut bank = Bank { words: BTreeMap::new(), bits: BTreeMap::new() };
+        for &(device, size) in sizes {
+            let size = size as usize;
+            if device.is_bit() {
+                bank.bits.insert(device, vec![false; size]);
+            } else {
+                bank.words.insert(device, vec![0; size]);
+            }
+        }
+        bank
+    }
+
+    /// This bank wrapped for sharing with a server.
+    pub fn shared(self) -> SharedBank {
+        Arc::new(Mutex::new(self))
+    }
+
+    /// Number of points (words or bits) of a device.
+    pub fn size(&self, device: Device) -> u32 {
+        let len = if device.is_bit() {
+            self.bits.get(&device).map(Vec::len)
+        } else {
+            self.words.get(&device).map(Vec::len)
+        };
+        len.unwrap_or(0) as u32
+    }
+
+    fn range(&self, device: Device, start: u32, points: usize) -> Result<std::ops::Range<usize>, u16> {
+        let start = start as usize;
+        let end = start.checked_add(points).ok_or(end_code::DEVICE_OUT_OF_RANGE)?;
+        if points == 0 {
+            return Err(end_code::POINTS_OUT_OF_RANGE);
+        }
+        if end > self.size(device) as usize {
+            return Err(end_code::DEVICE_OUT_OF_RANGE);
+        }
+        Ok(start..end)
+    }
+
+    /// Reads `count` words; on a bit device each word packs 16 points, the first in bit 0.
+    pub fn read_words(&self, device: Device, start: u32, count: u16) -> Result<Vec<u16>, u16> {
+        if let Some(bits) = self.bits.get(&device) {
+            let r = self.range(device, start, 16 * usize::from(count))?;
+            return Ok(bits[r]
+                .chunks(16)
+                .map(|c| c.iter().rev().fold(0, |w, &b| (w << 1) | u16::from(b)))
+                .collect());
+        }
+        let r = self.range(device, start, usize::from(count))?;
+        Ok(self.words[&device][r].to_vec())
+    }
+
+    /// Writes words; on a bit device each word sets 16 points, the first from bit 0.
+    pub fn write_words(&mut self, device: Device, start: u32, values: &[u16]) -> Result<(), u16> {
+        if device.is_bit() {
+            let r = self.range(device, start, 16 * values.len())?;
+            let bits = self.bits.get_mut(&device).ok_or(end_code::DEVICE_OUT_OF_RANGE)?;
+            for (i, slot) in bits[r].iter_mut().enumerate() {
+                *slot = values[i / 16] & (1 << (i % 16)) != 0;
+            }
+            return Ok(());
+        }
+        let r = self.range(device, start, values.len())?;
+        let words = self.words.get_mut(&device).ok_or(end_code::DEVICE_OUT_OF_RANGE)?;
+        words[r].copy_from_slice(values);
+        Ok(())
+    }
+
+    /// Reads `count` bits of a bit device (word devices: C05C, as in bit-unit requests).
+    pub fn read_bits(&self, device: Device, start: u32, count: u16) -> Result<Vec<bool>, u16> {
+        let bits = self.bits.get(&device).ok_or(Self::no_bits(device))?;
+        let r = self.range(device, start, usize::from(count))?;
+        Ok(bits[r].to_vec())
+    }
+
+    /// Writes bits of a bit device.
+    pub fn write_bits(&mut self, device: Device, start: u32, values: &[bool]) -> Result<(), u16> {
+        let r = self.range(device, start, values.len())?;
+        let bits = self.bits.get_mut(&device).ok_or(Self::no_bits(device))?;
+        bits[r].copy_from_slice(values);
+        Ok(())
+    }
+
+    fn no_bits(device: Device) -> u16 {
+        if device.is_bit() { end_code::DEVICE_OUT_OF_RANGE } else { end_code::BAD_REQUEST_CONTENTS }
+    }
+
+    /// One word (0 when out of range): a convenience for simulators.
+    pub fn word(&self, device: Device, number: u32) -> u16 {
+        self.read_words(device, number, 1).map_or(0, |w| w[0])
+    }
+
+    /// Sets one word; false when out of range.
+    pub fn set_word(&mut self, device: Device, number: u32, value: u16) -> bool {
+        self.write_words(device, number, &[value]).is_ok()
+    }
+
+    /// One bit (false when out of range).
+    pub fn bit(&self, device: Device, number: u32) -> bool {
+        self.read_bits(device, number, 1).is_ok_and(|b| b[0])
+    }
+
+    /// Sets one bit; false when out of range.
+    pub fn set_bit(&mut self, device: Device, number: u32, value: bool) -> bool {
+        self.write_bits(device, number, &[value]).is_ok()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn words_and_ranges() {
+        let mut bank = Bank::with_sizes(&[(Device::D, 10)]);
+        assert!(bank.set_word(Device::D, 9, 7));
+        assert_eq!(bank.read_words(Device::D, 8, 2), Ok(vec![0, 7]));
+        assert_eq!(bank.read_words(Device::D, 9, 2), Err(0xC056));
+        assert_eq!(bank.read_words(Device::D, 0, 0), Err(0xC051));
+        assert_eq!(bank.read_words(Device::W, 0, 1), Err(0xC056));
+        assert_eq!(bank.read_bits(Device::D, 0, 1), Err(0xC05C));
+        assert_eq!(bank.read_words(Device::D, u32::MAX, 2), Err(0xC056));
+    }
+
+    #[test]
+    fn bit_devices_in_word_units_pack_bit0_first() {
+        let mut bank = Bank::with_sizes(&[(Device::M, 32)]);
+        bank.set_bit(Device::M, 0, true);
+        bank.set_bit(Device::M, 17, true);
+        assert_eq!(bank.read_words(Device::M, 0, 2), Ok(vec![0x0001, 0x0002]));
+        bank.write_words(Device::M, 16, &[0x8001]).unwrap();
+        assert!(bank.bit(Device::M, 16) && bank.bit(Device::M, 31) && !bank.bit(Device::M, 17));
+        assert_eq!(bank.write_words(Device::M, 17, &[1]), Err(0xC056));
+    }
+}

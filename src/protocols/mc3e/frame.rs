@@ -1,0 +1,214 @@
+//! What requests and responses share: the route fields, the 9-byte header, framing errors,
+//! and the packing of bit values (two per byte, first point in the high nibble).
+//!
+//! ```text
+//! subheader(2) network(1) pc(1) module_io(2, LE) station(1) data_length(2, LE) | data...
+//! ```
+//! `data_length` counts every byte after itself. Requests start `50 00`, responses `D0 00`.
+
+/// The subheader of a 3E binary request.
+pub const REQUEST_SUBHEADER: [u8; 2] = [0x50, 0x00];
+/// The subheader of a 3E binary response.
+pub const RESPONSE_SUBHEADER: [u8; 2] = [0xD0, 0x00];
+/// Bytes before the data: subheader, route and data length.
+pub const HEADER_LEN: usize = 9;
+
+/// Largest point count of one batch read or write in word units (words, or 16-bit
+/// groups of a bit device), per the Q-series MC protocol manual for 3E frames.
+pub const MAX_WORD_POINTS: u16 = 960;
+/// Largest point count of one batch read or write in bit units (binary code), per the same
+/// manual (ASCII code allows fewer; rackd speaks binary only).
+pub const MAX_BIT_POINTS: u16 = 7168;
+
+/// The route to the target station; a response echoes its request's route.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Route {
+    /// Network number (`00` = the local network).
+    pub network: u8,
+    /// PC number (`FF` = the station the Ethernet module is in).
+    pub pc: u8,
+    /// Request destination module I/O number (`03FF` = the own station's CPU).
+    pub module_io: u16,
+    /// Request destination module station number (`00`).
+    pub station: u8,
+}
+
+impl Default for Route {
+    /// The route to the CPU of the station the Ethernet module sits in: 00/FF/03FF/00.
+    fn default() -> Self {
+        Route { network: 0x00, pc: 0xFF, module_io: 0x03FF, station: 0x00 }
+    }
+}
+
+impl Route {
+    /// Appends the 5 route bytes.
+    pub fn encode(&self, out: &mut Vec<u8>) {
+        out.push(self.network);
+        out.push(self.pc);
+        out.extend_from_slice(&self.module_io.to_le_bytes());
+        out.push(self.station);
+    }
+
+    /// Reads the 5 route bytes; `bytes` must hold at least 5.
+    pub(crate) fn decode(bytes: &[u8]) -> Option<Route> {
+        match bytes {
+            [network, pc, io_lo, io_hi, station, ..] => Some(Route {
+                network: *network,
+                pc: *pc,
+                module_io: u16::from_le_bytes([*io_lo, *io_hi]),
+                station: *station,
+            }),
+            _ => None,
+        }
+    }
+}
+
+/// Why bytes are not a well-formed 3E binary frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum FrameError {
+    /// Fewer bytes than the frame needs.
+    #[error("truncated frame: need {need} bytes, have {have}")]
+    Truncated {
+        /// Bytes needed.
+        need: usize,
+        /// Bytes present.
+        have: usize,
+    },
+    /// The subheader is not the expected one.
+    #[error("unexpected subheader {0:02X?}")]
+    Subheader([u8; 2]),
+    /// The data length field disagrees with the bytes present.
+    #[error("data length field says {declared}, {actual} bytes follow")]
+    Length {
+        /// What the length field says.
+        declared: usize,
+        /// What is there.
+        actual: usize,
+    },
+    /// An error response carries error information that is neither absent nor 9 bytes.
+    #[error("error response with {0} bytes of error information (expected 0 or 9)")]
+    ErrorInfo(usize),
+}
+
+/// The route and the declared data length of a frame starting with `subheader`, or why not.
+///
+/// Used by stream readers: once this succeeds, the frame is `HEADER_LEN + length` bytes.
+pub fn parse_header(bytes: &[u8], subheader: [u8; 2]) -> Result<(Route, usize), FrameError> {
+    if bytes.len() < HEADER_LEN {
+        return Err(FrameError::Truncated { need: HEADER_LEN, have: bytes.len() });
+    }
+    if bytes[..2] != subheader {
+        return Err(FrameError::Subheader([bytes[0], bytes[1]]));
+    }
+    let route = Route::decode(&bytes[2..7]).ok_or(FrameError::Truncated { need: 7, have: bytes.len() })?;
+    Ok((route, usize::from(u16::from_le_bytes([bytes[7], bytes[8]]))))
+}
+
+/// Checks a whole frame's header and returns its route and the bytes after the length field.
+pub fn split_frame(bytes: &[u8], subheader: [u8; 2]) -> Result<(Route, &[u8]), FrameError> {
+    let (route, declared) = parse_header(bytes, subheader)?;
+    let data = &bytes[HEADER_LEN..];
+    if data.len() != declared {
+        return Err(FrameError::Length { declared, actual: data.len() });
+    }
+    Ok((route, data))
+}
+
+/// Writes the header with a placeholder length; [`finish_frame`] fills it in.
+pub(crate) fn start_frame(subheader: [u8; 2], route: &Route, capacity: usize) -> Vec<u8> {
+    let mut out = Vec::with_capacity(HEADER_LEN + capacity);
+    out.extend_from_slice(&subheader);
+    route.encode(&mut out);
+    out.extend_from_slice(&[0, 0]);
+    out
+}
+
+/// Sets the data length field. Data longer than 65535 bytes cannot be framed: callers keep
+/// requests within the point limits, so this saturates rather than panics.
+pub(crate) fn finish_frame(out: &mut [u8]) {
+    let len = u16::try_from(out.len().saturating_sub(HEADER_LEN)).unwrap_or(u16::MAX);
+    out[7..9].copy_from_slice(&len.to_le_bytes());
+}
+
+/// Bytes needed for `count` bits in bit units.
+pub fn bit_bytes(count: usize) -> usize {
+    count.div_ceil(2)
+}
+
+/// Packs bits two per byte, first point in the high nibble, `1` for ON (binary bit units).
+pub fn pack_bits(bits: &[bool], out: &mut Vec<u8>) {
+    for pair in bits.chunks(2) {
+        let hi = u8::from(pair[0]) << 4;
+        let lo = pair.get(1).map_or(0, |b| u8::from(*b));
+        out.push(hi | lo);
+    }
+}
+
+/// Unpacks `count` bits; `None` if `bytes` is not exactly [`bit_bytes`]`(count)` long or a
+/// nibble is neither 0 nor 1.
+pub fn unpack_bits(bytes: &[u8], count: usize) -> Option<Vec<bool>> {
+    if bytes.len() != bit_bytes(count) {
+        return None;
+    }
+    let mut bits = Vec::with_capacity(count);
+    for (i, byte) in bytes.iter().enumerate() {
+        let (hi, lo) = (byte >> 4, byte & 0x0F);
+        if hi > 1 || lo > 1 {
+            return None;
+        }
+        bits.push(hi == 1);
+        if 2 * i + 1 < count {
+            bits.push(lo == 1);
+        }
+    }
+    Some(bits)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn route_default_is_00_ff_03ff_00() {
+        let mut out = Vec::new();
+        Route::default().encode(&mut out);
+        assert_eq!(out, [0x00, 0xFF, 0xFF, 0x03, 0x00]);
+    }
+
+    #[test]
+    fn bits_pack_high_nibble_first() {
+        // The MC Protocol Reference Manual's (SH-080008) bit-unit read example: M100..M107 =
+        // 0,0,0,1,0,0,1,1 is `00 01 00 11`.
+        let bits = [false, false, false, true, false, false, true, true];
+        let mut out = Vec::new();
+        pack_bits(&bits, &mut out);
+        assert_eq!(out, [0x00, 0x01, 0x00, 0x11]);
+        assert_eq!(unpack_bits(&out, 8).unwrap(), bits);
+        let mut odd = Vec::new();
+        pack_bits(&[true, false, true], &mut odd);
+        assert_eq!(odd, [0x10, 0x10]);
+        assert_eq!(unpack_bits(&odd, 3).unwrap(), [true, false, true]);
+    }
+
+    #[test]
+    fn unpack_rejects_bad_nibbles_and_lengths() {
+        assert_eq!(unpack_bits(&[0x20], 2), None);
+        assert_eq!(unpack_bits(&[0x01], 3), None);
+        assert_eq!(unpack_bits(&[], 0), Some(vec![]));
+    }
+
+    #[test]
+    fn header_errors() {
+        assert_eq!(
+            parse_header(&[0x50, 0x00, 0x00], REQUEST_SUBHEADER),
+            Err(FrameError::Truncated { need: 9, have: 3 })
+        );
+        let frame = [0x54, 0x00, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x00, 0x00];
+        assert_eq!(parse_header(&frame, REQUEST_SUBHEADER), Err(FrameError::Subheader([0x54, 0x00])));
+        let frame = [0x50, 0x00, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x03, 0x00, 0x01];
+        assert_eq!(
+            split_frame(&frame, REQUEST_SUBHEADER),
+            Err(FrameError::Length { declared: 3, actual: 1 })
+        );
+    }
+}

@@ -1,0 +1,215 @@
+//! An MC 3E binary server over TCP or UDP, for simulators and tests.
+//!
+//! The server answers batch reads and writes against a [`SharedBank`] and injects the
+//! faults of a [`SharedFaults`]; both handles stay with the caller, who may read and change
+//! them while the server runs. A write hook ([`WriteHook`]) is called after each write.
+//!
+//! ```no_run
+//! # async fn demo() -> std::io::Result<()> {
+//! use rackd::protocols::mc3e::{Bank, Device, Fault, Mc3eServer, ServerState};
+//! let state = ServerState::new(Bank::default().shared());
+//! let server = Mc3eServer::bind_udp("127.0.0.1:0".parse().unwrap(), state).await?;
+//! server.bank().lock().unwrap().set_word(Device::D, 200, 1);
+//! server.faults().lock().unwrap().push(Fault::Drop);
+//! server.shutdown().await;
+//! # Ok(()) }
+//! ```
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream, UdpSocket};
+use tokio::task::{JoinHandle, JoinSet};
+
+use super::bank::SharedBank;
+use super::faults::{Fault, Faults, SharedFaults};
+use super::frame::{self, REQUEST_SUBHEADER};
+use super::handler::{self, Answer, WriteHook};
+
+/// What a server serves: memory, faults and an optional write hook.
+#[derive(Clone)]
+pub struct ServerState {
+    /// The device memory.
+    pub bank: SharedBank,
+    /// The fault settings.
+    pub faults: SharedFaults,
+    /// Called after every successful write.
+    pub on_write: Option<WriteHook>,
+}
+
+impl ServerState {
+    /// A state serving `bank`, without faults or hook.
+    pub fn new(bank: SharedBank) -> Self {
+        ServerState { bank, faults: Faults::default().shared(), on_write: None }
+    }
+
+    /// The same state with these faults.
+    pub fn with_faults(mut self, faults: SharedFaults) -> Self {
+        self.faults = faults;
+        self
+    }
+
+    /// The same state with a write hook.
+    pub fn on_write(mut self, hook: WriteHook) -> Self {
+        self.on_write = Some(hook);
+        self
+    }
+
+    /// The fault to apply and the answer to give to one frame.
+    fn process(&self, bytes: &[u8]) -> (Option<Fault>, Option<Answer>) {
+        let fault = self.faults.lock().unwrap_or_else(|p| p.into_inner()).take_next();
+        let answer = match fault {
+            Some(Fault::Drop | Fault::Close) => None,
+            Some(Fault::EndCode(code)) => handler::answer(&self.bank, bytes, Some(code)),
+            _ => handler::answer(&self.bank, bytes, None),
+        };
+        if let (Some(hook), Some(write)) = (&self.on_write, answer.as_ref().and_then(|a| a.write)) {
+            hook(write);
+        }
+        (fault, answer)
+    }
+}
+
+/// A running server; dropping it (or [`Mc3eServer::shutdown`]) stops it and closes every
+/// connection.
+pub struct Mc3eServer {
+    local_addr: SocketAddr,
+    state: ServerState,
+    task: JoinHandle<()>,
+}
+
+impl Mc3eServer {
+    /// Listens for TCP connections on `addr` (port 0 picks a free port).
+    pub async fn bind_tcp(addr: SocketAddr, state: ServerState) -> std::io::Result<Mc3eServer> {
+        let listener = TcpListener::bind(addr).await?;
+        let local_addr = listener.local_addr()?;
+        let task = tokio::spawn(serve_tcp(listener, state.clone()));
+        Ok(Mc3eServer { local_addr, state, task })
+    }
+
+    /// Serves UDP datagrams on `addr` (port 0 picks a free port).
+    pub async fn bind_udp(addr: SocketAddr, state: ServerState) -> std::io::Result<Mc3eServer> {
+        let socket = Arc::new(UdpSocket::bind(addr).await?);
+        let local_addr = socket.local_addr()?;
+        let task = tokio::spawn(serve_udp(socket, state.clone()));
+        Ok(Mc3eServer { local_addr, state, task })
+    }
+
+    /// The address the server listens on.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.local_addr
+    }
+
+    /// The served memory.
+    pub fn bank(&self) -> SharedBank {
+        self.state.bank.clone()
+    }
+
+    /// The fault settings.
+    pub fn faults(&self) -> SharedFaults {
+        self.state.faults.clone()
+    }
+
+    /// Serves until the process ends (for standalone simulators).
+    pub async fn run_forever(mut self) {
+        let _ = (&mut self.task).await;
+    }
+
+    /// Stops the server and closes its connections and socket.
+    pub async fn shutdown(mut self) {
+        self.task.abort();
+        let _ = (&mut self.task).await;
+    }
+}
+
+impl Drop for Mc3eServer {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+async fn serve_tcp(listener: TcpListener, state: ServerState) {
+    // Connection tasks live in the set, so aborting this task drops (closes) them all.
+    let mut connections = JoinSet::new();
+    loop {
+        tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok((stream, peer)) => {
+                    let _ = stream.set_nodelay(true);
+                    connections.spawn(serve_connection(stream, peer, state.clone()));
+                }
+                Err(e) => tracing::warn!(error = %e, "mc3e server: accept failed"),
+            },
+            Some(_) = connections.join_next(), if !connections.is_empty() => {}
+        }
+    }
+}
+
+/// Serves one connection, one request at a time, like a PLC's Ethernet port. Bytes that are
+/// not a 3E request leave the stream impossible to resynchronise, so the connection closes.
+async fn serve_connection(mut stream: TcpStream, peer: SocketAddr, state: ServerState) {
+    let mut frame_bytes = Vec::new();
+    loop {
+        let mut header = [0u8; frame::HEADER_LEN];
+        if stream.read_exact(&mut header).await.is_err() {
+            return;
+        }
+        let Ok((_, len)) = frame::parse_header(&header, REQUEST_SUBHEADER) else {
+            tracing::debug!(%peer, "mc3e server: not a 3E binary request, closing");
+            return;
+        };
+        frame_bytes.clear();
+        frame_bytes.extend_from_slice(&header);
+        frame_bytes.resize(frame::HEADER_LEN + len, 0);
+        if stream.read_exact(&mut frame_bytes[frame::HEADER_LEN..]).await.is_err() {
+            return;
+        }
+        let (fault, answer) = state.process(&frame_bytes);
+        if let Some(Fault::Delay(delay)) = fault {
+            tokio::time::sleep(delay).await;
+        }
+        if fault == Some(Fault::Close) {
+            return;
+        }
+        if let Some(answer) = answer
+            && stream.write_all(&answer.bytes).await.is_err()
+        {
+            return;
+        }
+    }
+}
+
+async fn serve_udp(socket: Arc<UdpSocket>, state: ServerState) {
+    let mut buf = vec![0u8; 65_536];
+    // Delayed replies live in the set, so stopping the server cancels them too.
+    let mut delayed = JoinSet::new();
+    loop {
+        let received = tokio::select! {
+            received = socket.recv_from(&mut buf) => received,
+            Some(_) = delayed.join_next(), if !delayed.is_empty() => continue,
+        };
+        let (len, peer) = match received {
+            Ok(received) => received,
+            Err(e) => {
+                // ICMP "port unreachable" from an earlier reply surfaces here on some systems.
+                tracing::debug!(error = %e, "mc3e server: recv failed");
+                continue;
+            }
+        };
+        let (fault, answer) = state.process(&buf[..len]);
+        let Some(answer) = answer else { continue };
+        match fault {
+            Some(Fault::Delay(delay)) => {
+                let socket = socket.clone();
+                delayed.spawn(async move {
+                    tokio::time::sleep(delay).await;
+                    let _ = socket.send_to(&answer.bytes, peer).await;
+                });
+            }
+            _ => {
+                let _ = socket.send_to(&answer.bytes, peer).await;
+            }
+        }
+    }
+}
