@@ -31,6 +31,18 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 1000)]
         batch: usize,
     },
+    /// Shelf PLC: POST-to-slot latency and completed jobs/s against the simulator.
+    Shelf {
+        /// Jobs sent one at a time for the latency figures.
+        #[arg(long, default_value_t = 1000)]
+        latency_jobs: usize,
+        /// Jobs sent in batches for the throughput figure.
+        #[arg(long, default_value_t = 20000)]
+        batch_jobs: usize,
+        /// The device's poll period in milliseconds.
+        #[arg(long, default_value_t = 10)]
+        poll_ms: u64,
+    },
 }
 
 struct Phase {
@@ -49,7 +61,12 @@ impl Phase {
 
 /// Runs a benchmark and prints its figures.
 pub async fn run(cmd: BenchCommand) -> anyhow::Result<()> {
-    let BenchCommand::Intake { clients, seconds, batch } = cmd;
+    let (clients, seconds, batch) = match cmd {
+        BenchCommand::Intake { clients, seconds, batch } => (clients, seconds, batch),
+        BenchCommand::Shelf { latency_jobs, batch_jobs, poll_ms } => {
+            return super::bench_shelf::run(latency_jobs, batch_jobs, poll_ms).await;
+        }
+    };
     let dir = tempfile::tempdir()?;
     let mut config = Config::demo();
     config.server.listen = "127.0.0.1:0".parse()?;

@@ -2,6 +2,7 @@
 //! `plc`, `sim`, `bench`.
 
 pub mod bench;
+pub mod bench_shelf;
 pub mod demo;
 pub mod plc;
 pub mod plc_mc3e;

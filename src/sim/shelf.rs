@@ -71,6 +71,7 @@ struct World {
     violations: u64,
     withdrawals: u64,
     received: HashMap<u16, u32>,
+    received_at: HashMap<u16, std::time::Instant>,
     completed: u64,
     failed: u64,
 }
@@ -150,6 +151,11 @@ impl ShelfSim {
         self.world().received.get(&task_id).copied().unwrap_or(0)
     }
 
+    /// When a task with this id last reached a slot.
+    pub fn received_at(&self, task_id: u16) -> Option<std::time::Instant> {
+        self.world().received_at.get(&task_id).copied()
+    }
+
     /// Tasks finished (state 2) and failed (state 3) so far.
     pub fn finished(&self) -> (u64, u64) {
         let w = self.world();
@@ -225,6 +231,7 @@ impl ShelfHandler {
             let new_id = writes.iter().find(|&&(o, _)| o == 0).map(|&(_, v)| v);
             if let Some(new_id) = new_id.filter(|&v| v != 0 && v != id) {
                 *world.received.entry(new_id).or_default() += 1;
+                world.received_at.insert(new_id, std::time::Instant::now());
                 tracing::info!(slot = slot + 1, task = new_id, "task received");
             }
         }

@@ -1,0 +1,130 @@
+//! `rackd bench shelf`: how fast jobs reach and run on a shelf PLC.
+//!
+//! Starts the shelf simulator (zero-duration tasks) and a real server driving it over
+//! loopback UDP, then measures:
+//! - hand-over latency: from sending `POST /api/v1/jobs` to the task id landing in a slot
+//!   at the simulator, one job at a time (p50/p99);
+//! - sustained throughput: completed jobs per second for a large batch of light jobs.
+//!
+//! The baseline, measured in the same run, is one Modbus UDP read round trip to the same
+//! simulator: a hand-over needs at least three (read the slot, write the body, write the
+//! id), so `latency / (3 x round trip)` says how close dispatch is to the wire's floor.
+
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use hdrhistogram::Histogram;
+use tokio::sync::oneshot;
+
+use crate::app::Application;
+use crate::config::Config;
+use crate::devices::DeviceConfig;
+use crate::devices::shelf::slot::task_id_for;
+use crate::protocols::PlcMemory;
+use crate::protocols::modbus::{ModbusClient, ModbusConfig};
+use crate::sim::shelf::{ShelfSim, ShelfSimOptions};
+
+/// Runs the shelf benchmark: `latency_jobs` single jobs, then `batch_jobs` in batches.
+pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow::Result<()> {
+    let sim =
+        ShelfSim::start("127.0.0.1:0", ShelfSimOptions { task_time: Duration::ZERO, ..Default::default() })
+            .await?;
+    let dir = tempfile::tempdir()?;
+    let mut config = Config::demo();
+    config.server.listen = "127.0.0.1:0".parse()?;
+    config.database.path = dir.path().join("bench.db");
+    let mut device = DeviceConfig::shelf("shelf1", &sim.local_addr().to_string(), vec![1]);
+    device.poll_ms = poll_ms;
+    config.devices = vec![device];
+    let app = Application::build(&config, false).await?;
+    let base = format!("http://{}", app.local_addr());
+    let (stop, stopped) = oneshot::channel::<()>();
+    let server = tokio::spawn(app.run_until(async {
+        let _ = stopped.await;
+    }));
+    let client = reqwest::Client::new();
+
+    let plc = ModbusClient::connect(ModbusConfig::shelf_plc(sim.local_addr().to_string())).await?;
+    let at = plc.parse_address("4x4000")?;
+    let mut rtt = Histogram::<u64>::new(3)?;
+    for _ in 0..2000 {
+        let t = Instant::now();
+        plc.read_words(&at, 35).await?;
+        rtt.saturating_record(t.elapsed().as_micros() as u64);
+    }
+
+    let mut handover = Histogram::<u64>::new(3)?;
+    for n in 0..latency_jobs {
+        let body = light(n);
+        let t = Instant::now();
+        let r = client.post(format!("{base}/api/v1/jobs")).json(&body).send().await?;
+        anyhow::ensure!(r.status() == 201, "POST: {}", r.status());
+        let id = r.json::<serde_json::Value>().await?["id"].as_i64().context("job id")?;
+        let deadline = Instant::now() + Duration::from_secs(5);
+        let landed = loop {
+            if let Some(at) = sim.received_at(task_id_for(id)).filter(|&at| at >= t) {
+                break at;
+            }
+            anyhow::ensure!(Instant::now() < deadline, "job {id} never reached the PLC");
+            tokio::task::yield_now().await;
+        };
+        handover.saturating_record((landed - t).as_micros() as u64);
+    }
+
+    let jobs: Vec<_> = (0..batch_jobs).map(|n| light(n + latency_jobs)).collect();
+    let (done_before, _) = sim.finished();
+    let t = Instant::now();
+    for chunk in jobs.chunks(1000) {
+        let r = client
+            .post(format!("{base}/api/v1/jobs/batch"))
+            .json(&serde_json::json!({ "jobs": chunk }))
+            .send()
+            .await?;
+        anyhow::ensure!(r.status() == 201, "batch: {}", r.status());
+    }
+    let deadline = Instant::now() + Duration::from_secs(600);
+    loop {
+        let r: serde_json::Value =
+            client.get(format!("{base}/api/v1/jobs?state=queued&limit=1")).send().await?.json().await?;
+        let running: serde_json::Value =
+            client.get(format!("{base}/api/v1/devices/shelf1")).send().await?.json().await?;
+        if r["jobs"].as_array().is_some_and(|a| a.is_empty()) && running["slots_in_use"] == 0 {
+            break;
+        }
+        anyhow::ensure!(Instant::now() < deadline, "the batch did not finish");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let elapsed = t.elapsed();
+    let (done_after, _) = sim.finished();
+
+    let ms = |h: &Histogram<u64>, q: f64| h.value_at_quantile(q) as f64 / 1000.0;
+    println!("rackd bench shelf: simulator with zero-duration tasks, poll every {poll_ms} ms");
+    println!("Modbus UDP round trip (baseline)   p50 {:.3} ms  p99 {:.3} ms", ms(&rtt, 0.5), ms(&rtt, 0.99));
+    println!(
+        "POST -> task in slot ({latency_jobs} jobs)    p50 {:.3} ms  p99 {:.3} ms  = {:.1}x / {:.1}x three round trips",
+        ms(&handover, 0.5),
+        ms(&handover, 0.99),
+        ms(&handover, 0.5) / (3.0 * ms(&rtt, 0.5)),
+        ms(&handover, 0.99) / (3.0 * ms(&rtt, 0.5)),
+    );
+    println!(
+        "sustained: {} jobs completed in {:.2} s = {:.0} jobs/s ({} slots)",
+        done_after - done_before,
+        elapsed.as_secs_f64(),
+        (done_after - done_before) as f64 / elapsed.as_secs_f64(),
+        60
+    );
+    let _ = stop.send(());
+    server.await??;
+    sim.shutdown().await;
+    Ok(())
+}
+
+/// A light job on the demo site; consecutive jobs use different locations.
+fn light(n: usize) -> serde_json::Value {
+    let n = n as u64;
+    serde_json::json!({
+        "kind": "light", "color": if n % 2 == 0 { "green" } else { "red" }, "on": n % 3 != 0,
+        "location": {"aisle": 1, "row": 1 + n % 2, "bay": 1 + (n / 2) % 10, "level": 1 + (n / 20) % 6, "position": 1 + (n / 120) % 4},
+    })
+}
