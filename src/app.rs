@@ -54,11 +54,13 @@ impl Application {
         locations::seed(&mut *pool.acquire().await?, &layout, now_ms()).await.context("seeding locations")?;
         let wakers = devices::wakers(&config.devices);
         let (writer, writer_task) = Writer::start(
-            pool.clone(),
+            &db.path,
+            Duration::from_millis(db.busy_timeout_ms),
             config.intake.max_group,
             config.intake.queue,
             Some(devices::wake_hook(wakers.clone())),
-        );
+        )
+        .context("opening the job writer's connection")?;
         let (devices, device_tasks) = devices::start(&config.devices, wakers, &writer, &pool).await?;
         let rules = Rules {
             layout,

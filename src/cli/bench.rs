@@ -161,7 +161,7 @@ where
                     let status = response.status();
                     response.bytes().await?;
                     anyhow::ensure!(status.is_success(), "{name}: status {status}");
-                    hist.saturating_record(t.elapsed().as_micros() as u64);
+                    hist.record(t.elapsed().as_micros() as u64)?;
                     n += 1;
                 }
                 Ok::<_, anyhow::Error>(hist)

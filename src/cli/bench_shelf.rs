@@ -50,7 +50,7 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
     for _ in 0..2000 {
         let t = Instant::now();
         plc.read_words(&at, 35).await?;
-        rtt.saturating_record(t.elapsed().as_micros() as u64);
+        rtt.record(t.elapsed().as_micros() as u64)?;
     }
 
     let mut handover = Histogram::<u64>::new(3)?;
@@ -68,7 +68,7 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
             anyhow::ensure!(Instant::now() < deadline, "job {id} never reached the PLC");
             tokio::task::yield_now().await;
         };
-        handover.saturating_record((landed - t).as_micros() as u64);
+        handover.record((landed - t).as_micros() as u64)?;
     }
 
     let jobs: Vec<_> = (0..batch_jobs).map(|n| light(n + latency_jobs)).collect();

@@ -166,8 +166,9 @@ pub struct JobFilter {
     pub limit: u32,
 }
 
+/// A job as stored, column by column (read through sqlx or, by the writer, rusqlite).
 #[derive(sqlx::FromRow)]
-struct JobRow {
+pub(crate) struct JobRow {
     id: i64,
     reference: Option<String>,
     priority: i64,
@@ -183,14 +184,46 @@ struct JobRow {
     updated_at: i64,
 }
 
+impl JobRow {
+    /// Reads the row from a rusqlite row whose columns start with [`COLUMNS`] at `first`.
+    pub(crate) fn from_rusqlite(row: &rusqlite::Row<'_>, first: usize) -> rusqlite::Result<JobRow> {
+        Ok(JobRow {
+            id: row.get(first)?,
+            reference: row.get(first + 1)?,
+            priority: row.get(first + 2)?,
+            barcode: row.get(first + 3)?,
+            spec: row.get(first + 4)?,
+            device: row.get(first + 5)?,
+            state: row.get(first + 6)?,
+            forced: row.get(first + 7)?,
+            failure_kind: row.get(first + 8)?,
+            failure_code: row.get(first + 9)?,
+            failure_text: row.get(first + 10)?,
+            created_at: row.get(first + 11)?,
+            updated_at: row.get(first + 12)?,
+        })
+    }
+}
+
 /// The columns [`JobRow`] reads, in a SELECT list.
-const COLUMNS: &str = "id, reference, priority, barcode, spec, device, state, forced, \
+pub(crate) const COLUMNS: &str = "id, reference, priority, barcode, spec, device, state, forced, \
     failure_kind, failure_code, failure_text, created_at, updated_at";
 
+/// A stored row that does not make a valid job (a damaged or hand-edited database).
+#[derive(Debug, thiserror::Error)]
+#[error("job {id}: bad {what} in the database")]
+pub struct CorruptRow {
+    /// The job.
+    pub id: i64,
+    /// The column.
+    pub what: &'static str,
+}
+
 impl TryFrom<JobRow> for Job {
-    type Error = sqlx::Error;
-    fn try_from(row: JobRow) -> Result<Job, sqlx::Error> {
-        let corrupt = |what: &str| sqlx::Error::Decode(format!("job {}: bad {what}", row.id).into());
+    type Error = CorruptRow;
+    fn try_from(row: JobRow) -> Result<Job, CorruptRow> {
+        let id = row.id;
+        let corrupt = |what: &'static str| CorruptRow { id, what };
         let spec: JobSpec = serde_json::from_str(&row.spec).map_err(|_| corrupt("spec"))?;
         let priority = Priority::try_from(row.priority).map_err(|_| corrupt("priority"))?;
         let state = JobState::parse(&row.state).ok_or_else(|| corrupt("state"))?;
@@ -213,32 +246,12 @@ impl TryFrom<JobRow> for Job {
 pub async fn get(db: impl SqliteExecutor<'_>, id: i64) -> Result<Option<Job>, sqlx::Error> {
     let sql = format!("SELECT {COLUMNS} FROM jobs WHERE id = ?");
     let row: Option<JobRow> = sqlx::query_as(sqlx::AssertSqlSafe(sql)).bind(id).fetch_optional(db).await?;
-    row.map(Job::try_from).transpose()
+    row.map(Job::try_from).transpose().map_err(decode)
 }
 
-/// The stored canonical request and job for each of `references` that exists.
-pub async fn by_references(
-    db: impl SqliteExecutor<'_>,
-    references: &[&str],
-) -> Result<Vec<(String, Job)>, sqlx::Error> {
-    if references.is_empty() {
-        return Ok(Vec::new());
-    }
-    let mut q =
-        QueryBuilder::<Sqlite>::new(format!("SELECT request, {COLUMNS} FROM jobs WHERE reference IN ("));
-    let mut list = q.separated(", ");
-    for r in references {
-        list.push_bind(*r);
-    }
-    q.push(")");
-    #[derive(sqlx::FromRow)]
-    struct WithRequest {
-        request: String,
-        #[sqlx(flatten)]
-        row: JobRow,
-    }
-    let rows: Vec<WithRequest> = q.build_query_as().fetch_all(db).await?;
-    rows.into_iter().map(|r| Ok((r.request, Job::try_from(r.row)?))).collect()
+/// A corrupt row as the sqlx error the read functions return.
+fn decode(e: CorruptRow) -> sqlx::Error {
+    sqlx::Error::Decode(e.into())
 }
 
 /// Jobs matching `filter`, in id order.
@@ -267,7 +280,7 @@ pub async fn list(db: impl SqliteExecutor<'_>, filter: &JobFilter) -> Result<Vec
     }
     q.push(" ORDER BY id LIMIT ").push_bind(filter.limit as i64);
     let rows: Vec<JobRow> = q.build_query_as().fetch_all(db).await?;
-    rows.into_iter().map(Job::try_from).collect()
+    rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
 }
 
 /// A job's history, oldest first.
@@ -298,5 +311,5 @@ pub async fn unfinished(db: impl SqliteExecutor<'_>, device: &str) -> Result<Vec
          AND state IN ('queued', 'dispatched', 'running', 'cancelling') ORDER BY id"
     );
     let rows: Vec<JobRow> = sqlx::query_as(sqlx::AssertSqlSafe(sql)).bind(device).fetch_all(db).await?;
-    rows.into_iter().map(Job::try_from).collect()
+    rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
 }

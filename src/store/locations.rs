@@ -31,6 +31,7 @@ pub struct LocationState {
     pub updated_at: OffsetDateTime,
 }
 
+/// A location row as stored, read by sqlx (the API) or rusqlite (the writer).
 #[derive(sqlx::FromRow)]
 struct Row {
     aisle: i64,
@@ -67,15 +68,6 @@ impl From<Row> for LocationState {
     }
 }
 
-const KEY: &str = "aisle = ? AND row = ? AND bay = ? AND level = ? AND position = ?";
-
-fn bind_key<'q>(
-    q: sqlx::query::Query<'q, Sqlite, sqlx::sqlite::SqliteArguments>,
-    l: Location,
-) -> sqlx::query::Query<'q, Sqlite, sqlx::sqlite::SqliteArguments> {
-    q.bind(l.aisle as i64).bind(l.row as i64).bind(l.bay as i64).bind(l.level as i64).bind(l.position as i64)
-}
-
 /// Adds a row for every location of the layout that has none (existing rows are kept).
 pub async fn seed(db: &mut SqliteConnection, layout: &Layout, now: i64) -> Result<(), sqlx::Error> {
     let all: Vec<Location> = layout.locations().collect();
@@ -110,50 +102,69 @@ pub async fn list(
     Ok(rows.into_iter().map(LocationState::from).collect())
 }
 
-/// One location, if the layout has it.
-pub async fn get(db: impl SqliteExecutor<'_>, l: Location) -> Result<Option<LocationState>, sqlx::Error> {
-    let q = sqlx::query_as::<_, Row>(sqlx::AssertSqlSafe(format!("SELECT * FROM locations WHERE {KEY}")));
-    let q = q
-        .bind(l.aisle as i64)
-        .bind(l.row as i64)
-        .bind(l.bay as i64)
-        .bind(l.level as i64)
-        .bind(l.position as i64);
-    Ok(q.fetch_optional(db).await?.map(LocationState::from))
+// What follows runs in the job writer's thread on its own rusqlite connection, inside the
+// writer's transaction (see `writer`).
+
+const KEY: &str = "aisle = ?1 AND row = ?2 AND bay = ?3 AND level = ?4 AND position = ?5";
+
+fn key(l: Location) -> [i64; 5] {
+    [l.aisle as i64, l.row as i64, l.bay as i64, l.level as i64, l.position as i64]
 }
 
-/// Marks `locations` reserved by `job` (`hold`), or releases everything `job` holds.
-pub async fn reserve(
-    db: &mut SqliteConnection,
-    job: i64,
-    locations: &[Location],
-    hold: bool,
-) -> Result<(), sqlx::Error> {
-    if hold {
-        for &l in locations {
-            let sql = format!("UPDATE locations SET reserved_by = ? WHERE {KEY}");
-            bind_key(sqlx::query(sqlx::AssertSqlSafe(sql)).bind(job), l).execute(&mut *db).await?;
-        }
-    } else {
-        sqlx::query("UPDATE locations SET reserved_by = NULL WHERE reserved_by = ?")
-            .bind(job)
-            .execute(&mut *db)
-            .await?;
+/// One location, if the layout has it.
+pub(crate) fn state(db: &rusqlite::Connection, l: Location) -> rusqlite::Result<Option<LocationState>> {
+    use rusqlite::OptionalExtension;
+    let sql = format!(
+        "SELECT aisle, row, bay, level, position, occupied, barcode, red, green, reserved_by, updated_at \
+         FROM locations WHERE {KEY}"
+    );
+    db.prepare_cached(&sql)?
+        .query_row(rusqlite::params_from_iter(key(l)), |r| {
+            Ok(Row {
+                aisle: r.get(0)?,
+                row: r.get(1)?,
+                bay: r.get(2)?,
+                level: r.get(3)?,
+                position: r.get(4)?,
+                occupied: r.get(5)?,
+                barcode: r.get(6)?,
+                red: r.get(7)?,
+                green: r.get(8)?,
+                reserved_by: r.get(9)?,
+                updated_at: r.get(10)?,
+            })
+        })
+        .optional()
+        .map(|row| row.map(LocationState::from))
+}
+
+/// Marks `locations` reserved by `job`.
+pub(crate) fn reserve(db: &rusqlite::Connection, job: i64, locations: &[Location]) -> rusqlite::Result<()> {
+    let mut q = db.prepare_cached(&format!("UPDATE locations SET reserved_by = ?6 WHERE {KEY}"))?;
+    for &l in locations {
+        let [a, r, b, v, p] = key(l);
+        q.execute(rusqlite::params![a, r, b, v, p, job])?;
     }
     Ok(())
 }
 
+/// Releases every location `job` holds.
+pub(crate) fn release(db: &rusqlite::Connection, job: i64) -> rusqlite::Result<()> {
+    db.prepare_cached("UPDATE locations SET reserved_by = NULL WHERE reserved_by = ?1")?.execute([job])?;
+    Ok(())
+}
+
 /// Sets whether a box is at `l` and its barcode.
-async fn set_box(
-    db: &mut SqliteConnection,
+fn set_box(
+    db: &rusqlite::Connection,
     l: Location,
     occupied: bool,
     barcode: Option<String>,
     now: i64,
-) -> Result<(), sqlx::Error> {
-    let sql = format!("UPDATE locations SET occupied = ?, barcode = ?, updated_at = ? WHERE {KEY}");
-    let q = sqlx::query(sqlx::AssertSqlSafe(sql)).bind(occupied).bind(barcode).bind(now);
-    bind_key(q, l).execute(db).await?;
+) -> rusqlite::Result<()> {
+    let sql = format!("UPDATE locations SET occupied = ?6, barcode = ?7, updated_at = ?8 WHERE {KEY}");
+    let [a, r, b, v, p] = key(l);
+    db.prepare_cached(&sql)?.execute(rusqlite::params![a, r, b, v, p, occupied, barcode, now])?;
     Ok(())
 }
 
@@ -162,28 +173,28 @@ async fn set_box(
 /// store: the target is occupied with the job's barcode; retrieve and clear: the location
 /// is empty; move: the box (and its barcode) goes from source to target; light: the light's
 /// state; travel: nothing.
-pub async fn complete(
-    db: &mut SqliteConnection,
+pub(crate) fn complete(
+    db: &rusqlite::Connection,
     spec: &JobSpec,
     barcode: Option<&str>,
     now: i64,
-) -> Result<Vec<Location>, sqlx::Error> {
+) -> rusqlite::Result<Vec<Location>> {
     Ok(match *spec {
         JobSpec::Store { to } => {
-            set_box(db, to, true, barcode.map(str::to_owned), now).await?;
+            set_box(db, to, true, barcode.map(str::to_owned), now)?;
             vec![to]
         }
         JobSpec::Retrieve { from: l } | JobSpec::Clear { location: l } => {
-            set_box(db, l, false, None, now).await?;
+            set_box(db, l, false, None, now)?;
             vec![l]
         }
         JobSpec::Move { from, to } => {
             let moved = match barcode {
                 Some(b) => Some(b.to_owned()),
-                None => get(&mut *db, from).await?.and_then(|s| s.barcode),
+                None => state(db, from)?.and_then(|s| s.barcode),
             };
-            set_box(db, from, false, None, now).await?;
-            set_box(db, to, true, moved, now).await?;
+            set_box(db, from, false, None, now)?;
+            set_box(db, to, true, moved, now)?;
             vec![from, to]
         }
         JobSpec::Light { location, color, on } => {
@@ -191,8 +202,9 @@ pub async fn complete(
                 LightColor::Red => "red",
                 LightColor::Green => "green",
             };
-            let sql = format!("UPDATE locations SET {column} = ?, updated_at = ? WHERE {KEY}");
-            bind_key(sqlx::query(sqlx::AssertSqlSafe(sql)).bind(on).bind(now), location).execute(db).await?;
+            let sql = format!("UPDATE locations SET {column} = ?6, updated_at = ?7 WHERE {KEY}");
+            let [a, r, b, v, p] = key(location);
+            db.prepare_cached(&sql)?.execute(rusqlite::params![a, r, b, v, p, on, now])?;
             vec![location]
         }
         JobSpec::Travel { .. } => Vec::new(),

@@ -1,0 +1,237 @@
+//! One group, one transaction: plan submissions in memory, apply changes, write the rows.
+
+use std::collections::HashMap;
+
+use rusqlite::{OptionalExtension, Transaction, params};
+
+use super::{Change, Command, Outcome, WriteError};
+use crate::domain::{JobState, Transition};
+use crate::store::jobs::{COLUMNS, Job, JobRow, NewJob};
+use crate::store::locations;
+use crate::store::time::{from_ms, now_ms, to_ms};
+
+/// What the writer answers for one command.
+pub(super) enum Answer {
+    Submitted(Result<Vec<Outcome>, WriteError>),
+    Changed(Result<Job, WriteError>),
+    Failed(WriteError),
+}
+
+impl Answer {
+    /// The jobs this answer created or changed.
+    pub(super) fn jobs(&self) -> Vec<&Job> {
+        match self {
+            Answer::Submitted(Ok(outcomes)) => outcomes
+                .iter()
+                .filter_map(|o| match o {
+                    Outcome::Created(job) => Some(job),
+                    Outcome::Existing(_) => None,
+                })
+                .collect(),
+            Answer::Changed(Ok(job)) => vec![job],
+            _ => Vec::new(),
+        }
+    }
+}
+
+/// Applies a group in one transaction; any database error rolls back the whole group.
+/// `next_id` is the writer's id counter, read from the table when unknown.
+pub(super) fn commit(
+    db: &mut rusqlite::Connection,
+    group: &[Command],
+    next_id: &mut Option<i64>,
+) -> rusqlite::Result<Vec<Answer>> {
+    let tx = db.transaction_with_behavior(rusqlite::TransactionBehavior::Immediate)?;
+    let now = now_ms();
+    let mut id = match *next_id {
+        Some(id) => id,
+        None => tx.query_row("SELECT COALESCE(MAX(id), 0) + 1 FROM jobs", [], |r| r.get(0))?,
+    };
+    let mut known: HashMap<String, (String, Job)> = HashMap::new();
+    let mut answers = Vec::with_capacity(group.len());
+    for cmd in group {
+        answers.push(match cmd {
+            Command::Submit { jobs, .. } => Answer::Submitted(submit(&tx, jobs, &mut known, &mut id, now)?),
+            Command::Change { id, change, .. } => Answer::Changed(apply(&tx, *id, change, now)?),
+        });
+    }
+    tx.commit()?;
+    *next_id = Some(id);
+    Ok(answers)
+}
+
+/// The stored request and job with this reference, looked up once per group.
+fn lookup<'k>(
+    tx: &Transaction<'_>,
+    known: &'k mut HashMap<String, (String, Job)>,
+    reference: &str,
+) -> rusqlite::Result<Option<&'k (String, Job)>> {
+    if !known.contains_key(reference) {
+        let sql = format!("SELECT request, {COLUMNS} FROM jobs WHERE reference = ?1");
+        let found = tx
+            .prepare_cached(&sql)?
+            .query_row([reference], |r| Ok((r.get::<_, String>(0)?, JobRow::from_rusqlite(r, 1)?)))
+            .optional()?;
+        match found {
+            Some((request, row)) => {
+                let job =
+                    Job::try_from(row).map_err(|e| rusqlite::Error::ToSqlConversionFailure(e.into()))?;
+                known.insert(reference.to_owned(), (request, job));
+            }
+            None => return Ok(None),
+        }
+    }
+    Ok(known.get(reference))
+}
+
+/// Stores one submission, all or nothing: a reference used with a different request
+/// refuses the whole submission before anything of it is written.
+fn submit(
+    tx: &Transaction<'_>,
+    jobs: &[NewJob],
+    known: &mut HashMap<String, (String, Job)>,
+    next_id: &mut i64,
+    now: i64,
+) -> rusqlite::Result<Result<Vec<Outcome>, WriteError>> {
+    let mut outcomes = Vec::with_capacity(jobs.len());
+    let mut created: Vec<(String, Job)> = Vec::new();
+    let mut local: HashMap<&str, usize> = HashMap::new();
+    for new in jobs {
+        let request = new.canonical();
+        if let Some(reference) = new.reference.as_deref() {
+            let seen = match local.get(reference) {
+                Some(&i) => Some(&created[i]),
+                None => lookup(tx, known, reference)?,
+            };
+            if let Some((stored, job)) = seen {
+                if *stored != request {
+                    return Ok(Err(WriteError::Conflict(reference.to_owned())));
+                }
+                outcomes.push(Outcome::Existing(job.clone()));
+                continue;
+            }
+            local.insert(reference, created.len());
+        }
+        let job = new.accepted(*next_id + created.len() as i64, now);
+        outcomes.push(Outcome::Created(job.clone()));
+        created.push((request, job));
+    }
+    *next_id += created.len() as i64;
+    for (request, job) in created {
+        insert_job(tx, &request, &job)?;
+        history(tx, job.id, JobState::Queued, "accepted", now)?;
+        event(tx, "job.updated", &job, now)?;
+        if let Some(r) = job.reference.clone() {
+            known.insert(r, (request, job));
+        }
+    }
+    Ok(Ok(outcomes))
+}
+
+fn insert_job(tx: &Transaction<'_>, request: &str, job: &Job) -> rusqlite::Result<()> {
+    let spec = serde_json::to_string(&job.spec()).unwrap_or_default();
+    let created = to_ms(job.created_at);
+    tx.prepare_cached(
+        "INSERT INTO jobs (id, reference, kind, priority, barcode, spec, request, device, state, \
+         created_at, updated_at) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?10)",
+    )?
+    .execute(params![
+        job.id,
+        job.reference,
+        job.kind.as_str(),
+        job.priority,
+        job.barcode,
+        spec,
+        request,
+        job.device,
+        job.state.as_str(),
+        created
+    ])?;
+    Ok(())
+}
+
+fn history(tx: &Transaction<'_>, id: i64, state: JobState, cause: &str, now: i64) -> rusqlite::Result<()> {
+    tx.prepare_cached("INSERT INTO job_history (job_id, state, cause, at) VALUES (?1, ?2, ?3, ?4)")?
+        .execute(params![id, state.as_str(), cause, now])?;
+    Ok(())
+}
+
+/// Appends an event to the log; its sequence number is the row id, gapless because only
+/// committed rows take one and this thread is the only writer.
+fn event(tx: &Transaction<'_>, kind: &str, data: &impl serde::Serialize, now: i64) -> rusqlite::Result<()> {
+    let data = serde_json::to_string(data).unwrap_or_default();
+    tx.prepare_cached("INSERT INTO events (type, data, at) VALUES (?1, ?2, ?3)")?
+        .execute(params![kind, data, now])?;
+    Ok(())
+}
+
+/// Applies one change to a stored job, with its effects on the location model.
+fn apply(
+    tx: &Transaction<'_>,
+    id: i64,
+    change: &Change,
+    now: i64,
+) -> rusqlite::Result<Result<Job, WriteError>> {
+    let sql = format!("SELECT {COLUMNS} FROM jobs WHERE id = ?1");
+    let row = tx.prepare_cached(&sql)?.query_row([id], |r| JobRow::from_rusqlite(r, 0)).optional()?;
+    let Some(row) = row else { return Ok(Err(WriteError::NotFound(id))) };
+    let mut job = Job::try_from(row).map_err(|e| rusqlite::Error::ToSqlConversionFailure(e.into()))?;
+    let cause = match change {
+        Change::Transition { transition, cause, expect, failure, forced } => {
+            if expect.as_ref().is_some_and(|states| !states.contains(&job.state)) {
+                return Ok(Err(WriteError::Unexpected { id, state: job.state }));
+            }
+            job.state = match job.state.apply(*transition) {
+                Ok(state) => state,
+                Err(e) => return Ok(Err(e.into())),
+            };
+            job.forced = *forced && job.state == JobState::Completed;
+            if *transition == Transition::Fail {
+                job.failure = failure.clone();
+            }
+            if *transition == Transition::Dispatch
+                && let Some(spec) = job.spec()
+            {
+                locations::reserve(tx, id, &spec.locations())?;
+            }
+            cause.clone()
+        }
+        Change::Priority(p) => {
+            if job.state != JobState::Queued {
+                return Ok(Err(WriteError::Unexpected { id, state: job.state }));
+            }
+            let cause = format!("priority {} -> {}", job.priority, p.get());
+            job.priority = p.get();
+            cause
+        }
+    };
+    job.updated_at = from_ms(now);
+    if job.state.is_terminal() {
+        if let (JobState::Completed, Some(spec)) = (job.state, job.spec()) {
+            for l in locations::complete(tx, &spec, job.barcode.as_deref(), now)? {
+                if let Some(state) = locations::state(tx, l)? {
+                    event(tx, "location.updated", &state, now)?;
+                }
+            }
+        }
+        locations::release(tx, id)?;
+    }
+    let f = job.failure.as_ref();
+    tx.prepare_cached(
+        "UPDATE jobs SET state = ?1, priority = ?2, forced = ?3, failure_kind = ?4, failure_code = ?5, \
+         failure_text = ?6, updated_at = ?7 WHERE id = ?8",
+    )?
+    .execute(params![
+        job.state.as_str(),
+        job.priority,
+        job.forced,
+        f.map(|f| &f.kind),
+        f.and_then(|f| f.code),
+        f.map(|f| &f.text),
+        now,
+        id
+    ])?;
+    history(tx, id, job.state, &cause, now)?;
+    event(tx, "job.updated", &job, now)?;
+    Ok(Ok(job))
+}
