@@ -91,11 +91,22 @@ pub struct NewJob {
 impl NewJob {
     /// The canonical form of the request, compared on a repeated POST with the same reference.
     pub fn canonical(&self) -> String {
-        serde_json::json!({
-            "spec": self.spec, "reference": self.reference, "priority": self.priority,
-            "barcode": self.barcode, "device": self.device,
-        })
-        .to_string()
+        #[derive(Serialize)]
+        struct Canonical<'a> {
+            spec: &'a JobSpec,
+            reference: &'a Option<String>,
+            priority: Priority,
+            barcode: &'a Option<Barcode>,
+            device: &'a Option<String>,
+        }
+        let c = Canonical {
+            spec: &self.spec,
+            reference: &self.reference,
+            priority: self.priority,
+            barcode: &self.barcode,
+            device: &self.device,
+        };
+        serde_json::to_string(&c).unwrap_or_default()
     }
 
     /// The job as it is stored on acceptance.

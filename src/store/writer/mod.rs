@@ -148,7 +148,10 @@ fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group:
                 Err(_) => break,
             }
         }
-        let answers = match commit::commit(&mut db, &group, &mut next_id) {
+        let started = std::time::Instant::now();
+        let result = commit::commit(&mut db, &group, &mut next_id);
+        tracing::trace!(requests = group.len(), micros = started.elapsed().as_micros() as u64, "group committed");
+        let answers = match result {
             Ok(answers) => answers,
             Err(e) => {
                 tracing::error!(error = %e, requests = group.len(), "group commit failed");
