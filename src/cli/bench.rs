@@ -96,7 +96,8 @@ pub async fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     let batch_phase = phase("POST /api/v1/jobs/batch", &client, clients, duration, batch as u64, {
         let url = reqwest::Url::parse(&format!("{base}/api/v1/jobs/batch"))?;
         move |c, n| {
-            let jobs: Vec<String> = (0..batch as u64).map(|i| job(n * batch as u64 + i + (1 << 40))).collect();
+            let jobs: Vec<String> =
+                (0..batch as u64).map(|i| job(n * batch as u64 + i + (1 << 40))).collect();
             let body = format!(r#"{{"jobs":[{}]}}"#, jobs.join(","));
             c.post(url.clone()).header("content-type", "application/json").body(body)
         }

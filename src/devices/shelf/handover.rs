@@ -2,14 +2,16 @@
 
 use std::collections::HashSet;
 
+use futures::future::join_all;
+
 use super::slot::{self, ExecState, SLOT_WORDS, SlotView, task_id_for};
 use super::{Shelf, Slot};
 use crate::devices::follow::{Reported, advance};
 use crate::domain::{Failure, JobState, Transition};
 use crate::protocols::PlcError;
 use crate::service::dispatch::next_jobs;
-use crate::store::jobs;
 use crate::store::writer::Change;
+use crate::store::{Job, jobs};
 
 /// Why a dispatch round stopped early.
 #[derive(Debug, thiserror::Error)]
@@ -42,21 +44,42 @@ impl Shelf {
             .filter(|j| !held.contains(&j.id))
             .take(free.len())
             .collect();
+        let mut taken = Vec::new();
+        let mut failed = None;
         for (k, job) in free.into_iter().zip(candidates) {
-            self.hand_over(k, job).await?;
+            match self.hand_over(k, job).await {
+                Ok(Some(report)) => taken.push(report),
+                Ok(None) => {}
+                Err(e) => {
+                    failed = Some(e);
+                    break;
+                }
+            }
         }
-        Ok(())
+        // Recorded together, so one commit covers the whole round.
+        let writer = &self.writer;
+        for result in
+            join_all(taken.iter().map(|(job, to, cause)| advance(writer, job, to.clone(), cause))).await
+        {
+            result.map_err(|e| DispatchError::Store(e.to_string()))?;
+        }
+        failed.map_or(Ok(()), Err)
     }
 
-    /// Writes `job` into slot `k` in the safe order (see the module doc), then records it.
-    async fn hand_over(&mut self, k: usize, job: &crate::store::Job) -> Result<(), DispatchError> {
-        let Some(spec) = job.spec() else { return Ok(()) };
+    /// Writes `job` into slot `k` in the safe order (see the module doc); returns what to
+    /// record for it.
+    async fn hand_over(
+        &mut self,
+        k: usize,
+        job: &Job,
+    ) -> Result<Option<(Job, Reported, String)>, DispatchError> {
+        let Some(spec) = job.spec() else { return Ok(None) };
         let body = match slot::encode_body(&spec, job.priority, job.barcode.as_deref()) {
             Ok(body) => body,
             Err(why) => {
                 let failure = Failure { kind: "unsupported".into(), code: None, text: why.into() };
-                self.record(job, Reported::Failed(failure), "the shelf PLC cannot run this job").await?;
-                return Ok(());
+                let cause = "the shelf PLC cannot run this job".to_owned();
+                return Ok(Some((job.clone(), Reported::Failed(failure), cause)));
             }
         };
         let task = task_id_for(job.id);
@@ -66,7 +89,7 @@ impl Shelf {
         if !view.is_free() {
             tracing::warn!(device = %self.config.id, slot = k + 1, task = view.task_id, "slot busy with unknown work");
             self.slots[k] = Slot::Foreign;
-            return Ok(());
+            return Ok(None);
         }
         if view.task_id != 0 {
             self.write(&at, &[0]).await?;
@@ -76,17 +99,11 @@ impl Shelf {
         self.slots[k] = Slot::Held { job: job.id, task, confirmed: false };
         self.write(&at, &[task]).await?;
         self.slots[k] = Slot::Held { job: job.id, task, confirmed: true };
-        let cause = format!("handed to slot {} as task {task}", k + 1);
-        self.record(job, Reported::Taken, &cause).await
+        Ok(Some((job.clone(), Reported::Taken, format!("handed to slot {} as task {task}", k + 1))))
     }
 
     /// Records a device report for a job.
-    pub(super) async fn record(
-        &self,
-        job: &crate::store::Job,
-        to: Reported,
-        cause: &str,
-    ) -> Result<(), DispatchError> {
+    pub(super) async fn record(&self, job: &Job, to: Reported, cause: &str) -> Result<(), DispatchError> {
         advance(&self.writer, job, to, cause)
             .await
             .map(|_| ())

@@ -150,7 +150,11 @@ fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group:
         }
         let started = std::time::Instant::now();
         let result = commit::commit(&mut db, &group, &mut next_id);
-        tracing::trace!(requests = group.len(), micros = started.elapsed().as_micros() as u64, "group committed");
+        tracing::trace!(
+            requests = group.len(),
+            micros = started.elapsed().as_micros() as u64,
+            "group committed"
+        );
         let answers = match result {
             Ok(answers) => answers,
             Err(e) => {
