@@ -82,6 +82,11 @@ pub struct DeviceConfig {
     /// Shelf: allow cancelling a task the PLC has not started by clearing its slot.
     #[serde(default = "yes")]
     pub withdraw: bool,
+    /// How many of the oldest queued jobs the dispatcher weighs at a time: priorities order
+    /// jobs within this window, so a very urgent job behind a longer backlog waits until it
+    /// enters the window. Bounds the work of each dispatch round.
+    #[serde(default = "default_window")]
+    pub dispatch_window: u32,
 }
 
 fn default_protocol() -> String {
@@ -110,6 +115,9 @@ fn default_base() -> String {
 }
 fn default_stride() -> u16 {
     100
+}
+fn default_window() -> u32 {
+    1000
 }
 fn yes() -> bool {
     true

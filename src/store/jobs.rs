@@ -315,6 +315,46 @@ pub async fn count_by_state(db: impl SqliteExecutor<'_>) -> Result<Vec<(String, 
     sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetch_all(db).await
 }
 
+/// The jobs with these ids that exist, in id order.
+pub async fn many(db: impl SqliteExecutor<'_>, ids: &[i64]) -> Result<Vec<Job>, sqlx::Error> {
+    if ids.is_empty() {
+        return Ok(Vec::new());
+    }
+    let mut q = QueryBuilder::<Sqlite>::new(format!("SELECT {COLUMNS} FROM jobs WHERE id IN ("));
+    let mut list = q.separated(", ");
+    for id in ids {
+        list.push_bind(*id);
+    }
+    q.push(") ORDER BY id");
+    let rows: Vec<JobRow> = q.build_query_as().fetch_all(db).await?;
+    rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
+}
+
+/// The unfinished jobs of `device` a dispatcher considers: every one on the device, and the
+/// oldest `window` queued ones, oldest first. Since the queued ones are a prefix by age,
+/// every older job that could block one of them (same location) is among them too.
+pub async fn dispatch_window(
+    db: impl SqliteExecutor<'_> + Copy,
+    device: &str,
+    window: u32,
+) -> Result<Vec<Job>, sqlx::Error> {
+    let on_device = format!(
+        "SELECT {COLUMNS} FROM jobs WHERE device = ? AND state IN ('dispatched', 'running', 'cancelling') ORDER BY id"
+    );
+    let queued =
+        format!("SELECT {COLUMNS} FROM jobs WHERE device = ? AND state = 'queued' ORDER BY id LIMIT ?");
+    let mut rows: Vec<JobRow> =
+        sqlx::query_as(sqlx::AssertSqlSafe(on_device)).bind(device).fetch_all(db).await?;
+    rows.extend(
+        sqlx::query_as::<_, JobRow>(sqlx::AssertSqlSafe(queued))
+            .bind(device)
+            .bind(window as i64)
+            .fetch_all(db)
+            .await?,
+    );
+    rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
+}
+
 /// Every job of `device` that has not ended, oldest first.
 pub async fn unfinished(db: impl SqliteExecutor<'_>, device: &str) -> Result<Vec<Job>, sqlx::Error> {
     let sql = format!(

@@ -27,7 +27,7 @@ pub enum DispatchError {
 impl Shelf {
     /// Fills free slots with the best eligible queued jobs.
     pub(super) async fn dispatch(&mut self) -> Result<(), DispatchError> {
-        let unfinished = jobs::unfinished(&self.pool, &self.config.id)
+        let window = jobs::dispatch_window(&self.pool, &self.config.id, self.config.dispatch_window)
             .await
             .map_err(|e| DispatchError::Store(e.to_string()))?;
         let held: HashSet<i64> = self
@@ -39,7 +39,7 @@ impl Shelf {
             })
             .collect();
         let free: Vec<usize> = (0..self.slots.len()).filter(|&k| self.slots[k] == Slot::Free).collect();
-        let candidates: Vec<_> = next_jobs(&unfinished, usize::MAX)
+        let candidates: Vec<_> = next_jobs(&window, usize::MAX)
             .into_iter()
             .filter(|j| !held.contains(&j.id))
             .take(free.len())
