@@ -15,6 +15,7 @@ use crate::domain::{AisleLayout, Layout};
 /// The whole configuration file.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
+#[derive(Default)]
 pub struct Config {
     /// The HTTP server.
     pub server: ServerConfig,
@@ -205,19 +206,6 @@ impl Config {
     /// The site layout that locations are checked against.
     pub fn layout(&self) -> Layout {
         Layout::new(self.site.aisles.iter().map(|a| (a.aisle, a.layout())).collect::<BTreeMap<_, _>>())
-    }
-}
-
-impl Default for Config {
-    fn default() -> Self {
-        Config {
-            server: ServerConfig::default(),
-            database: DatabaseConfig::default(),
-            intake: IntakeConfig::default(),
-            auth: AuthConfig::default(),
-            site: SiteConfig::default(),
-            devices: Vec::new(),
-        }
     }
 }
 

@@ -124,7 +124,7 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
 fn light(n: usize) -> serde_json::Value {
     let n = n as u64;
     serde_json::json!({
-        "kind": "light", "color": if n % 2 == 0 { "green" } else { "red" }, "on": n % 3 != 0,
+        "kind": "light", "color": if n.is_multiple_of(2) { "green" } else { "red" }, "on": !n.is_multiple_of(3),
         "location": {"aisle": 1, "row": 1 + n % 2, "bay": 1 + (n / 2) % 10, "level": 1 + (n / 20) % 6, "position": 1 + (n / 120) % 4},
     })
 }

@@ -25,7 +25,8 @@ async fn bad_requests_get_json_errors() {
     let app = spawn_with(|c| c.server.body_limit_bytes = 64 * 1024).await;
     use reqwest::Method as M;
     let json_ct = Some("application/json");
-    let cases: Vec<(M, &str, Option<&str>, Vec<u8>, u16, &str)> = vec![
+    type Case<'a> = (M, &'a str, Option<&'a str>, Vec<u8>, u16, &'a str);
+    let cases: Vec<Case> = vec![
         (M::POST, "/api/v1/jobs", json_ct, b"{\"kind\": \"store\",".to_vec(), 400, "malformed_json"),
         (M::POST, "/api/v1/jobs", json_ct, b"not json".to_vec(), 400, "malformed_json"),
         (M::POST, "/api/v1/jobs", Some("text/plain"), b"{}".to_vec(), 415, "unsupported_media_type"),

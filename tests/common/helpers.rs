@@ -1,3 +1,4 @@
+#![allow(dead_code)] // shared by several test binaries; each uses a part
 //! Starting and stopping a real rackd for a test.
 
 use std::path::PathBuf;

@@ -96,10 +96,10 @@ impl Shelf {
                     next_poll = Instant::now() + period;
                 }
             }
-            if self.may_dispatch() {
-                if let Err(e) = self.dispatch().await {
-                    tracing::warn!(device = %self.config.id, error = %e, "dispatch stopped");
-                }
+            if self.may_dispatch()
+                && let Err(e) = self.dispatch().await
+            {
+                tracing::warn!(device = %self.config.id, error = %e, "dispatch stopped");
             }
             self.update_status(|s| {
                 s.slots_in_use = self.slots.iter().filter(|s| matches!(s, Slot::Held { .. })).count() as u16
