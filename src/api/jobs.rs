@@ -11,7 +11,7 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::error::{ApiError, ErrorBody};
 use super::extract::{Json, Path, Query};
 use super::state::AppState;
-use crate::domain::{JobKind, JobState, Priority, Transition};
+use crate::domain::{JobKind, JobState, Priority};
 use crate::service::intake::{JobRequest, MAX_BATCH};
 use crate::store::jobs::{self, Job, JobEvent, JobFilter};
 use crate::store::time::to_ms;
@@ -271,13 +271,7 @@ async fn cancel_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<
         let job = jobs::get(&app.pool, id).await?;
         return job.map(Json).ok_or_else(|| ApiError::not_found(format!("job {id} does not exist")));
     }
-    let change = Change::Transition {
-        transition: Transition::Cancel,
-        cause: "cancelled through the API".into(),
-        expect: Some(vec![JobState::Queued]),
-        failure: None,
-        forced: false,
-    };
+    let change = Change::cancel_queued();
     match app.writer.change(id, change).await {
         Ok(job) => Ok(Json(job)),
         Err(WriteError::Unexpected { state, .. }) if state.is_terminal() => {

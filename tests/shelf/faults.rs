@@ -2,7 +2,6 @@
 
 use std::time::Duration;
 
-use rackd::devices::shelf::slot::task_id_for;
 use rackd::protocols::modbus::server::Faults;
 use rackd::sim::shelf::ShelfSimOptions;
 use serde_json::json;
@@ -29,13 +28,7 @@ async fn with_twenty_percent_loss_every_job_completes_exactly_once() {
     let jobs = mixed_jobs(200, 11, &mut model);
     submit(&app, &jobs).await;
     let done = wait_ended(&app, 200, 180).await;
-    for j in &done {
-        assert_eq!(j["state"], "completed", "{j}");
-        let (_, history) = app.get(&format!("/api/v1/jobs/{}/history", j["id"])).await;
-        let ends = history.as_array().unwrap().iter().filter(|h| h["state"] == "completed").count();
-        assert_eq!(ends, 1, "job {} ended once: {history}", j["id"]);
-        assert_eq!(sim.received(task_id_for(j["id"].as_i64().unwrap())), 1, "job {} sent once", j["id"]);
-    }
+    crate::assert_each_completed_once(&app, &sim, &done).await;
     assert_eq!(rackd_store(&app).await.0, sim.inventory());
     assert_eq!(sim.violations(), 0);
 }

@@ -39,3 +39,15 @@ pub fn device_for(sim: &ShelfSim, edit: impl FnOnce(&mut DeviceConfig)) -> Devic
 pub fn sim(ms: u64) -> ShelfSimOptions {
     ShelfSimOptions { task_time: std::time::Duration::from_millis(ms), ..ShelfSimOptions::default() }
 }
+
+/// Asserts every job completed, ended exactly once in its history, and reached the PLC once.
+pub async fn assert_each_completed_once(app: &TestApp, sim: &ShelfSim, jobs: &[serde_json::Value]) {
+    for j in jobs {
+        assert_eq!(j["state"], "completed", "{j}");
+        let (_, history) = app.get(&format!("/api/v1/jobs/{}/history", j["id"])).await;
+        let ends = history.as_array().unwrap().iter().filter(|h| h["state"] == "completed").count();
+        assert_eq!(ends, 1, "job {} ended once: {history}", j["id"]);
+        let task = rackd::devices::shelf::slot::task_id_for(j["id"].as_i64().unwrap());
+        assert_eq!(sim.received(task), 1, "job {} sent once", j["id"]);
+    }
+}

@@ -6,7 +6,6 @@ use std::time::Duration;
 
 use rackd::app::Application;
 use rackd::config::Config;
-use rackd::devices::shelf::slot::task_id_for;
 use serde_json::json;
 
 use crate::device_for;
@@ -71,13 +70,7 @@ async fn a_crash_mid_run_loses_and_repeats_nothing() {
 
     let app = spawn_on(db.clone(), |c| c.devices = vec![device]).await;
     let done = wait_ended(&app, 300, 120).await;
-    for j in &done {
-        assert_eq!(j["state"], "completed", "{j}");
-        let (_, history) = app.get(&format!("/api/v1/jobs/{}/history", j["id"])).await;
-        let ends = history.as_array().unwrap().iter().filter(|h| h["state"] == "completed").count();
-        assert_eq!(ends, 1, "job {} ended once: {history}", j["id"]);
-        assert_eq!(sim.received(task_id_for(j["id"].as_i64().unwrap())), 1, "job {} sent once", j["id"]);
-    }
+    crate::assert_each_completed_once(&app, &sim, &done).await;
     assert_eq!(rackd_store(&app).await.0, sim.inventory());
     assert_eq!(sim.inventory(), model.boxes);
     assert_eq!(sim.violations(), 0);

@@ -7,7 +7,7 @@ use futures::future::join_all;
 use super::slot::{self, ExecState, SLOT_WORDS, SlotView, task_id_for};
 use super::{Shelf, Slot};
 use crate::devices::follow::{Reported, advance};
-use crate::domain::{Failure, JobState, Transition};
+use crate::domain::{Failure, JobState};
 use crate::protocols::PlcError;
 use crate::service::dispatch::next_jobs;
 use crate::store::writer::Change;
@@ -122,13 +122,7 @@ impl Shelf {
             if job.state != JobState::Queued {
                 return Err(format!("job {id} is {} but no slot holds it", job.state));
             }
-            let change = Change::Transition {
-                transition: Transition::Cancel,
-                cause: "cancelled through the API".into(),
-                expect: Some(vec![JobState::Queued]),
-                failure: None,
-                forced: false,
-            };
+            let change = Change::cancel_queued();
             return self.writer.change(id, change).await.map(|_| ()).map_err(|e| e.to_string());
         };
         if !self.config.withdraw {

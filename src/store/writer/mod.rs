@@ -47,6 +47,19 @@ pub enum Change {
     Priority(Priority),
 }
 
+impl Change {
+    /// Cancel a job that is still queued (refused with [`WriteError::Unexpected`] otherwise).
+    pub fn cancel_queued() -> Change {
+        Change::Transition {
+            transition: Transition::Cancel,
+            cause: "cancelled through the API".into(),
+            expect: Some(vec![JobState::Queued]),
+            failure: None,
+            forced: false,
+        }
+    }
+}
+
 /// How a submitted job was taken.
 #[derive(Clone, Debug)]
 pub enum Outcome {
