@@ -15,7 +15,7 @@ pub enum SimCommand {
     /// A Mitsubishi MC protocol 3E (binary) server over the whole device range.
     Mc3e(super::sim_mc3e::SimMc3eArgs),
     /// A stacker crane with the MC 3E register interface (D0..D39 / D200..D239). Reads
-    /// commands on stdin: `alarm CODE`, `clear`, `heartbeat on|off`, `force`, `drop`,
+    /// commands on stdin: `alarm CODE`, `clear`, `heartbeat on|off`, `handshake on|off`, `force`, `drop`,
     /// `link on|off`, `status`.
     Crane(super::sim_crane::SimCraneArgs),
 }

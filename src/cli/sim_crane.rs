@@ -5,6 +5,7 @@
 //! > alarm 7002        raise an alarm (any code)
 //! > clear             clear the alarm
 //! > heartbeat off     stop answering the heartbeat (on: answer again)
+//! > handshake off     ignore the hand-over strobe (on: answer again)
 //! > force             force-complete the task under way (state 30)
 //! > drop              close the connection once (UDP: lose one request)
 //! > link off          ignore every request (on: answer again)

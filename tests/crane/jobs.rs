@@ -2,6 +2,8 @@
 
 use rackd::devices::shelf::slot::task_id_for;
 use rackd::protocols::mc3e::TransportKind;
+use std::time::Duration;
+
 use serde_json::json;
 
 use crate::*;
@@ -63,5 +65,50 @@ async fn tasks_carry_the_mapped_coordinates_and_run_one_at_a_time() {
     wait_job(&app, b, &["completed"], 10).await;
     wait_job(&app, a, &["completed"], 1).await;
     assert_eq!(sim.refused(), 0);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dropped_link_mid_task_is_survived_and_nothing_is_sent_twice() {
+    let (app, sim) = crane_app(TransportKind::Tcp, 30, |d| d.ack = "echo".into()).await;
+    let id =
+        submit(&app, json!({"kind": "move", "from": cloc(1, 3, 3, 1), "to": cloc(1, 4, 4, 2)}), "drop").await;
+    wait_job(&app, id, &["running"], 5).await;
+    sim.drop_link();
+    sim.set_link(false);
+    let status = wait_device(&app, "offline", 5, |s| s["online"] == false).await;
+    assert!(status["last_error"].as_str().is_some(), "{status}");
+    sim.set_link(true);
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 10).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    assert_eq!(sim.received(task_id_for(id)), 1);
+    // The echo reading acknowledged it: the crane dropped the task.
+    wait_device(&app, "idle", 5, |s| s["crane"]["task"] == 0 && s["online"] == true).await;
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_hand_over_the_crane_never_acknowledges_times_out_and_the_job_waits() {
+    let (app, sim) = crane_app(TransportKind::Udp, 10, |d| d.handshake_timeout_ms = 200).await;
+    sim.set_handshake(false);
+    let id = submit(&app, json!({"kind": "travel", "to": cloc(2, 5, 5, 1)}), "deaf").await;
+    let status = wait_device(&app, "reporting the timeout", 5, |s| {
+        s["last_error"].as_str().is_some_and(|e| e.contains("step 2"))
+    })
+    .await;
+    assert_eq!(status["online"], true, "{status}");
+    let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
+    assert_eq!(job["state"], "queued", "{job}");
+    // Paused, rackd stops retrying: the strobe of the last attempt was withdrawn.
+    let (status, _) = app.post("/api/v1/devices/crane1/pause", &json!({})).await;
+    assert_eq!(status, 200);
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    assert_eq!(sim.word(21), 0, "the strobe was withdrawn");
+    sim.set_handshake(true);
+    let (status, _) = app.post("/api/v1/devices/crane1/resume", &json!({})).await;
+    assert_eq!(status, 200);
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    assert_eq!(sim.received(task_id_for(id)), 1);
     app.stop().await;
 }

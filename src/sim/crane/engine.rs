@@ -47,6 +47,8 @@ pub struct Engine {
     pub step: Duration,
     /// Whether it answers the WCS's heartbeat.
     pub heartbeat_on: bool,
+    /// Whether it answers the strobe (off: a crane deaf to hand-overs).
+    pub handshake_on: bool,
     taken: Option<Taken>,
     motion: Option<Motion>,
     next_step: Instant,
@@ -65,6 +67,7 @@ impl Engine {
         Engine {
             step,
             heartbeat_on: true,
+            handshake_on: true,
             taken: None,
             motion: None,
             next_step: Instant::now(),
@@ -102,6 +105,9 @@ impl Engine {
     }
 
     fn handshake(&mut self, bank: &mut Bank, now: Instant) {
+        if !self.handshake_on {
+            return;
+        }
         match (d(bank, 21), d(bank, 225)) {
             (1, 0) => {
                 let words: Vec<u16> = (8..18).map(|n| d(bank, n)).collect();

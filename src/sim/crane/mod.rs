@@ -12,7 +12,7 @@
 //!
 //! Controls, as methods ([`CraneSim::raise_alarm`], ...) and as text commands
 //! ([`CraneSim::command`], read from stdin by `rackd sim crane`): `alarm CODE`, `clear`,
-//! `heartbeat off|on`, `force`, `drop` (close the connection / lose the next request),
+//! `heartbeat off|on`, `handshake off|on` (ignore the strobe), `force`, `drop` (close the connection / lose the next request),
 //! `link off|on` (ignore every request), `status`.
 //! Not simulated: the crane's own heartbeat alarm 7020 when the WCS stalls.
 
@@ -106,6 +106,11 @@ impl CraneSim {
         self.engine.lock().unwrap_or_else(|p| p.into_inner()).heartbeat_on = on;
     }
 
+    /// Stops or restarts answering the hand-over strobe.
+    pub fn set_handshake(&self, on: bool) {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).handshake_on = on;
+    }
+
     /// Presses "force complete": the task under way ends in state 30. False if none.
     pub fn force_complete(&self) -> bool {
         let mut bank = self.bank.lock().unwrap_or_else(|p| p.into_inner());
@@ -163,6 +168,10 @@ impl CraneSim {
                 self.set_heartbeat(*on == "on");
                 format!("heartbeat {on}")
             }),
+            ["handshake", on @ ("on" | "off")] => Ok({
+                self.set_handshake(*on == "on");
+                format!("handshake {on}")
+            }),
             ["force"] => Ok(if self.force_complete() { "force-completed (30)" } else { "no task" }.into()),
             ["drop"] => Ok({
                 self.drop_link();
@@ -182,7 +191,7 @@ impl CraneSim {
                 self.word(221)
             )),
             _ => Err(format!(
-                "unknown command {line:?} (alarm CODE, clear, heartbeat on|off, force, drop, link on|off, status)"
+                "unknown command {line:?} (alarm CODE, clear, heartbeat on|off, handshake on|off, force, drop, link on|off, status)"
             )),
         }
     }
