@@ -12,10 +12,25 @@ use crate::*;
 async fn a_stalled_heartbeat_takes_the_crane_offline_until_it_moves_again() {
     let (app, sim) = crane_app(TransportKind::Udp, 10, |_| {}).await;
     wait_device(&app, "online", 5, |s| s["online"] == true && s["crane"]["heartbeat_ok"] == true).await;
+    // The 4-step scheme runs: both words keep flipping.
+    let (mut flips, mut last) = ([0, 0], [sim.word(0), sim.word(200)]);
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    while flips[0] < 3 || flips[1] < 3 {
+        assert!(std::time::Instant::now() < deadline, "heartbeat words stuck: {last:?}, {flips:?} flips");
+        for (k, n) in [0, 200].into_iter().enumerate() {
+            let w = sim.word(n);
+            if w != last[k] {
+                flips[k] += 1;
+                last[k] = w;
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
     sim.set_heartbeat(false);
     let lost = std::time::Instant::now();
     let status = wait_device(&app, "lost", 5, |s| s["crane"]["heartbeat_ok"] == false).await;
     assert_eq!(status["online"], false, "{status}");
+    assert!(status["last_error"].as_str().is_some_and(|e| e.contains("heartbeat")), "{status}");
     // Configured loss time 500 ms: not before it, and well within the bounded wait.
     assert!(lost.elapsed() >= Duration::from_millis(400), "declared lost too early: {:?}", lost.elapsed());
     let id = submit(&app, json!({"kind": "travel", "to": cloc(2, 3, 1, 1)}), "hb").await;
@@ -48,5 +63,21 @@ async fn cancelling_a_running_job_sends_mode_3_and_a_queued_one_cancels_at_once(
     let c = submit(&app, json!({"kind": "travel", "to": cloc(1, 2, 2, 1)}), "next").await;
     let job = wait_job(&app, c, &["completed", "failed", "cancelled"], 5).await;
     assert_eq!(job["state"], "completed", "{job}");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_heartbeat_lost_mid_task_fails_nothing_and_the_task_is_followed_again() {
+    let (app, sim) = crane_app(TransportKind::Tcp, 30, |_| {}).await;
+    let id = submit(&app, json!({"kind": "retrieve", "from": cloc(2, 11, 7, 1)}), "hb-task").await;
+    wait_job(&app, id, &["running"], 5).await;
+    sim.set_heartbeat(false);
+    wait_device(&app, "lost", 5, |s| s["crane"]["heartbeat_ok"] == false).await;
+    let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
+    assert!(["running", "completed"].contains(&job["state"].as_str().unwrap()), "{job}");
+    sim.set_heartbeat(true);
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    assert_eq!(sim.received(task_id_for(id)), 1);
     app.stop().await;
 }

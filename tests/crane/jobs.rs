@@ -51,13 +51,14 @@ async fn every_job_kind_completes_over_udp() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn tasks_carry_the_mapped_coordinates_and_run_one_at_a_time() {
-    let (app, sim) = crane_app(TransportKind::Tcp, 40, |_| {}).await;
+    // Stations come from the configuration.
+    let (app, sim) = crane_app(TransportKind::Tcp, 40, |d| d.outbound_station = [1, 0, 2, 2]).await;
     let a = submit(&app, json!({"kind": "retrieve", "from": cloc(2, 9, 6, 2)}), "one").await;
     let b = submit(&app, json!({"kind": "store", "barcode": "P", "to": cloc(1, 3, 2, 1)}), "two").await;
     wait_job(&app, a, &["running"], 5).await;
     // The crane shows the retrieve's words: from the rack to the outbound station.
     let words: Vec<u16> = (208..218).map(|n| sim.word(n)).collect();
-    assert_eq!(words, vec![task_id_for(a), 2, 2, 9, 6, 2, 1, 0, 1, 1]);
+    assert_eq!(words, vec![task_id_for(a), 2, 2, 9, 6, 2, 1, 0, 2, 2]);
     let (_, second) = app.get(&format!("/api/v1/jobs/{b}")).await;
     assert_eq!(second["state"], "queued", "one task at a time: {second}");
     let status = wait_device(&app, "running", 5, |s| s["crane"]["task"] == task_id_for(a)).await;

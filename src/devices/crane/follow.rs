@@ -85,6 +85,7 @@ impl Crane {
                 v.lift,
                 v.load
             );
+            tracing::debug!(device = %self.config.id, job = job.id, "{cause}");
             self.record(&job, Reported::Running, &cause).await?;
             c.action = v.action;
         }

@@ -26,6 +26,12 @@
 //! - **Heartbeat**: see [`heartbeat`]. While lost the device is offline (no new work) and
 //!   the status says so; a task under way is not failed, since the crane may still be
 //!   running it; rackd follows it again once the heartbeat moves.
+//! - **Words left alone**: D20 (execute action) stays 0, since the spec gives it no role in
+//!   the hand-over; D201, D202 and D224 are read but not interpreted.
+//! - **Status**: the device status carries a `crane` object (heartbeat, action state and
+//!   its text, positions D220/D221, load D206, task D208, alarm code/text/class); each new
+//!   action state of the held task is logged, and the first one is the `running` cause in
+//!   the job's history.
 //! - **Recovery**: on start rackd reads both blocks; its own D0 and D22 are taken as
 //!   written, a strobe left at 1 by a crash is withdrawn, and a task the crane holds whose
 //!   number belongs to an unfinished job is followed (its pending completion is recorded and
@@ -234,6 +240,9 @@ impl Crane {
         let (id, link_ok) = (self.config.id.clone(), self.link_ok);
         self.update_status(|s| {
             let online = link_ok && !lost;
+            if lost {
+                s.last_error = Some("the crane's heartbeat (D200) stopped moving: crane lost".into());
+            }
             if online != s.online {
                 if online {
                     tracing::info!(device = %id, "crane online");
