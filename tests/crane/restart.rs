@@ -49,3 +49,32 @@ async fn a_completion_while_rackd_is_down_is_recorded_and_acknowledged() {
     assert_eq!(sim.received(task_id_for(id)), 1);
     app.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_hand_over_cut_by_a_crash_is_finished_on_restart_and_followed() {
+    let (app, sim) = crane_app(TransportKind::Tcp, 10, |_| {}).await;
+    let device = device_for(&sim, TransportKind::Tcp, |_| {});
+    let (status, _) = app.post("/api/v1/devices/crane1/pause", &json!({})).await;
+    assert_eq!(status, 200);
+    let id = submit(&app, json!({"kind": "travel", "to": cloc(2, 6, 2, 1)}), "cut").await;
+    let (db, _dir) = app.stop().await;
+    // rackd died right after STB := 1 (step 1): the task words and the strobe are up.
+    let task = task_id_for(id);
+    for (k, w) in [task, 1, 0, 0, 0, 0, 2, 6, 2, 1].into_iter().enumerate() {
+        sim.set_word(8 + k as u32, w);
+    }
+    sim.set_word(21, 1);
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while sim.word(225) != 1 {
+        assert!(Instant::now() < deadline, "the crane never took the data");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let app = spawn_on(db, |c| with_crane(c, device)).await;
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    assert_eq!(sim.received(task), 1, "finished the cut hand-over instead of sending again");
+    assert_eq!(sim.word(21), 0);
+    let h = history(&app, id).await;
+    assert!(h.iter().any(|(_, cause)| cause.contains("the crane holds it")), "{h:?}");
+    app.stop().await;
+}

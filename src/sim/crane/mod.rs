@@ -87,6 +87,11 @@ impl CraneSim {
         self.bank.lock().unwrap_or_else(|p| p.into_inner()).word(Device::D, n)
     }
 
+    /// Writes one D register as another writer would (tests staging a crashed WCS).
+    pub fn set_word(&self, n: u32, v: u16) {
+        self.set(n, v);
+    }
+
     fn set(&self, n: u32, v: u16) {
         self.bank.lock().unwrap_or_else(|p| p.into_inner()).set_word(Device::D, n, v);
     }
