@@ -30,7 +30,8 @@ pub async fn start(config: &mut Config) -> anyhow::Result<(ShelfSim, CraneSim)> 
     let sim = ShelfSim::start("127.0.0.1:0", options).await?;
     let mut device = DeviceConfig::shelf("shelf1", &sim.local_addr().to_string(), vec![1]);
     device.poll_ms = 100;
-    let crane_options = CraneSimOptions { transport: TransportKind::Tcp, step: DEMO_CRANE_STEP };
+    let crane_options =
+        CraneSimOptions { transport: TransportKind::Tcp, step: DEMO_CRANE_STEP, wcs_timeout: None };
     let crane = CraneSim::start("127.0.0.1:0", crane_options).await?;
     let mut crane_device = DeviceConfig::crane("crane1", &crane.local_addr().to_string(), vec![2]);
     crane_device.poll_ms = 100;

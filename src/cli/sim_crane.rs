@@ -32,6 +32,9 @@ pub struct SimCraneArgs {
     /// Milliseconds per action state.
     #[arg(long, default_value_t = 500)]
     pub step_ms: u64,
+    /// Raise alarm 7020 when rackd's heartbeat (D0) stalls this many seconds (0 = never).
+    #[arg(long, default_value_t = 10)]
+    pub watchdog_secs: u64,
     /// Raise alarm CODE SECONDS after start (repeatable), e.g. `7069@10`.
     #[arg(long, value_parser = scheduled_alarm)]
     pub alarm: Vec<(u16, u64)>,
@@ -48,7 +51,8 @@ pub async fn run(args: SimCraneArgs) -> anyhow::Result<()> {
         SimTransport::Tcp => TransportKind::Tcp,
         SimTransport::Udp => TransportKind::Udp,
     };
-    let options = CraneSimOptions { transport, step: Duration::from_millis(args.step_ms) };
+    let wcs_timeout = (args.watchdog_secs > 0).then(|| Duration::from_secs(args.watchdog_secs));
+    let options = CraneSimOptions { transport, step: Duration::from_millis(args.step_ms), wcs_timeout };
     let sim = std::sync::Arc::new(CraneSim::start(&args.listen, options).await?);
     println!("crane simulator on {:?} {} (commands on stdin)", args.transport, sim.local_addr());
     for (code, secs) in args.alarm.clone() {

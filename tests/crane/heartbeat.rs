@@ -4,6 +4,7 @@ use std::time::Duration;
 
 use rackd::devices::shelf::slot::task_id_for;
 use rackd::protocols::mc3e::TransportKind;
+use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use serde_json::json;
 
 use crate::*;
@@ -79,5 +80,35 @@ async fn a_heartbeat_lost_mid_task_fails_nothing_and_the_task_is_followed_again(
     let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
     assert_eq!(job["state"], "completed", "{job}");
     assert_eq!(sim.received(task_id_for(id)), 1);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_crane_sees_rackds_heartbeat_and_raises_7020_only_while_rackd_is_away() {
+    let options = CraneSimOptions {
+        transport: TransportKind::Tcp,
+        step: Duration::from_millis(10),
+        wcs_timeout: Some(Duration::from_millis(300)),
+    };
+    let sim = CraneSim::start("127.0.0.1:0", options).await.unwrap();
+    let device = device_for(&sim, TransportKind::Tcp, |_| {});
+    let app = helpers::spawn_with(|c| with_crane(c, device.clone())).await;
+    wait_device(&app, "clean", 5, |s| s["online"] == true && s["crane"]["alarm_code"].is_null()).await;
+    let start = std::time::Instant::now();
+    while start.elapsed() < Duration::from_millis(800) {
+        assert_eq!(sim.word(205), 0, "rackd's heartbeat keeps the crane's watchdog quiet");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    let (db, _dir) = app.stop().await;
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    while sim.word(205) != 7020 {
+        assert!(std::time::Instant::now() < deadline, "the crane never noticed rackd was gone");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    let app = helpers::spawn_on(db, |c| with_crane(c, device)).await;
+    let id = submit(&app, json!({"kind": "travel", "to": cloc(1, 9, 1, 1)}), "back").await;
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    assert_eq!(sim.word(205), 0);
     app.stop().await;
 }

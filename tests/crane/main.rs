@@ -22,7 +22,7 @@ use helpers::{TestApp, spawn_with};
 
 /// A simulated crane with `step_ms` per action state.
 pub async fn crane(transport: TransportKind, step_ms: u64) -> CraneSim {
-    let options = CraneSimOptions { transport, step: Duration::from_millis(step_ms) };
+    let options = CraneSimOptions { transport, step: Duration::from_millis(step_ms), wcs_timeout: None };
     CraneSim::start("127.0.0.1:0", options).await.unwrap()
 }
 

@@ -15,6 +15,9 @@ const TRANSFER: [u16; 16] = [1, 2, 3, 4, 5, 6, 7, 8, 11, 12, 13, 14, 15, 16, 17,
 /// Travel: only the travel states.
 const TRAVEL: [u16; 2] = [1, 2];
 
+/// The crane's heartbeat alarm.
+const HEARTBEAT_ALARM: u16 = 7020;
+
 fn d(bank: &Bank, n: u32) -> u16 {
     bank.word(Device::D, n)
 }
@@ -49,6 +52,11 @@ pub struct Engine {
     pub heartbeat_on: bool,
     /// Whether it answers the strobe (off: a crane deaf to hand-overs).
     pub handshake_on: bool,
+    /// The crane's watchdog on the WCS heartbeat (D0): alarm 7020 when D0 stays the same
+    /// this long; cleared by the crane once D0 moves again. None: no watchdog.
+    pub wcs_timeout: Option<Duration>,
+    wcs_seen: Option<u16>,
+    wcs_changed: Instant,
     taken: Option<Taken>,
     motion: Option<Motion>,
     next_step: Instant,
@@ -68,6 +76,9 @@ impl Engine {
             step,
             heartbeat_on: true,
             handshake_on: true,
+            wcs_timeout: None,
+            wcs_seen: None,
+            wcs_changed: Instant::now(),
             taken: None,
             motion: None,
             next_step: Instant::now(),
@@ -87,6 +98,7 @@ impl Engine {
                 _ => {}
             }
         }
+        self.watchdog(bank, now);
         self.handshake(bank, now);
         self.motion(bank, now);
         if d(bank, 223) != 0 && d(bank, 22) != 0 {
@@ -97,6 +109,21 @@ impl Engine {
             set(bank, 203, 0);
             set(bank, 220, 0);
             set(bank, 221, 0);
+        }
+    }
+
+    /// The spec's other half of the heartbeat: the crane raises 7020 when the WCS stalls.
+    fn watchdog(&mut self, bank: &mut Bank, now: Instant) {
+        let Some(limit) = self.wcs_timeout else { return };
+        let word = d(bank, 0);
+        if self.wcs_seen != Some(word) {
+            self.wcs_seen = Some(word);
+            self.wcs_changed = now;
+            if d(bank, 205) == HEARTBEAT_ALARM {
+                set(bank, 205, 0);
+            }
+        } else if now.duration_since(self.wcs_changed) >= limit && d(bank, 205) == 0 {
+            set(bank, 205, HEARTBEAT_ALARM);
         }
     }
 
@@ -252,6 +279,21 @@ mod tests {
         e.tick(&mut bank, now);
         assert_eq!((d(&bank, 203), d(&bank, 223), d(&bank, 208)), (0, 0, 0));
         assert_eq!(e.received[&5], 1);
+    }
+
+    #[test]
+    fn the_watchdog_raises_7020_when_the_wcs_stalls_and_clears_it_when_it_moves() {
+        let mut bank = Bank::default();
+        let mut e = Engine::new(Duration::from_millis(10));
+        e.wcs_timeout = Some(Duration::from_millis(100));
+        let mut now = Instant::now();
+        run(&mut e, &mut bank, &mut now, 5);
+        assert_eq!(d(&bank, 205), 0);
+        run(&mut e, &mut bank, &mut now, 10);
+        assert_eq!(d(&bank, 205), HEARTBEAT_ALARM);
+        bank.set_word(Device::D, 0, 1);
+        run(&mut e, &mut bank, &mut now, 1);
+        assert_eq!(d(&bank, 205), 0);
     }
 
     #[test]

@@ -14,7 +14,9 @@
 //! ([`CraneSim::command`], read from stdin by `rackd sim crane`): `alarm CODE`, `clear`,
 //! `heartbeat off|on`, `handshake off|on` (ignore the strobe), `force`, `drop` (close the connection / lose the next request),
 //! `link off|on` (ignore every request), `status`.
-//! Not simulated: the crane's own heartbeat alarm 7020 when the WCS stalls.
+//! With `wcs_timeout` set the crane watches rackd's heartbeat too and raises 7020 when D0
+//! stalls; it clears 7020 itself once D0 moves again (a simplification: a real crane may
+//! want a reset).
 
 pub mod engine;
 
@@ -42,11 +44,14 @@ pub struct CraneSimOptions {
     pub transport: TransportKind,
     /// Time of each action state.
     pub step: Duration,
+    /// The crane's watchdog on rackd's heartbeat: alarm 7020 when D0 stalls this long
+    /// (cleared when it moves again). None: no watchdog.
+    pub wcs_timeout: Option<Duration>,
 }
 
 impl Default for CraneSimOptions {
     fn default() -> Self {
-        CraneSimOptions { transport: TransportKind::Tcp, step: Duration::from_millis(500) }
+        CraneSimOptions { transport: TransportKind::Tcp, step: Duration::from_millis(500), wcs_timeout: None }
     }
 }
 
@@ -64,7 +69,9 @@ impl CraneSim {
         let addr: SocketAddr =
             addr.parse().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
         let bank = Bank::default().shared();
-        let engine = Arc::new(Mutex::new(Engine::new(options.step)));
+        let mut engine = Engine::new(options.step);
+        engine.wcs_timeout = options.wcs_timeout;
+        let engine = Arc::new(Mutex::new(engine));
         let kick = Arc::new(Notify::new());
         let hook_kick = kick.clone();
         let state = ServerState::new(bank.clone()).on_write(Arc::new(move |_| hook_kick.notify_one()));
