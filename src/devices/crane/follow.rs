@@ -20,6 +20,9 @@ impl Crane {
     /// One poll: read the crane's block, step the heartbeat, follow the task, acknowledge
     /// a recorded completion, react to alarms.
     pub(super) async fn poll(&mut self) -> Result<(), CraneError> {
+        if self.strobe_up {
+            self.withdraw_strobe().await;
+        }
         let words = self.read(&self.crane.clone(), BLOCK_WORDS).await?;
         let view = CraneView::parse(&words).ok_or(PlcError::Malformed("short crane block"))?;
         let now = Instant::now();
@@ -128,7 +131,8 @@ impl Crane {
         self.ack_written = word(wcs::ACK);
         if word(wcs::STB) != 0 {
             tracing::warn!(device = %self.config.id, "a hand-over was interrupted; withdrawing the strobe");
-            self.write(&self.wcs.offset(wcs::STB), &[0]).await?;
+            self.strobe_up = true;
+            self.withdraw_strobe().await;
         }
         self.current = None;
         if view.task != 0 {

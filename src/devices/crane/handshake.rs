@@ -37,15 +37,33 @@ impl Crane {
             return Err(HandshakeError::AckStuck.into());
         }
         let task_at = self.wcs.offset(wcs::TASK);
-        let stb = self.wcs.offset(wcs::STB);
         self.write(&task_at, &task.words()).await?;
-        self.write(&stb, &[1]).await?;
-        if let Err(e) = self.wait_ack(1, 2).await {
-            let _ = self.write(&stb, &[0]).await;
-            return Err(e);
+        // From here the strobe may be up (a write whose reply was lost still happened).
+        self.strobe_up = true;
+        let result = self.strobe().await;
+        if result.is_err() {
+            self.withdraw_strobe().await;
         }
+        result
+    }
+
+    /// Steps 1 to 4 once the task words are written.
+    async fn strobe(&mut self) -> Result<(), CraneError> {
+        let stb = self.wcs.offset(wcs::STB);
+        self.write(&stb, &[1]).await?;
+        self.wait_ack(1, 2).await?;
         self.write(&stb, &[0]).await?;
+        self.strobe_up = false;
         self.wait_ack(0, 4).await
+    }
+
+    /// Lowers a strobe a failed hand-over may have left up; if the link fails, the next
+    /// poll tries again before anything else. Should the crane have taken the data, it
+    /// starts the task now, and its D208 echo leads rackd to follow it.
+    pub(super) async fn withdraw_strobe(&mut self) {
+        if self.write(&self.wcs.offset(wcs::STB), &[0]).await.is_ok() {
+            self.strobe_up = false;
+        }
     }
 
     /// Polls D225 until it equals `want`, within the handshake timeout.

@@ -12,7 +12,8 @@
 //! - **Hand-over**: only to an idle, clean crane (D203 = 0, D208 = 0, D223 = 0, no alarm),
 //!   heartbeat alive, link up, not paused. Words D8..D17 in one write, then STB := 1, wait
 //!   ACK = 1, STB := 0, wait ACK = 0, each wait bounded by `handshake_timeout_ms`. A
-//!   timeout withdraws the strobe and leaves the job queued; if the crane took the data
+//!   timeout or link failure withdraws the strobe (retried at every poll until it is down)
+//!   and leaves the job queued; if the crane took the data
 //!   after all, its D208 echo shows the task and rackd follows it (never sends it twice).
 //! - **Acknowledgement**: see [`ack`]; the outcome is stored before D22 is written.
 //! - **Alarms**: see [`alarms`]. A business alarm with `auto_cancel` sends mode 3 through
@@ -114,6 +115,8 @@ pub struct Crane {
     ack_written: u16,
     link_ok: bool,
     view: Option<CraneView>,
+    /// rackd's strobe (D21) may still be 1 after a failed hand-over.
+    strobe_up: bool,
 }
 
 impl Crane {
@@ -150,6 +153,7 @@ impl Crane {
             ack_written: 0,
             link_ok: false,
             view: None,
+            strobe_up: false,
         })
     }
 
@@ -196,7 +200,7 @@ impl Crane {
     fn may_dispatch(&self) -> bool {
         let s = self.status.lock().unwrap_or_else(|p| p.into_inner());
         let idle = self.view.is_some_and(|v| v.is_idle());
-        s.online && !s.paused && self.current.is_none() && idle && self.ack_written == 0
+        s.online && !s.paused && self.current.is_none() && idle && self.ack_written == 0 && !self.strobe_up
     }
 
     /// Reads words, keeping the device's contact status.
