@@ -229,3 +229,29 @@ impl DeviceConfig {
         self.link().check().or_else(|e| fail(e.to_string()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_crane_entry_has_the_spec_defaults() {
+        let c = DeviceConfig::crane("crane1", "192.168.60.45:8000", vec![2]);
+        assert_eq!(c.kind.job_kinds().len(), 4);
+        assert!(!c.kind.job_kinds().contains(&crate::domain::JobKind::Clear));
+        assert_eq!((c.inbound_station, c.outbound_station), ([2, 0, 1, 1], [1, 0, 1, 1]));
+        assert_eq!(
+            (c.heartbeat_timeout_ms, c.wcs_base.as_str(), c.crane_base.as_str()),
+            (10_000, "D0", "D200")
+        );
+        assert!(c.auto_cancel);
+        assert_eq!(c.ack, "handshake");
+        c.check().unwrap();
+        let mut bad = c.clone();
+        bad.ack = "maybe".into();
+        assert!(bad.check().unwrap_err().contains("ack"));
+        let mut bad = c;
+        bad.handshake_timeout_ms = 0;
+        assert!(bad.check().is_err());
+    }
+}

@@ -113,3 +113,36 @@ pub async fn connect(config: &LinkConfig) -> Result<Arc<dyn PlcMemory>, LinkErro
     }
     Ok(Arc::new(ModbusClient::connect(config.modbus()?).await?))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn link(protocol: &str) -> LinkConfig {
+        LinkConfig {
+            protocol: protocol.into(),
+            address: "127.0.0.1:5000".into(),
+            unit: 1,
+            serial: None,
+            timeout: Duration::from_millis(1000),
+            retries: 2,
+            quirks: vec![],
+        }
+    }
+
+    #[tokio::test]
+    async fn mc3e_links_over_tcp_and_udp() {
+        for p in ["mc3e", "mc3e-udp"] {
+            assert!(PROTOCOLS.contains(&p));
+            link(p).check().unwrap();
+            let plc = connect(&link(p)).await.unwrap();
+            assert_eq!(plc.parse_address("D200").unwrap().index, 200);
+        }
+        let mut quirky = link("mc3e");
+        quirky.quirks = vec!["length0".into()];
+        assert!(quirky.check().is_err());
+        assert!(matches!(link("mc9").check(), Err(LinkError::UnknownProtocol(_))));
+        let timer = link("mc3e-udp").mc3e().unwrap().monitor_timer;
+        assert_eq!(timer, 4, "1 s timeout = 4 x 250 ms");
+    }
+}
