@@ -144,9 +144,12 @@ pub enum ConfigError {
 }
 
 impl Config {
-    /// The demo site: one shelf aisle of 2 rows x 10 bays x 6 levels x 4 positions.
+    /// The demo site: shelf aisle 1 of 2 rows x 10 bays x 6 levels x 4 positions, and
+    /// crane aisle 2 of 2 rows x 20 bays x 8 levels x 2 depths (sides).
     pub fn demo() -> Self {
-        Config::default()
+        let mut config = Config::default();
+        config.site.aisles.push(AisleConfig { aisle: 2, rows: 2, bays: 20, levels: 8, positions: 2 });
+        config
     }
 
     /// Loads and checks a configuration file.

@@ -14,6 +14,10 @@ pub enum SimCommand {
     Shelf(SimShelfArgs),
     /// A Mitsubishi MC protocol 3E (binary) server over the whole device range.
     Mc3e(super::sim_mc3e::SimMc3eArgs),
+    /// A stacker crane with the MC 3E register interface (D0..D39 / D200..D239). Reads
+    /// commands on stdin: `alarm CODE`, `clear`, `heartbeat on|off`, `handshake on|off`, `force`, `drop`,
+    /// `link on|off`, `status`.
+    Crane(super::sim_crane::SimCraneArgs),
 }
 
 /// Options of `rackd sim shelf`.
@@ -75,6 +79,7 @@ pub async fn run(cmd: SimCommand) -> anyhow::Result<()> {
     match cmd {
         SimCommand::Modbus(args) => super::sim_modbus::run(args).await,
         SimCommand::Mc3e(args) => super::sim_mc3e::run(args).await,
+        SimCommand::Crane(args) => super::sim_crane::run(args).await,
         SimCommand::Shelf(args) => {
             let sim = ShelfSim::start(&args.listen, args.options()?).await?;
             println!(

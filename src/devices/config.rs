@@ -13,6 +13,8 @@ use crate::protocols::link::LinkConfig;
 pub enum DeviceKind {
     /// A shelf storage PLC with task slots (shelf-plc.md).
     Shelf,
+    /// A stacker crane with the MC 3E register interface (crane-mc3e.md).
+    Crane,
 }
 
 impl DeviceKind {
@@ -21,6 +23,7 @@ impl DeviceKind {
         use crate::domain::JobKind::*;
         match self {
             DeviceKind::Shelf => &[Store, Retrieve, Move, Clear, Light],
+            DeviceKind::Crane => &[Store, Retrieve, Move, Travel],
         }
     }
 
@@ -28,6 +31,7 @@ impl DeviceKind {
     pub fn as_str(self) -> &'static str {
         match self {
             DeviceKind::Shelf => "shelf",
+            DeviceKind::Crane => "crane",
         }
     }
 }
@@ -42,7 +46,7 @@ pub struct DeviceConfig {
     pub kind: DeviceKind,
     /// The aisles whose locations this device serves (jobs are routed by location).
     pub aisles: Vec<u16>,
-    /// `modbus-udp`, `modbus-tcp`, `modbus-rtu` or `modbus-rtu-tcp`.
+    /// `modbus-udp`, `modbus-tcp`, `modbus-rtu`, `modbus-rtu-tcp`, `mc3e` (TCP) or `mc3e-udp`.
     #[serde(default = "default_protocol")]
     pub protocol: String,
     /// `HOST:PORT`, or a serial device path.
@@ -87,6 +91,34 @@ pub struct DeviceConfig {
     /// enters the window. Bounds the work of each dispatch round.
     #[serde(default = "default_window")]
     pub dispatch_window: u32,
+    /// Crane: first word the WCS writes (D0..D39), in the protocol's notation.
+    #[serde(default = "default_wcs_base")]
+    pub wcs_base: String,
+    /// Crane: first word the crane writes (D200..D239), in the protocol's notation.
+    #[serde(default = "default_crane_base")]
+    pub crane_base: String,
+    /// Crane: where an inbound transfer (a store) picks: row, bay, level, side.
+    #[serde(default = "default_inbound")]
+    pub inbound_station: [u16; 4],
+    /// Crane: where an outbound transfer (a retrieve) puts: row, bay, level, side.
+    #[serde(default = "default_outbound")]
+    pub outbound_station: [u16; 4],
+    /// Crane: least time between two of rackd's heartbeat steps, in milliseconds.
+    #[serde(default = "default_heartbeat_ms")]
+    pub heartbeat_ms: u64,
+    /// Crane: the crane is lost when its heartbeat stays unchanged this long (ms).
+    #[serde(default = "default_heartbeat_timeout_ms")]
+    pub heartbeat_timeout_ms: u64,
+    /// Crane: longest wait for each step of the STB/ACK hand-over, in milliseconds.
+    #[serde(default = "default_handshake_timeout_ms")]
+    pub handshake_timeout_ms: u64,
+    /// Crane: a business alarm sends the cancel (mode 3) by itself.
+    #[serde(default = "yes")]
+    pub auto_cancel: bool,
+    /// Crane: how completion is acknowledged (see `devices::crane::ack`): `handshake`
+    /// (D22 := 1, wait for D223 = 0, D22 := 0) or `echo` (D22 := the value of D223).
+    #[serde(default = "default_ack")]
+    pub ack: String,
 }
 
 fn default_protocol() -> String {
@@ -119,6 +151,30 @@ fn default_stride() -> u16 {
 fn default_window() -> u32 {
     1000
 }
+fn default_wcs_base() -> String {
+    "D0".into()
+}
+fn default_crane_base() -> String {
+    "D200".into()
+}
+fn default_inbound() -> [u16; 4] {
+    [2, 0, 1, 1]
+}
+fn default_outbound() -> [u16; 4] {
+    [1, 0, 1, 1]
+}
+fn default_heartbeat_ms() -> u64 {
+    500
+}
+fn default_heartbeat_timeout_ms() -> u64 {
+    10_000
+}
+fn default_handshake_timeout_ms() -> u64 {
+    3_000
+}
+fn default_ack() -> String {
+    "handshake".into()
+}
 fn yes() -> bool {
     true
 }
@@ -130,6 +186,14 @@ impl DeviceConfig {
             "id = {id:?}\nkind = \"shelf\"\naddress = {address:?}\naisles = {aisles:?}\nquirks = [\"length0\"]\n"
         );
         toml::from_str(&text).expect("a valid shelf entry")
+    }
+
+    /// A stacker crane over MC 3E TCP on the given address with every default.
+    pub fn crane(id: &str, address: &str, aisles: Vec<u16>) -> Self {
+        let text = format!(
+            "id = {id:?}\nkind = \"crane\"\nprotocol = \"mc3e\"\naddress = {address:?}\naisles = {aisles:?}\ntimeout_ms = 1500\n"
+        );
+        toml::from_str(&text).expect("a valid crane entry")
     }
 
     /// The protocol link.
@@ -156,6 +220,14 @@ impl DeviceConfig {
         if self.id.is_empty() || !self.id.chars().all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c)) {
             return fail("id must be letters, digits, '-', '_' or '.'".into());
         }
+        if self.kind == DeviceKind::Crane {
+            if crate::devices::crane::ack::AckReading::parse(&self.ack).is_none() {
+                return fail(format!("ack must be \"handshake\" or \"echo\", got {:?}", self.ack));
+            }
+            if self.heartbeat_timeout_ms == 0 || self.handshake_timeout_ms == 0 {
+                return fail("heartbeat_timeout_ms and handshake_timeout_ms must be above 0".into());
+            }
+        }
         if self.slots == 0 || self.stride < crate::devices::shelf::slot::SLOT_WORDS as u16 {
             return fail("slots must be at least 1 and stride at least 35".into());
         }
@@ -163,5 +235,31 @@ impl DeviceConfig {
             return fail("offline_after must be at least 1".into());
         }
         self.link().check().or_else(|e| fail(e.to_string()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_crane_entry_has_the_spec_defaults() {
+        let c = DeviceConfig::crane("crane1", "192.168.60.45:8000", vec![2]);
+        assert_eq!(c.kind.job_kinds().len(), 4);
+        assert!(!c.kind.job_kinds().contains(&crate::domain::JobKind::Clear));
+        assert_eq!((c.inbound_station, c.outbound_station), ([2, 0, 1, 1], [1, 0, 1, 1]));
+        assert_eq!(
+            (c.heartbeat_timeout_ms, c.wcs_base.as_str(), c.crane_base.as_str()),
+            (10_000, "D0", "D200")
+        );
+        assert!(c.auto_cancel);
+        assert_eq!(c.ack, "handshake");
+        c.check().unwrap();
+        let mut bad = c.clone();
+        bad.ack = "maybe".into();
+        assert!(bad.check().unwrap_err().contains("ack"));
+        let mut bad = c;
+        bad.handshake_timeout_ms = 0;
+        assert!(bad.check().is_err());
     }
 }

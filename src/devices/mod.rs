@@ -6,6 +6,7 @@
 //! (cancel, pause, resume) answered by the device task, and a status snapshot.
 
 pub mod config;
+pub mod crane;
 pub mod follow;
 pub mod shelf;
 pub mod status;
@@ -98,12 +99,24 @@ pub async fn start(
     for c in configs {
         let plc =
             crate::protocols::link::connect(&c.link()).await.with_context(|| format!("device {:?}", c.id))?;
-        let status = Arc::new(Mutex::new(DeviceStatus::new(&c.id, c.kind, &c.protocol, &c.address, c.slots)));
+        let slots = if c.kind == DeviceKind::Crane { 1 } else { c.slots };
+        let status = Arc::new(Mutex::new(DeviceStatus::new(&c.id, c.kind, &c.protocol, &c.address, slots)));
         let (requests, inbox) = mpsc::channel(16);
         let wake = wakers.remove(&c.id).unwrap_or_default();
-        let shelf = shelf::Shelf::new(c.clone(), plc, writer.clone(), pool.clone(), status.clone())
-            .with_context(|| format!("device {:?}", c.id))?;
-        tasks.push(tokio::spawn(shelf.run(wake.clone(), inbox)));
+        let context = || format!("device {:?}", c.id);
+        let task = match c.kind {
+            DeviceKind::Shelf => {
+                let shelf = shelf::Shelf::new(c.clone(), plc, writer.clone(), pool.clone(), status.clone())
+                    .with_context(context)?;
+                tokio::spawn(shelf.run(wake.clone(), inbox))
+            }
+            DeviceKind::Crane => {
+                let crane = crane::Crane::new(c.clone(), plc, writer.clone(), pool.clone(), status.clone())
+                    .with_context(context)?;
+                tokio::spawn(crane.run(wake.clone(), inbox))
+            }
+        };
+        tasks.push(task);
         devices.insert(c.id.clone(), DeviceHandle { wake, status, requests });
     }
     Ok((Arc::new(devices), tasks))

@@ -34,6 +34,35 @@ pub struct DeviceStatus {
     pub consecutive_failures: u32,
     /// The last error, if any.
     pub last_error: Option<String>,
+    /// What a stacker crane reports (cranes only; absent for other kinds).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub crane: Option<CraneStatus>,
+}
+
+/// A stacker crane's own registers, as last read.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, ToSchema)]
+pub struct CraneStatus {
+    /// The crane's heartbeat moves (false once it stalled for the configured time).
+    pub heartbeat_ok: bool,
+    /// Current action state (D203): 0 idle, 1..18 motion, 20/30/40 awaiting acknowledgement,
+    /// 100 homing.
+    pub action_state: u16,
+    /// The action state in words.
+    pub action: String,
+    /// Travel axis position (D220).
+    pub travel_position: u16,
+    /// Lift axis position (D221).
+    pub lift_position: u16,
+    /// Load on the platform (D206; 0 = empty).
+    pub load: u16,
+    /// Task number the crane holds (D208; 0 = none).
+    pub task: u16,
+    /// Active alarm code (D205), if any.
+    pub alarm_code: Option<u16>,
+    /// The alarm in words, from the catalogue.
+    pub alarm_text: Option<String>,
+    /// `business` (rackd resolves it) or `hardware` (needs a person at the crane).
+    pub alarm_class: Option<String>,
 }
 
 impl DeviceStatus {
@@ -51,6 +80,7 @@ impl DeviceStatus {
             slots_in_use: 0,
             consecutive_failures: 0,
             last_error: None,
+            crane: (kind == super::DeviceKind::Crane).then(CraneStatus::default),
         }
     }
 }

@@ -4,11 +4,13 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use super::mc3e::{Mc3eClient, Mc3eConfig, TransportKind};
 use super::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use super::{PlcError, PlcMemory};
 
 /// The protocols a device can be reached with.
-pub const PROTOCOLS: &[&str] = &["modbus-udp", "modbus-tcp", "modbus-rtu", "modbus-rtu-tcp"];
+pub const PROTOCOLS: &[&str] =
+    &["modbus-udp", "modbus-tcp", "modbus-rtu", "modbus-rtu-tcp", "mc3e", "mc3e-udp"];
 
 /// How to reach one PLC.
 #[derive(Clone, Debug, PartialEq)]
@@ -46,7 +48,26 @@ pub enum LinkError {
 impl LinkConfig {
     /// Checks the settings without connecting (for `rackd check-config`).
     pub fn check(&self) -> Result<(), LinkError> {
-        self.modbus().map(|_| ())
+        match self.mc3e() {
+            Some(_) if !self.quirks.is_empty() => Err(LinkError::Setting("mc3e links have no quirks".into())),
+            Some(_) => Ok(()),
+            None => self.modbus().map(|_| ()),
+        }
+    }
+
+    /// The MC 3E settings, when the protocol is `mc3e` (TCP) or `mc3e-udp`.
+    fn mc3e(&self) -> Option<Mc3eConfig> {
+        let transport = match self.protocol.as_str() {
+            "mc3e" | "mc3e-tcp" => TransportKind::Tcp,
+            "mc3e-udp" => TransportKind::Udp,
+            _ => return None,
+        };
+        let mut config = Mc3eConfig::new(self.address.clone(), transport);
+        config.link.timeout = self.timeout;
+        config.link.retries = self.retries;
+        // The PLC's own monitoring timer must give up before rackd does (250 ms units).
+        config.monitor_timer = ((self.timeout.as_millis() / 250) as u16).clamp(1, 40);
+        Some(config)
     }
 
     fn modbus(&self) -> Result<ModbusConfig, LinkError> {
@@ -86,5 +107,42 @@ impl LinkConfig {
 /// Opens the PLC connection a configuration describes. Connection-oriented transports
 /// connect lazily, so a PLC that is down at start does not stop rackd.
 pub async fn connect(config: &LinkConfig) -> Result<Arc<dyn PlcMemory>, LinkError> {
+    if let Some(mc3e) = config.mc3e() {
+        config.check()?;
+        return Ok(Arc::new(Mc3eClient::new(mc3e)));
+    }
     Ok(Arc::new(ModbusClient::connect(config.modbus()?).await?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn link(protocol: &str) -> LinkConfig {
+        LinkConfig {
+            protocol: protocol.into(),
+            address: "127.0.0.1:5000".into(),
+            unit: 1,
+            serial: None,
+            timeout: Duration::from_millis(1000),
+            retries: 2,
+            quirks: vec![],
+        }
+    }
+
+    #[tokio::test]
+    async fn mc3e_links_over_tcp_and_udp() {
+        for p in ["mc3e", "mc3e-udp"] {
+            assert!(PROTOCOLS.contains(&p));
+            link(p).check().unwrap();
+            let plc = connect(&link(p)).await.unwrap();
+            assert_eq!(plc.parse_address("D200").unwrap().index, 200);
+        }
+        let mut quirky = link("mc3e");
+        quirky.quirks = vec!["length0".into()];
+        assert!(quirky.check().is_err());
+        assert!(matches!(link("mc9").check(), Err(LinkError::UnknownProtocol(_))));
+        let timer = link("mc3e-udp").mc3e().unwrap().monitor_timer;
+        assert_eq!(timer, 4, "1 s timeout = 4 x 250 ms");
+    }
 }

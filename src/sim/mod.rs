@@ -1,4 +1,5 @@
 //! Simulated machines, faithful to their specs and able to inject faults: engineers use
 //! them to commission a site, and the tests run rackd against them over real sockets.
 
+pub mod crane;
 pub mod shelf;

@@ -1,0 +1,155 @@
+//! Following the crane by polling D200..D239: heartbeat, the held task's progress, its
+//! completion and acknowledgement, and recovery after a restart.
+
+use tokio::time::Instant;
+
+use super::ack::Outcome;
+use super::registers::{self, BLOCK_WORDS, CraneView, wcs};
+use super::{Crane, CraneError, Current};
+use crate::devices::follow::{Reported, advance};
+use crate::devices::shelf::slot::task_id_for;
+use crate::domain::{Failure, JobState};
+use crate::protocols::PlcError;
+use crate::store::{Job, jobs};
+
+fn store(e: impl std::fmt::Display) -> CraneError {
+    CraneError::Store(e.to_string())
+}
+
+impl Crane {
+    /// One poll: read the crane's block, step the heartbeat, follow the task, acknowledge
+    /// a recorded completion, react to alarms.
+    pub(super) async fn poll(&mut self) -> Result<(), CraneError> {
+        if self.strobe_up {
+            self.withdraw_strobe().await;
+        }
+        let words = self.read(&self.crane.clone(), BLOCK_WORDS).await?;
+        let view = CraneView::parse(&words).ok_or(PlcError::Malformed("short crane block"))?;
+        let now = Instant::now();
+        if let Some(word) = self.heartbeat.observe(view.heartbeat, now) {
+            self.write(&self.wcs.offset(wcs::HEARTBEAT), &[word]).await?;
+            self.heartbeat.wrote(word, now);
+        }
+        self.view = Some(view);
+        self.show(&view);
+        self.follow(&view).await?;
+        if let Some(word) = self.ack.next_word(view.completion, self.ack_written) {
+            self.write(&self.wcs.offset(wcs::ACK), &[word]).await?;
+            self.ack_written = word;
+        }
+        self.on_alarm(&view).await
+    }
+
+    /// Brings the held job in line with what the crane shows.
+    async fn follow(&mut self, v: &CraneView) -> Result<(), CraneError> {
+        if self.current.is_none() && v.task != 0 {
+            self.adopt(v.task).await?;
+        }
+        let Some(mut c) = self.current.clone() else { return Ok(()) };
+        let Some(job) = jobs::get(&self.pool, c.job).await.map_err(store)? else {
+            self.current = None;
+            return Ok(());
+        };
+        if v.task != c.task.number {
+            self.current = None;
+            if c.seen && !job.state.is_terminal() {
+                let text = format!("the crane no longer holds task {} (it shows {})", c.task.number, v.task);
+                let lost = Failure { kind: "lost".into(), code: None, text: text.clone() };
+                self.record(&job, Reported::Failed(lost), &text).await?;
+            }
+            return Ok(());
+        }
+        c.seen = true;
+        if let Some(outcome) = Outcome::of(v.action, v.completion) {
+            let (to, cause) = match (outcome, c.alarm.take()) {
+                (Outcome::Done, _) => {
+                    (Reported::Finished { forced: false }, "the crane completed it (20)".into())
+                }
+                (Outcome::Forced, _) => {
+                    (Reported::Finished { forced: true }, "force-completed on the crane's panel (30)".into())
+                }
+                (Outcome::Cancelled, Some(f)) => {
+                    let cause = format!("cancelled after alarm {}: {}", f.code.unwrap_or(0), f.text);
+                    (Reported::Failed(f), cause)
+                }
+                (Outcome::Cancelled, None) => (Reported::Cancelled, "the crane cancelled it (40)".to_owned()),
+            };
+            self.record(&job, to, &cause).await?;
+            // Done with the job; the acknowledgement follows in the same poll.
+            self.current = None;
+            return Ok(());
+        }
+        if (1..=18).contains(&v.action) && v.action != c.action {
+            let cause = format!(
+                "action {} ({}), travel {} lift {} load {}",
+                v.action,
+                registers::action_text(v.action),
+                v.travel,
+                v.lift,
+                v.load
+            );
+            tracing::debug!(device = %self.config.id, job = job.id, "{cause}");
+            self.record(&job, Reported::Running, &cause).await?;
+            c.action = v.action;
+        }
+        self.current = Some(c);
+        Ok(())
+    }
+
+    /// Follows the task the crane shows when it belongs to an unfinished job of ours.
+    async fn adopt(&mut self, task: u16) -> Result<(), CraneError> {
+        let unfinished = jobs::unfinished(&self.pool, &self.config.id).await.map_err(store)?;
+        let Some(job) = unfinished.into_iter().find(|j| task_id_for(j.id) == task) else { return Ok(()) };
+        let Some(spec) = job.spec() else { return Ok(()) };
+        let Ok(task) = registers::task_for(&spec, task, &self.stations) else { return Ok(()) };
+        tracing::info!(device = %self.config.id, job = job.id, task = task.number, "following the crane's task");
+        self.record(&job, Reported::Taken, &format!("the crane holds it as task {}", task.number)).await?;
+        self.current = Some(Current {
+            job: job.id,
+            task,
+            seen: true,
+            cancel_sent: job.state == JobState::Cancelling,
+            alarm: None,
+            action: 0,
+        });
+        Ok(())
+    }
+
+    /// Records a device report for a job.
+    pub(super) async fn record(&self, job: &Job, to: Reported, cause: &str) -> Result<(), CraneError> {
+        advance(&self.writer, job, to, cause).await.map(|_| ()).map_err(store)
+    }
+
+    /// On start: read both blocks, take rackd's own words as found, withdraw a strobe a
+    /// crash left up, follow the crane's task if it is ours, fail the rest as `lost`.
+    pub(super) async fn recover(&mut self) -> Result<(), CraneError> {
+        let mine = self.read(&self.wcs.clone(), BLOCK_WORDS).await?;
+        let words = self.read(&self.crane.clone(), BLOCK_WORDS).await?;
+        let view = CraneView::parse(&words).ok_or(PlcError::Malformed("short crane block"))?;
+        let word = |k: u32| mine.get(k as usize).copied().unwrap_or(0);
+        self.heartbeat.found(word(wcs::HEARTBEAT));
+        self.ack_written = word(wcs::ACK);
+        if word(wcs::STB) != 0 {
+            tracing::warn!(device = %self.config.id, "a hand-over was interrupted; withdrawing the strobe");
+            self.strobe_up = true;
+            self.withdraw_strobe().await;
+        }
+        self.current = None;
+        if view.task != 0 {
+            self.adopt(view.task).await?;
+        }
+        let unfinished = jobs::unfinished(&self.pool, &self.config.id).await.map_err(store)?;
+        let held = self.current.as_ref().map(|c| c.job);
+        for job in unfinished.iter().filter(|j| j.state != JobState::Queued && Some(j.id) != held) {
+            let text = format!(
+                "after a restart the crane does not hold task {} (it shows {})",
+                task_id_for(job.id),
+                view.task
+            );
+            let lost = Failure { kind: "lost".into(), code: None, text: text.clone() };
+            self.record(job, Reported::Failed(lost), &text).await?;
+        }
+        tracing::info!(device = %self.config.id, task = view.task, "crane recovered");
+        self.poll().await
+    }
+}

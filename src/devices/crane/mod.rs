@@ -1,0 +1,289 @@
+//! The stacker crane adapter (spec: crane-mc3e.md): one task at a time, handed over with
+//! the STB/ACK handshake and followed by polling D200..D239, over any [`PlcMemory`] (MC 3E
+//! over TCP or UDP in practice).
+//!
+//! Answers to the questions the spec leaves open:
+//! - **Task number**: derived from the job id like the shelf's task id
+//!   ([`crate::devices::shelf::slot::task_id_for`]), so the crane's echo (D208) leads back
+//!   to the job after a restart with no extra record.
+//! - **Modes**: store = transfer from the inbound station into the rack, retrieve = transfer
+//!   from the rack to the outbound station, move = transfer rack to rack, travel = mode 1
+//!   with "from" zero. The location's position is the crane's side (1 near, 2 far).
+//! - **Hand-over**: only to an idle, clean crane (D203 = 0, D208 = 0, D223 = 0, no alarm),
+//!   heartbeat alive, link up, not paused. Words D8..D17 in one write, then STB := 1, wait
+//!   ACK = 1, STB := 0, wait ACK = 0, each wait bounded by `handshake_timeout_ms`. A
+//!   timeout or link failure withdraws the strobe (retried at every poll until it is down)
+//!   and leaves the job queued; if the crane took the data
+//!   after all, its D208 echo shows the task and rackd follows it (never sends it twice).
+//! - **Acknowledgement**: see [`ack`]; the outcome is stored before D22 is written.
+//! - **Alarms**: see [`alarms`]. A business alarm with `auto_cancel` sends mode 3 through
+//!   the same handshake and moves the job to `cancelling`; when the crane reports 40 the job
+//!   fails with kind `alarm`, the code and the catalogue text. A hardware alarm (or an
+//!   unknown code) only stops new work until D205 is 0 again. Any alarm is shown in the
+//!   device status; a crane with an alarm gets no new work.
+//! - **Cancel through the API**: a queued job is cancelled at once; the job the crane holds
+//!   gets mode 3 (job `cancelling`), and `cancelled` once 40 is acknowledged. A crane that
+//!   completes before it sees the cancel completes the job (cancelling → completed).
+//! - **Heartbeat**: see [`heartbeat`]. While lost the device is offline (no new work) and
+//!   the status says so; a task under way is not failed, since the crane may still be
+//!   running it; rackd follows it again once the heartbeat moves.
+//! - **Words left alone**: D20 (execute action) stays 0, since the spec gives it no role in
+//!   the hand-over; D201, D202 and D224 are read but not interpreted.
+//! - **Status**: the device status carries a `crane` object (heartbeat, action state and
+//!   its text, positions D220/D221, load D206, task D208, alarm code/text/class); each new
+//!   action state of the held task is logged, and the first one is the `running` cause in
+//!   the job's history.
+//! - **Recovery**: on start rackd reads both blocks; its own D0 and D22 are taken as
+//!   written, a strobe left at 1 by a crash is withdrawn, and a task the crane holds whose
+//!   number belongs to an unfinished job is followed (its pending completion is recorded and
+//!   acknowledged). Unfinished jobs past `queued` that the crane does not hold fail as
+//!   `lost`. A cancel under way for a business alarm is not remembered across a restart:
+//!   such a job ends `cancelled` rather than `failed`.
+
+pub mod ack;
+pub mod alarms;
+mod follow;
+mod handshake;
+pub mod heartbeat;
+pub mod registers;
+mod work;
+
+use std::sync::{Arc, Mutex};
+
+use sqlx::SqlitePool;
+use tokio::sync::{Notify, mpsc};
+use tokio::time::{Instant, sleep_until};
+
+use super::DeviceRequest;
+use super::config::DeviceConfig;
+use super::status::{CraneStatus, DeviceStatus};
+use crate::domain::Failure;
+use crate::protocols::{Address, PlcError, PlcMemory};
+use crate::store::time::from_ms;
+use crate::store::writer::Writer;
+use ack::AckReading;
+use heartbeat::Heartbeat;
+use registers::{CraneView, Stations};
+
+pub use handshake::HandshakeError;
+
+/// Why a step of the crane adapter stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum CraneError {
+    /// The PLC did not answer or refused.
+    #[error(transparent)]
+    Plc(#[from] PlcError),
+    /// The hand-over handshake did not complete.
+    #[error(transparent)]
+    Handshake(#[from] HandshakeError),
+    /// The database or writer failed.
+    #[error("storage: {0}")]
+    Store(String),
+    /// A setting cannot be used.
+    #[error("configuration: {0}")]
+    Config(String),
+}
+
+/// The job the crane holds (or was just handed).
+#[derive(Clone, Debug, PartialEq)]
+struct Current {
+    job: i64,
+    task: registers::Task,
+    /// The crane was seen holding it (its D208 showed the number).
+    seen: bool,
+    /// A cancel (mode 3) was handed over.
+    cancel_sent: bool,
+    /// The business alarm that cancelled it: the job fails with this at 40.
+    alarm: Option<Failure>,
+    /// The last action state recorded, so each change is logged once.
+    action: u16,
+}
+
+/// One stacker crane: its link, what it holds and the job writer.
+pub struct Crane {
+    config: DeviceConfig,
+    plc: Arc<dyn PlcMemory>,
+    wcs: Address,
+    crane: Address,
+    writer: Writer,
+    pool: SqlitePool,
+    status: Arc<Mutex<DeviceStatus>>,
+    stations: Stations,
+    ack: AckReading,
+    heartbeat: Heartbeat,
+    current: Option<Current>,
+    ack_written: u16,
+    link_ok: bool,
+    view: Option<CraneView>,
+    /// rackd's strobe (D21) may still be 1 after a failed hand-over.
+    strobe_up: bool,
+}
+
+impl Crane {
+    /// A crane adapter; nothing is sent until [`Crane::run`].
+    pub fn new(
+        config: DeviceConfig,
+        plc: Arc<dyn PlcMemory>,
+        writer: Writer,
+        pool: SqlitePool,
+        status: Arc<Mutex<DeviceStatus>>,
+    ) -> Result<Crane, CraneError> {
+        let wcs = plc.parse_address(&config.wcs_base)?;
+        let crane = plc.parse_address(&config.crane_base)?;
+        let ack = AckReading::parse(&config.ack)
+            .ok_or_else(|| CraneError::Config(format!("unknown ack reading {:?}", config.ack)))?;
+        let stations = Stations { inbound: config.inbound_station, outbound: config.outbound_station };
+        let heartbeat = Heartbeat::new(
+            std::time::Duration::from_millis(config.heartbeat_ms),
+            std::time::Duration::from_millis(config.heartbeat_timeout_ms),
+            Instant::now(),
+        );
+        Ok(Crane {
+            config,
+            plc,
+            wcs,
+            crane,
+            writer,
+            pool,
+            status,
+            stations,
+            ack,
+            heartbeat,
+            current: None,
+            ack_written: 0,
+            link_ok: false,
+            view: None,
+            strobe_up: false,
+        })
+    }
+
+    /// Runs the device until the task is aborted: recover, then poll at the configured
+    /// period, hand over work when the crane is free, and answer requests.
+    pub async fn run(mut self, wake: Arc<Notify>, mut requests: mpsc::Receiver<DeviceRequest>) {
+        let period = self.config.poll();
+        while let Err(e) = self.recover().await {
+            tracing::warn!(device = %self.config.id, error = %e, "crane recovery failed; retrying");
+            self.update_status(|s| s.last_error = Some(e.to_string()));
+            tokio::time::sleep(period).await;
+        }
+        let mut next_poll = Instant::now() + period;
+        loop {
+            tokio::select! {
+                Some(request) = requests.recv() => self.handle(request).await,
+                _ = wake.notified() => {}
+                _ = sleep_until(next_poll) => {
+                    if let Err(e) = self.poll().await {
+                        tracing::warn!(device = %self.config.id, error = %e, "crane poll failed");
+                        self.update_status(|s| s.last_error = Some(e.to_string()));
+                    }
+                    next_poll = Instant::now() + period;
+                }
+            }
+            if self.may_dispatch()
+                && let Err(e) = self.dispatch().await
+            {
+                tracing::warn!(device = %self.config.id, error = %e, "crane hand-over stopped");
+                self.update_status(|s| s.last_error = Some(e.to_string()));
+            }
+        }
+    }
+
+    async fn handle(&mut self, request: DeviceRequest) {
+        match request {
+            DeviceRequest::Cancel { job, reply } => {
+                let _ = reply.send(self.cancel(job).await);
+            }
+        }
+    }
+
+    /// New work only to a reachable, live, idle crane without alarm, when not paused.
+    fn may_dispatch(&self) -> bool {
+        let s = self.status.lock().unwrap_or_else(|p| p.into_inner());
+        let idle = self.view.is_some_and(|v| v.is_idle());
+        s.online && !s.paused && self.current.is_none() && idle && self.ack_written == 0 && !self.strobe_up
+    }
+
+    /// Reads words, keeping the device's contact status.
+    async fn read(&mut self, at: &Address, count: u16) -> Result<Vec<u16>, PlcError> {
+        let result = self.plc.read_words(at, count).await;
+        self.contact(result.as_ref().map(|_| ()).map_err(|e| e.to_string()));
+        result
+    }
+
+    /// Writes words, keeping the device's contact status.
+    async fn write(&mut self, at: &Address, values: &[u16]) -> Result<(), PlcError> {
+        let result = self.plc.write_words(at, values).await;
+        self.contact(result.as_ref().map(|_| ()).map_err(|e| e.to_string()));
+        result
+    }
+
+    fn contact(&mut self, result: Result<(), String>) {
+        let offline_after = self.config.offline_after;
+        let mut link_ok = self.link_ok;
+        self.update_status(|s| match result {
+            Ok(()) => {
+                link_ok = true;
+                s.consecutive_failures = 0;
+                s.last_contact = Some(from_ms(crate::store::time::now_ms()));
+            }
+            Err(e) => {
+                s.consecutive_failures += 1;
+                s.last_error = Some(e);
+                if s.consecutive_failures >= offline_after {
+                    link_ok = false;
+                }
+            }
+        });
+        self.link_ok = link_ok;
+        self.show_online();
+    }
+
+    /// Online = the link answers and the crane's heartbeat moves.
+    fn show_online(&self) {
+        let lost = self.heartbeat.is_lost(Instant::now());
+        let (id, link_ok) = (self.config.id.clone(), self.link_ok);
+        self.update_status(|s| {
+            let online = link_ok && !lost;
+            if lost {
+                s.last_error = Some("the crane's heartbeat (D200) stopped moving: crane lost".into());
+            }
+            if online != s.online {
+                if online {
+                    tracing::info!(device = %id, "crane online");
+                } else {
+                    tracing::warn!(device = %id, link_ok, heartbeat_lost = lost, "crane offline");
+                }
+            }
+            s.online = online;
+            if let Some(c) = s.crane.as_mut() {
+                c.heartbeat_ok = !lost;
+            }
+        });
+    }
+
+    /// Shows what the crane reports in the device status.
+    fn show(&self, v: &CraneView) {
+        let alarm = (v.alarm != 0).then(|| alarms::lookup(v.alarm));
+        self.update_status(|s| {
+            let heartbeat_ok = s.crane.as_ref().is_some_and(|c| c.heartbeat_ok);
+            s.crane = Some(CraneStatus {
+                heartbeat_ok,
+                action_state: v.action,
+                action: registers::action_text(v.action).to_owned(),
+                travel_position: v.travel,
+                lift_position: v.lift,
+                load: v.load,
+                task: v.task,
+                alarm_code: alarm.as_ref().map(|a| a.code),
+                alarm_text: alarm.as_ref().map(|a| a.text.clone()),
+                alarm_class: alarm.as_ref().map(|a| a.class.as_str().to_owned()),
+            });
+            s.slots_in_use = u16::from(v.task != 0);
+        });
+        self.show_online();
+    }
+
+    fn update_status(&self, f: impl FnOnce(&mut DeviceStatus)) {
+        f(&mut self.status.lock().unwrap_or_else(|p| p.into_inner()));
+    }
+}

@@ -1,0 +1,236 @@
+//! A simulated stacker crane (spec: crane-mc3e.md) on the MC 3E server, over TCP or UDP,
+//! for commissioning and tests.
+//!
+//! It implements the whole register interface ([`engine`]): it answers the heartbeat, takes
+//! tasks through the STB/ACK hand-over, runs them through the action states 1..8, 11..18
+//! (travel: 1, 2) one step per `step` time, shows load (D206) and positions (D220 travel =
+//! bay x 1000, D221 lift = level x 500), reports 20/30/40 with D223 set to the same value
+//! and clears D223 and its task words once D22 is non-zero, and homes (state 100 for one
+//! step) after a cancel. An alarm (D205 non-zero) halts motion; a cancel (mode 3) ends the
+//! task in 40 and clears the alarm. It refuses (acknowledges but ignores) a task handed over
+//! while it is busy, and counts tasks received per task number.
+//!
+//! Controls, as methods ([`CraneSim::raise_alarm`], ...) and as text commands
+//! ([`CraneSim::command`], read from stdin by `rackd sim crane`): `alarm CODE`, `clear`,
+//! `heartbeat off|on`, `handshake off|on` (ignore the strobe), `force`, `drop` (close the connection / lose the next request),
+//! `link off|on` (ignore every request), `status`.
+//! With `wcs_timeout` set the crane watches rackd's heartbeat too and raises 7020 when D0
+//! stalls; it clears 7020 itself once D0 moves again (a simplification: a real crane may
+//! want a reset).
+
+pub mod engine;
+
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use tokio::sync::Notify;
+use tokio::task::JoinHandle;
+
+use crate::protocols::mc3e::{Bank, Device, Fault, Mc3eServer, ServerState, SharedBank, TransportKind};
+use engine::Engine;
+
+/// Whether a code is a business alarm of the catalogue.
+pub fn is_business(code: u16) -> bool {
+    code != 0
+        && crate::devices::crane::alarms::lookup(code).class
+            == crate::devices::crane::alarms::AlarmClass::Business
+}
+
+/// How the simulated crane is set up.
+#[derive(Clone, Debug)]
+pub struct CraneSimOptions {
+    /// TCP or UDP.
+    pub transport: TransportKind,
+    /// Time of each action state.
+    pub step: Duration,
+    /// The crane's watchdog on rackd's heartbeat: alarm 7020 when D0 stalls this long
+    /// (cleared when it moves again). None: no watchdog.
+    pub wcs_timeout: Option<Duration>,
+}
+
+impl Default for CraneSimOptions {
+    fn default() -> Self {
+        CraneSimOptions { transport: TransportKind::Tcp, step: Duration::from_millis(500), wcs_timeout: None }
+    }
+}
+
+/// A running simulated crane.
+pub struct CraneSim {
+    server: Option<Mc3eServer>,
+    bank: SharedBank,
+    engine: Arc<Mutex<Engine>>,
+    ticker: JoinHandle<()>,
+}
+
+impl CraneSim {
+    /// Starts a crane listening on `addr` (port 0 picks a free port).
+    pub async fn start(addr: &str, options: CraneSimOptions) -> std::io::Result<CraneSim> {
+        let addr: SocketAddr =
+            addr.parse().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
+        let bank = Bank::default().shared();
+        let mut engine = Engine::new(options.step);
+        engine.wcs_timeout = options.wcs_timeout;
+        let engine = Arc::new(Mutex::new(engine));
+        let kick = Arc::new(Notify::new());
+        let hook_kick = kick.clone();
+        let state = ServerState::new(bank.clone()).on_write(Arc::new(move |_| hook_kick.notify_one()));
+        let server = match options.transport {
+            TransportKind::Tcp => Mc3eServer::bind_tcp(addr, state).await?,
+            TransportKind::Udp => Mc3eServer::bind_udp(addr, state).await?,
+        };
+        let tick = (options.step / 5).clamp(Duration::from_millis(1), Duration::from_millis(20));
+        let ticker = tokio::spawn(run_ticks(bank.clone(), engine.clone(), kick, tick));
+        Ok(CraneSim { server: Some(server), bank, engine, ticker })
+    }
+
+    /// The address it listens on.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.server.as_ref().map(|s| s.local_addr()).unwrap_or_else(|| ([0, 0, 0, 0], 0).into())
+    }
+
+    /// Reads one D register.
+    pub fn word(&self, n: u32) -> u16 {
+        self.bank.lock().unwrap_or_else(|p| p.into_inner()).word(Device::D, n)
+    }
+
+    /// Writes one D register as another writer would (tests staging a crashed WCS).
+    pub fn set_word(&self, n: u32, v: u16) {
+        self.set(n, v);
+    }
+
+    fn set(&self, n: u32, v: u16) {
+        self.bank.lock().unwrap_or_else(|p| p.into_inner()).set_word(Device::D, n, v);
+    }
+
+    /// Raises an alarm (D205 := code); motion halts until it clears or a cancel comes.
+    pub fn raise_alarm(&self, code: u16) {
+        self.set(205, code);
+    }
+
+    /// Clears the alarm (a person reset the crane).
+    pub fn clear_alarm(&self) {
+        self.set(205, 0);
+    }
+
+    /// Stops or restarts answering the heartbeat.
+    pub fn set_heartbeat(&self, on: bool) {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).heartbeat_on = on;
+    }
+
+    /// Stops or restarts answering the hand-over strobe.
+    pub fn set_handshake(&self, on: bool) {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).handshake_on = on;
+    }
+
+    /// Presses "force complete": the task under way ends in state 30. False if none.
+    pub fn force_complete(&self) -> bool {
+        let mut bank = self.bank.lock().unwrap_or_else(|p| p.into_inner());
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).force_complete(&mut bank)
+    }
+
+    /// Closes the TCP connection (loses the next request over UDP).
+    pub fn drop_link(&self) {
+        if let Some(s) = &self.server {
+            s.faults().lock().unwrap_or_else(|p| p.into_inner()).push(Fault::Close);
+        }
+    }
+
+    /// Ignores every request (`false`) or answers again (`true`).
+    pub fn set_link(&self, up: bool) {
+        if let Some(s) = &self.server {
+            s.faults().lock().unwrap_or_else(|p| p.into_inner()).drop_ratio = if up { 0.0 } else { 1.0 };
+        }
+    }
+
+    /// How many times task `number` was handed over (mode 1 or 2).
+    pub fn received(&self, number: u16) -> u32 {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).received.get(&number).copied().unwrap_or(0)
+    }
+
+    /// Cancels (mode 3) received.
+    pub fn cancels(&self) -> u32 {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).cancels
+    }
+
+    /// Hand-overs refused because the crane was busy (rackd should cause none).
+    pub fn refused(&self) -> u32 {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).refused
+    }
+
+    /// Action state (D203).
+    pub fn action(&self) -> u16 {
+        self.word(203)
+    }
+
+    /// Runs one text command (see the module doc); returns what to print.
+    pub fn command(&self, line: &str) -> Result<String, String> {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["alarm", code] => {
+                let code: u16 = code.parse().map_err(|_| format!("not an alarm code: {code}"))?;
+                self.raise_alarm(code);
+                Ok(format!("alarm {code}: {}", crate::devices::crane::alarms::lookup(code).text))
+            }
+            ["clear"] => Ok({
+                self.clear_alarm();
+                "alarm cleared".into()
+            }),
+            ["heartbeat", on @ ("on" | "off")] => Ok({
+                self.set_heartbeat(*on == "on");
+                format!("heartbeat {on}")
+            }),
+            ["handshake", on @ ("on" | "off")] => Ok({
+                self.set_handshake(*on == "on");
+                format!("handshake {on}")
+            }),
+            ["force"] => Ok(if self.force_complete() { "force-completed (30)" } else { "no task" }.into()),
+            ["drop"] => Ok({
+                self.drop_link();
+                "link dropped once".into()
+            }),
+            ["link", on @ ("on" | "off")] => Ok({
+                self.set_link(*on == "on");
+                format!("link {on}")
+            }),
+            ["status"] => Ok(format!(
+                "action {} task {} alarm {} load {} travel {} lift {}",
+                self.word(203),
+                self.word(208),
+                self.word(205),
+                self.word(206),
+                self.word(220),
+                self.word(221)
+            )),
+            _ => Err(format!(
+                "unknown command {line:?} (alarm CODE, clear, heartbeat on|off, handshake on|off, force, drop, link on|off, status)"
+            )),
+        }
+    }
+
+    /// Stops the crane and its server.
+    pub async fn shutdown(mut self) {
+        self.ticker.abort();
+        if let Some(s) = self.server.take() {
+            s.shutdown().await;
+        }
+    }
+}
+
+impl Drop for CraneSim {
+    fn drop(&mut self) {
+        self.ticker.abort();
+    }
+}
+
+/// Advances the engine after every write from the WCS and at least every `tick`.
+async fn run_ticks(bank: SharedBank, engine: Arc<Mutex<Engine>>, kick: Arc<Notify>, tick: Duration) {
+    loop {
+        tokio::select! {
+            _ = kick.notified() => {}
+            _ = tokio::time::sleep(tick) => {}
+        }
+        let mut bank = bank.lock().unwrap_or_else(|p| p.into_inner());
+        engine.lock().unwrap_or_else(|p| p.into_inner()).tick(&mut bank, tokio::time::Instant::now());
+    }
+}

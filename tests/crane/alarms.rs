@@ -1,0 +1,109 @@
+//! Alarms: business alarms cancel and fail the job with their code, hardware alarms block
+//! the crane until cleared, and forced completion ends the job `forced`.
+
+use std::time::Duration;
+
+use rackd::devices::crane::alarms::{self, business_codes};
+use rackd::devices::shelf::slot::task_id_for;
+use rackd::protocols::mc3e::TransportKind;
+use serde_json::json;
+
+use crate::*;
+
+fn store_job() -> serde_json::Value {
+    json!({"kind": "store", "barcode": "PAL", "to": cloc(1, 4, 2, 1)})
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_business_alarm_cancels_the_task_and_fails_the_job_with_its_code() {
+    let (app, sim) = crane_app(TransportKind::Udp, 25, |_| {}).await;
+    for code in business_codes() {
+        let id = submit(&app, store_job(), &format!("alarm-{code}")).await;
+        wait_job(&app, id, &["running"], 5).await;
+        let cancels = sim.cancels();
+        sim.raise_alarm(code);
+        let job = wait_job(&app, id, &["failed", "completed", "cancelled"], 5).await;
+        assert_eq!(job["state"], "failed", "{job}");
+        assert_eq!(job["failure"]["kind"], "alarm", "{job}");
+        assert_eq!(job["failure"]["code"], code, "{job}");
+        assert_eq!(job["failure"]["text"], alarms::lookup(code).text, "{job}");
+        assert_eq!(sim.cancels(), cancels + 1, "one cancel for alarm {code}");
+        assert_eq!(sim.word(205), 0, "the crane cleared alarm {code}");
+        let states: Vec<String> = history(&app, id).await.into_iter().map(|(s, _)| s).collect();
+        assert!(states.contains(&"cancelling".to_owned()), "{states:?}");
+    }
+    // The crane is clean again: the next job completes.
+    let id = submit(&app, store_job(), "after-alarms").await;
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    assert_eq!(sim.refused(), 0);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_hardware_alarm_blocks_the_crane_until_it_clears() {
+    let (app, sim) = crane_app(TransportKind::Tcp, 20, |_| {}).await;
+    wait_device(&app, "online", 5, |s| s["online"] == true).await;
+    sim.raise_alarm(7002);
+    let status = wait_device(&app, "showing the alarm", 5, |s| s["crane"]["alarm_code"] == 7002).await;
+    assert_eq!(status["crane"]["alarm_class"], "hardware", "{status}");
+    assert_eq!(status["crane"]["alarm_text"], alarms::lookup(7002).text, "{status}");
+    let id = submit(&app, store_job(), "blocked").await;
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
+    assert_eq!(job["state"], "queued", "no new work under a hardware alarm: {job}");
+    assert_eq!(sim.received(task_id_for(id)), 0);
+    sim.clear_alarm();
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+
+    // Mid-task: the task halts, the job waits (not failed), then finishes after the reset.
+    let id = submit(&app, store_job(), "halted").await;
+    wait_job(&app, id, &["running"], 5).await;
+    sim.raise_alarm(7011);
+    let halted = sim.action();
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
+    assert_eq!(job["state"], "running", "a hardware alarm fails nothing by itself: {job}");
+    assert_eq!(sim.action(), halted, "the crane stands still");
+    assert_eq!(sim.cancels(), 0, "no cancel for a hardware alarm");
+    sim.clear_alarm();
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn forced_completion_completes_the_job_as_forced() {
+    let (app, sim) = crane_app(TransportKind::Tcp, 30, |_| {}).await;
+    let id = submit(&app, store_job(), "forced").await;
+    wait_job(&app, id, &["running"], 5).await;
+    sim.raise_alarm(7013);
+    wait_device(&app, "showing the alarm", 5, |s| s["crane"]["alarm_code"] == 7013).await;
+    assert!(sim.force_complete(), "a task was under way");
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    assert_eq!(job["forced"], true, "{job}");
+    // Acknowledged: the crane drops its task and takes the next one.
+    let next = submit(&app, store_job(), "after-forced").await;
+    let job = wait_job(&app, next, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!((job["state"].as_str(), job["forced"].as_bool()), (Some("completed"), Some(false)), "{job}");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn without_auto_cancel_a_business_alarm_waits_for_an_operator() {
+    let (app, sim) = crane_app(TransportKind::Tcp, 30, |d| d.auto_cancel = false).await;
+    let id = submit(&app, store_job(), "manual").await;
+    wait_job(&app, id, &["running"], 5).await;
+    sim.raise_alarm(7094);
+    wait_device(&app, "showing the alarm", 5, |s| s["crane"]["alarm_class"] == "business").await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(sim.cancels(), 0);
+    let (status, job) = app.post(&format!("/api/v1/jobs/{id}/cancel"), &json!({})).await;
+    assert_eq!(status, 200, "{job}");
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "cancelled", "{job}");
+    assert_eq!(sim.word(205), 0);
+    app.stop().await;
+}

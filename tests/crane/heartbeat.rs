@@ -1,0 +1,114 @@
+//! Heartbeat loss and return, and cancels through the API.
+
+use std::time::Duration;
+
+use rackd::devices::shelf::slot::task_id_for;
+use rackd::protocols::mc3e::TransportKind;
+use rackd::sim::crane::{CraneSim, CraneSimOptions};
+use serde_json::json;
+
+use crate::*;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stalled_heartbeat_takes_the_crane_offline_until_it_moves_again() {
+    let (app, sim) = crane_app(TransportKind::Udp, 10, |_| {}).await;
+    wait_device(&app, "online", 5, |s| s["online"] == true && s["crane"]["heartbeat_ok"] == true).await;
+    // The 4-step scheme runs: both words keep flipping.
+    let (mut flips, mut last) = ([0, 0], [sim.word(0), sim.word(200)]);
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    while flips[0] < 3 || flips[1] < 3 {
+        assert!(std::time::Instant::now() < deadline, "heartbeat words stuck: {last:?}, {flips:?} flips");
+        for (k, n) in [0, 200].into_iter().enumerate() {
+            let w = sim.word(n);
+            if w != last[k] {
+                flips[k] += 1;
+                last[k] = w;
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    sim.set_heartbeat(false);
+    let lost = std::time::Instant::now();
+    let status = wait_device(&app, "lost", 5, |s| s["crane"]["heartbeat_ok"] == false).await;
+    assert_eq!(status["online"], false, "{status}");
+    assert!(status["last_error"].as_str().is_some_and(|e| e.contains("heartbeat")), "{status}");
+    // Configured loss time 500 ms: not before it, and well within the bounded wait.
+    assert!(lost.elapsed() >= Duration::from_millis(300), "declared lost too early: {:?}", lost.elapsed());
+    let id = submit(&app, json!({"kind": "travel", "to": cloc(2, 3, 1, 1)}), "hb").await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
+    assert_eq!(job["state"], "queued", "no work for a lost crane: {job}");
+    assert_eq!(sim.received(task_id_for(id)), 0);
+    sim.set_heartbeat(true);
+    wait_device(&app, "back", 5, |s| s["online"] == true && s["crane"]["heartbeat_ok"] == true).await;
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cancelling_a_running_job_sends_mode_3_and_a_queued_one_cancels_at_once() {
+    let (app, sim) = crane_app(TransportKind::Tcp, 40, |_| {}).await;
+    let a = submit(&app, json!({"kind": "retrieve", "from": cloc(1, 6, 3, 2)}), "run").await;
+    let b = submit(&app, json!({"kind": "retrieve", "from": cloc(1, 7, 3, 2)}), "wait").await;
+    wait_job(&app, a, &["running"], 5).await;
+    let (status, job) = app.post(&format!("/api/v1/jobs/{b}/cancel"), &json!({})).await;
+    assert_eq!((status, job["state"].as_str()), (200, Some("cancelled")), "{job}");
+    let (status, job) = app.post(&format!("/api/v1/jobs/{a}/cancel"), &json!({})).await;
+    assert_eq!((status, job["state"].as_str()), (200, Some("cancelling")), "{job}");
+    let job = wait_job(&app, a, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "cancelled", "{job}");
+    assert_eq!(sim.cancels(), 1);
+    assert_eq!(sim.received(task_id_for(b)), 0, "the queued job never reached the crane");
+    // The crane homes after the cancel and then takes new work.
+    let c = submit(&app, json!({"kind": "travel", "to": cloc(1, 2, 2, 1)}), "next").await;
+    let job = wait_job(&app, c, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_heartbeat_lost_mid_task_fails_nothing_and_the_task_is_followed_again() {
+    let (app, sim) = crane_app(TransportKind::Tcp, 30, |_| {}).await;
+    let id = submit(&app, json!({"kind": "retrieve", "from": cloc(2, 11, 7, 1)}), "hb-task").await;
+    wait_job(&app, id, &["running"], 5).await;
+    sim.set_heartbeat(false);
+    wait_device(&app, "lost", 5, |s| s["crane"]["heartbeat_ok"] == false).await;
+    let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
+    assert!(["running", "completed"].contains(&job["state"].as_str().unwrap()), "{job}");
+    sim.set_heartbeat(true);
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    assert_eq!(sim.received(task_id_for(id)), 1);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_crane_sees_rackds_heartbeat_and_raises_7020_only_while_rackd_is_away() {
+    let options = CraneSimOptions {
+        transport: TransportKind::Tcp,
+        step: Duration::from_millis(10),
+        wcs_timeout: Some(Duration::from_millis(400)),
+    };
+    let sim = CraneSim::start("127.0.0.1:0", options).await.unwrap();
+    let device = device_for(&sim, TransportKind::Tcp, |_| {});
+    let app = helpers::spawn_with(|c| with_crane(c, device.clone())).await;
+    wait_device(&app, "clean", 5, |s| s["online"] == true && s["crane"]["alarm_code"].is_null()).await;
+    let start = std::time::Instant::now();
+    while start.elapsed() < Duration::from_millis(1200) {
+        assert_eq!(sim.word(205), 0, "rackd's heartbeat keeps the crane's watchdog quiet");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    let (db, _dir) = app.stop().await;
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    while sim.word(205) != 7020 {
+        assert!(std::time::Instant::now() < deadline, "the crane never noticed rackd was gone");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    let app = helpers::spawn_on(db, |c| with_crane(c, device)).await;
+    let id = submit(&app, json!({"kind": "travel", "to": cloc(1, 9, 1, 1)}), "back").await;
+    let job = wait_job(&app, id, &["completed", "failed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    assert_eq!(sim.word(205), 0);
+    app.stop().await;
+}
