@@ -2,7 +2,6 @@
 //! driving the real crane simulator over real MC 3E TCP and UDP.
 
 #[path = "../common/helpers.rs"]
-#[allow(dead_code)]
 mod helpers;
 
 mod alarms;
