@@ -10,8 +10,10 @@
 //! [`Address`] with [`PlcMemory::parse_address`].
 
 pub mod error;
+pub mod line;
 pub mod link;
 pub mod mc3e;
+pub mod mewtocol;
 pub mod modbus;
 pub mod serial;
 
