@@ -15,6 +15,7 @@ pub mod link;
 pub mod mc3e;
 pub mod mewtocol;
 pub mod modbus;
+pub mod ppi;
 pub mod serial;
 
 use async_trait::async_trait;
