@@ -42,7 +42,7 @@ pub struct DeviceConfig {
     pub kind: DeviceKind,
     /// The aisles whose locations this device serves (jobs are routed by location).
     pub aisles: Vec<u16>,
-    /// `modbus-udp`, `modbus-tcp`, `modbus-rtu` or `modbus-rtu-tcp`.
+    /// One of [`crate::protocols::link::PROTOCOLS`] (`modbus-udp`, `modbus-tcp`, `modbus-rtu`, `modbus-rtu-tcp`, `mewtocol`, `mewtocol-tcp`, `ppi`, `ppi-tcp`).
     #[serde(default = "default_protocol")]
     pub protocol: String,
     /// `HOST:PORT`, or a serial device path.
