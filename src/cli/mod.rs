@@ -6,6 +6,7 @@ pub mod demo;
 pub mod plc;
 pub mod plc_mc3e;
 pub mod sim;
+pub mod sim_line;
 pub mod sim_mc3e;
 pub mod sim_modbus;
 

@@ -14,6 +14,10 @@ pub enum SimCommand {
     Shelf(SimShelfArgs),
     /// A Mitsubishi MC protocol 3E (binary) server over the whole device range.
     Mc3e(super::sim_mc3e::SimMc3eArgs),
+    /// A Panasonic PLC answering MEWTOCOL-COM (DT, X, Y, R, L, T, C) on TCP or a serial port.
+    Mewtocol(super::sim_line::SimLineArgs),
+    /// A Siemens S7-200 answering PPI (V, I, Q, M, SM, S, AI, AQ, T, C) on TCP or a serial port.
+    Ppi(super::sim_line::SimLineArgs),
 }
 
 /// Options of `rackd sim shelf`.
@@ -75,6 +79,14 @@ pub async fn run(cmd: SimCommand) -> anyhow::Result<()> {
     match cmd {
         SimCommand::Modbus(args) => super::sim_modbus::run(args).await,
         SimCommand::Mc3e(args) => super::sim_mc3e::run(args).await,
+        SimCommand::Mewtocol(args) => {
+            let server = super::sim_line::start_mewtocol(&args).await?;
+            super::sim_line::run(server, "MEWTOCOL", &args).await
+        }
+        SimCommand::Ppi(args) => {
+            let server = super::sim_line::start_ppi(&args).await?;
+            super::sim_line::run(server, "PPI", &args).await
+        }
         SimCommand::Shelf(args) => {
             let sim = ShelfSim::start(&args.listen, args.options()?).await?;
             println!(
