@@ -60,10 +60,11 @@ async fn exercise(plc: &MewtocolClient, state: &ServerState) {
     let pattern: Vec<bool> = (0..11).map(|i| i % 3 == 0).collect();
     plc.write_bits(&at("R0020"), &pattern).await.unwrap();
     assert_eq!(plc.read_bits(&at("R20"), 11).await.unwrap(), pattern);
-    let bank = state.bank.lock().unwrap();
-    assert_eq!(bank.word(ContactArea::R, 1), Some(0x8000));
-    assert!(bank.bit(ContactArea::R, 32).unwrap() && bank.bit(ContactArea::R, 35).unwrap());
-    drop(bank);
+    {
+        let bank = state.bank.lock().unwrap();
+        assert_eq!(bank.word(ContactArea::R, 1), Some(0x8000));
+        assert!(bank.bit(ContactArea::R, 32).unwrap() && bank.bit(ContactArea::R, 35).unwrap());
+    }
     assert_eq!(plc.read_words(&at("WR2"), 1).await.unwrap(), vec![0x249]);
 }
 
@@ -157,4 +158,55 @@ async fn a_late_reply_is_not_taken_for_the_next_answer() {
     // RCS answer taken.
     assert_eq!(plc.read_bits(&at("R0"), 1).await.unwrap(), vec![true]);
     assert_eq!(plc.read_words(&at("DT1"), 1).await.unwrap(), vec![2222]);
+}
+
+/// A fake PLC on TCP answering every command (one per CR) with `reply`; counts commands.
+async fn fake(reply: &'static [u8]) -> (String, std::sync::Arc<std::sync::atomic::AtomicU32>) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let address = listener.local_addr().unwrap().to_string();
+    let count = std::sync::Arc::new(std::sync::atomic::AtomicU32::new(0));
+    let seen = count.clone();
+    tokio::spawn(async move {
+        let (mut stream, _) = listener.accept().await.unwrap();
+        let mut buf = [0u8; 256];
+        while let Ok(n @ 1..) = stream.read(&mut buf).await {
+            for _ in buf[..n].iter().filter(|&&b| b == b'\r') {
+                seen.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                if stream.write_all(reply).await.is_err() {
+                    return;
+                }
+            }
+        }
+    });
+    (address, count)
+}
+
+#[tokio::test]
+async fn bcc_errors_and_missing_bcc_in_replies() {
+    // `%01$WC` has BCC 14 (spec); 15 is wrong: rejected, retried, then reported.
+    let (address, count) = fake(b"%01$WC15\r").await;
+    let plc = MewtocolClient::new(config(MewtocolTransport::Tcp, &address, 200, 1)).unwrap();
+    let err = plc.write_words(&plc.parse_address("WR0").unwrap(), &[1]).await.unwrap_err();
+    assert!(matches!(err, PlcError::Malformed("BCC error in the reply")), "{err:?}");
+    assert_eq!(count.load(std::sync::atomic::Ordering::SeqCst), 2);
+    // `**` is refused while BCC is required, accepted when it is off.
+    let (address, _) = fake(b"%01$WC**\r").await;
+    let plc = MewtocolClient::new(config(MewtocolTransport::Tcp, &address, 200, 0)).unwrap();
+    assert!(matches!(
+        plc.write_words(&plc.parse_address("WR0").unwrap(), &[1]).await,
+        Err(PlcError::Malformed(_))
+    ));
+    let (address, _) = fake(b"%01$WC**\r").await;
+    let mut c = config(MewtocolTransport::Tcp, &address, 200, 0);
+    c.bcc = false;
+    let plc = MewtocolClient::new(c).unwrap();
+    plc.write_words(&plc.parse_address("WR0").unwrap(), &[1]).await.unwrap();
+    // A device error reply with its BCC (`%01!40` + `01`): code 40 surfaces.
+    let (address, _) = fake(b"%01!4001\r").await;
+    let plc = MewtocolClient::new(config(MewtocolTransport::Tcp, &address, 200, 0)).unwrap();
+    match plc.read_words(&plc.parse_address("DT0").unwrap(), 1).await.unwrap_err() {
+        PlcError::Device { protocol: "mewtocol", code: 40, meaning: "BCC error" } => {}
+        other => panic!("{other:?}"),
+    }
 }

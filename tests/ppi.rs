@@ -173,3 +173,58 @@ async fn a_late_response_is_not_taken_for_the_next_answer() {
     assert_eq!(plc.read_words(&at("VW2"), 1).await.unwrap(), vec![0x2222]);
     assert_eq!(plc.read_words(&at("VW0"), 1).await.unwrap(), vec![0x1111]);
 }
+
+/// A fake S7-200 on TCP: `E5` to every request frame, `response` to every poll.
+async fn fake(response: Vec<u8>) -> String {
+    use rackd::protocols::ppi::frame::{self, Frame, Scan};
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let address = listener.local_addr().unwrap().to_string();
+    tokio::spawn(async move {
+        let (mut stream, _) = listener.accept().await.unwrap();
+        let mut rx = Vec::new();
+        while let Ok(1..) = stream.read_buf(&mut rx).await {
+            while let Scan::Found { end, frame } = frame::scan(&rx) {
+                rx.drain(..end);
+                let out = match frame {
+                    Frame::Long { .. } => vec![frame::ACK],
+                    _ => response.clone(),
+                };
+                if stream.write_all(&out).await.is_err() {
+                    return;
+                }
+            }
+        }
+    });
+    address
+}
+
+fn hex(text: &str) -> Vec<u8> {
+    text.split_whitespace().map(|b| u8::from_str_radix(b, 16).unwrap()).collect()
+}
+
+#[tokio::test]
+async fn responses_with_a_wrong_fcs_are_rejected() {
+    let seed = "68 18 18 68 00 02 08 32 03 00 00 00 00 00 02 00 07 00 00 04 01 FF 04 00 18 99 34 56 8B 16";
+    let read = Item { size: Size::Byte, count: 3, area: MemArea::V, offset: 800 };
+    // The seed's response as is (PDU reference 0, so reference matching is off).
+    let mut c = config(PpiTransport::Tcp, &fake(hex(seed)).await);
+    c.match_pdu_ref = false;
+    assert_eq!(PpiClient::new(c).unwrap().read(read).await.unwrap(), vec![0x99, 0x34, 0x56]);
+    // With reference matching on, a reference-0 response is not ours.
+    let mut c = config(PpiTransport::Tcp, &fake(hex(seed)).await);
+    c.retries = 0;
+    let err = PpiClient::new(c).unwrap().read(read).await.unwrap_err();
+    assert!(matches!(err, PlcError::Malformed(m) if m.contains("stale")), "{err:?}");
+    // The same response with its FCS changed: rejected on every attempt.
+    let mut c = config(PpiTransport::Tcp, &fake(hex(&seed.replace("8B 16", "8C 16"))).await);
+    c.match_pdu_ref = false;
+    let err = PpiClient::new(c).unwrap().read(read).await.unwrap_err();
+    assert!(matches!(err, PlcError::Malformed("FCS error in the response")), "{err:?}");
+    // The seed's refusal `85 00`.
+    let refused = hex("68 0F 0F 68 00 02 08 32 02 00 00 00 00 00 00 00 00 85 00 C3 16");
+    let mut c = config(PpiTransport::Tcp, &fake(refused).await);
+    c.match_pdu_ref = false;
+    let err = PpiClient::new(c).unwrap().write(read, &[1, 2, 3]).await.unwrap_err();
+    assert!(matches!(err, PlcError::Device { protocol: "ppi", code: 0x8500, .. }), "{err:?}");
+}

@@ -125,7 +125,7 @@ mod tests {
         assert_eq!(parse("Y1A").unwrap(), at("Y", 26));
         assert_eq!(parse("Y001A").unwrap(), at("Y", 26));
         assert_eq!(parse("C7").unwrap(), at("C", 7));
-        assert_eq!(parse("T9999F").unwrap_err().to_string().contains("out of range"), true);
+        assert!(parse("T9999F").unwrap_err().to_string().contains("out of range"));
         for bad in ["", "DT", "DT1A", "Q1", "RG", "WZ1", "DT100000", "WR1000", "R"] {
             assert!(parse(bad).is_err(), "{bad}");
         }

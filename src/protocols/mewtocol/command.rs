@@ -155,7 +155,7 @@ pub fn push_word(out: &mut Vec<u8>, w: u16) {
 
 /// Parses words written low byte first, 4 hex characters each.
 pub fn parse_words(b: &[u8]) -> Option<Vec<u16>> {
-    if b.len() % 4 != 0 {
+    if !b.len().is_multiple_of(4) {
         return None;
     }
     b.chunks(4)

@@ -60,7 +60,7 @@ impl Bank {
         let start = match item.size {
             Size::Timer | Size::Counter => item.offset as usize * 2,
             Size::Bit => item.offset as usize / 8,
-            _ if item.offset % 8 != 0 => return Err(OUT_OF_RANGE),
+            _ if !item.offset.is_multiple_of(8) => return Err(OUT_OF_RANGE),
             _ => item.offset as usize / 8,
         };
         let bytes = if item.size == Size::Bit { 1 } else { item.data_len() };

@@ -55,7 +55,7 @@ impl PlcMemory for PpiClient {
     async fn read_words(&self, start: &Address, count: u16) -> Result<Vec<u16>, PlcError> {
         let target = words_target(start)?;
         let elements = match target.size {
-            Size::DWord if count % 2 != 0 => {
+            Size::DWord if !count.is_multiple_of(2) => {
                 return Err(PlcError::OutOfRange("double words are read as an even number of words"));
             }
             Size::DWord => count as usize / 2,
@@ -86,7 +86,7 @@ impl PlcMemory for PpiClient {
                 .iter()
                 .map(|&v| u8::try_from(v).map_err(|_| PlcError::OutOfRange("byte values are 0..=255")))
                 .collect::<Result<_, _>>()?,
-            Size::DWord if values.len() % 2 != 0 => {
+            Size::DWord if !values.len().is_multiple_of(2) => {
                 return Err(PlcError::OutOfRange("double words are written as an even number of words"));
             }
             _ => values.iter().flat_map(|v| v.to_be_bytes()).collect(),
