@@ -38,6 +38,7 @@ pub mod address;
 pub mod bank;
 mod client;
 pub mod command;
+pub mod contact;
 pub mod error_code;
 pub mod frame;
 mod memory;

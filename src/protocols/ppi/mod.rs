@@ -40,6 +40,7 @@
 //!   bytes per value. This follows the S7 convention; it is not checked against a CPU.
 
 pub mod address;
+pub mod area;
 pub mod bank;
 mod client;
 pub mod frame;
