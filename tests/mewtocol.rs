@@ -148,11 +148,11 @@ async fn a_late_reply_is_not_taken_for_the_next_answer() {
     }
     let (_server, plc) = tcp(&s, |c| {
         c.retries = 0;
-        c.timeout = Duration::from_millis(200);
+        c.timeout = Duration::from_millis(400);
     })
     .await;
     let at = |t: &str| plc.parse_address(t).unwrap();
-    s.faults.lock().unwrap().push(Fault::Delay(Duration::from_millis(300)));
+    s.faults.lock().unwrap().push(Fault::Delay(Duration::from_millis(600)));
     assert!(matches!(plc.read_words(&at("DT0"), 1).await, Err(PlcError::Timeout { .. })));
     // The late `RD` reply to DT0 arrives while this RCS waits: it must be skipped, and the
     // RCS answer taken.

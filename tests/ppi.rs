@@ -163,11 +163,11 @@ async fn a_late_response_is_not_taken_for_the_next_answer() {
     }
     let (_server, plc) = tcp(&s, |c| {
         c.retries = 0;
-        c.timeout = Duration::from_millis(200);
+        c.timeout = Duration::from_millis(400);
     })
     .await;
     let at = |t: &str| plc.parse_address(t).unwrap();
-    s.faults.lock().unwrap().push(Fault::Delay(Duration::from_millis(300)));
+    s.faults.lock().unwrap().push(Fault::Delay(Duration::from_millis(600)));
     assert!(matches!(plc.read_words(&at("VW0"), 1).await, Err(PlcError::Timeout { .. })));
     // Same request shape, other data: the late VW0 response must not answer VW2.
     assert_eq!(plc.read_words(&at("VW2"), 1).await.unwrap(), vec![0x2222]);
