@@ -228,3 +228,46 @@ async fn responses_with_a_wrong_fcs_are_rejected() {
     let err = PpiClient::new(c).unwrap().write(read, &[1, 2, 3]).await.unwrap_err();
     assert!(matches!(err, PlcError::Device { protocol: "ppi", code: 0x8500, .. }), "{err:?}");
 }
+
+/// A fake S7-200 that answers each poll with a stale response (the previous PDU reference,
+/// other data) right before the real one: only the real one may be taken.
+#[tokio::test]
+async fn a_response_with_an_old_pdu_reference_is_skipped() {
+    use rackd::protocols::ppi::frame::{self, Frame, Scan};
+    use rackd::protocols::ppi::{Reply, Request};
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let address = listener.local_addr().unwrap().to_string();
+    tokio::spawn(async move {
+        let (mut stream, _) = listener.accept().await.unwrap();
+        let (mut rx, mut last) = (Vec::new(), None);
+        while let Ok(1..) = stream.read_buf(&mut rx).await {
+            while let Scan::Found { end, frame } = frame::scan(&rx) {
+                rx.drain(..end);
+                let mut out = Vec::new();
+                match frame {
+                    Frame::Long { payload, .. } => {
+                        last = Request::decode(&payload).ok();
+                        out.push(frame::ACK);
+                    }
+                    _ => {
+                        let Some((r, request)) = last.take() else { continue };
+                        for (pdu_ref, data) in [(r.wrapping_sub(1), [0xDE, 0xAD]), (r, [0x12, 0x34])] {
+                            let mut pdu = Vec::new();
+                            Reply::Data(data.to_vec()).encode(&request, pdu_ref, &mut pdu);
+                            frame::encode_long(&mut out, 0, 2, frame::FC_RESPONSE, &pdu);
+                        }
+                    }
+                }
+                if stream.write_all(&out).await.is_err() {
+                    return;
+                }
+            }
+        }
+    });
+    let plc = PpiClient::new(config(PpiTransport::Tcp, &address)).unwrap();
+    let vw0 = plc.parse_address("VW0").unwrap();
+    for _ in 0..3 {
+        assert_eq!(plc.read_words(&vw0, 1).await.unwrap(), vec![0x1234]);
+    }
+}
