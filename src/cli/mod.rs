@@ -8,6 +8,7 @@ pub mod plc;
 pub mod plc_mc3e;
 pub mod sim;
 pub mod sim_crane;
+pub mod sim_line;
 pub mod sim_mc3e;
 pub mod sim_modbus;
 

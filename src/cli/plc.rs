@@ -3,6 +3,8 @@
 //! ```text
 //! rackd plc --protocol modbus-udp --address 10.0.0.5:502 read 4x4000 3
 //! rackd plc --protocol modbus-rtu --address /dev/ttyUSB0 --serial 9600,8E1 --unit 2 write 4x4000 10000 10001
+//! rackd plc --protocol mewtocol --address /dev/ttyUSB0 --unit 1 read DT100 2
+//! rackd plc --protocol ppi-tcp --address 10.0.0.7:4001 read VW100 3
 //! ```
 //!
 //! The command builds a `Box<dyn PlcMemory>` from `--protocol` and uses only the trait, so
@@ -13,8 +15,10 @@ use std::time::Duration;
 use anyhow::{Context, anyhow, bail};
 
 use crate::protocols::mc3e::Device;
+use crate::protocols::mewtocol::{self, MewtocolClient, MewtocolConfig, MewtocolTransport};
 use crate::protocols::modbus::address::{self as modbus_address, Table};
 use crate::protocols::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
+use crate::protocols::ppi::{self, PpiClient, PpiConfig, PpiTransport};
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::{Address, PlcError, PlcMemory};
 
@@ -33,6 +37,14 @@ pub enum PlcProtocol {
     Mc3e,
     /// Mitsubishi MC protocol 3E binary over UDP.
     Mc3eUdp,
+    /// Panasonic MEWTOCOL-COM on a serial port (addresses DT100, WR1, R1F, Y1A).
+    Mewtocol,
+    /// Panasonic MEWTOCOL-COM over raw TCP (serial-to-Ethernet gateway).
+    MewtocolTcp,
+    /// Siemens S7-200 PPI on a serial port (addresses VW100, VB0, V10.3, Q0.1, T37).
+    Ppi,
+    /// Siemens S7-200 PPI over raw TCP (serial-to-Ethernet gateway).
+    PpiTcp,
 }
 
 /// Arguments of `rackd plc`.
@@ -44,12 +56,14 @@ pub struct PlcArgs {
     /// HOST:PORT, or a serial device such as /dev/ttyUSB0.
     #[arg(long)]
     pub address: String,
-    /// Serial settings: baud,data bits parity stop bits.
-    #[arg(long, default_value = "9600,8E1")]
-    pub serial: SerialSettings,
-    /// Station (unit) number; 0 broadcasts a write.
-    #[arg(long, default_value_t = 1)]
-    pub unit: u8,
+    /// Serial settings: baud,data bits parity stop bits [default: 9600,8E1; 9600,8O1 for
+    /// MEWTOCOL].
+    #[arg(long)]
+    pub serial: Option<SerialSettings>,
+    /// Station (unit) number; 0 broadcasts a Modbus write [default: 1; 2 for PPI, the
+    /// S7-200's default address].
+    #[arg(long)]
+    pub unit: Option<u8>,
     /// Reply timeout of each try, in milliseconds.
     #[arg(long, default_value_t = 1000)]
     pub timeout_ms: u64,
@@ -62,6 +76,12 @@ pub struct PlcArgs {
     /// The device does not echo the transaction id.
     #[arg(long)]
     pub ignore_transaction_id: bool,
+    /// MEWTOCOL: send `**` instead of a BCC (PLC set up without the check).
+    #[arg(long)]
+    pub no_bcc: bool,
+    /// MEWTOCOL: use `<` long frames.
+    #[arg(long)]
+    pub long_frames: bool,
     /// Print JSON instead of `ADDRESS VALUE` lines.
     #[arg(long)]
     pub json: bool,
@@ -110,10 +130,35 @@ pub async fn connect(args: &PlcArgs) -> Result<Box<dyn PlcMemory>, PlcError> {
                     reason: "not an MC 3E protocol",
                 });
         }
+        PlcProtocol::Mewtocol | PlcProtocol::MewtocolTcp => {
+            let transport = if args.protocol == PlcProtocol::Mewtocol {
+                MewtocolTransport::Serial
+            } else {
+                MewtocolTransport::Tcp
+            };
+            let mut config = MewtocolConfig::new(transport, args.address.clone());
+            config.serial = args.serial.unwrap_or(config.serial);
+            config.station = args.unit.unwrap_or(1);
+            config.timeout = timeout;
+            config.retries = args.retries;
+            config.bcc = !args.no_bcc;
+            config.long_frames = args.long_frames;
+            return Ok(Box::new(MewtocolClient::new(config)?));
+        }
+        PlcProtocol::Ppi | PlcProtocol::PpiTcp => {
+            let transport =
+                if args.protocol == PlcProtocol::Ppi { PpiTransport::Serial } else { PpiTransport::Tcp };
+            let mut config = PpiConfig::new(transport, args.address.clone());
+            config.serial = args.serial.unwrap_or(config.serial);
+            config.plc = args.unit.unwrap_or(2);
+            config.timeout = timeout;
+            config.retries = args.retries;
+            return Ok(Box::new(PpiClient::new(config)?));
+        }
     };
     let mut config = ModbusConfig::new(transport, args.address.clone());
-    config.serial = args.serial;
-    config.unit = args.unit;
+    config.serial = args.serial.unwrap_or_default();
+    config.unit = args.unit.unwrap_or(1);
     config.timeout = timeout;
     config.retries = args.retries;
     config.quirks = Quirks { length0: args.length0, ignore_transaction_id: args.ignore_transaction_id };
@@ -128,6 +173,16 @@ fn is_bit_area(protocol: PlcProtocol, address: &Address) -> bool {
         | PlcProtocol::ModbusRtu
         | PlcProtocol::ModbusRtuTcp => Table::from_area(&address.area).is_some_and(|t| !t.holds_words()),
         PlcProtocol::Mc3e | PlcProtocol::Mc3eUdp => Device::of_area(&address.area).is_ok_and(Device::is_bit),
+        PlcProtocol::Mewtocol | PlcProtocol::MewtocolTcp => mewtocol::address::is_bit_area(address),
+        PlcProtocol::Ppi | PlcProtocol::PpiTcp => ppi::address::is_bit_area(address),
+    }
+}
+
+/// How far apart consecutive items are in `Address.index` (PPI words step 2 bytes).
+fn step(protocol: PlcProtocol, address: &Address) -> u32 {
+    match protocol {
+        PlcProtocol::Ppi | PlcProtocol::PpiTcp => ppi::address::step(address),
+        _ => 1,
     }
 }
 
@@ -139,6 +194,8 @@ fn format_address(protocol: PlcProtocol, address: &Address) -> String {
         | PlcProtocol::ModbusRtuTcp => modbus_address::format(address),
         PlcProtocol::Mc3e | PlcProtocol::Mc3eUdp => Device::of_area(&address.area)
             .map_or_else(|_| format!("{}{}", address.area, address.index), |d| d.format(address.index)),
+        PlcProtocol::Mewtocol | PlcProtocol::MewtocolTcp => mewtocol::address::format(address),
+        PlcProtocol::Ppi | PlcProtocol::PpiTcp => ppi::address::format(address),
     }
 }
 
@@ -149,6 +206,13 @@ pub fn describe(error: &PlcError) -> String {
             format!("exception {code:02X} \"{meaning}\"")
         }
         PlcError::Device { protocol: "mc3e", code, meaning } => format!("end code {code:04X} \"{meaning}\""),
+        PlcError::Device { protocol: "mewtocol", code, meaning } => format!("error {code:02} \"{meaning}\""),
+        PlcError::Device { protocol: "ppi", code, meaning } if *code > 0xFF => {
+            format!("request refused, error class {:02X} code {:02X} \"{meaning}\"", code >> 8, code & 0xFF)
+        }
+        PlcError::Device { protocol: "ppi", code, meaning } => {
+            format!("item return code {code:02X} \"{meaning}\"")
+        }
         PlcError::Timeout { attempts, timeout } => {
             format!("timeout: no reply after {attempts} tries of {} ms", timeout.as_millis())
         }
@@ -216,7 +280,10 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
     let items: Vec<(String, u32)> = values
         .iter()
         .enumerate()
-        .map(|(i, v)| (format_address(args.protocol, &start.offset(i as u32)), *v))
+        .map(|(i, v)| {
+            let at = start.offset(i as u32 * step(args.protocol, &start));
+            (format_address(args.protocol, &at), *v)
+        })
         .collect();
     if args.json {
         let json: Vec<_> =
@@ -250,5 +317,24 @@ mod tests {
         assert_eq!(describe(&e), "exception 02 \"illegal data address\"");
         let t = PlcError::Timeout { attempts: 3, timeout: Duration::from_millis(200) };
         assert_eq!(describe(&t), "timeout: no reply after 3 tries of 200 ms");
+        assert_eq!(describe(&mewtocol::error_code::device_error(63)), "error 63 \"PLC mode error\"");
+        assert_eq!(
+            describe(&ppi::return_code::item_error(0x0A)),
+            "item return code 0A \"object does not exist\""
+        );
+        assert_eq!(
+            describe(&ppi::return_code::refused(0x85, 0)),
+            "request refused, error class 85 code 00 \"error on supplies (request refused)\""
+        );
+    }
+
+    #[test]
+    fn mewtocol_and_ppi_notation() {
+        let vw = ppi::address::parse("VW100").unwrap();
+        assert_eq!(format_address(PlcProtocol::Ppi, &vw.offset(step(PlcProtocol::Ppi, &vw))), "VW102");
+        assert!(is_bit_area(PlcProtocol::PpiTcp, &ppi::address::parse("Q0.1").unwrap()));
+        let y = mewtocol::address::parse("Y1A").unwrap();
+        assert!(is_bit_area(PlcProtocol::Mewtocol, &y));
+        assert_eq!(format_address(PlcProtocol::MewtocolTcp, &y.offset(6)), "Y20");
     }
 }

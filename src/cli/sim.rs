@@ -18,6 +18,10 @@ pub enum SimCommand {
     /// commands on stdin: `alarm CODE`, `clear`, `heartbeat on|off`, `handshake on|off`, `force`, `drop`,
     /// `link on|off`, `status`.
     Crane(super::sim_crane::SimCraneArgs),
+    /// A Panasonic PLC answering MEWTOCOL-COM (DT, X, Y, R, L, T, C) on TCP or a serial port.
+    Mewtocol(super::sim_line::SimLineArgs),
+    /// A Siemens S7-200 answering PPI (V, I, Q, M, SM, S, AI, AQ, T, C) on TCP or a serial port.
+    Ppi(super::sim_line::SimLineArgs),
 }
 
 /// Options of `rackd sim shelf`.
@@ -80,6 +84,14 @@ pub async fn run(cmd: SimCommand) -> anyhow::Result<()> {
         SimCommand::Modbus(args) => super::sim_modbus::run(args).await,
         SimCommand::Mc3e(args) => super::sim_mc3e::run(args).await,
         SimCommand::Crane(args) => super::sim_crane::run(args).await,
+        SimCommand::Mewtocol(args) => {
+            let server = super::sim_line::start_mewtocol(&args).await?;
+            super::sim_line::run(server, "MEWTOCOL", &args).await
+        }
+        SimCommand::Ppi(args) => {
+            let server = super::sim_line::start_ppi(&args).await?;
+            super::sim_line::run(server, "PPI", &args).await
+        }
         SimCommand::Shelf(args) => {
             let sim = ShelfSim::start(&args.listen, args.options()?).await?;
             println!(

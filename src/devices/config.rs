@@ -46,7 +46,8 @@ pub struct DeviceConfig {
     pub kind: DeviceKind,
     /// The aisles whose locations this device serves (jobs are routed by location).
     pub aisles: Vec<u16>,
-    /// `modbus-udp`, `modbus-tcp`, `modbus-rtu`, `modbus-rtu-tcp`, `mc3e` (TCP) or `mc3e-udp`.
+    /// One of [`crate::protocols::link::PROTOCOLS`] (`modbus-udp`, `modbus-tcp`, `modbus-rtu`,
+    /// `modbus-rtu-tcp`, `mc3e`, `mc3e-udp`, `mewtocol`, `mewtocol-tcp`, `ppi`, `ppi-tcp`).
     #[serde(default = "default_protocol")]
     pub protocol: String,
     /// `HOST:PORT`, or a serial device path.

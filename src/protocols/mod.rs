@@ -10,9 +10,12 @@
 //! [`Address`] with [`PlcMemory::parse_address`].
 
 pub mod error;
+pub mod line;
 pub mod link;
 pub mod mc3e;
+pub mod mewtocol;
 pub mod modbus;
+pub mod ppi;
 pub mod serial;
 
 use async_trait::async_trait;

@@ -50,7 +50,7 @@ mod memory;
 pub mod pdu;
 pub mod rtu;
 pub mod server;
-mod transport;
+pub(crate) mod transport;
 
 pub use client::{ClientStats, ModbusClient};
 pub use config::{ModbusConfig, Quirks, Transport};

@@ -1,0 +1,196 @@
+//! The MEWTOCOL-COM client (the computer side): one PLC station over a serial line or raw
+//! TCP to a serial-to-Ethernet gateway, with timeouts and retries in one place.
+
+use std::time::Duration;
+
+use tokio::sync::Mutex;
+use tokio::time::Instant;
+
+use super::command::{Request, Response};
+use super::error_code;
+use super::frame::{self, Bcc, Kind, MAX_LONG, MAX_SHORT, Scan};
+use crate::protocols::PlcError;
+use crate::protocols::line::{LineLink, attempt_error};
+use crate::protocols::modbus::ByteStream;
+use crate::protocols::modbus::transport::{AttemptError, Endpoint};
+use crate::protocols::serial::SerialSettings;
+
+/// How the PLC is reached.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MewtocolTransport {
+    /// A serial port (RS-232C / RS-485).
+    Serial,
+    /// Raw TCP to a serial-to-Ethernet gateway (`HOST:PORT`).
+    Tcp,
+}
+
+/// Settings of a [`MewtocolClient`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct MewtocolConfig {
+    /// Serial or TCP.
+    pub transport: MewtocolTransport,
+    /// Serial device path or `HOST:PORT`.
+    pub address: String,
+    /// Serial line settings (default 9600,8O1, the FP series' factory setting).
+    pub serial: SerialSettings,
+    /// Station number of the PLC, 1..=99 (the seed's `01` is only the default).
+    pub station: u8,
+    /// Reply timeout of each attempt.
+    pub timeout: Duration,
+    /// Resends after a timeout or a bad reply (never after an error reply).
+    pub retries: u32,
+    /// Send a BCC and require one in replies; false sends `**` (PLCs set up without the
+    /// check) and also accepts `**` in replies.
+    pub bcc: bool,
+    /// Use `<` long frames (2048 characters) instead of `%` frames (118).
+    pub long_frames: bool,
+}
+
+impl MewtocolConfig {
+    /// Defaults: station 1, 1 s timeout, 2 retries, BCC on, `%` frames, 9600,8O1.
+    pub fn new(transport: MewtocolTransport, address: impl Into<String>) -> Self {
+        let serial = SerialSettings { parity: tokio_serial::Parity::Odd, ..SerialSettings::default() };
+        MewtocolConfig {
+            transport,
+            address: address.into(),
+            serial,
+            station: 1,
+            timeout: Duration::from_secs(1),
+            retries: 2,
+            bcc: true,
+            long_frames: false,
+        }
+    }
+
+    fn frame_limit(&self) -> usize {
+        if self.long_frames { MAX_LONG } else { MAX_SHORT }
+    }
+
+    /// Most words one RD or RCC reply carries (`%01$RD` + 4 per word + BCC + CR).
+    pub fn max_read_words(&self) -> usize {
+        (self.frame_limit() - 9) / 4
+    }
+
+    /// Most words one WD or WCC command carries (`%01#WDD` + 10 digits + 4 per word + 3).
+    pub fn max_write_words(&self) -> usize {
+        (self.frame_limit() - 20) / 4
+    }
+}
+
+/// A MEWTOCOL-COM client for one station. Requests from concurrent callers go one at a
+/// time. Implements [`crate::protocols::PlcMemory`] (see `memory.rs`).
+pub struct MewtocolClient {
+    config: MewtocolConfig,
+    link: Mutex<LineLink>,
+}
+
+fn check_station(station: u8) -> Result<(), PlcError> {
+    if (1..=99).contains(&station) { Ok(()) } else { Err(PlcError::OutOfRange("station must be 1..=99")) }
+}
+
+impl MewtocolClient {
+    /// A client for `config`; the port or connection is opened on the first request and
+    /// reopened after it is lost.
+    pub fn new(config: MewtocolConfig) -> Result<Self, PlcError> {
+        check_station(config.station)?;
+        let endpoint = match config.transport {
+            MewtocolTransport::Serial => Endpoint::Serial(config.address.clone(), config.serial),
+            MewtocolTransport::Tcp => Endpoint::Tcp(config.address.clone()),
+        };
+        Ok(MewtocolClient { config, link: Mutex::new(LineLink::new(endpoint)) })
+    }
+
+    /// A client over a stream the caller opened (a pty in tests); it cannot be reopened.
+    pub fn over_stream(config: MewtocolConfig, stream: impl ByteStream + 'static) -> Result<Self, PlcError> {
+        check_station(config.station)?;
+        let endpoint = Endpoint::Given(Some(Box::new(stream)));
+        Ok(MewtocolClient { config, link: Mutex::new(LineLink::new(endpoint)) })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &MewtocolConfig {
+        &self.config
+    }
+
+    /// Sends one command and returns its response. An error reply (`!` + code) returns
+    /// [`PlcError::Device`] at once; timeouts and bad replies are retried.
+    pub async fn call(&self, request: &Request) -> Result<Response, PlcError> {
+        request.check().map_err(PlcError::OutOfRange)?;
+        let mut body = Vec::new();
+        request.encode(&mut body);
+        let mut tx = Vec::with_capacity(body.len() + 8);
+        let c = &self.config;
+        frame::encode(&mut tx, c.long_frames, c.station, Kind::Command, &body, c.bcc);
+        if tx.len() > c.frame_limit() {
+            return Err(PlcError::OutOfRange("command longer than one frame"));
+        }
+        let mut link = self.link.lock().await;
+        let attempts = c.retries + 1;
+        let mut last = AttemptError::Timeout;
+        for attempt in 0..attempts {
+            match self.attempt(&mut link, &tx, request).await {
+                Ok(Ok(response)) => return Ok(response),
+                Ok(Err(code)) => return Err(error_code::device_error(code)),
+                Err(e) => {
+                    tracing::debug!(station = c.station, attempt, error = ?e, "mewtocol attempt failed");
+                    last = e;
+                }
+            }
+        }
+        Err(attempt_error(last, attempts, c.timeout))
+    }
+
+    /// One attempt: flush stale input, send, and wait for this station's reply.
+    async fn attempt(
+        &self,
+        link: &mut LineLink,
+        tx: &[u8],
+        request: &Request,
+    ) -> Result<Result<Response, u8>, AttemptError> {
+        let deadline = Instant::now() + self.config.timeout;
+        link.send_fresh(tx, self.config.timeout).await?;
+        let mut reason = None;
+        loop {
+            match frame::scan(&link.rx) {
+                Scan::Found { end, frame } => {
+                    link.rx.drain(..end);
+                    // Our own command echoed by a 2-wire RS-485 adapter, or another station.
+                    if frame.kind == Kind::Command || frame.station != self.config.station {
+                        continue;
+                    }
+                    match frame.bcc {
+                        Bcc::Wrong { .. } => {
+                            reason = Some("BCC error in the reply");
+                            continue;
+                        }
+                        Bcc::Skipped if self.config.bcc => {
+                            reason = Some("reply without a BCC (`**`) while BCC is required");
+                            continue;
+                        }
+                        _ => {}
+                    }
+                    if frame.kind == Kind::Error {
+                        return error_code::parse(&frame.body)
+                            .map(Err)
+                            .ok_or(AttemptError::Malformed("error reply without a 2-digit code"));
+                    }
+                    match request.decode_response(&frame.body) {
+                        Ok(response) => return Ok(Ok(response)),
+                        // A reply to another command (a late one): keep waiting for ours.
+                        Err(msg) => reason = Some(msg),
+                    }
+                }
+                Scan::Bad { end, .. } => {
+                    link.rx.drain(..end);
+                    reason = Some("reply is not a MEWTOCOL frame");
+                }
+                Scan::NeedMore { discard } => {
+                    link.rx.drain(..discard);
+                    if !link.fill(deadline).await? {
+                        return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed));
+                    }
+                }
+            }
+        }
+    }
+}

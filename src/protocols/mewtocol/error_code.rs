@@ -1,0 +1,78 @@
+//! MEWTOCOL-COM error codes (the two digits after `!`) and their meanings.
+
+use crate::protocols::PlcError;
+
+/// BCC error.
+pub const BCC_ERROR: u8 = 40;
+/// Format error.
+pub const FORMAT_ERROR: u8 = 41;
+/// Command not supported.
+pub const NOT_SUPPORTED: u8 = 42;
+/// Procedure error (multi-frame).
+pub const PROCEDURE_ERROR: u8 = 43;
+/// Parameter error (counts, ranges).
+pub const PARAMETER_ERROR: u8 = 60;
+/// Data error (contact, area or number out of range, bad data).
+pub const DATA_ERROR: u8 = 61;
+/// Registration error.
+pub const REGISTRATION_ERROR: u8 = 62;
+/// PLC mode error (e.g. a write while the PLC forbids it).
+pub const MODE_ERROR: u8 = 63;
+
+/// What an error code means, from the MEWTOCOL-COM documentation (spec/mewtocol.md).
+pub fn meaning(code: u8) -> &'static str {
+    match code {
+        BCC_ERROR => "BCC error",
+        FORMAT_ERROR => "format error",
+        NOT_SUPPORTED => "command not supported",
+        PROCEDURE_ERROR => "procedure error (multi-frame)",
+        PARAMETER_ERROR => "parameter error",
+        DATA_ERROR => "data error",
+        REGISTRATION_ERROR => "registration error",
+        MODE_ERROR => "PLC mode error",
+        _ => "unknown MEWTOCOL error code",
+    }
+}
+
+/// The [`PlcError`] for an error response.
+pub fn device_error(code: u8) -> PlcError {
+    PlcError::Device { protocol: "mewtocol", code: code.into(), meaning: meaning(code) }
+}
+
+/// Parses the body of an `!` frame: two decimal digits.
+pub fn parse(body: &[u8]) -> Option<u8> {
+    match body {
+        [a @ b'0'..=b'9', b @ b'0'..=b'9'] => Some((a - b'0') * 10 + (b - b'0')),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_documented_code_has_its_meaning() {
+        for (code, text) in [
+            (40, "BCC error"),
+            (41, "format error"),
+            (42, "command not supported"),
+            (43, "procedure error (multi-frame)"),
+            (60, "parameter error"),
+            (61, "data error"),
+            (62, "registration error"),
+            (63, "PLC mode error"),
+            (99, "unknown MEWTOCOL error code"),
+        ] {
+            match device_error(code) {
+                PlcError::Device { protocol: "mewtocol", code: c, meaning } => {
+                    assert_eq!((c, meaning), (code as u32, text));
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(parse(b"63"), Some(63));
+        assert_eq!(parse(b"6"), None);
+        assert_eq!(parse(b"6x"), None);
+    }
+}

@@ -1,0 +1,111 @@
+//! A simulated Panasonic PLC answering MEWTOCOL-COM on a byte stream (serial port, pty) or
+//! on TCP connections (like a serial-to-Ethernet gateway in front of a PLC).
+//!
+//! Commands with a wrong BCC get `!40`; a command that does not parse gets `!41` or `!42`;
+//! an address past the bank gets `!61`. Commands for other stations are ignored, as on a
+//! shared RS-485 line. Faults ([`SharedFaults`]) drop, delay, prefix noise or answer a
+//! chosen error code.
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+use super::bank::SharedBank;
+use super::command::Request;
+use super::error_code::BCC_ERROR;
+use super::frame::{self, Bcc, Frame, Kind, Scan};
+use crate::protocols::line::{self, Faults, LineServer, SharedFaults};
+use crate::protocols::modbus::ByteStream;
+
+/// What a server serves.
+#[derive(Clone)]
+pub struct ServerState {
+    /// The PLC memory.
+    pub bank: SharedBank,
+    /// The fault settings.
+    pub faults: SharedFaults,
+    /// The station number answered to.
+    pub station: u8,
+}
+
+impl ServerState {
+    /// Station 1 serving `bank`, without faults.
+    pub fn new(bank: SharedBank) -> Self {
+        ServerState { bank, faults: Faults::default().shared(), station: 1 }
+    }
+
+    /// The reply to one command frame, or None when it is not for this station.
+    fn reply(&self, frame: &Frame, error: Option<u16>) -> Option<Vec<u8>> {
+        if frame.kind != Kind::Command || frame.station != self.station {
+            return None;
+        }
+        let mut body = Vec::new();
+        let kind = match (frame.bcc, error) {
+            (Bcc::Wrong { .. }, _) => Err(BCC_ERROR),
+            (_, Some(code)) => Err((code % 100) as u8),
+            _ => Request::decode(&frame.body).and_then(|request| {
+                let response = self.bank.lock().unwrap_or_else(|p| p.into_inner()).execute(&request)?;
+                response.encode(&request, &mut body);
+                Ok(())
+            }),
+        };
+        let kind = match kind {
+            Ok(()) => Kind::Ok,
+            Err(code) => {
+                body = format!("{code:02}").into_bytes();
+                Kind::Error
+            }
+        };
+        let mut out = Vec::new();
+        frame::encode(&mut out, frame.long, self.station, kind, &body, true);
+        Some(out)
+    }
+}
+
+/// Serves one stream until it closes or the returned server is dropped.
+pub fn serve_stream(stream: impl ByteStream + 'static, state: ServerState) -> LineServer {
+    LineServer::new(None, tokio::spawn(serve(Box::new(stream), state)))
+}
+
+/// Listens on `addr` (port 0 picks one) and serves each TCP connection as a stream.
+pub async fn serve_tcp(addr: &str, state: ServerState) -> std::io::Result<LineServer> {
+    line::spawn_tcp(addr, move |stream| serve(Box::new(stream), state.clone())).await
+}
+
+async fn serve(mut stream: Box<dyn ByteStream>, state: ServerState) {
+    let mut rx = Vec::with_capacity(256);
+    loop {
+        loop {
+            match frame::scan(&rx) {
+                Scan::Found { end, frame } => {
+                    rx.drain(..end);
+                    if frame.kind != Kind::Command || frame.station != state.station {
+                        continue;
+                    }
+                    let plan = line::faults::plan(&state.faults);
+                    if plan.drop || plan.drop_ack {
+                        continue;
+                    }
+                    let Some(reply) = state.reply(&frame, plan.error) else { continue };
+                    if !plan.delay.is_zero() {
+                        tokio::time::sleep(plan.delay).await;
+                    }
+                    let mut out = plan.garbage.unwrap_or_default();
+                    out.extend_from_slice(&reply);
+                    if stream.write_all(&out).await.is_err() || stream.flush().await.is_err() {
+                        return;
+                    }
+                }
+                Scan::Bad { end, .. } => {
+                    rx.drain(..end);
+                }
+                Scan::NeedMore { discard } => {
+                    rx.drain(..discard);
+                    break;
+                }
+            }
+        }
+        match stream.read_buf(&mut rx).await {
+            Ok(0) | Err(_) => return,
+            Ok(_) => {}
+        }
+    }
+}

@@ -1,0 +1,235 @@
+//! The PPI master: one S7-200 over a serial line (9600/19200/187500 baud, 8E1) or raw TCP
+//! through a gateway, with the two-step exchange, timeouts and retries in one place.
+
+use std::sync::atomic::{AtomicU16, Ordering};
+use std::time::Duration;
+
+use tokio::sync::Mutex;
+use tokio::time::Instant;
+
+use super::frame::{self, FC_POLL, FC_RESPONSE, Frame, Scan};
+use super::pdu::{Item, Reply, Request};
+use super::return_code;
+use crate::protocols::PlcError;
+use crate::protocols::line::{LineLink, attempt_error};
+use crate::protocols::modbus::ByteStream;
+use crate::protocols::modbus::transport::{AttemptError, Endpoint};
+use crate::protocols::serial::SerialSettings;
+
+/// How the PLC is reached.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PpiTransport {
+    /// The RS-485 port through a serial adapter.
+    Serial,
+    /// Raw TCP to a serial-to-Ethernet gateway (`HOST:PORT`).
+    Tcp,
+}
+
+/// Settings of a [`PpiClient`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct PpiConfig {
+    /// Serial or TCP.
+    pub transport: PpiTransport,
+    /// Serial device path or `HOST:PORT`.
+    pub address: String,
+    /// Serial settings (default 9600,8E1; the S7-200 also runs 19200 and 187500).
+    pub serial: SerialSettings,
+    /// The PLC's station address (default 2).
+    pub plc: u8,
+    /// Our (master) address (default 0).
+    pub master: u8,
+    /// Time allowed for the whole exchange (request, E5, poll, response) of one attempt.
+    pub timeout: Duration,
+    /// Resends after a timeout or bad reply (never after a return code from the PLC).
+    pub retries: u32,
+    /// Take only responses carrying the PDU reference of this request's attempts. Turn off
+    /// for a device that answers with reference 0 whatever it was sent.
+    pub match_pdu_ref: bool,
+}
+
+impl PpiConfig {
+    /// Defaults: PLC 2, master 0, 9600,8E1, 1 s, 2 retries, PDU references matched.
+    pub fn new(transport: PpiTransport, address: impl Into<String>) -> Self {
+        PpiConfig {
+            transport,
+            address: address.into(),
+            serial: SerialSettings::default(),
+            plc: 2,
+            master: 0,
+            timeout: Duration::from_secs(1),
+            retries: 2,
+            match_pdu_ref: true,
+        }
+    }
+}
+
+/// A PPI master for one S7-200. Requests from concurrent callers go one at a time.
+/// Implements [`crate::protocols::PlcMemory`] (see `memory.rs`).
+pub struct PpiClient {
+    config: PpiConfig,
+    link: Mutex<LineLink>,
+    next_ref: AtomicU16,
+}
+
+fn check(config: &PpiConfig) -> Result<(), PlcError> {
+    if config.plc > 126 || config.master > 126 || config.plc == config.master {
+        return Err(PlcError::OutOfRange("PPI addresses are 0..=126 and the PLC's differs from ours"));
+    }
+    Ok(())
+}
+
+impl PpiClient {
+    /// A client for `config`; the port or connection opens on the first request.
+    pub fn new(config: PpiConfig) -> Result<Self, PlcError> {
+        check(&config)?;
+        let endpoint = match config.transport {
+            PpiTransport::Serial => Endpoint::Serial(config.address.clone(), config.serial),
+            PpiTransport::Tcp => Endpoint::Tcp(config.address.clone()),
+        };
+        Ok(Self::with(config, endpoint))
+    }
+
+    /// A client over a stream the caller opened (a pty in tests); it cannot be reopened.
+    pub fn over_stream(config: PpiConfig, stream: impl ByteStream + 'static) -> Result<Self, PlcError> {
+        check(&config)?;
+        Ok(Self::with(config, Endpoint::Given(Some(Box::new(stream)))))
+    }
+
+    fn with(config: PpiConfig, endpoint: Endpoint) -> Self {
+        PpiClient {
+            config,
+            link: Mutex::new(LineLink::new(endpoint)),
+            next_ref: AtomicU16::new(rand::random()),
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PpiConfig {
+        &self.config
+    }
+
+    /// Reads one item; the item's return code, if not success, is the error.
+    pub async fn read(&self, item: Item) -> Result<Vec<u8>, PlcError> {
+        match self.call(&Request::Read(item)).await? {
+            Reply::Data(bytes) => Ok(bytes),
+            _ => Err(PlcError::Malformed("reply of the wrong kind")),
+        }
+    }
+
+    /// Writes one item.
+    pub async fn write(&self, item: Item, data: &[u8]) -> Result<(), PlcError> {
+        self.call(&Request::Write(item, data.to_vec())).await.map(|_| ())
+    }
+
+    /// Puts the PLC in RUN (the mode switch must be at RUN or TERM).
+    pub async fn run(&self) -> Result<(), PlcError> {
+        self.call(&Request::Run).await.map(|_| ())
+    }
+
+    /// Puts the PLC in STOP.
+    pub async fn stop(&self) -> Result<(), PlcError> {
+        self.call(&Request::Stop).await.map(|_| ())
+    }
+
+    /// Sends one request through the two-step exchange. Item return codes and refusals
+    /// come back as [`PlcError::Device`] at once; timeouts and bad frames are retried.
+    pub async fn call(&self, request: &Request) -> Result<Reply, PlcError> {
+        request.check().map_err(PlcError::OutOfRange)?;
+        let mut link = self.link.lock().await;
+        let attempts = self.config.retries + 1;
+        let mut refs = Vec::with_capacity(attempts as usize);
+        let mut last = AttemptError::Timeout;
+        for attempt in 0..attempts {
+            refs.push(self.next_ref.fetch_add(1, Ordering::Relaxed));
+            match self.attempt(&mut link, request, &refs).await {
+                Ok(Reply::ItemError(code)) => return Err(return_code::item_error(code)),
+                Ok(Reply::Refused { class, code }) => return Err(return_code::refused(class, code)),
+                Ok(reply) => return Ok(reply),
+                Err(e) => {
+                    tracing::debug!(plc = self.config.plc, attempt, error = ?e, "ppi attempt failed");
+                    last = e;
+                }
+            }
+        }
+        Err(attempt_error(last, attempts, self.config.timeout))
+    }
+
+    async fn attempt(
+        &self,
+        link: &mut LineLink,
+        request: &Request,
+        refs: &[u16],
+    ) -> Result<Reply, AttemptError> {
+        let c = &self.config;
+        let deadline = Instant::now() + c.timeout;
+        let mut pdu = Vec::with_capacity(64);
+        request.encode(*refs.last().unwrap_or(&0), &mut pdu);
+        let mut tx = Vec::with_capacity(pdu.len() + 9);
+        frame::encode_long(&mut tx, c.plc, c.master, request.fc(), &pdu);
+        link.send_fresh(&tx, c.timeout).await?;
+        // Step 1: the short acknowledgement. Whole frames before it are stale and skipped.
+        let mut reason = None;
+        loop {
+            match frame::scan(&link.rx) {
+                Scan::Found { end, frame } => {
+                    link.rx.drain(..end);
+                    if matches!(frame, Frame::Ack(_)) {
+                        break;
+                    }
+                }
+                Scan::Bad { end, .. } => {
+                    link.rx.drain(..end);
+                }
+                Scan::NeedMore { discard } => {
+                    link.rx.drain(..discard);
+                    if !link.fill(deadline).await? {
+                        return Err(AttemptError::Timeout);
+                    }
+                }
+            }
+        }
+        // Step 2: the poll, and the response frame.
+        tx.clear();
+        frame::encode_short(&mut tx, c.plc, c.master, FC_POLL);
+        link.send(&tx, c.timeout).await?;
+        loop {
+            match frame::scan(&link.rx) {
+                Scan::Found { end, frame } => {
+                    link.rx.drain(..end);
+                    let Frame::Long { da, sa, fc: FC_RESPONSE, payload } = frame else { continue };
+                    if da != c.master || sa != c.plc {
+                        continue;
+                    }
+                    match Reply::decode(&payload, request) {
+                        Ok((r, reply)) if !c.match_pdu_ref || refs.contains(&r) => return Ok(reply),
+                        Ok(_) => reason = Some("stale reply (PDU reference of an earlier request)"),
+                        Err(e) => reason = Some(pdu_message(e)),
+                    }
+                }
+                Scan::Bad { end, error } => {
+                    link.rx.drain(..end);
+                    if error == frame::FrameError::BadFcs {
+                        reason = Some("FCS error in the response");
+                    }
+                }
+                Scan::NeedMore { discard } => {
+                    link.rx.drain(..discard);
+                    if !link.fill(deadline).await? {
+                        return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed));
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn pdu_message(e: super::pdu::PduError) -> &'static str {
+    use super::pdu::PduError;
+    match e {
+        PduError::NotS7 => "response is not an S7 acknowledgement",
+        PduError::BadLength => "response PDU lengths do not add up",
+        PduError::Unsupported => "response to an unsupported function",
+        PduError::BadItem => "malformed data item in the response",
+        PduError::Mismatch => "response does not match the request",
+    }
+}

@@ -1,0 +1,84 @@
+//! PPI / S7 return codes: the per-item code of a data item, and the error class of a
+//! refused request, with their meanings.
+
+use crate::protocols::PlcError;
+
+/// Item return code for success.
+pub const SUCCESS: u8 = 0xFF;
+/// Item return code: hardware fault.
+pub const HARDWARE_FAULT: u8 = 0x01;
+/// Item return code: access to the object not allowed.
+pub const ACCESS_DENIED: u8 = 0x03;
+/// Item return code: address out of range.
+pub const OUT_OF_RANGE: u8 = 0x05;
+/// Item return code: data type not supported.
+pub const TYPE_NOT_SUPPORTED: u8 = 0x06;
+/// Item return code: data type or size mismatch.
+pub const SIZE_MISMATCH: u8 = 0x07;
+/// Item return code: object does not exist.
+pub const NO_OBJECT: u8 = 0x0A;
+
+/// What an item return code means.
+pub fn item_meaning(code: u8) -> &'static str {
+    match code {
+        SUCCESS => "success",
+        HARDWARE_FAULT => "hardware fault",
+        ACCESS_DENIED => "accessing the object not allowed",
+        OUT_OF_RANGE => "address out of range",
+        TYPE_NOT_SUPPORTED => "data type not supported",
+        SIZE_MISMATCH => "data type or size mismatch",
+        NO_OBJECT => "object does not exist",
+        _ => "unknown item return code",
+    }
+}
+
+/// What a header error class means (S7 protocol error classes).
+pub fn class_meaning(class: u8) -> &'static str {
+    match class {
+        0x81 => "application relationship error",
+        0x82 => "object definition error",
+        0x83 => "no resources available",
+        0x84 => "error on service processing",
+        0x85 => "error on supplies (request refused)",
+        0x87 => "access error",
+        _ => "unknown error class",
+    }
+}
+
+/// The error for a failed item: `code` is the item's return code (below 0x100).
+pub fn item_error(code: u8) -> PlcError {
+    PlcError::Device { protocol: "ppi", code: code.into(), meaning: item_meaning(code) }
+}
+
+/// The error for a refused request: `code` is class x 256 + code (0x8500 and up).
+pub fn refused(class: u8, code: u8) -> PlcError {
+    PlcError::Device {
+        protocol: "ppi",
+        code: u32::from(class) << 8 | u32::from(code),
+        meaning: class_meaning(class),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_keep_their_number_and_meaning() {
+        for (code, text) in [
+            (0x01, "hardware fault"),
+            (0x03, "accessing the object not allowed"),
+            (0x05, "address out of range"),
+            (0x06, "data type not supported"),
+            (0x07, "data type or size mismatch"),
+            (0x0A, "object does not exist"),
+            (0x42, "unknown item return code"),
+        ] {
+            assert!(matches!(item_error(code), PlcError::Device { protocol: "ppi", code: c, meaning }
+                if c == code as u32 && meaning == text));
+        }
+        assert!(matches!(refused(0x85, 0), PlcError::Device { code: 0x8500, meaning, .. }
+            if meaning.starts_with("error on supplies")));
+        assert_eq!(class_meaning(0x10), "unknown error class");
+    }
+}

@@ -1,0 +1,126 @@
+//! A simulated S7-200 answering PPI on a byte stream (serial port, pty) or on TCP
+//! connections (like a serial-to-Ethernet gateway), with the two-step exchange: a request
+//! is acknowledged with `E5` and executed, and its response is sent when the master polls.
+//!
+//! A poll with nothing pending is answered with `E5`. Frames with a bad FCS are ignored, as
+//! a PLC ignores a frame it did not receive intact. Faults ([`SharedFaults`]): drop (E5
+//! sent, no response to the poll), lost E5 (request ignored), delay and noise before the
+//! response, and an error code: below 0x100 an item return code, above it a refusal with
+//! error class `code >> 8`.
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+use super::bank::SharedBank;
+use super::frame::{self, ACK, FC_POLL, FC_RESPONSE, Frame, Scan};
+use super::pdu::{Reply, Request};
+use crate::protocols::line::{self, Faults, LineServer, Plan, SharedFaults};
+use crate::protocols::modbus::ByteStream;
+
+/// What a server serves.
+#[derive(Clone)]
+pub struct ServerState {
+    /// The PLC memory.
+    pub bank: SharedBank,
+    /// The fault settings.
+    pub faults: SharedFaults,
+    /// The PLC's station address (default 2).
+    pub address: u8,
+}
+
+impl ServerState {
+    /// Address 2 serving `bank`, without faults.
+    pub fn new(bank: SharedBank) -> Self {
+        ServerState { bank, faults: Faults::default().shared(), address: 2 }
+    }
+
+    /// The response frame to a request PDU from `master`.
+    fn respond(&self, master: u8, payload: &[u8], plan: &Plan) -> Vec<u8> {
+        let (pdu_ref, reply, request) = match Request::decode(payload) {
+            Ok((r, request)) => {
+                let reply = match plan.error {
+                    Some(code) if code > 0xFF => {
+                        Reply::Refused { class: (code >> 8) as u8, code: code as u8 }
+                    }
+                    Some(code) => Reply::ItemError(code as u8),
+                    None => self.bank.lock().unwrap_or_else(|p| p.into_inner()).execute(&request),
+                };
+                (r, reply, request)
+            }
+            Err(_) => {
+                let r = payload.get(4..6).map_or(0, |b| u16::from_be_bytes([b[0], b[1]]));
+                (r, Reply::Refused { class: 0x84, code: 0x04 }, Request::Stop)
+            }
+        };
+        let mut pdu = Vec::new();
+        reply.encode(&request, pdu_ref, &mut pdu);
+        let mut out = Vec::new();
+        frame::encode_long(&mut out, master, self.address, FC_RESPONSE, &pdu);
+        out
+    }
+}
+
+/// Serves one stream until it closes or the returned server is dropped.
+pub fn serve_stream(stream: impl ByteStream + 'static, state: ServerState) -> LineServer {
+    LineServer::new(None, tokio::spawn(serve(Box::new(stream), state)))
+}
+
+/// Listens on `addr` (port 0 picks one) and serves each TCP connection as a stream.
+pub async fn serve_tcp(addr: &str, state: ServerState) -> std::io::Result<LineServer> {
+    line::spawn_tcp(addr, move |stream| serve(Box::new(stream), state.clone())).await
+}
+
+async fn serve(mut stream: Box<dyn ByteStream>, state: ServerState) {
+    let mut rx = Vec::with_capacity(512);
+    // The response waiting for the master's poll, and the plan for sending it.
+    let mut pending: Option<(Vec<u8>, Plan)> = None;
+    loop {
+        loop {
+            let out = match frame::scan(&rx) {
+                Scan::Found { end, frame } => {
+                    rx.drain(..end);
+                    match frame {
+                        Frame::Long { da, sa, payload, .. } if da == state.address => {
+                            let plan = line::faults::plan(&state.faults);
+                            if plan.drop_ack {
+                                continue;
+                            }
+                            let response = state.respond(sa, &payload, &plan);
+                            pending = (!plan.drop).then_some((response, plan));
+                            vec![ACK]
+                        }
+                        Frame::Short { da, fc: FC_POLL, .. } if da == state.address => match pending.take() {
+                            Some((response, plan)) => {
+                                if !plan.delay.is_zero() {
+                                    tokio::time::sleep(plan.delay).await;
+                                }
+                                let mut out = plan.garbage.unwrap_or_default();
+                                out.extend_from_slice(&response);
+                                out
+                            }
+                            None => vec![ACK],
+                        },
+                        _ => continue,
+                    }
+                }
+                Scan::Bad { end, .. } => {
+                    rx.drain(..end);
+                    continue;
+                }
+                Scan::NeedMore { discard } => {
+                    rx.drain(..discard);
+                    break;
+                }
+            };
+            if stream.write_all(&out).await.is_err() || stream.flush().await.is_err() {
+                return;
+            }
+        }
+        if rx.len() > 4096 {
+            rx.clear();
+        }
+        match stream.read_buf(&mut rx).await {
+            Ok(0) | Err(_) => return,
+            Ok(_) => {}
+        }
+    }
+}
