@@ -66,6 +66,24 @@ pub struct CraneStatus {
 }
 
 impl DeviceStatus {
+    /// Records the outcome of one request to the device (time of contact, failures in a
+    /// row, last error) and returns whether the link is up now, given whether it was: an
+    /// answer brings it up; it goes down after `offline_after` failures in a row.
+    pub fn record_contact(&mut self, result: Result<(), String>, offline_after: u32, was_up: bool) -> bool {
+        match result {
+            Ok(()) => {
+                self.consecutive_failures = 0;
+                self.last_contact = Some(crate::store::time::from_ms(crate::store::time::now_ms()));
+                true
+            }
+            Err(e) => {
+                self.consecutive_failures += 1;
+                self.last_error = Some(e);
+                was_up && self.consecutive_failures < offline_after
+            }
+        }
+    }
+
     /// The status of a device not yet heard from.
     pub fn new(id: &str, kind: super::DeviceKind, protocol: &str, address: &str, slots_total: u16) -> Self {
         DeviceStatus {

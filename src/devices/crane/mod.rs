@@ -59,7 +59,6 @@ use super::config::DeviceConfig;
 use super::status::{CraneStatus, DeviceStatus};
 use crate::domain::Failure;
 use crate::protocols::{Address, PlcError, PlcMemory};
-use crate::store::time::from_ms;
 use crate::store::writer::Writer;
 use ack::AckReading;
 use heartbeat::Heartbeat;
@@ -220,19 +219,8 @@ impl Crane {
     fn contact(&mut self, result: Result<(), String>) {
         let offline_after = self.config.offline_after;
         let mut link_ok = self.link_ok;
-        self.update_status(|s| match result {
-            Ok(()) => {
-                link_ok = true;
-                s.consecutive_failures = 0;
-                s.last_contact = Some(from_ms(crate::store::time::now_ms()));
-            }
-            Err(e) => {
-                s.consecutive_failures += 1;
-                s.last_error = Some(e);
-                if s.consecutive_failures >= offline_after {
-                    link_ok = false;
-                }
-            }
+        self.update_status(|s| {
+            link_ok = s.record_contact(result, offline_after, link_ok);
         });
         self.link_ok = link_ok;
         self.show_online();

@@ -37,7 +37,6 @@ use super::DeviceRequest;
 use super::config::DeviceConfig;
 use super::status::DeviceStatus;
 use crate::protocols::{Address, PlcError, PlcMemory};
-use crate::store::time::from_ms;
 use crate::store::writer::Writer;
 
 /// What rackd knows of one task slot.
@@ -141,23 +140,15 @@ impl Shelf {
     fn contact(&self, result: Result<(), String>) {
         let offline_after = self.config.offline_after;
         let id = self.config.id.clone();
-        self.update_status(|s| match result {
-            Ok(()) => {
-                if !s.online {
-                    tracing::info!(device = %id, "device online");
-                }
-                s.online = true;
-                s.consecutive_failures = 0;
-                s.last_contact = Some(from_ms(crate::store::time::now_ms()));
-            }
-            Err(e) => {
-                s.consecutive_failures += 1;
-                s.last_error = Some(e);
-                if s.online && s.consecutive_failures >= offline_after {
-                    tracing::warn!(device = %id, error = ?s.last_error, "device offline");
-                    s.online = false;
+        self.update_status(|s| {
+            let up = s.record_contact(result, offline_after, s.online);
+            if up != s.online {
+                match up {
+                    true => tracing::info!(device = %id, "device online"),
+                    false => tracing::warn!(device = %id, error = ?s.last_error, "device offline"),
                 }
             }
+            s.online = up;
         });
     }
 
