@@ -15,14 +15,18 @@ use crate::api::{self, AppState};
 use crate::auth::KeyRing;
 use crate::config::Config;
 use crate::devices::{self, Devices};
+use crate::service::events::Hub;
 use crate::service::intake::Rules;
-use crate::store::{self, locations, time::now_ms, writer::Writer};
+use crate::service::monitor::{self, MonitorOptions};
+use crate::store::writer::{Hooks, Record, Writer};
+use crate::store::{self, locations, time::now_ms};
 
 /// A bound, ready-to-run rackd.
 pub struct Application {
     listener: TcpListener,
     router: axum::Router,
     writer_task: JoinHandle<()>,
+    /// Device tasks, the device monitor and retention: stopped before the writer drains.
     device_tasks: Vec<JoinHandle<()>>,
     devices: Devices,
     keep: Vec<Box<dyn std::any::Any + Send>>,
@@ -53,15 +57,23 @@ impl Application {
         let layout = config.layout();
         locations::seed(&mut *pool.acquire().await?, &layout, now_ms()).await.context("seeding locations")?;
         let wakers = devices::wakers(&config.devices);
+        let hub = Hub::new(config.events.buffer);
+        let hooks = Hooks { wake: Some(devices::wake_hook(wakers.clone())), publish: Some(hub.hook()) };
         let (writer, writer_task) = Writer::start(
             &db.path,
             Duration::from_millis(db.busy_timeout_ms),
             config.intake.max_group,
             config.intake.queue,
-            Some(devices::wake_hook(wakers.clone())),
+            hooks,
         )
         .context("opening the job writer's connection")?;
-        let (devices, device_tasks) = devices::start(&config.devices, wakers, &writer, &pool).await?;
+        let (devices, mut device_tasks) = devices::start(&config.devices, wakers, &writer, &pool).await?;
+        let options = MonitorOptions {
+            period: Duration::from_millis(config.events.device_period_ms),
+            contact_refresh: Duration::from_millis(config.events.contact_refresh_ms),
+        };
+        device_tasks.push(tokio::spawn(monitor::run(devices.clone(), writer.clone(), pool.clone(), options)));
+        device_tasks.push(tokio::spawn(retention(writer.clone(), config.events.retention_hours)));
         let rules = Rules {
             layout,
             devices: config.devices.iter().map(|d| (d.id.clone(), d.kind.job_kinds())).collect(),
@@ -74,6 +86,8 @@ impl Application {
             keys: Arc::new(keys),
             metrics: Arc::new(Metrics::default()),
             devices: devices.clone(),
+            hub,
+            events: Arc::new(config.events.clone()),
         };
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);
@@ -116,6 +130,22 @@ impl Application {
         drop(self.keep);
         tracing::info!("rackd stopped");
         Ok(())
+    }
+}
+
+/// Deletes events older than the retention from the log, at start and then every tenth of
+/// the retention (at most hourly).
+async fn retention(writer: Writer, hours: u64) {
+    let keep = Duration::from_secs(hours.saturating_mul(3600));
+    let mut tick = tokio::time::interval((keep / 10).min(Duration::from_secs(3600)));
+    loop {
+        tick.tick().await;
+        let before_ms = now_ms().saturating_sub(keep.as_millis() as i64);
+        match writer.record(Record::Prune { before_ms }).await {
+            Ok(()) => {}
+            Err(store::writer::WriteError::Closed) => return,
+            Err(e) => tracing::warn!(error = %e, "pruning the event log"),
+        }
     }
 }
 

@@ -9,6 +9,10 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+mod events;
+
+pub use events::EventsConfig;
+
 use crate::auth::KeyHash;
 use crate::domain::{AisleLayout, Layout};
 
@@ -27,6 +31,8 @@ pub struct Config {
     pub auth: AuthConfig,
     /// The site's layout.
     pub site: SiteConfig,
+    /// The event log and live subscribers.
+    pub events: EventsConfig,
     /// The machines, one `[[devices]]` entry each.
     pub devices: Vec<crate::devices::DeviceConfig>,
 }
@@ -203,7 +209,7 @@ impl Config {
         if self.intake.max_group == 0 || self.intake.queue == 0 {
             return Err("intake.max_group and intake.queue must be at least 1".into());
         }
-        Ok(())
+        self.events.check()
     }
 
     /// The site layout that locations are checked against.

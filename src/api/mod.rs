@@ -1,9 +1,12 @@
 //! The HTTP API: routes, OpenAPI, auth, errors.
 //!
-//! Public without a key: `/healthz`, `/readyz`, `/openapi.json`, `/docs`. Everything under
+//! Public without a key: `/healthz`, `/readyz`, `/openapi.json`, `/docs` and the dashboard's
+//! files (`/`, which asks for a key itself when keys are configured). Everything under
 //! `/api/v1` and `/metrics` needs a key once keys are configured (see [`auth`]).
 
+pub mod alarms;
 pub mod auth;
+pub mod dashboard;
 pub mod devices;
 pub mod error;
 pub mod extract;
@@ -12,6 +15,7 @@ pub mod locations;
 pub mod metrics;
 pub mod ops;
 pub mod state;
+pub mod ws;
 
 use std::time::Duration;
 
@@ -48,6 +52,8 @@ also submits and changes jobs, `admin` may do everything. A `201` means the job 
         (name = "jobs", description = "Submit and follow jobs"),
         (name = "devices", description = "The machines: status, pause and resume"),
         (name = "locations", description = "What rackd knows of each location"),
+        (name = "alarms", description = "Device alarms, active and past"),
+        (name = "events", description = "Live events over WebSocket: snapshot, replay with `since`, resync"),
         (name = "operations", description = "Health, readiness and metrics"),
     ),
     modifiers(&Security),
@@ -83,7 +89,11 @@ async fn metrics_route(state: axum::extract::State<AppState>) -> Result<axum::re
 
 /// Routes that need a key once keys are configured.
 fn protected_routes() -> OpenApiRouter<AppState> {
-    let v1 = jobs::router().merge(devices::router()).merge(locations::router());
+    let v1 = jobs::router()
+        .merge(devices::router())
+        .merge(locations::router())
+        .merge(alarms::router())
+        .merge(ws::router());
     OpenApiRouter::with_openapi(ApiDoc::openapi()).nest("/api/v1", v1).routes(routes!(metrics_route))
 }
 
@@ -109,6 +119,7 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
         .merge(protected)
         .merge(public)
         .merge(SwaggerUi::new("/docs").url("/openapi.json", doc))
+        .merge(dashboard::router())
         .fallback(ops::not_found)
         .method_not_allowed_fallback(ops::method_not_allowed)
         .layer(middleware::from_fn_with_state(state.clone(), metrics::count_requests))

@@ -24,4 +24,8 @@ pub struct AppState {
     pub metrics: Arc<Metrics>,
     /// The running devices.
     pub devices: crate::devices::Devices,
+    /// Live events, for WebSocket subscribers.
+    pub hub: crate::service::events::Hub,
+    /// Settings of the event stream.
+    pub events: Arc<crate::config::EventsConfig>,
 }

@@ -294,6 +294,16 @@ pub async fn list(db: impl SqliteExecutor<'_>, filter: &JobFilter) -> Result<Vec
     rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
 }
 
+/// Up to `limit` jobs not yet ended (queued, dispatched, running, cancelling), newest first.
+pub async fn active(db: impl SqliteExecutor<'_>, limit: u32) -> Result<Vec<Job>, sqlx::Error> {
+    let sql = format!(
+        "SELECT {COLUMNS} FROM jobs WHERE state NOT IN ('completed', 'failed', 'cancelled') \
+         ORDER BY id DESC LIMIT ?"
+    );
+    let rows: Vec<JobRow> = sqlx::query_as(sqlx::AssertSqlSafe(sql)).bind(limit).fetch_all(db).await?;
+    rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
+}
+
 /// A job's history, oldest first.
 pub async fn history(db: impl SqliteExecutor<'_>, id: i64) -> Result<Vec<JobEvent>, sqlx::Error> {
     let rows: Vec<(String, String, i64)> =

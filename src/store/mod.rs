@@ -4,6 +4,8 @@
 //! returns: a 201 means the job survives a power cut. Every change to jobs goes through one
 //! writer task ([`writer::Writer`]) that commits many requests per transaction.
 
+pub mod alarms;
+pub mod events;
 pub mod jobs;
 pub mod locations;
 pub mod time;

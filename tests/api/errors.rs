@@ -59,7 +59,7 @@ async fn bad_requests_get_json_errors() {
         (M::GET, "/api/v1/jobs?limit=5000", None, vec![], 400, "bad_query"),
         (M::GET, "/api/v1/jobs?state=done", None, vec![], 400, "bad_query"),
         (M::GET, "/api/v1/nothing", None, vec![], 404, "not_found"),
-        (M::GET, "/", None, vec![], 404, "not_found"),
+        (M::GET, "/nothing.html", None, vec![], 404, "not_found"),
         (M::DELETE, "/api/v1/jobs", None, vec![], 405, "method_not_allowed"),
         (M::PUT, "/api/v1/jobs/1", json_ct, b"{}".to_vec(), 405, "method_not_allowed"),
         (

@@ -4,8 +4,10 @@ use std::collections::HashMap;
 
 use rusqlite::{OptionalExtension, Transaction, params};
 
-use super::{Change, Command, Outcome, WriteError};
+use super::{Change, Command, Outcome, Record, WriteError};
 use crate::domain::{JobState, Transition};
+use crate::store::alarms;
+use crate::store::events::StoredEvent;
 use crate::store::jobs::{COLUMNS, Job, JobRow, NewJob};
 use crate::store::locations;
 use crate::store::time::{from_ms, now_ms, to_ms};
@@ -14,6 +16,7 @@ use crate::store::time::{from_ms, now_ms, to_ms};
 pub(super) enum Answer {
     Submitted(Result<Vec<Outcome>, WriteError>),
     Changed(Result<Job, WriteError>),
+    Recorded,
     Failed(WriteError),
 }
 
@@ -34,13 +37,17 @@ impl Answer {
     }
 }
 
+/// The events a group appends, in sequence order.
+type Events = Vec<StoredEvent>;
+
 /// Applies a group in one transaction; any database error rolls back the whole group.
-/// `next_id` is the writer's id counter, read from the table when unknown.
+/// `next_id` is the writer's id counter, read from the table when unknown. Returns the
+/// answers and the events the group appended.
 pub(super) fn commit(
     db: &mut rusqlite::Connection,
     group: &[Command],
     next_id: &mut Option<i64>,
-) -> rusqlite::Result<Vec<Answer>> {
+) -> rusqlite::Result<(Vec<Answer>, Events)> {
     let tx = db.transaction_with_behavior(rusqlite::TransactionBehavior::Immediate)?;
     let now = now_ms();
     let mut id = match *next_id {
@@ -49,15 +56,45 @@ pub(super) fn commit(
     };
     let mut known: HashMap<String, (String, Job)> = HashMap::new();
     let mut answers = Vec::with_capacity(group.len());
+    let mut events = Vec::new();
+    let ev = &mut events;
     for cmd in group {
         answers.push(match cmd {
-            Command::Submit { jobs, .. } => Answer::Submitted(submit(&tx, jobs, &mut known, &mut id, now)?),
-            Command::Change { id, change, .. } => Answer::Changed(apply(&tx, *id, change, now)?),
+            Command::Submit { jobs, .. } => {
+                Answer::Submitted(submit(&tx, jobs, &mut known, &mut id, now, ev)?)
+            }
+            Command::Change { id, change, .. } => Answer::Changed(apply(&tx, *id, change, now, ev)?),
+            Command::Record { record, .. } => {
+                self::record(&tx, record, now, ev)?;
+                Answer::Recorded
+            }
         });
     }
     tx.commit()?;
     *next_id = Some(id);
-    Ok(answers)
+    Ok((answers, events))
+}
+
+/// Records a change that is not a job's.
+fn record(tx: &Transaction<'_>, record: &Record, now: i64, events: &mut Events) -> rusqlite::Result<()> {
+    match record {
+        Record::Device { status } => events.push(append(tx, "device.updated", status.clone(), now)?),
+        Record::AlarmRaised(new) => {
+            if let Some(alarm) = alarms::raise(tx, new, now)? {
+                event(tx, "alarm.raised", &alarm, now, events)?;
+            }
+        }
+        Record::AlarmCleared { device, code } => {
+            if let Some(alarm) = alarms::clear(tx, device, *code, now)? {
+                event(tx, "alarm.cleared", &alarm, now, events)?;
+            }
+        }
+        Record::Prune { before_ms } => {
+            tx.prepare_cached("DELETE FROM events WHERE at < ?1 AND seq < (SELECT MAX(seq) FROM events)")?
+                .execute([before_ms])?;
+        }
+    }
+    Ok(())
 }
 
 /// The stored request and job with this reference, looked up once per group.
@@ -92,6 +129,7 @@ fn submit(
     known: &mut HashMap<String, (String, Job)>,
     next_id: &mut i64,
     now: i64,
+    events: &mut Events,
 ) -> rusqlite::Result<Result<Vec<Outcome>, WriteError>> {
     let mut outcomes = Vec::with_capacity(jobs.len());
     let mut created: Vec<(String, Job)> = Vec::new();
@@ -120,7 +158,7 @@ fn submit(
     for (request, job) in created {
         insert_job(tx, &request, &job)?;
         history(tx, job.id, JobState::Queued, "accepted", now)?;
-        event(tx, "job.updated", &job, now)?;
+        event(tx, "job.updated", &job, now, events)?;
         if let Some(r) = job.reference.clone() {
             known.insert(r, (request, job));
         }
@@ -156,13 +194,25 @@ fn history(tx: &Transaction<'_>, id: i64, state: JobState, cause: &str, now: i64
     Ok(())
 }
 
+/// Appends an event with `data` serialized to the log and to `events`.
+fn event(
+    tx: &Transaction<'_>,
+    kind: &str,
+    data: &impl serde::Serialize,
+    now: i64,
+    events: &mut Events,
+) -> rusqlite::Result<()> {
+    let data = serde_json::to_string(data).map_err(|e| rusqlite::Error::ToSqlConversionFailure(e.into()))?;
+    events.push(append(tx, kind, data, now)?);
+    Ok(())
+}
+
 /// Appends an event to the log; its sequence number is the row id, gapless because only
 /// committed rows take one and this thread is the only writer.
-fn event(tx: &Transaction<'_>, kind: &str, data: &impl serde::Serialize, now: i64) -> rusqlite::Result<()> {
-    let data = serde_json::to_string(data).unwrap_or_default();
+fn append(tx: &Transaction<'_>, kind: &str, data: String, now: i64) -> rusqlite::Result<StoredEvent> {
     tx.prepare_cached("INSERT INTO events (type, data, at) VALUES (?1, ?2, ?3)")?
         .execute(params![kind, data, now])?;
-    Ok(())
+    Ok(StoredEvent { seq: tx.last_insert_rowid(), at: now, kind: kind.to_owned(), data })
 }
 
 /// Applies one change to a stored job, with its effects on the location model.
@@ -171,6 +221,7 @@ fn apply(
     id: i64,
     change: &Change,
     now: i64,
+    events: &mut Events,
 ) -> rusqlite::Result<Result<Job, WriteError>> {
     let sql = format!("SELECT {COLUMNS} FROM jobs WHERE id = ?1");
     let row = tx.prepare_cached(&sql)?.query_row([id], |r| JobRow::from_rusqlite(r, 0)).optional()?;
@@ -210,7 +261,7 @@ fn apply(
         if let (JobState::Completed, Some(spec)) = (job.state, job.spec()) {
             for l in locations::complete(tx, &spec, job.barcode.as_deref(), now)? {
                 if let Some(state) = locations::state(tx, l)? {
-                    event(tx, "location.updated", &state, now)?;
+                    event(tx, "location.updated", &state, now, events)?;
                 }
             }
         }
@@ -232,6 +283,6 @@ fn apply(
         id
     ])?;
     history(tx, id, job.state, &cause, now)?;
-    event(tx, "job.updated", &job, now)?;
+    event(tx, "job.updated", &job, now, events)?;
     Ok(Ok(job))
 }

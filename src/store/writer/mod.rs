@@ -23,6 +23,8 @@ use std::time::Duration;
 use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
 
+use super::alarms::NewAlarm;
+use super::events::StoredEvent;
 use super::jobs::{Job, NewJob};
 use crate::domain::state::IllegalTransition;
 use crate::domain::{Failure, JobState, Priority, Transition};
@@ -58,6 +60,31 @@ impl Change {
             forced: false,
         }
     }
+}
+
+/// A change that is not a job's: device status, alarms, the log's retention.
+#[derive(Clone, Debug)]
+pub enum Record {
+    /// A device's status changed: a `device.updated` event with `status` (JSON) as data.
+    Device {
+        /// The device's status, serialized.
+        status: String,
+    },
+    /// An alarm is raised (ignored if the same device and code is already active).
+    AlarmRaised(NewAlarm),
+    /// The device's active alarm with this code is cleared (ignored if none is active).
+    AlarmCleared {
+        /// The device.
+        device: String,
+        /// The alarm code.
+        code: u16,
+    },
+    /// Retention: delete events committed before this time (Unix ms), always keeping the
+    /// newest so that sequence numbers are never reused.
+    Prune {
+        /// The cut-off.
+        before_ms: i64,
+    },
 }
 
 /// How a submitted job was taken.
@@ -101,9 +128,23 @@ pub enum WriteError {
 /// it to hear of new work within milliseconds instead of polling the database).
 pub type Wake = Arc<dyn Fn(&Job) + Send + Sync>;
 
+/// Called after each commit with the events it appended, in sequence order (the event hub
+/// forwards them to subscribers). Only committed events are passed on.
+pub type Publish = Arc<dyn Fn(Vec<StoredEvent>) + Send + Sync>;
+
+/// What the writer calls after each commit.
+#[derive(Clone, Default)]
+pub struct Hooks {
+    /// Wakes the devices of new or changed jobs.
+    pub wake: Option<Wake>,
+    /// Publishes the committed events.
+    pub publish: Option<Publish>,
+}
+
 enum Command {
     Submit { jobs: Vec<NewJob>, reply: oneshot::Sender<Result<Vec<Outcome>, WriteError>> },
     Change { id: i64, change: Change, reply: oneshot::Sender<Result<Job, WriteError>> },
+    Record { record: Record, reply: oneshot::Sender<Result<(), WriteError>> },
 }
 
 /// The handle callers use to send commands to the writer.
@@ -121,7 +162,7 @@ impl Writer {
         busy_timeout: Duration,
         max_group: usize,
         queue: usize,
-        wake: Option<Wake>,
+        hooks: Hooks,
     ) -> rusqlite::Result<(Writer, JoinHandle<()>)> {
         let db = rusqlite::Connection::open(path)?;
         db.busy_timeout(busy_timeout)?;
@@ -130,7 +171,7 @@ impl Writer {
         db.pragma_update(None, "foreign_keys", true)?;
         db.set_prepared_statement_cache_capacity(64);
         let (tx, rx) = mpsc::channel(queue);
-        let task = tokio::task::spawn_blocking(move || run(db, rx, max_group.max(1), wake));
+        let task = tokio::task::spawn_blocking(move || run(db, rx, max_group.max(1), hooks));
         Ok((Writer { tx }, task))
     }
 
@@ -147,10 +188,17 @@ impl Writer {
         self.tx.send(Command::Change { id, change, reply }).await.map_err(|_| WriteError::Closed)?;
         answer.await.map_err(|_| WriteError::Closed)?
     }
+
+    /// Records a change that is not a job's, answering once it is on disk.
+    pub async fn record(&self, record: Record) -> Result<(), WriteError> {
+        let (reply, answer) = oneshot::channel();
+        self.tx.send(Command::Record { record, reply }).await.map_err(|_| WriteError::Closed)?;
+        answer.await.map_err(|_| WriteError::Closed)?
+    }
 }
 
 /// The writer thread: take what waits, commit it, answer, repeat until every handle is gone.
-fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group: usize, wake: Option<Wake>) {
+fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group: usize, hooks: Hooks) {
     let mut next_id = None;
     let mut group = Vec::with_capacity(max_group);
     while let Some(first) = rx.blocking_recv() {
@@ -169,7 +217,12 @@ fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group:
             "group committed"
         );
         let answers = match result {
-            Ok(answers) => answers,
+            Ok((answers, events)) => {
+                if let Some(publish) = hooks.publish.as_ref().filter(|_| !events.is_empty()) {
+                    publish(events);
+                }
+                answers
+            }
             Err(e) => {
                 tracing::error!(error = %e, requests = group.len(), "group commit failed");
                 next_id = None;
@@ -177,17 +230,20 @@ fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group:
                 group.iter().map(|_| commit::Answer::Failed(e.clone())).collect()
             }
         };
-        if let Some(wake) = &wake {
+        if let Some(wake) = &hooks.wake {
             answers.iter().flat_map(commit::Answer::jobs).for_each(|job| wake(job));
         }
         for (cmd, answer) in group.drain(..).zip(answers) {
             match (cmd, answer) {
                 (Command::Submit { reply, .. }, commit::Answer::Submitted(r)) => drop(reply.send(r)),
                 (Command::Change { reply, .. }, commit::Answer::Changed(r)) => drop(reply.send(r)),
+                (Command::Record { reply, .. }, commit::Answer::Recorded) => drop(reply.send(Ok(()))),
                 (Command::Submit { reply, .. }, commit::Answer::Failed(e)) => drop(reply.send(Err(e))),
                 (Command::Change { reply, .. }, commit::Answer::Failed(e)) => drop(reply.send(Err(e))),
+                (Command::Record { reply, .. }, commit::Answer::Failed(e)) => drop(reply.send(Err(e))),
                 (Command::Submit { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
                 (Command::Change { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
+                (Command::Record { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
             }
         }
     }

@@ -1,0 +1,162 @@
+//! One subscriber's connection: start (snapshot or replay), then the live stream, with
+//! pings, a send timeout and resync for a subscriber that falls behind.
+
+use std::time::Duration;
+
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket};
+use futures::stream::SplitSink;
+use futures::{SinkExt, StreamExt};
+use sqlx::SqlitePool;
+use tokio::sync::broadcast::{Receiver, error::RecvError};
+
+use crate::api::state::AppState;
+use crate::devices::Devices;
+use crate::service::events::{Commit, Topic};
+use crate::store::events;
+
+/// Close code sent with `resync`: the client fell behind and should reconnect with `since`.
+pub const CLOSE_RESYNC: u16 = 4000;
+
+/// Events read from the log per query during a replay.
+const REPLAY_PAGE: u32 = 1000;
+
+/// Why a session ended early.
+#[derive(Debug, thiserror::Error)]
+enum End {
+    #[error("the client went away or a send failed: {0}")]
+    Socket(#[from] axum::Error),
+    #[error("a send took longer than {0:?}")]
+    Stalled(Duration),
+    #[error("reading the database: {0}")]
+    Database(#[from] sqlx::Error),
+}
+
+/// Everything a session needs, taken from the app state before the upgrade (a session must
+/// not hold the job writer, or shutdown would wait for subscribers).
+pub struct Session {
+    pool: SqlitePool,
+    devices: Devices,
+    events: Receiver<Commit>,
+    topics: Vec<Topic>,
+    since: Option<i64>,
+    ping: Duration,
+    send_timeout: Duration,
+    snapshot_jobs: u32,
+}
+
+type Sink = SplitSink<WebSocket, Message>;
+
+impl Session {
+    /// Subscribes to the hub now, so the session misses nothing committed from here on.
+    pub fn new(app: &AppState, topics: Vec<Topic>, since: Option<i64>) -> Session {
+        let options = &app.events;
+        Session {
+            pool: app.pool.clone(),
+            devices: app.devices.clone(),
+            events: app.hub.subscribe(),
+            topics,
+            since,
+            ping: Duration::from_secs(options.ping_secs),
+            send_timeout: Duration::from_secs(options.send_timeout_secs),
+            snapshot_jobs: options.snapshot_jobs,
+        }
+    }
+
+    /// Runs the session until the client leaves, falls behind or the server stops.
+    pub async fn run(mut self, socket: WebSocket) {
+        let (mut sink, mut stream) = socket.split();
+        let result = async {
+            let mut last = self.start(&mut sink).await?;
+            let mut ping = tokio::time::interval_at(tokio::time::Instant::now() + self.ping, self.ping);
+            let mut heard = true;
+            loop {
+                tokio::select! {
+                    commit = self.events.recv() => match commit {
+                        Ok(commit) => {
+                            let from = last;
+                            for event in commit.iter().filter(|e| e.seq > from) {
+                                last = event.seq;
+                                if self.wants(event.topic) {
+                                    self.send(&mut sink, Message::Text(event.text.clone())).await?;
+                                }
+                            }
+                        }
+                        Err(RecvError::Lagged(missed)) => {
+                            let reason = format!("fell {missed} commits behind; reconnect with since={last}");
+                            let text = serde_json::json!({"type": "resync", "seq": last, "reason": reason});
+                            self.send(&mut sink, Message::Text(text.to_string().into())).await?;
+                            return self.close(&mut sink, CLOSE_RESYNC, "resync").await;
+                        }
+                        Err(RecvError::Closed) => return self.close(&mut sink, 1001, "server stopping").await,
+                    },
+                    message = stream.next() => match message {
+                        Some(Ok(Message::Close(_))) | None | Some(Err(_)) => return Ok(()),
+                        Some(Ok(_)) => heard = true,
+                    },
+                    _ = ping.tick() => {
+                        if !heard {
+                            return self.close(&mut sink, 1001, "no answer to ping").await;
+                        }
+                        heard = false;
+                        self.send(&mut sink, Message::Ping(Default::default())).await?;
+                    }
+                }
+            }
+        }
+        .await;
+        if let Err(e) = result {
+            tracing::debug!(error = %e, "websocket session ended");
+        }
+    }
+
+    fn wants(&self, topic: Option<Topic>) -> bool {
+        topic.is_none_or(|t| self.topics.contains(&t))
+    }
+
+    /// Sends the replay after `since` when the log still holds it, else a snapshot; returns
+    /// the last sequence number covered.
+    async fn start(&mut self, sink: &mut Sink) -> Result<i64, End> {
+        let (first, end) = events::bounds(&self.pool).await?;
+        let reason = match self.since {
+            None => "requested",
+            Some(since) if since > end => "since_unknown",
+            Some(since) if since + 1 < first => "since_expired",
+            Some(since) => return self.replay(sink, since).await,
+        };
+        let snapshot =
+            super::snapshot::read(&self.pool, &self.devices, &self.topics, self.snapshot_jobs, reason)
+                .await?;
+        let text = serde_json::to_string(&snapshot).unwrap_or_default();
+        self.send(sink, Message::Text(text.into())).await?;
+        Ok(snapshot.seq)
+    }
+
+    /// Sends every event after `since` from the log, page by page.
+    async fn replay(&self, sink: &mut Sink, since: i64) -> Result<i64, End> {
+        let mut last = since;
+        loop {
+            let page = events::after(&self.pool, last, REPLAY_PAGE).await?;
+            for event in &page {
+                last = event.seq;
+                if self.wants(Topic::of(&event.kind)) {
+                    self.send(sink, Message::Text(Utf8Bytes::from(event.to_json()))).await?;
+                }
+            }
+            if page.len() < REPLAY_PAGE as usize {
+                return Ok(last);
+            }
+        }
+    }
+
+    async fn send(&self, sink: &mut Sink, message: Message) -> Result<(), End> {
+        match tokio::time::timeout(self.send_timeout, sink.send(message)).await {
+            Ok(result) => Ok(result?),
+            Err(_) => Err(End::Stalled(self.send_timeout)),
+        }
+    }
+
+    async fn close(&self, sink: &mut Sink, code: u16, reason: &'static str) -> Result<(), End> {
+        let frame = CloseFrame { code, reason: Utf8Bytes::from_static(reason) };
+        self.send(sink, Message::Close(Some(frame))).await
+    }
+}

@@ -1,0 +1,79 @@
+//! The state a new subscriber starts from, consistent with one event sequence number.
+
+use serde::Serialize;
+use sqlx::SqlitePool;
+use utoipa::ToSchema;
+
+use crate::devices::{DeviceHandle, DeviceStatus, Devices};
+use crate::service::events::Topic;
+use crate::store::alarms::{self, Alarm};
+use crate::store::locations::{self, LocationState};
+use crate::store::{Job, events, jobs};
+
+/// The first message of a subscription without a usable `since`.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct Snapshot {
+    /// Always `snapshot`.
+    #[serde(rename = "type")]
+    #[schema(rename = "type")]
+    pub kind: &'static str,
+    /// The state is as of this event; live events follow from the next one.
+    pub seq: i64,
+    /// Why a snapshot: `requested`, `since_expired` (the log no longer reaches back that
+    /// far) or `since_unknown` (beyond the log's end).
+    pub reason: &'static str,
+    /// The requested topics' state.
+    pub data: SnapshotData,
+}
+
+/// What a snapshot holds; only the requested topics are present.
+#[derive(Debug, Default, Serialize, ToSchema)]
+pub struct SnapshotData {
+    /// Jobs not yet ended, newest first (at most `events.snapshot_jobs`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub jobs: Option<Vec<Job>>,
+    /// More jobs are active than the snapshot holds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub jobs_truncated: Option<bool>,
+    /// Every device.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub devices: Option<Vec<DeviceStatus>>,
+    /// Active alarms.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub alarms: Option<Vec<Alarm>>,
+    /// Every location.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub locations: Option<Vec<LocationState>>,
+}
+
+/// Reads the snapshot in one read transaction, so jobs, alarms and locations are all as of
+/// the same `seq`. Device statuses come from memory and may be a little newer, which is
+/// harmless: a `device.updated` event carries the whole status and replaces it.
+pub async fn read(
+    pool: &SqlitePool,
+    devices: &Devices,
+    topics: &[Topic],
+    job_limit: u32,
+    reason: &'static str,
+) -> Result<Snapshot, sqlx::Error> {
+    let mut tx = pool.begin().await?;
+    let (_, seq) = events::bounds(&mut *tx).await?;
+    let mut data = SnapshotData::default();
+    if topics.contains(&Topic::Jobs) {
+        let mut active = jobs::active(&mut *tx, job_limit.saturating_add(1)).await?;
+        data.jobs_truncated = Some(active.len() > job_limit as usize);
+        active.truncate(job_limit as usize);
+        data.jobs = Some(active);
+    }
+    if topics.contains(&Topic::Alarms) {
+        data.alarms = Some(alarms::active(&mut *tx).await?);
+    }
+    if topics.contains(&Topic::Locations) {
+        data.locations = Some(locations::list(&mut *tx, None).await?);
+    }
+    tx.commit().await?;
+    if topics.contains(&Topic::Devices) {
+        data.devices = Some(devices.values().map(DeviceHandle::status).collect());
+    }
+    Ok(Snapshot { kind: "snapshot", seq, reason, data })
+}

@@ -1,0 +1,58 @@
+//! `[events]`: the event log, live subscribers and the device monitor.
+
+use serde::Deserialize;
+
+/// `[events]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EventsConfig {
+    /// Events older than this many hours are deleted from the log (replay with `?since=`
+    /// reaches back this far; the newest event is always kept).
+    pub retention_hours: u64,
+    /// How many commits (each one or more events) a WebSocket subscriber may fall behind
+    /// before it is sent `resync` and disconnected.
+    pub buffer: usize,
+    /// Seconds between the server's pings; a subscriber silent for two pings is dropped.
+    pub ping_secs: u64,
+    /// Seconds one send to a subscriber may take before it is dropped as stalled.
+    pub send_timeout_secs: u64,
+    /// Most non-terminal jobs in a WebSocket snapshot (the newest; `jobs_truncated` tells).
+    pub snapshot_jobs: u32,
+    /// How often device statuses are looked at for changes and alarms, in milliseconds.
+    pub device_period_ms: u64,
+    /// Longest time a device's new last contact goes unpublished, in milliseconds.
+    pub contact_refresh_ms: u64,
+}
+
+impl Default for EventsConfig {
+    fn default() -> Self {
+        EventsConfig {
+            retention_hours: 168,
+            buffer: 1024,
+            ping_secs: 20,
+            send_timeout_secs: 10,
+            snapshot_jobs: 5000,
+            device_period_ms: 100,
+            contact_refresh_ms: 5000,
+        }
+    }
+}
+
+impl EventsConfig {
+    /// Checks the values make sense together.
+    pub fn check(&self) -> Result<(), String> {
+        if self.buffer == 0
+            || self.ping_secs == 0
+            || self.send_timeout_secs == 0
+            || self.device_period_ms == 0
+        {
+            return Err(
+                "events.buffer, ping_secs, send_timeout_secs and device_period_ms must be at least 1".into(),
+            );
+        }
+        if self.retention_hours == 0 {
+            return Err("events.retention_hours must be at least 1".into());
+        }
+        Ok(())
+    }
+}

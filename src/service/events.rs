@@ -1,0 +1,156 @@
+//! Live events: the hub that hands each committed event to every subscriber.
+//!
+//! The writer thread calls [`Hub::publish`] after each commit with the events it appended,
+//! in sequence order. Each event is serialized once, to the text subscribers receive, and
+//! shared by all of them. The hub is a bounded broadcast ring of commits (one entry holds
+//! all of a commit's events, so a batch of thousands of jobs is one entry, not a burst that
+//! would overrun every subscriber at once): publishing never waits for a subscriber, and a
+//! subscriber that falls more than the ring's size behind learns so on its next receive
+//! (and is told to resync, see [`crate::api::ws`]) instead of slowing the writer or the
+//! other subscribers.
+
+use std::sync::Arc;
+
+use axum::extract::ws::Utf8Bytes;
+use tokio::sync::broadcast;
+
+use crate::store::events::StoredEvent;
+
+/// What subscribers can filter on; an event's topic follows from its type's prefix.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Topic {
+    /// `job.updated`
+    Jobs,
+    /// `device.updated`
+    Devices,
+    /// `alarm.raised`, `alarm.cleared`
+    Alarms,
+    /// `location.updated`
+    Locations,
+}
+
+impl Topic {
+    /// Every topic.
+    pub const ALL: [Topic; 4] = [Topic::Jobs, Topic::Devices, Topic::Alarms, Topic::Locations];
+
+    /// The topic of an event type.
+    pub fn of(kind: &str) -> Option<Topic> {
+        match kind.split('.').next()? {
+            "job" => Some(Topic::Jobs),
+            "device" => Some(Topic::Devices),
+            "alarm" => Some(Topic::Alarms),
+            "location" => Some(Topic::Locations),
+            _ => None,
+        }
+    }
+
+    /// The topic's name in `?topics=`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Topic::Jobs => "jobs",
+            Topic::Devices => "devices",
+            Topic::Alarms => "alarms",
+            Topic::Locations => "locations",
+        }
+    }
+
+    /// A topic by its name.
+    pub fn parse(name: &str) -> Option<Topic> {
+        Topic::ALL.into_iter().find(|t| t.as_str() == name)
+    }
+}
+
+/// One committed event, ready to send.
+#[derive(Debug)]
+pub struct Published {
+    /// Its sequence number.
+    pub seq: i64,
+    /// Its topic (None for a type no topic covers: sent to everyone).
+    pub topic: Option<Topic>,
+    /// `{"seq", "time", "type", "data"}` as sent.
+    pub text: Utf8Bytes,
+}
+
+impl Published {
+    /// A stored event, serialized for subscribers.
+    pub fn new(event: &StoredEvent) -> Published {
+        Published { seq: event.seq, topic: Topic::of(&event.kind), text: event.to_json().into() }
+    }
+}
+
+/// The events of one commit, in sequence order.
+pub type Commit = Arc<[Published]>;
+
+/// The fan-out point between the writer and the WebSocket sessions.
+#[derive(Clone)]
+pub struct Hub {
+    tx: broadcast::Sender<Commit>,
+}
+
+impl Hub {
+    /// A hub that lets a subscriber fall `capacity` commits behind before it must resync.
+    pub fn new(capacity: usize) -> Hub {
+        Hub { tx: broadcast::channel(capacity.max(1)).0 }
+    }
+
+    /// Hands one commit's events, in sequence order, to every subscriber.
+    pub fn publish(&self, events: Vec<StoredEvent>) {
+        if self.tx.receiver_count() == 0 {
+            // Nobody listens: the log keeps the events for later replays.
+            return;
+        }
+        let _ = self.tx.send(events.iter().map(Published::new).collect());
+    }
+
+    /// A new subscription: every commit published from now on.
+    pub fn subscribe(&self) -> broadcast::Receiver<Commit> {
+        self.tx.subscribe()
+    }
+
+    /// How many subscribers there are.
+    pub fn subscribers(&self) -> usize {
+        self.tx.receiver_count()
+    }
+
+    /// The writer hook that publishes through this hub.
+    pub fn hook(&self) -> crate::store::writer::Publish {
+        let hub = self.clone();
+        Arc::new(move |events| hub.publish(events))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stored(seq: i64, kind: &str) -> StoredEvent {
+        StoredEvent { seq, at: 0, kind: kind.into(), data: "{}".into() }
+    }
+
+    #[test]
+    fn topics_follow_the_type() {
+        assert_eq!(Topic::of("job.updated"), Some(Topic::Jobs));
+        assert_eq!(Topic::of("alarm.cleared"), Some(Topic::Alarms));
+        assert_eq!(Topic::of("device.updated"), Some(Topic::Devices));
+        assert_eq!(Topic::of("location.updated"), Some(Topic::Locations));
+        assert_eq!(Topic::of("nothing"), None);
+        assert!(Topic::ALL.iter().all(|t| Topic::parse(t.as_str()) == Some(*t)));
+    }
+
+    #[tokio::test]
+    async fn a_subscriber_that_falls_behind_is_told_so() {
+        let hub = Hub::new(2);
+        let mut fast = hub.subscribe();
+        let mut slow = hub.subscribe();
+        hub.publish(vec![stored(1, "job.updated")]);
+        assert_eq!(fast.recv().await.unwrap()[0].seq, 1);
+        // A commit of many events is one entry: no lag for anyone.
+        hub.publish((2..=100).map(|s| stored(s, "job.updated")).collect());
+        let commit = fast.recv().await.unwrap();
+        assert_eq!(commit.iter().map(|p| p.seq).collect::<Vec<_>>(), (2..=100).collect::<Vec<_>>());
+        assert_eq!(commit[0].topic, Some(Topic::Jobs));
+        hub.publish(vec![stored(101, "alarm.raised")]);
+        assert_eq!(fast.recv().await.unwrap()[0].seq, 101);
+        assert!(matches!(slow.recv().await, Err(broadcast::error::RecvError::Lagged(1))));
+    }
+}

@@ -1,0 +1,166 @@
+//! Device alarms as recorded: raised and cleared by the writer thread (with their events),
+//! read through the pool by the API and the WebSocket snapshot.
+
+use rusqlite::{OptionalExtension, Transaction, params};
+use serde::Serialize;
+use sqlx::SqliteExecutor;
+use time::OffsetDateTime;
+use utoipa::ToSchema;
+
+use super::time::from_ms;
+
+/// One alarm, active (no `cleared_at`) or past.
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
+#[schema(example = json!({"id": 3, "device": "crane1", "code": 41, "class": "hardware",
+    "text": "travel motor overload", "raised_at": "2026-11-21T08:00:00.000Z", "cleared_at": null}))]
+pub struct Alarm {
+    /// The alarm's number.
+    pub id: i64,
+    /// The device that raised it.
+    pub device: String,
+    /// The device's own alarm code; 0 for `link` alarms (the device stopped answering).
+    pub code: u16,
+    /// `business` (rackd resolves it), `hardware` (needs a person) or `link` (no answer).
+    pub class: String,
+    /// The alarm in words.
+    pub text: String,
+    /// When it was raised.
+    #[serde(with = "time::serde::rfc3339")]
+    #[schema(value_type = String, format = DateTime)]
+    pub raised_at: OffsetDateTime,
+    /// When it was cleared; null while active.
+    #[serde(with = "time::serde::rfc3339::option")]
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub cleared_at: Option<OffsetDateTime>,
+}
+
+/// An alarm to raise.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NewAlarm {
+    /// The device.
+    pub device: String,
+    /// Its code (0 = link lost).
+    pub code: u16,
+    /// `business`, `hardware` or `link`.
+    pub class: String,
+    /// In words.
+    pub text: String,
+}
+
+#[derive(sqlx::FromRow)]
+struct Row {
+    id: i64,
+    device: String,
+    code: i64,
+    class: String,
+    text: String,
+    raised_at: i64,
+    cleared_at: Option<i64>,
+}
+
+impl From<Row> for Alarm {
+    fn from(r: Row) -> Alarm {
+        Alarm {
+            id: r.id,
+            device: r.device,
+            code: r.code.clamp(0, u16::MAX as i64) as u16,
+            class: r.class,
+            text: r.text,
+            raised_at: from_ms(r.raised_at),
+            cleared_at: r.cleared_at.map(from_ms),
+        }
+    }
+}
+
+const COLUMNS: &str = "id, device, code, class, text, raised_at, cleared_at";
+
+/// Which alarms to list. Alarms come newest first.
+#[derive(Clone, Debug, Default)]
+pub struct AlarmFilter {
+    /// Only active (true) or only cleared (false) alarms.
+    pub active: Option<bool>,
+    /// Only this device's.
+    pub device: Option<String>,
+    /// Only alarms older than this id (the cursor).
+    pub before_id: Option<i64>,
+    /// At most this many.
+    pub limit: u32,
+}
+
+/// Alarms matching `filter`, newest first.
+pub async fn list(db: impl SqliteExecutor<'_>, filter: &AlarmFilter) -> Result<Vec<Alarm>, sqlx::Error> {
+    let rows: Vec<Row> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
+        "SELECT {COLUMNS} FROM alarms WHERE (?1 IS NULL OR (cleared_at IS NULL) = ?1) \
+         AND (?2 IS NULL OR device = ?2) AND (?3 IS NULL OR id < ?3) ORDER BY id DESC LIMIT ?4"
+    )))
+    .bind(filter.active)
+    .bind(&filter.device)
+    .bind(filter.before_id)
+    .bind(filter.limit)
+    .fetch_all(db)
+    .await?;
+    Ok(rows.into_iter().map(Alarm::from).collect())
+}
+
+/// Every active alarm, oldest first.
+pub async fn active(db: impl SqliteExecutor<'_>) -> Result<Vec<Alarm>, sqlx::Error> {
+    let rows: Vec<Row> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
+        "SELECT {COLUMNS} FROM alarms WHERE cleared_at IS NULL ORDER BY id"
+    )))
+    .fetch_all(db)
+    .await?;
+    Ok(rows.into_iter().map(Alarm::from).collect())
+}
+
+/// Records a raised alarm (writer thread); None when the same alarm is already active.
+pub(crate) fn raise(tx: &Transaction<'_>, new: &NewAlarm, now: i64) -> rusqlite::Result<Option<Alarm>> {
+    let active: Option<i64> = tx
+        .prepare_cached("SELECT id FROM alarms WHERE device = ?1 AND code = ?2 AND cleared_at IS NULL")?
+        .query_row(params![new.device, new.code], |r| r.get(0))
+        .optional()?;
+    if active.is_some() {
+        return Ok(None);
+    }
+    tx.prepare_cached(
+        "INSERT INTO alarms (device, code, class, text, raised_at) VALUES (?1, ?2, ?3, ?4, ?5)",
+    )?
+    .execute(params![new.device, new.code, new.class, new.text, now])?;
+    Ok(Some(Alarm {
+        id: tx.last_insert_rowid(),
+        device: new.device.clone(),
+        code: new.code,
+        class: new.class.clone(),
+        text: new.text.clone(),
+        raised_at: from_ms(now),
+        cleared_at: None,
+    }))
+}
+
+/// Clears the device's active alarm with this code (writer thread); None when none is active.
+pub(crate) fn clear(
+    tx: &Transaction<'_>,
+    device: &str,
+    code: u16,
+    now: i64,
+) -> rusqlite::Result<Option<Alarm>> {
+    let row = tx
+        .prepare_cached(&format!(
+            "SELECT {COLUMNS} FROM alarms WHERE device = ?1 AND code = ?2 AND cleared_at IS NULL"
+        ))?
+        .query_row(params![device, code], |r| {
+            Ok(Row {
+                id: r.get(0)?,
+                device: r.get(1)?,
+                code: r.get(2)?,
+                class: r.get(3)?,
+                text: r.get(4)?,
+                raised_at: r.get(5)?,
+                cleared_at: None,
+            })
+        })
+        .optional()?;
+    let Some(mut row) = row else { return Ok(None) };
+    tx.prepare_cached("UPDATE alarms SET cleared_at = ?1 WHERE id = ?2")?.execute(params![now, row.id])?;
+    row.cleared_at = Some(now);
+    Ok(Some(row.into()))
+}

@@ -1,0 +1,114 @@
+//! Alarms and device events: a crane's alarm raised and cleared, a link alarm while a
+//! device does not answer, `GET /api/v1/alarms`.
+
+use std::time::Duration;
+
+use rackd::devices::DeviceConfig;
+use rackd::sim::crane::{CraneSim, CraneSimOptions};
+use serde_json::Value;
+
+use super::helpers::{TestApp, spawn_with};
+use super::ws::Ws;
+
+async fn crane_app() -> (TestApp, CraneSim) {
+    let sim = CraneSim::start("127.0.0.1:0", CraneSimOptions::default()).await.unwrap();
+    let mut device = DeviceConfig::crane("crane1", &sim.local_addr().to_string(), vec![2]);
+    device.poll_ms = 20;
+    device.timeout_ms = 100;
+    device.retries = 0;
+    device.offline_after = 2;
+    let app = spawn_with(|c| {
+        c.devices = vec![device];
+        c.events.device_period_ms = 20;
+    })
+    .await;
+    (app, sim)
+}
+
+/// The next message of type `kind`, skipping others.
+async fn next_of(ws: &mut Ws, kind: &str) -> Value {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+    loop {
+        assert!(tokio::time::Instant::now() < deadline, "no {kind} within 10 s");
+        let v = ws.json().await;
+        if v["type"] == kind {
+            return v;
+        }
+    }
+}
+
+#[tokio::test]
+async fn a_crane_alarm_is_raised_and_cleared_live_and_listed() {
+    let (app, sim) = crane_app().await;
+    let mut ws = Ws::connect(&app.base, "?topics=alarms,devices").await;
+    let snapshot = ws.json().await;
+    assert_eq!(snapshot["data"]["devices"][0]["id"], "crane1", "{snapshot}");
+    let online = loop {
+        let v = next_of(&mut ws, "device.updated").await;
+        if v["data"]["online"] == true {
+            break v;
+        }
+    };
+    assert_eq!(online["data"]["kind"], "crane");
+
+    sim.raise_alarm(41);
+    let raised = next_of(&mut ws, "alarm.raised").await;
+    assert_eq!(raised["data"]["device"], "crane1");
+    assert_eq!(raised["data"]["code"], 41);
+    assert!(raised["data"]["text"].as_str().is_some_and(|t| !t.is_empty()), "{raised}");
+    assert!(raised["data"]["cleared_at"].is_null());
+    let (status, page) = app.get("/api/v1/alarms?active=true").await;
+    assert_eq!(status, 200);
+    assert_eq!(page["alarms"].as_array().unwrap().len(), 1, "{page}");
+    assert_eq!(page["alarms"][0]["id"], raised["data"]["id"]);
+
+    sim.clear_alarm();
+    let cleared = next_of(&mut ws, "alarm.cleared").await;
+    assert_eq!(cleared["data"]["id"], raised["data"]["id"]);
+    assert!(cleared["data"]["cleared_at"].is_string(), "{cleared}");
+    let (_, page) = app.get("/api/v1/alarms?active=true").await;
+    assert_eq!(page["alarms"], serde_json::json!([]));
+    let (_, page) = app.get("/api/v1/alarms?device=crane1").await;
+    assert_eq!(page["alarms"].as_array().unwrap().len(), 1);
+    assert!(page["alarms"][0]["raised_at"].is_string());
+}
+
+#[tokio::test]
+async fn a_silent_device_raises_a_link_alarm_until_it_answers_again() {
+    let (app, sim) = crane_app().await;
+    let mut ws = Ws::connect(&app.base, "?topics=alarms").await;
+    ws.json().await;
+    sim.set_link(false);
+    let raised = next_of(&mut ws, "alarm.raised").await;
+    assert_eq!(raised["data"]["class"], "link");
+    assert_eq!(raised["data"]["code"], 0);
+    let (_, device) = app.get("/api/v1/devices/crane1").await;
+    assert_eq!(device["online"], false, "{device}");
+    sim.set_link(true);
+    let cleared = next_of(&mut ws, "alarm.cleared").await;
+    assert_eq!(cleared["data"]["id"], raised["data"]["id"]);
+}
+
+#[tokio::test]
+async fn the_alarm_list_pages_and_refuses_bad_queries() {
+    let (app, sim) = crane_app().await;
+    let mut ws = Ws::connect(&app.base, "?topics=alarms").await;
+    ws.json().await;
+    for code in [41, 42, 43] {
+        sim.raise_alarm(code);
+        next_of(&mut ws, "alarm.raised").await;
+        sim.clear_alarm();
+        next_of(&mut ws, "alarm.cleared").await;
+    }
+    let (_, first) = app.get("/api/v1/alarms?limit=2").await;
+    let codes: Vec<i64> =
+        first["alarms"].as_array().unwrap().iter().map(|a| a["code"].as_i64().unwrap()).collect();
+    assert_eq!(codes, vec![43, 42], "newest first: {first}");
+    let cursor = first["next_cursor"].as_str().unwrap();
+    let (_, second) = app.get(&format!("/api/v1/alarms?limit=2&cursor={cursor}")).await;
+    assert_eq!(second["alarms"][0]["code"], 41);
+    assert!(second["next_cursor"].is_null());
+    super::helpers::assert_error(&app.get("/api/v1/alarms?limit=0").await, 400, "bad_query");
+    super::helpers::assert_error(&app.get("/api/v1/alarms?cursor=x").await, 400, "bad_cursor");
+    super::helpers::assert_error(&app.get("/api/v1/alarms?active=maybe").await, 400, "bad_query");
+}

@@ -1,0 +1,37 @@
+//! The live event stream end to end: the real server on 127.0.0.1:0 with a temporary
+//! database, real WebSocket clients.
+
+#[path = "../common/helpers.rs"]
+mod helpers;
+#[path = "../common/ws.rs"]
+mod ws;
+
+mod alarms;
+mod replay;
+mod slow;
+mod stream;
+
+use serde_json::{Value, json};
+
+use helpers::TestApp;
+
+/// Submits `n` light jobs (no device runs them in these tests, so they stay queued) in one
+/// batch; returns their ids. Each makes one `job.updated` event.
+pub async fn submit(app: &TestApp, n: usize) -> Vec<i64> {
+    let jobs: Vec<Value> = (0..n)
+        .map(|i| {
+            let bay = (i % 10) as u16 + 1;
+            json!({"kind": "light", "location": helpers::loc(1, bay, 1, 1), "color": "green", "on": true})
+        })
+        .collect();
+    let (status, body) = app.post("/api/v1/jobs/batch", &json!({ "jobs": jobs })).await;
+    assert_eq!(status, 201, "{body}");
+    body["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()).collect()
+}
+
+/// Asserts `events` have consecutive sequence numbers starting at `first`.
+pub fn assert_consecutive(events: &[Value], first: i64) {
+    for (i, e) in events.iter().enumerate() {
+        assert_eq!(e["seq"].as_i64(), Some(first + i as i64), "event {i} of {}: {e}", events.len());
+    }
+}

@@ -1,0 +1,66 @@
+//! `?since=SEQ`: replay from the log, then live, without gap or duplicate.
+
+use std::time::Duration;
+
+use super::helpers::{spawn_app, spawn_on};
+use super::ws::Ws;
+use super::{assert_consecutive, submit};
+
+#[tokio::test]
+async fn a_reconnect_with_since_misses_nothing_and_repeats_nothing() {
+    let app = spawn_app().await;
+    let mut ws = Ws::connect(&app.base, "").await;
+    assert_eq!(ws.json().await["seq"], 0);
+    submit(&app, 10).await;
+    let first = ws.events(4).await;
+    assert_consecutive(&first, 1);
+    ws.close().await;
+
+    // While away: more events.
+    submit(&app, 7).await;
+    let mut ws = Ws::connect(&app.base, "?since=4").await;
+    // Events keep coming while the replay runs.
+    let more = tokio::spawn({
+        let base = app.base.clone();
+        async move {
+            let client = reqwest::Client::new();
+            for i in 0..20 {
+                let body = serde_json::json!({"kind": "light", "location": super::helpers::loc(1, 1, 1, 1),
+                    "color": "red", "on": i % 2 == 0});
+                let r = client.post(format!("{base}/api/v1/jobs")).json(&body).send().await.unwrap();
+                assert_eq!(r.status(), 201);
+            }
+        }
+    });
+    let events = ws.events(13 + 20).await;
+    more.await.unwrap();
+    assert_consecutive(&events, 5);
+    ws.quiet(Duration::from_millis(200)).await;
+}
+
+#[tokio::test]
+async fn since_with_a_topic_replays_only_that_topic_and_survives_a_restart() {
+    let app = spawn_app().await;
+    submit(&app, 3).await;
+    let (db, dir) = app.stop().await;
+    let app = spawn_on(db, |_| {}).await;
+    submit(&app, 2).await;
+    let mut ws = Ws::connect(&app.base, "?since=1&topics=jobs").await;
+    let events = ws.events(4).await;
+    assert_consecutive(&events, 2);
+    ws.quiet(Duration::from_millis(200)).await;
+    drop(dir);
+}
+
+#[tokio::test]
+async fn a_since_the_log_cannot_serve_starts_with_a_snapshot() {
+    let app = spawn_app().await;
+    submit(&app, 3).await;
+    let mut ws = Ws::connect(&app.base, "?since=99").await;
+    let snapshot = ws.json().await;
+    assert_eq!(snapshot["type"], "snapshot");
+    assert_eq!(snapshot["reason"], "since_unknown");
+    assert_eq!(snapshot["seq"], 3);
+    submit(&app, 1).await;
+    assert_consecutive(&ws.events(1).await, 4);
+}

@@ -1,0 +1,108 @@
+//! Snapshot, live order, topic filters, bad requests and auth.
+
+use std::time::Duration;
+
+use serde_json::json;
+
+use super::helpers::{assert_error, spawn_app, spawn_with, store};
+use super::ws::{Got, Ws};
+use super::{assert_consecutive, submit};
+
+#[tokio::test]
+async fn a_snapshot_then_every_event_in_order() {
+    let app = spawn_app().await;
+    let before = submit(&app, 2).await;
+    let mut ws = Ws::connect(&app.base, "").await;
+    let snapshot = ws.json().await;
+    assert_eq!(snapshot["type"], "snapshot", "{snapshot}");
+    assert_eq!(snapshot["reason"], "requested");
+    assert_eq!(snapshot["seq"], 2, "two jobs accepted before: two events");
+    let data = &snapshot["data"];
+    let ids: Vec<i64> = data["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()).collect();
+    assert_eq!(ids, vec![before[1], before[0]], "active jobs, newest first");
+    assert_eq!(data["jobs_truncated"], false);
+    assert_eq!(data["locations"].as_array().unwrap().len(), 2 * 10 * 6 * 4 + 2 * 20 * 8 * 2);
+    assert_eq!(data["alarms"], json!([]));
+    assert_eq!(data["devices"], json!([]), "the plain test config has no devices");
+
+    let ids = submit(&app, 5).await;
+    let (status, cancelled) = app.post(&format!("/api/v1/jobs/{}/cancel", ids[0]), &json!({})).await;
+    assert_eq!(status, 200, "{cancelled}");
+    let events = ws.events(6).await;
+    assert_consecutive(&events, 3);
+    for (event, id) in events.iter().zip(&ids) {
+        assert_eq!(event["type"], "job.updated");
+        assert_eq!(event["data"]["id"], *id);
+        assert_eq!(event["data"]["state"], "queued");
+        assert!(event["time"].as_str().unwrap().ends_with('Z'), "{event}");
+    }
+    assert_eq!(events[5]["data"]["id"], ids[0]);
+    assert_eq!(events[5]["data"]["state"], "cancelled");
+    ws.quiet(Duration::from_millis(200)).await;
+}
+
+#[tokio::test]
+async fn topics_filter_both_snapshot_and_events() {
+    let app = spawn_app().await;
+    let mut jobs_only = Ws::connect(&app.base, "?topics=jobs").await;
+    let mut locations_only = Ws::connect(&app.base, "?topics=locations,alarms").await;
+    let snapshot = jobs_only.json().await;
+    let keys: Vec<&String> = snapshot["data"].as_object().unwrap().keys().collect();
+    assert_eq!(keys, vec!["jobs", "jobs_truncated"], "{snapshot}");
+    let snapshot = locations_only.json().await;
+    let keys: Vec<&String> = snapshot["data"].as_object().unwrap().keys().collect();
+    assert_eq!(keys, vec!["alarms", "locations"], "{snapshot}");
+
+    submit(&app, 3).await;
+    let events = jobs_only.events(3).await;
+    assert!(events.iter().all(|e| e["type"] == "job.updated"));
+    locations_only.quiet(Duration::from_millis(300)).await;
+}
+
+#[tokio::test]
+async fn bad_requests_are_json_errors() {
+    let app = spawn_app().await;
+    let got = app.get("/api/v1/ws").await;
+    assert_error(&got, 400, "websocket_required");
+    let got = app.get("/api/v1/ws?topics=jobs,boxes").await;
+    assert_error(&got, 400, "bad_query");
+    assert!(got.1["error"]["message"].as_str().unwrap().contains("boxes"), "{got:?}");
+    assert_error(&app.get("/api/v1/ws?since=-1").await, 400, "bad_query");
+    assert_error(&app.get("/api/v1/ws?since=abc").await, 400, "bad_query");
+    assert_error(&app.get("/api/v1/ws?colour=red").await, 400, "bad_query");
+    assert!(matches!(Ws::try_connect(&app.base, "?topics=nope", None).await, Err(400)));
+}
+
+#[tokio::test]
+async fn subscribers_need_a_viewer_key_in_a_header_or_the_query() {
+    use rackd::auth::{KeyHash, Role};
+    use rackd::config::KeyConfig;
+    let app = spawn_with(|c| {
+        c.auth.keys =
+            vec![KeyConfig { name: "screen".into(), role: Role::Viewer, hash: KeyHash::of("screen-key") }];
+    })
+    .await;
+    assert!(matches!(Ws::try_connect(&app.base, "", None).await, Err(401)));
+    assert!(matches!(Ws::try_connect(&app.base, "?token=wrong", None).await, Err(401)));
+    assert!(matches!(Ws::try_connect(&app.base, "", Some("wrong")).await, Err(401)));
+    let mut by_query = Ws::try_connect(&app.base, "?token=screen-key", None).await.unwrap();
+    let mut by_header = Ws::try_connect(&app.base, "", Some("screen-key")).await.unwrap();
+    assert_eq!(by_query.json().await["type"], "snapshot");
+    assert_eq!(by_header.json().await["type"], "snapshot");
+    // A viewer may watch but not submit.
+    let (status, _) = app.post("/api/v1/jobs", &store("r1")).await;
+    assert_eq!(status, 401);
+}
+
+#[tokio::test]
+async fn subscribers_are_closed_when_the_server_stops() {
+    let app = spawn_app().await;
+    let mut ws = Ws::connect(&app.base, "").await;
+    assert_eq!(ws.json().await["type"], "snapshot");
+    let stopping = tokio::spawn(app.stop());
+    match ws.next(Duration::from_secs(10)).await {
+        Got::Closed(code) => assert_eq!(code, 1001),
+        other => panic!("expected a close, got {other:?}"),
+    }
+    stopping.await.unwrap();
+}
