@@ -148,10 +148,9 @@ pub(crate) fn reserve(db: &rusqlite::Connection, job: i64, locations: &[Location
     Ok(())
 }
 
-/// Releases every location `job` holds.
-pub(crate) fn release(db: &rusqlite::Connection, job: i64) -> rusqlite::Result<()> {
-    db.prepare_cached("UPDATE locations SET reserved_by = NULL WHERE reserved_by = ?1")?.execute([job])?;
-    Ok(())
+/// Releases every location `job` holds; returns how many it held.
+pub(crate) fn release(db: &rusqlite::Connection, job: i64) -> rusqlite::Result<usize> {
+    db.prepare_cached("UPDATE locations SET reserved_by = NULL WHERE reserved_by = ?1")?.execute([job])
 }
 
 /// Sets whether a box is at `l` and its barcode.

@@ -6,8 +6,11 @@ mod helpers;
 
 mod control;
 mod faults;
+mod reservations;
 mod restart;
 mod workload;
+#[path = "../common/ws.rs"]
+mod ws;
 
 use rackd::devices::DeviceConfig;
 use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};

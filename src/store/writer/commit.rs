@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use rusqlite::{OptionalExtension, Transaction, params};
 
 use super::{Change, Command, Outcome, Record, WriteError};
-use crate::domain::{JobState, Transition};
+use crate::domain::{JobState, Location, Transition};
 use crate::store::alarms;
 use crate::store::events::StoredEvent;
 use crate::store::jobs::{COLUMNS, Job, JobRow, NewJob};
@@ -207,6 +207,21 @@ fn event(
     Ok(())
 }
 
+/// A `location.updated` event for each of `locations` (as they now are).
+fn location_events(
+    tx: &Transaction<'_>,
+    locations: &[Location],
+    now: i64,
+    events: &mut Events,
+) -> rusqlite::Result<()> {
+    for &l in locations {
+        if let Some(state) = locations::state(tx, l)? {
+            event(tx, "location.updated", &state, now, events)?;
+        }
+    }
+    Ok(())
+}
+
 /// Appends an event to the log; its sequence number is the row id, gapless because only
 /// committed rows take one and this thread is the only writer.
 fn append(tx: &Transaction<'_>, kind: &str, data: String, now: i64) -> rusqlite::Result<StoredEvent> {
@@ -244,6 +259,7 @@ fn apply(
                 && let Some(spec) = job.spec()
             {
                 locations::reserve(tx, id, &spec.locations())?;
+                location_events(tx, &spec.locations(), now, events)?;
             }
             cause.clone()
         }
@@ -258,14 +274,21 @@ fn apply(
     };
     job.updated_at = from_ms(now);
     if job.state.is_terminal() {
-        if let (JobState::Completed, Some(spec)) = (job.state, job.spec()) {
-            for l in locations::complete(tx, &spec, job.barcode.as_deref(), now)? {
-                if let Some(state) = locations::state(tx, l)? {
-                    event(tx, "location.updated", &state, now, events)?;
+        // Released before the events are made, so that they show the location free.
+        let spec = job.spec();
+        let mut touched = match (job.state, &spec) {
+            (JobState::Completed, Some(spec)) => locations::complete(tx, spec, job.barcode.as_deref(), now)?,
+            _ => Vec::new(),
+        };
+        if locations::release(tx, id)? > 0 {
+            let held = spec.map(|s| s.locations()).unwrap_or_default();
+            for l in held {
+                if !touched.contains(&l) {
+                    touched.push(l);
                 }
             }
         }
-        locations::release(tx, id)?;
+        location_events(tx, &touched, now, events)?;
     }
     let f = job.failure.as_ref();
     tx.prepare_cached(
