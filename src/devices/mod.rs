@@ -100,7 +100,9 @@ pub async fn start(
         let plc =
             crate::protocols::link::connect(&c.link()).await.with_context(|| format!("device {:?}", c.id))?;
         let slots = if c.kind == DeviceKind::Crane { 1 } else { c.slots };
-        let status = Arc::new(Mutex::new(DeviceStatus::new(&c.id, c.kind, &c.protocol, &c.address, slots)));
+        let mut status = DeviceStatus::new(&c.id, c.kind, &c.protocol, &c.address, slots);
+        status.aisles = c.aisles.clone();
+        let status = Arc::new(Mutex::new(status));
         let (requests, inbox) = mpsc::channel(16);
         let wake = wakers.remove(&c.id).unwrap_or_default();
         let context = || format!("device {:?}", c.id);

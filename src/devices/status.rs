@@ -7,7 +7,7 @@ use utoipa::ToSchema;
 /// What rackd knows of a device right now.
 #[derive(Clone, Debug, Serialize, ToSchema)]
 #[schema(example = json!({"id": "shelf1", "kind": "shelf", "protocol": "modbus-udp", "address": "127.0.0.1:1502",
-    "online": true, "paused": false, "last_contact": "2026-11-21T08:00:00.000Z", "slots_total": 60,
+    "aisles": [1], "online": true, "paused": false, "last_contact": "2026-11-21T08:00:00.000Z", "slots_total": 60,
     "slots_in_use": 3, "consecutive_failures": 0, "last_error": null}))]
 pub struct DeviceStatus {
     /// The device's id from the configuration.
@@ -18,6 +18,8 @@ pub struct DeviceStatus {
     pub protocol: String,
     /// Where it is.
     pub address: String,
+    /// The aisles whose locations it serves (from the configuration).
+    pub aisles: Vec<u16>,
     /// It answered recently (fewer than the configured number of consecutive failures).
     pub online: bool,
     /// Paused by an operator: gets no new work.
@@ -91,6 +93,7 @@ impl DeviceStatus {
             kind,
             protocol: protocol.to_owned(),
             address: address.to_owned(),
+            aisles: Vec::new(),
             online: false,
             paused: false,
             last_contact: None,
