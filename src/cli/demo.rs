@@ -17,21 +17,35 @@ use crate::protocols::mc3e::TransportKind;
 use crate::sim::crane::{CraneSim, CraneSimOptions};
 use crate::sim::shelf::{ShelfSim, ShelfSimOptions};
 
-/// How long each simulated task takes in the demo: slow enough to watch a job run.
-const DEMO_TASK_TIME: Duration = Duration::from_millis(1500);
+/// How fast the demo's simulated machines work.
+#[derive(Clone, Copy, Debug)]
+pub struct Pace {
+    /// How long each simulated shelf task takes.
+    pub task_time: Duration,
+    /// Time of each simulated crane action state (a transfer has 16).
+    pub crane_step: Duration,
+}
 
-/// Time of each simulated crane action state in the demo (a transfer has 16).
-const DEMO_CRANE_STEP: Duration = Duration::from_millis(250);
+impl Pace {
+    /// `rackd serve`'s pace: slow enough to watch a job run.
+    pub const DEMO: Pace =
+        Pace { task_time: Duration::from_millis(1500), crane_step: Duration::from_millis(250) };
+}
 
 /// Starts the demo's simulated machines and adds their devices to `config`; keep the
 /// returned simulators alive as long as the service runs.
 pub async fn start(config: &mut Config) -> anyhow::Result<(ShelfSim, CraneSim)> {
-    let options = ShelfSimOptions { task_time: DEMO_TASK_TIME, ..ShelfSimOptions::default() };
+    start_with(config, Pace::DEMO).await
+}
+
+/// [`start`] at another pace (tests run the demo site faster).
+pub async fn start_with(config: &mut Config, pace: Pace) -> anyhow::Result<(ShelfSim, CraneSim)> {
+    let options = ShelfSimOptions { task_time: pace.task_time, ..ShelfSimOptions::default() };
     let sim = ShelfSim::start("127.0.0.1:0", options).await?;
     let mut device = DeviceConfig::shelf("shelf1", &sim.local_addr().to_string(), vec![1]);
     device.poll_ms = 100;
     let crane_options =
-        CraneSimOptions { transport: TransportKind::Tcp, step: DEMO_CRANE_STEP, wcs_timeout: None };
+        CraneSimOptions { transport: TransportKind::Tcp, step: pace.crane_step, wcs_timeout: None };
     let crane = CraneSim::start("127.0.0.1:0", crane_options).await?;
     let mut crane_device = DeviceConfig::crane("crane1", &crane.local_addr().to_string(), vec![2]);
     crane_device.poll_ms = 100;

@@ -1,0 +1,145 @@
+// One tile per device: link state, pause, last contact, task slots, what a crane reports,
+// its alarms; pause and resume for operators.
+
+import { api } from './api.js';
+import { ago, el, setText } from './dom.js';
+
+export class Devices {
+  constructor(root, model, notify) {
+    this.root = root;
+    this.model = model;
+    this.notify = notify;
+    this.tiles = new Map();
+  }
+
+  /** Redraws every tile (cheap: a handful of devices), adding and removing as needed. */
+  render() {
+    const ids = [...this.model.devices.keys()].sort();
+    for (const [id, tile] of this.tiles) {
+      if (!this.model.devices.has(id)) {
+        tile.root.remove();
+        this.tiles.delete(id);
+      }
+    }
+    ids.forEach((id, index) => {
+      let tile = this.tiles.get(id);
+      if (!tile) {
+        tile = this.tile(id);
+        this.tiles.set(id, tile);
+      }
+      if (this.root.children[index] !== tile.root) this.root.insertBefore(tile.root, this.root.children[index] || null);
+      this.fill(tile, this.model.devices.get(id));
+    });
+    if (ids.length === 0 && !this.root.querySelector('.empty')) {
+      this.root.append(el('p', { class: 'empty', text: 'No devices yet.' }));
+    } else if (ids.length) {
+      this.root.querySelectorAll('.empty').forEach((n) => n.remove());
+    }
+  }
+
+  /** Only the "last contact" times, once a second. */
+  tick() {
+    for (const [id, tile] of this.tiles) {
+      const d = this.model.devices.get(id);
+      if (d) setText(tile.contact, ago(d.last_contact));
+    }
+  }
+
+  tile(id) {
+    const t = {};
+    t.name = el('span', { class: 'name', text: id });
+    t.kind = el('span', { class: 'kind' });
+    t.link = el('span', { class: 'badge' });
+    t.paused = el('span', { class: 'badge paused', text: 'paused' });
+    t.alarmBadge = el('span', { class: 'badge alarm', text: 'alarm' });
+    t.contact = el('span', { class: 'v contact' });
+    t.address = el('span', { class: 'v' });
+    t.slotsText = el('span', { class: 'slots-text' });
+    t.slotsBar = el('div', { class: 'bar' }, el('span'));
+    t.crane = el('div', { class: 'crane-info' });
+    t.alarms = el('ul', { class: 'device-alarms' });
+    t.error = el('p', { class: 'error-text' });
+    t.pause = el('button', { type: 'button', class: 'pause', text: 'Pause', onclick: () => this.toggle(id, true) });
+    t.resume = el('button', { type: 'button', class: 'resume', text: 'Resume', onclick: () => this.toggle(id, false) });
+    t.root = el(
+      'article',
+      { class: 'device', dataset: { device: id } },
+      el('header', {}, t.name, t.kind, el('span', { class: 'badges' }, t.link, t.paused, t.alarmBadge)),
+      el(
+        'div',
+        { class: 'facts' },
+        el('span', { class: 'k', text: 'Last contact' }),
+        t.contact,
+        el('span', { class: 'k', text: 'Slots in use' }),
+        el('span', { class: 'v slots' }, t.slotsText, t.slotsBar),
+        el('span', { class: 'k', text: 'Link' }),
+        t.address,
+      ),
+      t.crane,
+      t.alarms,
+      t.error,
+      el('div', { class: 'actions' }, t.pause, t.resume),
+    );
+    return t;
+  }
+
+  fill(t, d) {
+    setText(t.kind, d.kind === 'crane' ? 'stacker crane' : 'shelf PLC');
+    setText(t.link, d.online ? 'online' : 'offline');
+    t.link.className = `badge ${d.online ? 'online' : 'offline'}`;
+    t.paused.hidden = !d.paused;
+    t.root.classList.toggle('is-offline', !d.online);
+    t.root.classList.toggle('is-paused', d.paused);
+    setText(t.contact, ago(d.last_contact));
+    setText(t.address, `${d.protocol} ${d.address}${d.aisles && d.aisles.length ? ` · aisle ${d.aisles.join(', ')}` : ''}`);
+    setText(t.slotsText, `${d.slots_in_use} / ${d.slots_total}`);
+    const share = d.slots_total ? Math.min(100, (100 * d.slots_in_use) / d.slots_total) : 0;
+    t.slotsBar.firstChild.style.width = `${share}%`;
+    t.pause.hidden = d.paused;
+    t.resume.hidden = !d.paused;
+
+    const c = d.crane;
+    t.crane.hidden = !c;
+    if (c) {
+      t.crane.replaceChildren(
+        el('div', { class: 'action', text: c.action }),
+        el(
+          'div',
+          { class: 'axes' },
+          `travel ${c.travel_position} · lift ${c.lift_position} · ${c.load ? 'loaded' : 'empty'}`,
+          c.task ? ` · task ${c.task}` : '',
+          c.heartbeat_ok ? '' : ' · heartbeat lost',
+        ),
+      );
+    }
+
+    const alarms = [...this.model.alarms.values()].filter((a) => a.device === d.id && !a.cleared_at);
+    if (c && c.alarm_code && !alarms.some((a) => a.code === c.alarm_code)) {
+      alarms.push({ code: c.alarm_code, class: c.alarm_class || '', text: c.alarm_text || 'unknown alarm' });
+    }
+    t.alarmBadge.hidden = alarms.length === 0;
+    t.root.classList.toggle('in-alarm', alarms.length > 0);
+    t.alarms.replaceChildren(
+      ...alarms.map((a) =>
+        el('li', {}, el('span', { class: 'code', text: a.code ? String(a.code) : 'link' }), ` ${a.text}`, a.class ? el('span', { class: 'class', text: ` (${a.class})` }) : null),
+      ),
+    );
+    const error = d.online ? '' : d.last_error || '';
+    setText(t.error, error ? `${d.consecutive_failures} failed requests: ${error}` : '');
+    t.error.hidden = !error;
+  }
+
+  async toggle(id, pause) {
+    const tile = this.tiles.get(id);
+    const button = pause ? tile.pause : tile.resume;
+    button.disabled = true;
+    try {
+      const status = await api('POST', `/api/v1/devices/${encodeURIComponent(id)}/${pause ? 'pause' : 'resume'}`);
+      this.model.updateDevice(status);
+    } catch (e) {
+      this.notify(`${pause ? 'Pause' : 'Resume'} ${id}: ${e.message}`);
+    } finally {
+      button.disabled = false;
+    }
+  }
+}

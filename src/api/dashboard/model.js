@@ -1,0 +1,163 @@
+// What the page knows, built from the snapshot and the events (and, for what the snapshot
+// leaves out, recent history read over HTTP): jobs, devices, alarms and locations by id.
+// Views subscribe and redraw what changed.
+
+import { locKey, ms } from './dom.js';
+
+/** States a job never leaves. */
+export const TERMINAL = new Set(['completed', 'failed', 'cancelled']);
+
+/** How many jobs the page keeps: active ones first, then the newest ended ones. */
+export const MAX_JOBS = 500;
+
+/** How many alarms the page keeps: active ones, then the newest cleared ones. */
+export const MAX_ALARMS = 200;
+
+export class Model {
+  constructor() {
+    /** The last event applied (or the snapshot's), for `?since=`. */
+    this.seq = null;
+    this.jobs = new Map();
+    this.devices = new Map();
+    this.alarms = new Map();
+    this.locations = new Map();
+    /** The server had more active jobs than its snapshot holds. */
+    this.jobsTruncated = false;
+    this.listeners = [];
+  }
+
+  /** `listener(kind, item)` with kind `snapshot`, `job`, `device`, `alarm` or `location`. */
+  subscribe(listener) {
+    this.listeners.push(listener);
+  }
+
+  emit(kind, item) {
+    for (const listener of this.listeners) listener(kind, item);
+  }
+
+  /**
+   * Replaces the state with a snapshot. Ended jobs and cleared alarms already shown are
+   * kept (they never change again); active ones not in the snapshot have ended since and
+   * come back with their final state from the history read after it.
+   */
+  applySnapshot(snapshot) {
+    const data = snapshot.data || {};
+    if (snapshot.reason === 'since_unknown') {
+      // Our `since` is beyond the server's log: another database. Nothing we hold is its.
+      this.jobs.clear();
+      this.alarms.clear();
+    }
+    this.seq = snapshot.seq;
+    if (data.jobs) {
+      for (const [id, job] of this.jobs) if (!TERMINAL.has(job.state)) this.jobs.delete(id);
+      for (const job of data.jobs) this.jobs.set(job.id, job);
+      this.jobsTruncated = Boolean(data.jobs_truncated);
+      this.trimJobs();
+    }
+    if (data.devices) {
+      this.devices.clear();
+      for (const device of data.devices) this.devices.set(device.id, device);
+    }
+    if (data.alarms) {
+      for (const [id, alarm] of this.alarms) if (!alarm.cleared_at) this.alarms.delete(id);
+      for (const alarm of data.alarms) this.alarms.set(alarm.id, alarm);
+      this.trimAlarms();
+    }
+    if (data.locations) {
+      this.locations.clear();
+      for (const location of data.locations) this.locations.set(locKey(location), location);
+    }
+    this.emit('snapshot', snapshot);
+  }
+
+  /** Applies one event `{seq, time, type, data}`; the caller keeps `seq` order. */
+  applyEvent(event) {
+    this.seq = event.seq;
+    const data = event.data;
+    switch (event.type) {
+      case 'job.updated':
+        if (this.mergeJob(data, true)) this.emit('job', this.jobs.get(data.id));
+        break;
+      case 'device.updated':
+        this.updateDevice(data);
+        break;
+      case 'alarm.raised':
+      case 'alarm.cleared':
+        this.alarms.set(data.id, data);
+        this.trimAlarms();
+        this.emit('alarm', data);
+        break;
+      case 'location.updated':
+        this.locations.set(locKey(data), data);
+        this.emit('location', data);
+        break;
+      default:
+        break;
+    }
+  }
+
+  /** A device status from an event or from a pause/resume answer. */
+  updateDevice(device) {
+    this.devices.set(device.id, device);
+    this.emit('device', device);
+  }
+
+  /** Jobs read over HTTP (recent history, a cancel's answer): merged, newest wins. */
+  addJobs(jobs) {
+    let changed = false;
+    for (const job of jobs) changed = this.mergeJob(job, false) || changed;
+    if (changed) this.emit('jobs');
+  }
+
+  /** Alarms read over HTTP (the recent past): merged, a cleared one wins. */
+  addAlarms(alarms) {
+    for (const alarm of alarms) {
+      const known = this.alarms.get(alarm.id);
+      if (!known || (alarm.cleared_at && !known.cleared_at)) this.alarms.set(alarm.id, alarm);
+    }
+    this.trimAlarms();
+    this.emit('alarms');
+  }
+
+  /**
+   * Keeps the newer of two versions of a job: an event replaces a version as old as it,
+   * an HTTP read only an older one; an ended job is never taken back to an active state.
+   */
+  mergeJob(job, fromEvent) {
+    const known = this.jobs.get(job.id);
+    if (known) {
+      if (TERMINAL.has(known.state) && !TERMINAL.has(job.state)) return false;
+      const age = ms(job.updated_at) - ms(known.updated_at);
+      if (age < 0 || (age === 0 && !fromEvent)) return false;
+    }
+    this.jobs.set(job.id, job);
+    if (!known && this.jobs.size > MAX_JOBS) this.trimJobs();
+    return this.jobs.has(job.id);
+  }
+
+  /** Drops the oldest ended jobs, then the oldest active ones, down to MAX_JOBS. */
+  trimJobs() {
+    if (this.jobs.size <= MAX_JOBS) return;
+    const order = [...this.jobs.values()].sort(
+      (a, b) => Number(TERMINAL.has(a.state)) - Number(TERMINAL.has(b.state)) || b.id - a.id,
+    );
+    for (const job of order.slice(MAX_JOBS)) this.jobs.delete(job.id);
+  }
+
+  /** Drops the oldest cleared alarms down to MAX_ALARMS (active ones always stay). */
+  trimAlarms() {
+    if (this.alarms.size <= MAX_ALARMS) return;
+    const cleared = [...this.alarms.values()].filter((a) => a.cleared_at).sort((a, b) => a.id - b.id);
+    for (const alarm of cleared.slice(0, this.alarms.size - MAX_ALARMS)) this.alarms.delete(alarm.id);
+  }
+
+  /** The job a crane holds as its task number (task numbers come from job ids). */
+  craneJob(device) {
+    const task = device.crane ? device.crane.task : 0;
+    if (!task) return null;
+    for (const job of this.jobs.values()) {
+      if (job.device === device.id && !TERMINAL.has(job.state) && ((job.id - 1) % 65535) + 1 === task) return job;
+    }
+    return null;
+  }
+}
