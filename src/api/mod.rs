@@ -53,9 +53,16 @@ also submits and changes jobs, `admin` may do everything. A `201` means the job 
         (name = "devices", description = "The machines: status, pause and resume"),
         (name = "locations", description = "What rackd knows of each location"),
         (name = "alarms", description = "Device alarms, active and past"),
-        (name = "events", description = "Live events over WebSocket: snapshot, replay with `since`, resync"),
+        (name = "events", description = "Live events over WebSocket (`GET /api/v1/ws`). A subscriber first gets a \
+`Snapshot` (or, with `?since=SEQ`, the replay of every later event), then every `Event` as it is committed, in \
+`seq` order with no gap and no duplicate. Event types and their `data`: `job.updated` (a `Job`), \
+`device.updated` (a `DeviceStatus`), `alarm.raised` and `alarm.cleared` (an `Alarm`), `location.updated` \
+(a `LocationState`). A subscriber that falls behind gets a `Resync` and the connection closes with code \
+4000: reconnect with `?since=` its `seq`. `?topics=jobs,devices,alarms,locations` filters both the \
+snapshot and the events. Browsers pass the key as `?token=`."),
         (name = "operations", description = "Health, readiness and metrics"),
     ),
+    components(schemas(ws::Snapshot, ws::SnapshotData, ws::Resync)),
     modifiers(&Security),
 )]
 struct ApiDoc;

@@ -30,7 +30,22 @@ use super::extract::Query;
 use super::state::AppState;
 use crate::service::events::Topic;
 
-pub use snapshot::Snapshot;
+pub use snapshot::{Snapshot, SnapshotData};
+
+/// Sent to a subscriber that fell too far behind, just before the connection is closed
+/// with code 4000.
+#[derive(Debug, serde::Serialize, ToSchema)]
+#[schema(example = json!({"type": "resync", "seq": 1200, "reason": "fell 1025 commits behind; reconnect with since=1200"}))]
+pub struct Resync {
+    /// Always `resync`.
+    #[serde(rename = "type")]
+    #[schema(rename = "type")]
+    pub kind: &'static str,
+    /// The last event this subscriber was sent: reconnect with `?since=` this.
+    pub seq: i64,
+    /// Why, in words.
+    pub reason: String,
+}
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {

@@ -89,8 +89,9 @@ impl Session {
                         }
                         Err(RecvError::Lagged(missed)) => {
                             let reason = format!("fell {missed} commits behind; reconnect with since={last}");
-                            let text = serde_json::json!({"type": "resync", "seq": last, "reason": reason});
-                            self.send(&mut sink, Message::Text(text.to_string().into())).await?;
+                            let resync = super::Resync { kind: "resync", seq: last, reason };
+                            let text = serde_json::to_string(&resync).unwrap_or_default();
+                            self.send(&mut sink, Message::Text(text.into())).await?;
                             return self.close(&mut sink, CLOSE_RESYNC, "resync").await;
                         }
                         Err(RecvError::Closed) => return self.close(&mut sink, 1001, "server stopping").await,
