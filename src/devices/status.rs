@@ -42,6 +42,9 @@ pub struct DeviceStatus {
 /// A stacker crane's own registers, as last read.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, ToSchema)]
 pub struct CraneStatus {
+    /// The registers below have been read since rackd started (until then they are zeros,
+    /// not the crane's word).
+    pub known: bool,
     /// The crane's heartbeat moves (false once it stalled for the configured time).
     pub heartbeat_ok: bool,
     /// Current action state (D203): 0 idle, 1..18 motion, 20/30/40 awaiting acknowledgement,
