@@ -37,6 +37,9 @@ pub struct DeviceStatus {
     /// What a stacker crane reports (cranes only; absent for other kinds).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub crane: Option<CraneStatus>,
+    /// Each tag's latest value, by name (tags devices only; absent for other kinds).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tags: Option<std::collections::BTreeMap<String, super::tags::TagStatus>>,
 }
 
 /// A stacker crane's own registers, as last read.
@@ -102,6 +105,7 @@ impl DeviceStatus {
             consecutive_failures: 0,
             last_error: None,
             crane: (kind == super::DeviceKind::Crane).then(CraneStatus::default),
+            tags: None,
         }
     }
 }
