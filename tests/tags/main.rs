@@ -4,9 +4,12 @@
 
 #[path = "../common/helpers.rs"]
 mod helpers;
+#[path = "../common/ws.rs"]
+mod ws;
 
 mod access;
 mod errors;
+mod events;
 mod lines;
 mod modbus;
 
