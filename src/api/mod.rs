@@ -50,7 +50,7 @@ also submits and changes jobs, `admin` may do everything. A `201` means the job 
     servers((url = "/", description = "This server")),
     tags(
         (name = "jobs", description = "Submit and follow jobs"),
-        (name = "devices", description = "The machines: status, pause and resume"),
+        (name = "devices", description = "The machines: status, pause and resume; tags of tag I/O devices"),
         (name = "locations", description = "What rackd knows of each location"),
         (name = "alarms", description = "Device alarms, active and past"),
         (name = "events", description = "Live events over WebSocket (`GET /api/v1/ws`). A subscriber first gets a \
