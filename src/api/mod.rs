@@ -121,7 +121,11 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
     let (protected, mut doc) = protected_routes().split_for_parts();
     let (public, public_doc) = public_routes().split_for_parts();
     doc.merge(public_doc);
-    let protected = protected.layer(middleware::from_fn_with_state(state.clone(), auth::require_key));
+    // The 405 fallback is set before the key check is layered on, so that a wrong method
+    // on a protected route is refused for a missing key first.
+    let protected = protected
+        .method_not_allowed_fallback(ops::method_not_allowed)
+        .layer(middleware::from_fn_with_state(state.clone(), auth::require_key));
     Router::new()
         .merge(protected)
         .merge(public)
