@@ -114,7 +114,14 @@ impl Application {
     /// devices between two steps and commits what is pending before returning.
     pub async fn run_until(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
         tracing::info!(addr = %self.local_addr(), "rackd listening");
-        axum::serve(self.listener, self.router).with_graceful_shutdown(shutdown).await?;
+        // No Nagle: live events and replies are small writes that must leave at once
+        // (Nagle's wait for an ACK, against a delayed ACK, stalls them by up to 40 ms).
+        let listener = axum::serve::ListenerExt::tap_io(self.listener, |tcp| {
+            if let Err(e) = tcp.set_nodelay(true) {
+                tracing::debug!(error = %e, "TCP_NODELAY");
+            }
+        });
+        axum::serve(listener, self.router).with_graceful_shutdown(shutdown).await?;
         // A device stopped between two PLC requests is the same as a crash, which the
         // hand-over order and recovery make safe.
         for task in &self.device_tasks {

@@ -266,6 +266,20 @@ mod tests {
     }
 
     #[test]
+    fn a_tags_device_table_follows_its_entry() {
+        let text = "[[devices]]\nid = \"tower1\"\nkind = \"tags\"\nprotocol = \"ppi-tcp\"\naddress = \"10.0.0.2:102\"\nunit = 2\n\
+                    [devices.tags]\nbeacon.red = \"Q0.1\"\n\"conveyor.speed\" = { address = \"VD4\", type = \"f32\", max = 2.5 }\n";
+        let config = Config::parse(text, Path::new("x.toml")).unwrap();
+        assert_eq!(config.devices[0].tags.0.len(), 2);
+        let bad = text.replace("max = 2.5", "mx = 2.5");
+        let err = Config::parse(&bad, Path::new("x.toml")).unwrap_err().to_string();
+        assert!(err.contains("conveyor.speed") && err.contains("mx") && err.contains("line"), "{err}");
+        let bad = text.replace("VD4", "VD4.1");
+        let err = Config::parse(&bad, Path::new("x.toml")).unwrap_err().to_string();
+        assert!(err.contains("tower1") && err.contains("conveyor.speed") && err.contains("VD4.1"), "{err}");
+    }
+
+    #[test]
     fn bad_layout_is_refused() {
         let text = "[[site.aisles]]\naisle = 1\nrows = 3\nbays = 1\nlevels = 1\npositions = 1\n";
         let err = Config::parse(text, Path::new("x.toml")).unwrap_err().to_string();

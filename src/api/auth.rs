@@ -1,7 +1,9 @@
 //! The API key check: who is calling, and may they?
 //!
 //! The role a request needs follows from its method: reads (`GET`, `HEAD`) need `viewer`,
-//! everything else `operator`; routes registered under [`admin_paths`] need `admin`. With no
+//! everything else `operator`; routes registered under [`admin_paths`] need `admin`, except
+//! pause, resume and tag writes (`/api/v1/devices/{id}/tags/{tag}`), which are operators'
+//! daily work. With no
 //! keys configured every request is let through (the server then only listens on loopback,
 //! see [`crate::app`]).
 
@@ -26,11 +28,18 @@ pub fn required_role(method: &Method, path: &str) -> Role {
     } else if admin_paths().iter().any(|p| path.starts_with(p))
         && !path.ends_with("/pause")
         && !path.ends_with("/resume")
+        && !is_tag_write(path)
     {
         Role::Admin
     } else {
         Role::Operator
     }
+}
+
+/// `/api/v1/devices/{id}/tags/{tag}`: exactly a device, `tags` and a tag name.
+fn is_tag_write(path: &str) -> bool {
+    let rest = path.strip_prefix("/api/v1/devices/").unwrap_or("");
+    matches!(rest.split('/').collect::<Vec<_>>()[..], [id, "tags", tag] if !id.is_empty() && !tag.is_empty())
 }
 
 /// The key a request presents: `Authorization: Bearer KEY`, `X-Api-Key: KEY`, or (for
@@ -87,5 +96,10 @@ mod tests {
         assert_eq!(required_role(&Method::PATCH, "/api/v1/jobs/1"), Role::Operator);
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/registers"), Role::Admin);
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/pause"), Role::Operator);
+        assert_eq!(required_role(&Method::POST, "/api/v1/devices/tower1/tags/beacon.red"), Role::Operator);
+        assert_eq!(required_role(&Method::GET, "/api/v1/devices/tower1/tags"), Role::Viewer);
+        assert_eq!(required_role(&Method::POST, "/api/v1/devices/tower1/tags"), Role::Admin);
+        assert_eq!(required_role(&Method::POST, "/api/v1/devices/tower1/tags/a/b"), Role::Admin);
+        assert_eq!(required_role(&Method::POST, "/api/v1/devices//tags/x"), Role::Admin);
     }
 }

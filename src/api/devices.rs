@@ -1,4 +1,6 @@
-//! `/api/v1/devices`: device status, pause and resume.
+//! `/api/v1/devices`: device status, pause and resume; tags devices' values ([`tags`]).
+
+mod tags;
 
 use axum::extract::State;
 use utoipa_axum::{router::OpenApiRouter, routes};
@@ -15,6 +17,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(get_device))
         .routes(routes!(pause_device))
         .routes(routes!(resume_device))
+        .merge(tags::router())
 }
 
 fn device<'a>(app: &'a AppState, id: &str) -> Result<&'a DeviceHandle, ApiError> {

@@ -1,4 +1,5 @@
-//! Prometheus metrics: HTTP requests by route and status, jobs by state, intake latency.
+//! Prometheus metrics: HTTP requests by route and status, jobs by state, intake latency,
+//! live event subscribers.
 
 use axum::extract::{MatchedPath, Request, State};
 use axum::http::header;
@@ -35,6 +36,7 @@ pub struct Metrics {
     registry: Registry,
     requests: Family<RequestLabels, Counter>,
     jobs: Family<StateLabels, Gauge>,
+    subscribers: Gauge,
     /// Seconds from a submission reaching the writer to its commit.
     pub intake_seconds: Histogram,
 }
@@ -48,7 +50,9 @@ impl Default for Metrics {
         registry.register("http_requests", "HTTP requests by method, route and status", requests.clone());
         registry.register("jobs", "Jobs by state", jobs.clone());
         registry.register("intake_seconds", "Time from submission to durable commit", intake_seconds.clone());
-        Metrics { registry, requests, jobs, intake_seconds }
+        let subscribers = Gauge::default();
+        registry.register("ws_subscribers", "WebSocket subscribers to live events", subscribers.clone());
+        Metrics { registry, requests, jobs, subscribers, intake_seconds }
     }
 }
 
@@ -69,6 +73,7 @@ pub async fn metrics(State(app): State<AppState>) -> Result<Response, ApiError> 
         let n = counts.iter().find(|(s, _)| s == state.as_str()).map_or(0, |(_, n)| *n);
         app.metrics.jobs.get_or_create(&StateLabels { state: state.as_str() }).set(n);
     }
+    app.metrics.subscribers.set(app.hub.subscribers() as i64);
     let mut text = String::new();
     prometheus_client::encoding::text::encode(&mut text, &app.metrics.registry)
         .map_err(|e| ApiError::unavailable(format!("metrics encoding: {e}")))?;

@@ -50,12 +50,19 @@ also submits and changes jobs, `admin` may do everything. A `201` means the job 
     servers((url = "/", description = "This server")),
     tags(
         (name = "jobs", description = "Submit and follow jobs"),
-        (name = "devices", description = "The machines: status, pause and resume"),
+        (name = "devices", description = "The machines: status, pause and resume; tags of tag I/O devices"),
         (name = "locations", description = "What rackd knows of each location"),
         (name = "alarms", description = "Device alarms, active and past"),
-        (name = "events", description = "Live events over WebSocket: snapshot, replay with `since`, resync"),
+        (name = "events", description = "Live events over WebSocket (`GET /api/v1/ws`). A subscriber first gets a \
+`Snapshot` (or, with `?since=SEQ`, the replay of every later event), then every `Event` as it is committed, in \
+`seq` order with no gap and no duplicate. Event types and their `data`: `job.updated` (a `Job`), \
+`device.updated` (a `DeviceStatus`), `alarm.raised` and `alarm.cleared` (an `Alarm`), `location.updated` \
+(a `LocationState`). A subscriber that falls behind gets a `Resync` and the connection closes with code \
+4000: reconnect with `?since=` its `seq`. `?topics=jobs,devices,alarms,locations` filters both the \
+snapshot and the events. Browsers pass the key as `?token=`."),
         (name = "operations", description = "Health, readiness and metrics"),
     ),
+    components(schemas(ws::Snapshot, ws::SnapshotData, ws::Resync)),
     modifiers(&Security),
 )]
 struct ApiDoc;
@@ -114,7 +121,11 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
     let (protected, mut doc) = protected_routes().split_for_parts();
     let (public, public_doc) = public_routes().split_for_parts();
     doc.merge(public_doc);
-    let protected = protected.layer(middleware::from_fn_with_state(state.clone(), auth::require_key));
+    // The 405 fallback is set before the key check is layered on, so that a wrong method
+    // on a protected route is refused for a missing key first.
+    let protected = protected
+        .method_not_allowed_fallback(ops::method_not_allowed)
+        .layer(middleware::from_fn_with_state(state.clone(), auth::require_key));
     Router::new()
         .merge(protected)
         .merge(public)

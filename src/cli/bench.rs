@@ -43,6 +43,18 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 10)]
         poll_ms: u64,
     },
+    /// Live events: fan-out latency and the server's CPU with 1 and with N WebSocket subscribers.
+    Ws {
+        /// Concurrent subscribers in the second phase.
+        #[arg(long, default_value_t = 1000)]
+        subscribers: usize,
+        /// Jobs (events) per phase.
+        #[arg(long, default_value_t = 500)]
+        events: usize,
+        /// Jobs posted per second.
+        #[arg(long, default_value_t = 50)]
+        rate: u32,
+    },
 }
 
 struct Phase {
@@ -65,6 +77,9 @@ pub async fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Intake { clients, seconds, batch } => (clients, seconds, batch),
         BenchCommand::Shelf { latency_jobs, batch_jobs, poll_ms } => {
             return super::bench_shelf::run(latency_jobs, batch_jobs, poll_ms).await;
+        }
+        BenchCommand::Ws { subscribers, events, rate } => {
+            return super::bench_ws::run(subscribers, events, rate).await;
         }
     };
     let dir = tempfile::tempdir()?;

@@ -5,7 +5,9 @@
 //! PLC on a free loopback UDP port (device `shelf1`, aisle 1) and a simulated stacker crane
 //! on a free loopback MC 3E TCP port (device `crane1`, aisle 2), both inside the process, so
 //! the first command of the README gives a working store; jobs go to the device of their
-//! location's aisle. A real site
+//! location's aisle. A simulated light tower on Modbus TCP (device `tower1`, a tags device:
+//! lamps, buzzer, a box sensor that changes every few seconds, a conveyor speed) shows tag
+//! I/O. A real site
 //! replaces the simulator with its PLC's address in `[[devices]]` (see
 //! `config/rackd.example.toml`).
 
@@ -16,6 +18,7 @@ use crate::devices::DeviceConfig;
 use crate::protocols::mc3e::TransportKind;
 use crate::sim::crane::{CraneSim, CraneSimOptions};
 use crate::sim::shelf::{ShelfSim, ShelfSimOptions};
+use crate::sim::tower::{self, TowerSim};
 
 /// How fast the demo's simulated machines work.
 #[derive(Clone, Copy, Debug)]
@@ -32,14 +35,25 @@ impl Pace {
         Pace { task_time: Duration::from_millis(1500), crane_step: Duration::from_millis(250) };
 }
 
+/// How often a box arrives at (or leaves) the demo tower's station sensor.
+const DEMO_BOX_PERIOD: Duration = Duration::from_secs(5);
+
+/// The tags device `id` for a simulated light tower at `address` (Modbus TCP), with the
+/// tower's tags ([`tower::TAGS`]) and fast polling.
+pub fn tower_device(id: &str, address: &str) -> DeviceConfig {
+    let entry = format!("id = {id:?}\nkind = \"tags\"\nprotocol = \"modbus-tcp\"\naddress = {address:?}\n");
+    let text = format!("{entry}poll_ms = 100\n[tags]\n{}", tower::TAGS);
+    toml::from_str(&text).expect("a valid tags entry")
+}
+
 /// Starts the demo's simulated machines and adds their devices to `config`; keep the
 /// returned simulators alive as long as the service runs.
-pub async fn start(config: &mut Config) -> anyhow::Result<(ShelfSim, CraneSim)> {
+pub async fn start(config: &mut Config) -> anyhow::Result<(ShelfSim, CraneSim, TowerSim)> {
     start_with(config, Pace::DEMO).await
 }
 
 /// [`start`] at another pace (tests run the demo site faster).
-pub async fn start_with(config: &mut Config, pace: Pace) -> anyhow::Result<(ShelfSim, CraneSim)> {
+pub async fn start_with(config: &mut Config, pace: Pace) -> anyhow::Result<(ShelfSim, CraneSim, TowerSim)> {
     let options = ShelfSimOptions { task_time: pace.task_time, ..ShelfSimOptions::default() };
     let sim = ShelfSim::start("127.0.0.1:0", options).await?;
     let mut device = DeviceConfig::shelf("shelf1", &sim.local_addr().to_string(), vec![1]);
@@ -52,10 +66,15 @@ pub async fn start_with(config: &mut Config, pace: Pace) -> anyhow::Result<(Shel
     if !config.site.aisles.iter().any(|a| a.aisle == 2) {
         crane_device.aisles.clear();
     }
+    let tower = TowerSim::start("127.0.0.1:0", Some(DEMO_BOX_PERIOD)).await?;
     config.devices = vec![device];
     if !crane_device.aisles.is_empty() {
         config.devices.push(crane_device);
     }
-    tracing::info!(plc = %sim.local_addr(), crane = %crane.local_addr(), "demo site: simulated shelf PLC (device shelf1) and crane (device crane1) started");
-    Ok((sim, crane))
+    config.devices.push(tower_device("tower1", &tower.local_addr().to_string()));
+    tracing::info!(
+        plc = %sim.local_addr(), crane = %crane.local_addr(), tower = %tower.local_addr(),
+        "demo site: simulated shelf PLC (device shelf1), crane (device crane1) and light tower (device tower1) started"
+    );
+    Ok((sim, crane, tower))
 }

@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod bench_shelf;
+pub mod bench_ws;
 pub mod demo;
 pub mod plc;
 pub mod plc_mc3e;

@@ -15,6 +15,9 @@ pub enum DeviceKind {
     Shelf,
     /// A stacker crane with the MC 3E register interface (crane-mc3e.md).
     Crane,
+    /// Named tags mapped to PLC addresses (light towers, stations, conveyors), polled and
+    /// written through the API; runs no jobs.
+    Tags,
 }
 
 impl DeviceKind {
@@ -24,6 +27,7 @@ impl DeviceKind {
         match self {
             DeviceKind::Shelf => &[Store, Retrieve, Move, Clear, Light],
             DeviceKind::Crane => &[Store, Retrieve, Move, Travel],
+            DeviceKind::Tags => &[],
         }
     }
 
@@ -32,11 +36,12 @@ impl DeviceKind {
         match self {
             DeviceKind::Shelf => "shelf",
             DeviceKind::Crane => "crane",
+            DeviceKind::Tags => "tags",
         }
     }
 }
 
-/// One `[[devices]]` entry. Every key but `id`, `kind`, `address` and `aisles` has a default.
+/// One `[[devices]]` entry. Every key but `id`, `kind` and `address` has a default.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DeviceConfig {
@@ -44,7 +49,9 @@ pub struct DeviceConfig {
     pub id: String,
     /// What kind of machine.
     pub kind: DeviceKind,
-    /// The aisles whose locations this device serves (jobs are routed by location).
+    /// The aisles whose locations this device serves (jobs are routed by location); none
+    /// by default, and none for a tags device.
+    #[serde(default)]
     pub aisles: Vec<u16>,
     /// One of [`crate::protocols::link::PROTOCOLS`] (`modbus-udp`, `modbus-tcp`, `modbus-rtu`,
     /// `modbus-rtu-tcp`, `mc3e`, `mc3e-udp`, `mewtocol`, `mewtocol-tcp`, `ppi`, `ppi-tcp`).
@@ -120,6 +127,10 @@ pub struct DeviceConfig {
     /// (D22 := 1, wait for D223 = 0, D22 := 0) or `echo` (D22 := the value of D223).
     #[serde(default = "default_ack")]
     pub ack: String,
+    /// Tags: `[devices.tags]`, tag name -> address or `{ address, type, word_order, min,
+    /// max, writable }` (see [`crate::devices::tags`]).
+    #[serde(default)]
+    pub tags: crate::devices::tags::TagTable,
 }
 
 fn default_protocol() -> String {
@@ -235,7 +246,12 @@ impl DeviceConfig {
         if self.offline_after == 0 {
             return fail("offline_after must be at least 1".into());
         }
-        self.link().check().or_else(|e| fail(e.to_string()))
+        self.link().check().or_else(|e| fail(e.to_string()))?;
+        match self.kind {
+            DeviceKind::Tags => crate::devices::tags::check(self).or_else(fail),
+            _ if !self.tags.0.is_empty() => fail("[devices.tags] is only for kind = \"tags\"".into()),
+            _ => Ok(()),
+        }
     }
 }
 
@@ -262,5 +278,36 @@ mod tests {
         let mut bad = c;
         bad.handshake_timeout_ms = 0;
         assert!(bad.check().is_err());
+    }
+
+    fn tags_entry(extra: &str) -> Result<DeviceConfig, String> {
+        let text = format!(
+            "id = \"tower1\"\nkind = \"tags\"\nprotocol = \"modbus-tcp\"\naddress = \"127.0.0.1:502\"\n{extra}"
+        );
+        let c: DeviceConfig = toml::from_str(&text).map_err(|e| e.to_string())?;
+        c.check().map(|_| c)
+    }
+
+    #[test]
+    fn a_tags_entry_is_checked_without_a_connection() {
+        let c = tags_entry(
+            "[tags]\n\"beacon.red\" = \"0x1\"\nconveyor.speed = { address = \"4x100\", type = \"f32\" }\n",
+        )
+        .unwrap();
+        assert_eq!((c.kind.as_str(), c.kind.job_kinds(), c.tags.0.len()), ("tags", &[][..], 2));
+        assert!(c.aisles.is_empty());
+        let err = tags_entry("aisles = [1]\n[tags]\nx = \"0x1\"\n").unwrap_err();
+        assert!(err.contains("tower1") && err.contains("aisles"), "{err}");
+        let err = tags_entry("").unwrap_err();
+        assert!(err.contains("at least one tag"), "{err}");
+        let err = tags_entry("[tags]\nbeacon.red = \"Q0.1\"\n").unwrap_err();
+        assert!(err.contains("beacon.red") && err.contains("Q0.1"), "{err}");
+        let err = tags_entry("[tags]\n\"9lives\" = \"0x1\"\n").unwrap_err();
+        assert!(err.contains("9lives"), "{err}");
+        let err = tags_entry("[tags]\nx = { address = \"4x1\", typo = 1 }\n").unwrap_err();
+        assert!(err.contains("typo"), "{err}");
+        let mut shelf = DeviceConfig::shelf("shelf1", "127.0.0.1:502", vec![1]);
+        shelf.tags.0.insert("x".into(), crate::devices::tags::TagDef::at("0x1"));
+        assert!(shelf.check().unwrap_err().contains("only for kind"));
     }
 }

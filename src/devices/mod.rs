@@ -10,6 +10,7 @@ pub mod crane;
 pub mod follow;
 pub mod shelf;
 pub mod status;
+pub mod tags;
 
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
@@ -40,6 +41,8 @@ pub struct DeviceHandle {
     pub status: Arc<Mutex<DeviceStatus>>,
     /// Requests to the device task.
     pub requests: mpsc::Sender<DeviceRequest>,
+    /// Tag values and writes (tags devices only).
+    pub tags: Option<tags::TagsHandle>,
 }
 
 impl DeviceHandle {
@@ -99,13 +102,18 @@ pub async fn start(
     for c in configs {
         let plc =
             crate::protocols::link::connect(&c.link()).await.with_context(|| format!("device {:?}", c.id))?;
-        let slots = if c.kind == DeviceKind::Crane { 1 } else { c.slots };
+        let slots = match c.kind {
+            DeviceKind::Shelf => c.slots,
+            DeviceKind::Crane => 1,
+            DeviceKind::Tags => 0,
+        };
         let mut status = DeviceStatus::new(&c.id, c.kind, &c.protocol, &c.address, slots);
         status.aisles = c.aisles.clone();
         let status = Arc::new(Mutex::new(status));
         let (requests, inbox) = mpsc::channel(16);
         let wake = wakers.remove(&c.id).unwrap_or_default();
         let context = || format!("device {:?}", c.id);
+        let mut tag_handle = None;
         let task = match c.kind {
             DeviceKind::Shelf => {
                 let shelf = shelf::Shelf::new(c.clone(), plc, writer.clone(), pool.clone(), status.clone())
@@ -117,9 +125,16 @@ pub async fn start(
                     .with_context(context)?;
                 tokio::spawn(crane.run(wake.clone(), inbox))
             }
+            DeviceKind::Tags => {
+                let (device, handle) = tags::TagDevice::new(c.clone(), plc, status.clone())
+                    .map_err(anyhow::Error::msg)
+                    .with_context(context)?;
+                tag_handle = Some(handle);
+                tokio::spawn(device.run(inbox))
+            }
         };
         tasks.push(task);
-        devices.insert(c.id.clone(), DeviceHandle { wake, status, requests });
+        devices.insert(c.id.clone(), DeviceHandle { wake, status, requests, tags: tag_handle });
     }
     Ok((Arc::new(devices), tasks))
 }

@@ -39,11 +39,17 @@ pub struct DeviceStatus {
     /// What a stacker crane reports (cranes only; absent for other kinds).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub crane: Option<CraneStatus>,
+    /// Each tag's latest value, by name (tags devices only; absent for other kinds).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tags: Option<std::collections::BTreeMap<String, super::tags::TagStatus>>,
 }
 
 /// A stacker crane's own registers, as last read.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, ToSchema)]
 pub struct CraneStatus {
+    /// The registers below have been read since rackd started (until then they are zeros,
+    /// not the crane's word).
+    pub known: bool,
     /// The crane's heartbeat moves (false once it stalled for the configured time).
     pub heartbeat_ok: bool,
     /// Current action state (D203): 0 idle, 1..18 motion, 20/30/40 awaiting acknowledgement,
@@ -102,6 +108,7 @@ impl DeviceStatus {
             consecutive_failures: 0,
             last_error: None,
             crane: (kind == super::DeviceKind::Crane).then(CraneStatus::default),
+            tags: None,
         }
     }
 }

@@ -15,6 +15,7 @@ pub mod link;
 pub mod mc3e;
 pub mod mewtocol;
 pub mod modbus;
+pub mod notation;
 pub mod ppi;
 pub mod serial;
 

@@ -112,9 +112,11 @@ impl Rules {
     }
 
     /// The device a job runs on: the one named, or the one serving its locations' aisle.
-    /// With no devices configured jobs have none and stay queued.
+    /// With no device that runs jobs (none, or only tags devices) jobs have none and stay
+    /// queued. A device that runs no jobs (tags) serves no aisle and refuses any job named
+    /// for it.
     fn route(&self, spec: &JobSpec, named: Option<String>) -> Result<Option<String>, Invalid> {
-        if self.devices.is_empty() && named.is_none() {
+        if named.is_none() && self.devices.values().all(|kinds| kinds.is_empty()) {
             return Ok(None);
         }
         let device = match named {
@@ -194,6 +196,20 @@ mod tests {
         assert!(err.unwrap_err().0.contains("two different"));
         let err = rules().check(req(serde_json::json!({"kind": "clear", "location": LOC(), "device": "x"})));
         assert!(err.unwrap_err().0.contains("not configured"));
+    }
+
+    #[test]
+    fn a_tags_device_is_never_routed_jobs() {
+        let mut r = rules();
+        r.devices.insert("tower1".into(), crate::devices::DeviceKind::Tags.job_kinds());
+        let queued = r.check(req(serde_json::json!({"kind": "store", "to": LOC()}))).unwrap();
+        assert_eq!(queued.device, None, "only a tags device: the job waits for a real one");
+        let err = r.check(req(serde_json::json!({"kind": "clear", "location": LOC(), "device": "tower1"})));
+        assert!(err.unwrap_err().0.contains("cannot run clear jobs"));
+        r.devices.insert("shelf1".into(), crate::devices::DeviceKind::Shelf.job_kinds());
+        r.routes.insert(1, "shelf1".into());
+        let routed = r.check(req(serde_json::json!({"kind": "store", "to": LOC()}))).unwrap();
+        assert_eq!(routed.device.as_deref(), Some("shelf1"));
     }
 
     #[test]

@@ -136,8 +136,11 @@ fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<u16>) -> (Vec<NewAlarm
     };
     if status.online {
         known.insert(LINK_ALARM);
-        // Online, its own alarm registers were read: every code is known.
-        known.extend(active.iter().copied());
+        // Online and its alarm register read (a crane's just after a start may not be yet):
+        // every code is known.
+        if status.crane.as_ref().is_none_or(|c| c.known) {
+            known.extend(active.iter().copied());
+        }
         if let Some(crane) = &status.crane
             && let Some(code) = crane.alarm_code
         {
@@ -179,6 +182,7 @@ mod tests {
         s.online = online;
         s.consecutive_failures = failures;
         s.crane = Some(CraneStatus {
+            known: true,
             alarm_code: alarm,
             alarm_text: alarm.map(|c| format!("text {c}")),
             alarm_class: alarm.map(|_| "hardware".into()),
@@ -209,6 +213,15 @@ mod tests {
         assert_eq!(raise[0].class, "link");
         let (raise, clear) = alarm_changes(&crane(true, 0, None), &BTreeSet::from([LINK_ALARM, 41]));
         assert_eq!((codes(&raise), clear), (vec![], vec![LINK_ALARM, 41]));
+    }
+
+    #[test]
+    fn a_crane_online_but_not_yet_read_clears_nothing() {
+        let mut status = crane(true, 0, None);
+        status.crane.as_mut().unwrap().known = false;
+        let (raise, clear) = alarm_changes(&status, &BTreeSet::from([41, LINK_ALARM]));
+        assert!(raise.is_empty());
+        assert_eq!(clear, vec![LINK_ALARM]);
     }
 
     #[test]

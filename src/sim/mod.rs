@@ -3,3 +3,4 @@
 
 pub mod crane;
 pub mod shelf;
+pub mod tower;

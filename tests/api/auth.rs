@@ -29,6 +29,9 @@ async fn each_role_reaches_exactly_its_routes() {
         ("POST", "/api/v1/jobs/batch", Some(json!({"jobs": [store("AUTH-2")]})), Some(Role::Operator)),
         ("PATCH", "/api/v1/jobs/1", Some(json!({"priority": 1})), Some(Role::Operator)),
         ("POST", "/api/v1/jobs/1/cancel", None, Some(Role::Operator)),
+        ("GET", "/api/v1/alarms", None, Some(Role::Viewer)),
+        // A method the route lacks: the key is checked first, so strangers learn nothing.
+        ("POST", "/api/v1/alarms", None, Some(Role::Operator)),
     ];
     let callers: [(Option<&str>, Option<Role>); 5] = [
         (None, None),

@@ -1,5 +1,5 @@
 //! The committed OpenAPI document matches the code, and every request example in it is a
-//! valid request against the demo site.
+//! valid request against the demo site (with its simulated light tower for tag writes).
 
 use crate::helpers::*;
 
@@ -16,7 +16,15 @@ fn committed_openapi_matches_the_code() {
 
 #[tokio::test]
 async fn every_request_example_is_accepted_by_the_demo_site() {
-    let app = spawn_app().await;
+    let tower = rackd::sim::tower::TowerSim::start("127.0.0.1:0", None).await.unwrap();
+    let device = rackd::cli::demo::tower_device("tower1", &tower.local_addr().to_string());
+    let app = spawn_with(|c| c.devices = vec![device]).await;
+    // Tag writes need the device online, which its first poll makes it.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+    while app.get("/api/v1/devices/tower1").await.1["online"] != true {
+        assert!(std::time::Instant::now() < deadline, "the tower never came online");
+        tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+    }
     let doc: serde_json::Value = serde_json::from_str(&rackd::api::openapi().to_json().unwrap()).unwrap();
     let mut tried = 0;
     for (path, item) in doc["paths"].as_object().unwrap() {
@@ -29,7 +37,10 @@ async fn every_request_example_is_accepted_by_the_demo_site() {
             assert!(!example.is_null(), "{method} {path}: schema {name} has no example");
             // Make sure a job exists for the example's path parameters.
             let (_, job) = app.post("/api/v1/jobs", &store(&format!("example-{tried}"))).await;
-            let path = path.replace("{id}", &job["id"].to_string());
+            let path = match path.strip_prefix("/api/v1/devices/{id}/tags/") {
+                Some("{tag}") => "/api/v1/devices/tower1/tags/tower.green".to_owned(),
+                _ => path.replace("{id}", &job["id"].to_string()),
+            };
             let r = app
                 .client
                 .request(method.to_uppercase().parse().unwrap(), app.url(&path))

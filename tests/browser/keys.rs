@@ -14,7 +14,7 @@ const KEY: &str = "rk_browser-test-operator";
 #[tokio::test]
 async fn with_keys_the_page_asks_for_one_and_works_once_given() {
     let Some(browser) = Browser::start().await else { return };
-    let (app, _shelf, _crane) = demo_app(|c| {
+    let (app, _sims) = demo_app(|c| {
         c.auth.keys =
             vec![KeyConfig { name: "operator".into(), role: Role::Operator, hash: KeyHash::of(KEY) }];
     })
@@ -55,7 +55,7 @@ async fn with_keys_the_page_asks_for_one_and_works_once_given() {
             15,
         )
         .await;
-    browser.wait("the devices", "return document.querySelectorAll('[data-device]').length === 2", 10).await;
+    browser.wait("the devices", "return document.querySelectorAll('[data-device]').length === 3", 10).await;
     let open = browser.js("return document.getElementById('key-dialog').open").await;
     assert_eq!(open, json!(false), "no dialog once the key is good");
     let url = browser.client.current_url().await.unwrap();

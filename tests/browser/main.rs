@@ -1,6 +1,6 @@
 //! The dashboard in a real browser: headless Chromium driven over WebDriver (chromedriver,
 //! started here on a free port) against the real server on 127.0.0.1:0 with a temporary
-//! database and the demo site's simulated shelf PLC and crane, run fast.
+//! database and the demo site's simulated shelf PLC, crane and light tower, run fast.
 //!
 //! Needs `chromium` and `chromedriver` (Debian: `apt-get install chromium chromium-driver`),
 //! found on the PATH or at `$CHROMIUM` and `$CHROMEDRIVER`; without them the tests fail,
@@ -21,6 +21,7 @@ use rackd::cli::demo::{self, Pace};
 use rackd::config::Config;
 use rackd::sim::crane::CraneSim;
 use rackd::sim::shelf::ShelfSim;
+use rackd::sim::tower::TowerSim;
 use serde_json::{Value, json};
 
 use helpers::TestApp;
@@ -31,18 +32,27 @@ const FAST: Pace = Pace { task_time: Duration::from_millis(200), crane_step: Dur
 /// One browser test at a time: two Chromiums on two shared cores make both slow and flaky.
 static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
-/// The demo site (shelf `shelf1` on aisle 1, crane `crane1` on aisle 2) at [`FAST`] pace,
-/// with the config changed by `edit`; keep the simulators as long as the server.
-pub async fn demo_app(edit: impl FnOnce(&mut Config)) -> (TestApp, ShelfSim, CraneSim) {
+/// The demo site's simulators.
+pub struct Sims {
+    pub crane: CraneSim,
+    _shelf: ShelfSim,
+    _tower: TowerSim,
+}
+
+/// The demo site (shelf `shelf1` on aisle 1, crane `crane1` on aisle 2, light tower
+/// `tower1`) at [`FAST`] pace, with the config changed by `edit`; keep the simulators as long
+/// as the server.
+pub async fn demo_app(edit: impl FnOnce(&mut Config)) -> (TestApp, Sims) {
     let mut demo_config = Config::demo();
-    let (shelf, crane) = demo::start_with(&mut demo_config, FAST).await.expect("demo simulators start");
+    let (shelf, crane, tower) =
+        demo::start_with(&mut demo_config, FAST).await.expect("demo simulators start");
     let app = helpers::spawn_with(|c| {
         c.site = demo_config.site.clone();
         c.devices = demo_config.devices.clone();
         edit(c);
     })
     .await;
-    (app, shelf, crane)
+    (app, Sims { crane, _shelf: shelf, _tower: tower })
 }
 
 /// Where test artefacts (screenshots) go: `target/artefacts`.

@@ -38,7 +38,8 @@ fn has_class(loc_key: &str, class: &str) -> String {
 #[tokio::test]
 async fn the_dashboard_follows_the_demo_store_live() {
     let Some(browser) = Browser::start().await else { return };
-    let (app, _shelf, crane) = demo_app(|_| {}).await;
+    let (app, sims) = demo_app(|_| {}).await;
+    let crane = &sims.crane;
     browser.open(&app.url("/")).await;
 
     // The snapshot: connected, both devices online, every location drawn.
@@ -49,7 +50,7 @@ async fn the_dashboard_follows_the_demo_store_live() {
             15,
         )
         .await;
-    for device in ["shelf1", "crane1"] {
+    for device in ["shelf1", "crane1", "tower1"] {
         let script = format!(
             "const b = document.querySelector('[data-device=\"{device}\"] .badge.online'); return b && !b.hidden;"
         );

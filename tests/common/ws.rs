@@ -107,6 +107,31 @@ impl Ws {
         }
     }
 
+    /// Sends a ping and waits up to `wait` for its pong, passing over other messages.
+    pub async fn ping(&mut self, wait: Duration) -> bool {
+        self.stream.send(Message::Ping(b"are you there".to_vec().into())).await.unwrap();
+        let deadline = tokio::time::Instant::now() + wait;
+        loop {
+            match tokio::time::timeout_at(deadline, self.stream.next()).await {
+                Ok(Some(Ok(Message::Pong(payload)))) => return payload.as_ref() == b"are you there",
+                Ok(Some(Ok(_))) => continue,
+                _ => return false,
+            }
+        }
+    }
+
+    /// Whether the server pings within `wait` (answered automatically, like a browser).
+    pub async fn pinged(&mut self, wait: Duration) -> bool {
+        let deadline = tokio::time::Instant::now() + wait;
+        loop {
+            match tokio::time::timeout_at(deadline, self.stream.next()).await {
+                Ok(Some(Ok(Message::Ping(_)))) => return true,
+                Ok(Some(Ok(_))) => continue,
+                _ => return false,
+            }
+        }
+    }
+
     /// Closes politely.
     pub async fn close(mut self) {
         let _ = self.stream.send(Message::Close(None)).await;

@@ -112,3 +112,32 @@ async fn the_alarm_list_pages_and_refuses_bad_queries() {
     super::helpers::assert_error(&app.get("/api/v1/alarms?cursor=x").await, 400, "bad_cursor");
     super::helpers::assert_error(&app.get("/api/v1/alarms?active=maybe").await, 400, "bad_query");
 }
+
+#[tokio::test]
+async fn an_alarm_active_at_a_restart_is_carried_over_not_raised_twice() {
+    let (app, sim) = crane_app().await;
+    let mut ws = Ws::connect(&app.base, "?topics=alarms").await;
+    ws.json().await;
+    sim.raise_alarm(41);
+    let raised = next_of(&mut ws, "alarm.raised").await;
+    ws.close().await;
+    let (db, dir) = app.stop().await;
+
+    let mut device = DeviceConfig::crane("crane1", &sim.local_addr().to_string(), vec![2]);
+    device.poll_ms = 20;
+    let app = super::helpers::spawn_on(db, |c| {
+        c.devices = vec![device];
+        c.events.device_period_ms = 20;
+    })
+    .await;
+    let seq = raised["seq"].as_i64().unwrap();
+    let mut ws = Ws::connect(&app.base, &format!("?topics=alarms&since={seq}")).await;
+    // Long enough for the crane to be read and judged several times.
+    ws.quiet(Duration::from_millis(500)).await;
+    sim.clear_alarm();
+    let cleared = next_of(&mut ws, "alarm.cleared").await;
+    assert_eq!(cleared["data"]["id"], raised["data"]["id"]);
+    let (_, page) = app.get("/api/v1/alarms").await;
+    assert_eq!(page["alarms"].as_array().unwrap().len(), 1, "{page}");
+    drop(dir);
+}

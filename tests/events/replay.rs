@@ -64,3 +64,28 @@ async fn a_since_the_log_cannot_serve_starts_with_a_snapshot() {
     submit(&app, 1).await;
     assert_consecutive(&ws.events(1).await, 4);
 }
+
+#[tokio::test]
+async fn retention_keeps_the_newest_event_so_numbers_are_never_reused() {
+    use rackd::store::writer::{Hooks, Record, Writer};
+    let app = spawn_app().await;
+    submit(&app, 5).await;
+    let (db, dir) = app.stop().await;
+    // Prune everything up to now, as the retention task does with old events.
+    let (writer, task) = Writer::start(&db, Duration::from_secs(5), 16, 16, Hooks::default()).unwrap();
+    let now = rackd::store::time::now_ms() + 1;
+    writer.record(Record::Prune { before_ms: now }).await.unwrap();
+    drop(writer);
+    task.await.unwrap();
+
+    let app = spawn_on(db, |_| {}).await;
+    let mut ws = Ws::connect(&app.base, "?since=2").await;
+    let snapshot = ws.json().await;
+    assert_eq!(snapshot["reason"], "since_expired", "{snapshot}");
+    assert_eq!(snapshot["seq"], 5, "the newest event is kept");
+    submit(&app, 1).await;
+    assert_consecutive(&ws.events(1).await, 6);
+    let mut replay = Ws::connect(&app.base, "?since=4").await;
+    assert_consecutive(&replay.events(2).await, 5);
+    drop(dir);
+}

@@ -106,3 +106,33 @@ async fn subscribers_are_closed_when_the_server_stops() {
     }
     stopping.await.unwrap();
 }
+
+#[tokio::test]
+async fn pings_go_both_ways_and_a_silent_client_is_dropped() {
+    let app = spawn_with(|c| c.events.ping_secs = 1).await;
+    let mut ws = Ws::connect(&app.base, "").await;
+    assert_eq!(ws.json().await["type"], "snapshot");
+    assert!(ws.ping(Duration::from_secs(2)).await, "the server answers a ping at once");
+    assert!(ws.pinged(Duration::from_secs(3)).await, "the server pings every ping_secs");
+
+    // A client that reads nothing never answers a ping: dropped after two.
+    let (stream, _) =
+        tokio_tungstenite::connect_async(super::ws::url(&app.base, "/api/v1/ws")).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(3500)).await;
+    let mut stream = stream;
+    let mut closed = false;
+    while let Ok(Some(message)) =
+        tokio::time::timeout(Duration::from_secs(2), futures::StreamExt::next(&mut stream)).await
+    {
+        match message {
+            Ok(tokio_tungstenite::tungstenite::Message::Close(frame)) => {
+                assert_eq!(frame.map(|f| u16::from(f.code)), Some(1001));
+                closed = true;
+                break;
+            }
+            Ok(_) => continue,
+            Err(_) => break,
+        }
+    }
+    assert!(closed, "the silent client was closed");
+}

@@ -73,18 +73,25 @@ impl Session {
                 tokio::select! {
                     commit = self.events.recv() => match commit {
                         Ok(commit) => {
+                            // Queue the commit's events, then write them out together.
                             let from = last;
+                            let mut queued = false;
                             for event in commit.iter().filter(|e| e.seq > from) {
                                 last = event.seq;
                                 if self.wants(event.topic) {
-                                    self.send(&mut sink, Message::Text(event.text.clone())).await?;
+                                    self.feed(&mut sink, Message::Text(event.text.clone())).await?;
+                                    queued = true;
                                 }
+                            }
+                            if queued {
+                                self.flush(&mut sink).await?;
                             }
                         }
                         Err(RecvError::Lagged(missed)) => {
                             let reason = format!("fell {missed} commits behind; reconnect with since={last}");
-                            let text = serde_json::json!({"type": "resync", "seq": last, "reason": reason});
-                            self.send(&mut sink, Message::Text(text.to_string().into())).await?;
+                            let resync = super::Resync { kind: "resync", seq: last, reason };
+                            let text = serde_json::to_string(&resync).unwrap_or_default();
+                            self.send(&mut sink, Message::Text(text.into())).await?;
                             return self.close(&mut sink, CLOSE_RESYNC, "resync").await;
                         }
                         Err(RecvError::Closed) => return self.close(&mut sink, 1001, "server stopping").await,
@@ -150,6 +157,20 @@ impl Session {
 
     async fn send(&self, sink: &mut Sink, message: Message) -> Result<(), End> {
         match tokio::time::timeout(self.send_timeout, sink.send(message)).await {
+            Ok(result) => Ok(result?),
+            Err(_) => Err(End::Stalled(self.send_timeout)),
+        }
+    }
+
+    async fn feed(&self, sink: &mut Sink, message: Message) -> Result<(), End> {
+        match tokio::time::timeout(self.send_timeout, sink.feed(message)).await {
+            Ok(result) => Ok(result?),
+            Err(_) => Err(End::Stalled(self.send_timeout)),
+        }
+    }
+
+    async fn flush(&self, sink: &mut Sink) -> Result<(), End> {
+        match tokio::time::timeout(self.send_timeout, sink.flush()).await {
             Ok(result) => Ok(result?),
             Err(_) => Err(End::Stalled(self.send_timeout)),
         }

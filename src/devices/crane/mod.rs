@@ -255,6 +255,7 @@ impl Crane {
         self.update_status(|s| {
             let heartbeat_ok = s.crane.as_ref().is_some_and(|c| c.heartbeat_ok);
             s.crane = Some(CraneStatus {
+                known: true,
                 heartbeat_ok,
                 action_state: v.action,
                 action: registers::action_text(v.action).to_owned(),

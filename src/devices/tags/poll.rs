@@ -1,0 +1,80 @@
+//! One poll cycle: every planned read, each tag's value from it, and all outcomes recorded
+//! in the device status under one lock, so a watcher never sees half a cycle.
+
+use super::codec::TagValue;
+use super::spec::TagSpec;
+use super::{TagDevice, link_failed};
+use crate::protocols::{Address, PlcError};
+
+/// What one read returned.
+pub(super) enum Raw {
+    /// From `read_bits`.
+    Bits(Vec<bool>),
+    /// From `read_words`.
+    Words(Vec<u16>),
+}
+
+impl Raw {
+    /// The value of `spec`, whose first item is at `offset` in this read.
+    pub(super) fn value_of(&self, spec: &TagSpec, offset: usize) -> Result<TagValue, String> {
+        let short = || "the reply held fewer items than asked for".to_owned();
+        let range = offset..offset + spec.count() as usize;
+        match self {
+            Raw::Bits(bits) => spec.from_bits(bits.get(range).ok_or_else(short)?),
+            Raw::Words(words) => spec.from_words(words.get(range).ok_or_else(short)?),
+        }
+    }
+}
+
+impl TagDevice {
+    /// Reads every tag once and records the outcomes.
+    pub(super) async fn poll(&mut self) {
+        let mut outcomes = Vec::with_capacity(self.specs.len());
+        let mut link_down: Option<String> = None;
+        for g in 0..self.groups.len() {
+            let group = self.groups[g].clone();
+            if let Some(e) = &link_down {
+                outcomes.extend(group.members.iter().map(|&(i, _)| (i, Err(format!("not read: {e}")))));
+                continue;
+            }
+            match self.read(group.bits, &group.at, group.count).await {
+                Ok(raw) => {
+                    let specs = &self.specs;
+                    outcomes.extend(
+                        group.members.iter().map(|&(i, offset)| (i, raw.value_of(&specs[i], offset))),
+                    );
+                }
+                Err(e) => {
+                    let text = e.to_string();
+                    outcomes.extend(group.members.iter().map(|&(i, _)| (i, Err(text.clone()))));
+                    if link_failed(&e) {
+                        link_down = Some(text);
+                    }
+                }
+            }
+        }
+        self.record(outcomes);
+    }
+
+    /// Reads bits or words, keeping the contact bookkeeping.
+    pub(super) async fn read(&mut self, bits: bool, at: &Address, count: u16) -> Result<Raw, PlcError> {
+        let result = match bits {
+            true => self.plc.read_bits(at, count).await.map(Raw::Bits),
+            false => self.plc.read_words(at, count).await.map(Raw::Words),
+        };
+        self.contact(&result);
+        result
+    }
+
+    /// Records read outcomes (tag index, value or why not) in the device status.
+    pub(super) fn record(&self, outcomes: Vec<(usize, Result<TagValue, String>)>) {
+        let now = crate::store::time::from_ms(crate::store::time::now_ms());
+        let mut status = self.status.lock().unwrap_or_else(|p| p.into_inner());
+        let Some(tags) = status.tags.as_mut() else { return };
+        for (i, outcome) in outcomes {
+            if let Some(tag) = tags.get_mut(&self.specs[i].name) {
+                tag.settle(outcome, now);
+            }
+        }
+    }
+}
