@@ -56,6 +56,11 @@ async fn the_dashboard_follows_the_demo_store_live() {
         );
         browser.wait(&format!("{device} to show online"), &script, 15).await;
     }
+    let script = "const q = document.querySelector('[data-device=\"tower1\"] tr[data-tag=\"tower.red\"] .tag-quality'); return q && q.textContent === 'good';";
+    browser.wait("the light tower's tags", script, 10).await;
+    let pause =
+        browser.js("return document.querySelector('[data-device=\"tower1\"] button.pause').hidden").await;
+    assert_eq!(pause, json!(true), "a tags device takes no jobs, so it has no pause button");
     let cells =
         browser.wait("the racks", "return document.querySelectorAll('.pos[data-loc]').length", 10).await;
     assert_eq!(cells, json!(2 * 10 * 6 * 4 + 2 * 20 * 8 * 2), "every location of both aisles is drawn");

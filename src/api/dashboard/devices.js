@@ -1,8 +1,20 @@
 // One tile per device: link state, pause, last contact, task slots, what a crane reports,
-// its alarms; pause and resume for operators.
+// a tags device's values, its alarms; pause and resume for operators (devices that take
+// jobs: pausing a tags device would change nothing).
 
 import { api } from './api.js';
 import { ago, el, setText } from './dom.js';
+
+const KINDS = { shelf: 'shelf PLC', crane: 'stacker crane', tags: 'tag I/O' };
+
+/** A tag's value for people: `on`/`off`, numbers to at most three decimals. */
+function tagValue(tag) {
+  const v = tag.value;
+  if (v === null || v === undefined) return '–';
+  if (typeof v === 'boolean') return v ? 'on' : 'off';
+  if (typeof v === 'number') return Number.isInteger(v) ? String(v) : String(Number(v.toFixed(3)));
+  return String(v);
+}
 
 export class Devices {
   constructor(root, model, notify) {
@@ -56,6 +68,9 @@ export class Devices {
     t.address = el('span', { class: 'v' });
     t.slotsText = el('span', { class: 'slots-text' });
     t.slotsBar = el('div', { class: 'bar' }, el('span'));
+    t.slotsKey = el('span', { class: 'k', text: 'Slots in use' });
+    t.slots = el('span', { class: 'v slots' }, t.slotsText, t.slotsBar);
+    t.tags = el('table', { class: 'tags' });
     t.crane = el('div', { class: 'crane-info' });
     t.alarms = el('ul', { class: 'device-alarms' });
     t.error = el('p', { class: 'error-text' });
@@ -70,12 +85,13 @@ export class Devices {
         { class: 'facts' },
         el('span', { class: 'k', text: 'Last contact' }),
         t.contact,
-        el('span', { class: 'k', text: 'Slots in use' }),
-        el('span', { class: 'v slots' }, t.slotsText, t.slotsBar),
+        t.slotsKey,
+        t.slots,
         el('span', { class: 'k', text: 'Link' }),
         t.address,
       ),
       t.crane,
+      t.tags,
       t.alarms,
       t.error,
       el('div', { class: 'actions' }, t.pause, t.resume),
@@ -84,7 +100,7 @@ export class Devices {
   }
 
   fill(t, d) {
-    setText(t.kind, d.kind === 'crane' ? 'stacker crane' : 'shelf PLC');
+    setText(t.kind, KINDS[d.kind] || d.kind);
     setText(t.link, d.online ? 'online' : 'offline');
     t.link.className = `badge ${d.online ? 'online' : 'offline'}`;
     t.paused.hidden = !d.paused;
@@ -95,8 +111,12 @@ export class Devices {
     setText(t.slotsText, `${d.slots_in_use} / ${d.slots_total}`);
     const share = d.slots_total ? Math.min(100, (100 * d.slots_in_use) / d.slots_total) : 0;
     t.slotsBar.firstChild.style.width = `${share}%`;
-    t.pause.hidden = d.paused;
-    t.resume.hidden = !d.paused;
+    const works = d.kind !== 'tags';
+    t.slotsKey.hidden = !works;
+    t.slots.hidden = !works;
+    t.pause.hidden = !works || d.paused;
+    t.resume.hidden = !works || !d.paused;
+    this.fillTags(t, d.tags);
 
     const c = d.crane;
     t.crane.hidden = !c;
@@ -127,6 +147,24 @@ export class Devices {
     const error = d.online ? '' : d.last_error || '';
     setText(t.error, error ? `${d.consecutive_failures} failed requests: ${error}` : '');
     t.error.hidden = !error;
+  }
+
+  /** A tags device's values: name, value, quality (a bad read shows its error on hover). */
+  fillTags(t, tags) {
+    t.tags.hidden = !tags;
+    if (!tags) return;
+    t.tags.replaceChildren(
+      ...Object.entries(tags).map(([name, tag]) => {
+        const on = tag.value === true;
+        return el(
+          'tr',
+          { class: `tag quality-${tag.quality}`, dataset: { tag: name }, title: tag.error || `${tag.address} (${tag.type})` },
+          el('td', { class: 'tag-name', text: name }),
+          el('td', { class: `tag-value${on ? ' on' : ''}`, text: tagValue(tag) }),
+          el('td', { class: 'tag-quality', text: tag.quality }),
+        );
+      }),
+    );
   }
 
   async toggle(id, pause) {
