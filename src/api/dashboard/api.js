@@ -4,6 +4,9 @@
 
 const STORAGE = 'rackd.key';
 
+/** The key for this page's lifetime, in case local storage is disabled. */
+let memory = '';
+
 /** The stored key, or ''. */
 export function getKey() {
   try {
@@ -24,8 +27,6 @@ export function setKey(key) {
   }
   memory = k;
 }
-
-let memory = '';
 
 function key() {
   return getKey() || memory;

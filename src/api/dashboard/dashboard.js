@@ -132,6 +132,8 @@ function askKey(message) {
     message ||
     'This rackd needs an API key. A viewer key shows the store; an operator key also cancels jobs and pauses devices.';
   $('key-input').value = '';
+  // Escape closes without setting a return value: forget the last one.
+  dialog.returnValue = '';
   if (!dialog.open) dialog.showModal();
   $('key-input').focus();
 }

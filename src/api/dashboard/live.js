@@ -42,11 +42,11 @@ export class Live {
     this.onState('connecting');
     const socket = new WebSocket(wsUrl(this.model.seq));
     this.socket = socket;
-    let heard = false;
+    let opened = false;
     socket.addEventListener('open', () => {
       // Live once open: a replay of nothing sends nothing.
       if (this.socket !== socket) return;
-      heard = true;
+      opened = true;
       this.failures = 0;
       this.lastStart = this.model.seq === null ? 'snapshot' : 'replay';
       this.onState('live');
@@ -64,7 +64,7 @@ export class Live {
     socket.addEventListener('close', (event) => {
       if (this.socket !== socket) return;
       this.socket = null;
-      this.closed(heard, event.code);
+      this.closed(opened, event.code);
     });
   }
 
@@ -86,9 +86,9 @@ export class Live {
     // what follows the last event applied.
   }
 
-  async closed(heard, code) {
+  async closed(opened, code) {
     if (this.stopped) return;
-    if (!heard) {
+    if (!opened) {
       // The upgrade itself failed and a browser does not say why: ask the HTTP API.
       try {
         await api('GET', '/api/v1/alarms?limit=1');
