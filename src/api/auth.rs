@@ -7,6 +7,8 @@
 //! keys configured every request is let through (the server then only listens on loopback,
 //! see [`crate::app`]).
 
+use std::borrow::Cow;
+
 use axum::extract::{Request, State};
 use axum::http::{Method, StatusCode, header};
 use axum::middleware::Next;
@@ -43,16 +45,17 @@ fn is_tag_write(path: &str) -> bool {
 }
 
 /// The key a request presents: `Authorization: Bearer KEY`, `X-Api-Key: KEY`, or (for
-/// browsers opening a WebSocket, which cannot set headers) `?token=KEY`.
-fn presented_key(req: &Request) -> Option<&str> {
+/// browsers opening a WebSocket, which cannot set headers) `?token=KEY`, URL-decoded.
+fn presented_key(req: &Request) -> Option<Cow<'_, str>> {
     let headers = req.headers();
     if let Some(v) = headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()) {
-        return v.strip_prefix("Bearer ").map(str::trim);
+        return v.strip_prefix("Bearer ").map(|k| Cow::Borrowed(k.trim()));
     }
     if let Some(v) = headers.get("x-api-key").and_then(|v| v.to_str().ok()) {
-        return Some(v.trim());
+        return Some(Cow::Borrowed(v.trim()));
     }
-    req.uri().query()?.split('&').find_map(|kv| kv.strip_prefix("token="))
+    let query = req.uri().query()?;
+    form_urlencoded::parse(query.as_bytes()).find(|(k, _)| k == "token").map(|(_, v)| v)
 }
 
 /// Middleware: answers 401 without a known key and 403 when the key's role is too low.
@@ -72,7 +75,7 @@ pub async fn require_key(
             "an API key is required (Authorization: Bearer KEY)",
         ));
     };
-    let Some(who) = app.keys.identify(key) else {
+    let Some(who) = app.keys.identify(&key) else {
         return Err(ApiError::new(StatusCode::UNAUTHORIZED, "unauthorized", "the API key is not known"));
     };
     if who.role < needed {
@@ -101,5 +104,19 @@ mod tests {
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/tower1/tags"), Role::Admin);
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/tower1/tags/a/b"), Role::Admin);
         assert_eq!(required_role(&Method::POST, "/api/v1/devices//tags/x"), Role::Admin);
+    }
+}
+
+#[cfg(test)]
+mod key_tests {
+    use super::*;
+
+    #[test]
+    fn a_token_in_the_query_is_url_decoded() {
+        let req = Request::builder()
+            .uri("/api/v1/ws?topics=jobs&token=a%2Bb%2Fc%3Dd%25")
+            .body(axum::body::Body::empty())
+            .unwrap();
+        assert_eq!(presented_key(&req).as_deref(), Some("a+b/c=d%"));
     }
 }

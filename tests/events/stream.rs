@@ -78,8 +78,10 @@ async fn subscribers_need_a_viewer_key_in_a_header_or_the_query() {
     use rackd::auth::{KeyHash, Role};
     use rackd::config::KeyConfig;
     let app = spawn_with(|c| {
-        c.auth.keys =
-            vec![KeyConfig { name: "screen".into(), role: Role::Viewer, hash: KeyHash::of("screen-key") }];
+        c.auth.keys = vec![
+            KeyConfig { name: "screen".into(), role: Role::Viewer, hash: KeyHash::of("screen-key") },
+            KeyConfig { name: "odd".into(), role: Role::Viewer, hash: KeyHash::of("a+b/c=d%") },
+        ];
     })
     .await;
     assert!(matches!(Ws::try_connect(&app.base, "", None).await, Err(401)));
@@ -88,6 +90,9 @@ async fn subscribers_need_a_viewer_key_in_a_header_or_the_query() {
     let mut by_query = Ws::try_connect(&app.base, "?token=screen-key", None).await.unwrap();
     let mut by_header = Ws::try_connect(&app.base, "", Some("screen-key")).await.unwrap();
     assert_eq!(by_query.json().await["type"], "snapshot");
+    // The query is URL-decoded: a key with + / = % works when encoded.
+    let mut encoded = Ws::try_connect(&app.base, "?token=a%2Bb%2Fc%3Dd%25", None).await.unwrap();
+    assert_eq!(encoded.json().await["type"], "snapshot");
     assert_eq!(by_header.json().await["type"], "snapshot");
     // A viewer may watch but not submit.
     let (status, _) = app.post("/api/v1/jobs", &store("r1")).await;
