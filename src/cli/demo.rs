@@ -11,6 +11,8 @@
 
 use std::time::Duration;
 
+use anyhow::Context;
+
 use crate::config::Config;
 use crate::devices::DeviceConfig;
 use crate::protocols::mc3e::TransportKind;
@@ -28,7 +30,8 @@ const DEMO_CRANE_STEP: Duration = Duration::from_millis(250);
 pub async fn start(config: &mut Config) -> anyhow::Result<(ShelfSim, CraneSim)> {
     let options = ShelfSimOptions { task_time: DEMO_TASK_TIME, ..ShelfSimOptions::default() };
     let sim = ShelfSim::start("127.0.0.1:0", options).await?;
-    let mut device = DeviceConfig::shelf("shelf1", &sim.local_addr().to_string(), vec![1]);
+    let plc = sim.local_addr().context("a UDP simulator has an address")?;
+    let mut device = sim.device_config("shelf1", &plc.to_string(), vec![1]);
     device.poll_ms = 100;
     let crane_options =
         CraneSimOptions { transport: TransportKind::Tcp, step: DEMO_CRANE_STEP, wcs_timeout: None };
@@ -42,6 +45,6 @@ pub async fn start(config: &mut Config) -> anyhow::Result<(ShelfSim, CraneSim)> 
     if !crane_device.aisles.is_empty() {
         config.devices.push(crane_device);
     }
-    tracing::info!(plc = %sim.local_addr(), crane = %crane.local_addr(), "demo site: simulated shelf PLC (device shelf1) and crane (device crane1) started");
+    tracing::info!(plc = %plc, crane = %crane.local_addr(), "demo site: simulated shelf PLC (device shelf1) and crane (device crane1) started");
     Ok((sim, crane))
 }

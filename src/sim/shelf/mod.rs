@@ -1,337 +1,261 @@
 //! A simulated shelf storage PLC (spec: shelf-plc.md), for commissioning and tests.
 //!
-//! It serves the task-slot area over Modbus UDP and answers like the real PLC (MBAP length
-//! 0). A task engine takes waiting tasks in priority order (lower first, then slot order),
-//! one at a time as the single shelf machine does, and runs each through execution state
+//! One task-slot PLC behind any of rackd's shelf transports ([`ShelfProtocol`]): Modbus UDP
+//! (the seed's PLC, answering with MBAP length 0), Modbus TCP, Modbus RTU on a serial line
+//! or over TCP (answering like an S7-1200 Modbus_Slave, see `s7_1200.rs`), S7-200 PPI and
+//! Panasonic MEWTOCOL-COM, each on a serial line or over TCP. Where the slots sit in each
+//! protocol's memory, and the defaults, are in [`ShelfSimOptions`]'s module (`options.rs`).
+//!
+//! A task engine takes waiting tasks in priority order (lower first, then slot order), one
+//! at a time as the single shelf machine does, and runs each through execution state
 //! 0 → 1 → 2 in a configurable time. It keeps its own inventory and lights and rejects
 //! commands that disagree with them with failure kind 2 (retrieve from an empty position,
 //! store into a full one, move from empty or into full); it can fail tasks with kind 1 at
-//! a given rate, and drop or delay datagrams.
+//! a given rate, and drop, delay or garble replies ([`LinkFaults`]).
 //!
 //! It also watches the WCS: every write into a busy slot (task id set and not finished) is
 //! a violation of rule 1, logged and counted ([`ShelfSim::violations`]). The one write
 //! into a busy slot that is allowed is task id := 0 on a task not yet running (a withdraw)
 //! or on a failed one (acknowledging the failure).
+//!
+//! # How the transports plug in
+//! The engine and the watch work on the slot area as words counted from slot 1's task id
+//! (`slots.rs`: `SlotMemory`), whatever bank holds them. Each transport adapter (`modbus.rs`,
+//! `ppi.rs`, `mewtocol.rs`) gives its server's bank that face, and hooks into its server's
+//! request path (the Modbus `Handler`, the PPI and MEWTOCOL `Handler` closures) to turn
+//! each write into `(area word, value)` pairs for the watch before the bank applies it.
 
-use std::collections::{BTreeMap, HashMap};
+mod engine;
+mod mewtocol;
+mod modbus;
+mod options;
+mod ppi;
+mod s7_1200;
+mod slots;
+#[cfg(test)]
+mod tests;
+mod world;
+
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
-use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::sync::Arc;
 
-use rand::Rng;
-use tokio::sync::Notify;
 use tokio::task::JoinHandle;
 
-use crate::devices::shelf::slot::{Command, EXEC_STATE, FAILURE_KIND, SLOT_WORDS, Task};
+pub use options::{LinkFaults, ShelfProtocol, ShelfSimOptions, UnknownProtocol};
+
+use self::engine::Machine;
+use self::options::Family;
+use self::slots::{Core, Layout, SlotMemory};
+use crate::devices::DeviceConfig;
+use crate::devices::shelf::slot::SLOT_WORDS;
 use crate::domain::Location;
-use crate::protocols::modbus::exception::Exception;
-use crate::protocols::modbus::pdu::{Request, Response};
-use crate::protocols::modbus::server::{
-    Bank, Faults, Handler, ModbusServer, RegisterBank, ServerHandle, ServerOptions,
-};
+use crate::protocols::line::{LineServer, SharedFaults};
+use crate::protocols::modbus::ByteStream;
+use crate::protocols::modbus::server::ServerHandle;
 
-/// How the simulated PLC is set up.
-#[derive(Clone, Debug)]
-pub struct ShelfSimOptions {
-    /// Number of task slots.
-    pub slots: u16,
-    /// Holding register of slot 1's task id.
-    pub base: u16,
-    /// Registers from one slot to the next.
-    pub stride: u16,
-    /// Modbus unit id.
-    pub unit: u8,
-    /// Time each task takes (0 = at once).
-    pub task_time: Duration,
-    /// Fraction of tasks that fail with kind 1 (PLC fault).
-    pub fail_rate: f64,
-    /// Datagram faults (loss, delay, ...).
-    pub faults: Faults,
+/// Where a transport is served.
+enum Endpoint<'a> {
+    /// A UDP or TCP address to bind.
+    Listen(&'a str),
+    /// A serial line already open.
+    Stream(Box<dyn ByteStream>),
 }
 
-impl Default for ShelfSimOptions {
-    fn default() -> Self {
-        ShelfSimOptions {
-            slots: 60,
-            base: 4000,
-            stride: 100,
-            unit: 1,
-            task_time: Duration::from_millis(500),
-            fail_rate: 0.0,
-            faults: Faults::default(),
-        }
-    }
+/// What every transport adapter is started with.
+#[derive(Clone, Copy)]
+struct Setup<'a> {
+    protocol: ShelfProtocol,
+    /// Slot 1's task id in the protocol's notation.
+    base: &'a str,
+    unit: u8,
+    /// The serial line's baud rate (Modbus RTU times its inter-frame silence by it).
+    baud: u32,
+    core: &'a Core,
+    faults: &'a LinkFaults,
 }
 
-/// What the simulated shelf holds and has seen.
-#[derive(Debug, Default)]
-struct World {
-    inventory: BTreeMap<Location, String>,
-    lights: BTreeMap<(Location, &'static str), bool>,
-    violations: u64,
-    withdrawals: u64,
-    received: HashMap<u16, u32>,
-    received_at: HashMap<u16, std::time::Instant>,
-    completed: u64,
-    failed: u64,
+/// A transport adapter, serving: the slot area over its bank, and its server.
+struct Started {
+    memory: Arc<dyn SlotMemory>,
+    server: Server,
+}
+
+/// A running server of either kind.
+enum Server {
+    Modbus(ServerHandle),
+    Line { server: LineServer, faults: SharedFaults },
 }
 
 /// A running simulated shelf PLC.
 pub struct ShelfSim {
-    world: Arc<Mutex<World>>,
-    bank: Bank,
-    server: ServerHandle,
+    core: Core,
+    memory: Arc<dyn SlotMemory>,
+    server: Server,
     engine: JoinHandle<()>,
+    protocol: ShelfProtocol,
+    base: String,
+    unit: u8,
+    options: ShelfSimOptions,
 }
 
-struct ShelfHandler {
-    bank: Bank,
-    world: Arc<Mutex<World>>,
-    options: ShelfSimOptions,
-    wake: Arc<Notify>,
+fn invalid(message: &str) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidInput, message.to_owned())
 }
 
 impl ShelfSim {
-    /// Starts the simulator on a UDP address (`127.0.0.1:0` for any free port).
+    /// Starts the simulator: on a UDP or TCP address (`127.0.0.1:0` for any free port) for
+    /// network protocols, on a serial device it opens (`/dev/ttyUSB0`) for serial ones.
     pub async fn start(listen: &str, options: ShelfSimOptions) -> std::io::Result<ShelfSim> {
-        let end = options.base as usize + options.slots as usize * options.stride as usize;
-        if options.slots == 0 || (options.stride as usize) < SLOT_WORDS || end > 0x1_0000 {
-            return Err(std::io::Error::new(
-                std::io::ErrorKind::InvalidInput,
-                "the slots must fit the holding registers: slots >= 1, stride >= 35, base + slots * stride <= 65536",
-            ));
+        if options.protocol.is_serial() {
+            let port = options.serial_or_default().open(listen)?;
+            return ShelfSim::launch(Endpoint::Stream(Box::new(port)), options).await;
         }
-        let bank = Bank::new();
-        let world = Arc::new(Mutex::new(World::default()));
-        let wake = Arc::new(Notify::new());
-        let handler = ShelfHandler {
-            bank: bank.clone(),
-            world: world.clone(),
-            options: options.clone(),
-            wake: wake.clone(),
-        };
-        let server_options = ServerOptions {
-            unit: options.unit,
-            length0: true,
-            faults: options.faults.clone(),
-            ..Default::default()
-        };
-        let server = ModbusServer::new(Arc::new(handler), server_options).serve_udp(listen).await?;
-        let engine = tokio::spawn(run_engine(bank.clone(), world.clone(), options, wake));
-        Ok(ShelfSim { world, bank, server, engine })
+        ShelfSim::launch(Endpoint::Listen(listen), options).await
     }
 
-    /// The UDP address it answers on.
-    pub fn local_addr(&self) -> SocketAddr {
-        self.server.local_addr().expect("a UDP server has an address")
+    /// Starts a serial-protocol simulator on a stream already open (one end of a pty pair).
+    pub async fn serve_stream(
+        stream: impl ByteStream + 'static,
+        options: ShelfSimOptions,
+    ) -> std::io::Result<ShelfSim> {
+        if !options.protocol.is_serial() {
+            return Err(invalid("only modbus-rtu, ppi and mewtocol are served on a serial stream"));
+        }
+        ShelfSim::launch(Endpoint::Stream(Box::new(stream)), options).await
+    }
+
+    async fn launch(endpoint: Endpoint<'_>, options: ShelfSimOptions) -> std::io::Result<ShelfSim> {
+        let stride = options.stride_or_default();
+        if options.slots == 0 || (stride as usize) < SLOT_WORDS {
+            return Err(invalid("the slots must be at least 1 and the stride at least 35 words"));
+        }
+        let f = &options.faults;
+        if ![options.fail_rate, f.drop_rate, f.garbage_rate].iter().all(|p| (0.0..=1.0).contains(p)) {
+            return Err(invalid("fail, drop and garbage rates are fractions between 0 and 1"));
+        }
+        let core = Core::new(Layout { slots: options.slots, stride });
+        let (protocol, base, unit) = (options.protocol, options.base_text(), options.unit_or_default());
+        let baud = options.serial_or_default().baud;
+        let setup = Setup { protocol, base: &base, unit, baud, core: &core, faults: &options.faults };
+        let Started { memory, server } = match protocol.family() {
+            Family::Modbus => modbus::start(endpoint, &setup).await?,
+            Family::Ppi => ppi::start(endpoint, &setup).await?,
+            Family::Mewtocol => mewtocol::start(endpoint, &setup).await?,
+        };
+        let machine = Machine { task_time: options.task_time, fail_rate: options.fail_rate };
+        let engine = tokio::spawn(engine::run(memory.clone(), core.clone(), machine));
+        Ok(ShelfSim { core, memory, server, engine, protocol, base, unit, options })
+    }
+
+    /// The address it answers on (`None` on a serial line).
+    pub fn local_addr(&self) -> Option<SocketAddr> {
+        match &self.server {
+            Server::Modbus(handle) => handle.local_addr(),
+            Server::Line { server, .. } => server.local_addr(),
+        }
+    }
+
+    /// The protocol it speaks.
+    pub fn protocol(&self) -> ShelfProtocol {
+        self.protocol
+    }
+
+    /// Slot 1's task id, in the protocol's notation (`4x4000`, `VW1000`, `DT4000`).
+    pub fn base(&self) -> &str {
+        &self.base
+    }
+
+    /// Words from one slot to the next.
+    pub fn stride(&self) -> u16 {
+        self.core.layout.stride
+    }
+
+    /// The unit, PPI address or MEWTOCOL station it answers.
+    pub fn unit(&self) -> u8 {
+        self.unit
+    }
+
+    /// A `[[devices]]` entry that drives this simulator, reached at `address` (its
+    /// [`ShelfSim::local_addr`], or the serial device at the other end of its line).
+    pub fn device_config(&self, id: &str, address: &str, aisles: Vec<u16>) -> DeviceConfig {
+        let mut device = DeviceConfig::shelf(id, address, aisles);
+        device.protocol = self.protocol.name().to_owned();
+        device.unit = self.unit;
+        device.base = self.base.clone();
+        device.stride = self.stride();
+        device.slots = self.core.layout.slots;
+        device.serial = self.options.serial.map(|s| s.to_string());
+        if self.protocol != ShelfProtocol::ModbusUdp {
+            device.quirks.clear(); // MBAP length 0 is the UDP PLC's own habit
+        }
+        device
     }
 
     /// Boxes on the shelf and their barcodes ("" when unlabelled).
     pub fn inventory(&self) -> BTreeMap<Location, String> {
-        self.world().inventory.clone()
+        self.core.world().inventory.clone()
     }
 
     /// Lights that are on, as (location, "red" | "green").
     pub fn lights_on(&self) -> Vec<(Location, &'static str)> {
-        self.world().lights.iter().filter(|(_, on)| **on).map(|(k, _)| *k).collect()
+        self.core.world().lights.iter().filter(|(_, on)| **on).map(|(k, _)| *k).collect()
     }
 
     /// Writes into busy slots (rule 1 broken).
     pub fn violations(&self) -> u64 {
-        self.world().violations
+        self.core.world().violations
     }
 
     /// Tasks withdrawn (task id set to 0 before they ran).
     pub fn withdrawals(&self) -> u64 {
-        self.world().withdrawals
+        self.core.world().withdrawals
     }
 
     /// How many times a task with this id was handed to a slot.
     pub fn received(&self, task_id: u16) -> u32 {
-        self.world().received.get(&task_id).copied().unwrap_or(0)
+        self.core.world().received.get(&task_id).copied().unwrap_or(0)
     }
 
     /// When a task with this id last reached a slot.
     pub fn received_at(&self, task_id: u16) -> Option<std::time::Instant> {
-        self.world().received_at.get(&task_id).copied()
+        self.core.world().received_at.get(&task_id).copied()
     }
 
     /// Tasks finished (state 2) and failed (state 3) so far.
     pub fn finished(&self) -> (u64, u64) {
-        let w = self.world();
+        let w = self.core.world();
         (w.completed, w.failed)
     }
 
     /// Puts a box at a location directly (as a person at the shelf would).
     pub fn place(&self, at: Location, barcode: &str) {
-        self.world().inventory.insert(at, barcode.to_owned());
+        self.core.world().inventory.insert(at, barcode.to_owned());
     }
 
-    /// Changes the datagram faults while running.
-    pub fn set_faults(&self, faults: Faults) {
-        self.server.set_faults(faults);
+    /// The 35 used words of slot `k` (1-based), whatever the protocol; `None` past the
+    /// last slot.
+    pub fn slot(&self, k: u16) -> Option<Vec<u16>> {
+        let layout = self.core.layout;
+        (1..=layout.slots).contains(&k).then(|| self.memory.lock().read(layout.start(k - 1), SLOT_WORDS))
     }
 
-    /// The register bank (to inspect or change slots directly).
-    pub fn bank(&self) -> &Bank {
-        &self.bank
+    /// Changes the link faults while running.
+    pub fn set_faults(&self, faults: LinkFaults) {
+        match &self.server {
+            Server::Modbus(handle) => handle.set_faults(faults.modbus()),
+            Server::Line { faults: shared, .. } => {
+                faults.apply_to_line(&mut shared.lock().unwrap_or_else(|p| p.into_inner()));
+            }
+        }
     }
 
     /// Stops serving.
     pub async fn shutdown(self) {
         self.engine.abort();
-        self.server.shutdown().await;
-    }
-
-    fn world(&self) -> std::sync::MutexGuard<'_, World> {
-        self.world.lock().unwrap_or_else(|p| p.into_inner())
-    }
-}
-
-impl ShelfHandler {
-    /// Slot number (0-based) and offset of a holding register, if it is in a slot's used words.
-    fn slot_of(&self, address: u32) -> Option<(u16, u16)> {
-        let o = &self.options;
-        let rel = address.checked_sub(o.base as u32)?;
-        let (slot, offset) = (rel / o.stride as u32, rel % o.stride as u32);
-        (slot < o.slots as u32 && offset < SLOT_WORDS as u32).then_some((slot as u16, offset as u16))
-    }
-
-    /// Checks a write of `values` at `address` against rule 1 before it is applied.
-    /// Called with the bank locked; locks are always taken bank first, then world.
-    fn watch_write(&self, bank: &RegisterBank, address: u16, values: &[u16]) {
-        let mut touched: BTreeMap<u16, Vec<(u16, u16)>> = BTreeMap::new();
-        for (i, &v) in values.iter().enumerate() {
-            if let Some((slot, offset)) = self.slot_of(address as u32 + i as u32) {
-                touched.entry(slot).or_default().push((offset, v));
-            }
-        }
-        let mut world = self.world.lock().unwrap_or_else(|p| p.into_inner());
-        for (slot, writes) in touched {
-            let start = self.options.base as usize + slot as usize * self.options.stride as usize;
-            let words = &bank.holding_registers[start..start + SLOT_WORDS];
-            let (id, state) = (words[0], words[EXEC_STATE]);
-            let busy = id != 0 && state != 2;
-            let only_clears_id = writes.iter().all(|&(o, v)| o == 0 && v == 0);
-            if busy {
-                match (only_clears_id, state) {
-                    (true, 0) => world.withdrawals += 1,
-                    (true, 3) => {}
-                    _ => {
-                        world.violations += 1;
-                        tracing::warn!(
-                            slot = slot + 1,
-                            task = id,
-                            state,
-                            "VIOLATION: write into a busy slot"
-                        );
-                    }
-                }
-            }
-            let new_id = writes.iter().find(|&&(o, _)| o == 0).map(|&(_, v)| v);
-            if let Some(new_id) = new_id.filter(|&v| v != 0 && v != id) {
-                *world.received.entry(new_id).or_default() += 1;
-                world.received_at.insert(new_id, std::time::Instant::now());
-                tracing::info!(slot = slot + 1, task = new_id, "task received");
-            }
+        match self.server {
+            Server::Modbus(handle) => handle.shutdown().await,
+            Server::Line { server, .. } => server.shutdown().await,
         }
     }
-}
-
-impl Handler for ShelfHandler {
-    fn handle(&self, _unit: u8, request: &Request) -> Result<Response, Exception> {
-        let mut bank = self.bank.lock();
-        match request {
-            Request::WriteSingleRegister { address, value } => self.watch_write(&bank, *address, &[*value]),
-            Request::WriteMultipleRegisters { address, values } => self.watch_write(&bank, *address, values),
-            _ => {}
-        }
-        let response = bank.apply(request);
-        drop(bank);
-        if matches!(request, Request::WriteSingleRegister { .. } | Request::WriteMultipleRegisters { .. }) {
-            self.wake.notify_one();
-        }
-        response
-    }
-}
-
-/// The shelf machine: one task at a time, lowest priority number first.
-async fn run_engine(bank: Bank, world: Arc<Mutex<World>>, o: ShelfSimOptions, wake: Arc<Notify>) {
-    loop {
-        let next = {
-            let mut bank = bank.lock();
-            let regs = &mut bank.holding_registers;
-            let waiting = (0..o.slots).filter_map(|k| {
-                let start = o.base as usize + k as usize * o.stride as usize;
-                let (id, state) = (regs[start], regs[start + EXEC_STATE]);
-                (id != 0 && state == 0).then_some((regs[start + 1], k, start))
-            });
-            let next = waiting.min();
-            if let Some((_, _, start)) = next {
-                regs[start + EXEC_STATE] = 1;
-            }
-            next
-        };
-        let Some((_, slot, start)) = next else {
-            let _ = tokio::time::timeout(Duration::from_millis(50), wake.notified()).await;
-            continue;
-        };
-        if !o.task_time.is_zero() {
-            tokio::time::sleep(o.task_time).await;
-        }
-        let mut bank = bank.lock();
-        let regs = &mut bank.holding_registers;
-        let Some(task) = Task::decode(&regs[start..start + SLOT_WORDS]) else { continue };
-        if task.id == 0 || regs[start + EXEC_STATE] != 1 {
-            continue; // withdrawn or overwritten while running (a violation, already counted)
-        }
-        let mut world = world.lock().unwrap_or_else(|p| p.into_inner());
-        let outcome = if rand::rng().random_bool(o.fail_rate.clamp(0.0, 1.0)) {
-            Err(1)
-        } else {
-            perform(&mut world, &task).map_err(|_| 2)
-        };
-        match outcome {
-            Ok(()) => {
-                regs[start + EXEC_STATE] = 2;
-                world.completed += 1;
-            }
-            Err(kind) => {
-                regs[start + FAILURE_KIND] = kind;
-                regs[start + EXEC_STATE] = 3;
-                world.failed += 1;
-                tracing::info!(slot = slot + 1, task = task.id, kind, "task failed");
-            }
-        }
-    }
-}
-
-/// Carries out a task on the simulated shelf, or says why the PLC refuses it.
-fn perform(world: &mut World, task: &Task) -> Result<(), &'static str> {
-    let inv = &mut world.inventory;
-    match (Command::from_code(task.command), task.from, task.to) {
-        (Some(Command::Store), _, Some(to)) if !inv.contains_key(&to) => {
-            inv.insert(to, task.barcode.clone());
-        }
-        (Some(Command::Retrieve), Some(from), _) if inv.contains_key(&from) => {
-            inv.remove(&from);
-        }
-        (Some(Command::Move), Some(from), Some(to)) if inv.contains_key(&from) && !inv.contains_key(&to) => {
-            let b = inv.remove(&from).unwrap_or_default();
-            inv.insert(to, if task.barcode.is_empty() { b } else { task.barcode.clone() });
-        }
-        (Some(Command::Clear), Some(at), _) => {
-            inv.remove(&at);
-        }
-        (
-            Some(c @ (Command::GreenOn | Command::GreenOff | Command::RedOn | Command::RedOff)),
-            Some(at),
-            None,
-        ) => {
-            let color = if matches!(c, Command::RedOn | Command::RedOff) { "red" } else { "green" };
-            world.lights.insert((at, color), matches!(c, Command::GreenOn | Command::RedOn));
-        }
-        _ => return Err("the command disagrees with the PLC's own data"),
-    }
-    Ok(())
 }
