@@ -18,7 +18,6 @@ use tokio::sync::oneshot;
 
 use crate::app::Application;
 use crate::config::Config;
-use crate::devices::DeviceConfig;
 use crate::devices::shelf::slot::task_id_for;
 use crate::protocols::PlcMemory;
 use crate::protocols::modbus::{ModbusClient, ModbusConfig};
@@ -33,7 +32,8 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
     let mut config = Config::demo();
     config.server.listen = "127.0.0.1:0".parse()?;
     config.database.path = dir.path().join("bench.db");
-    let mut device = DeviceConfig::shelf("shelf1", &sim.local_addr().to_string(), vec![1]);
+    let plc_addr = sim.local_addr().context("a UDP simulator has an address")?.to_string();
+    let mut device = sim.device_config("shelf1", &plc_addr, vec![1]);
     device.poll_ms = poll_ms;
     config.devices = vec![device];
     let app = Application::build(&config, false).await?;
@@ -44,7 +44,7 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
     }));
     let client = reqwest::Client::new();
 
-    let plc = ModbusClient::connect(ModbusConfig::shelf_plc(sim.local_addr().to_string())).await?;
+    let plc = ModbusClient::connect(ModbusConfig::shelf_plc(plc_addr)).await?;
     let at = plc.parse_address("4x4000")?;
     let mut rtt = Histogram::<u64>::new(3)?;
     for _ in 0..2000 {

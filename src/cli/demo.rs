@@ -13,6 +13,8 @@
 
 use std::time::Duration;
 
+use anyhow::Context;
+
 use crate::config::Config;
 use crate::devices::DeviceConfig;
 use crate::protocols::mc3e::TransportKind;
@@ -56,7 +58,8 @@ pub async fn start(config: &mut Config) -> anyhow::Result<(ShelfSim, CraneSim, T
 pub async fn start_with(config: &mut Config, pace: Pace) -> anyhow::Result<(ShelfSim, CraneSim, TowerSim)> {
     let options = ShelfSimOptions { task_time: pace.task_time, ..ShelfSimOptions::default() };
     let sim = ShelfSim::start("127.0.0.1:0", options).await?;
-    let mut device = DeviceConfig::shelf("shelf1", &sim.local_addr().to_string(), vec![1]);
+    let plc = sim.local_addr().context("a UDP simulator has an address")?;
+    let mut device = sim.device_config("shelf1", &plc.to_string(), vec![1]);
     device.poll_ms = 100;
     let crane_options =
         CraneSimOptions { transport: TransportKind::Tcp, step: pace.crane_step, wcs_timeout: None };
@@ -73,7 +76,7 @@ pub async fn start_with(config: &mut Config, pace: Pace) -> anyhow::Result<(Shel
     }
     config.devices.push(tower_device("tower1", &tower.local_addr().to_string()));
     tracing::info!(
-        plc = %sim.local_addr(), crane = %crane.local_addr(), tower = %tower.local_addr(),
+        plc = %plc, crane = %crane.local_addr(), tower = %tower.local_addr(),
         "demo site: simulated shelf PLC (device shelf1), crane (device crane1) and light tower (device tower1) started"
     );
     Ok((sim, crane, tower))

@@ -2,15 +2,18 @@
 
 use std::time::Duration;
 
-use crate::protocols::modbus::server::Faults;
-use crate::sim::shelf::{ShelfSim, ShelfSimOptions};
+use anyhow::Context;
+
+use crate::protocols::serial::SerialSettings;
+use crate::sim::shelf::{LinkFaults, ShelfProtocol, ShelfSim, ShelfSimOptions};
 
 /// The simulators.
 #[derive(clap::Subcommand, Debug)]
 pub enum SimCommand {
     /// A Modbus server with a full register bank (all four tables, 0..65535).
     Modbus(super::sim_modbus::SimModbusArgs),
-    /// The shelf storage PLC: task slots over Modbus UDP, answering with MBAP length 0.
+    /// The shelf storage PLC: task slots over Modbus UDP (answering with MBAP length 0),
+    /// Modbus TCP, Modbus RTU as an S7-1200 (serial or over TCP), PPI or MEWTOCOL.
     Shelf(SimShelfArgs),
     /// A Mitsubishi MC protocol 3E (binary) server over the whole device range.
     Mc3e(super::sim_mc3e::SimMc3eArgs),
@@ -27,30 +30,44 @@ pub enum SimCommand {
 /// Options of `rackd sim shelf`.
 #[derive(clap::Args, Debug)]
 pub struct SimShelfArgs {
-    /// UDP address to answer on.
-    #[arg(long, default_value = "127.0.0.1:1502")]
-    pub listen: String,
+    /// Protocol served: modbus-udp, modbus-tcp, modbus-rtu, modbus-rtu-tcp, ppi, ppi-tcp,
+    /// mewtocol or mewtocol-tcp.
+    #[arg(long, default_value = "modbus-udp")]
+    pub protocol: ShelfProtocol,
+    /// Address to answer on (UDP / TCP), or the serial device to open (modbus-rtu, ppi,
+    /// mewtocol) [default: 127.0.0.1:1502 for network protocols].
+    #[arg(long)]
+    pub listen: Option<String>,
     /// Number of task slots.
     #[arg(long, default_value_t = 60)]
     pub slots: u16,
-    /// Holding register of slot 1's task id.
-    #[arg(long, default_value_t = 4000)]
-    pub base: u16,
-    /// Registers from one slot to the next.
-    #[arg(long, default_value_t = 100)]
-    pub stride: u16,
-    /// Modbus unit id.
-    #[arg(long, default_value_t = 1)]
-    pub unit: u8,
+    /// Slot 1's task id in the protocol's notation (a bare number is a Modbus holding
+    /// register) [default: 4x4000 Modbus UDP/TCP, 4x0 Modbus RTU (S7-1200), VW1000 PPI,
+    /// DT4000 MEWTOCOL].
+    #[arg(long)]
+    pub base: Option<String>,
+    /// Words from one slot to the next [default: 50 for PPI, else 100].
+    #[arg(long)]
+    pub stride: Option<u16>,
+    /// Modbus unit, PPI address or MEWTOCOL station [default: 2 for PPI, else 1].
+    #[arg(long)]
+    pub unit: Option<u8>,
+    /// Serial settings when opening a serial device [default: 9600,8E1; 9600,8O1 for
+    /// MEWTOCOL].
+    #[arg(long)]
+    pub serial: Option<SerialSettings>,
     /// Milliseconds each task takes.
     #[arg(long, default_value_t = 500)]
     pub task_ms: u64,
-    /// Fraction (0..1) of datagrams ignored.
+    /// Fraction (0..1) of requests left unanswered.
     #[arg(long, default_value_t = 0.0)]
     pub drop: f64,
     /// Milliseconds before each reply.
     #[arg(long, default_value_t = 0)]
     pub delay_ms: u64,
+    /// Fraction (0..1) of replies preceded by random bytes.
+    #[arg(long, default_value_t = 0.0)]
+    pub garbage: f64,
     /// Fraction (0..1) of tasks failing with kind 1 (PLC fault).
     #[arg(long, default_value_t = 0.0)]
     pub fail: f64,
@@ -59,23 +76,58 @@ pub struct SimShelfArgs {
 impl SimShelfArgs {
     /// The simulator options these arguments select.
     pub fn options(&self) -> anyhow::Result<ShelfSimOptions> {
-        for (name, p) in [("--drop", self.drop), ("--fail", self.fail)] {
+        for (name, p) in [("--drop", self.drop), ("--garbage", self.garbage), ("--fail", self.fail)] {
             anyhow::ensure!((0.0..=1.0).contains(&p), "{name} must be between 0 and 1, got {p}");
         }
         Ok(ShelfSimOptions {
+            protocol: self.protocol,
             slots: self.slots,
-            base: self.base,
+            base: self.base.clone(),
             stride: self.stride,
             unit: self.unit,
+            serial: self.serial,
             task_time: Duration::from_millis(self.task_ms),
             fail_rate: self.fail,
-            faults: Faults {
+            faults: LinkFaults {
                 drop_rate: self.drop,
                 delay: Duration::from_millis(self.delay_ms),
-                ..Faults::default()
+                garbage_rate: self.garbage,
             },
         })
     }
+
+    /// Where to serve: `--listen`, or for network protocols 127.0.0.1:1502.
+    pub fn listen(&self) -> anyhow::Result<String> {
+        match (&self.listen, self.protocol.is_serial()) {
+            (Some(at), _) => Ok(at.clone()),
+            (None, false) => Ok("127.0.0.1:1502".into()),
+            (None, true) => {
+                anyhow::bail!("{} needs --listen with a serial device, e.g. /dev/ttyUSB0", self.protocol)
+            }
+        }
+    }
+}
+
+/// Runs the shelf simulator until Ctrl-C.
+async fn run_shelf(args: SimShelfArgs) -> anyhow::Result<()> {
+    let listen = args.listen()?;
+    let sim = ShelfSim::start(&listen, args.options()?)
+        .await
+        .with_context(|| format!("starting the {} shelf simulator on {listen}", args.protocol))?;
+    let at = sim.local_addr().map_or(listen, |a| a.to_string());
+    println!(
+        "shelf PLC simulator ({}) on {at}: {} slots from {}, {} words apart, unit {}",
+        sim.protocol(),
+        args.slots,
+        sim.base(),
+        sim.stride(),
+        sim.unit()
+    );
+    tokio::signal::ctrl_c().await?;
+    let (done, failed) = sim.finished();
+    println!("tasks finished {done}, failed {failed}; busy-slot violations {}", sim.violations());
+    sim.shutdown().await;
+    Ok(())
 }
 
 /// Runs a simulator until Ctrl-C.
@@ -92,19 +144,6 @@ pub async fn run(cmd: SimCommand) -> anyhow::Result<()> {
             let server = super::sim_line::start_ppi(&args).await?;
             super::sim_line::run(server, "PPI", &args).await
         }
-        SimCommand::Shelf(args) => {
-            let sim = ShelfSim::start(&args.listen, args.options()?).await?;
-            println!(
-                "shelf PLC simulator on udp://{} ({} slots from MW{})",
-                sim.local_addr(),
-                args.slots,
-                args.base
-            );
-            tokio::signal::ctrl_c().await?;
-            let (done, failed) = sim.finished();
-            println!("tasks finished {done}, failed {failed}; busy-slot violations {}", sim.violations());
-            sim.shutdown().await;
-            Ok(())
-        }
+        SimCommand::Shelf(args) => run_shelf(args).await,
     }
 }

@@ -85,7 +85,8 @@ pub struct DeviceConfig {
     /// Shelf: address of slot 1's task id, in the protocol's notation.
     #[serde(default = "default_base")]
     pub base: String,
-    /// Shelf: words from one slot to the next.
+    /// Shelf: 16-bit words from one slot to the next, whatever the protocol's address step
+    /// (on PPI, `VW` addresses count bytes: a stride of 50 is 100 byte addresses).
     #[serde(default = "default_stride")]
     pub stride: u16,
     /// Shelf: after recording a finished or failed task, set the slot's task id to 0.

@@ -73,6 +73,13 @@ pub trait PlcMemory: Send + Sync {
     /// Parses an address in this protocol's notation (`4x4000`, `D200`, ...).
     fn parse_address(&self, text: &str) -> Result<Address, PlcError>;
 
+    /// The address `words` 16-bit words after `start`. Most protocols number words one
+    /// apart; PPI numbers bytes, so `VW100` is followed by `VW102`. Adapters that lay out
+    /// blocks of words (task slots) step with this, never with [`Address::offset`].
+    fn word_address(&self, start: &Address, words: u32) -> Address {
+        start.offset(words)
+    }
+
     /// Reads `count` consecutive 16-bit words starting at `start`.
     async fn read_words(&self, start: &Address, count: u16) -> Result<Vec<u16>, PlcError>;
 

@@ -76,6 +76,25 @@ impl FromStr for SerialSettings {
     }
 }
 
+impl std::fmt::Display for SerialSettings {
+    /// The `9600,8E1` notation [`FromStr`] reads.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let data = match self.data_bits {
+            DataBits::Five => 5,
+            DataBits::Six => 6,
+            DataBits::Seven => 7,
+            DataBits::Eight => 8,
+        };
+        let parity = match self.parity {
+            Parity::None => 'N',
+            Parity::Even => 'E',
+            Parity::Odd => 'O',
+        };
+        let stop = if self.stop_bits == StopBits::Two { 2 } else { 1 };
+        write!(f, "{},{data}{parity}{stop}", self.baud)
+    }
+}
+
 impl SerialSettings {
     /// Opens the serial port at `path` with these settings.
     pub fn open(&self, path: &str) -> std::io::Result<SerialStream> {
@@ -102,6 +121,9 @@ mod tests {
             (19200, DataBits::Seven, Parity::Odd, StopBits::Two)
         );
         assert_eq!("115200,8N1".parse::<SerialSettings>().unwrap().parity, Parity::None);
+        for text in ["9600,8E1", "19200,7O2", "187500,8N1", "300,5E1"] {
+            assert_eq!(text.parse::<SerialSettings>().unwrap().to_string(), text, "round trip");
+        }
     }
 
     #[test]

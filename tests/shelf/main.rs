@@ -1,11 +1,13 @@
 //! The shelf PLC end to end: the real server on 127.0.0.1:0 with a temporary database,
-//! driving the real shelf simulator over real UDP.
+//! driving the real shelf simulator over real UDP (and, in `protocols`, over every other
+//! transport: TCP, RTU on a pty, PPI, MEWTOCOL).
 
 #[path = "../common/helpers.rs"]
 mod helpers;
 
 mod control;
 mod faults;
+mod protocols;
 mod reservations;
 mod restart;
 mod workload;
@@ -30,7 +32,8 @@ pub async fn shelf_app(
 
 /// The device entry for a simulator.
 pub fn device_for(sim: &ShelfSim, edit: impl FnOnce(&mut DeviceConfig)) -> DeviceConfig {
-    let mut device = DeviceConfig::shelf("shelf1", &sim.local_addr().to_string(), vec![1]);
+    let address = sim.local_addr().expect("a network simulator").to_string();
+    let mut device = sim.device_config("shelf1", &address, vec![1]);
     device.poll_ms = 20;
     device.timeout_ms = 100;
     device.retries = 3;

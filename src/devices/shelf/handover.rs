@@ -94,7 +94,7 @@ impl Shelf {
         if view.task_id != 0 {
             self.write(&at, &[0]).await?;
         }
-        self.write(&at.offset(1), &body).await?;
+        self.write(&self.plc.word_address(&at, 1), &body).await?;
         // From here the PLC may hold the task: the slot is ours until a read says otherwise.
         self.slots[k] = Slot::Held { job: job.id, task, confirmed: false };
         self.write(&at, &[task]).await?;

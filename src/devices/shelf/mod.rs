@@ -119,8 +119,10 @@ impl Shelf {
         s.online && !s.paused && self.slots.contains(&Slot::Free)
     }
 
+    /// Where slot `k` (0-based) starts; `stride` counts words, whatever the protocol's
+    /// address step (PPI numbers bytes).
     fn slot_address(&self, k: usize) -> Address {
-        self.base.offset(k as u32 * self.config.stride as u32)
+        self.plc.word_address(&self.base, k as u32 * self.config.stride as u32)
     }
 
     /// Reads words, keeping the device's contact status.

@@ -4,16 +4,25 @@
 //! Commands with a wrong BCC get `!40`; a command that does not parse gets `!41` or `!42`;
 //! an address past the bank gets `!61`. Commands for other stations are ignored, as on a
 //! shared RS-485 line. Faults ([`SharedFaults`]) drop, delay, prefix noise or answer a
-//! chosen error code.
+//! chosen error code. A [`Handler`] lets a machine simulator see each command against the
+//! memory as it was, and carry it out itself.
+
+use std::sync::Arc;
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
-use super::bank::SharedBank;
-use super::command::Request;
+use super::bank::{Bank, SharedBank};
+use super::command::{Request, Response};
 use super::error_code::BCC_ERROR;
 use super::frame::{self, Bcc, Frame, Kind, Scan};
 use crate::protocols::line::{self, Faults, LineServer, SharedFaults};
 use crate::protocols::modbus::ByteStream;
+
+/// Carries out a decoded command on the locked bank in place of [`Bank::execute`], which it
+/// normally calls: the seam where a simulator watches the host's writes against the memory
+/// as it was before them (a shelf PLC counting writes into busy task slots). The error is
+/// the MEWTOCOL code to answer. Runs on the reply path with the bank locked: keep it short.
+pub type Handler = Arc<dyn Fn(&mut Bank, &Request) -> Result<Response, u8> + Send + Sync>;
 
 /// What a server serves.
 #[derive(Clone)]
@@ -24,12 +33,20 @@ pub struct ServerState {
     pub faults: SharedFaults,
     /// The station number answered to.
     pub station: u8,
+    /// Carries out commands instead of the bank itself, when set.
+    pub handler: Option<Handler>,
 }
 
 impl ServerState {
-    /// Station 1 serving `bank`, without faults.
+    /// Station 1 serving `bank`, without faults or handler.
     pub fn new(bank: SharedBank) -> Self {
-        ServerState { bank, faults: Faults::default().shared(), station: 1 }
+        ServerState { bank, faults: Faults::default().shared(), station: 1, handler: None }
+    }
+
+    /// The same state with commands carried out by `handler`.
+    pub fn with_handler(mut self, handler: Handler) -> Self {
+        self.handler = Some(handler);
+        self
     }
 
     /// The reply to one command frame, or None when it is not for this station.
@@ -42,7 +59,11 @@ impl ServerState {
             (Bcc::Wrong { .. }, _) => Err(BCC_ERROR),
             (_, Some(code)) => Err((code % 100) as u8),
             _ => Request::decode(&frame.body).and_then(|request| {
-                let response = self.bank.lock().unwrap_or_else(|p| p.into_inner()).execute(&request)?;
+                let mut bank = self.bank.lock().unwrap_or_else(|p| p.into_inner());
+                let response = match &self.handler {
+                    Some(handler) => handler(&mut bank, &request)?,
+                    None => bank.execute(&request)?,
+                };
                 response.encode(&request, &mut body);
                 Ok(())
             }),

@@ -52,6 +52,10 @@ impl PlcMemory for PpiClient {
         address::parse(text)
     }
 
+    fn word_address(&self, start: &Address, words: u32) -> Address {
+        start.offset(address::step(start) * words)
+    }
+
     async fn read_words(&self, start: &Address, count: u16) -> Result<Vec<u16>, PlcError> {
         let target = words_target(start)?;
         let elements = match target.size {
@@ -140,5 +144,21 @@ impl PlcMemory for PpiClient {
             self.write(item, &[u8::from(v)]).await?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocols::ppi::{PpiConfig, PpiTransport};
+
+    #[test]
+    fn word_addresses_step_by_the_bytes_a_word_takes() {
+        let plc = PpiClient::new(PpiConfig::new(PpiTransport::Tcp, "127.0.0.1:9")).unwrap();
+        let at = |t: &str| plc.parse_address(t).unwrap();
+        assert_eq!(plc.word_address(&at("VW1000"), 50), at("VW1100"), "a slot of 50 words");
+        assert_eq!(plc.word_address(&at("VD4"), 2), at("VD8"), "two words, one double word");
+        assert_eq!(plc.word_address(&at("VB10"), 3), at("VB13"), "one byte per word value");
+        assert_eq!(plc.word_address(&at("T37"), 1), at("T38"));
     }
 }

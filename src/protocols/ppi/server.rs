@@ -6,15 +6,24 @@
 //! a PLC ignores a frame it did not receive intact. Faults ([`SharedFaults`]): drop (E5
 //! sent, no response to the poll), lost E5 (request ignored), delay and noise before the
 //! response, and an error code: below 0x100 an item return code, above it a refusal with
-//! error class `code >> 8`.
+//! error class `code >> 8`. A [`Handler`] lets a machine simulator see each request
+//! against the memory as it was, and carry it out itself.
+
+use std::sync::Arc;
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
-use super::bank::SharedBank;
+use super::bank::{Bank, SharedBank};
 use super::frame::{self, ACK, FC_POLL, FC_RESPONSE, Frame, Scan};
 use super::pdu::{Reply, Request};
 use crate::protocols::line::{self, Faults, LineServer, Plan, SharedFaults};
 use crate::protocols::modbus::ByteStream;
+
+/// Carries out a decoded request on the locked bank in place of [`Bank::execute`], which it
+/// normally calls: the seam where a simulator watches the host's writes against the memory
+/// as it was before them (a shelf PLC counting writes into busy task slots). Runs on the
+/// reply path with the bank locked: keep it short.
+pub type Handler = Arc<dyn Fn(&mut Bank, &Request) -> Reply + Send + Sync>;
 
 /// What a server serves.
 #[derive(Clone)]
@@ -25,12 +34,20 @@ pub struct ServerState {
     pub faults: SharedFaults,
     /// The PLC's station address (default 2).
     pub address: u8,
+    /// Carries out requests instead of the bank itself, when set.
+    pub handler: Option<Handler>,
 }
 
 impl ServerState {
-    /// Address 2 serving `bank`, without faults.
+    /// Address 2 serving `bank`, without faults or handler.
     pub fn new(bank: SharedBank) -> Self {
-        ServerState { bank, faults: Faults::default().shared(), address: 2 }
+        ServerState { bank, faults: Faults::default().shared(), address: 2, handler: None }
+    }
+
+    /// The same state with requests carried out by `handler`.
+    pub fn with_handler(mut self, handler: Handler) -> Self {
+        self.handler = Some(handler);
+        self
     }
 
     /// The response frame to a request PDU from `master`.
@@ -42,7 +59,13 @@ impl ServerState {
                         Reply::Refused { class: (code >> 8) as u8, code: code as u8 }
                     }
                     Some(code) => Reply::ItemError(code as u8),
-                    None => self.bank.lock().unwrap_or_else(|p| p.into_inner()).execute(&request),
+                    None => {
+                        let mut bank = self.bank.lock().unwrap_or_else(|p| p.into_inner());
+                        match &self.handler {
+                            Some(handler) => handler(&mut bank, &request),
+                            None => bank.execute(&request),
+                        }
+                    }
                 };
                 (r, reply, request)
             }
