@@ -27,14 +27,14 @@ impl Crane {
         let view = CraneView::parse(&words).ok_or(PlcError::Malformed("short crane block"))?;
         let now = Instant::now();
         if let Some(word) = self.heartbeat.observe(view.heartbeat, now) {
-            self.write(&self.wcs.offset(wcs::HEARTBEAT), &[word]).await?;
+            self.write(&self.wcs_word(wcs::HEARTBEAT), &[word]).await?;
             self.heartbeat.wrote(word, now);
         }
         self.view = Some(view);
         self.show(&view);
         self.follow(&view).await?;
         if let Some(word) = self.ack.next_word(view.completion, self.ack_written) {
-            self.write(&self.wcs.offset(wcs::ACK), &[word]).await?;
+            self.write(&self.wcs_word(wcs::ACK), &[word]).await?;
             self.ack_written = word;
         }
         self.on_alarm(&view).await

@@ -32,11 +32,11 @@ impl Crane {
     /// Hands `task` over: task words, STB := 1, ACK = 1, STB := 0, ACK = 0. Whatever fails,
     /// the strobe is left at 0 when the link allows.
     pub(super) async fn hand_over(&mut self, task: &Task) -> Result<(), CraneError> {
-        let ack_at = self.crane.offset(25);
+        let ack_at = self.crane_word(25);
         if self.read(&ack_at, 1).await?.first().copied().unwrap_or(0) != 0 {
             return Err(HandshakeError::AckStuck.into());
         }
-        let task_at = self.wcs.offset(wcs::TASK);
+        let task_at = self.wcs_word(wcs::TASK);
         self.write(&task_at, &task.words()).await?;
         // From here the strobe may be up (a write whose reply was lost still happened).
         self.strobe_up = true;
@@ -49,7 +49,7 @@ impl Crane {
 
     /// Steps 1 to 4 once the task words are written.
     async fn strobe(&mut self) -> Result<(), CraneError> {
-        let stb = self.wcs.offset(wcs::STB);
+        let stb = self.wcs_word(wcs::STB);
         self.write(&stb, &[1]).await?;
         self.wait_ack(1, 2).await?;
         self.write(&stb, &[0]).await?;
@@ -61,7 +61,7 @@ impl Crane {
     /// poll tries again before anything else. Should the crane have taken the data, it
     /// starts the task now, and its D208 echo leads rackd to follow it.
     pub(super) async fn withdraw_strobe(&mut self) {
-        if self.write(&self.wcs.offset(wcs::STB), &[0]).await.is_ok() {
+        if self.write(&self.wcs_word(wcs::STB), &[0]).await.is_ok() {
             self.strobe_up = false;
         }
     }
@@ -71,7 +71,7 @@ impl Crane {
         let timeout = Duration::from_millis(self.config.handshake_timeout_ms);
         let pause = self.config.poll().min(Duration::from_millis(10));
         let start = Instant::now();
-        let ack_at = self.crane.offset(25);
+        let ack_at = self.crane_word(25);
         loop {
             match self.read(&ack_at, 1).await {
                 Ok(w) if w.first() == Some(&want) => return Ok(()),

@@ -202,6 +202,16 @@ impl Crane {
         s.online && !s.paused && self.current.is_none() && idle && self.ack_written == 0 && !self.strobe_up
     }
 
+    /// Word `n` of the block the WCS writes (D0..), in the protocol's addressing.
+    fn wcs_word(&self, n: u32) -> Address {
+        self.plc.word_address(&self.wcs, n)
+    }
+
+    /// Word `n` of the block the crane writes (D200..), in the protocol's addressing.
+    fn crane_word(&self, n: u32) -> Address {
+        self.plc.word_address(&self.crane, n)
+    }
+
     /// Reads words, keeping the device's contact status.
     async fn read(&mut self, at: &Address, count: u16) -> Result<Vec<u16>, PlcError> {
         let result = self.plc.read_words(at, count).await;
