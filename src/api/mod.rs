@@ -145,7 +145,11 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
                         "internal error",
                     ))
                 }))
-                .layer(TraceLayer::new_for_http())
+                // Spans name the path only: a query may carry `?token=KEY`, which must not
+                // end up in logs.
+                .layer(TraceLayer::new_for_http().make_span_with(|req: &axum::http::Request<_>| {
+                    tracing::debug_span!("request", method = %req.method(), path = %req.uri().path())
+                }))
                 .layer(HandleErrorLayer::new(|_: tower::BoxError| async {
                     ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "timeout", "the request took too long")
                 }))
