@@ -59,9 +59,10 @@ pub struct DeviceConfig {
     pub protocol: String,
     /// `HOST:PORT`, or a serial device path.
     pub address: String,
-    /// Modbus unit (station).
-    #[serde(default = "one")]
-    pub unit: u8,
+    /// Unit / station: Modbus unit, MEWTOCOL station, PPI address of the PLC. Default 1, or
+    /// 2 on PPI (an S7-200's factory address); see [`DeviceConfig::unit`].
+    #[serde(default)]
+    pub unit: Option<u8>,
     /// Serial settings such as `9600,8E1` (serial protocols only).
     pub serial: Option<String>,
     /// Reply timeout per attempt, in milliseconds.
@@ -82,13 +83,15 @@ pub struct DeviceConfig {
     /// Shelf: number of task slots.
     #[serde(default = "default_slots")]
     pub slots: u16,
-    /// Shelf: address of slot 1's task id, in the protocol's notation.
-    #[serde(default = "default_base")]
-    pub base: String,
+    /// Shelf: address of slot 1's task id, in the protocol's notation; the default depends
+    /// on the protocol (see [`crate::devices::shelf::default_layout`]).
+    #[serde(default)]
+    pub base: Option<String>,
     /// Shelf: 16-bit words from one slot to the next, whatever the protocol's address step
-    /// (on PPI, `VW` addresses count bytes: a stride of 50 is 100 byte addresses).
-    #[serde(default = "default_stride")]
-    pub stride: u16,
+    /// (on PPI, `VW` addresses count bytes: a stride of 50 is 100 byte addresses); the
+    /// default depends on the protocol.
+    #[serde(default)]
+    pub stride: Option<u16>,
     /// Shelf: after recording a finished or failed task, set the slot's task id to 0.
     #[serde(default = "yes")]
     pub clear_finished: bool,
@@ -137,9 +140,6 @@ pub struct DeviceConfig {
 fn default_protocol() -> String {
     "modbus-udp".into()
 }
-fn one() -> u8 {
-    1
-}
 fn default_timeout_ms() -> u64 {
     300
 }
@@ -154,12 +154,6 @@ fn default_offline_after() -> u32 {
 }
 fn default_slots() -> u16 {
     60
-}
-fn default_base() -> String {
-    "4x4000".into()
-}
-fn default_stride() -> u16 {
-    100
 }
 fn default_window() -> u32 {
     1000
@@ -209,12 +203,27 @@ impl DeviceConfig {
         toml::from_str(&text).expect("a valid crane entry")
     }
 
+    /// The unit / station, or the protocol's default.
+    pub fn unit(&self) -> u8 {
+        self.unit.unwrap_or_else(|| crate::protocols::link::default_unit(&self.protocol))
+    }
+
+    /// Shelf: slot 1's task id, or the protocol's default.
+    pub fn slot_base(&self) -> &str {
+        self.base.as_deref().unwrap_or_else(|| crate::devices::shelf::default_layout(&self.protocol).0)
+    }
+
+    /// Shelf: words from one slot to the next, or the protocol's default.
+    pub fn slot_stride(&self) -> u16 {
+        self.stride.unwrap_or_else(|| crate::devices::shelf::default_layout(&self.protocol).1)
+    }
+
     /// The protocol link.
     pub fn link(&self) -> LinkConfig {
         LinkConfig {
             protocol: self.protocol.clone(),
             address: self.address.clone(),
-            unit: self.unit,
+            unit: self.unit(),
             serial: self.serial.clone(),
             timeout: Duration::from_millis(self.timeout_ms),
             retries: self.retries,
@@ -241,13 +250,16 @@ impl DeviceConfig {
                 return fail("heartbeat_timeout_ms and handshake_timeout_ms must be above 0".into());
             }
         }
-        if self.slots == 0 || self.stride < crate::devices::shelf::slot::SLOT_WORDS as u16 {
+        if self.slots == 0 || self.slot_stride() < crate::devices::shelf::slot::SLOT_WORDS as u16 {
             return fail("slots must be at least 1 and stride at least 35".into());
         }
         if self.offline_after == 0 {
             return fail("offline_after must be at least 1".into());
         }
         self.link().check().or_else(|e| fail(e.to_string()))?;
+        if self.kind == DeviceKind::Shelf {
+            crate::devices::shelf::check_layout(self).or_else(fail)?;
+        }
         match self.kind {
             DeviceKind::Tags => crate::devices::tags::check(self).or_else(fail),
             _ if !self.tags.0.is_empty() => fail("[devices.tags] is only for kind = \"tags\"".into()),
@@ -259,6 +271,35 @@ impl DeviceConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn shelf_over(protocol: &str, extra: &str) -> DeviceConfig {
+        let text = format!(
+            "id = \"s\"\nkind = \"shelf\"\nprotocol = {protocol:?}\naddress = \"/dev/ttyS0\"\n{extra}"
+        );
+        toml::from_str(&text).unwrap()
+    }
+
+    #[test]
+    fn shelf_slots_and_unit_default_by_protocol() {
+        let ppi = shelf_over("ppi", "");
+        assert_eq!((ppi.slot_base(), ppi.slot_stride(), ppi.unit()), ("VW1000", 50, 2));
+        assert!(ppi.check().is_ok(), "{:?}", ppi.check());
+        let rtu = shelf_over("modbus-rtu", "");
+        assert_eq!((rtu.slot_base(), rtu.slot_stride(), rtu.unit()), ("4x0", 100, 1));
+        let mew = shelf_over("mewtocol", "unit = 5\nstride = 40\n");
+        assert_eq!((mew.slot_base(), mew.slot_stride(), mew.unit()), ("DT4000", 40, 5));
+        assert!(mew.check().is_ok(), "{:?}", mew.check());
+    }
+
+    #[test]
+    fn a_shelf_base_the_protocol_cannot_write_is_refused_before_connecting() {
+        let err = shelf_over("ppi", "base = \"4x4000\"\n").check().unwrap_err();
+        assert!(err.contains("base"), "{err}");
+        let err = shelf_over("modbus-rtu", "base = \"3x0\"\n").check().unwrap_err();
+        assert!(err.contains("writable word"), "{err}");
+        let err = shelf_over("modbus-rtu", "base = \"4x60000\"\n").check().unwrap_err();
+        assert!(err.contains("run past the end"), "{err}");
+    }
 
     #[test]
     fn a_crane_entry_has_the_spec_defaults() {

@@ -25,6 +25,12 @@ pub const PROTOCOLS: &[&str] = &[
     "ppi-tcp",
 ];
 
+/// The unit / station a protocol's PLC answers by default: 2 on PPI (an S7-200's factory
+/// address), 1 elsewhere.
+pub fn default_unit(protocol: &str) -> u8 {
+    if protocol.starts_with("ppi") { 2 } else { 1 }
+}
+
 /// How to reach one PLC.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinkConfig {

@@ -22,7 +22,7 @@ async fn s7_200_tags_over_ppi() {
         "station.present" = "I0.0"
     "#;
     let mut device = tags_device("s7", "ppi-tcp", &server.local_addr().unwrap().to_string(), tags);
-    device.unit = 2;
+    device.unit = Some(2);
     device.timeout_ms = 300;
     let app = spawn_with(|c| c.devices = vec![device]).await;
     let v = |range: std::ops::Range<usize>| state.bank.lock().unwrap().bytes(MemArea::V)[range].to_vec();

@@ -63,6 +63,41 @@ pub struct Shelf {
     slots: Vec<Slot>,
 }
 
+/// Where the task slots sit by default on each protocol: slot 1's task id and the words
+/// from one slot to the next. Modbus UDP/TCP: the seed's PLC, `4x4000` (MW4000), 100;
+/// Modbus RTU: an S7-1200 Modbus_Slave, whose holding registers start at its slot data
+/// block, `4x0`, 100; PPI: an S7-200, `VW1000`, 50 (60 slots of 100 words would not fit its
+/// V memory); MEWTOCOL: `DT4000`, 100; MC: `D4000`, 100.
+pub fn default_layout(protocol: &str) -> (&'static str, u16) {
+    match protocol {
+        "modbus-rtu" | "modbus-rtu-tcp" => ("4x0", 100),
+        "ppi" | "ppi-tcp" => ("VW1000", 50),
+        "mewtocol" | "mewtocol-tcp" => ("DT4000", 100),
+        "mc3e" | "mc3e-tcp" | "mc3e-udp" => ("D4000", 100),
+        _ => ("4x4000", 100),
+    }
+}
+
+/// Checks, without a connection, that the slot area is writable words of the protocol and
+/// that every slot fits inside its memory area.
+pub fn check_layout(config: &DeviceConfig) -> Result<(), String> {
+    use crate::protocols::notation::{Items, shape};
+    let base = config.slot_base();
+    let area = shape(&config.protocol, base).map_err(|e| format!("base {base:?}: {e}"))?;
+    if area.items != Items::Words || !area.writable {
+        return Err(format!("base {base:?} must be a writable word address (a holding register, D, DT, VW)"));
+    }
+    let words = config.slots as u32 * config.slot_stride() as u32;
+    if !area.fits(words) {
+        return Err(format!(
+            "{} slots of {} words from {base:?} run past the end of the memory area",
+            config.slots,
+            config.slot_stride()
+        ));
+    }
+    Ok(())
+}
+
 impl Shelf {
     /// A shelf adapter; nothing is sent until [`Shelf::run`].
     pub fn new(
@@ -72,7 +107,7 @@ impl Shelf {
         pool: SqlitePool,
         status: Arc<Mutex<DeviceStatus>>,
     ) -> Result<Shelf, PlcError> {
-        let base = plc.parse_address(&config.base)?;
+        let base = plc.parse_address(config.slot_base())?;
         let slots = vec![Slot::Unknown; config.slots as usize];
         Ok(Shelf { config, plc, base, writer, pool, status, slots })
     }
@@ -122,7 +157,7 @@ impl Shelf {
     /// Where slot `k` (0-based) starts; `stride` counts words, whatever the protocol's
     /// address step (PPI numbers bytes).
     fn slot_address(&self, k: usize) -> Address {
-        self.plc.word_address(&self.base, k as u32 * self.config.stride as u32)
+        self.plc.word_address(&self.base, k as u32 * self.config.slot_stride() as u32)
     }
 
     /// Reads words, keeping the device's contact status.

@@ -181,9 +181,9 @@ impl ShelfSim {
     pub fn device_config(&self, id: &str, address: &str, aisles: Vec<u16>) -> DeviceConfig {
         let mut device = DeviceConfig::shelf(id, address, aisles);
         device.protocol = self.protocol.name().to_owned();
-        device.unit = self.unit;
-        device.base = self.base.clone();
-        device.stride = self.stride();
+        device.unit = Some(self.unit);
+        device.base = Some(self.base.clone());
+        device.stride = Some(self.stride());
         device.slots = self.core.layout.slots;
         device.serial = self.options.serial.map(|s| s.to_string());
         if self.protocol != ShelfProtocol::ModbusUdp {

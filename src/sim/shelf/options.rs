@@ -105,24 +105,20 @@ impl ShelfProtocol {
 
     /// Where slot 1's task id sits by default, in the protocol's notation (see the table
     /// in the module documentation).
+    /// (The same defaults as a shelf device's: [`crate::devices::shelf::default_layout`].)
     pub fn default_base(self) -> &'static str {
-        match self {
-            ShelfProtocol::ModbusUdp | ShelfProtocol::ModbusTcp => "4x4000",
-            ShelfProtocol::ModbusRtu | ShelfProtocol::ModbusRtuTcp => "4x0",
-            ShelfProtocol::Ppi | ShelfProtocol::PpiTcp => "VW1000",
-            ShelfProtocol::Mewtocol | ShelfProtocol::MewtocolTcp => "DT4000",
-        }
+        crate::devices::shelf::default_layout(self.name()).0
     }
 
     /// Words from one slot to the next by default.
     pub fn default_stride(self) -> u16 {
-        if self.family() == Family::Ppi { 50 } else { 100 }
+        crate::devices::shelf::default_layout(self.name()).1
     }
 
     /// The unit (Modbus unit, PPI address, MEWTOCOL station) answered by default: 2 is
-    /// the S7-200's factory PPI address.
+    /// the S7-200's factory PPI address ([`crate::protocols::link::default_unit`]).
     pub fn default_unit(self) -> u8 {
-        if self.family() == Family::Ppi { 2 } else { 1 }
+        crate::protocols::link::default_unit(self.name())
     }
 
     /// Serial settings by default: 9600,8E1 (Modbus RTU and PPI), 9600,8O1 (MEWTOCOL).
