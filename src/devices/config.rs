@@ -257,8 +257,15 @@ impl DeviceConfig {
             return fail("offline_after must be at least 1".into());
         }
         self.link().check().or_else(|e| fail(e.to_string()))?;
-        if self.kind == DeviceKind::Shelf {
-            crate::devices::shelf::check_layout(self).or_else(fail)?;
+        match self.kind {
+            DeviceKind::Shelf => crate::devices::shelf::check_layout(self).or_else(fail)?,
+            DeviceKind::Crane => {
+                // rackd writes its own block and only reads the crane's.
+                let words = crate::devices::crane::registers::BLOCK_WORDS;
+                check_words(&self.protocol, "wcs_base", &self.wcs_base, words, true).or_else(fail)?;
+                check_words(&self.protocol, "crane_base", &self.crane_base, words, false).or_else(fail)?;
+            }
+            DeviceKind::Tags => {}
         }
         match self.kind {
             DeviceKind::Tags => crate::devices::tags::check(self).or_else(fail),
@@ -266,6 +273,23 @@ impl DeviceConfig {
             _ => Ok(()),
         }
     }
+}
+
+/// Checks, without a connection, that `count` words (`writable` ones when rackd writes
+/// them) of the protocol start at `text` (the value of `key`).
+pub fn check_words(protocol: &str, key: &str, text: &str, count: u16, writable: bool) -> Result<(), String> {
+    use crate::protocols::notation::{Items, shape};
+    let area = shape(protocol, text).map_err(|e| format!("{key} {text:?}: {e}"))?;
+    if area.items != Items::Words {
+        return Err(format!("{key} {text:?} must be a word address of {protocol}"));
+    }
+    if writable && !area.writable {
+        return Err(format!("{key} {text:?} must be a writable word address of {protocol}"));
+    }
+    if !area.fits(count as u32) {
+        return Err(format!("{key} {text:?}: {count} words from there run past the end of the memory area"));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -292,11 +316,23 @@ mod tests {
     }
 
     #[test]
+    fn crane_blocks_are_checked_against_the_protocol() {
+        let mut c = DeviceConfig::crane("crane1", "127.0.0.1:1", vec![2]);
+        assert!(c.check().is_ok());
+        c.protocol = "ppi-tcp".into();
+        let err = c.check().unwrap_err();
+        assert!(err.contains("wcs_base"), "{err}");
+        c.wcs_base = "VW0".into();
+        c.crane_base = "VW400".into();
+        assert!(c.check().is_ok(), "{:?}", c.check());
+    }
+
+    #[test]
     fn a_shelf_base_the_protocol_cannot_write_is_refused_before_connecting() {
         let err = shelf_over("ppi", "base = \"4x4000\"\n").check().unwrap_err();
         assert!(err.contains("base"), "{err}");
         let err = shelf_over("modbus-rtu", "base = \"3x0\"\n").check().unwrap_err();
-        assert!(err.contains("writable word"), "{err}");
+        assert!(err.contains("writable word address"), "{err}");
         let err = shelf_over("modbus-rtu", "base = \"4x60000\"\n").check().unwrap_err();
         assert!(err.contains("run past the end"), "{err}");
     }

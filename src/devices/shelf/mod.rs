@@ -81,21 +81,10 @@ pub fn default_layout(protocol: &str) -> (&'static str, u16) {
 /// Checks, without a connection, that the slot area is writable words of the protocol and
 /// that every slot fits inside its memory area.
 pub fn check_layout(config: &DeviceConfig) -> Result<(), String> {
-    use crate::protocols::notation::{Items, shape};
-    let base = config.slot_base();
-    let area = shape(&config.protocol, base).map_err(|e| format!("base {base:?}: {e}"))?;
-    if area.items != Items::Words || !area.writable {
-        return Err(format!("base {base:?} must be a writable word address (a holding register, D, DT, VW)"));
-    }
     let words = config.slots as u32 * config.slot_stride() as u32;
-    if !area.fits(words) {
-        return Err(format!(
-            "{} slots of {} words from {base:?} run past the end of the memory area",
-            config.slots,
-            config.slot_stride()
-        ));
-    }
-    Ok(())
+    let words =
+        u16::try_from(words).map_err(|_| format!("{words} words of slots are more than any PLC area"))?;
+    super::config::check_words(&config.protocol, "base", config.slot_base(), words, true)
 }
 
 impl Shelf {
