@@ -11,6 +11,7 @@ use tokio::net::TcpListener;
 use tokio::task::JoinHandle;
 
 use crate::api::metrics::Metrics;
+use crate::api::state::Shared;
 use crate::api::{self, AppState};
 use crate::auth::KeyRing;
 use crate::config::Config;
@@ -79,7 +80,7 @@ impl Application {
             devices: config.devices.iter().map(|d| (d.id.clone(), d.kind.job_kinds())).collect(),
             routes: config.devices.iter().flat_map(|d| d.aisles.iter().map(|&a| (a, d.id.clone()))).collect(),
         };
-        let state = AppState {
+        let state = AppState::new(Shared {
             pool,
             writer,
             rules: Arc::new(rules),
@@ -88,7 +89,7 @@ impl Application {
             devices: devices.clone(),
             hub,
             events: Arc::new(config.events.clone()),
-        };
+        });
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);
         let listener = TcpListener::bind(listen).await.with_context(|| format!("binding {listen}"))?;
