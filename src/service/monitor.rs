@@ -153,22 +153,10 @@ fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<u16>) -> (Vec<NewAlarm
         let why = status.last_error.as_deref().unwrap_or("no reply");
         wanted.insert(LINK_ALARM, alarm(LINK_ALARM, "link", format!("the device does not answer: {why}")));
     }
+    let clear =
+        active.iter().copied().filter(|code| known.contains(code) && !wanted.contains_key(code)).collect();
     let raise = wanted.into_iter().filter(|(code, _)| !active.contains(code)).map(|(_, a)| a).collect();
-    let clear = active
-        .iter()
-        .copied()
-        .filter(|code| known.contains(code))
-        .filter(|code| !wanted_code(status, *code))
-        .collect();
     (raise, clear)
-}
-
-/// Whether `code` is an alarm the status shows as active now.
-fn wanted_code(status: &DeviceStatus, code: u16) -> bool {
-    if code == LINK_ALARM {
-        return !status.online && status.consecutive_failures > 0;
-    }
-    status.online && status.crane.as_ref().and_then(|c| c.alarm_code) == Some(code)
 }
 
 #[cfg(test)]

@@ -156,21 +156,20 @@ impl Session {
     }
 
     async fn send(&self, sink: &mut Sink, message: Message) -> Result<(), End> {
-        match tokio::time::timeout(self.send_timeout, sink.send(message)).await {
-            Ok(result) => Ok(result?),
-            Err(_) => Err(End::Stalled(self.send_timeout)),
-        }
+        self.bounded(sink.send(message)).await
     }
 
     async fn feed(&self, sink: &mut Sink, message: Message) -> Result<(), End> {
-        match tokio::time::timeout(self.send_timeout, sink.feed(message)).await {
-            Ok(result) => Ok(result?),
-            Err(_) => Err(End::Stalled(self.send_timeout)),
-        }
+        self.bounded(sink.feed(message)).await
     }
 
     async fn flush(&self, sink: &mut Sink) -> Result<(), End> {
-        match tokio::time::timeout(self.send_timeout, sink.flush()).await {
+        self.bounded(sink.flush()).await
+    }
+
+    /// A socket operation that may take at most `send_timeout` (a stalled client is dropped).
+    async fn bounded(&self, op: impl Future<Output = Result<(), axum::Error>>) -> Result<(), End> {
+        match tokio::time::timeout(self.send_timeout, op).await {
             Ok(result) => Ok(result?),
             Err(_) => Err(End::Stalled(self.send_timeout)),
         }
