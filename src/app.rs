@@ -16,11 +16,13 @@ use crate::api::{self, AppState};
 use crate::auth::KeyRing;
 use crate::config::Config;
 use crate::devices::{self, Devices};
+use crate::domain::time::now_ms;
+use crate::service::dispatch::{Dispatcher, Queues};
 use crate::service::events::Hub;
 use crate::service::intake::Rules;
-use crate::service::monitor::{self, MonitorOptions};
+use crate::service::monitor;
 use crate::store::writer::{Hooks, Record, Writer};
-use crate::store::{self, locations, time::now_ms};
+use crate::store::{self, locations};
 
 /// A bound, ready-to-run rackd.
 pub struct Application {
@@ -57,9 +59,9 @@ impl Application {
             .with_context(|| format!("opening database {}", db.path.display()))?;
         let layout = config.layout();
         locations::seed(&mut *pool.acquire().await?, &layout, now_ms()).await.context("seeding locations")?;
-        let wakers = devices::wakers(&config.devices);
+        let queues = Queues::new(config.devices.iter().map(|d| (d.id.clone(), d.dispatch_window as usize)));
         let hub = Hub::new(config.events.buffer);
-        let hooks = Hooks { wake: Some(devices::wake_hook(wakers.clone())), publish: Some(hub.hook()) };
+        let hooks = Hooks { committed: Some(queues.hook()), publish: Some(hub.hook()) };
         let (writer, writer_task) = Writer::start(
             &db.path,
             Duration::from_millis(db.busy_timeout_ms),
@@ -68,12 +70,12 @@ impl Application {
             hooks,
         )
         .context("opening the job writer's connection")?;
-        let (devices, mut device_tasks) = devices::start(&config.devices, wakers, &writer, &pool).await?;
-        let options = MonitorOptions {
-            period: Duration::from_millis(config.events.device_period_ms),
-            contact_refresh: Duration::from_millis(config.events.contact_refresh_ms),
-        };
-        device_tasks.push(tokio::spawn(monitor::run(devices.clone(), writer.clone(), pool.clone(), options)));
+        let dispatcher = Dispatcher::new(queues.clone(), writer.clone(), pool.clone());
+        dispatcher.load(config.devices.iter().map(|d| d.id.as_str())).await.context("loading the queues")?;
+        let contact_refresh = Duration::from_millis(config.events.contact_refresh_ms);
+        let port = |id: &str| queues.port(id, writer.clone());
+        let (devices, mut device_tasks) = devices::start(&config.devices, port, contact_refresh).await?;
+        device_tasks.extend(monitor::start(&devices, &queues, writer.clone(), &pool).await);
         device_tasks.push(tokio::spawn(retention(writer.clone(), config.events.retention_hours)));
         let rules = Rules {
             layout,
@@ -87,6 +89,7 @@ impl Application {
             keys: Arc::new(keys),
             metrics: Arc::new(Metrics::default()),
             devices: devices.clone(),
+            dispatcher,
             hub,
             events: Arc::new(config.events.clone()),
         });

@@ -17,3 +17,4 @@ pub mod protocols;
 pub mod service;
 pub mod sim;
 pub mod store;
+pub mod wire;

@@ -9,6 +9,7 @@ use super::error::{ApiError, ErrorBody};
 use super::extract::{Json, Path};
 use super::state::AppState;
 use crate::devices::{DeviceHandle, DeviceStatus};
+use crate::service::monitor::{all_shown, shown};
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
@@ -24,11 +25,18 @@ fn device<'a>(app: &'a AppState, id: &str) -> Result<&'a DeviceHandle, ApiError>
     app.devices.get(id).ok_or_else(|| ApiError::not_found(format!("device {id:?} is not configured")))
 }
 
+/// Pauses or resumes a device and shows it.
+fn set_paused(app: &AppState, id: &str, paused: bool) -> Result<DeviceStatus, ApiError> {
+    let handle = device(app, id)?;
+    app.dispatcher.queues().set_paused(id, paused);
+    Ok(shown(id, handle, app.dispatcher.queues()))
+}
+
 /// Every device with its status.
 #[utoipa::path(get, path = "/devices", tag = "devices",
     responses((status = 200, description = "Every configured device", body = Vec<DeviceStatus>)))]
 async fn list_devices(State(app): State<AppState>) -> Json<Vec<DeviceStatus>> {
-    Json(app.devices.values().map(DeviceHandle::status).collect())
+    Json(all_shown(&app.devices, app.dispatcher.queues()))
 }
 
 /// One device's status: online, last contact, slots in use, last error.
@@ -41,7 +49,7 @@ async fn get_device(
     State(app): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<DeviceStatus>, ApiError> {
-    Ok(Json(device(&app, &id)?.status()))
+    Ok(Json(shown(&id, device(&app, &id)?, app.dispatcher.queues())))
 }
 
 /// Pause a device: it gets no new work; what it runs goes on and is followed.
@@ -55,7 +63,7 @@ async fn pause_device(
     Path(id): Path<String>,
 ) -> Result<Json<DeviceStatus>, ApiError> {
     tracing::info!(device = %id, "paused through the API");
-    Ok(Json(device(&app, &id)?.set_paused(true)))
+    Ok(Json(set_paused(&app, &id, true)?))
 }
 
 /// Resume a paused device: queued work is handed over at once.
@@ -69,5 +77,5 @@ async fn resume_device(
     Path(id): Path<String>,
 ) -> Result<Json<DeviceStatus>, ApiError> {
     tracing::info!(device = %id, "resumed through the API");
-    Ok(Json(device(&app, &id)?.set_paused(false)))
+    Ok(Json(set_paused(&app, &id, false)?))
 }

@@ -10,6 +10,7 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
+use crate::service::dispatch::CancelError;
 use crate::store::writer::WriteError;
 
 /// An error answer.
@@ -97,6 +98,23 @@ impl From<WriteError> for ApiError {
                 Self::conflict("invalid_state", e.to_string())
             }
             WriteError::Closed | WriteError::Database(_) => Self::unavailable(e),
+        }
+    }
+}
+
+impl From<CancelError> for ApiError {
+    fn from(e: CancelError) -> Self {
+        let message = e.to_string();
+        match e {
+            CancelError::NotFound(_) => Self::not_found(message),
+            CancelError::Ended { .. } => Self::conflict("job_ended", message),
+            CancelError::Refused { .. } | CancelError::Unconfigured { .. } => {
+                Self::conflict("job_on_device", message)
+            }
+            CancelError::Unavailable { .. } => {
+                Self::new(StatusCode::SERVICE_UNAVAILABLE, "unavailable", message)
+            }
+            CancelError::Store(cause) => Self::unavailable(cause),
         }
     }
 }

@@ -11,11 +11,11 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::error::{ApiError, ErrorBody};
 use super::extract::{Json, Path, Query};
 use super::state::AppState;
+use crate::domain::time::to_ms;
 use crate::domain::{JobKind, JobState, Priority};
 use crate::service::intake::{JobRequest, MAX_BATCH};
 use crate::store::jobs::{self, Job, JobEvent, JobFilter};
-use crate::store::time::to_ms;
-use crate::store::writer::{Change, Outcome, WriteError};
+use crate::store::writer::{Change, Outcome};
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
@@ -256,31 +256,8 @@ async fn job_history(
         (status = 200, description = "Cancelled", body = Job),
         (status = 404, description = "No such job", body = ErrorBody),
         (status = 409, description = "The job has ended, or is on a device and cannot be withdrawn", body = ErrorBody),
+        (status = 503, description = "The job's device does not answer now; retry", body = ErrorBody),
     ))]
 async fn cancel_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<Json<Job>, ApiError> {
-    let job = jobs::get(&app.pool, id)
-        .await?
-        .ok_or_else(|| ApiError::not_found(format!("job {id} does not exist")))?;
-    if job.state.is_terminal() {
-        return Err(ApiError::conflict("job_ended", format!("job {id} is already {}", job.state)));
-    }
-    // A job of a device is cancelled by the device task, which alone hands jobs over, so a
-    // cancel can never race a hand-over of the same job.
-    if let Some(device) = job.device.as_ref().and_then(|d| app.devices.get(d)) {
-        device.cancel(id).await.map_err(|reason| ApiError::conflict("job_on_device", reason))?;
-        let job = jobs::get(&app.pool, id).await?;
-        return job.map(Json).ok_or_else(|| ApiError::not_found(format!("job {id} does not exist")));
-    }
-    let change = Change::cancel_queued();
-    match app.writer.change(id, change).await {
-        Ok(job) => Ok(Json(job)),
-        Err(WriteError::Unexpected { state, .. }) if state.is_terminal() => {
-            Err(ApiError::conflict("job_ended", format!("job {id} is already {state}")))
-        }
-        Err(WriteError::Unexpected { state, .. }) => Err(ApiError::conflict(
-            "job_on_device",
-            format!("job {id} is {state} and its device is not configured; it cannot be withdrawn"),
-        )),
-        Err(e) => Err(e.into()),
-    }
+    Ok(Json(app.dispatcher.cancel(id, &app.devices).await?))
 }

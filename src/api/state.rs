@@ -43,6 +43,8 @@ pub struct Shared {
     pub metrics: Arc<Metrics>,
     /// The running devices.
     pub devices: crate::devices::Devices,
+    /// The dispatcher: cancels and devices' control state.
+    pub dispatcher: crate::service::dispatch::Dispatcher,
     /// Live events, for WebSocket subscribers.
     pub hub: crate::service::events::Hub,
     /// Settings of the event stream.

@@ -18,10 +18,10 @@ use tokio::sync::oneshot;
 
 use crate::app::Application;
 use crate::config::Config;
-use crate::devices::shelf::slot::task_id_for;
 use crate::protocols::PlcMemory;
 use crate::protocols::modbus::{ModbusClient, ModbusConfig};
 use crate::sim::shelf::{ShelfSim, ShelfSimOptions};
+use crate::wire::task_id_for;
 
 /// Runs the shelf benchmark: `latency_jobs` single jobs, then `batch_jobs` in batches.
 pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow::Result<()> {

@@ -250,7 +250,7 @@ impl DeviceConfig {
                 return fail("heartbeat_timeout_ms and handshake_timeout_ms must be above 0".into());
             }
         }
-        if self.slots == 0 || self.slot_stride() < crate::devices::shelf::slot::SLOT_WORDS as u16 {
+        if self.slots == 0 || self.slot_stride() < crate::wire::slot::SLOT_WORDS as u16 {
             return fail("slots must be at least 1 and stride at least 35".into());
         }
         if self.offline_after == 0 {
@@ -261,7 +261,7 @@ impl DeviceConfig {
             DeviceKind::Shelf => crate::devices::shelf::check_layout(self).or_else(fail)?,
             DeviceKind::Crane => {
                 // rackd writes its own block and only reads the crane's.
-                let words = crate::devices::crane::registers::BLOCK_WORDS;
+                let words = crate::wire::registers::BLOCK_WORDS;
                 check_words(&self.protocol, "wcs_base", &self.wcs_base, words, true).or_else(fail)?;
                 check_words(&self.protocol, "crane_base", &self.crane_base, words, false).or_else(fail)?;
             }

@@ -1,44 +1,47 @@
 //! What machines mean: device adapters that turn jobs into a machine's own commands and
 //! follow them to their end, over any protocol (through [`crate::protocols::PlcMemory`]).
 //!
-//! Each configured device runs as one task that owns its PLC connection; the rest of rackd
-//! talks to it through a [`DeviceHandle`]: a wake-up when new work arrives, requests
-//! (cancel, pause, resume) answered by the device task, and a status snapshot.
+//! Each configured device runs as one task that owns its PLC connection. It gets its work
+//! from the dispatcher and reports what became of it through a narrow [`port::Port`]; it
+//! publishes its status through a `watch` ([`status::StatusCell`]); the rest of rackd
+//! reaches it through a [`DeviceHandle`]: the status receiver and requests (cancel)
+//! answered by the device task, which alone hands work to the machine.
 
+pub mod cancel;
 pub mod config;
 pub mod crane;
-pub mod follow;
+pub mod port;
 pub mod shelf;
 pub mod status;
 pub mod tags;
 
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
+use std::time::Duration;
 
-use tokio::sync::{Notify, mpsc, oneshot};
+use tokio::sync::{mpsc, oneshot, watch};
 
+pub use cancel::{CancelRefusal, Withdrawal};
 pub use config::{DeviceConfig, DeviceKind};
-pub use status::DeviceStatus;
+pub use status::{DeviceStatus, StatusCell};
 
 /// What the rest of rackd may ask of a device task.
 #[derive(Debug)]
 pub enum DeviceRequest {
-    /// Cancel a job of this device; answered with why not when it cannot be done safely.
+    /// Cancel a job of this device, or say that the device does not hold it.
     Cancel {
         /// The job.
         job: i64,
-        /// Ok once cancelled and recorded; Err(reason) otherwise.
-        reply: oneshot::Sender<Result<(), String>>,
+        /// What the device did, or why it cannot.
+        reply: oneshot::Sender<Result<Withdrawal, CancelRefusal>>,
     },
 }
 
 /// The handle to one running device.
 #[derive(Clone)]
 pub struct DeviceHandle {
-    /// Wakes the device task when new work may be waiting.
-    pub wake: Arc<Notify>,
-    /// The latest status, kept up to date by the device task.
-    pub status: Arc<Mutex<DeviceStatus>>,
+    /// The latest status, as the device task publishes it.
+    pub status: watch::Receiver<DeviceStatus>,
     /// Requests to the device task.
     pub requests: mpsc::Sender<DeviceRequest>,
     /// Tag values and writes (tags devices only).
@@ -48,53 +51,27 @@ pub struct DeviceHandle {
 impl DeviceHandle {
     /// A copy of the current status.
     pub fn status(&self) -> DeviceStatus {
-        self.status.lock().unwrap_or_else(|p| p.into_inner()).clone()
+        self.status.borrow().clone()
     }
 
-    /// Pauses or resumes the device (a paused device gets no new work; what it runs goes on).
-    pub fn set_paused(&self, paused: bool) -> DeviceStatus {
-        self.status.lock().unwrap_or_else(|p| p.into_inner()).paused = paused;
-        self.wake.notify_one();
-        self.status()
-    }
-
-    /// Asks the device task to cancel `job`.
-    pub async fn cancel(&self, job: i64) -> Result<(), String> {
+    /// Asks the device task about cancelling `job`; `None` if the task has stopped.
+    pub async fn cancel(&self, job: i64) -> Option<Result<Withdrawal, CancelRefusal>> {
         let (reply, answer) = oneshot::channel();
-        self.requests
-            .send(DeviceRequest::Cancel { job, reply })
-            .await
-            .map_err(|_| "the device task has stopped".to_string())?;
-        answer.await.map_err(|_| "the device task has stopped".to_string())?
+        self.requests.send(DeviceRequest::Cancel { job, reply }).await.ok()?;
+        answer.await.ok()
     }
 }
 
 /// Every configured device, by id.
 pub type Devices = Arc<BTreeMap<String, DeviceHandle>>;
 
-/// A wake-up per configured device, made before the job writer so that the writer can wake
-/// a device the moment a job for it is committed.
-pub fn wakers(configs: &[DeviceConfig]) -> BTreeMap<String, Arc<Notify>> {
-    configs.iter().map(|c| (c.id.clone(), Arc::new(Notify::new()))).collect()
-}
-
-/// The writer hook that wakes a job's device when queued work for it is committed.
-pub fn wake_hook(wakers: BTreeMap<String, Arc<Notify>>) -> crate::store::writer::Wake {
-    Arc::new(move |job: &crate::store::Job| {
-        if job.state == crate::domain::JobState::Queued
-            && let Some(n) = job.device.as_ref().and_then(|d| wakers.get(d))
-        {
-            n.notify_one();
-        }
-    })
-}
-
-/// Connects to every device and starts its task.
+/// Connects to every device and starts its task; `port` gives each device that runs jobs
+/// its port to the dispatcher; contact bookkeeping reaches status watchers at most every
+/// `contact_refresh`.
 pub async fn start(
     configs: &[DeviceConfig],
-    mut wakers: BTreeMap<String, Arc<Notify>>,
-    writer: &crate::store::writer::Writer,
-    pool: &sqlx::SqlitePool,
+    port: impl Fn(&str) -> Arc<dyn port::Port>,
+    contact_refresh: Duration,
 ) -> anyhow::Result<(Devices, Vec<tokio::task::JoinHandle<()>>)> {
     use anyhow::Context;
     let mut devices = BTreeMap::new();
@@ -109,24 +86,22 @@ pub async fn start(
         };
         let mut status = DeviceStatus::new(&c.id, c.kind, &c.protocol, &c.address, slots);
         status.aisles = c.aisles.clone();
-        let status = Arc::new(Mutex::new(status));
+        let status = StatusCell::new(status, contact_refresh);
+        let receiver = status.subscribe();
         let (requests, inbox) = mpsc::channel(16);
-        let wake = wakers.remove(&c.id).unwrap_or_default();
         let context = || format!("device {:?}", c.id);
         let mut tag_handle = None;
         let task = match c.kind {
             DeviceKind::Shelf => {
-                let shelf = shelf::Shelf::new(c.clone(), plc, writer.clone(), pool.clone(), status.clone())
-                    .with_context(context)?;
-                tokio::spawn(shelf.run(wake.clone(), inbox))
+                let shelf = shelf::Shelf::new(c.clone(), plc, port(&c.id), status).with_context(context)?;
+                tokio::spawn(shelf.run(inbox))
             }
             DeviceKind::Crane => {
-                let crane = crane::Crane::new(c.clone(), plc, writer.clone(), pool.clone(), status.clone())
-                    .with_context(context)?;
-                tokio::spawn(crane.run(wake.clone(), inbox))
+                let crane = crane::Crane::new(c.clone(), plc, port(&c.id), status).with_context(context)?;
+                tokio::spawn(crane.run(inbox))
             }
             DeviceKind::Tags => {
-                let (device, handle) = tags::TagDevice::new(c.clone(), plc, status.clone())
+                let (device, handle) = tags::TagDevice::new(c.clone(), plc, status)
                     .map_err(anyhow::Error::msg)
                     .with_context(context)?;
                 tag_handle = Some(handle);
@@ -134,7 +109,7 @@ pub async fn start(
             }
         };
         tasks.push(task);
-        devices.insert(c.id.clone(), DeviceHandle { wake, status, requests, tags: tag_handle });
+        devices.insert(c.id.clone(), DeviceHandle { status: receiver, requests, tags: tag_handle });
     }
     Ok((Arc::new(devices), tasks))
 }

@@ -1,11 +1,21 @@
-//! A device's status as the API shows it.
+//! A device's status as the API shows it, and the watch it travels through.
+//!
+//! Each device task owns a [`StatusCell`], the sending side of a `tokio::sync::watch`:
+//! the API reads the latest status from its receiver and the service's monitor wakes on
+//! each change. What changes on every poll (last contact, failures in a row) is contact
+//! bookkeeping: it is always current for readers, but wakes watchers at most every
+//! `refresh`, so a fleet of devices polled twice a second does not publish twice a second.
+
+use std::time::Duration;
 
 use serde::Serialize;
 use time::OffsetDateTime;
+use tokio::sync::watch;
+use tokio::time::Instant;
 use utoipa::ToSchema;
 
 /// What rackd knows of a device right now.
-#[derive(Clone, Debug, Serialize, ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
 #[schema(example = json!({"id": "shelf1", "kind": "shelf", "protocol": "modbus-udp", "address": "127.0.0.1:1502",
     "aisles": [1], "online": true, "paused": false, "last_contact": "2026-11-21T08:00:00.000Z", "slots_total": 60,
     "slots_in_use": 3, "consecutive_failures": 0, "last_error": null}))]
@@ -22,7 +32,8 @@ pub struct DeviceStatus {
     pub aisles: Vec<u16>,
     /// It answered recently (fewer than the configured number of consecutive failures).
     pub online: bool,
-    /// Paused by an operator: gets no new work.
+    /// Paused by an operator: gets no new work. (Control state, kept by the service's
+    /// dispatcher and shown here; a device task never sets it.)
     pub paused: bool,
     /// When it last answered.
     #[serde(with = "time::serde::rfc3339::option")]
@@ -70,23 +81,28 @@ pub struct CraneStatus {
     /// The alarm in words, from the catalogue.
     pub alarm_text: Option<String>,
     /// `business` (rackd resolves it) or `hardware` (needs a person at the crane).
-    pub alarm_class: Option<String>,
+    pub alarm_class: Option<crate::domain::AlarmClass>,
 }
 
 impl DeviceStatus {
     /// Records the outcome of one request to the device (time of contact, failures in a
     /// row, last error) and returns whether the link is up now, given whether it was: an
     /// answer brings it up; it goes down after `offline_after` failures in a row.
-    pub fn record_contact(&mut self, result: Result<(), String>, offline_after: u32, was_up: bool) -> bool {
+    pub fn record_contact(
+        &mut self,
+        result: Result<(), &crate::protocols::PlcError>,
+        offline_after: u32,
+        was_up: bool,
+    ) -> bool {
         match result {
             Ok(()) => {
                 self.consecutive_failures = 0;
-                self.last_contact = Some(crate::store::time::from_ms(crate::store::time::now_ms()));
+                self.last_contact = Some(crate::domain::time::from_ms(crate::domain::time::now_ms()));
                 true
             }
             Err(e) => {
                 self.consecutive_failures += 1;
-                self.last_error = Some(e);
+                self.last_error = Some(e.to_string());
                 was_up && self.consecutive_failures < offline_after
             }
         }
@@ -109,6 +125,75 @@ impl DeviceStatus {
             last_error: None,
             crane: (kind == super::DeviceKind::Crane).then(CraneStatus::default),
             tags: None,
+        }
+    }
+}
+
+/// What watchers must hear of at once: everything but the contact bookkeeping and the
+/// tags (whose changes the tags device reports itself).
+#[derive(PartialEq)]
+struct Shape {
+    online: bool,
+    slots_in_use: u16,
+    last_error: Option<String>,
+    crane: Option<CraneStatus>,
+}
+
+impl Shape {
+    fn of(s: &DeviceStatus) -> Shape {
+        Shape {
+            online: s.online,
+            slots_in_use: s.slots_in_use,
+            last_error: s.last_error.clone(),
+            crane: s.crane.clone(),
+        }
+    }
+}
+
+/// The sending side of a device's status (see the module doc).
+pub struct StatusCell {
+    tx: watch::Sender<DeviceStatus>,
+    refresh: Duration,
+    told: Instant,
+}
+
+impl StatusCell {
+    /// A cell holding `status`; contact bookkeeping wakes watchers at most every `refresh`.
+    pub fn new(status: DeviceStatus, refresh: Duration) -> StatusCell {
+        StatusCell { tx: watch::Sender::new(status), refresh, told: Instant::now() }
+    }
+
+    /// A receiver of the status.
+    pub fn subscribe(&self) -> watch::Receiver<DeviceStatus> {
+        self.tx.subscribe()
+    }
+
+    /// The status now.
+    pub fn get(&self) -> watch::Ref<'_, DeviceStatus> {
+        self.tx.borrow()
+    }
+
+    /// Changes the status.
+    pub fn update(&mut self, f: impl FnOnce(&mut DeviceStatus)) {
+        self.update_marked(|s| {
+            f(s);
+            false
+        })
+    }
+
+    /// Changes the status; `f` answers whether it changed a tag (which [`StatusCell::update`]
+    /// does not look at).
+    pub fn update_marked(&mut self, f: impl FnOnce(&mut DeviceStatus) -> bool) {
+        let stale = self.told.elapsed() >= self.refresh;
+        let mut told = false;
+        self.tx.send_if_modified(|s| {
+            let (before, contact) = (Shape::of(s), s.last_contact);
+            let tags_changed = f(s);
+            told = tags_changed || Shape::of(s) != before || (stale && s.last_contact != contact);
+            told
+        });
+        if told {
+            self.told = Instant::now();
         }
     }
 }

@@ -3,14 +3,19 @@
 //! Parse, don't validate: each type here can only hold a valid value, and its constructor
 //! says in one place what valid means.
 
+pub mod alarm;
 pub mod job;
 pub mod location;
+pub mod report;
 pub mod state;
+pub mod time;
 pub mod values;
 
-pub use job::{JobKind, JobSpec, LightColor};
+pub use alarm::AlarmClass;
+pub use job::{Job, JobKind, JobSpec, LightColor, NewJob};
 pub use location::{AisleLayout, Layout, Location};
-pub use state::{Failure, JobState, Transition};
+pub use report::{Report, Reported};
+pub use state::{Failure, FailureKind, JobState, Transition};
 pub use values::{Barcode, Priority};
 
 /// A value that failed its constructor's checks, with a message that says why.

@@ -49,11 +49,60 @@ pub enum Transition {
     Cancel,
 }
 
+/// The class of a failure: what the operator has to look at.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum FailureKind {
+    /// The device reported a fault of its own (a shelf PLC's failure kind 1).
+    DeviceFault,
+    /// The device refused the task: its data disagrees with rackd's (failure kind 2).
+    Rejected,
+    /// A business alarm stopped the task (crane D205), and it was cancelled.
+    Alarm,
+    /// The device no longer holds the task rackd gave it.
+    Lost,
+    /// The device cannot run this job at all (nothing was sent).
+    Unsupported,
+}
+
+impl FailureKind {
+    /// Every kind.
+    pub const ALL: [FailureKind; 5] = [
+        FailureKind::DeviceFault,
+        FailureKind::Rejected,
+        FailureKind::Alarm,
+        FailureKind::Lost,
+        FailureKind::Unsupported,
+    ];
+
+    /// The kind's name as the API writes it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FailureKind::DeviceFault => "device_fault",
+            FailureKind::Rejected => "rejected",
+            FailureKind::Alarm => "alarm",
+            FailureKind::Lost => "lost",
+            FailureKind::Unsupported => "unsupported",
+        }
+    }
+
+    /// The kind with this name.
+    pub fn parse(text: &str) -> Option<FailureKind> {
+        FailureKind::ALL.into_iter().find(|k| k.as_str() == text)
+    }
+}
+
+impl std::fmt::Display for FailureKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 /// Why a job failed: who failed it, the device's own code if any, and a text.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 pub struct Failure {
-    /// The class of failure: `device_fault`, `rejected`, `alarm`, `offline`, ...
-    pub kind: String,
+    /// The class of failure.
+    pub kind: FailureKind,
     /// The device's own code (PLC failure kind, crane alarm code), if it gave one.
     pub code: Option<i64>,
     /// What happened, for people.

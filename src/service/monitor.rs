@@ -1,13 +1,11 @@
-//! The device monitor: turns what the device tasks keep in their status into events and
+//! The device monitor: turns each device's status and control state into events and
 //! alarms.
 //!
-//! Device tasks update their [`DeviceStatus`] in many places (every poll, every hand-over);
-//! rather than have each place publish, one task looks at every status each `period` and
-//! records:
-//! - `device.updated` when anything but the contact bookkeeping changed (online, paused,
-//!   slots, last error, crane registers, tags), and otherwise at most every
-//!   `contact_refresh` while the device answers, so dashboards see "last contact" move
-//!   without an event per poll;
+//! One task per device waits on the device's status watch and its control watch (pause),
+//! and on each change records:
+//! - `device.updated` with the device as the API shows it (status with its control state);
+//!   the device's [`StatusCell`](crate::devices::StatusCell) wakes the watch at once for
+//!   real changes and at most every `events.contact_refresh_ms` for a new last contact;
 //! - alarms, raised and cleared: a crane's alarm code (D205), with the catalogue's text and
 //!   class, and a `link` alarm (code 0) while a device does not answer. An alarm is judged
 //!   only on what is known: while a device is offline its own alarms stay as they were.
@@ -17,121 +15,119 @@
 //! configured are cleared at start.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
-use std::time::{Duration, Instant};
 
 use sqlx::SqlitePool;
+use tokio::sync::watch;
 
-use crate::devices::{DeviceStatus, Devices};
+use super::dispatch::{Control, Queues};
+use crate::devices::{DeviceHandle, DeviceStatus, Devices};
+use crate::domain::AlarmClass;
 use crate::store::alarms::{self, NewAlarm};
 use crate::store::writer::{Record, WriteError, Writer};
 
 /// The code of the alarm raised while a device does not answer.
 pub const LINK_ALARM: u16 = 0;
 
-/// How the monitor looks.
-#[derive(Clone, Copy, Debug)]
-pub struct MonitorOptions {
-    /// How often every status is looked at.
-    pub period: Duration,
-    /// Longest time a device's new last contact goes unpublished.
-    pub contact_refresh: Duration,
+/// A device as the API shows it: what it reports, with the control state set on it.
+pub fn view(status: &DeviceStatus, control: Control) -> DeviceStatus {
+    let mut view = status.clone();
+    view.paused = control.paused;
+    view
 }
 
-/// What was last recorded of one device.
-#[derive(Default)]
-struct Seen {
-    /// The status without its contact bookkeeping, as last published.
-    shape: String,
-    /// Last contact as last published.
-    contact: Option<time::OffsetDateTime>,
-    /// When it was last published.
-    at: Option<Instant>,
-    /// Active alarm codes.
-    alarms: BTreeSet<u16>,
+/// One device as the API shows it.
+pub fn shown(id: &str, handle: &DeviceHandle, queues: &Queues) -> DeviceStatus {
+    let control = queues.control(id).map(|c| *c.borrow()).unwrap_or_default();
+    view(&handle.status.borrow(), control)
 }
 
-/// Runs until the writer stops.
-pub async fn run(devices: Devices, writer: Writer, pool: SqlitePool, options: MonitorOptions) {
-    let mut seen: HashMap<String, Seen> = devices.keys().map(|id| (id.clone(), Seen::default())).collect();
-    match alarms::active(&pool).await {
-        Ok(active) => {
-            for alarm in active {
-                match seen.get_mut(&alarm.device) {
-                    Some(s) => drop(s.alarms.insert(alarm.code)),
-                    None => {
-                        let record = Record::AlarmCleared { device: alarm.device, code: alarm.code };
-                        if let Err(WriteError::Closed) = writer.record(record).await {
-                            return;
-                        }
+/// Every device as the API shows it, by id.
+pub fn all_shown(devices: &Devices, queues: &Queues) -> Vec<DeviceStatus> {
+    devices.iter().map(|(id, handle)| shown(id, handle, queues)).collect()
+}
+
+/// Starts watching every device; the tasks end when the writer stops.
+pub async fn start(
+    devices: &Devices,
+    queues: &Queues,
+    writer: Writer,
+    pool: &SqlitePool,
+) -> Vec<tokio::task::JoinHandle<()>> {
+    let mut active: HashMap<String, BTreeSet<u16>> = HashMap::new();
+    match alarms::active(pool).await {
+        Ok(found) => {
+            for alarm in found {
+                if devices.contains_key(&alarm.device) {
+                    active.entry(alarm.device).or_default().insert(alarm.code);
+                } else {
+                    let record = Record::AlarmCleared { device: alarm.device, code: alarm.code };
+                    if let Err(e) = writer.record(record).await {
+                        tracing::warn!(error = %e, "clearing an alarm of a device no longer configured");
                     }
                 }
             }
         }
         Err(e) => tracing::error!(error = %e, "reading active alarms"),
     }
-    let mut tick = tokio::time::interval(options.period);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut tasks = Vec::new();
+    for (id, handle) in devices.iter() {
+        let control = queues.control(id).unwrap_or_else(|| watch::Sender::default().subscribe());
+        let alarms = active.remove(id).unwrap_or_default();
+        tasks.push(tokio::spawn(watch_device(handle.clone(), control, alarms, writer.clone())));
+    }
+    tasks
+}
+
+/// Records every change of one device until its status or the writer goes away.
+async fn watch_device(
+    handle: DeviceHandle,
+    mut control: watch::Receiver<Control>,
+    mut alarms: BTreeSet<u16>,
+    writer: Writer,
+) {
+    let mut status = handle.status;
     loop {
-        tick.tick().await;
-        for (id, handle) in devices.iter() {
-            let status = handle.status();
-            let seen = seen.entry(id.clone()).or_default();
-            if let Err(e) = look(&status, seen, &writer, options).await {
-                if matches!(e, WriteError::Closed) {
-                    return;
-                }
-                tracing::warn!(device = %id, error = %e, "recording device status");
-            }
+        let device = view(&status.borrow_and_update(), *control.borrow_and_update());
+        match record(&device, &mut alarms, &writer).await {
+            Ok(()) => {}
+            Err(WriteError::Closed) => return,
+            Err(e) => tracing::warn!(device = %device.id, error = %e, "recording device status"),
+        }
+        tokio::select! {
+            changed = status.changed() => if changed.is_err() { return },
+            changed = control.changed() => if changed.is_err() { return },
         }
     }
 }
 
-/// Records what changed in one device's status since `seen`.
-async fn look(
+/// Records the device's status and the alarms it raises or clears, given those active.
+async fn record(
     status: &DeviceStatus,
-    seen: &mut Seen,
+    active: &mut BTreeSet<u16>,
     writer: &Writer,
-    options: MonitorOptions,
 ) -> Result<(), WriteError> {
-    let (raise, clear) = alarm_changes(status, &seen.alarms);
+    let (raise, clear) = alarm_changes(status, active);
     for code in clear {
         writer.record(Record::AlarmCleared { device: status.id.clone(), code }).await?;
-        seen.alarms.remove(&code);
+        active.remove(&code);
     }
     for alarm in raise {
         let code = alarm.code;
         writer.record(Record::AlarmRaised(alarm)).await?;
-        seen.alarms.insert(code);
+        active.insert(code);
     }
-    let shape = shape(status);
-    let stale = status.last_contact != seen.contact
-        && seen.at.is_none_or(|at| at.elapsed() >= options.contact_refresh);
-    if shape != seen.shape || stale {
-        let json = serde_json::to_string(status).unwrap_or_default();
-        writer.record(Record::Device { status: json }).await?;
-        seen.shape = shape;
-        seen.contact = status.last_contact;
-        seen.at = Some(Instant::now());
-    }
-    Ok(())
-}
-
-/// The status without what changes on every poll.
-fn shape(status: &DeviceStatus) -> String {
-    let mut s = status.clone();
-    s.last_contact = None;
-    s.consecutive_failures = 0;
-    serde_json::to_string(&s).unwrap_or_default()
+    let json = serde_json::to_string(status).unwrap_or_default();
+    writer.record(Record::Device { status: json }).await
 }
 
 /// The alarms to raise and the codes to clear, given the active codes.
 fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<u16>) -> (Vec<NewAlarm>, Vec<u16>) {
     let mut wanted: BTreeMap<u16, NewAlarm> = BTreeMap::new();
     let mut known: BTreeSet<u16> = BTreeSet::new();
-    let alarm = |code: u16, class: &str, text: String| NewAlarm {
+    let alarm = |code: u16, class: AlarmClass, text: String| NewAlarm {
         device: status.id.clone(),
         code,
-        class: class.to_owned(),
+        class,
         text,
     };
     if status.online {
@@ -144,14 +140,17 @@ fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<u16>) -> (Vec<NewAlarm
         if let Some(crane) = &status.crane
             && let Some(code) = crane.alarm_code
         {
-            let class = crane.alarm_class.as_deref().unwrap_or("hardware");
+            let class = crane.alarm_class.unwrap_or(AlarmClass::Hardware);
             let text = crane.alarm_text.clone().unwrap_or_else(|| format!("alarm {code}"));
             wanted.insert(code, alarm(code, class, text));
         }
     } else if status.consecutive_failures > 0 {
         known.insert(LINK_ALARM);
         let why = status.last_error.as_deref().unwrap_or("no reply");
-        wanted.insert(LINK_ALARM, alarm(LINK_ALARM, "link", format!("the device does not answer: {why}")));
+        wanted.insert(
+            LINK_ALARM,
+            alarm(LINK_ALARM, AlarmClass::Link, format!("the device does not answer: {why}")),
+        );
     }
     let clear =
         active.iter().copied().filter(|code| known.contains(code) && !wanted.contains_key(code)).collect();
@@ -173,7 +172,7 @@ mod tests {
             known: true,
             alarm_code: alarm,
             alarm_text: alarm.map(|c| format!("text {c}")),
-            alarm_class: alarm.map(|_| "hardware".into()),
+            alarm_class: alarm.map(|_| AlarmClass::Hardware),
             ..CraneStatus::default()
         });
         s
@@ -198,7 +197,7 @@ mod tests {
     fn while_offline_only_the_link_alarm_changes() {
         let (raise, clear) = alarm_changes(&crane(false, 3, None), &BTreeSet::from([41]));
         assert_eq!((codes(&raise), clear), (vec![LINK_ALARM], vec![]));
-        assert_eq!(raise[0].class, "link");
+        assert_eq!(raise[0].class, AlarmClass::Link);
         let (raise, clear) = alarm_changes(&crane(true, 0, None), &BTreeSet::from([LINK_ALARM, 41]));
         assert_eq!((codes(&raise), clear), (vec![], vec![LINK_ALARM, 41]));
     }
@@ -219,13 +218,9 @@ mod tests {
     }
 
     #[test]
-    fn contact_bookkeeping_is_not_a_change() {
-        let a = crane(true, 0, None);
-        let mut b = a.clone();
-        b.last_contact = Some(time::OffsetDateTime::now_utc());
-        b.consecutive_failures = 1;
-        assert_eq!(shape(&a), shape(&b));
-        b.paused = true;
-        assert_ne!(shape(&a), shape(&b));
+    fn the_view_carries_the_control_state() {
+        let status = crane(true, 0, None);
+        assert!(!view(&status, Control::default()).paused);
+        assert!(view(&status, Control { paused: true }).paused);
     }
 }

@@ -7,7 +7,8 @@ use sqlx::SqliteExecutor;
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
-use super::time::from_ms;
+use crate::domain::AlarmClass;
+use crate::domain::time::from_ms;
 
 /// One alarm, active (no `cleared_at`) or past.
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
@@ -21,7 +22,7 @@ pub struct Alarm {
     /// The device's own alarm code; 0 for `link` alarms (the device stopped answering).
     pub code: u16,
     /// `business` (rackd resolves it), `hardware` (needs a person) or `link` (no answer).
-    pub class: String,
+    pub class: AlarmClass,
     /// The alarm in words.
     pub text: String,
     /// When it was raised.
@@ -41,8 +42,8 @@ pub struct NewAlarm {
     pub device: String,
     /// Its code (0 = link lost).
     pub code: u16,
-    /// `business`, `hardware` or `link`.
-    pub class: String,
+    /// Who resolves it.
+    pub class: AlarmClass,
     /// In words.
     pub text: String,
 }
@@ -64,7 +65,8 @@ impl From<Row> for Alarm {
             id: r.id,
             device: r.device,
             code: r.code.clamp(0, u16::MAX as i64) as u16,
-            class: r.class,
+            // A class this version does not know (a hand-edited row) needs a person.
+            class: AlarmClass::parse(&r.class).unwrap_or(AlarmClass::Hardware),
             text: r.text,
             raised_at: from_ms(r.raised_at),
             cleared_at: r.cleared_at.map(from_ms),
@@ -124,12 +126,12 @@ pub(crate) fn raise(tx: &Transaction<'_>, new: &NewAlarm, now: i64) -> rusqlite:
     tx.prepare_cached(
         "INSERT INTO alarms (device, code, class, text, raised_at) VALUES (?1, ?2, ?3, ?4, ?5)",
     )?
-    .execute(params![new.device, new.code, new.class, new.text, now])?;
+    .execute(params![new.device, new.code, new.class.as_str(), new.text, now])?;
     Ok(Some(Alarm {
         id: tx.last_insert_rowid(),
         device: new.device.clone(),
         code: new.code,
-        class: new.class.clone(),
+        class: new.class,
         text: new.text.clone(),
         raised_at: from_ms(now),
         cleared_at: None,

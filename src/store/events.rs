@@ -8,7 +8,7 @@
 
 use sqlx::SqliteExecutor;
 
-use super::time::from_ms;
+use crate::domain::time::from_ms;
 
 /// One event as stored.
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]

@@ -5,143 +5,9 @@ use sqlx::{QueryBuilder, Sqlite, SqliteExecutor};
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
-use super::time::from_ms;
-use crate::domain::{Barcode, Failure, JobKind, JobSpec, JobState, LightColor, Location, Priority};
-
-/// A job as the API shows it.
-#[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
-#[schema(example = json!({
-    "id": 1, "reference": "WMS-1001", "kind": "store", "priority": 10, "barcode": "BOX-0001",
-    "to": {"aisle": 1, "row": 1, "bay": 2, "level": 3, "position": 1}, "device": null,
-    "state": "queued", "forced": false, "failure": null,
-    "created_at": "2026-11-21T08:00:00.000Z", "updated_at": "2026-11-21T08:00:00.000Z"}))]
-pub struct Job {
-    /// rackd's id for the job.
-    pub id: i64,
-    /// The WMS's reference, unique; the idempotency key.
-    pub reference: Option<String>,
-    /// What the job does.
-    pub kind: JobKind,
-    /// 0..=20, lower first.
-    pub priority: u8,
-    /// The box's barcode, if given.
-    pub barcode: Option<String>,
-    /// Source location (`retrieve`, `move`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub from: Option<Location>,
-    /// Target location (`store`, `move`, `travel`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub to: Option<Location>,
-    /// The location (`clear`, `light`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub location: Option<Location>,
-    /// The light (`light`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub color: Option<LightColor>,
-    /// On or off (`light`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub on: Option<bool>,
-    /// The device that runs the job, once known.
-    pub device: Option<String>,
-    /// Where the job is in its life.
-    pub state: JobState,
-    /// Completed by force on the device (crane forced completion).
-    pub forced: bool,
-    /// Why the job failed, when it did.
-    pub failure: Option<Failure>,
-    /// When rackd accepted the job.
-    #[serde(with = "time::serde::rfc3339")]
-    #[schema(value_type = String, format = DateTime)]
-    pub created_at: OffsetDateTime,
-    /// When the job last changed.
-    #[serde(with = "time::serde::rfc3339")]
-    #[schema(value_type = String, format = DateTime)]
-    pub updated_at: OffsetDateTime,
-}
-
-impl Job {
-    /// The job's kind-specific fields.
-    pub fn spec(&self) -> Option<JobSpec> {
-        Some(match self.kind {
-            JobKind::Store => JobSpec::Store { to: self.to? },
-            JobKind::Retrieve => JobSpec::Retrieve { from: self.from? },
-            JobKind::Move => JobSpec::Move { from: self.from?, to: self.to? },
-            JobKind::Clear => JobSpec::Clear { location: self.location? },
-            JobKind::Light => JobSpec::Light { location: self.location?, color: self.color?, on: self.on? },
-            JobKind::Travel => JobSpec::Travel { to: self.to? },
-        })
-    }
-}
-
-/// A job to be stored, already validated.
-#[derive(Clone, Debug, PartialEq)]
-pub struct NewJob {
-    /// What it does.
-    pub spec: JobSpec,
-    /// The WMS's reference, if any.
-    pub reference: Option<String>,
-    /// Its priority.
-    pub priority: Priority,
-    /// The box's barcode, if any.
-    pub barcode: Option<Barcode>,
-    /// The device named in the request, if any.
-    pub device: Option<String>,
-}
-
-impl NewJob {
-    /// The canonical form of the request, compared on a repeated POST with the same reference.
-    pub fn canonical(&self) -> String {
-        #[derive(Serialize)]
-        struct Canonical<'a> {
-            spec: &'a JobSpec,
-            reference: &'a Option<String>,
-            priority: Priority,
-            barcode: &'a Option<Barcode>,
-            device: &'a Option<String>,
-        }
-        let c = Canonical {
-            spec: &self.spec,
-            reference: &self.reference,
-            priority: self.priority,
-            barcode: &self.barcode,
-            device: &self.device,
-        };
-        serde_json::to_string(&c).unwrap_or_default()
-    }
-
-    /// The job as it is stored on acceptance.
-    pub fn accepted(&self, id: i64, now_ms: i64) -> Job {
-        let at = from_ms(now_ms);
-        let mut job = Job {
-            id,
-            reference: self.reference.clone(),
-            kind: self.spec.kind(),
-            priority: self.priority.get(),
-            barcode: self.barcode.as_ref().map(|b| b.as_str().to_owned()),
-            from: None,
-            to: None,
-            location: None,
-            color: None,
-            on: None,
-            device: self.device.clone(),
-            state: JobState::Queued,
-            forced: false,
-            failure: None,
-            created_at: at,
-            updated_at: at,
-        };
-        match self.spec {
-            JobSpec::Store { to } | JobSpec::Travel { to } => job.to = Some(to),
-            JobSpec::Retrieve { from } => job.from = Some(from),
-            JobSpec::Move { from, to } => (job.from, job.to) = (Some(from), Some(to)),
-            JobSpec::Clear { location } => job.location = Some(location),
-            JobSpec::Light { location, color, on } => {
-                (job.location, job.color, job.on) = (Some(location), Some(color), Some(on))
-            }
-        }
-        job
-    }
-}
+use crate::domain::time::from_ms;
+use crate::domain::{Failure, FailureKind, JobKind, JobSpec, JobState, Priority};
+pub use crate::domain::{Job, NewJob};
 
 /// One entry of a job's history.
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
@@ -244,11 +110,14 @@ impl TryFrom<JobRow> for Job {
         job.state = state;
         job.forced = row.forced;
         job.updated_at = from_ms(row.updated_at);
-        job.failure = row.failure_kind.map(|kind| Failure {
-            kind,
-            code: row.failure_code,
-            text: row.failure_text.unwrap_or_default(),
-        });
+        job.failure = match row.failure_kind {
+            Some(kind) => Some(Failure {
+                kind: FailureKind::parse(&kind).ok_or_else(|| corrupt("failure kind"))?,
+                code: row.failure_code,
+                text: row.failure_text.unwrap_or_default(),
+            }),
+            None => None,
+        };
         Ok(job)
     }
 }

@@ -6,7 +6,7 @@ use sqlx::{QueryBuilder, Sqlite, SqliteConnection, SqliteExecutor};
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
-use super::time::from_ms;
+use crate::domain::time::from_ms;
 use crate::domain::{JobSpec, Layout, LightColor, Location};
 
 /// A location and what rackd knows of it.

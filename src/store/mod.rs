@@ -8,7 +8,6 @@ pub mod alarms;
 pub mod events;
 pub mod jobs;
 pub mod locations;
-pub mod time;
 pub mod writer;
 
 use std::path::Path;

@@ -3,9 +3,9 @@
 
 use std::time::Duration;
 
-use rackd::devices::crane::alarms::{self, business_codes};
-use rackd::devices::shelf::slot::task_id_for;
 use rackd::protocols::mc3e::TransportKind;
+use rackd::wire::alarms::{self, business_codes};
+use rackd::wire::task_id_for;
 use serde_json::json;
 
 use crate::*;

@@ -2,9 +2,9 @@
 
 use std::time::Duration;
 
-use rackd::devices::shelf::slot::task_id_for;
 use rackd::protocols::mc3e::TransportKind;
 use rackd::sim::crane::{CraneSim, CraneSimOptions};
+use rackd::wire::task_id_for;
 use serde_json::json;
 
 use crate::*;

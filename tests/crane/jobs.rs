@@ -1,7 +1,7 @@
 //! Every crane job kind through the handshake, over TCP and over UDP.
 
-use rackd::devices::shelf::slot::task_id_for;
 use rackd::protocols::mc3e::TransportKind;
+use rackd::wire::task_id_for;
 use std::time::Duration;
 
 use serde_json::json;

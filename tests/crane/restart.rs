@@ -3,8 +3,8 @@
 
 use std::time::{Duration, Instant};
 
-use rackd::devices::shelf::slot::task_id_for;
 use rackd::protocols::mc3e::TransportKind;
+use rackd::wire::task_id_for;
 use serde_json::json;
 
 use crate::helpers::spawn_on;

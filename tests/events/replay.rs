@@ -73,7 +73,7 @@ async fn retention_keeps_the_newest_event_so_numbers_are_never_reused() {
     let (db, dir) = app.stop().await;
     // Prune everything up to now, as the retention task does with old events.
     let (writer, task) = Writer::start(&db, Duration::from_secs(5), 16, 16, Hooks::default()).unwrap();
-    let now = rackd::store::time::now_ms() + 1;
+    let now = rackd::domain::time::now_ms() + 1;
     writer.record(Record::Prune { before_ms: now }).await.unwrap();
     drop(writer);
     task.await.unwrap();

@@ -53,7 +53,7 @@ pub async fn assert_each_completed_once(app: &TestApp, sim: &ShelfSim, jobs: &[s
         let (_, history) = app.get(&format!("/api/v1/jobs/{}/history", j["id"])).await;
         let ends = history.as_array().unwrap().iter().filter(|h| h["state"] == "completed").count();
         assert_eq!(ends, 1, "job {} ended once: {history}", j["id"]);
-        let task = rackd::devices::shelf::slot::task_id_for(j["id"].as_i64().unwrap());
+        let task = rackd::wire::task_id_for(j["id"].as_i64().unwrap());
         assert_eq!(sim.received(task), 1, "job {} sent once", j["id"]);
     }
 }

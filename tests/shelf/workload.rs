@@ -2,8 +2,8 @@
 
 use std::collections::BTreeMap;
 
-use rackd::devices::shelf::slot::task_id_for;
 use rackd::domain::Location;
+use rackd::wire::task_id_for;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde_json::{Value, json};

@@ -11,6 +11,7 @@ use tokio::sync::broadcast::{Receiver, error::RecvError};
 
 use crate::api::state::AppState;
 use crate::devices::Devices;
+use crate::service::dispatch::Queues;
 use crate::service::events::{Commit, Topic};
 use crate::store::events;
 
@@ -36,6 +37,7 @@ enum End {
 pub struct Session {
     pool: SqlitePool,
     devices: Devices,
+    queues: Queues,
     events: Receiver<Commit>,
     topics: Vec<Topic>,
     since: Option<i64>,
@@ -53,6 +55,7 @@ impl Session {
         Session {
             pool: app.pool.clone(),
             devices: app.devices.clone(),
+            queues: app.dispatcher.queues().clone(),
             events: app.hub.subscribe(),
             topics,
             since,
@@ -130,9 +133,14 @@ impl Session {
             Some(since) if since + 1 < first => "since_expired",
             Some(since) => return self.replay(sink, since).await,
         };
-        let snapshot =
-            super::snapshot::read(&self.pool, &self.devices, &self.topics, self.snapshot_jobs, reason)
-                .await?;
+        let snapshot = super::snapshot::read(
+            &self.pool,
+            (&self.devices, &self.queues),
+            &self.topics,
+            self.snapshot_jobs,
+            reason,
+        )
+        .await?;
         let text = serde_json::to_string(&snapshot).unwrap_or_default();
         self.send(sink, Message::Text(text.into())).await?;
         Ok(snapshot.seq)

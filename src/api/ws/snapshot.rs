@@ -4,8 +4,10 @@ use serde::Serialize;
 use sqlx::SqlitePool;
 use utoipa::ToSchema;
 
-use crate::devices::{DeviceHandle, DeviceStatus, Devices};
+use crate::devices::{DeviceStatus, Devices};
+use crate::service::dispatch::Queues;
 use crate::service::events::Topic;
+use crate::service::monitor::all_shown;
 use crate::store::alarms::{self, Alarm};
 use crate::store::locations::{self, LocationState};
 use crate::store::{Job, events, jobs};
@@ -51,7 +53,7 @@ pub struct SnapshotData {
 /// harmless: a `device.updated` event carries the whole status and replaces it.
 pub async fn read(
     pool: &SqlitePool,
-    devices: &Devices,
+    devices: (&Devices, &Queues),
     topics: &[Topic],
     job_limit: u32,
     reason: &'static str,
@@ -73,7 +75,7 @@ pub async fn read(
     }
     tx.commit().await?;
     if topics.contains(&Topic::Devices) {
-        data.devices = Some(devices.values().map(DeviceHandle::status).collect());
+        data.devices = Some(all_shown(devices.0, devices.1));
     }
     Ok(Snapshot { kind: "snapshot", seq, reason, data })
 }

@@ -4,17 +4,11 @@
 use tokio::time::Instant;
 
 use super::ack::Outcome;
-use super::registers::{self, BLOCK_WORDS, CraneView, wcs};
 use super::{Crane, CraneError, Current};
-use crate::devices::follow::{Reported, advance};
-use crate::devices::shelf::slot::task_id_for;
-use crate::domain::{Failure, JobState};
+use crate::domain::{Failure, FailureKind, JobState, Reported};
 use crate::protocols::PlcError;
-use crate::store::{Job, jobs};
-
-fn store(e: impl std::fmt::Display) -> CraneError {
-    CraneError::Store(e.to_string())
-}
+use crate::wire::registers::{self, BLOCK_WORDS, CraneView, wcs};
+use crate::wire::task_id_for;
 
 impl Crane {
     /// One poll: read the crane's block, step the heartbeat, follow the task, acknowledge
@@ -46,7 +40,7 @@ impl Crane {
             self.adopt(v.task).await?;
         }
         let Some(mut c) = self.current.clone() else { return Ok(()) };
-        let Some(job) = jobs::get(&self.pool, c.job).await.map_err(store)? else {
+        let Some(job) = self.port.job(c.job) else {
             self.current = None;
             return Ok(());
         };
@@ -54,8 +48,8 @@ impl Crane {
             self.current = None;
             if c.seen && !job.state.is_terminal() {
                 let text = format!("the crane no longer holds task {} (it shows {})", c.task.number, v.task);
-                let lost = Failure { kind: "lost".into(), code: None, text: text.clone() };
-                self.record(&job, Reported::Failed(lost), &text).await?;
+                let lost = Failure { kind: FailureKind::Lost, code: None, text: text.clone() };
+                self.record(job.id, Reported::Failed(lost), text).await?;
             }
             return Ok(());
         }
@@ -74,7 +68,7 @@ impl Crane {
                 }
                 (Outcome::Cancelled, None) => (Reported::Cancelled, "the crane cancelled it (40)".to_owned()),
             };
-            self.record(&job, to, &cause).await?;
+            self.record(job.id, to, cause).await?;
             // Done with the job; the acknowledgement follows in the same poll.
             self.current = None;
             return Ok(());
@@ -89,7 +83,7 @@ impl Crane {
                 v.load
             );
             tracing::debug!(device = %self.config.id, job = job.id, "{cause}");
-            self.record(&job, Reported::Running, &cause).await?;
+            self.record(job.id, Reported::Running, cause).await?;
             c.action = v.action;
         }
         self.current = Some(c);
@@ -98,12 +92,12 @@ impl Crane {
 
     /// Follows the task the crane shows when it belongs to an unfinished job of ours.
     async fn adopt(&mut self, task: u16) -> Result<(), CraneError> {
-        let unfinished = jobs::unfinished(&self.pool, &self.config.id).await.map_err(store)?;
+        let unfinished = self.port.unfinished();
         let Some(job) = unfinished.into_iter().find(|j| task_id_for(j.id) == task) else { return Ok(()) };
         let Some(spec) = job.spec() else { return Ok(()) };
         let Ok(task) = registers::task_for(&spec, task, &self.stations) else { return Ok(()) };
         tracing::info!(device = %self.config.id, job = job.id, task = task.number, "following the crane's task");
-        self.record(&job, Reported::Taken, &format!("the crane holds it as task {}", task.number)).await?;
+        self.record(job.id, Reported::Taken, format!("the crane holds it as task {}", task.number)).await?;
         self.current = Some(Current {
             job: job.id,
             task,
@@ -113,11 +107,6 @@ impl Crane {
             action: 0,
         });
         Ok(())
-    }
-
-    /// Records a device report for a job.
-    pub(super) async fn record(&self, job: &Job, to: Reported, cause: &str) -> Result<(), CraneError> {
-        advance(&self.writer, job, to, cause).await.map(|_| ()).map_err(store)
     }
 
     /// On start: read both blocks, take rackd's own words as found, withdraw a strobe a
@@ -138,7 +127,7 @@ impl Crane {
         if view.task != 0 {
             self.adopt(view.task).await?;
         }
-        let unfinished = jobs::unfinished(&self.pool, &self.config.id).await.map_err(store)?;
+        let unfinished = self.port.unfinished();
         let held = self.current.as_ref().map(|c| c.job);
         for job in unfinished.iter().filter(|j| j.state != JobState::Queued && Some(j.id) != held) {
             let text = format!(
@@ -146,8 +135,8 @@ impl Crane {
                 task_id_for(job.id),
                 view.task
             );
-            let lost = Failure { kind: "lost".into(), code: None, text: text.clone() };
-            self.record(job, Reported::Failed(lost), &text).await?;
+            let lost = Failure { kind: FailureKind::Lost, code: None, text: text.clone() };
+            self.record(job.id, Reported::Failed(lost), text).await?;
         }
         tracing::info!(device = %self.config.id, task = view.task, "crane recovered");
         self.poll().await

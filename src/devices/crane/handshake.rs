@@ -5,9 +5,9 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
-use super::registers::{Task, wcs};
 use super::{Crane, CraneError};
 use crate::protocols::PlcError;
+use crate::wire::registers::{Task, wcs};
 
 /// Why a hand-over did not complete.
 #[derive(Debug, thiserror::Error)]

@@ -4,7 +4,7 @@
 //!
 //! Answers to the questions the spec leaves open:
 //! - **Task number**: derived from the job id like the shelf's task id
-//!   ([`crate::devices::shelf::slot::task_id_for`]), so the crane's echo (D208) leads back
+//!   ([`crate::wire::task_id_for`]), so the crane's echo (D208) leads back
 //!   to the job after a restart with no extra record.
 //! - **Modes**: store = transfer from the inbound station into the rack, retrieve = transfer
 //!   from the rack to the outbound station, move = transfer rack to rack, travel = mode 1
@@ -41,28 +41,26 @@
 //!   such a job ends `cancelled` rather than `failed`.
 
 pub mod ack;
-pub mod alarms;
 mod follow;
 mod handshake;
 pub mod heartbeat;
-pub mod registers;
 mod work;
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
-use sqlx::SqlitePool;
-use tokio::sync::{Notify, mpsc};
+use tokio::sync::mpsc;
 use tokio::time::{Instant, sleep_until};
 
 use super::DeviceRequest;
 use super::config::DeviceConfig;
-use super::status::{CraneStatus, DeviceStatus};
-use crate::domain::Failure;
+use super::port::{Port, ReportError};
+use super::status::{CraneStatus, StatusCell};
+use crate::domain::{Failure, Report, Reported};
 use crate::protocols::{Address, PlcError, PlcMemory};
-use crate::store::writer::Writer;
+use crate::wire::alarms;
+use crate::wire::registers::{self, CraneView, Stations};
 use ack::AckReading;
 use heartbeat::Heartbeat;
-use registers::{CraneView, Stations};
 
 pub use handshake::HandshakeError;
 
@@ -75,9 +73,9 @@ pub enum CraneError {
     /// The hand-over handshake did not complete.
     #[error(transparent)]
     Handshake(#[from] HandshakeError),
-    /// The database or writer failed.
-    #[error("storage: {0}")]
-    Store(String),
+    /// The dispatcher could not record a report.
+    #[error(transparent)]
+    Report(#[from] ReportError),
     /// A setting cannot be used.
     #[error("configuration: {0}")]
     Config(String),
@@ -98,15 +96,14 @@ struct Current {
     action: u16,
 }
 
-/// One stacker crane: its link, what it holds and the job writer.
+/// One stacker crane: its link, what it holds and its port to the dispatcher.
 pub struct Crane {
     config: DeviceConfig,
     plc: Arc<dyn PlcMemory>,
     wcs: Address,
     crane: Address,
-    writer: Writer,
-    pool: SqlitePool,
-    status: Arc<Mutex<DeviceStatus>>,
+    port: Arc<dyn Port>,
+    status: StatusCell,
     stations: Stations,
     ack: AckReading,
     heartbeat: Heartbeat,
@@ -123,9 +120,8 @@ impl Crane {
     pub fn new(
         config: DeviceConfig,
         plc: Arc<dyn PlcMemory>,
-        writer: Writer,
-        pool: SqlitePool,
-        status: Arc<Mutex<DeviceStatus>>,
+        port: Arc<dyn Port>,
+        status: StatusCell,
     ) -> Result<Crane, CraneError> {
         let wcs = plc.parse_address(&config.wcs_base)?;
         let crane = plc.parse_address(&config.crane_base)?;
@@ -142,8 +138,7 @@ impl Crane {
             plc,
             wcs,
             crane,
-            writer,
-            pool,
+            port,
             status,
             stations,
             ack,
@@ -158,22 +153,23 @@ impl Crane {
 
     /// Runs the device until the task is aborted: recover, then poll at the configured
     /// period, hand over work when the crane is free, and answer requests.
-    pub async fn run(mut self, wake: Arc<Notify>, mut requests: mpsc::Receiver<DeviceRequest>) {
+    pub async fn run(mut self, mut requests: mpsc::Receiver<DeviceRequest>) {
         let period = self.config.poll();
         while let Err(e) = self.recover().await {
             tracing::warn!(device = %self.config.id, error = %e, "crane recovery failed; retrying");
-            self.update_status(|s| s.last_error = Some(e.to_string()));
+            self.status.update(|s| s.last_error = Some(e.to_string()));
             tokio::time::sleep(period).await;
         }
         let mut next_poll = Instant::now() + period;
         loop {
+            let port = self.port.clone();
             tokio::select! {
                 Some(request) = requests.recv() => self.handle(request).await,
-                _ = wake.notified() => {}
+                _ = port.work_waiting() => {}
                 _ = sleep_until(next_poll) => {
                     if let Err(e) = self.poll().await {
                         tracing::warn!(device = %self.config.id, error = %e, "crane poll failed");
-                        self.update_status(|s| s.last_error = Some(e.to_string()));
+                        self.status.update(|s| s.last_error = Some(e.to_string()));
                     }
                     next_poll = Instant::now() + period;
                 }
@@ -182,7 +178,7 @@ impl Crane {
                 && let Err(e) = self.dispatch().await
             {
                 tracing::warn!(device = %self.config.id, error = %e, "crane hand-over stopped");
-                self.update_status(|s| s.last_error = Some(e.to_string()));
+                self.status.update(|s| s.last_error = Some(e.to_string()));
             }
         }
     }
@@ -195,11 +191,11 @@ impl Crane {
         }
     }
 
-    /// New work only to a reachable, live, idle crane without alarm, when not paused.
+    /// New work only to a reachable, live, idle crane without alarm (the dispatcher offers
+    /// none while the crane is paused).
     fn may_dispatch(&self) -> bool {
-        let s = self.status.lock().unwrap_or_else(|p| p.into_inner());
         let idle = self.view.is_some_and(|v| v.is_idle());
-        s.online && !s.paused && self.current.is_none() && idle && self.ack_written == 0 && !self.strobe_up
+        self.status.get().online && self.current.is_none() && idle && self.ack_written == 0 && !self.strobe_up
     }
 
     /// Word `n` of the block the WCS writes (D0..), in the protocol's addressing.
@@ -215,21 +211,21 @@ impl Crane {
     /// Reads words, keeping the device's contact status.
     async fn read(&mut self, at: &Address, count: u16) -> Result<Vec<u16>, PlcError> {
         let result = self.plc.read_words(at, count).await;
-        self.contact(result.as_ref().map(|_| ()).map_err(|e| e.to_string()));
+        self.contact(result.as_ref().map(|_| ()));
         result
     }
 
     /// Writes words, keeping the device's contact status.
     async fn write(&mut self, at: &Address, values: &[u16]) -> Result<(), PlcError> {
         let result = self.plc.write_words(at, values).await;
-        self.contact(result.as_ref().map(|_| ()).map_err(|e| e.to_string()));
+        self.contact(result.as_ref().map(|_| ()));
         result
     }
 
-    fn contact(&mut self, result: Result<(), String>) {
+    fn contact(&mut self, result: Result<(), &PlcError>) {
         let offline_after = self.config.offline_after;
         let mut link_ok = self.link_ok;
-        self.update_status(|s| {
+        self.status.update(|s| {
             link_ok = s.record_contact(result, offline_after, link_ok);
         });
         self.link_ok = link_ok;
@@ -237,10 +233,10 @@ impl Crane {
     }
 
     /// Online = the link answers and the crane's heartbeat moves.
-    fn show_online(&self) {
+    fn show_online(&mut self) {
         let lost = self.heartbeat.is_lost(Instant::now());
         let (id, link_ok) = (self.config.id.clone(), self.link_ok);
-        self.update_status(|s| {
+        self.status.update(|s| {
             let online = link_ok && !lost;
             if lost {
                 s.last_error = Some("the crane's heartbeat (D200) stopped moving: crane lost".into());
@@ -260,9 +256,9 @@ impl Crane {
     }
 
     /// Shows what the crane reports in the device status.
-    fn show(&self, v: &CraneView) {
+    fn show(&mut self, v: &CraneView) {
         let alarm = (v.alarm != 0).then(|| alarms::lookup(v.alarm));
-        self.update_status(|s| {
+        self.status.update(|s| {
             let heartbeat_ok = s.crane.as_ref().is_some_and(|c| c.heartbeat_ok);
             s.crane = Some(CraneStatus {
                 known: true,
@@ -275,14 +271,16 @@ impl Crane {
                 task: v.task,
                 alarm_code: alarm.as_ref().map(|a| a.code),
                 alarm_text: alarm.as_ref().map(|a| a.text.clone()),
-                alarm_class: alarm.as_ref().map(|a| a.class.as_str().to_owned()),
+                alarm_class: alarm.as_ref().map(|a| a.class),
             });
             s.slots_in_use = u16::from(v.task != 0);
         });
         self.show_online();
     }
 
-    fn update_status(&self, f: impl FnOnce(&mut DeviceStatus)) {
-        f(&mut self.status.lock().unwrap_or_else(|p| p.into_inner()));
+    /// Records what the crane shows of one job.
+    async fn record(&self, job: i64, to: Reported, cause: impl Into<String>) -> Result<(), CraneError> {
+        self.port.report(vec![Report::new(job, to, cause)]).await?;
+        Ok(())
     }
 }

@@ -2,7 +2,7 @@
 //! and follows them by polling the same slots.
 //!
 //! Answers to the questions the spec leaves open:
-//! - **Task id**: derived from the job id ([`slot::task_id_for`], 1..=65535), not the slot
+//! - **Task id**: derived from the job id ([`crate::wire::task_id_for`], 1..=65535), not the slot
 //!   number, so a slot's task id leads back to its job after a restart with no extra record.
 //! - **Write order**: read the slot; only if free (task id 0 or state 2): if its task id is
 //!   not 0, write task id := 0 first; then write words 1..34 (body, state 0, failure 0) in
@@ -25,19 +25,17 @@
 
 mod handover;
 mod poll;
-pub mod slot;
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
-use sqlx::SqlitePool;
-use tokio::sync::{Notify, mpsc};
+use tokio::sync::mpsc;
 use tokio::time::{Instant, sleep_until};
 
 use super::DeviceRequest;
 use super::config::DeviceConfig;
-use super::status::DeviceStatus;
+use super::port::Port;
+use super::status::StatusCell;
 use crate::protocols::{Address, PlcError, PlcMemory};
-use crate::store::writer::Writer;
 
 /// What rackd knows of one task slot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -52,14 +50,13 @@ enum Slot {
     Foreign,
 }
 
-/// One shelf PLC: its link, its slots and the job writer.
+/// One shelf PLC: its link, its slots and its port to the dispatcher.
 pub struct Shelf {
     config: DeviceConfig,
     plc: Arc<dyn PlcMemory>,
     base: Address,
-    writer: Writer,
-    pool: SqlitePool,
-    status: Arc<Mutex<DeviceStatus>>,
+    port: Arc<dyn Port>,
+    status: StatusCell,
     slots: Vec<Slot>,
 }
 
@@ -92,18 +89,17 @@ impl Shelf {
     pub fn new(
         config: DeviceConfig,
         plc: Arc<dyn PlcMemory>,
-        writer: Writer,
-        pool: SqlitePool,
-        status: Arc<Mutex<DeviceStatus>>,
+        port: Arc<dyn Port>,
+        status: StatusCell,
     ) -> Result<Shelf, PlcError> {
         let base = plc.parse_address(config.slot_base())?;
         let slots = vec![Slot::Unknown; config.slots as usize];
-        Ok(Shelf { config, plc, base, writer, pool, status, slots })
+        Ok(Shelf { config, plc, base, port, status, slots })
     }
 
-    /// Runs the device until the task is aborted: recover, then dispatch on every wake-up
-    /// and poll at the configured period.
-    pub async fn run(mut self, wake: Arc<Notify>, mut requests: mpsc::Receiver<DeviceRequest>) {
+    /// Runs the device until the task is aborted: recover, then dispatch whenever work may
+    /// be waiting and poll at the configured period.
+    pub async fn run(mut self, mut requests: mpsc::Receiver<DeviceRequest>) {
         let period = self.config.poll();
         while let Err(e) = self.recover().await {
             tracing::warn!(device = %self.config.id, error = %e, "recovery failed; retrying");
@@ -111,9 +107,10 @@ impl Shelf {
         }
         let mut next_poll = Instant::now() + period;
         loop {
+            let port = self.port.clone();
             tokio::select! {
                 Some(request) = requests.recv() => self.handle(request).await,
-                _ = wake.notified() => {}
+                _ = port.work_waiting() => {}
                 _ = sleep_until(next_poll) => {
                     self.poll().await;
                     next_poll = Instant::now() + period;
@@ -124,9 +121,8 @@ impl Shelf {
             {
                 tracing::warn!(device = %self.config.id, error = %e, "dispatch stopped");
             }
-            self.update_status(|s| {
-                s.slots_in_use = self.slots.iter().filter(|s| matches!(s, Slot::Held { .. })).count() as u16
-            });
+            let in_use = self.slots.iter().filter(|s| matches!(s, Slot::Held { .. })).count() as u16;
+            self.status.update(|s| s.slots_in_use = in_use);
         }
     }
 
@@ -139,8 +135,7 @@ impl Shelf {
     }
 
     fn may_dispatch(&self) -> bool {
-        let s = self.status.lock().unwrap_or_else(|p| p.into_inner());
-        s.online && !s.paused && self.slots.contains(&Slot::Free)
+        self.status.get().online && self.slots.contains(&Slot::Free)
     }
 
     /// Where slot `k` (0-based) starts; `stride` counts words, whatever the protocol's
@@ -150,23 +145,23 @@ impl Shelf {
     }
 
     /// Reads words, keeping the device's contact status.
-    async fn read(&self, at: &Address, count: u16) -> Result<Vec<u16>, PlcError> {
+    async fn read(&mut self, at: &Address, count: u16) -> Result<Vec<u16>, PlcError> {
         let result = self.plc.read_words(at, count).await;
-        self.contact(result.as_ref().map(|_| ()).map_err(|e| e.to_string()));
+        self.contact(result.as_ref().map(|_| ()));
         result
     }
 
     /// Writes words, keeping the device's contact status.
-    async fn write(&self, at: &Address, values: &[u16]) -> Result<(), PlcError> {
+    async fn write(&mut self, at: &Address, values: &[u16]) -> Result<(), PlcError> {
         let result = self.plc.write_words(at, values).await;
-        self.contact(result.as_ref().map(|_| ()).map_err(|e| e.to_string()));
+        self.contact(result.as_ref().map(|_| ()));
         result
     }
 
-    fn contact(&self, result: Result<(), String>) {
+    fn contact(&mut self, result: Result<(), &PlcError>) {
         let offline_after = self.config.offline_after;
         let id = self.config.id.clone();
-        self.update_status(|s| {
+        self.status.update(|s| {
             let up = s.record_contact(result, offline_after, s.online);
             if up != s.online {
                 match up {
@@ -176,9 +171,5 @@ impl Shelf {
             }
             s.online = up;
         });
-    }
-
-    fn update_status(&self, f: impl FnOnce(&mut DeviceStatus)) {
-        f(&mut self.status.lock().unwrap_or_else(|p| p.into_inner()));
     }
 }

@@ -6,35 +6,32 @@
 
 use std::collections::HashMap;
 
-use futures::future::join_all;
-
 use super::handover::DispatchError;
-use super::slot::{ExecState, SLOT_WORDS, SlotView, task_id_for};
 use super::{Shelf, Slot};
-use crate::devices::follow::{Reported, advance};
-use crate::domain::{Failure, JobState};
+use crate::domain::{Failure, FailureKind, Job, JobState, Report, Reported};
 use crate::protocols::PlcError;
-use crate::store::{Job, jobs};
+use crate::wire::slot::{ExecState, SLOT_WORDS, SlotView};
+use crate::wire::task_id_for;
 
 /// The failure a PLC failure kind stands for.
 pub fn failure(kind: u16) -> Failure {
     let (class, text) = match kind {
-        1 => ("device_fault", "PLC system fault (failure kind 1)".to_owned()),
+        1 => (FailureKind::DeviceFault, "PLC system fault (failure kind 1)".to_owned()),
         2 => (
-            "rejected",
+            FailureKind::Rejected,
             "the PLC rejected the command: its data disagrees with rackd's (failure kind 2); check the location"
                 .to_owned(),
         ),
-        other => ("device_fault", format!("the PLC reported failure kind {other}")),
+        other => (FailureKind::DeviceFault, format!("the PLC reported failure kind {other}")),
     };
-    Failure { kind: class.into(), code: Some(kind as i64), text }
+    Failure { kind: class, code: Some(kind as i64), text }
 }
 
 /// What a slot showed: a job report to record (if the job moved), and whether the slot is
 /// free afterwards (`Some(clear)`: whether to set its task id to 0).
-struct Report {
+struct Seen {
     slot: usize,
-    record: Option<(Job, Reported, String)>,
+    record: Option<Report>,
     release: Option<bool>,
 }
 
@@ -64,28 +61,17 @@ impl Shelf {
     /// Brings rackd's records in line with what the slots show, recording all reports
     /// together.
     async fn settle(&mut self, reads: Vec<(usize, Vec<u16>)>) -> Result<(), DispatchError> {
-        let store = |e: sqlx::Error| DispatchError::Store(e.to_string());
-        let unfinished: HashMap<i64, Job> = jobs::unfinished(&self.pool, &self.config.id)
-            .await
-            .map_err(store)?
-            .into_iter()
-            .map(|j| (j.id, j))
-            .collect();
-        let mut reports = Vec::new();
+        let unfinished: HashMap<i64, Job> = self.port.unfinished().into_iter().map(|j| (j.id, j)).collect();
+        let mut seen = Vec::new();
         for (k, words) in reads {
             let view = SlotView::parse(&words).ok_or(PlcError::Malformed("short slot read"))?;
-            if let Some(report) = self.assess(k, view, &unfinished) {
-                reports.push(report);
+            if let Some(s) = self.assess(k, view, &unfinished) {
+                seen.push(s);
             }
         }
-        let writer = &self.writer;
-        let recorded = reports.iter().filter_map(|r| r.record.as_ref());
-        let results =
-            join_all(recorded.map(|(job, to, cause)| advance(writer, job, to.clone(), cause))).await;
-        for result in results {
-            result.map_err(|e| DispatchError::Store(e.to_string()))?;
-        }
-        for report in &reports {
+        let reports = seen.iter_mut().filter_map(|s| s.record.take()).collect();
+        self.port.report(reports).await?;
+        for report in &seen {
             if let Some(clear) = report.release {
                 if clear {
                     self.write(&self.slot_address(report.slot), &[0]).await?;
@@ -97,7 +83,7 @@ impl Shelf {
     }
 
     /// What slot `k` shows, updating rackd's idea of the slot; a report when a job moved.
-    fn assess(&mut self, k: usize, view: SlotView, unfinished: &HashMap<i64, Job>) -> Option<Report> {
+    fn assess(&mut self, k: usize, view: SlotView, unfinished: &HashMap<i64, Job>) -> Option<Seen> {
         let Slot::Held { job: id, task, confirmed } = self.slots[k] else {
             self.slots[k] = if view.is_free() { Slot::Free } else { Slot::Foreign };
             return None;
@@ -106,13 +92,13 @@ impl Shelf {
         let Some(job) = unfinished.get(&id).cloned() else {
             // Already recorded as ended, in a cycle whose release did not get through.
             if view.task_id == task {
-                return Some(Report { slot: k, record: None, release: Some(true) });
+                return Some(Seen { slot: k, record: None, release: Some(true) });
             }
             self.slots[k] = if view.is_free() { Slot::Free } else { Slot::Foreign };
             return None;
         };
         let report = |to, cause: String, release| {
-            Some(Report { slot: k, record: Some((job.clone(), to, cause)), release })
+            Some(Seen { slot: k, record: Some(Report::new(job.id, to, cause)), release })
         };
         if view.task_id != task {
             self.slots[k] = if view.is_free() { Slot::Free } else { Slot::Foreign };
@@ -120,7 +106,7 @@ impl Shelf {
                 return None; // the id write never arrived: the job is still queued
             }
             let text = format!("slot {slot_no} no longer holds task {task} (it holds {})", view.task_id);
-            let lost = Failure { kind: "lost".into(), code: None, text: text.clone() };
+            let lost = Failure { kind: FailureKind::Lost, code: None, text: text.clone() };
             return report(Reported::Failed(lost), text, None);
         }
         self.slots[k] = Slot::Held { job: id, task, confirmed: true };
@@ -144,9 +130,8 @@ impl Shelf {
                 report(Reported::Failed(f), cause, Some(true))
             }
             ExecState::Unknown(v) => {
-                self.update_status(|s| {
-                    s.last_error = Some(format!("slot {slot_no}: unknown execution state {v}"))
-                });
+                self.status
+                    .update(|s| s.last_error = Some(format!("slot {slot_no}: unknown execution state {v}")));
                 None
             }
         }
@@ -156,8 +141,7 @@ impl Shelf {
     /// while rackd was down is recorded, running work is followed, nothing is handed over
     /// twice and a job whose task vanished is failed as `lost`.
     pub(super) async fn recover(&mut self) -> Result<(), DispatchError> {
-        let store = |e: sqlx::Error| DispatchError::Store(e.to_string());
-        let unfinished = jobs::unfinished(&self.pool, &self.config.id).await.map_err(store)?;
+        let unfinished = self.port.unfinished();
         let by_task: HashMap<u16, i64> = unfinished.iter().map(|j| (task_id_for(j.id), j.id)).collect();
         let mut reads = Vec::with_capacity(self.slots.len());
         for k in 0..self.slots.len() {
@@ -190,13 +174,15 @@ impl Shelf {
             .filter(|j| j.state != JobState::Queued)
             .filter(|j| !self.slots.iter().any(|s| matches!(s, Slot::Held { job, .. } if *job == j.id)))
             .collect();
-        for job in lost {
-            let text = format!("after a restart no slot holds task {}", task_id_for(job.id));
-            let failure = Failure { kind: "lost".into(), code: None, text: text.clone() };
-            advance(&self.writer, job, Reported::Failed(failure), &text)
-                .await
-                .map_err(|e| DispatchError::Store(e.to_string()))?;
-        }
+        let lost = lost
+            .into_iter()
+            .map(|job| {
+                let text = format!("after a restart no slot holds task {}", task_id_for(job.id));
+                let failure = Failure { kind: FailureKind::Lost, code: None, text: text.clone() };
+                Report::new(job.id, Reported::Failed(failure), text)
+            })
+            .collect();
+        self.port.report(lost).await?;
         tracing::info!(device = %self.config.id, slots = self.slots.len(), "recovered");
         Ok(())
     }

@@ -7,10 +7,10 @@
 //! rather than performed late.
 
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::{mpsc, oneshot, watch};
 
 use super::codec::{TagValue, ValueError};
 use super::spec::TagSpec;
@@ -68,7 +68,7 @@ pub enum WriteError {
 pub struct TagsHandle {
     specs: Arc<Vec<TagSpec>>,
     names: Arc<BTreeMap<String, usize>>,
-    status: Arc<Mutex<DeviceStatus>>,
+    status: watch::Receiver<DeviceStatus>,
     requests: mpsc::Sender<WriteRequest>,
     deadline: Duration,
 }
@@ -77,7 +77,7 @@ impl TagsHandle {
     /// A handle writing through `requests`; a write waits at most `deadline` for the task.
     pub(super) fn new(
         specs: Arc<Vec<TagSpec>>,
-        status: Arc<Mutex<DeviceStatus>>,
+        status: watch::Receiver<DeviceStatus>,
         requests: mpsc::Sender<WriteRequest>,
         deadline: Duration,
     ) -> Self {
@@ -92,7 +92,7 @@ impl TagsHandle {
 
     /// Every tag with its latest value, by name.
     pub fn tags(&self) -> Vec<Tag> {
-        let status = self.status.lock().unwrap_or_else(|p| p.into_inner());
+        let status = self.status.borrow();
         let tags = status.tags.iter().flatten();
         tags.map(|(name, s)| Tag { name: name.clone(), status: s.clone() }).collect()
     }

@@ -40,15 +40,15 @@ mod state;
 mod write;
 
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::sync::mpsc;
 use tokio::time::{Instant, sleep_until};
 
-use super::DeviceRequest;
 use super::config::DeviceConfig;
-use super::status::DeviceStatus;
+use super::status::StatusCell;
+use super::{CancelRefusal, DeviceRequest};
 use crate::protocols::{PlcError, PlcMemory};
 
 pub use codec::{TagType, TagValue, ValueError, WordOrder};
@@ -80,7 +80,7 @@ pub struct TagDevice {
     plc: Arc<dyn PlcMemory>,
     specs: Arc<Vec<TagSpec>>,
     groups: Vec<Group>,
-    status: Arc<Mutex<DeviceStatus>>,
+    status: StatusCell,
     writes: mpsc::Receiver<handle::WriteRequest>,
     link_ok: bool,
 }
@@ -91,7 +91,7 @@ impl TagDevice {
     pub fn new(
         config: DeviceConfig,
         plc: Arc<dyn PlcMemory>,
-        status: Arc<Mutex<DeviceStatus>>,
+        mut status: StatusCell,
     ) -> Result<(TagDevice, TagsHandle), String> {
         let specs = resolve(&config)?;
         for spec in &specs {
@@ -110,13 +110,16 @@ impl TagDevice {
         }
         let groups = plan::plan(&specs);
         let tags = specs.iter().map(|s| (s.name.clone(), TagStatus::new(s))).collect::<BTreeMap<_, _>>();
-        status.lock().unwrap_or_else(|p| p.into_inner()).tags = Some(tags);
+        status.update_marked(|s| {
+            s.tags = Some(tags);
+            true
+        });
         let (requests, writes) = mpsc::channel(16);
         let specs = Arc::new(specs);
         // Room for a poll under way, a read of a word, the write and the read-back, each
         // with every retry, and a margin.
         let deadline = request_time(&config) * (groups.len() as u32 + 3) + Duration::from_secs(1);
-        let handle = TagsHandle::new(specs.clone(), status.clone(), requests, deadline);
+        let handle = TagsHandle::new(specs.clone(), status.subscribe(), requests, deadline);
         let device = TagDevice { config, plc, specs, groups, status, writes, link_ok: false };
         Ok((device, handle))
     }
@@ -131,7 +134,7 @@ impl TagDevice {
                 Some(write) = self.writes.recv() => self.write(write).await,
                 Some(request) = requests.recv() => match request {
                     DeviceRequest::Cancel { reply, .. } => {
-                        let _ = reply.send(Err("a tags device runs no jobs".into()));
+                        let _ = reply.send(Err(CancelRefusal::NoJobs));
                     }
                 },
                 _ = sleep_until(next_poll) => {
@@ -148,21 +151,21 @@ impl TagDevice {
     fn contact<T>(&mut self, result: &Result<T, PlcError>) {
         let outcome = match result {
             Ok(_) | Err(PlcError::Device { .. }) => Ok(()),
-            Err(e @ (PlcError::Timeout { .. } | PlcError::Connection(_) | PlcError::Malformed(_))) => {
-                Err(e.to_string())
-            }
+            Err(e @ (PlcError::Timeout { .. } | PlcError::Connection(_) | PlcError::Malformed(_))) => Err(e),
             Err(PlcError::OutOfRange(_) | PlcError::BadAddress { .. }) => return,
         };
         let (offline_after, id, was_up) = (self.config.offline_after, &self.config.id, self.link_ok);
-        let mut status = self.status.lock().unwrap_or_else(|p| p.into_inner());
-        let up = status.record_contact(outcome, offline_after, was_up);
-        if up != status.online {
-            match up {
-                true => tracing::info!(device = %id, "device online"),
-                false => tracing::warn!(device = %id, error = ?status.last_error, "device offline"),
+        let mut up = was_up;
+        self.status.update(|status| {
+            up = status.record_contact(outcome, offline_after, was_up);
+            if up != status.online {
+                match up {
+                    true => tracing::info!(device = %id, "device online"),
+                    false => tracing::warn!(device = %id, error = ?status.last_error, "device offline"),
+                }
             }
-        }
-        status.online = up;
+            status.online = up;
+        });
         self.link_ok = up;
     }
 }

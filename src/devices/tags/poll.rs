@@ -67,14 +67,18 @@ impl TagDevice {
     }
 
     /// Records read outcomes (tag index, value or why not) in the device status.
-    pub(super) fn record(&self, outcomes: Vec<(usize, Result<TagValue, String>)>) {
-        let now = crate::store::time::from_ms(crate::store::time::now_ms());
-        let mut status = self.status.lock().unwrap_or_else(|p| p.into_inner());
-        let Some(tags) = status.tags.as_mut() else { return };
-        for (i, outcome) in outcomes {
-            if let Some(tag) = tags.get_mut(&self.specs[i].name) {
-                tag.settle(outcome, now);
+    pub(super) fn record(&mut self, outcomes: Vec<(usize, Result<TagValue, String>)>) {
+        let now = crate::domain::time::from_ms(crate::domain::time::now_ms());
+        let specs = &self.specs;
+        self.status.update_marked(|status| {
+            let Some(tags) = status.tags.as_mut() else { return false };
+            let mut changed = false;
+            for (i, outcome) in outcomes {
+                if let Some(tag) = tags.get_mut(&specs[i].name) {
+                    changed |= tag.settle(outcome, now);
+                }
             }
-        }
+            changed
+        });
     }
 }

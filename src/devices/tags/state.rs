@@ -92,7 +92,8 @@ impl TagStatus {
     }
 
     /// Records the outcome of reading the tag at `now`.
-    pub fn settle(&mut self, read: Result<TagValue, String>, now: OffsetDateTime) {
+    pub fn settle(&mut self, read: Result<TagValue, String>, now: OffsetDateTime) -> bool {
+        let before = (self.value, self.quality, self.error.clone());
         match read {
             Ok(value) => {
                 if self.value != Some(value) {
@@ -108,6 +109,7 @@ impl TagStatus {
                 self.error = Some(e);
             }
         }
+        (self.value, self.quality, &self.error) != (before.0, before.1, &before.2)
     }
 }
 

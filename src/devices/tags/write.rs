@@ -32,7 +32,7 @@ impl TagDevice {
 
     async fn perform(&mut self, index: usize, value: TagValue) -> Result<Tag, WriteError> {
         {
-            let status = self.status.lock().unwrap_or_else(|p| p.into_inner());
+            let status = self.status.get();
             if !status.online {
                 let why = status.last_error.clone().unwrap_or_else(|| "not reached yet".into());
                 return Err(WriteError::Offline(why));
@@ -65,7 +65,7 @@ impl TagDevice {
         let bits = spec.place == Place::Bit;
         let raw = self.read(bits, &spec.at, spec.count()).await.map_err(WriteError::ReadBack)?;
         self.record(vec![(index, raw.value_of(&spec, 0))]);
-        let status = self.status.lock().unwrap_or_else(|p| p.into_inner());
+        let status = self.status.get();
         let tag = status.tags.as_ref().and_then(|t| t.get(&spec.name)).cloned();
         tag.map(|status| Tag { name: spec.name.clone(), status })
             .ok_or(WriteError::UnknownTag(spec.name.clone()))

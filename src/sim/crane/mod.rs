@@ -32,9 +32,7 @@ use engine::Engine;
 
 /// Whether a code is a business alarm of the catalogue.
 pub fn is_business(code: u16) -> bool {
-    code != 0
-        && crate::devices::crane::alarms::lookup(code).class
-            == crate::devices::crane::alarms::AlarmClass::Business
+    code != 0 && crate::wire::alarms::lookup(code).class == crate::wire::alarms::AlarmClass::Business
 }
 
 /// How the simulated crane is set up.
@@ -170,7 +168,7 @@ impl CraneSim {
             ["alarm", code] => {
                 let code: u16 = code.parse().map_err(|_| format!("not an alarm code: {code}"))?;
                 self.raise_alarm(code);
-                Ok(format!("alarm {code}: {}", crate::devices::crane::alarms::lookup(code).text))
+                Ok(format!("alarm {code}: {}", crate::wire::alarms::lookup(code).text))
             }
             ["clear"] => Ok({
                 self.clear_alarm();

@@ -8,7 +8,7 @@ use std::time::Duration;
 use rand::Rng;
 
 use super::slots::{Core, SlotMemory};
-use crate::devices::shelf::slot::{EXEC_STATE, FAILURE_KIND, SLOT_WORDS, TASK_ID, Task};
+use crate::wire::slot::{EXEC_STATE, FAILURE_KIND, SLOT_WORDS, TASK_ID, Task};
 
 /// How the machine works.
 #[derive(Clone, Copy, Debug)]
@@ -86,9 +86,9 @@ mod tests {
     use std::sync::Mutex;
 
     use super::*;
-    use crate::devices::shelf::slot::encode_body;
     use crate::domain::{JobSpec, Location};
     use crate::sim::shelf::slots::{Layout, VecMemory};
+    use crate::wire::slot::encode_body;
 
     fn put(memory: &VecMemory, slot: usize, id: u16, spec: &JobSpec, priority: u8) {
         let body = encode_body(spec, priority, Some("BX")).unwrap();

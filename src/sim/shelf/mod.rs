@@ -48,11 +48,11 @@ use self::engine::Machine;
 use self::options::Family;
 use self::slots::{Core, Layout, SlotMemory};
 use crate::devices::DeviceConfig;
-use crate::devices::shelf::slot::SLOT_WORDS;
 use crate::domain::Location;
 use crate::protocols::line::{LineServer, SharedFaults};
 use crate::protocols::modbus::ByteStream;
 use crate::protocols::modbus::server::ServerHandle;
+use crate::wire::slot::SLOT_WORDS;
 
 /// Where a transport is served.
 enum Endpoint<'a> {

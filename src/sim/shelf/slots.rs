@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use tokio::sync::Notify;
 
 use super::world::World;
-use crate::devices::shelf::slot::{EXEC_STATE, SLOT_WORDS, TASK_ID};
+use crate::wire::slot::{EXEC_STATE, SLOT_WORDS, TASK_ID};
 
 /// How the slots lie in the area: `slots` of them, `stride` words apart.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -6,10 +6,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use super::*;
-use crate::devices::shelf::slot::{EXEC_STATE, FAILURE_KIND, encode_body};
 use crate::domain::JobSpec;
 use crate::protocols::modbus::{ModbusClient, ModbusConfig, Transport};
 use crate::protocols::{PlcError, PlcMemory, link, mewtocol, ppi};
+use crate::wire::slot::{EXEC_STATE, FAILURE_KIND, encode_body};
 
 fn options(protocol: ShelfProtocol) -> ShelfSimOptions {
     ShelfSimOptions { task_time: Duration::ZERO, ..ShelfSimOptions::for_protocol(protocol) }

@@ -4,8 +4,8 @@
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
-use crate::devices::shelf::slot::{Command, Task};
 use crate::domain::Location;
+use crate::wire::slot::{Command, Task};
 
 /// The shelf's contents and the simulator's counters.
 #[derive(Debug, Default)]

@@ -5,17 +5,19 @@ use std::collections::HashMap;
 use rusqlite::{OptionalExtension, Transaction, params};
 
 use super::{Change, Command, Outcome, Record, WriteError};
-use crate::domain::{JobState, Location, Transition};
+use crate::domain::report::path;
+use crate::domain::time::{from_ms, now_ms, to_ms};
+use crate::domain::{Failure, JobState, Location, Transition};
 use crate::store::alarms;
 use crate::store::events::StoredEvent;
 use crate::store::jobs::{COLUMNS, Job, JobRow, NewJob};
 use crate::store::locations;
-use crate::store::time::{from_ms, now_ms, to_ms};
 
 /// What the writer answers for one command.
 pub(super) enum Answer {
     Submitted(Result<Vec<Outcome>, WriteError>),
     Changed(Result<Job, WriteError>),
+    Reported(Vec<Result<Job, WriteError>>),
     Recorded,
     Failed(WriteError),
 }
@@ -32,6 +34,7 @@ impl Answer {
                 })
                 .collect(),
             Answer::Changed(Ok(job)) => vec![job],
+            Answer::Reported(jobs) => jobs.iter().filter_map(|r| r.as_ref().ok()).collect(),
             _ => Vec::new(),
         }
     }
@@ -64,6 +67,14 @@ pub(super) fn commit(
                 Answer::Submitted(submit(&tx, jobs, &mut known, &mut id, now, ev)?)
             }
             Command::Change { id, change, .. } => Answer::Changed(apply(&tx, *id, change, now, ev)?),
+            Command::Reports { reports, .. } => {
+                let mut jobs = Vec::with_capacity(reports.len());
+                for r in reports {
+                    let change = Change::Report { to: r.to.clone(), cause: r.cause.clone() };
+                    jobs.push(apply(&tx, r.job, &change, now, ev)?);
+                }
+                Answer::Reported(jobs)
+            }
             Command::Record { record, .. } => {
                 self::record(&tx, record, now, ev)?;
                 Answer::Recorded
@@ -242,26 +253,22 @@ fn apply(
     let row = tx.prepare_cached(&sql)?.query_row([id], |r| JobRow::from_rusqlite(r, 0)).optional()?;
     let Some(row) = row else { return Ok(Err(WriteError::NotFound(id))) };
     let mut job = Job::try_from(row).map_err(|e| rusqlite::Error::ToSqlConversionFailure(e.into()))?;
-    let cause = match change {
+    match change {
         Change::Transition { transition, cause, expect, failure, forced } => {
             if expect.as_ref().is_some_and(|states| !states.contains(&job.state)) {
                 return Ok(Err(WriteError::Unexpected { id, state: job.state }));
             }
-            job.state = match job.state.apply(*transition) {
-                Ok(state) => state,
-                Err(e) => return Ok(Err(e.into())),
-            };
-            job.forced = *forced && job.state == JobState::Completed;
-            if *transition == Transition::Fail {
-                job.failure = failure.clone();
+            if let Err(e) = step(tx, &mut job, *transition, cause, failure.as_ref(), *forced, now, events)? {
+                return Ok(Err(e));
             }
-            if *transition == Transition::Dispatch
-                && let Some(spec) = job.spec()
-            {
-                locations::reserve(tx, id, &spec.locations())?;
-                location_events(tx, &spec.locations(), now, events)?;
+        }
+        Change::Report { to, cause } => {
+            for transition in path(job.state, to) {
+                if let Err(e) = step(tx, &mut job, transition, cause, to.failure(), to.forced(), now, events)?
+                {
+                    return Ok(Err(e));
+                }
             }
-            cause.clone()
         }
         Change::Priority(p) => {
             if job.state != JobState::Queued {
@@ -269,10 +276,41 @@ fn apply(
             }
             let cause = format!("priority {} -> {}", job.priority, p.get());
             job.priority = p.get();
-            cause
+            save(tx, &mut job, &cause, now, events)?;
         }
+    }
+    Ok(Ok(job))
+}
+
+/// Moves `job` through one transition and stores it, with the transition's effects on the
+/// location model: a dispatch reserves the job's locations, an end releases them (and a
+/// completion changes their contents).
+#[allow(clippy::too_many_arguments)]
+fn step(
+    tx: &Transaction<'_>,
+    job: &mut Job,
+    transition: Transition,
+    cause: &str,
+    failure: Option<&Failure>,
+    forced: bool,
+    now: i64,
+    events: &mut Events,
+) -> rusqlite::Result<Result<(), WriteError>> {
+    let id = job.id;
+    job.state = match job.state.apply(transition) {
+        Ok(state) => state,
+        Err(e) => return Ok(Err(e.into())),
     };
-    job.updated_at = from_ms(now);
+    job.forced = forced && job.state == JobState::Completed;
+    if transition == Transition::Fail {
+        job.failure = failure.cloned();
+    }
+    if transition == Transition::Dispatch
+        && let Some(spec) = job.spec()
+    {
+        locations::reserve(tx, id, &spec.locations())?;
+        location_events(tx, &spec.locations(), now, events)?;
+    }
     if job.state.is_terminal() {
         // Released before the events are made, so that they show the location free.
         let spec = job.spec();
@@ -290,6 +328,19 @@ fn apply(
         }
         location_events(tx, &touched, now, events)?;
     }
+    save(tx, job, cause, now, events)?;
+    Ok(Ok(()))
+}
+
+/// Writes the job's row, a history entry and a `job.updated` event.
+fn save(
+    tx: &Transaction<'_>,
+    job: &mut Job,
+    cause: &str,
+    now: i64,
+    events: &mut Events,
+) -> rusqlite::Result<()> {
+    job.updated_at = from_ms(now);
     let f = job.failure.as_ref();
     tx.prepare_cached(
         "UPDATE jobs SET state = ?1, priority = ?2, forced = ?3, failure_kind = ?4, failure_code = ?5, \
@@ -299,13 +350,13 @@ fn apply(
         job.state.as_str(),
         job.priority,
         job.forced,
-        f.map(|f| &f.kind),
+        f.map(|f| f.kind.as_str()),
         f.and_then(|f| f.code),
         f.map(|f| &f.text),
         now,
-        id
+        job.id
     ])?;
-    history(tx, id, job.state, &cause, now)?;
-    event(tx, "job.updated", &job, now, events)?;
-    Ok(Ok(job))
+    history(tx, job.id, job.state, cause, now)?;
+    event(tx, "job.updated", job, now, events)?;
+    Ok(())
 }

@@ -27,7 +27,7 @@ use super::alarms::NewAlarm;
 use super::events::StoredEvent;
 use super::jobs::{Job, NewJob};
 use crate::domain::state::IllegalTransition;
-use crate::domain::{Failure, JobState, Priority, Transition};
+use crate::domain::{Failure, JobState, Priority, Report, Reported, Transition};
 
 /// A change to one stored job.
 #[derive(Clone, Debug)]
@@ -47,6 +47,14 @@ pub enum Change {
     },
     /// Give a queued job a new priority.
     Priority(Priority),
+    /// What a device reports: every transition from where the job is to where the device
+    /// says it is, each in the history, all in the same commit.
+    Report {
+        /// Where the device says the job is.
+        to: Reported,
+        /// Why, for the history.
+        cause: String,
+    },
 }
 
 impl Change {
@@ -124,9 +132,9 @@ pub enum WriteError {
     Database(Arc<rusqlite::Error>),
 }
 
-/// Called after each commit with every job the commit created or changed (dispatchers use
-/// it to hear of new work within milliseconds instead of polling the database).
-pub type Wake = Arc<dyn Fn(&Job) + Send + Sync>;
+/// Called after each commit with every job the commit created or changed, as committed (the
+/// dispatcher keeps its queues with it, so devices never read the database for work).
+pub type Committed = Arc<dyn Fn(&[&Job]) + Send + Sync>;
 
 /// Called after each commit with the events it appended, in sequence order (the event hub
 /// forwards them to subscribers). Only committed events are passed on.
@@ -135,8 +143,8 @@ pub type Publish = Arc<dyn Fn(Vec<StoredEvent>) + Send + Sync>;
 /// What the writer calls after each commit.
 #[derive(Clone, Default)]
 pub struct Hooks {
-    /// Wakes the devices of new or changed jobs.
-    pub wake: Option<Wake>,
+    /// Hands every committed job to the dispatcher.
+    pub committed: Option<Committed>,
     /// Publishes the committed events.
     pub publish: Option<Publish>,
 }
@@ -144,6 +152,7 @@ pub struct Hooks {
 enum Command {
     Submit { jobs: Vec<NewJob>, reply: oneshot::Sender<Result<Vec<Outcome>, WriteError>> },
     Change { id: i64, change: Change, reply: oneshot::Sender<Result<Job, WriteError>> },
+    Reports { reports: Vec<Report>, reply: oneshot::Sender<Vec<Result<Job, WriteError>>> },
     Record { record: Record, reply: oneshot::Sender<Result<(), WriteError>> },
 }
 
@@ -189,6 +198,14 @@ impl Writer {
         answer.await.map_err(|_| WriteError::Closed)?
     }
 
+    /// Records what a device reports of several jobs in one commit, answering each job as
+    /// stored afterwards (or why its report was refused), once they are on disk.
+    pub async fn report(&self, reports: Vec<Report>) -> Result<Vec<Result<Job, WriteError>>, WriteError> {
+        let (reply, answer) = oneshot::channel();
+        self.tx.send(Command::Reports { reports, reply }).await.map_err(|_| WriteError::Closed)?;
+        answer.await.map_err(|_| WriteError::Closed)
+    }
+
     /// Records a change that is not a job's, answering once it is on disk.
     pub async fn record(&self, record: Record) -> Result<(), WriteError> {
         let (reply, answer) = oneshot::channel();
@@ -230,14 +247,24 @@ fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group:
                 group.iter().map(|_| commit::Answer::Failed(e.clone())).collect()
             }
         };
-        if let Some(wake) = &hooks.wake {
-            answers.iter().flat_map(commit::Answer::jobs).for_each(|job| wake(job));
+        if let Some(committed) = &hooks.committed {
+            let jobs: Vec<&Job> = answers.iter().flat_map(commit::Answer::jobs).collect();
+            if !jobs.is_empty() {
+                committed(&jobs);
+            }
         }
         for (cmd, answer) in group.drain(..).zip(answers) {
             match (cmd, answer) {
                 (Command::Submit { reply, .. }, commit::Answer::Submitted(r)) => drop(reply.send(r)),
                 (Command::Change { reply, .. }, commit::Answer::Changed(r)) => drop(reply.send(r)),
                 (Command::Record { reply, .. }, commit::Answer::Recorded) => drop(reply.send(Ok(()))),
+                (Command::Reports { reply, .. }, commit::Answer::Reported(r)) => drop(reply.send(r)),
+                (Command::Reports { reply, reports }, commit::Answer::Failed(e)) => {
+                    drop(reply.send(reports.iter().map(|_| Err(e.clone())).collect()))
+                }
+                (Command::Reports { reply, reports }, _) => {
+                    drop(reply.send(reports.iter().map(|_| Err(WriteError::Closed)).collect()))
+                }
                 (Command::Submit { reply, .. }, commit::Answer::Failed(e)) => drop(reply.send(Err(e))),
                 (Command::Change { reply, .. }, commit::Answer::Failed(e)) => drop(reply.send(Err(e))),
                 (Command::Record { reply, .. }, commit::Answer::Failed(e)) => drop(reply.send(Err(e))),

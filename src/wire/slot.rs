@@ -219,15 +219,10 @@ impl Task {
     }
 }
 
-/// The task id rackd gives a job: derived from the job id (1..=65535, never 0), so after a
-/// restart a slot's task id leads back to its job without any extra record.
-pub fn task_id_for(job_id: i64) -> u16 {
-    ((job_id - 1).rem_euclid(65535) + 1) as u16
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::wire::task_id_for;
 
     fn loc(aisle: u16, row: u16, bay: u16, level: u16, position: u16) -> Location {
         Location { aisle, row, bay, level, position }

@@ -4,24 +4,7 @@
 //! hardware alarms need a person at the crane. A code missing from the catalogue is taken as
 //! hardware: rackd cannot know that cancelling is safe, so it only stops giving new work.
 
-/// Who resolves an alarm.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum AlarmClass {
-    /// rackd resolves it by cancelling the task (mode 3).
-    Business,
-    /// A person must fix the crane; rackd gives it no new work until the alarm clears.
-    Hardware,
-}
-
-impl AlarmClass {
-    /// The class's name as the API writes it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            AlarmClass::Business => "business",
-            AlarmClass::Hardware => "hardware",
-        }
-    }
-}
+pub use crate::domain::AlarmClass;
 
 /// One alarm code as the catalogue describes it.
 #[derive(Clone, Debug, PartialEq, Eq)]

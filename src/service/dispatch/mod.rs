@@ -1,0 +1,50 @@
+//! The dispatcher: which job runs next, on which device, and cancels.
+//!
+//! The job writer hands every committed job to the [`Queues`] (in memory, one queue per
+//! device); each device task asks its [`Port`](crate::devices::port::Port) for the best
+//! jobs it can start ([`order::next_jobs`]: priority, then age, never overtaking an older
+//! job on the same location) and reports what became of them through the same port, one
+//! commit per report round. Pausing is control state kept here, apart from what devices
+//! report: a paused device is simply offered no work.
+
+pub mod cancel;
+pub mod order;
+pub mod queues;
+
+use sqlx::SqlitePool;
+
+pub use cancel::CancelError;
+pub use queues::{Control, Queues};
+
+use crate::store::jobs;
+use crate::store::writer::Writer;
+
+/// The dispatcher as the API uses it: cancels and control state.
+#[derive(Clone)]
+pub struct Dispatcher {
+    queues: Queues,
+    writer: Writer,
+    pool: SqlitePool,
+}
+
+impl Dispatcher {
+    /// The dispatcher over `queues` (already handed to the writer as its hook).
+    pub fn new(queues: Queues, writer: Writer, pool: SqlitePool) -> Dispatcher {
+        Dispatcher { queues, writer, pool }
+    }
+
+    /// Fills the queues with the unfinished jobs the store holds for `devices` (at start,
+    /// before any device runs).
+    pub async fn load<'a>(&self, devices: impl IntoIterator<Item = &'a str>) -> Result<(), sqlx::Error> {
+        for device in devices {
+            let unfinished = jobs::unfinished(&self.pool, device).await?;
+            self.queues.load(device, unfinished);
+        }
+        Ok(())
+    }
+
+    /// The queues.
+    pub fn queues(&self) -> &Queues {
+        &self.queues
+    }
+}

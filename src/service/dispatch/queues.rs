@@ -1,0 +1,240 @@
+//! Every device's unfinished jobs, in memory, kept by the job writer's commits.
+//!
+//! The writer hands each commit's jobs to [`Queues::committed`] before it answers anyone,
+//! so when a device's report returns, the queues already show it, and a job answered 201
+//! is in its device's queue before the client hears of it. Devices ask for work through a
+//! [`DevicePort`]: nothing reads the database to find work.
+//!
+//! Per device, jobs on the machine (`active`) are kept apart from `queued` ones, so a
+//! dispatch round weighs every active job and only the oldest `dispatch_window` queued
+//! ones: a backlog of a hundred thousand jobs costs each round no more than a thousand.
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use async_trait::async_trait;
+use tokio::sync::{Notify, watch};
+
+use super::order::next_jobs;
+use crate::devices::port::{Port, ReportError};
+use crate::domain::{Job, JobState, Report};
+use crate::store::writer::{Committed, WriteError, Writer};
+
+/// What an operator set for a device, apart from what the device reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Control {
+    /// Paused: the device gets no new work; what it runs goes on and is followed.
+    pub paused: bool,
+}
+
+/// One device's unfinished jobs.
+#[derive(Default)]
+struct Queue {
+    /// Jobs handed to the device and not yet ended, by id.
+    active: BTreeMap<i64, Job>,
+    /// Jobs waiting for the device, by id (= acceptance order).
+    queued: BTreeMap<i64, Job>,
+    /// Queued jobs a cancel is deciding on: not handed out meanwhile.
+    withheld: HashSet<i64>,
+}
+
+/// A device's way to be told of work, and its control state.
+struct Lane {
+    wake: Arc<Notify>,
+    control: watch::Sender<Control>,
+    window: usize,
+}
+
+/// The unfinished jobs of every configured device.
+#[derive(Clone)]
+pub struct Queues(Arc<Inner>);
+
+struct Inner {
+    queues: Mutex<HashMap<String, Queue>>,
+    lanes: HashMap<String, Lane>,
+}
+
+impl Queues {
+    /// Empty queues for these devices, each with its dispatch window.
+    pub fn new(devices: impl IntoIterator<Item = (String, usize)>) -> Queues {
+        let mut queues = HashMap::new();
+        let mut lanes = HashMap::new();
+        for (id, window) in devices {
+            queues.insert(id.clone(), Queue::default());
+            let lane = Lane { wake: Arc::new(Notify::new()), control: watch::Sender::default(), window };
+            lanes.insert(id, lane);
+        }
+        Queues(Arc::new(Inner { queues: Mutex::new(queues), lanes }))
+    }
+
+    fn lock(&self) -> MutexGuard<'_, HashMap<String, Queue>> {
+        self.0.queues.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The writer hook: every committed job, as committed.
+    pub fn hook(&self) -> Committed {
+        let queues = self.clone();
+        Arc::new(move |jobs: &[&Job]| queues.committed(jobs))
+    }
+
+    /// Takes in committed jobs: new and changed ones go to their device's queue, ended ones
+    /// leave it; the device is woken.
+    pub fn committed(&self, jobs: &[&Job]) {
+        let mut woken: Vec<&str> = Vec::new();
+        {
+            let mut queues = self.lock();
+            for job in jobs {
+                let Some(device) = job.device.as_deref() else { continue };
+                let Some(queue) = queues.get_mut(device) else { continue };
+                queue.put(job);
+                if !woken.contains(&device) {
+                    woken.push(device);
+                }
+            }
+        }
+        for device in woken {
+            self.wake(device);
+        }
+    }
+
+    /// Loads what the store holds (at start, before any device runs); jobs the writer
+    /// already handed over are newer and kept.
+    pub fn load(&self, device: &str, jobs: Vec<Job>) {
+        let mut queues = self.lock();
+        if let Some(queue) = queues.get_mut(device) {
+            for job in jobs {
+                if !queue.active.contains_key(&job.id) && !queue.queued.contains_key(&job.id) {
+                    queue.put(&job);
+                }
+            }
+        }
+    }
+
+    fn wake(&self, device: &str) {
+        if let Some(lane) = self.0.lanes.get(device) {
+            lane.wake.notify_one();
+        }
+    }
+
+    /// The job, if it is unfinished and its device is configured.
+    pub fn find(&self, id: i64) -> Option<Job> {
+        let queues = self.lock();
+        queues.values().find_map(|q| q.get(id).cloned())
+    }
+
+    /// Keeps a queued job from being handed out while a cancel decides on it; false if
+    /// the device is not configured.
+    pub fn withhold(&self, device: &str, id: i64, withhold: bool) {
+        let mut queues = self.lock();
+        if let Some(queue) = queues.get_mut(device) {
+            match withhold {
+                true => queue.withheld.insert(id),
+                false => queue.withheld.remove(&id),
+            };
+        }
+        drop(queues);
+        if !withhold {
+            self.wake(device);
+        }
+    }
+
+    /// The device's control state, to watch.
+    pub fn control(&self, device: &str) -> Option<watch::Receiver<Control>> {
+        self.0.lanes.get(device).map(|lane| lane.control.subscribe())
+    }
+
+    /// Pauses or resumes a device; false if it is not configured.
+    pub fn set_paused(&self, device: &str, paused: bool) -> bool {
+        let Some(lane) = self.0.lanes.get(device) else { return false };
+        lane.control.send_if_modified(|c| std::mem::replace(&mut c.paused, paused) != paused);
+        lane.wake.notify_one();
+        true
+    }
+
+    /// The port through which `device` gets its work and reports it.
+    pub fn port(&self, device: &str, writer: Writer) -> Arc<dyn Port> {
+        Arc::new(DevicePort { queues: self.clone(), device: device.to_owned(), writer })
+    }
+}
+
+impl Queue {
+    fn put(&mut self, job: &Job) {
+        if job.state.is_terminal() {
+            self.active.remove(&job.id);
+            self.queued.remove(&job.id);
+            self.withheld.remove(&job.id);
+        } else if job.state == JobState::Queued {
+            self.active.remove(&job.id);
+            self.queued.insert(job.id, job.clone());
+        } else {
+            self.queued.remove(&job.id);
+            self.withheld.remove(&job.id);
+            self.active.insert(job.id, job.clone());
+        }
+    }
+
+    fn get(&self, id: i64) -> Option<&Job> {
+        self.active.get(&id).or_else(|| self.queued.get(&id))
+    }
+
+    /// Every active job and the oldest `window` queued ones, in id order.
+    fn window(&self, window: usize) -> Vec<&Job> {
+        let mut jobs: Vec<&Job> = self.active.values().chain(self.queued.values().take(window)).collect();
+        jobs.sort_unstable_by_key(|j| j.id);
+        jobs
+    }
+}
+
+/// One device's [`Port`].
+struct DevicePort {
+    queues: Queues,
+    device: String,
+    writer: Writer,
+}
+
+#[async_trait]
+impl Port for DevicePort {
+    fn unfinished(&self) -> Vec<Job> {
+        let queues = self.queues.lock();
+        let Some(queue) = queues.get(&self.device) else { return Vec::new() };
+        queue.window(usize::MAX).into_iter().cloned().collect()
+    }
+
+    fn job(&self, id: i64) -> Option<Job> {
+        self.queues.lock().get(&self.device).and_then(|q| q.get(id)).cloned()
+    }
+
+    fn next(&self, free: usize, holding: &HashSet<i64>) -> Vec<Job> {
+        let Some(lane) = self.queues.0.lanes.get(&self.device) else { return Vec::new() };
+        if free == 0 || lane.control.borrow().paused {
+            return Vec::new();
+        }
+        let queues = self.queues.lock();
+        let Some(queue) = queues.get(&self.device) else { return Vec::new() };
+        let held: HashSet<i64> = queue.withheld.union(holding).copied().collect();
+        next_jobs(queue.window(lane.window), &held, free).into_iter().cloned().collect()
+    }
+
+    async fn work_waiting(&self) {
+        match self.queues.0.lanes.get(&self.device) {
+            Some(lane) => lane.wake.notified().await,
+            None => std::future::pending().await,
+        }
+    }
+
+    async fn report(&self, reports: Vec<Report>) -> Result<Vec<Job>, ReportError> {
+        if reports.is_empty() {
+            return Ok(Vec::new());
+        }
+        let answers = self.writer.report(reports).await.map_err(report_error)?;
+        answers.into_iter().map(|a| a.map_err(report_error)).collect()
+    }
+}
+
+fn report_error(e: WriteError) -> ReportError {
+    match e {
+        WriteError::Closed => ReportError::Stopped,
+        WriteError::NotFound(id) => ReportError::NotFound(id),
+        other => ReportError::Store(Box::new(other)),
+    }
+}

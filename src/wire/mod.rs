@@ -1,0 +1,18 @@
+//! What the machines' interfaces look like on the wire, word by word: the shelf PLC's task
+//! slot ([`slot`]), the stacker crane's register map ([`registers`]) and its alarm
+//! catalogue ([`alarms`]).
+//!
+//! A leaf: no I/O and nothing of rackd's but the [`crate::domain`] words. The device
+//! adapters (which drive real machines) and the simulators (which play them) both read the
+//! interface from here, so neither depends on the other.
+
+pub mod alarms;
+pub mod registers;
+pub mod slot;
+
+/// The task number rackd gives a job on a machine (a shelf slot's task id, a crane's task
+/// number): derived from the job id (1..=65535, never 0), so after a restart the number a
+/// machine shows leads back to its job without any extra record.
+pub fn task_id_for(job_id: i64) -> u16 {
+    ((job_id - 1).rem_euclid(65535) + 1) as u16
+}
