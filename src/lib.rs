@@ -18,3 +18,5 @@ pub mod service;
 pub mod sim;
 pub mod store;
 pub mod wire;
+
+mod layering;

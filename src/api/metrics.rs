@@ -1,10 +1,6 @@
 //! Prometheus metrics: HTTP requests by route and status, jobs by state, intake latency,
 //! live event subscribers.
 
-use axum::extract::{MatchedPath, Request, State};
-use axum::http::header;
-use axum::middleware::Next;
-use axum::response::{IntoResponse, Response};
 use prometheus_client::encoding::EncodeLabelSet;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
@@ -12,10 +8,7 @@ use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
 use prometheus_client::registry::Registry;
 
-use super::error::ApiError;
-use super::state::AppState;
 use crate::domain::JobState;
-use crate::store::jobs;
 
 /// Labels of the request counter.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
@@ -56,26 +49,22 @@ impl Default for Metrics {
     }
 }
 
-/// Middleware: counts every request by method, matched route and status.
-pub async fn count_requests(State(app): State<AppState>, req: Request, next: Next) -> Response {
-    let method = req.method().to_string();
-    let route = req.extensions().get::<MatchedPath>().map_or("unmatched", |p| p.as_str()).to_owned();
-    let response = next.run(req).await;
-    let labels = RequestLabels { method, route, status: response.status().as_u16() };
-    app.metrics.requests.get_or_create(&labels).inc();
-    response
-}
-
-/// `GET /metrics`: Prometheus text.
-pub async fn metrics(State(app): State<AppState>) -> Result<Response, ApiError> {
-    let counts = jobs::count_by_state(&app.pool).await?;
-    for state in JobState::ALL {
-        let n = counts.iter().find(|(s, _)| s == state.as_str()).map_or(0, |(_, n)| *n);
-        app.metrics.jobs.get_or_create(&StateLabels { state: state.as_str() }).set(n);
+impl Metrics {
+    /// Counts one answered request.
+    pub fn count_request(&self, method: String, route: String, status: u16) {
+        self.requests.get_or_create(&RequestLabels { method, route, status }).inc();
     }
-    app.metrics.subscribers.set(app.hub.subscribers() as i64);
-    let mut text = String::new();
-    prometheus_client::encoding::text::encode(&mut text, &app.metrics.registry)
-        .map_err(|e| ApiError::unavailable(format!("metrics encoding: {e}")))?;
-    Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4; charset=utf-8")], text).into_response())
+
+    /// Prometheus text, with the job counts by state (as the store counts them) and the
+    /// number of live event subscribers set first.
+    pub fn encode(&self, counts: &[(String, i64)], subscribers: usize) -> Result<String, std::fmt::Error> {
+        for state in JobState::ALL {
+            let n = counts.iter().find(|(s, _)| s == state.as_str()).map_or(0, |(_, n)| *n);
+            self.jobs.get_or_create(&StateLabels { state: state.as_str() }).set(n);
+        }
+        self.subscribers.set(subscribers as i64);
+        let mut text = String::new();
+        prometheus_client::encoding::text::encode(&mut text, &self.registry)?;
+        Ok(text)
+    }
 }

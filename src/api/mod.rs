@@ -91,7 +91,7 @@ impl Modify for Security {
 #[utoipa::path(get, path = "/metrics", tag = "operations",
     responses((status = 200, description = "Prometheus text: rackd_http_requests_total, rackd_jobs, rackd_intake_seconds", content_type = "text/plain")))]
 async fn metrics_route(state: axum::extract::State<AppState>) -> Result<axum::response::Response, ApiError> {
-    metrics::metrics(state).await
+    ops::metrics(state).await
 }
 
 /// Routes that need a key once keys are configured.
@@ -133,7 +133,7 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
         .merge(dashboard::router())
         .fallback(ops::not_found)
         .method_not_allowed_fallback(ops::method_not_allowed)
-        .layer(middleware::from_fn_with_state(state.clone(), metrics::count_requests))
+        .layer(middleware::from_fn_with_state(state.clone(), ops::count_requests))
         .layer(DefaultBodyLimit::max(body_limit))
         .layer(
             ServiceBuilder::new()

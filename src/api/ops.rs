@@ -1,7 +1,9 @@
-//! Operations: liveness, readiness, fallbacks.
+//! Operations: liveness, readiness, metrics, fallbacks.
 
-use axum::extract::State;
-use axum::http::{Method, Uri};
+use axum::extract::{MatchedPath, Request, State};
+use axum::http::{Method, Uri, header};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
@@ -49,4 +51,23 @@ pub async fn method_not_allowed(method: Method, uri: Uri) -> ApiError {
         "method_not_allowed",
         format!("{method} is not allowed on {}", uri.path()),
     )
+}
+
+/// Middleware: counts every request by method, matched route and status.
+pub async fn count_requests(State(app): State<AppState>, req: Request, next: Next) -> Response {
+    let method = req.method().to_string();
+    let route = req.extensions().get::<MatchedPath>().map_or("unmatched", |p| p.as_str()).to_owned();
+    let response = next.run(req).await;
+    app.metrics.count_request(method, route, response.status().as_u16());
+    response
+}
+
+/// `GET /metrics`: Prometheus text.
+pub async fn metrics(State(app): State<AppState>) -> Result<Response, ApiError> {
+    let counts = crate::store::jobs::count_by_state(&app.pool).await?;
+    let text = app
+        .metrics
+        .encode(&counts, app.hub.subscribers())
+        .map_err(|e| ApiError::unavailable(format!("metrics encoding: {e}")))?;
+    Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4; charset=utf-8")], text).into_response())
 }
