@@ -7,7 +7,8 @@ use rackd::cli::sim_mc3e::{self, SimMc3eArgs, SimTransport};
 use rackd::protocols::mc3e::{
     Bank, Device, Fault, Mc3eClient, Mc3eConfig, Mc3eServer, ServerState, TransportKind, WriteEvent,
 };
-use rackd::protocols::{PlcError, PlcMemory};
+use rackd::protocols::transport::Backoff;
+use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
 use tokio::net::UdpSocket;
 
 const BOTH: [TransportKind; 2] = [TransportKind::Tcp, TransportKind::Udp];
@@ -24,8 +25,7 @@ fn client_for(address: String, kind: TransportKind, timeout_ms: u64, retries: u3
     let mut config = Mc3eConfig::new(address, kind);
     config.link.timeout = Duration::from_millis(timeout_ms);
     config.link.retries = retries;
-    config.link.reconnect_min = Duration::from_millis(20);
-    config.link.reconnect_max = Duration::from_millis(200);
+    config.link.backoff = Backoff { first: Duration::from_millis(20), max: Duration::from_millis(200) };
     Mc3eClient::new(config)
 }
 
@@ -39,7 +39,7 @@ fn seen(server: &Mc3eServer) -> u64 {
 
 fn device_code(result: Result<impl std::fmt::Debug, PlcError>) -> u32 {
     match result {
-        Err(PlcError::Device { protocol: "mc3e", code, .. }) => code,
+        Err(PlcError::Device(DeviceCode::Mc3e(code))) => u32::from(code.0),
         other => panic!("expected an MC end code, got {other:?}"),
     }
 }

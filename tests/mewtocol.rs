@@ -4,9 +4,10 @@
 use std::time::Duration;
 
 use rackd::protocols::line::{Fault, LineServer};
+use rackd::protocols::mewtocol::ErrorCode;
 use rackd::protocols::mewtocol::server::{self, ServerState};
 use rackd::protocols::mewtocol::{Bank, ContactArea, MewtocolClient, MewtocolConfig, MewtocolTransport};
-use rackd::protocols::{PlcError, PlcMemory};
+use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
 
 fn config(transport: MewtocolTransport, address: &str, timeout_ms: u64, retries: u32) -> MewtocolConfig {
     let mut c = MewtocolConfig::new(transport, address);
@@ -102,14 +103,16 @@ async fn error_replies_surface_with_their_code() {
     let at = |t: &str| plc.parse_address(t).unwrap();
     s.faults.lock().unwrap().push(Fault::Error(63));
     match plc.write_words(&at("DT0"), &[1]).await.unwrap_err() {
-        PlcError::Device { protocol: "mewtocol", code: 63, meaning } => assert_eq!(meaning, "PLC mode error"),
+        PlcError::Device(DeviceCode::Mewtocol(code @ ErrorCode(63))) => {
+            assert_eq!(code.meaning(), "PLC mode error")
+        }
         other => panic!("{other:?}"),
     }
     // Not retried: exactly one request reached the PLC.
     assert_eq!(s.faults.lock().unwrap().requests_seen, 1);
     // Past the simulated bank: data error 61 from the device itself.
     match plc.read_words(&at("DT40000"), 1).await.unwrap_err() {
-        PlcError::Device { code: 61, .. } => {}
+        PlcError::Device(DeviceCode::Mewtocol(ErrorCode(61))) => {}
         other => panic!("{other:?}"),
     }
     // Beyond what the notation allows: refused before sending.
@@ -206,7 +209,9 @@ async fn bcc_errors_and_missing_bcc_in_replies() {
     let (address, _) = fake(b"%01!4001\r").await;
     let plc = MewtocolClient::new(config(MewtocolTransport::Tcp, &address, 200, 0)).unwrap();
     match plc.read_words(&plc.parse_address("DT0").unwrap(), 1).await.unwrap_err() {
-        PlcError::Device { protocol: "mewtocol", code: 40, meaning: "BCC error" } => {}
+        PlcError::Device(DeviceCode::Mewtocol(code @ ErrorCode(40))) => {
+            assert_eq!(code.meaning(), "BCC error")
+        }
         other => panic!("{other:?}"),
     }
 }

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use rackd::protocols::modbus::server::{Bank, Faults, ModbusServer, ServerHandle, ServerOptions};
 use rackd::protocols::modbus::{Exception, ModbusClient, ModbusConfig, Quirks, Request, Response, Transport};
-use rackd::protocols::{PlcError, PlcMemory};
+use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
 use tokio::net::UdpSocket;
 
 async fn serve(transport: Transport, options: ServerOptions) -> (ServerHandle, Bank, String) {
@@ -142,8 +142,8 @@ async fn exceptions_surface_with_their_code_and_are_not_retried() {
         let plc = client(transport, &address, 500, 2).await;
         let err = plc.write_words(&plc.parse_address("4x4000").unwrap(), &[1, 2]).await.unwrap_err();
         match err {
-            PlcError::Device { protocol, code, meaning } => {
-                assert_eq!((protocol, code, meaning), ("modbus", 2, "illegal data address"))
+            PlcError::Device(DeviceCode::Modbus(e)) => {
+                assert_eq!((e, e.meaning()), (Exception::ILLEGAL_DATA_ADDRESS, "illegal data address"))
             }
             other => panic!("{transport:?}: expected an exception, got {other:?}"),
         }

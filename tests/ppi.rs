@@ -4,9 +4,10 @@
 use std::time::Duration;
 
 use rackd::protocols::line::{Fault, LineServer};
+use rackd::protocols::ppi::ReturnCode;
 use rackd::protocols::ppi::server::{self, ServerState};
 use rackd::protocols::ppi::{Bank, Item, MemArea, PpiClient, PpiConfig, PpiTransport, Size};
-use rackd::protocols::{PlcError, PlcMemory};
+use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
 
 fn config(transport: PpiTransport, address: &str) -> PpiConfig {
     let mut c = PpiConfig::new(transport, address);
@@ -112,19 +113,21 @@ async fn return_codes_and_refusals_surface() {
     let at = |t: &str| plc.parse_address(t).unwrap();
     // Past the simulated V memory: the item's own return code 05.
     match plc.read_words(&at("VW10240"), 1).await.unwrap_err() {
-        PlcError::Device { protocol: "ppi", code: 0x05, meaning } => {
-            assert_eq!(meaning, "address out of range")
+        PlcError::Device(DeviceCode::Ppi(code @ ReturnCode::Item(0x05))) => {
+            assert_eq!(code.meaning(), "address out of range")
         }
         other => panic!("{other:?}"),
     }
     s.faults.lock().unwrap().push(Fault::Error(0x0A));
     match plc.read_bits(&at("M0.0"), 1).await.unwrap_err() {
-        PlcError::Device { code: 0x0A, meaning, .. } => assert_eq!(meaning, "object does not exist"),
+        PlcError::Device(DeviceCode::Ppi(code @ ReturnCode::Item(0x0A))) => {
+            assert_eq!(code.meaning(), "object does not exist")
+        }
         other => panic!("{other:?}"),
     }
     s.faults.lock().unwrap().push(Fault::Error(0x8500));
     match plc.write_words(&at("VB100"), &[0x12]).await.unwrap_err() {
-        PlcError::Device { code: 0x8500, .. } => {}
+        PlcError::Device(DeviceCode::Ppi(ReturnCode::Refused { class: 0x85, code: 0 })) => {}
         other => panic!("{other:?}"),
     }
     // Not retried: one request per call reached the PLC.
@@ -226,7 +229,10 @@ async fn responses_with_a_wrong_fcs_are_rejected() {
     let mut c = config(PpiTransport::Tcp, &fake(refused).await);
     c.match_pdu_ref = false;
     let err = PpiClient::new(c).unwrap().write(read, &[1, 2, 3]).await.unwrap_err();
-    assert!(matches!(err, PlcError::Device { protocol: "ppi", code: 0x8500, .. }), "{err:?}");
+    assert!(
+        matches!(err, PlcError::Device(DeviceCode::Ppi(ReturnCode::Refused { class: 0x85, code: 0 }))),
+        "{err:?}"
+    );
 }
 
 /// A fake S7-200 that answers each poll with a stale response (the previous PDU reference,

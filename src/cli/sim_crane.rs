@@ -40,9 +40,16 @@ pub struct SimCraneArgs {
     pub alarm: Vec<(u16, u64)>,
 }
 
-fn scheduled_alarm(text: &str) -> Result<(u16, u64), String> {
-    let (code, secs) = text.split_once('@').ok_or("expected CODE@SECONDS")?;
-    Ok((code.parse().map_err(|_| "bad code")?, secs.parse().map_err(|_| "bad seconds")?))
+/// Why a `--alarm` value was refused.
+#[derive(Debug, thiserror::Error)]
+#[error("expected CODE@SECONDS, e.g. 7069@10: {0}")]
+pub struct BadScheduledAlarm(&'static str);
+
+fn scheduled_alarm(text: &str) -> Result<(u16, u64), BadScheduledAlarm> {
+    let (code, secs) = text.split_once('@').ok_or(BadScheduledAlarm("no '@'"))?;
+    let code = code.parse().map_err(|_| BadScheduledAlarm("the code is not a number"))?;
+    let secs = secs.parse().map_err(|_| BadScheduledAlarm("the seconds are not a number"))?;
+    Ok((code, secs))
 }
 
 /// Runs the crane until Ctrl-C or the end of stdin.

@@ -18,10 +18,11 @@ pub mod modbus;
 pub mod notation;
 pub mod ppi;
 pub mod serial;
+pub mod transport;
 
 use async_trait::async_trait;
 
-pub use error::PlcError;
+pub use error::{DeviceCode, PlcError};
 
 /// A named memory area of a PLC in the protocol's own notation, upper-cased
 /// (`"4X"` holding registers, `"D"` data registers, `"DT"`, `"V"`, ...).
@@ -65,8 +66,9 @@ impl Address {
 
 /// A PLC's memory, whatever the protocol: the one interface device adapters use.
 ///
-/// Implementations own their transport, timeouts, retries and reconnection; a call either
-/// completes or returns a typed [`PlcError`] once the configured retries are spent. Requests
+/// Implementations run every request over the shared [`transport`] layer, under its one
+/// retry policy and reconnect; a call either completes or returns a typed [`PlcError`] once
+/// the configured retries are spent. Requests
 /// larger than one frame allows are split by the implementation.
 #[async_trait]
 pub trait PlcMemory: Send + Sync {

@@ -5,7 +5,18 @@
 //! or CPU while checking the request). Codes outside this table are still surfaced with
 //! their number and a generic meaning.
 
-use crate::protocols::PlcError;
+use crate::protocols::{DeviceCode, PlcError};
+
+/// A nonzero end code in a 3E response: the PLC's refusal of a request.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct EndCode(pub u16);
+
+impl EndCode {
+    /// What the code means (see [`meaning`]).
+    pub fn meaning(self) -> &'static str {
+        meaning(self.0)
+    }
+}
 
 /// ASCII data that cannot be converted to binary was received.
 pub const ASCII_NOT_CONVERTIBLE: u16 = 0xC050;
@@ -54,7 +65,7 @@ pub fn meaning(code: u16) -> &'static str {
 
 /// The typed error for a nonzero end code.
 pub fn to_error(code: u16) -> PlcError {
-    PlcError::Device { protocol: "mc3e", code: u32::from(code), meaning: meaning(code) }
+    PlcError::Device(DeviceCode::Mc3e(EndCode(code)))
 }
 
 #[cfg(test)]
@@ -74,9 +85,9 @@ mod tests {
     #[test]
     fn error_carries_code_and_meaning() {
         match to_error(0xC051) {
-            PlcError::Device { protocol, code, meaning } => {
-                assert_eq!((protocol, code), ("mc3e", 0xC051));
-                assert!(meaning.contains("points"));
+            PlcError::Device(DeviceCode::Mc3e(code)) => {
+                assert_eq!(code, EndCode(0xC051));
+                assert!(code.meaning().contains("points"));
             }
             other => panic!("{other:?}"),
         }

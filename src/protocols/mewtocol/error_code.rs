@@ -1,6 +1,17 @@
 //! MEWTOCOL-COM error codes (the two digits after `!`) and their meanings.
 
-use crate::protocols::PlcError;
+use crate::protocols::{DeviceCode, PlcError};
+
+/// A MEWTOCOL-COM error code: the PLC's refusal of a command (`!` and two digits).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ErrorCode(pub u8);
+
+impl ErrorCode {
+    /// What the code means (see [`meaning`]).
+    pub fn meaning(self) -> &'static str {
+        meaning(self.0)
+    }
+}
 
 /// BCC error.
 pub const BCC_ERROR: u8 = 40;
@@ -36,7 +47,7 @@ pub fn meaning(code: u8) -> &'static str {
 
 /// The [`PlcError`] for an error response.
 pub fn device_error(code: u8) -> PlcError {
-    PlcError::Device { protocol: "mewtocol", code: code.into(), meaning: meaning(code) }
+    PlcError::Device(DeviceCode::Mewtocol(ErrorCode(code)))
 }
 
 /// Parses the body of an `!` frame: two decimal digits.
@@ -65,9 +76,7 @@ mod tests {
             (99, "unknown MEWTOCOL error code"),
         ] {
             match device_error(code) {
-                PlcError::Device { protocol: "mewtocol", code: c, meaning } => {
-                    assert_eq!((c, meaning), (code as u32, text));
-                }
+                PlcError::Device(DeviceCode::Mewtocol(c)) => assert_eq!((c.0, c.meaning()), (code, text)),
                 other => panic!("{other:?}"),
             }
         }

@@ -16,7 +16,7 @@ use super::command::{Request, Response};
 use super::error_code::BCC_ERROR;
 use super::frame::{self, Bcc, Frame, Kind, Scan};
 use crate::protocols::line::{self, Faults, LineServer, SharedFaults};
-use crate::protocols::modbus::ByteStream;
+use crate::protocols::transport::ByteStream;
 
 /// Carries out a decoded command on the locked bank in place of [`Bank::execute`], which it
 /// normally calls: the seam where a simulator watches the host's writes against the memory

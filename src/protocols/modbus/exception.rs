@@ -1,6 +1,6 @@
 //! Modbus exception codes: what a device answers instead of data when it refuses a request.
 
-use crate::protocols::PlcError;
+use crate::protocols::{DeviceCode, PlcError};
 
 /// A Modbus exception code, as carried by an exception reply (function | 0x80, one code byte).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -45,6 +45,6 @@ impl std::fmt::Display for Exception {
 
 impl From<Exception> for PlcError {
     fn from(e: Exception) -> Self {
-        PlcError::Device { protocol: "modbus", code: u32::from(e.0), meaning: e.meaning() }
+        PlcError::Device(DeviceCode::Modbus(e))
     }
 }

@@ -17,7 +17,7 @@ use super::bank::{Bank, SharedBank};
 use super::frame::{self, ACK, FC_POLL, FC_RESPONSE, Frame, Scan};
 use super::pdu::{Reply, Request};
 use crate::protocols::line::{self, Faults, LineServer, Plan, SharedFaults};
-use crate::protocols::modbus::ByteStream;
+use crate::protocols::transport::ByteStream;
 
 /// Carries out a decoded request on the locked bank in place of [`Bank::execute`], which it
 /// normally calls: the seam where a simulator watches the host's writes against the memory

@@ -55,6 +55,19 @@ impl Default for CraneSimOptions {
     }
 }
 
+/// Why a text command was refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum CommandError {
+    /// `alarm` with something other than a number.
+    #[error("not an alarm code: {0}")]
+    AlarmCode(String),
+    /// Not one of the commands.
+    #[error(
+        "unknown command {0:?} (alarm CODE, clear, heartbeat on|off, handshake on|off, force, drop, link on|off, status)"
+    )]
+    Unknown(String),
+}
+
 /// A running simulated crane.
 pub struct CraneSim {
     server: Option<Mc3eServer>,
@@ -164,11 +177,11 @@ impl CraneSim {
     }
 
     /// Runs one text command (see the module doc); returns what to print.
-    pub fn command(&self, line: &str) -> Result<String, String> {
+    pub fn command(&self, line: &str) -> Result<String, CommandError> {
         let words: Vec<&str> = line.split_whitespace().collect();
         match words.as_slice() {
             ["alarm", code] => {
-                let code: u16 = code.parse().map_err(|_| format!("not an alarm code: {code}"))?;
+                let code: u16 = code.parse().map_err(|_| CommandError::AlarmCode(code.to_string()))?;
                 self.raise_alarm(code);
                 Ok(format!("alarm {code}: {}", crate::devices::crane::alarms::lookup(code).text))
             }
@@ -202,9 +215,7 @@ impl CraneSim {
                 self.word(220),
                 self.word(221)
             )),
-            _ => Err(format!(
-                "unknown command {line:?} (alarm CODE, clear, heartbeat on|off, handshake on|off, force, drop, link on|off, status)"
-            )),
+            _ => Err(CommandError::Unknown(line.to_string())),
         }
     }
 

@@ -51,8 +51,8 @@ use crate::devices::DeviceConfig;
 use crate::devices::shelf::slot::SLOT_WORDS;
 use crate::domain::Location;
 use crate::protocols::line::{LineServer, SharedFaults};
-use crate::protocols::modbus::ByteStream;
 use crate::protocols::modbus::server::ServerHandle;
+use crate::protocols::transport::ByteStream;
 
 /// Where a transport is served.
 enum Endpoint<'a> {

@@ -8,8 +8,8 @@ use std::time::Duration;
 use super::*;
 use crate::devices::shelf::slot::{EXEC_STATE, FAILURE_KIND, encode_body};
 use crate::domain::JobSpec;
-use crate::protocols::modbus::{ModbusClient, ModbusConfig, Transport};
-use crate::protocols::{PlcError, PlcMemory, link, mewtocol, ppi};
+use crate::protocols::modbus::{Exception, ModbusClient, ModbusConfig, Transport};
+use crate::protocols::{DeviceCode, PlcError, PlcMemory, link, mewtocol, ppi};
 
 fn options(protocol: ShelfProtocol) -> ShelfSimOptions {
     ShelfSimOptions { task_time: Duration::ZERO, ..ShelfSimOptions::for_protocol(protocol) }
@@ -149,11 +149,14 @@ async fn the_rtu_slave_answers_like_an_s7_1200() {
     let last = plc.read_words(&at("4x5965"), 35).await.unwrap();
     assert_eq!(last.len(), 35, "slot 60 is the data block's end");
     let past = plc.read_words(&at("4x5966"), 35).await;
-    assert!(matches!(past, Err(PlcError::Device { code: 2, .. })), "{past:?}");
+    assert!(matches!(past, Err(PlcError::Device(DeviceCode::Modbus(Exception(2))))), "{past:?}");
     let written = plc.write_words(&at("4x6000"), &[1]).await;
-    assert!(matches!(written, Err(PlcError::Device { code: 2, .. })), "{written:?}");
+    assert!(matches!(written, Err(PlcError::Device(DeviceCode::Modbus(Exception(2))))), "{written:?}");
     let inputs = plc.read_words(&at("3x512"), 1).await;
-    assert!(matches!(inputs, Err(PlcError::Device { code: 2, .. })), "IW0..IW1022 only: {inputs:?}");
+    assert!(
+        matches!(inputs, Err(PlcError::Device(DeviceCode::Modbus(Exception(2))))),
+        "IW0..IW1022 only: {inputs:?}"
+    );
     plc.write_bits(&at("0x8191"), &[true]).await.unwrap();
     assert_eq!(plc.read_bits(&at("0x8191"), 1).await.unwrap(), vec![true], "Q1023.7");
 

@@ -38,8 +38,8 @@ pub use handler::Handler;
 
 use faults::Plan;
 
-use super::ByteStream;
 use super::pdu::{Request, encode_exception};
+use crate::protocols::transport::ByteStream;
 
 /// How a server presents itself.
 #[derive(Clone, Debug, PartialEq)]
