@@ -86,10 +86,55 @@ impl DeviceCode {
     }
 }
 
+impl From<modbus::Exception> for DeviceCode {
+    fn from(e: modbus::Exception) -> Self {
+        DeviceCode::Modbus(e)
+    }
+}
+
+impl From<mc3e::EndCode> for DeviceCode {
+    fn from(c: mc3e::EndCode) -> Self {
+        DeviceCode::Mc3e(c)
+    }
+}
+
+impl From<mewtocol::ErrorCode> for DeviceCode {
+    fn from(c: mewtocol::ErrorCode) -> Self {
+        DeviceCode::Mewtocol(c)
+    }
+}
+
+impl From<ppi::ReturnCode> for DeviceCode {
+    fn from(c: ppi::ReturnCode) -> Self {
+        DeviceCode::Ppi(c)
+    }
+}
+
 impl std::fmt::Display for DeviceCode {
     /// `modbus device error 0x0002: illegal data address`: one shape for logs and alarms.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{} device error {:#06X}: {}", self.protocol(), self.number(), self.meaning())
+    }
+}
+
+/// Why a device error code given as text (a simulator's `--device-error`) was refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("bad {protocol} device error code {text:?}: {expected}")]
+pub struct BadDeviceCode {
+    /// The protocol whose code was asked for.
+    pub protocol: &'static str,
+    /// The text as given.
+    pub text: String,
+    /// What a valid code looks like.
+    pub expected: &'static str,
+}
+
+/// A number in decimal, or in hexadecimal after `0x`.
+pub(crate) fn parse_number(text: &str) -> Option<u32> {
+    let text = text.trim();
+    match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+        Some(hex) => u32::from_str_radix(hex, 16).ok(),
+        None => text.parse().ok(),
     }
 }
 
@@ -117,5 +162,25 @@ mod tests {
         for (code, text) in cases {
             assert_eq!(PlcError::Device(code).to_string(), text);
         }
+    }
+
+    #[test]
+    fn codes_parse_in_each_manuals_notation() {
+        assert_eq!("2".parse(), Ok(modbus::Exception(2)));
+        assert_eq!("0x0B".parse(), Ok(modbus::Exception(0x0B)));
+        assert!("0".parse::<modbus::Exception>().is_err() && "256".parse::<modbus::Exception>().is_err());
+        assert_eq!("C051".parse(), Ok(mc3e::EndCode(0xC051)));
+        assert_eq!("0xc059".parse(), Ok(mc3e::EndCode(0xC059)));
+        assert!("0".parse::<mc3e::EndCode>().is_err() && "G1".parse::<mc3e::EndCode>().is_err());
+        assert_eq!("63".parse(), Ok(mewtocol::ErrorCode(63)));
+        assert!("100".parse::<mewtocol::ErrorCode>().is_err());
+        assert_eq!("0x0A".parse(), Ok(ppi::ReturnCode::Item(0x0A)));
+        assert_eq!("34048".parse(), Ok(ppi::ReturnCode::Refused { class: 0x85, code: 0 }));
+        assert!("0xFF".parse::<ppi::ReturnCode>().is_err(), "FF is success");
+        let e = "x".parse::<mc3e::EndCode>().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "bad mc3e device error code \"x\": a nonzero hexadecimal end code such as C051"
+        );
     }
 }

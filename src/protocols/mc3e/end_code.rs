@@ -5,7 +5,7 @@
 //! or CPU while checking the request). Codes outside this table are still surfaced with
 //! their number and a generic meaning.
 
-use crate::protocols::{DeviceCode, PlcError};
+use crate::protocols::{BadDeviceCode, DeviceCode, PlcError};
 
 /// A nonzero end code in a 3E response: the PLC's refusal of a request.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -35,6 +35,23 @@ pub const BAD_REQUEST_CONTENTS: u16 = 0xC05C;
 pub const BAD_REQUEST_DATA: u16 = 0xC060;
 /// The request data length does not match the number of data bytes.
 pub const LENGTH_MISMATCH: u16 = 0xC061;
+
+impl std::str::FromStr for EndCode {
+    type Err = BadDeviceCode;
+
+    /// A nonzero code in hexadecimal as the manuals write it (`C051`, or `0xC051`).
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let hex = text.trim().trim_start_matches("0x").trim_start_matches("0X");
+        match u16::from_str_radix(hex, 16) {
+            Ok(code) if code != 0 => Ok(EndCode(code)),
+            _ => Err(BadDeviceCode {
+                protocol: "mc3e",
+                text: text.to_owned(),
+                expected: "a nonzero hexadecimal end code such as C051",
+            }),
+        }
+    }
+}
 
 /// What an end code means; never fails (unknown codes get a generic meaning).
 pub fn meaning(code: u16) -> &'static str {

@@ -11,7 +11,8 @@
 //! - UDP: before each send, datagrams already waiting are drained and discarded; every
 //!   datagram is checked for shape (subheader, route echo, data length for the points
 //!   requested, command in the error information) and discarded if it does not fit;
-//! - TCP: the reply's length field is never trusted past the longest valid reply.
+//! - TCP: input already waiting before a request (a duplicated reply) is thrown away, and
+//!   the reply's length field is never trusted past the longest valid reply.
 //!
 //! Limitation (UDP with a fixed local port, `udp_local`, as some Ethernet-module open
 //! settings require): a late reply that arrives after the drain and has the same shape as
@@ -140,6 +141,10 @@ async fn tcp_attempt(
     attempt: &Attempt,
 ) -> Result<Outcome, AttemptError> {
     link.begin_exclusive();
+    // A reply already waiting (a device that answered twice) is not this request's.
+    if link.flush_stale(attempt.timeout).await? {
+        tracing::debug!("mc3e tcp: discarded stale input");
+    }
     link.send(frame, attempt.timeout).await?;
     let mut responses = Responses { max_len: 2 + expect.data_len.max(ErrorInfo::LEN) };
     let Some(bytes) = link.read_frame(&mut responses, attempt.deadline).await? else {

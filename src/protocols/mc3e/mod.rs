@@ -16,7 +16,8 @@
 //! [`end_code`] names end codes; [`link`] sends frames over the shared
 //! [`transport`](crate::protocols::transport) layer (timeouts, retries, reconnection) with
 //! the stale-reply defences; [`client`] implements [`PlcMemory`](super::PlcMemory); [`bank`],
-//! [`faults`], [`handler`] and [`server`] make the simulated PLC.
+//! [`handler`] and [`server`] make the simulated PLC (faults from
+//! [`crate::protocols::faults`]).
 //!
 //! # Choices
 //! - The codec is written here rather than taken from a crate: the Rust MC crates found are
@@ -39,7 +40,6 @@ pub mod bank;
 pub mod client;
 pub mod device;
 pub mod end_code;
-pub mod faults;
 pub mod frame;
 pub mod handler;
 pub mod link;
@@ -54,7 +54,6 @@ pub use bank::{Bank, SharedBank};
 pub use client::{Mc3eClient, Mc3eConfig};
 pub use device::Device;
 pub use end_code::EndCode;
-pub use faults::{Fault, Faults, SharedFaults};
 pub use frame::Route;
 pub use handler::{WriteEvent, WriteHook};
 pub use link::{LinkConfig, TransportKind};

@@ -1,6 +1,6 @@
 //! MEWTOCOL-COM error codes (the two digits after `!`) and their meanings.
 
-use crate::protocols::{DeviceCode, PlcError};
+use crate::protocols::{BadDeviceCode, DeviceCode, PlcError};
 
 /// A MEWTOCOL-COM error code: the PLC's refusal of a command (`!` and two digits).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -29,6 +29,22 @@ pub const DATA_ERROR: u8 = 61;
 pub const REGISTRATION_ERROR: u8 = 62;
 /// PLC mode error (e.g. a write while the PLC forbids it).
 pub const MODE_ERROR: u8 = 63;
+
+impl std::str::FromStr for ErrorCode {
+    type Err = BadDeviceCode;
+
+    /// Two decimal digits as the `!` reply carries them (`63`), 1..=99.
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        match text.trim().parse::<u8>() {
+            Ok(code @ 1..=99) => Ok(ErrorCode(code)),
+            _ => Err(BadDeviceCode {
+                protocol: "mewtocol",
+                text: text.to_owned(),
+                expected: "a decimal error code 1..=99 such as 63",
+            }),
+        }
+    }
+}
 
 /// What an error code means, from the MEWTOCOL-COM documentation (spec/mewtocol.md).
 pub fn meaning(code: u8) -> &'static str {

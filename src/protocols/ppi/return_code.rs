@@ -1,7 +1,8 @@
 //! PPI / S7 return codes: the per-item code of a data item, and the error class of a
 //! refused request, with their meanings.
 
-use crate::protocols::{DeviceCode, PlcError};
+use crate::protocols::error::parse_number;
+use crate::protocols::{BadDeviceCode, DeviceCode, PlcError};
 
 /// What an S7-200 answered instead of doing a request.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -49,6 +50,26 @@ pub const TYPE_NOT_SUPPORTED: u8 = 0x06;
 pub const SIZE_MISMATCH: u8 = 0x07;
 /// Item return code: object does not exist.
 pub const NO_OBJECT: u8 = 0x0A;
+
+impl std::str::FromStr for ReturnCode {
+    type Err = BadDeviceCode;
+
+    /// An item return code below 0x100 (not FF, success), or a refusal as error class x 256
+    /// + code (`0x8500`, or 34048), in decimal or `0x` hexadecimal.
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        match parse_number(text) {
+            Some(code) if code < 0x100 && code != u32::from(SUCCESS) => Ok(ReturnCode::Item(code as u8)),
+            Some(code @ 0x100..=0xFFFF) => {
+                Ok(ReturnCode::Refused { class: (code >> 8) as u8, code: code as u8 })
+            }
+            _ => Err(BadDeviceCode {
+                protocol: "ppi",
+                text: text.to_owned(),
+                expected: "an item return code below 0x100 (not 0xFF) or class x 256 + code, e.g. 0x8500",
+            }),
+        }
+    }
+}
 
 /// What an item return code means.
 pub fn item_meaning(code: u8) -> &'static str {

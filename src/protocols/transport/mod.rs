@@ -10,6 +10,9 @@
 //! in the byte stream). A *client* (Modbus, MC 3E, MEWTOCOL, PPI) owns one link behind a
 //! mutex, so requests to one device go one at a time, as the devices expect.
 //!
+//! Simulators serving a byte-stream protocol over TCP or one stream run as a
+//! [`StreamServer`].
+//!
 //! Connections open on first use and reopen after a loss, with one exponential backoff, so
 //! a device that is off when rackd starts does not stop it and is not hammered while off.
 //!
@@ -44,6 +47,7 @@ mod connection;
 mod datagram;
 mod endpoint;
 mod retry;
+mod server;
 mod stream;
 
 pub use connection::Backoff;
@@ -51,4 +55,6 @@ pub(crate) use datagram::DatagramLink;
 pub use endpoint::{ByteStream, Endpoint};
 pub use retry::RetryPolicy;
 pub(crate) use retry::{Attempt, AttemptError};
+pub use server::StreamServer;
+pub(crate) use server::spawn_tcp;
 pub(crate) use stream::StreamLink;

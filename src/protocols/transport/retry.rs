@@ -12,7 +12,7 @@
 //! The loop is written by each client, not taken as a closure, so the client keeps its own
 //! per-request state (transaction ids of earlier attempts) in plain locals:
 //!
-//! ```ignore
+//! ```text
 //! let mut retry = self.policy.start("modbus");
 //! while let Some(attempt) = retry.next_attempt() {
 //!     match link.attempt(&exchange, &attempt).await {
