@@ -3,11 +3,14 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use rackd::cli::sim::FaultArgs;
 use rackd::cli::sim_mc3e::{self, SimMc3eArgs, SimTransport};
+use rackd::protocols::faults::Fault;
 use rackd::protocols::mc3e::{
-    Bank, Device, Fault, Mc3eClient, Mc3eConfig, Mc3eServer, ServerState, TransportKind, WriteEvent,
+    Bank, Device, Mc3eClient, Mc3eConfig, Mc3eServer, ServerState, TransportKind, WriteEvent,
 };
-use rackd::protocols::{PlcError, PlcMemory};
+use rackd::protocols::transport::Backoff;
+use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
 use tokio::net::UdpSocket;
 
 const BOTH: [TransportKind; 2] = [TransportKind::Tcp, TransportKind::Udp];
@@ -24,8 +27,7 @@ fn client_for(address: String, kind: TransportKind, timeout_ms: u64, retries: u3
     let mut config = Mc3eConfig::new(address, kind);
     config.link.timeout = Duration::from_millis(timeout_ms);
     config.link.retries = retries;
-    config.link.reconnect_min = Duration::from_millis(20);
-    config.link.reconnect_max = Duration::from_millis(200);
+    config.link.backoff = Backoff { first: Duration::from_millis(20), max: Duration::from_millis(200) };
     Mc3eClient::new(config)
 }
 
@@ -34,12 +36,12 @@ fn client(server: &Mc3eServer, kind: TransportKind, timeout_ms: u64, retries: u3
 }
 
 fn seen(server: &Mc3eServer) -> u64 {
-    server.faults().lock().unwrap().requests_seen
+    server.faults().requests_seen()
 }
 
 fn device_code(result: Result<impl std::fmt::Debug, PlcError>) -> u32 {
     match result {
-        Err(PlcError::Device { protocol: "mc3e", code, .. }) => code,
+        Err(PlcError::Device(DeviceCode::Mc3e(code))) => u32::from(code.0),
         other => panic!("expected an MC end code, got {other:?}"),
     }
 }
@@ -109,10 +111,10 @@ async fn end_codes_are_surfaced_and_not_retried() {
         // D has 12288 words in the default bank.
         assert_eq!(device_code(plc.read_words(&plc.parse_address("D12287").unwrap(), 2).await), 0xC056);
         assert_eq!(seen(&srv), 1);
-        srv.faults().lock().unwrap().push(Fault::EndCode(0xC051));
+        srv.faults().push(Fault::DeviceError(0xC051));
         let err = plc.read_words(&plc.parse_address("D0").unwrap(), 1).await.unwrap_err();
         assert!(err.to_string().contains("0xC051") && err.to_string().contains("points"), "{err}");
-        srv.faults().lock().unwrap().end_code = Some(0xC05F);
+        srv.faults().update(|f| f.device_error = Some(0xC05F));
         assert_eq!(device_code(plc.write_bits(&plc.parse_address("M0").unwrap(), &[true]).await), 0xC05F);
         assert_eq!(seen(&srv), 3);
         assert!(!srv.bank().lock().unwrap().bit(Device::M, 0));
@@ -141,11 +143,11 @@ async fn error_replies_without_error_info_and_foreign_datagrams() {
 async fn dropped_udp_request_is_retried() {
     let srv = server(TransportKind::Udp, ServerState::new(Bank::default().shared())).await;
     srv.bank().lock().unwrap().set_word(Device::D, 5, 55);
-    srv.faults().lock().unwrap().push(Fault::Drop);
+    srv.faults().push(Fault::Drop);
     let plc = client(&srv, TransportKind::Udp, 300, 2);
     assert_eq!(plc.read_words(&plc.parse_address("D5").unwrap(), 1).await.unwrap(), [55]);
     assert_eq!(seen(&srv), 2);
-    srv.faults().lock().unwrap().push(Fault::Drop).push(Fault::Drop);
+    srv.faults().push(Fault::Drop).push(Fault::Drop);
     let once = client(&srv, TransportKind::Udp, 300, 1);
     let err = once.read_words(&plc.parse_address("D5").unwrap(), 1).await.unwrap_err();
     assert!(matches!(err, PlcError::Timeout { attempts: 2, .. }), "{err:?}");
@@ -159,8 +161,6 @@ async fn a_late_reply_is_never_taken_for_the_next_answer() {
         // The first reply (D10 = 1) arrives 300 ms after the first timeout, while the
         // client waits for the second reply (D10 = 2), due 450 ms after it is sent.
         srv.faults()
-            .lock()
-            .unwrap()
             .push(Fault::Delay(Duration::from_millis(900)))
             .push(Fault::Delay(Duration::from_millis(450)));
         let plc = client(&srv, kind, 600, 0);
@@ -169,11 +169,11 @@ async fn a_late_reply_is_never_taken_for_the_next_answer() {
         srv.bank().lock().unwrap().set_word(Device::D, 10, 2);
         assert_eq!(plc.read_words(&d10, 1).await.unwrap(), [2], "{kind:?}: took the stale reply");
         // The same when the caller gives up (drops the request) before the client times out.
-        srv.faults().lock().unwrap().push(Fault::Delay(Duration::from_millis(300)));
+        srv.faults().push(Fault::Delay(Duration::from_millis(300)));
         let abandoned = tokio::time::timeout(Duration::from_millis(100), plc.read_words(&d10, 1)).await;
         assert!(abandoned.is_err());
         srv.bank().lock().unwrap().set_word(Device::D, 10, 3);
-        srv.faults().lock().unwrap().push(Fault::Delay(Duration::from_millis(400)));
+        srv.faults().push(Fault::Delay(Duration::from_millis(400)));
         assert_eq!(
             plc.read_words(&d10, 1).await.unwrap(),
             [3],
@@ -190,7 +190,7 @@ async fn tcp_reconnects_after_close_and_server_restart() {
     let plc = client(&srv, TransportKind::Tcp, 500, 2);
     let d0 = plc.parse_address("D0").unwrap();
     plc.write_words(&d0, &[1]).await.unwrap();
-    srv.faults().lock().unwrap().push(Fault::Close);
+    srv.faults().push(Fault::Close);
     assert_eq!(plc.read_words(&d0, 1).await.unwrap(), [1]);
     assert_eq!(seen(&srv), 3);
     srv.shutdown().await;
@@ -226,13 +226,8 @@ async fn write_hook_sees_every_write() {
 #[tokio::test]
 async fn cli_pieces_build_a_client_and_a_simulator() {
     for (transport, protocol) in [(SimTransport::Udp, "mc3e-udp"), (SimTransport::Tcp, "mc3e")] {
-        let args = SimMc3eArgs {
-            listen: "127.0.0.1:0".parse().unwrap(),
-            transport,
-            drop: 0.0,
-            delay_ms: 0,
-            end_code: None,
-        };
+        let args =
+            SimMc3eArgs { listen: "127.0.0.1:0".parse().unwrap(), transport, faults: FaultArgs::default() };
         let sim = sim_mc3e::start(&args).await.unwrap();
         let address = sim.local_addr().to_string();
         let plc =
@@ -241,5 +236,20 @@ async fn cli_pieces_build_a_client_and_a_simulator() {
         plc.write_words(&zr, &[9, 8]).await.unwrap();
         assert_eq!(plc.read_words(&zr, 2).await.unwrap(), [9, 8]);
         assert_eq!(sim.bank().lock().unwrap().word(Device::ZR, 1_000_001), 8);
+    }
+}
+
+#[tokio::test]
+async fn a_duplicated_reply_is_never_taken_for_the_next_answer() {
+    for kind in BOTH {
+        let srv = server(kind, ServerState::new(Bank::default().shared())).await;
+        srv.bank().lock().unwrap().set_word(Device::D, 10, 1);
+        let plc = client(&srv, kind, 500, 0);
+        let d10 = plc.parse_address("D10").unwrap();
+        srv.faults().push(Fault::Duplicate);
+        assert_eq!(plc.read_words(&d10, 1).await.unwrap(), [1]);
+        srv.bank().lock().unwrap().set_word(Device::D, 10, 2);
+        assert_eq!(plc.read_words(&d10, 1).await.unwrap(), [2], "{kind:?}: took the duplicate");
+        srv.shutdown().await;
     }
 }

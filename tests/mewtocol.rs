@@ -3,10 +3,12 @@
 
 use std::time::Duration;
 
-use rackd::protocols::line::{Fault, LineServer};
+use rackd::protocols::faults::Fault;
+use rackd::protocols::mewtocol::ErrorCode;
 use rackd::protocols::mewtocol::server::{self, ServerState};
 use rackd::protocols::mewtocol::{Bank, ContactArea, MewtocolClient, MewtocolConfig, MewtocolTransport};
-use rackd::protocols::{PlcError, PlcMemory};
+use rackd::protocols::transport::StreamServer;
+use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
 
 fn config(transport: MewtocolTransport, address: &str, timeout_ms: u64, retries: u32) -> MewtocolConfig {
     let mut c = MewtocolConfig::new(transport, address);
@@ -18,7 +20,7 @@ fn config(transport: MewtocolTransport, address: &str, timeout_ms: u64, retries:
 async fn tcp(
     state: &ServerState,
     config_fn: impl FnOnce(&mut MewtocolConfig),
-) -> (LineServer, MewtocolClient) {
+) -> (StreamServer, MewtocolClient) {
     let server = server::serve_tcp("127.0.0.1:0", state.clone()).await.unwrap();
     let address = server.local_addr().unwrap().to_string();
     let mut c = config(MewtocolTransport::Tcp, &address, 500, 1);
@@ -26,7 +28,7 @@ async fn tcp(
     (server, MewtocolClient::new(c).unwrap())
 }
 
-fn pty(state: &ServerState, config_fn: impl FnOnce(&mut MewtocolConfig)) -> (LineServer, MewtocolClient) {
+fn pty(state: &ServerState, config_fn: impl FnOnce(&mut MewtocolConfig)) -> (StreamServer, MewtocolClient) {
     let (a, b) = tokio_serial::SerialStream::pair().expect("pty pair");
     let server = server::serve_stream(a, state.clone());
     let mut c = config(MewtocolTransport::Serial, "pty", 500, 1);
@@ -100,16 +102,18 @@ async fn error_replies_surface_with_their_code() {
     let s = state();
     let (_server, plc) = pty(&s, |_| {});
     let at = |t: &str| plc.parse_address(t).unwrap();
-    s.faults.lock().unwrap().push(Fault::Error(63));
+    s.faults.push(Fault::DeviceError(63));
     match plc.write_words(&at("DT0"), &[1]).await.unwrap_err() {
-        PlcError::Device { protocol: "mewtocol", code: 63, meaning } => assert_eq!(meaning, "PLC mode error"),
+        PlcError::Device(DeviceCode::Mewtocol(code @ ErrorCode(63))) => {
+            assert_eq!(code.meaning(), "PLC mode error")
+        }
         other => panic!("{other:?}"),
     }
     // Not retried: exactly one request reached the PLC.
-    assert_eq!(s.faults.lock().unwrap().requests_seen, 1);
+    assert_eq!(s.faults.requests_seen(), 1);
     // Past the simulated bank: data error 61 from the device itself.
     match plc.read_words(&at("DT40000"), 1).await.unwrap_err() {
-        PlcError::Device { code: 61, .. } => {}
+        PlcError::Device(DeviceCode::Mewtocol(ErrorCode(61))) => {}
         other => panic!("{other:?}"),
     }
     // Beyond what the notation allows: refused before sending.
@@ -123,15 +127,15 @@ async fn garbage_drops_and_delays_are_survived() {
     s.bank.lock().unwrap().set_dt(5, 77);
     let (_server, plc) = pty(&s, |c| c.retries = 2);
     let dt5 = plc.parse_address("DT5").unwrap();
-    s.faults.lock().unwrap().push(Fault::Garbage(b"\x00%0#\r$$\xff%".to_vec()));
+    s.faults.push(Fault::Garbage(b"\x00%0#\r$$\xff%".to_vec()));
     assert_eq!(plc.read_words(&dt5, 1).await.unwrap(), vec![77]);
-    s.faults.lock().unwrap().push(Fault::Drop).push(Fault::Drop);
+    s.faults.push(Fault::Drop).push(Fault::Drop);
     assert_eq!(plc.read_words(&dt5, 1).await.unwrap(), vec![77]);
-    s.faults.lock().unwrap().push(Fault::Drop).push(Fault::Drop).push(Fault::Drop);
+    s.faults.push(Fault::Drop).push(Fault::Drop).push(Fault::Drop);
     let err = plc.read_words(&dt5, 1).await.unwrap_err();
     assert!(matches!(err, PlcError::Timeout { attempts: 3, .. }), "{err:?}");
     // Random noise before every reply still lets every request through.
-    s.faults.lock().unwrap().garbage_ratio = 1.0;
+    s.faults.update(|f| f.garbage_rate = 1.0);
     for _ in 0..10 {
         assert_eq!(plc.read_words(&dt5, 1).await.unwrap(), vec![77]);
     }
@@ -152,7 +156,7 @@ async fn a_late_reply_is_not_taken_for_the_next_answer() {
     })
     .await;
     let at = |t: &str| plc.parse_address(t).unwrap();
-    s.faults.lock().unwrap().push(Fault::Delay(Duration::from_millis(600)));
+    s.faults.push(Fault::Delay(Duration::from_millis(600)));
     assert!(matches!(plc.read_words(&at("DT0"), 1).await, Err(PlcError::Timeout { .. })));
     // The late `RD` reply to DT0 arrives while this RCS waits: it must be skipped, and the
     // RCS answer taken.
@@ -206,7 +210,9 @@ async fn bcc_errors_and_missing_bcc_in_replies() {
     let (address, _) = fake(b"%01!4001\r").await;
     let plc = MewtocolClient::new(config(MewtocolTransport::Tcp, &address, 200, 0)).unwrap();
     match plc.read_words(&plc.parse_address("DT0").unwrap(), 1).await.unwrap_err() {
-        PlcError::Device { protocol: "mewtocol", code: 40, meaning: "BCC error" } => {}
+        PlcError::Device(DeviceCode::Mewtocol(code @ ErrorCode(40))) => {
+            assert_eq!(code.meaning(), "BCC error")
+        }
         other => panic!("{other:?}"),
     }
 }

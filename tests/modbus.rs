@@ -4,9 +4,10 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use rackd::protocols::modbus::server::{Bank, Faults, ModbusServer, ServerHandle, ServerOptions};
+use rackd::protocols::faults::Faults;
+use rackd::protocols::modbus::server::{Bank, ModbusServer, ServerHandle, ServerOptions};
 use rackd::protocols::modbus::{Exception, ModbusClient, ModbusConfig, Quirks, Request, Response, Transport};
-use rackd::protocols::{PlcError, PlcMemory};
+use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
 use tokio::net::UdpSocket;
 
 async fn serve(transport: Transport, options: ServerOptions) -> (ServerHandle, Bank, String) {
@@ -99,7 +100,7 @@ async fn requests_are_split_at_the_limits() {
 
 #[tokio::test]
 async fn udp_survives_20_percent_loss_without_mixing_up_replies() {
-    let faults = Faults { drop_rate: 0.2, duplicate: true, ..Faults::default() };
+    let faults = Faults { drop_rate: 0.2, duplicate_rate: 1.0, ..Faults::default() };
     let (server, bank, address) =
         serve(Transport::Udp, ServerOptions { faults, ..ServerOptions::default() }).await;
     let values: Vec<u16> = (0..400).map(|i| i * 7 + 1).collect();
@@ -136,14 +137,15 @@ async fn a_late_reply_is_never_taken_for_a_newer_request() {
 #[tokio::test]
 async fn exceptions_surface_with_their_code_and_are_not_retried() {
     for transport in [Transport::Udp, Transport::Tcp, Transport::RtuOverTcp] {
-        let faults = Faults { exception: Some(Exception::ILLEGAL_DATA_ADDRESS), ..Faults::default() };
+        let faults =
+            Faults { device_error: Some(Exception::ILLEGAL_DATA_ADDRESS.0.into()), ..Faults::default() };
         let (server, bank, address) =
             serve(transport, ServerOptions { faults, ..ServerOptions::default() }).await;
         let plc = client(transport, &address, 500, 2).await;
         let err = plc.write_words(&plc.parse_address("4x4000").unwrap(), &[1, 2]).await.unwrap_err();
         match err {
-            PlcError::Device { protocol, code, meaning } => {
-                assert_eq!((protocol, code, meaning), ("modbus", 2, "illegal data address"))
+            PlcError::Device(DeviceCode::Modbus(e)) => {
+                assert_eq!((e, e.meaning()), (Exception::ILLEGAL_DATA_ADDRESS, "illegal data address"))
             }
             other => panic!("{transport:?}: expected an exception, got {other:?}"),
         }
@@ -166,7 +168,7 @@ async fn the_server_answers_unknown_functions_with_exception_01() {
 #[tokio::test]
 async fn a_reply_from_the_wrong_unit_is_not_taken() {
     let options = || ServerOptions {
-        faults: Faults { reply_unit: Some(2), ..Faults::default() },
+        faults: Faults { wrong_unit: Some(2), ..Faults::default() },
         ..ServerOptions::default()
     };
     for transport in [Transport::Udp, Transport::Tcp, Transport::RtuOverTcp] {

@@ -3,10 +3,12 @@
 
 use std::time::Duration;
 
-use rackd::protocols::line::{Fault, LineServer};
+use rackd::protocols::faults::Fault;
+use rackd::protocols::ppi::ReturnCode;
 use rackd::protocols::ppi::server::{self, ServerState};
 use rackd::protocols::ppi::{Bank, Item, MemArea, PpiClient, PpiConfig, PpiTransport, Size};
-use rackd::protocols::{PlcError, PlcMemory};
+use rackd::protocols::transport::StreamServer;
+use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
 
 fn config(transport: PpiTransport, address: &str) -> PpiConfig {
     let mut c = PpiConfig::new(transport, address);
@@ -15,14 +17,14 @@ fn config(transport: PpiTransport, address: &str) -> PpiConfig {
     c
 }
 
-async fn tcp(state: &ServerState, tweak: impl FnOnce(&mut PpiConfig)) -> (LineServer, PpiClient) {
+async fn tcp(state: &ServerState, tweak: impl FnOnce(&mut PpiConfig)) -> (StreamServer, PpiClient) {
     let server = server::serve_tcp("127.0.0.1:0", state.clone()).await.unwrap();
     let mut c = config(PpiTransport::Tcp, &server.local_addr().unwrap().to_string());
     tweak(&mut c);
     (server, PpiClient::new(c).unwrap())
 }
 
-fn pty(state: &ServerState, tweak: impl FnOnce(&mut PpiConfig)) -> (LineServer, PpiClient) {
+fn pty(state: &ServerState, tweak: impl FnOnce(&mut PpiConfig)) -> (StreamServer, PpiClient) {
     let (a, b) = tokio_serial::SerialStream::pair().expect("pty pair");
     let server = server::serve_stream(a, state.clone());
     let mut c = config(PpiTransport::Serial, "pty");
@@ -112,23 +114,25 @@ async fn return_codes_and_refusals_surface() {
     let at = |t: &str| plc.parse_address(t).unwrap();
     // Past the simulated V memory: the item's own return code 05.
     match plc.read_words(&at("VW10240"), 1).await.unwrap_err() {
-        PlcError::Device { protocol: "ppi", code: 0x05, meaning } => {
-            assert_eq!(meaning, "address out of range")
+        PlcError::Device(DeviceCode::Ppi(code @ ReturnCode::Item(0x05))) => {
+            assert_eq!(code.meaning(), "address out of range")
         }
         other => panic!("{other:?}"),
     }
-    s.faults.lock().unwrap().push(Fault::Error(0x0A));
+    s.faults.push(Fault::DeviceError(0x0A));
     match plc.read_bits(&at("M0.0"), 1).await.unwrap_err() {
-        PlcError::Device { code: 0x0A, meaning, .. } => assert_eq!(meaning, "object does not exist"),
+        PlcError::Device(DeviceCode::Ppi(code @ ReturnCode::Item(0x0A))) => {
+            assert_eq!(code.meaning(), "object does not exist")
+        }
         other => panic!("{other:?}"),
     }
-    s.faults.lock().unwrap().push(Fault::Error(0x8500));
+    s.faults.push(Fault::DeviceError(0x8500));
     match plc.write_words(&at("VB100"), &[0x12]).await.unwrap_err() {
-        PlcError::Device { code: 0x8500, .. } => {}
+        PlcError::Device(DeviceCode::Ppi(ReturnCode::Refused { class: 0x85, code: 0 })) => {}
         other => panic!("{other:?}"),
     }
     // Not retried: one request per call reached the PLC.
-    assert_eq!(s.faults.lock().unwrap().requests_seen, 3);
+    assert_eq!(s.faults.requests_seen(), 3);
     assert_eq!(v(&s, 100..101), [0]);
 }
 
@@ -138,17 +142,17 @@ async fn lost_acknowledgements_responses_and_noise() {
     s.bank.lock().unwrap().bytes_mut(MemArea::V)[0..2].copy_from_slice(&[0x12, 0x34]);
     let (_server, plc) = pty(&s, |c| c.retries = 2);
     let vw0 = plc.parse_address("VW0").unwrap();
-    s.faults.lock().unwrap().push(Fault::DropAck).push(Fault::Drop);
+    s.faults.push(Fault::DropAck).push(Fault::Drop);
     assert_eq!(plc.read_words(&vw0, 1).await.unwrap(), vec![0x1234]);
-    assert_eq!(s.faults.lock().unwrap().requests_seen, 3);
-    s.faults.lock().unwrap().push(Fault::Garbage(vec![0x68, 0x05, 0x00, 0xFF, 0x10, 0x02, 0x16]));
+    assert_eq!(s.faults.requests_seen(), 3);
+    s.faults.push(Fault::Garbage(vec![0x68, 0x05, 0x00, 0xFF, 0x10, 0x02, 0x16]));
     assert_eq!(plc.read_words(&vw0, 1).await.unwrap(), vec![0x1234]);
     for _ in 0..3 {
-        s.faults.lock().unwrap().push(Fault::DropAck);
+        s.faults.push(Fault::DropAck);
     }
     let err = plc.read_words(&vw0, 1).await.unwrap_err();
     assert!(matches!(err, PlcError::Timeout { attempts: 3, .. }), "{err:?}");
-    s.faults.lock().unwrap().garbage_ratio = 1.0;
+    s.faults.update(|f| f.garbage_rate = 1.0);
     for _ in 0..10 {
         assert_eq!(plc.read_words(&vw0, 1).await.unwrap(), vec![0x1234]);
     }
@@ -167,7 +171,7 @@ async fn a_late_response_is_not_taken_for_the_next_answer() {
     })
     .await;
     let at = |t: &str| plc.parse_address(t).unwrap();
-    s.faults.lock().unwrap().push(Fault::Delay(Duration::from_millis(600)));
+    s.faults.push(Fault::Delay(Duration::from_millis(600)));
     assert!(matches!(plc.read_words(&at("VW0"), 1).await, Err(PlcError::Timeout { .. })));
     // Same request shape, other data: the late VW0 response must not answer VW2.
     assert_eq!(plc.read_words(&at("VW2"), 1).await.unwrap(), vec![0x2222]);
@@ -226,7 +230,10 @@ async fn responses_with_a_wrong_fcs_are_rejected() {
     let mut c = config(PpiTransport::Tcp, &fake(refused).await);
     c.match_pdu_ref = false;
     let err = PpiClient::new(c).unwrap().write(read, &[1, 2, 3]).await.unwrap_err();
-    assert!(matches!(err, PlcError::Device { protocol: "ppi", code: 0x8500, .. }), "{err:?}");
+    assert!(
+        matches!(err, PlcError::Device(DeviceCode::Ppi(ReturnCode::Refused { class: 0x85, code: 0 }))),
+        "{err:?}"
+    );
 }
 
 /// A fake S7-200 that answers each poll with a stale response (the previous PDU reference,
@@ -270,4 +277,23 @@ async fn a_response_with_an_old_pdu_reference_is_skipped() {
     for _ in 0..3 {
         assert_eq!(plc.read_words(&vw0, 1).await.unwrap(), vec![0x1234]);
     }
+}
+
+#[tokio::test]
+async fn wrong_ids_and_sources_are_not_taken_and_duplicates_do_not_desync() {
+    let s = state();
+    s.bank.lock().unwrap().bytes_mut(MemArea::V)[0..2].copy_from_slice(&[0x12, 0x34]);
+    let (_server, plc) = pty(&s, |c| c.retries = 1);
+    let vw0 = plc.parse_address("VW0").unwrap();
+    // A response with another PDU reference, then one from another address: each attempt
+    // ignores its wrong answer, so both fail with the reason kept.
+    s.faults.push(Fault::WrongId).push(Fault::WrongUnit(7));
+    let err = plc.read_words(&vw0, 1).await.unwrap_err();
+    assert!(matches!(err, PlcError::Timeout { attempts: 2, .. } | PlcError::Malformed(_)), "{err:?}");
+    assert_eq!(s.faults.requests_seen(), 2);
+    // A response sent twice: the copy is flushed before the next request.
+    s.faults.push(Fault::Duplicate);
+    assert_eq!(plc.read_words(&vw0, 1).await.unwrap(), vec![0x1234]);
+    s.bank.lock().unwrap().bytes_mut(MemArea::V)[0..2].copy_from_slice(&[0, 7]);
+    assert_eq!(plc.read_words(&vw0, 1).await.unwrap(), vec![7]);
 }

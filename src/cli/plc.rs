@@ -20,7 +20,7 @@ use crate::protocols::modbus::address::{self as modbus_address, Table};
 use crate::protocols::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use crate::protocols::ppi::{self, PpiClient, PpiConfig, PpiTransport};
 use crate::protocols::serial::SerialSettings;
-use crate::protocols::{Address, PlcError, PlcMemory};
+use crate::protocols::{Address, DeviceCode, PlcError, PlcMemory};
 
 /// The protocols `rackd plc` speaks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -202,17 +202,17 @@ fn format_address(protocol: PlcProtocol, address: &Address) -> String {
 /// A failure in words an operator understands.
 pub fn describe(error: &PlcError) -> String {
     match error {
-        PlcError::Device { protocol: "modbus", code, meaning } => {
-            format!("exception {code:02X} \"{meaning}\"")
-        }
-        PlcError::Device { protocol: "mc3e", code, meaning } => format!("end code {code:04X} \"{meaning}\""),
-        PlcError::Device { protocol: "mewtocol", code, meaning } => format!("error {code:02} \"{meaning}\""),
-        PlcError::Device { protocol: "ppi", code, meaning } if *code > 0xFF => {
-            format!("request refused, error class {:02X} code {:02X} \"{meaning}\"", code >> 8, code & 0xFF)
-        }
-        PlcError::Device { protocol: "ppi", code, meaning } => {
-            format!("item return code {code:02X} \"{meaning}\"")
-        }
+        PlcError::Device(code) => match code {
+            DeviceCode::Modbus(e) => format!("exception {:02X} \"{}\"", e.0, e.meaning()),
+            DeviceCode::Mc3e(c) => format!("end code {:04X} \"{}\"", c.0, c.meaning()),
+            DeviceCode::Mewtocol(c) => format!("error {:02} \"{}\"", c.0, c.meaning()),
+            DeviceCode::Ppi(c @ ppi::ReturnCode::Refused { class, code }) => {
+                format!("request refused, error class {class:02X} code {code:02X} \"{}\"", c.meaning())
+            }
+            DeviceCode::Ppi(c @ ppi::ReturnCode::Item(code)) => {
+                format!("item return code {code:02X} \"{}\"", c.meaning())
+            }
+        },
         PlcError::Timeout { attempts, timeout } => {
             format!("timeout: no reply after {attempts} tries of {} ms", timeout.as_millis())
         }

@@ -1,11 +1,88 @@
 //! `rackd sim <machine>`: one simulator alone, for commissioning and tests.
+//!
+//! Every simulator takes the same fault flags ([`FaultArgs`], flattened into each
+//! subcommand) with the same meanings, from [`crate::protocols::faults`]; only the notation
+//! of `--device-error` follows each protocol's manual (hexadecimal MC end codes, decimal
+//! MEWTOCOL codes).
 
+use std::str::FromStr;
 use std::time::Duration;
 
 use anyhow::Context;
 
+use crate::protocols::faults::Faults;
 use crate::protocols::serial::SerialSettings;
-use crate::sim::shelf::{LinkFaults, ShelfProtocol, ShelfSim, ShelfSimOptions};
+use crate::protocols::{BadDeviceCode, DeviceCode};
+use crate::sim::shelf::{ShelfProtocol, ShelfSim, ShelfSimOptions};
+
+/// The link faults of every `rackd sim` subcommand.
+#[derive(clap::Args, Clone, Debug, Default, PartialEq)]
+pub struct FaultArgs {
+    /// Fraction (0..1) of requests left unanswered.
+    #[arg(long, default_value_t = 0.0)]
+    pub drop: f64,
+    /// Milliseconds before each reply (more than the client's timeout: every reply is late).
+    #[arg(long, default_value_t = 0)]
+    pub delay_ms: u64,
+    /// Fraction (0..1) of replies preceded by random bytes (a separate datagram over UDP).
+    #[arg(long, default_value_t = 0.0)]
+    pub garbage: f64,
+    /// Fraction (0..1) of requests answered by closing the connection (UDP: dropped).
+    #[arg(long, default_value_t = 0.0)]
+    pub close: f64,
+    /// Fraction (0..1) of replies sent twice.
+    #[arg(long, default_value_t = 0.0)]
+    pub duplicate: f64,
+    /// Fraction (0..1) of replies with a wrong transaction id (Modbus TCP/UDP) or PDU
+    /// reference (PPI); no effect where frames carry none.
+    #[arg(long, default_value_t = 0.0)]
+    pub wrong_id: f64,
+    /// Answer as this unit / station / PPI address instead of the one asked (not MC 3E).
+    #[arg(long)]
+    pub wrong_unit: Option<u8>,
+    /// Answer every request with this device error code, as the protocol's manual writes
+    /// it: Modbus exception (2, 0x0B), MC end code in hexadecimal (C051), MEWTOCOL code
+    /// (63), PPI item return code (0x0A) or class x 256 + code (0x8500).
+    #[arg(long)]
+    pub device_error: Option<String>,
+}
+
+impl FaultArgs {
+    /// The faults these flags select, reading `--device-error` as a `C` code (the
+    /// protocol's code type, e.g. [`crate::protocols::mc3e::EndCode`]).
+    pub fn faults<C>(&self) -> anyhow::Result<Faults>
+    where
+        C: FromStr<Err = BadDeviceCode> + Into<DeviceCode>,
+    {
+        self.faults_with(|text| text.parse::<C>().map(Into::into))
+    }
+
+    /// The faults these flags select, reading `--device-error` with `code`.
+    pub fn faults_with(
+        &self,
+        code: impl Fn(&str) -> Result<DeviceCode, BadDeviceCode>,
+    ) -> anyhow::Result<Faults> {
+        let device_error = match &self.device_error {
+            Some(text) => {
+                let code = code(text)?;
+                Some(u16::try_from(code.number()).context("the device error code must fit 16 bits")?)
+            }
+            None => None,
+        };
+        let faults = Faults {
+            drop_rate: self.drop,
+            delay: Duration::from_millis(self.delay_ms),
+            garbage_rate: self.garbage,
+            close_rate: self.close,
+            duplicate_rate: self.duplicate,
+            wrong_id_rate: self.wrong_id,
+            wrong_unit: self.wrong_unit,
+            device_error,
+        };
+        faults.check()?;
+        Ok(faults)
+    }
+}
 
 /// The simulators.
 #[derive(clap::Subcommand, Debug)]
@@ -59,26 +136,23 @@ pub struct SimShelfArgs {
     /// Milliseconds each task takes.
     #[arg(long, default_value_t = 500)]
     pub task_ms: u64,
-    /// Fraction (0..1) of requests left unanswered.
-    #[arg(long, default_value_t = 0.0)]
-    pub drop: f64,
-    /// Milliseconds before each reply.
-    #[arg(long, default_value_t = 0)]
-    pub delay_ms: u64,
-    /// Fraction (0..1) of replies preceded by random bytes.
-    #[arg(long, default_value_t = 0.0)]
-    pub garbage: f64,
     /// Fraction (0..1) of tasks failing with kind 1 (PLC fault).
     #[arg(long, default_value_t = 0.0)]
     pub fail: f64,
+    /// Link faults.
+    #[command(flatten)]
+    pub faults: FaultArgs,
 }
 
 impl SimShelfArgs {
     /// The simulator options these arguments select.
     pub fn options(&self) -> anyhow::Result<ShelfSimOptions> {
-        for (name, p) in [("--drop", self.drop), ("--garbage", self.garbage), ("--fail", self.fail)] {
-            anyhow::ensure!((0.0..=1.0).contains(&p), "{name} must be between 0 and 1, got {p}");
-        }
+        anyhow::ensure!(
+            (0.0..=1.0).contains(&self.fail),
+            "--fail must be between 0 and 1, got {}",
+            self.fail
+        );
+        let faults = self.faults.faults_with(|text| self.protocol.device_code(text))?;
         Ok(ShelfSimOptions {
             protocol: self.protocol,
             slots: self.slots,
@@ -88,11 +162,7 @@ impl SimShelfArgs {
             serial: self.serial,
             task_time: Duration::from_millis(self.task_ms),
             fail_rate: self.fail,
-            faults: LinkFaults {
-                drop_rate: self.drop,
-                delay: Duration::from_millis(self.delay_ms),
-                garbage_rate: self.garbage,
-            },
+            faults,
         })
     }
 
@@ -145,5 +215,81 @@ pub async fn run(cmd: SimCommand) -> anyhow::Result<()> {
             super::sim_line::run(server, "PPI", &args).await
         }
         SimCommand::Shelf(args) => run_shelf(args).await,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(clap::Parser)]
+    struct Cli {
+        #[command(subcommand)]
+        sim: SimCommand,
+    }
+
+    fn faults_of(line: &str) -> FaultArgs {
+        let cli = Cli::try_parse_from(line.split_whitespace()).unwrap_or_else(|e| panic!("{line}: {e}"));
+        match cli.sim {
+            SimCommand::Modbus(a) => a.faults,
+            SimCommand::Shelf(a) => a.faults,
+            SimCommand::Mc3e(a) => a.faults,
+            SimCommand::Crane(a) => a.faults,
+            SimCommand::Mewtocol(a) | SimCommand::Ppi(a) => a.faults,
+        }
+    }
+
+    #[test]
+    fn every_simulator_takes_the_same_fault_flags() {
+        let flags =
+            "--drop 0.5 --delay-ms 7 --garbage 0.1 --close 0.2 --duplicate 0.3 --wrong-id 0.4 --wrong-unit 9";
+        let expected = Faults {
+            drop_rate: 0.5,
+            delay: Duration::from_millis(7),
+            garbage_rate: 0.1,
+            close_rate: 0.2,
+            duplicate_rate: 0.3,
+            wrong_id_rate: 0.4,
+            wrong_unit: Some(9),
+            device_error: None,
+        };
+        for sim in ["modbus --listen 127.0.0.1:0", "shelf", "mc3e", "crane", "mewtocol", "ppi"] {
+            let args = faults_of(&format!("sim {sim} {flags}"));
+            assert_eq!(args.faults_with(|_| unreachable!()).unwrap(), expected, "{sim}");
+        }
+    }
+
+    #[test]
+    fn device_errors_are_read_in_each_protocols_notation() {
+        let code = |line: &str, parse: &dyn Fn(&FaultArgs) -> anyhow::Result<Faults>| {
+            parse(&faults_of(line)).map(|f| f.device_error)
+        };
+        use crate::protocols::{mc3e, mewtocol, modbus, ppi};
+        assert_eq!(
+            code("sim mc3e --device-error C051", &|a| a.faults::<mc3e::EndCode>()).unwrap(),
+            Some(0xC051)
+        );
+        assert_eq!(
+            code("sim mewtocol --device-error 63", &|a| a.faults::<mewtocol::ErrorCode>()).unwrap(),
+            Some(63)
+        );
+        assert_eq!(
+            code("sim ppi --device-error 0x8500", &|a| a.faults::<ppi::ReturnCode>()).unwrap(),
+            Some(0x8500)
+        );
+        assert_eq!(
+            code("sim modbus --listen x --device-error 2", &|a| a.faults::<modbus::Exception>()).unwrap(),
+            Some(2)
+        );
+        assert!(code("sim mewtocol --device-error C051", &|a| a.faults::<mewtocol::ErrorCode>()).is_err());
+        let shelf = |line: &str| match Cli::try_parse_from(line.split_whitespace()).unwrap().sim {
+            SimCommand::Shelf(a) => a.options().map(|o| o.faults.device_error),
+            _ => unreachable!(),
+        };
+        assert_eq!(shelf("sim shelf --protocol ppi --device-error 0x0A").unwrap(), Some(0x0A));
+        assert!(shelf("sim shelf --protocol modbus-udp --device-error 300").is_err());
+        assert!(faults_of("sim ppi --drop 2").faults::<ppi::ReturnCode>().is_err(), "rates are fractions");
     }
 }

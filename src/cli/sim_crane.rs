@@ -16,8 +16,9 @@ use std::time::Duration;
 
 use tokio::io::{AsyncBufReadExt, BufReader};
 
+use super::sim::FaultArgs;
 use super::sim_mc3e::SimTransport;
-use crate::protocols::mc3e::TransportKind;
+use crate::protocols::mc3e::{EndCode, TransportKind};
 use crate::sim::crane::{CraneSim, CraneSimOptions};
 
 /// `rackd sim crane` options.
@@ -38,11 +39,21 @@ pub struct SimCraneArgs {
     /// Raise alarm CODE SECONDS after start (repeatable), e.g. `7069@10`.
     #[arg(long, value_parser = scheduled_alarm)]
     pub alarm: Vec<(u16, u64)>,
+    /// Link faults.
+    #[command(flatten)]
+    pub faults: FaultArgs,
 }
 
-fn scheduled_alarm(text: &str) -> Result<(u16, u64), String> {
-    let (code, secs) = text.split_once('@').ok_or("expected CODE@SECONDS")?;
-    Ok((code.parse().map_err(|_| "bad code")?, secs.parse().map_err(|_| "bad seconds")?))
+/// Why a `--alarm` value was refused.
+#[derive(Debug, thiserror::Error)]
+#[error("expected CODE@SECONDS, e.g. 7069@10: {0}")]
+pub struct BadScheduledAlarm(&'static str);
+
+fn scheduled_alarm(text: &str) -> Result<(u16, u64), BadScheduledAlarm> {
+    let (code, secs) = text.split_once('@').ok_or(BadScheduledAlarm("no '@'"))?;
+    let code = code.parse().map_err(|_| BadScheduledAlarm("the code is not a number"))?;
+    let secs = secs.parse().map_err(|_| BadScheduledAlarm("the seconds are not a number"))?;
+    Ok((code, secs))
 }
 
 /// Runs the crane until Ctrl-C or the end of stdin.
@@ -51,9 +62,11 @@ pub async fn run(args: SimCraneArgs) -> anyhow::Result<()> {
         SimTransport::Tcp => TransportKind::Tcp,
         SimTransport::Udp => TransportKind::Udp,
     };
+    let faults = args.faults.faults::<EndCode>()?;
     let wcs_timeout = (args.watchdog_secs > 0).then(|| Duration::from_secs(args.watchdog_secs));
     let options = CraneSimOptions { transport, step: Duration::from_millis(args.step_ms), wcs_timeout };
     let sim = std::sync::Arc::new(CraneSim::start(&args.listen, options).await?);
+    sim.set_faults(faults);
     println!("crane simulator on {:?} {} (commands on stdin)", args.transport, sim.local_addr());
     for (code, secs) in args.alarm.clone() {
         let sim = sim.clone();

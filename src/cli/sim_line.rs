@@ -1,10 +1,10 @@
 //! `rackd sim mewtocol` and `rackd sim ppi`: a simulated Panasonic or S7-200 PLC on TCP
 //! (as behind a serial-to-Ethernet gateway) or on a serial port, with optional faults.
 
-use std::time::Duration;
-
-use crate::protocols::line::{Faults, LineServer, SharedFaults};
+use super::sim::FaultArgs;
+use crate::protocols::faults::SharedFaults;
 use crate::protocols::serial::SerialSettings;
+use crate::protocols::transport::StreamServer;
 use crate::protocols::{mewtocol, ppi};
 
 /// Options shared by both simulators.
@@ -20,45 +20,21 @@ pub struct SimLineArgs {
     /// Station number (MEWTOCOL, default 1) or PPI address (default 2).
     #[arg(long)]
     pub station: Option<u8>,
-    /// Fraction (0..1) of requests left unanswered.
-    #[arg(long, default_value_t = 0.0)]
-    pub drop: f64,
-    /// Milliseconds before each reply.
-    #[arg(long, default_value_t = 0)]
-    pub delay_ms: u64,
-    /// Fraction (0..1) of replies preceded by random bytes.
-    #[arg(long, default_value_t = 0.0)]
-    pub garbage: f64,
-    /// Answer every request with this error code (MEWTOCOL: decimal, e.g. 63; PPI: an item
-    /// return code below 256 or class x 256 + code, e.g. 34048 for 85 00).
-    #[arg(long)]
-    pub error: Option<u16>,
+    /// Link faults.
+    #[command(flatten)]
+    pub faults: FaultArgs,
 }
 
 impl SimLineArgs {
-    fn faults(&self) -> anyhow::Result<SharedFaults> {
-        for (name, p) in [("--drop", self.drop), ("--garbage", self.garbage)] {
-            anyhow::ensure!((0.0..=1.0).contains(&p), "{name} must be between 0 and 1, got {p}");
-        }
-        Ok(Faults {
-            drop_ratio: self.drop,
-            garbage_ratio: self.garbage,
-            delay: Duration::from_millis(self.delay_ms),
-            error: self.error,
-            ..Faults::default()
-        }
-        .shared())
-    }
-
     fn is_tcp(&self) -> bool {
         !self.listen.starts_with('/') && self.listen.contains(':')
     }
 }
 
 /// Starts the MEWTOCOL simulator.
-pub async fn start_mewtocol(args: &SimLineArgs) -> anyhow::Result<LineServer> {
+pub async fn start_mewtocol(args: &SimLineArgs) -> anyhow::Result<StreamServer> {
     let mut state = mewtocol::ServerState::new(mewtocol::Bank::default().shared());
-    state.faults = args.faults()?;
+    state.faults = SharedFaults::new(args.faults.faults::<mewtocol::ErrorCode>()?);
     state.station = args.station.unwrap_or(1);
     anyhow::ensure!((1..=99).contains(&state.station), "--station must be 1..=99");
     if args.is_tcp() {
@@ -70,9 +46,9 @@ pub async fn start_mewtocol(args: &SimLineArgs) -> anyhow::Result<LineServer> {
 }
 
 /// Starts the PPI simulator.
-pub async fn start_ppi(args: &SimLineArgs) -> anyhow::Result<LineServer> {
+pub async fn start_ppi(args: &SimLineArgs) -> anyhow::Result<StreamServer> {
     let mut state = ppi::ServerState::new(ppi::Bank::default().shared());
-    state.faults = args.faults()?;
+    state.faults = SharedFaults::new(args.faults.faults::<ppi::ReturnCode>()?);
     state.address = args.station.unwrap_or(2);
     anyhow::ensure!((1..=126).contains(&state.address), "--station must be 1..=126");
     if args.is_tcp() {
@@ -83,7 +59,7 @@ pub async fn start_ppi(args: &SimLineArgs) -> anyhow::Result<LineServer> {
 }
 
 /// Runs a simulator until Ctrl-C.
-pub async fn run(server: LineServer, name: &str, args: &SimLineArgs) -> anyhow::Result<()> {
+pub async fn run(server: StreamServer, name: &str, args: &SimLineArgs) -> anyhow::Result<()> {
     let at = server.local_addr().map_or_else(|| args.listen.clone(), |a| a.to_string());
     eprintln!("{name} simulator on {at}; Ctrl-C to stop");
     tokio::signal::ctrl_c().await?;

@@ -2,12 +2,12 @@
 //! (addresses 0..65535), for commissioning tools and manual tests.
 
 use std::sync::Arc;
-use std::time::Duration;
 
 use anyhow::Context;
 
+use super::sim::FaultArgs;
 use crate::protocols::modbus::Exception;
-use crate::protocols::modbus::server::{Bank, Faults, ModbusServer, ServerOptions};
+use crate::protocols::modbus::server::{Bank, ModbusServer, ServerOptions};
 use crate::protocols::serial::SerialSettings;
 
 /// The transports the simulator can listen on.
@@ -47,35 +47,17 @@ pub struct SimModbusArgs {
     /// Device quirks to imitate (repeatable).
     #[arg(long, value_enum)]
     pub quirk: Vec<SimQuirk>,
-    /// Fraction of requests to ignore (0..1).
-    #[arg(long, default_value_t = 0.0)]
-    pub drop: f64,
-    /// Delay before each reply, in milliseconds.
-    #[arg(long, default_value_t = 0)]
-    pub delay_ms: u64,
-    /// Answer every request with this exception code.
-    #[arg(long)]
-    pub exception: Option<u8>,
-    /// Fraction of replies preceded by garbage bytes (0..1).
-    #[arg(long, default_value_t = 0.0)]
-    pub garbage: f64,
     /// Serial settings for `--transport rtu`.
     #[arg(long, default_value = "9600,8E1")]
     pub serial: SerialSettings,
+    /// Link faults.
+    #[command(flatten)]
+    pub faults: FaultArgs,
 }
 
 /// Runs the simulator until Ctrl-C.
 pub async fn run(args: SimModbusArgs) -> anyhow::Result<()> {
-    if !(0.0..=1.0).contains(&args.drop) || !(0.0..=1.0).contains(&args.garbage) {
-        anyhow::bail!("--drop and --garbage are fractions between 0 and 1");
-    }
-    let faults = Faults {
-        drop_rate: args.drop,
-        delay: Duration::from_millis(args.delay_ms),
-        exception: args.exception.map(Exception),
-        garbage_rate: args.garbage,
-        ..Faults::default()
-    };
+    let faults = args.faults.faults::<Exception>()?;
     let options = ServerOptions {
         unit: args.unit,
         length0: args.quirk.contains(&SimQuirk::Length0),

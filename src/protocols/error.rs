@@ -1,6 +1,12 @@
 //! The typed errors every protocol reports through [`PlcMemory`](super::PlcMemory).
+//!
+//! A device's own refusal ([`PlcError::Device`]) keeps which protocol's code it is
+//! ([`DeviceCode`]), so a caller that cares (the CLI, which words a failure as the device's
+//! manual does) matches every protocol exhaustively instead of comparing protocol names.
 
 use std::time::Duration;
+
+use super::{mc3e, mewtocol, modbus, ppi};
 
 /// Why a PLC request failed.
 #[derive(Debug, thiserror::Error)]
@@ -16,17 +22,9 @@ pub enum PlcError {
     /// The connection could not be made or was lost.
     #[error("connection lost: {0}")]
     Connection(#[from] std::io::Error),
-    /// The device answered with its own error code (Modbus exception, MC end code,
-    /// MEWTOCOL error code, PPI item return code).
-    #[error("{protocol} device error {code:#06X}: {meaning}")]
-    Device {
-        /// The protocol that carried the code ("modbus", "mc3e", ...).
-        protocol: &'static str,
-        /// The device's own code.
-        code: u32,
-        /// What the code means, from the protocol's documentation.
-        meaning: &'static str,
-    },
+    /// The device answered with its own error code. Never retried: the device answered.
+    #[error("{0}")]
+    Device(DeviceCode),
     /// The reply could not be decoded or did not match the request.
     #[error("malformed reply: {0}")]
     Malformed(&'static str),
@@ -41,4 +39,148 @@ pub enum PlcError {
         /// What is wrong with it.
         reason: &'static str,
     },
+}
+
+/// A device's own error code, typed by the protocol that carried it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum DeviceCode {
+    /// A Modbus exception reply.
+    Modbus(modbus::Exception),
+    /// A nonzero MC 3E end code.
+    Mc3e(mc3e::EndCode),
+    /// A MEWTOCOL-COM `!` error code.
+    Mewtocol(mewtocol::ErrorCode),
+    /// A PPI item return code or a refused request's error class and code.
+    Ppi(ppi::ReturnCode),
+}
+
+impl DeviceCode {
+    /// The protocol's name as rackd spells it in logs (`modbus`, `mc3e`, `mewtocol`, `ppi`).
+    pub fn protocol(&self) -> &'static str {
+        match self {
+            DeviceCode::Modbus(_) => "modbus",
+            DeviceCode::Mc3e(_) => "mc3e",
+            DeviceCode::Mewtocol(_) => "mewtocol",
+            DeviceCode::Ppi(_) => "ppi",
+        }
+    }
+
+    /// The code as a number (for a PPI refusal: error class x 256 + code).
+    pub fn number(&self) -> u32 {
+        match self {
+            DeviceCode::Modbus(e) => u32::from(e.0),
+            DeviceCode::Mc3e(c) => u32::from(c.0),
+            DeviceCode::Mewtocol(c) => u32::from(c.0),
+            DeviceCode::Ppi(c) => c.number(),
+        }
+    }
+
+    /// What the code means, from the protocol's documentation.
+    pub fn meaning(&self) -> &'static str {
+        match self {
+            DeviceCode::Modbus(e) => e.meaning(),
+            DeviceCode::Mc3e(c) => c.meaning(),
+            DeviceCode::Mewtocol(c) => c.meaning(),
+            DeviceCode::Ppi(c) => c.meaning(),
+        }
+    }
+}
+
+impl From<modbus::Exception> for DeviceCode {
+    fn from(e: modbus::Exception) -> Self {
+        DeviceCode::Modbus(e)
+    }
+}
+
+impl From<mc3e::EndCode> for DeviceCode {
+    fn from(c: mc3e::EndCode) -> Self {
+        DeviceCode::Mc3e(c)
+    }
+}
+
+impl From<mewtocol::ErrorCode> for DeviceCode {
+    fn from(c: mewtocol::ErrorCode) -> Self {
+        DeviceCode::Mewtocol(c)
+    }
+}
+
+impl From<ppi::ReturnCode> for DeviceCode {
+    fn from(c: ppi::ReturnCode) -> Self {
+        DeviceCode::Ppi(c)
+    }
+}
+
+impl std::fmt::Display for DeviceCode {
+    /// `modbus device error 0x0002: illegal data address`: one shape for logs and alarms.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} device error {:#06X}: {}", self.protocol(), self.number(), self.meaning())
+    }
+}
+
+/// Why a device error code given as text (a simulator's `--device-error`) was refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("bad {protocol} device error code {text:?}: {expected}")]
+pub struct BadDeviceCode {
+    /// The protocol whose code was asked for.
+    pub protocol: &'static str,
+    /// The text as given.
+    pub text: String,
+    /// What a valid code looks like.
+    pub expected: &'static str,
+}
+
+/// A number in decimal, or in hexadecimal after `0x`.
+pub(crate) fn parse_number(text: &str) -> Option<u32> {
+    let text = text.trim();
+    match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+        Some(hex) => u32::from_str_radix(hex, 16).ok(),
+        None => text.parse().ok(),
+    }
+}
+
+impl From<DeviceCode> for PlcError {
+    fn from(code: DeviceCode) -> Self {
+        PlcError::Device(code)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn device_errors_read_the_same_for_every_protocol() {
+        let cases = [
+            (DeviceCode::Modbus(modbus::Exception(2)), "modbus device error 0x0002: illegal data address"),
+            (
+                DeviceCode::Mc3e(mc3e::EndCode(0xC059)),
+                "mc3e device error 0xC059: wrong command or subcommand, or a command the target cannot execute",
+            ),
+            (DeviceCode::Mewtocol(mewtocol::ErrorCode(63)), "mewtocol device error 0x003F: PLC mode error"),
+            (DeviceCode::Ppi(ppi::ReturnCode::Item(0x0A)), "ppi device error 0x000A: object does not exist"),
+        ];
+        for (code, text) in cases {
+            assert_eq!(PlcError::Device(code).to_string(), text);
+        }
+    }
+
+    #[test]
+    fn codes_parse_in_each_manuals_notation() {
+        assert_eq!("2".parse(), Ok(modbus::Exception(2)));
+        assert_eq!("0x0B".parse(), Ok(modbus::Exception(0x0B)));
+        assert!("0".parse::<modbus::Exception>().is_err() && "256".parse::<modbus::Exception>().is_err());
+        assert_eq!("C051".parse(), Ok(mc3e::EndCode(0xC051)));
+        assert_eq!("0xc059".parse(), Ok(mc3e::EndCode(0xC059)));
+        assert!("0".parse::<mc3e::EndCode>().is_err() && "G1".parse::<mc3e::EndCode>().is_err());
+        assert_eq!("63".parse(), Ok(mewtocol::ErrorCode(63)));
+        assert!("100".parse::<mewtocol::ErrorCode>().is_err());
+        assert_eq!("0x0A".parse(), Ok(ppi::ReturnCode::Item(0x0A)));
+        assert_eq!("34048".parse(), Ok(ppi::ReturnCode::Refused { class: 0x85, code: 0 }));
+        assert!("0xFF".parse::<ppi::ReturnCode>().is_err(), "FF is success");
+        let e = "x".parse::<mc3e::EndCode>().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "bad mc3e device error code \"x\": a nonzero hexadecimal end code such as C051"
+        );
+    }
 }

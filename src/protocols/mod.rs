@@ -1,6 +1,6 @@
 //! How rackd talks to PLCs.
 //!
-//! Every protocol (Modbus, and later MC 3E, MEWTOCOL-COM, PPI) implements one small,
+//! Every protocol (Modbus, MC 3E, MEWTOCOL-COM, PPI) implements one small,
 //! protocol-neutral trait, [`PlcMemory`]: read and write words or bits of a named memory
 //! area. Device adapters (shelf task slots, crane handshakes, tag I/O) use only this trait,
 //! so any machine can run over whichever protocol its site uses.
@@ -8,9 +8,14 @@
 //! Addresses are written in the protocol's own notation (`4x4000` for Modbus, `D200` for
 //! MC, `DT100` for MEWTOCOL, `VW100` for PPI); each protocol parses its notation into an
 //! [`Address`] with [`PlcMemory::parse_address`].
+//!
+//! Under the protocols lies one [`transport`] layer (endpoints, connections and their
+//! reconnect, the one retry policy, the defences against late replies); a device's own
+//! refusal is a [`DeviceCode`] typed by protocol; and every simulated server injects the
+//! same [`faults`].
 
 pub mod error;
-pub mod line;
+pub mod faults;
 pub mod link;
 pub mod mc3e;
 pub mod mewtocol;
@@ -18,10 +23,11 @@ pub mod modbus;
 pub mod notation;
 pub mod ppi;
 pub mod serial;
+pub mod transport;
 
 use async_trait::async_trait;
 
-pub use error::PlcError;
+pub use error::{BadDeviceCode, DeviceCode, PlcError};
 
 /// A named memory area of a PLC in the protocol's own notation, upper-cased
 /// (`"4X"` holding registers, `"D"` data registers, `"DT"`, `"V"`, ...).
@@ -65,8 +71,9 @@ impl Address {
 
 /// A PLC's memory, whatever the protocol: the one interface device adapters use.
 ///
-/// Implementations own their transport, timeouts, retries and reconnection; a call either
-/// completes or returns a typed [`PlcError`] once the configured retries are spent. Requests
+/// Implementations run every request over the shared [`transport`] layer, under its one
+/// retry policy and reconnect; a call either completes or returns a typed [`PlcError`] once
+/// the configured retries are spent. Requests
 /// larger than one frame allows are split by the implementation.
 #[async_trait]
 pub trait PlcMemory: Send + Sync {

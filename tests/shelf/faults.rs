@@ -2,7 +2,8 @@
 
 use std::time::Duration;
 
-use rackd::sim::shelf::{LinkFaults, ShelfSimOptions};
+use rackd::protocols::faults::Faults;
+use rackd::sim::shelf::ShelfSimOptions;
 use serde_json::json;
 
 use crate::helpers::*;
@@ -16,7 +17,7 @@ async fn online(app: &TestApp) -> bool {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn with_twenty_percent_loss_every_job_completes_exactly_once() {
     let mut options = sim(0);
-    options.faults = LinkFaults { drop_rate: 0.2, ..LinkFaults::default() };
+    options.faults = Faults { drop_rate: 0.2, ..Faults::default() };
     let (app, sim) = shelf_app(options, |d| {
         d.timeout_ms = 40;
         d.retries = 8;
@@ -74,7 +75,7 @@ async fn a_silent_plc_goes_offline_and_comes_back_by_itself() {
         assert!(std::time::Instant::now() < deadline, "never came online");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
-    sim.set_faults(LinkFaults { drop_rate: 1.0, ..LinkFaults::default() });
+    sim.set_faults(Faults { drop_rate: 1.0, ..Faults::default() });
     while online(&app).await {
         assert!(std::time::Instant::now() < deadline, "never went offline");
         tokio::time::sleep(Duration::from_millis(20)).await;
@@ -86,7 +87,7 @@ async fn a_silent_plc_goes_offline_and_comes_back_by_itself() {
     let (_, job) = app.post("/api/v1/jobs", &store("WAITS")).await;
     tokio::time::sleep(Duration::from_millis(200)).await;
     assert_eq!(app.get(&format!("/api/v1/jobs/{}", job["id"])).await.1["state"], "queued");
-    sim.set_faults(LinkFaults::default());
+    sim.set_faults(Faults::default());
     let done = wait_ended(&app, 1, 30).await;
     assert_eq!(done[0]["state"], "completed");
     assert!(online(&app).await);

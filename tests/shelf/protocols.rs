@@ -8,7 +8,8 @@ use std::time::Duration;
 
 use rackd::devices::DeviceConfig;
 use rackd::domain::Location;
-use rackd::sim::shelf::{LinkFaults, ShelfProtocol, ShelfSim, ShelfSimOptions};
+use rackd::protocols::faults::Faults;
+use rackd::sim::shelf::{ShelfProtocol, ShelfSim, ShelfSimOptions};
 use serde_json::{Value, json};
 
 use crate::helpers::*;
@@ -122,7 +123,12 @@ async fn lossy_ppi_and_mewtocol_lines_still_end_as_over_udp() {
     let udp = over_udp().await;
     for protocol in [ShelfProtocol::PpiTcp, ShelfProtocol::MewtocolTcp] {
         let mut lossy = options(protocol);
-        lossy.faults = LinkFaults { drop_rate: 0.2, garbage_rate: 0.1, delay: Duration::from_millis(1) };
+        lossy.faults = Faults {
+            drop_rate: 0.2,
+            garbage_rate: 0.1,
+            delay: Duration::from_millis(1),
+            ..Faults::default()
+        };
         let sim = ShelfSim::start("127.0.0.1:0", lossy).await.unwrap();
         // Lost requests and responses, noise and late replies: rackd's retries must still
         // hand each task over once, and never write into a busy slot (run checks it).

@@ -2,8 +2,8 @@
 //! reaching the PLC; PLC refusals and silence as gateway errors.
 
 use rackd::devices::DeviceConfig;
+use rackd::protocols::faults::Faults;
 use rackd::protocols::modbus::Exception;
-use rackd::protocols::modbus::server::Faults;
 use serde_json::json;
 
 use crate::helpers::{assert_error, spawn_with, split, store};
@@ -88,7 +88,10 @@ async fn plc_refusals_are_502_and_silence_504_until_the_device_is_offline() {
     let app = spawn_with(|c| c.devices = vec![device]).await;
     wait_device(&app, "tags1", |d| d["online"] == true).await;
 
-    server.set_faults(Faults { exception: Some(Exception::SERVER_DEVICE_FAILURE), ..Faults::default() });
+    server.set_faults(Faults {
+        device_error: Some(Exception::SERVER_DEVICE_FAILURE.0.into()),
+        ..Faults::default()
+    });
     let refused = write(&app, "tags1", "plain.u16", json!(5)).await;
     assert_error(&refused, 502, "plc_error");
     let message = refused.1["error"]["message"].as_str().unwrap();

@@ -150,7 +150,7 @@ impl TagDevice {
     /// a failure; an error raised before sending anything is neither.
     fn contact<T>(&mut self, result: &Result<T, PlcError>) {
         let outcome = match result {
-            Ok(_) | Err(PlcError::Device { .. }) => Ok(()),
+            Ok(_) | Err(PlcError::Device(_)) => Ok(()),
             Err(e @ (PlcError::Timeout { .. } | PlcError::Connection(_) | PlcError::Malformed(_))) => Err(e),
             Err(PlcError::OutOfRange(_) | PlcError::BadAddress { .. }) => return,
         };

@@ -11,8 +11,9 @@ use tokio::sync::Mutex;
 
 use super::device::{self, Device, MAX_DEVICE_NUMBER};
 use super::frame::{self, MAX_BIT_POINTS, MAX_WORD_POINTS, Route};
+use super::link::{Expect, Link, LinkConfig, TransportKind};
 use super::request::{Command, Request};
-use super::transport::{Expect, Link, LinkConfig, TransportKind};
+use crate::protocols::transport::Backoff;
 use crate::protocols::{Address, PlcError, PlcMemory};
 
 /// Everything configurable about one PLC connection.
@@ -38,8 +39,7 @@ impl Mc3eConfig {
                 transport,
                 timeout: Duration::from_millis(1500),
                 retries: 2,
-                reconnect_min: Duration::from_millis(100),
-                reconnect_max: Duration::from_secs(5),
+                backoff: Backoff::default(),
                 udp_local: None,
             },
             route: Route::default(),

@@ -5,7 +5,18 @@
 //! or CPU while checking the request). Codes outside this table are still surfaced with
 //! their number and a generic meaning.
 
-use crate::protocols::PlcError;
+use crate::protocols::{BadDeviceCode, DeviceCode, PlcError};
+
+/// A nonzero end code in a 3E response: the PLC's refusal of a request.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct EndCode(pub u16);
+
+impl EndCode {
+    /// What the code means (see [`meaning`]).
+    pub fn meaning(self) -> &'static str {
+        meaning(self.0)
+    }
+}
 
 /// ASCII data that cannot be converted to binary was received.
 pub const ASCII_NOT_CONVERTIBLE: u16 = 0xC050;
@@ -24,6 +35,23 @@ pub const BAD_REQUEST_CONTENTS: u16 = 0xC05C;
 pub const BAD_REQUEST_DATA: u16 = 0xC060;
 /// The request data length does not match the number of data bytes.
 pub const LENGTH_MISMATCH: u16 = 0xC061;
+
+impl std::str::FromStr for EndCode {
+    type Err = BadDeviceCode;
+
+    /// A nonzero code in hexadecimal as the manuals write it (`C051`, or `0xC051`).
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let hex = text.trim().trim_start_matches("0x").trim_start_matches("0X");
+        match u16::from_str_radix(hex, 16) {
+            Ok(code) if code != 0 => Ok(EndCode(code)),
+            _ => Err(BadDeviceCode {
+                protocol: "mc3e",
+                text: text.to_owned(),
+                expected: "a nonzero hexadecimal end code such as C051",
+            }),
+        }
+    }
+}
 
 /// What an end code means; never fails (unknown codes get a generic meaning).
 pub fn meaning(code: u16) -> &'static str {
@@ -54,7 +82,7 @@ pub fn meaning(code: u16) -> &'static str {
 
 /// The typed error for a nonzero end code.
 pub fn to_error(code: u16) -> PlcError {
-    PlcError::Device { protocol: "mc3e", code: u32::from(code), meaning: meaning(code) }
+    PlcError::Device(DeviceCode::Mc3e(EndCode(code)))
 }
 
 #[cfg(test)]
@@ -74,9 +102,9 @@ mod tests {
     #[test]
     fn error_carries_code_and_meaning() {
         match to_error(0xC051) {
-            PlcError::Device { protocol, code, meaning } => {
-                assert_eq!((protocol, code), ("mc3e", 0xC051));
-                assert!(meaning.contains("points"));
+            PlcError::Device(DeviceCode::Mc3e(code)) => {
+                assert_eq!(code, EndCode(0xC051));
+                assert!(code.meaning().contains("points"));
             }
             other => panic!("{other:?}"),
         }

@@ -13,9 +13,11 @@
 //! # Layers
 //! [`frame`], [`request`], [`response`] are the pure codec (no I/O); [`device`] parses
 //! addresses in each device's native radix (`X1A` hexadecimal, `D200` decimal);
-//! [`end_code`] names end codes; [`transport`] owns timeouts, retries, reconnection and the
-//! stale-reply defences; [`client`] implements [`PlcMemory`](super::PlcMemory); [`bank`],
-//! [`faults`], [`handler`] and [`server`] make the simulated PLC.
+//! [`end_code`] names end codes; [`link`] sends frames over the shared
+//! [`transport`](crate::protocols::transport) layer (timeouts, retries, reconnection) with
+//! the stale-reply defences; [`client`] implements [`PlcMemory`](super::PlcMemory); [`bank`],
+//! [`handler`] and [`server`] make the simulated PLC (faults from
+//! [`crate::protocols::faults`]).
 //!
 //! # Choices
 //! - The codec is written here rather than taken from a crate: the Rust MC crates found are
@@ -26,9 +28,9 @@
 //!   bytes (up to 0xFFFFFF). The client splits larger requests; the server answers C051.
 //! - Word devices are read and written in words only; bit devices in bits, or in words of
 //!   16 points (bit 0 of each word is the lowest-numbered device).
-//! - End codes become `PlcError::Device { protocol: "mc3e", code, meaning }` and are never
+//! - End codes become `PlcError::Device(DeviceCode::Mc3e(EndCode))` and are never
 //!   retried (the PLC answered). Error replies are accepted with or without error info.
-//! - Over UDP plain 3E has no serial number; see [`transport`] for how stale replies are
+//! - Over UDP plain 3E has no serial number; see [`link`] for how stale replies are
 //!   kept out and the one case where they cannot be (a fixed local UDP port).
 //! - Only binary code, the 3E frame and the Q/L device specification (subcommands 0000
 //!   and 0001) are supported; not ASCII, 4E (which has serial numbers), random or block
@@ -38,13 +40,12 @@ pub mod bank;
 pub mod client;
 pub mod device;
 pub mod end_code;
-pub mod faults;
 pub mod frame;
 pub mod handler;
+pub mod link;
 pub mod request;
 pub mod response;
 pub mod server;
-pub mod transport;
 
 #[cfg(test)]
 mod proptests;
@@ -52,8 +53,8 @@ mod proptests;
 pub use bank::{Bank, SharedBank};
 pub use client::{Mc3eClient, Mc3eConfig};
 pub use device::Device;
-pub use faults::{Fault, Faults, SharedFaults};
+pub use end_code::EndCode;
 pub use frame::Route;
 pub use handler::{WriteEvent, WriteHook};
+pub use link::{LinkConfig, TransportKind};
 pub use server::{Mc3eServer, ServerState};
-pub use transport::{LinkConfig, TransportKind};

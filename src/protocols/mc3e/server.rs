@@ -6,11 +6,12 @@
 //!
 //! ```no_run
 //! # async fn demo() -> std::io::Result<()> {
-//! use rackd::protocols::mc3e::{Bank, Device, Fault, Mc3eServer, ServerState};
+//! use rackd::protocols::faults::Fault;
+//! use rackd::protocols::mc3e::{Bank, Device, Mc3eServer, ServerState};
 //! let state = ServerState::new(Bank::default().shared());
 //! let server = Mc3eServer::bind_udp("127.0.0.1:0".parse().unwrap(), state).await?;
 //! server.bank().lock().unwrap().set_word(Device::D, 200, 1);
-//! server.faults().lock().unwrap().push(Fault::Drop);
+//! server.faults().push(Fault::Drop);
 //! server.shutdown().await;
 //! # Ok(()) }
 //! ```
@@ -23,9 +24,9 @@ use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::task::{JoinHandle, JoinSet};
 
 use super::bank::SharedBank;
-use super::faults::{Fault, Faults, SharedFaults};
 use super::frame::{self, REQUEST_SUBHEADER};
-use super::handler::{self, Answer, WriteHook};
+use super::handler::{self, WriteHook};
+use crate::protocols::faults::{Plan, SharedFaults};
 
 /// What a server serves: memory, faults and an optional write hook.
 #[derive(Clone)]
@@ -41,7 +42,7 @@ pub struct ServerState {
 impl ServerState {
     /// A state serving `bank`, without faults or hook.
     pub fn new(bank: SharedBank) -> Self {
-        ServerState { bank, faults: Faults::default().shared(), on_write: None }
+        ServerState { bank, faults: SharedFaults::default(), on_write: None }
     }
 
     /// The same state with these faults.
@@ -56,18 +57,18 @@ impl ServerState {
         self
     }
 
-    /// The fault to apply and the answer to give to one frame.
-    fn process(&self, bytes: &[u8]) -> (Option<Fault>, Option<Answer>) {
-        let fault = self.faults.lock().unwrap_or_else(|p| p.into_inner()).take_next();
-        let answer = match fault {
-            Some(Fault::Drop | Fault::Close) => None,
-            Some(Fault::EndCode(code)) => handler::answer(&self.bank, bytes, Some(code)),
-            _ => handler::answer(&self.bank, bytes, None),
-        };
+    /// The faults to apply to one frame, and its answer, if any. Wrong ids and units do
+    /// not apply: 3E frames have neither.
+    fn process(&self, bytes: &[u8]) -> (Plan, Option<Vec<u8>>) {
+        let plan = self.faults.plan();
+        if plan.unanswered() {
+            return (plan, None);
+        }
+        let answer = handler::answer(&self.bank, bytes, plan.device_error);
         if let (Some(hook), Some(write)) = (&self.on_write, answer.as_ref().and_then(|a| a.write)) {
             hook(write);
         }
-        (fault, answer)
+        (plan, answer.map(|a| a.bytes))
     }
 }
 
@@ -165,16 +166,20 @@ async fn serve_connection(mut stream: TcpStream, peer: SocketAddr, state: Server
         if stream.read_exact(&mut frame_bytes[frame::HEADER_LEN..]).await.is_err() {
             return;
         }
-        let (fault, answer) = state.process(&frame_bytes);
-        if let Some(Fault::Delay(delay)) = fault {
-            tokio::time::sleep(delay).await;
-        }
-        if fault == Some(Fault::Close) {
+        let (plan, out) = state.process(&frame_bytes);
+        if plan.close {
             return;
         }
-        if let Some(answer) = answer
-            && stream.write_all(&answer.bytes).await.is_err()
-        {
+        if !plan.delay.is_zero() {
+            tokio::time::sleep(plan.delay).await;
+        }
+        let Some(answer) = out else { continue };
+        let mut out = plan.garbage.unwrap_or_default();
+        out.extend_from_slice(&answer);
+        if plan.duplicate {
+            out.extend_from_slice(&answer);
+        }
+        if stream.write_all(&out).await.is_err() {
             return;
         }
     }
@@ -197,19 +202,25 @@ async fn serve_udp(socket: Arc<UdpSocket>, state: ServerState) {
                 continue;
             }
         };
-        let (fault, answer) = state.process(&buf[..len]);
-        let Some(answer) = answer else { continue };
-        match fault {
-            Some(Fault::Delay(delay)) => {
-                let socket = socket.clone();
-                delayed.spawn(async move {
-                    tokio::time::sleep(delay).await;
-                    let _ = socket.send_to(&answer.bytes, peer).await;
-                });
-            }
-            _ => {
-                let _ = socket.send_to(&answer.bytes, peer).await;
-            }
+        let (plan, Some(answer)) = state.process(&buf[..len]) else { continue };
+        // Each piece is its own datagram: the noise, the answer, its duplicate.
+        let mut datagrams: Vec<Vec<u8>> = plan.garbage.into_iter().collect();
+        datagrams.push(answer.clone());
+        if plan.duplicate {
+            datagrams.push(answer);
         }
+        if plan.delay.is_zero() {
+            for datagram in &datagrams {
+                let _ = socket.send_to(datagram, peer).await;
+            }
+            continue;
+        }
+        let socket = socket.clone();
+        delayed.spawn(async move {
+            tokio::time::sleep(plan.delay).await;
+            for datagram in &datagrams {
+                let _ = socket.send_to(datagram, peer).await;
+            }
+        });
     }
 }

@@ -4,16 +4,17 @@
 use std::time::Duration;
 
 use tokio::sync::Mutex;
-use tokio::time::Instant;
+use tokio_util::bytes::{Buf, BytesMut};
+use tokio_util::codec::Decoder;
 
 use super::command::{Request, Response};
-use super::error_code;
-use super::frame::{self, Bcc, Kind, MAX_LONG, MAX_SHORT, Scan};
-use crate::protocols::PlcError;
-use crate::protocols::line::{LineLink, attempt_error};
-use crate::protocols::modbus::ByteStream;
-use crate::protocols::modbus::transport::{AttemptError, Endpoint};
+use super::error_code::{self, ErrorCode};
+use super::frame::{self, Bcc, Frame, FrameError, Kind, MAX_LONG, MAX_SHORT, Scan};
 use crate::protocols::serial::SerialSettings;
+use crate::protocols::transport::{
+    Attempt, AttemptError, Backoff, ByteStream, Endpoint, RetryPolicy, StreamLink,
+};
+use crate::protocols::{DeviceCode, PlcError};
 
 /// How the PLC is reached.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -77,11 +78,38 @@ impl MewtocolConfig {
     }
 }
 
+/// Finds MEWTOCOL frames in a byte stream ([`frame::scan`]): a whole frame, or the bytes
+/// from a start character that turned out not to be one.
+struct Frames;
+
+impl Decoder for Frames {
+    type Item = Result<Frame, FrameError>;
+    type Error = AttemptError;
+
+    fn decode(&mut self, src: &mut BytesMut) -> Result<Option<Self::Item>, AttemptError> {
+        Ok(match frame::scan(src) {
+            Scan::Found { end, frame } => {
+                src.advance(end);
+                Some(Ok(frame))
+            }
+            Scan::Bad { end, error } => {
+                src.advance(end);
+                Some(Err(error))
+            }
+            Scan::NeedMore { discard } => {
+                src.advance(discard);
+                None
+            }
+        })
+    }
+}
+
 /// A MEWTOCOL-COM client for one station. Requests from concurrent callers go one at a
 /// time. Implements [`crate::protocols::PlcMemory`] (see `memory.rs`).
 pub struct MewtocolClient {
     config: MewtocolConfig,
-    link: Mutex<LineLink>,
+    policy: RetryPolicy,
+    link: Mutex<StreamLink>,
 }
 
 fn check_station(station: u8) -> Result<(), PlcError> {
@@ -92,19 +120,24 @@ impl MewtocolClient {
     /// A client for `config`; the port or connection is opened on the first request and
     /// reopened after it is lost.
     pub fn new(config: MewtocolConfig) -> Result<Self, PlcError> {
-        check_station(config.station)?;
         let endpoint = match config.transport {
-            MewtocolTransport::Serial => Endpoint::Serial(config.address.clone(), config.serial),
+            MewtocolTransport::Serial => {
+                Endpoint::Serial { path: config.address.clone(), settings: config.serial }
+            }
             MewtocolTransport::Tcp => Endpoint::Tcp(config.address.clone()),
         };
-        Ok(MewtocolClient { config, link: Mutex::new(LineLink::new(endpoint)) })
+        Self::with(config, endpoint)
     }
 
     /// A client over a stream the caller opened (a pty in tests); it cannot be reopened.
     pub fn over_stream(config: MewtocolConfig, stream: impl ByteStream + 'static) -> Result<Self, PlcError> {
+        Self::with(config, Endpoint::given(stream))
+    }
+
+    fn with(config: MewtocolConfig, endpoint: Endpoint) -> Result<Self, PlcError> {
         check_station(config.station)?;
-        let endpoint = Endpoint::Given(Some(Box::new(stream)));
-        Ok(MewtocolClient { config, link: Mutex::new(LineLink::new(endpoint)) })
+        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries };
+        Ok(MewtocolClient { config, policy, link: Mutex::new(StreamLink::new(endpoint, Backoff::default())) })
     }
 
     /// The configuration.
@@ -125,71 +158,60 @@ impl MewtocolClient {
             return Err(PlcError::OutOfRange("command longer than one frame"));
         }
         let mut link = self.link.lock().await;
-        let attempts = c.retries + 1;
-        let mut last = AttemptError::Timeout;
-        for attempt in 0..attempts {
-            match self.attempt(&mut link, &tx, request).await {
-                Ok(Ok(response)) => return Ok(response),
-                Ok(Err(code)) => return Err(error_code::device_error(code)),
-                Err(e) => {
-                    tracing::debug!(station = c.station, attempt, error = ?e, "mewtocol attempt failed");
-                    last = e;
-                }
+        let mut retry = self.policy.start("mewtocol");
+        while let Some(attempt) = retry.next_attempt() {
+            match self.attempt(&mut link, &tx, request, &attempt).await {
+                Ok(response) => return Ok(response),
+                Err(e) => retry.failed(e)?,
             }
         }
-        Err(attempt_error(last, attempts, c.timeout))
+        Err(retry.spent())
     }
 
     /// One attempt: flush stale input, send, and wait for this station's reply.
     async fn attempt(
         &self,
-        link: &mut LineLink,
+        link: &mut StreamLink,
         tx: &[u8],
         request: &Request,
-    ) -> Result<Result<Response, u8>, AttemptError> {
-        let deadline = Instant::now() + self.config.timeout;
-        link.send_fresh(tx, self.config.timeout).await?;
+        attempt: &Attempt,
+    ) -> Result<Response, AttemptError> {
+        link.flush_stale(attempt.timeout).await?;
+        link.send(tx, attempt.timeout).await?;
         let mut reason = None;
         loop {
-            match frame::scan(&link.rx) {
-                Scan::Found { end, frame } => {
-                    link.rx.drain(..end);
-                    // Our own command echoed by a 2-wire RS-485 adapter, or another station.
-                    if frame.kind == Kind::Command || frame.station != self.config.station {
-                        continue;
-                    }
-                    match frame.bcc {
-                        Bcc::Wrong { .. } => {
-                            reason = Some("BCC error in the reply");
-                            continue;
-                        }
-                        Bcc::Skipped if self.config.bcc => {
-                            reason = Some("reply without a BCC (`**`) while BCC is required");
-                            continue;
-                        }
-                        _ => {}
-                    }
-                    if frame.kind == Kind::Error {
-                        return error_code::parse(&frame.body)
-                            .map(Err)
-                            .ok_or(AttemptError::Malformed("error reply without a 2-digit code"));
-                    }
-                    match request.decode_response(&frame.body) {
-                        Ok(response) => return Ok(Ok(response)),
-                        // A reply to another command (a late one): keep waiting for ours.
-                        Err(msg) => reason = Some(msg),
-                    }
+            let Some(scanned) = link.read_frame(&mut Frames, attempt.deadline).await? else {
+                return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed));
+            };
+            let Ok(frame) = scanned else {
+                reason = Some("reply is not a MEWTOCOL frame");
+                continue;
+            };
+            // Our own command echoed by a 2-wire RS-485 adapter, or another station.
+            if frame.kind == Kind::Command || frame.station != self.config.station {
+                continue;
+            }
+            match frame.bcc {
+                Bcc::Wrong { .. } => {
+                    reason = Some("BCC error in the reply");
+                    continue;
                 }
-                Scan::Bad { end, .. } => {
-                    link.rx.drain(..end);
-                    reason = Some("reply is not a MEWTOCOL frame");
+                Bcc::Skipped if self.config.bcc => {
+                    reason = Some("reply without a BCC (`**`) while BCC is required");
+                    continue;
                 }
-                Scan::NeedMore { discard } => {
-                    link.rx.drain(..discard);
-                    if !link.fill(deadline).await? {
-                        return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed));
-                    }
-                }
+                _ => {}
+            }
+            if frame.kind == Kind::Error {
+                return Err(match error_code::parse(&frame.body) {
+                    Some(code) => AttemptError::Device(DeviceCode::Mewtocol(ErrorCode(code))),
+                    None => AttemptError::Malformed("error reply without a 2-digit code"),
+                });
+            }
+            match request.decode_response(&frame.body) {
+                Ok(response) => return Ok(response),
+                // A reply to another command (a late one): keep waiting for ours.
+                Err(msg) => reason = Some(msg),
             }
         }
     }

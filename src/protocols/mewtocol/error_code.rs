@@ -1,6 +1,17 @@
 //! MEWTOCOL-COM error codes (the two digits after `!`) and their meanings.
 
-use crate::protocols::PlcError;
+use crate::protocols::{BadDeviceCode, DeviceCode, PlcError};
+
+/// A MEWTOCOL-COM error code: the PLC's refusal of a command (`!` and two digits).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ErrorCode(pub u8);
+
+impl ErrorCode {
+    /// What the code means (see [`meaning`]).
+    pub fn meaning(self) -> &'static str {
+        meaning(self.0)
+    }
+}
 
 /// BCC error.
 pub const BCC_ERROR: u8 = 40;
@@ -19,6 +30,22 @@ pub const REGISTRATION_ERROR: u8 = 62;
 /// PLC mode error (e.g. a write while the PLC forbids it).
 pub const MODE_ERROR: u8 = 63;
 
+impl std::str::FromStr for ErrorCode {
+    type Err = BadDeviceCode;
+
+    /// Two decimal digits as the `!` reply carries them (`63`), 1..=99.
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        match text.trim().parse::<u8>() {
+            Ok(code @ 1..=99) => Ok(ErrorCode(code)),
+            _ => Err(BadDeviceCode {
+                protocol: "mewtocol",
+                text: text.to_owned(),
+                expected: "a decimal error code 1..=99 such as 63",
+            }),
+        }
+    }
+}
+
 /// What an error code means, from the MEWTOCOL-COM documentation (spec/mewtocol.md).
 pub fn meaning(code: u8) -> &'static str {
     match code {
@@ -36,7 +63,7 @@ pub fn meaning(code: u8) -> &'static str {
 
 /// The [`PlcError`] for an error response.
 pub fn device_error(code: u8) -> PlcError {
-    PlcError::Device { protocol: "mewtocol", code: code.into(), meaning: meaning(code) }
+    PlcError::Device(DeviceCode::Mewtocol(ErrorCode(code)))
 }
 
 /// Parses the body of an `!` frame: two decimal digits.
@@ -65,9 +92,7 @@ mod tests {
             (99, "unknown MEWTOCOL error code"),
         ] {
             match device_error(code) {
-                PlcError::Device { protocol: "mewtocol", code: c, meaning } => {
-                    assert_eq!((c, meaning), (code as u32, text));
-                }
+                PlcError::Device(DeviceCode::Mewtocol(c)) => assert_eq!((c.0, c.meaning()), (code, text)),
                 other => panic!("{other:?}"),
             }
         }

@@ -47,4 +47,5 @@ pub mod server;
 pub use bank::{Bank, SharedBank};
 pub use client::{MewtocolClient, MewtocolConfig, MewtocolTransport};
 pub use command::{Contact, ContactArea, Request, Response};
+pub use error_code::ErrorCode;
 pub use server::ServerState;

@@ -3,8 +3,9 @@
 //!
 //! Commands with a wrong BCC get `!40`; a command that does not parse gets `!41` or `!42`;
 //! an address past the bank gets `!61`. Commands for other stations are ignored, as on a
-//! shared RS-485 line. Faults ([`SharedFaults`]) drop, delay, prefix noise or answer a
-//! chosen error code. A [`Handler`] lets a machine simulator see each command against the
+//! shared RS-485 line. Faults ([`SharedFaults`]) drop, delay, prefix noise, duplicate,
+//! answer from another station or with a chosen error code, or close the connection;
+//! MEWTOCOL frames carry no id, so a wrong-id fault has no effect. A [`Handler`] lets a machine simulator see each command against the
 //! memory as it was, and carry it out itself.
 
 use std::sync::Arc;
@@ -15,8 +16,8 @@ use super::bank::{Bank, SharedBank};
 use super::command::{Request, Response};
 use super::error_code::BCC_ERROR;
 use super::frame::{self, Bcc, Frame, Kind, Scan};
-use crate::protocols::line::{self, Faults, LineServer, SharedFaults};
-use crate::protocols::modbus::ByteStream;
+use crate::protocols::faults::SharedFaults;
+use crate::protocols::transport::{self, ByteStream, StreamServer};
 
 /// Carries out a decoded command on the locked bank in place of [`Bank::execute`], which it
 /// normally calls: the seam where a simulator watches the host's writes against the memory
@@ -40,7 +41,7 @@ pub struct ServerState {
 impl ServerState {
     /// Station 1 serving `bank`, without faults or handler.
     pub fn new(bank: SharedBank) -> Self {
-        ServerState { bank, faults: Faults::default().shared(), station: 1, handler: None }
+        ServerState { bank, faults: SharedFaults::default(), station: 1, handler: None }
     }
 
     /// The same state with commands carried out by `handler`.
@@ -49,8 +50,9 @@ impl ServerState {
         self
     }
 
-    /// The reply to one command frame, or None when it is not for this station.
-    fn reply(&self, frame: &Frame, error: Option<u16>) -> Option<Vec<u8>> {
+    /// The reply to one command frame, or None when it is not for this station; `error`
+    /// is answered instead of carrying the command out, and `station` signs the reply.
+    fn reply(&self, frame: &Frame, error: Option<u16>, station: u8) -> Option<Vec<u8>> {
         if frame.kind != Kind::Command || frame.station != self.station {
             return None;
         }
@@ -76,19 +78,19 @@ impl ServerState {
             }
         };
         let mut out = Vec::new();
-        frame::encode(&mut out, frame.long, self.station, kind, &body, true);
+        frame::encode(&mut out, frame.long, station, kind, &body, true);
         Some(out)
     }
 }
 
 /// Serves one stream until it closes or the returned server is dropped.
-pub fn serve_stream(stream: impl ByteStream + 'static, state: ServerState) -> LineServer {
-    LineServer::new(None, tokio::spawn(serve(Box::new(stream), state)))
+pub fn serve_stream(stream: impl ByteStream + 'static, state: ServerState) -> StreamServer {
+    StreamServer::new(None, tokio::spawn(serve(Box::new(stream), state)))
 }
 
 /// Listens on `addr` (port 0 picks one) and serves each TCP connection as a stream.
-pub async fn serve_tcp(addr: &str, state: ServerState) -> std::io::Result<LineServer> {
-    line::spawn_tcp(addr, move |stream| serve(Box::new(stream), state.clone())).await
+pub async fn serve_tcp(addr: &str, state: ServerState) -> std::io::Result<StreamServer> {
+    transport::spawn_tcp(addr, move |stream| serve(Box::new(stream), state.clone())).await
 }
 
 async fn serve(mut stream: Box<dyn ByteStream>, state: ServerState) {
@@ -101,16 +103,23 @@ async fn serve(mut stream: Box<dyn ByteStream>, state: ServerState) {
                     if frame.kind != Kind::Command || frame.station != state.station {
                         continue;
                     }
-                    let plan = line::faults::plan(&state.faults);
-                    if plan.drop || plan.drop_ack {
+                    let plan = state.faults.plan();
+                    if plan.close {
+                        return;
+                    }
+                    if plan.unanswered() {
                         continue;
                     }
-                    let Some(reply) = state.reply(&frame, plan.error) else { continue };
+                    let station = plan.wrong_unit.unwrap_or(state.station);
+                    let Some(reply) = state.reply(&frame, plan.device_error, station) else { continue };
                     if !plan.delay.is_zero() {
                         tokio::time::sleep(plan.delay).await;
                     }
                     let mut out = plan.garbage.unwrap_or_default();
                     out.extend_from_slice(&reply);
+                    if plan.duplicate {
+                        out.extend_from_slice(&reply);
+                    }
                     if stream.write_all(&out).await.is_err() || stream.flush().await.is_err() {
                         return;
                     }

@@ -6,12 +6,11 @@ use std::sync::atomic::Ordering;
 use tokio::sync::Mutex;
 
 use super::config::{ModbusConfig, Transport};
+use super::link::{Counters, Exchange, Link, RtuLink, TcpLink, UdpLink};
 use super::pdu::{self, Request, Response};
 use super::rtu;
-use super::transport::{
-    AttemptError, ByteStream, Connection, Counters, Endpoint, Exchange, Link, RtuLink, TcpLink, UdpLink,
-};
 use crate::protocols::PlcError;
+use crate::protocols::transport::{Backoff, ByteStream, Endpoint, RetryPolicy, StreamLink};
 
 /// Counters of a client's traffic, for diagnostics and tests.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -29,6 +28,7 @@ pub struct ClientStats {
 /// time. Implements [`crate::protocols::PlcMemory`] (see `memory.rs`).
 pub struct ModbusClient {
     config: ModbusConfig,
+    policy: RetryPolicy,
     link: Mutex<Link>,
     counters: Arc<Counters>,
 }
@@ -40,25 +40,27 @@ impl ModbusClient {
     pub async fn connect(config: ModbusConfig) -> Result<Self, PlcError> {
         check_unit(config.unit)?;
         let counters = Arc::new(Counters::default());
+        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries };
         let link = match config.transport {
             Transport::Udp => {
-                Link::Udp(UdpLink::connect(&config.address, config.quirks, counters.clone()).await?)
+                let mut udp = UdpLink::new(config.address.clone(), config.quirks, counters.clone());
+                udp.open(config.timeout).await.map_err(|e| policy.once(e))?;
+                Link::Udp(udp)
             }
-            Transport::Tcp => Link::Tcp(TcpLink::new(
-                Connection::new(Endpoint::Tcp(config.address.clone())),
-                config.quirks,
-                counters.clone(),
-            )),
+            Transport::Tcp => {
+                Link::Tcp(TcpLink::new(config.address.clone(), config.quirks, counters.clone()))
+            }
             Transport::RtuOverTcp => {
-                let conn = Connection::new(Endpoint::Tcp(config.address.clone()));
-                Link::Rtu(RtuLink::new(conn, rtu::silence(0), counters.clone()))
+                let link = StreamLink::new(Endpoint::Tcp(config.address.clone()), Backoff::default());
+                Link::Rtu(RtuLink::new(link, rtu::silence(0), counters.clone()))
             }
             Transport::RtuSerial => {
-                let conn = Connection::new(Endpoint::Serial(config.address.clone(), config.serial));
-                Link::Rtu(RtuLink::new(conn, rtu::silence(config.serial.baud), counters.clone()))
+                let endpoint = Endpoint::Serial { path: config.address.clone(), settings: config.serial };
+                let link = StreamLink::new(endpoint, Backoff::default());
+                Link::Rtu(RtuLink::new(link, rtu::silence(config.serial.baud), counters.clone()))
             }
         };
-        Ok(ModbusClient { config, link: Mutex::new(link), counters })
+        Ok(ModbusClient { config, policy, link: Mutex::new(link), counters })
     }
 
     /// An RTU client over a stream the caller already opened (a pty in tests, a port
@@ -69,9 +71,10 @@ impl ModbusClient {
     ) -> Result<Self, PlcError> {
         check_unit(config.unit)?;
         let counters = Arc::new(Counters::default());
-        let conn = Connection::new(Endpoint::Given(Some(Box::new(stream))));
-        let link = Link::Rtu(RtuLink::new(conn, rtu::silence(config.serial.baud), counters.clone()));
-        Ok(ModbusClient { config, link: Mutex::new(link), counters })
+        let link = StreamLink::new(Endpoint::given(stream), Backoff::default());
+        let link = Link::Rtu(RtuLink::new(link, rtu::silence(config.serial.baud), counters.clone()));
+        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries };
+        Ok(ModbusClient { config, policy, link: Mutex::new(link), counters })
     }
 
     /// The configuration this client was built with.
@@ -88,8 +91,8 @@ impl ModbusClient {
         }
     }
 
-    /// Sends one request (within the per-function limits) to the configured unit, with the
-    /// configured timeout and retries. Exception replies are returned at once as
+    /// Sends one request (within the per-function limits) to the configured unit under the
+    /// retry policy ([`RetryPolicy`]): exception replies are returned at once as
     /// [`PlcError::Device`]; timeouts, lost connections and malformed replies are retried.
     /// A write to unit 0 is broadcast: nothing is awaited and the expected echo is returned.
     pub async fn call(&self, request: &Request) -> Result<Response, PlcError> {
@@ -99,31 +102,24 @@ impl ModbusClient {
         request.encode(&mut pdu_bytes);
         Counters::bump(&self.counters.requests);
         let mut link = self.link.lock().await;
-        let timeout = self.config.timeout;
+        let ex = Exchange { unit, request, pdu: &pdu_bytes };
         if unit == 0 {
             if !request.is_write() {
                 return Err(PlcError::OutOfRange("unit 0 (broadcast) is for writes only"));
             }
-            let ex = Exchange { unit, request, pdu: &pdu_bytes, first: true };
-            return match link.send_only(&ex, timeout).await {
+            return match link.send_only(&ex, &self.policy.single()).await {
                 Ok(()) => Ok(echo_of(request)),
-                Err(e) => Err(attempt_error(e, 1, timeout)),
+                Err(e) => Err(self.policy.once(e)),
             };
         }
-        let attempts = self.config.retries + 1;
-        let mut last = AttemptError::Timeout;
-        for attempt in 0..attempts {
-            let ex = Exchange { unit, request, pdu: &pdu_bytes, first: attempt == 0 };
-            match link.attempt(&ex, timeout).await {
-                Ok(Ok(response)) => return Ok(response),
-                Ok(Err(exception)) => return Err(exception.into()),
-                Err(e) => {
-                    tracing::debug!(unit, attempt, error = ?e, "modbus attempt failed");
-                    last = e;
-                }
+        let mut retry = self.policy.start("modbus");
+        while let Some(attempt) = retry.next_attempt() {
+            match link.attempt(&ex, &attempt).await {
+                Ok(response) => return Ok(response),
+                Err(e) => retry.failed(e)?,
             }
         }
-        Err(attempt_error(last, attempts, timeout))
+        Err(retry.spent())
     }
 
     /// A link check: diagnostics 08 sub-function 0000 (return query data), which the
@@ -140,14 +136,6 @@ fn check_unit(unit: u8) -> Result<(), PlcError> {
         return Err(PlcError::OutOfRange("unit must be 0 (broadcast) or 1..247"));
     }
     Ok(())
-}
-
-fn attempt_error(e: AttemptError, attempts: u32, timeout: std::time::Duration) -> PlcError {
-    match e {
-        AttemptError::Timeout => PlcError::Timeout { attempts, timeout },
-        AttemptError::Io(e) => PlcError::Connection(e),
-        AttemptError::Malformed(msg) => PlcError::Malformed(msg),
-    }
 }
 
 /// The reply a device would have sent to a write; used for broadcasts, which get none.

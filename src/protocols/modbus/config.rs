@@ -24,8 +24,9 @@ pub struct Quirks {
     /// length from the datagram (UDP) or from the PDU itself (TCP). Requests stay standard.
     pub length0: bool,
     /// The device does not echo the transaction id: match replies by unit, function and
-    /// write echo only. Stale input is flushed before each request and, over TCP, the
-    /// connection is dropped after a timeout so a late reply cannot be mistaken.
+    /// write echo only. Over UDP stale datagrams are flushed before each request; over TCP
+    /// the connection is closed after an exchange that did not finish, so a late reply
+    /// cannot be mistaken.
     pub ignore_transaction_id: bool,
 }
 

@@ -1,6 +1,7 @@
 //! Modbus exception codes: what a device answers instead of data when it refuses a request.
 
-use crate::protocols::PlcError;
+use crate::protocols::error::parse_number;
+use crate::protocols::{BadDeviceCode, DeviceCode, PlcError};
 
 /// A Modbus exception code, as carried by an exception reply (function | 0x80, one code byte).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -45,6 +46,22 @@ impl std::fmt::Display for Exception {
 
 impl From<Exception> for PlcError {
     fn from(e: Exception) -> Self {
-        PlcError::Device { protocol: "modbus", code: u32::from(e.0), meaning: e.meaning() }
+        PlcError::Device(DeviceCode::Modbus(e))
+    }
+}
+
+impl std::str::FromStr for Exception {
+    type Err = BadDeviceCode;
+
+    /// A code in decimal or `0x` hexadecimal, 1..=255 (`2`, `0x0B`).
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        match parse_number(text) {
+            Some(code @ 1..=255) => Ok(Exception(code as u8)),
+            _ => Err(BadDeviceCode {
+                protocol: "modbus",
+                text: text.to_owned(),
+                expected: "an exception code 1..=255, decimal or 0x hexadecimal",
+            }),
+        }
     }
 }

@@ -4,8 +4,10 @@
 //!
 //! - [`pdu`], [`decode`], [`exception`]: PDUs as Rust values, encoded and decoded without I/O.
 //! - [`frame`] (MBAP, for TCP and UDP) and [`rtu`] (CRC-16, frame scanning): framings.
-//! - `transport`: one request/reply attempt per transport; [`ModbusClient`] adds retries,
-//!   splitting and the [`PlcMemory`](crate::protocols::PlcMemory) trait.
+//! - `link`: one request/reply attempt per framing (MBAP over TCP or UDP, RTU over a byte
+//!   stream), over the shared [`transport`](crate::protocols::transport) layer;
+//!   [`ModbusClient`] runs attempts under the one retry policy, splits requests and
+//!   implements the [`PlcMemory`](crate::protocols::PlcMemory) trait.
 //! - [`server`]: a slave over TCP, UDP, RTU over TCP or a serial stream, backed by a shared
 //!   register bank, with the shelf PLC's quirk and fault injection for tests.
 //!
@@ -46,14 +48,14 @@ pub mod config;
 pub mod decode;
 pub mod exception;
 pub mod frame;
+mod link;
 mod memory;
 pub mod pdu;
 pub mod rtu;
 pub mod server;
-pub(crate) mod transport;
 
+pub use crate::protocols::transport::ByteStream;
 pub use client::{ClientStats, ModbusClient};
 pub use config::{ModbusConfig, Quirks, Transport};
 pub use exception::Exception;
 pub use pdu::{Request, Response};
-pub use transport::ByteStream;

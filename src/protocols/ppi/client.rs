@@ -5,16 +5,17 @@ use std::sync::atomic::{AtomicU16, Ordering};
 use std::time::Duration;
 
 use tokio::sync::Mutex;
-use tokio::time::Instant;
+use tokio_util::bytes::{Buf, BytesMut};
+use tokio_util::codec::Decoder;
 
-use super::frame::{self, FC_POLL, FC_RESPONSE, Frame, Scan};
+use super::frame::{self, FC_POLL, FC_RESPONSE, Frame, FrameError, Scan};
 use super::pdu::{Item, Reply, Request};
-use super::return_code;
-use crate::protocols::PlcError;
-use crate::protocols::line::{LineLink, attempt_error};
-use crate::protocols::modbus::ByteStream;
-use crate::protocols::modbus::transport::{AttemptError, Endpoint};
+use super::return_code::ReturnCode;
 use crate::protocols::serial::SerialSettings;
+use crate::protocols::transport::{
+    Attempt, AttemptError, Backoff, ByteStream, Endpoint, RetryPolicy, StreamLink,
+};
+use crate::protocols::{DeviceCode, PlcError};
 
 /// How the PLC is reached.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -63,11 +64,38 @@ impl PpiConfig {
     }
 }
 
+/// Finds PPI frames (long, short, `E5`) in a byte stream ([`frame::scan`]): a whole frame,
+/// or bytes that turned out not to be one.
+struct Frames;
+
+impl Decoder for Frames {
+    type Item = Result<Frame, FrameError>;
+    type Error = AttemptError;
+
+    fn decode(&mut self, src: &mut BytesMut) -> Result<Option<Self::Item>, AttemptError> {
+        Ok(match frame::scan(src) {
+            Scan::Found { end, frame } => {
+                src.advance(end);
+                Some(Ok(frame))
+            }
+            Scan::Bad { end, error } => {
+                src.advance(end);
+                Some(Err(error))
+            }
+            Scan::NeedMore { discard } => {
+                src.advance(discard);
+                None
+            }
+        })
+    }
+}
+
 /// A PPI master for one S7-200. Requests from concurrent callers go one at a time.
 /// Implements [`crate::protocols::PlcMemory`] (see `memory.rs`).
 pub struct PpiClient {
     config: PpiConfig,
-    link: Mutex<LineLink>,
+    policy: RetryPolicy,
+    link: Mutex<StreamLink>,
     next_ref: AtomicU16,
 }
 
@@ -81,26 +109,28 @@ fn check(config: &PpiConfig) -> Result<(), PlcError> {
 impl PpiClient {
     /// A client for `config`; the port or connection opens on the first request.
     pub fn new(config: PpiConfig) -> Result<Self, PlcError> {
-        check(&config)?;
         let endpoint = match config.transport {
-            PpiTransport::Serial => Endpoint::Serial(config.address.clone(), config.serial),
+            PpiTransport::Serial => {
+                Endpoint::Serial { path: config.address.clone(), settings: config.serial }
+            }
             PpiTransport::Tcp => Endpoint::Tcp(config.address.clone()),
         };
-        Ok(Self::with(config, endpoint))
+        Self::with(config, endpoint)
     }
 
     /// A client over a stream the caller opened (a pty in tests); it cannot be reopened.
     pub fn over_stream(config: PpiConfig, stream: impl ByteStream + 'static) -> Result<Self, PlcError> {
-        check(&config)?;
-        Ok(Self::with(config, Endpoint::Given(Some(Box::new(stream)))))
+        Self::with(config, Endpoint::given(stream))
     }
 
-    fn with(config: PpiConfig, endpoint: Endpoint) -> Self {
-        PpiClient {
+    fn with(config: PpiConfig, endpoint: Endpoint) -> Result<Self, PlcError> {
+        check(&config)?;
+        Ok(PpiClient {
+            policy: RetryPolicy { timeout: config.timeout, retries: config.retries },
             config,
-            link: Mutex::new(LineLink::new(endpoint)),
+            link: Mutex::new(StreamLink::new(endpoint, Backoff::default())),
             next_ref: AtomicU16::new(rand::random()),
-        }
+        })
     }
 
     /// The configuration.
@@ -136,67 +166,55 @@ impl PpiClient {
     pub async fn call(&self, request: &Request) -> Result<Reply, PlcError> {
         request.check().map_err(PlcError::OutOfRange)?;
         let mut link = self.link.lock().await;
-        let attempts = self.config.retries + 1;
-        let mut refs = Vec::with_capacity(attempts as usize);
-        let mut last = AttemptError::Timeout;
-        for attempt in 0..attempts {
+        let mut refs = Vec::with_capacity(self.policy.attempts().min(8) as usize);
+        let mut retry = self.policy.start("ppi");
+        while let Some(attempt) = retry.next_attempt() {
             refs.push(self.next_ref.fetch_add(1, Ordering::Relaxed));
-            match self.attempt(&mut link, request, &refs).await {
-                Ok(Reply::ItemError(code)) => return Err(return_code::item_error(code)),
-                Ok(Reply::Refused { class, code }) => return Err(return_code::refused(class, code)),
-                Ok(reply) => return Ok(reply),
-                Err(e) => {
-                    tracing::debug!(plc = self.config.plc, attempt, error = ?e, "ppi attempt failed");
-                    last = e;
+            match self.attempt(&mut link, request, &refs, &attempt).await {
+                Ok(Reply::ItemError(code)) => retry.failed(device(ReturnCode::Item(code)))?,
+                Ok(Reply::Refused { class, code }) => {
+                    retry.failed(device(ReturnCode::Refused { class, code }))?
                 }
+                Ok(reply) => return Ok(reply),
+                Err(e) => retry.failed(e)?,
             }
         }
-        Err(attempt_error(last, attempts, self.config.timeout))
+        Err(retry.spent())
     }
 
+    /// One attempt of the two-step exchange; `refs` are the PDU references of this request's
+    /// attempts so far, the last one this attempt's.
     async fn attempt(
         &self,
-        link: &mut LineLink,
+        link: &mut StreamLink,
         request: &Request,
         refs: &[u16],
+        attempt: &Attempt,
     ) -> Result<Reply, AttemptError> {
         let c = &self.config;
-        let deadline = Instant::now() + c.timeout;
         let mut pdu = Vec::with_capacity(64);
         request.encode(*refs.last().unwrap_or(&0), &mut pdu);
         let mut tx = Vec::with_capacity(pdu.len() + 9);
         frame::encode_long(&mut tx, c.plc, c.master, request.fc(), &pdu);
-        link.send_fresh(&tx, c.timeout).await?;
+        link.flush_stale(attempt.timeout).await?;
+        link.send(&tx, attempt.timeout).await?;
         // Step 1: the short acknowledgement. Whole frames before it are stale and skipped.
-        let mut reason = None;
         loop {
-            match frame::scan(&link.rx) {
-                Scan::Found { end, frame } => {
-                    link.rx.drain(..end);
-                    if matches!(frame, Frame::Ack(_)) {
-                        break;
-                    }
-                }
-                Scan::Bad { end, .. } => {
-                    link.rx.drain(..end);
-                }
-                Scan::NeedMore { discard } => {
-                    link.rx.drain(..discard);
-                    if !link.fill(deadline).await? {
-                        return Err(AttemptError::Timeout);
-                    }
-                }
+            match link.read_frame(&mut Frames, attempt.deadline).await? {
+                None => return Err(AttemptError::Timeout),
+                Some(Ok(Frame::Ack(_))) => break,
+                Some(_) => {}
             }
         }
         // Step 2: the poll, and the response frame.
         tx.clear();
         frame::encode_short(&mut tx, c.plc, c.master, FC_POLL);
-        link.send(&tx, c.timeout).await?;
+        link.send(&tx, attempt.timeout).await?;
+        let mut reason = None;
         loop {
-            match frame::scan(&link.rx) {
-                Scan::Found { end, frame } => {
-                    link.rx.drain(..end);
-                    let Frame::Long { da, sa, fc: FC_RESPONSE, payload } = frame else { continue };
+            match link.read_frame(&mut Frames, attempt.deadline).await? {
+                None => return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed)),
+                Some(Ok(Frame::Long { da, sa, fc: FC_RESPONSE, payload })) => {
                     if da != c.master || sa != c.plc {
                         continue;
                     }
@@ -206,21 +224,16 @@ impl PpiClient {
                         Err(e) => reason = Some(pdu_message(e)),
                     }
                 }
-                Scan::Bad { end, error } => {
-                    link.rx.drain(..end);
-                    if error == frame::FrameError::BadFcs {
-                        reason = Some("FCS error in the response");
-                    }
-                }
-                Scan::NeedMore { discard } => {
-                    link.rx.drain(..discard);
-                    if !link.fill(deadline).await? {
-                        return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed));
-                    }
-                }
+                Some(Ok(_)) => {}
+                Some(Err(FrameError::BadFcs)) => reason = Some("FCS error in the response"),
+                Some(Err(_)) => {}
             }
         }
     }
+}
+
+fn device(code: ReturnCode) -> AttemptError {
+    AttemptError::Device(DeviceCode::Ppi(code))
 }
 
 fn pdu_message(e: super::pdu::PduError) -> &'static str {

@@ -33,9 +33,9 @@
 //! - Requests use the seed's function codes (6C read, 7C write); the FCB is not toggled.
 //! - One item per request; at most 200 data bytes (LE must fit one byte). Bit access reads
 //!   or writes one bit per item.
-//! - Errors: an item return code becomes `PlcError::Device { protocol: "ppi", code }` with
-//!   the code (05, 0A, ...); a refused request (`32 02 ... 85 00`) becomes code
-//!   `class << 8 | code` (0x8500). Neither is retried.
+//! - Errors: an item return code becomes [`ReturnCode::Item`] (05, 0A, ...) and a refused
+//!   request (`32 02 ... 85 00`) [`ReturnCode::Refused`] (numbered `class << 8 | code`,
+//!   0x8500), both as `PlcError::Device(DeviceCode::Ppi(..))`. Neither is retried.
 //! - Timers and counters (T, C) are read with transport size 1F / 1E, offset = number, two
 //!   bytes per value. This follows the S7 convention; it is not checked against a CPU.
 
@@ -52,4 +52,5 @@ pub mod server;
 pub use bank::{Bank, SharedBank};
 pub use client::{PpiClient, PpiConfig, PpiTransport};
 pub use pdu::{Item, MemArea, Reply, Request, Size};
+pub use return_code::ReturnCode;
 pub use server::ServerState;

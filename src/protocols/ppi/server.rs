@@ -4,9 +4,10 @@
 //!
 //! A poll with nothing pending is answered with `E5`. Frames with a bad FCS are ignored, as
 //! a PLC ignores a frame it did not receive intact. Faults ([`SharedFaults`]): drop (E5
-//! sent, no response to the poll), lost E5 (request ignored), delay and noise before the
-//! response, and an error code: below 0x100 an item return code, above it a refusal with
-//! error class `code >> 8`. A [`Handler`] lets a machine simulator see each request
+//! sent, no response to the poll), lost E5 (request ignored), delay, noise and a duplicate
+//! of the response, a wrong PDU reference or source address in it, a closed connection, and
+//! a device error code: below 0x100 an item return code, above it a refusal with error
+//! class `code >> 8`. A [`Handler`] lets a machine simulator see each request
 //! against the memory as it was, and carry it out itself.
 
 use std::sync::Arc;
@@ -16,8 +17,8 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use super::bank::{Bank, SharedBank};
 use super::frame::{self, ACK, FC_POLL, FC_RESPONSE, Frame, Scan};
 use super::pdu::{Reply, Request};
-use crate::protocols::line::{self, Faults, LineServer, Plan, SharedFaults};
-use crate::protocols::modbus::ByteStream;
+use crate::protocols::faults::{Plan, SharedFaults};
+use crate::protocols::transport::{self, ByteStream, StreamServer};
 
 /// Carries out a decoded request on the locked bank in place of [`Bank::execute`], which it
 /// normally calls: the seam where a simulator watches the host's writes against the memory
@@ -41,7 +42,7 @@ pub struct ServerState {
 impl ServerState {
     /// Address 2 serving `bank`, without faults or handler.
     pub fn new(bank: SharedBank) -> Self {
-        ServerState { bank, faults: Faults::default().shared(), address: 2, handler: None }
+        ServerState { bank, faults: SharedFaults::default(), address: 2, handler: None }
     }
 
     /// The same state with requests carried out by `handler`.
@@ -54,7 +55,7 @@ impl ServerState {
     fn respond(&self, master: u8, payload: &[u8], plan: &Plan) -> Vec<u8> {
         let (pdu_ref, reply, request) = match Request::decode(payload) {
             Ok((r, request)) => {
-                let reply = match plan.error {
+                let reply = match plan.device_error {
                     Some(code) if code > 0xFF => {
                         Reply::Refused { class: (code >> 8) as u8, code: code as u8 }
                     }
@@ -74,22 +75,24 @@ impl ServerState {
                 (r, Reply::Refused { class: 0x84, code: 0x04 }, Request::Stop)
             }
         };
+        let pdu_ref = if plan.wrong_id { !pdu_ref } else { pdu_ref };
         let mut pdu = Vec::new();
         reply.encode(&request, pdu_ref, &mut pdu);
         let mut out = Vec::new();
-        frame::encode_long(&mut out, master, self.address, FC_RESPONSE, &pdu);
+        let source = plan.wrong_unit.unwrap_or(self.address);
+        frame::encode_long(&mut out, master, source, FC_RESPONSE, &pdu);
         out
     }
 }
 
 /// Serves one stream until it closes or the returned server is dropped.
-pub fn serve_stream(stream: impl ByteStream + 'static, state: ServerState) -> LineServer {
-    LineServer::new(None, tokio::spawn(serve(Box::new(stream), state)))
+pub fn serve_stream(stream: impl ByteStream + 'static, state: ServerState) -> StreamServer {
+    StreamServer::new(None, tokio::spawn(serve(Box::new(stream), state)))
 }
 
 /// Listens on `addr` (port 0 picks one) and serves each TCP connection as a stream.
-pub async fn serve_tcp(addr: &str, state: ServerState) -> std::io::Result<LineServer> {
-    line::spawn_tcp(addr, move |stream| serve(Box::new(stream), state.clone())).await
+pub async fn serve_tcp(addr: &str, state: ServerState) -> std::io::Result<StreamServer> {
+    transport::spawn_tcp(addr, move |stream| serve(Box::new(stream), state.clone())).await
 }
 
 async fn serve(mut stream: Box<dyn ByteStream>, state: ServerState) {
@@ -103,7 +106,10 @@ async fn serve(mut stream: Box<dyn ByteStream>, state: ServerState) {
                     rx.drain(..end);
                     match frame {
                         Frame::Long { da, sa, payload, .. } if da == state.address => {
-                            let plan = line::faults::plan(&state.faults);
+                            let plan = state.faults.plan();
+                            if plan.close {
+                                return;
+                            }
                             if plan.drop_ack {
                                 continue;
                             }
@@ -118,6 +124,9 @@ async fn serve(mut stream: Box<dyn ByteStream>, state: ServerState) {
                                 }
                                 let mut out = plan.garbage.unwrap_or_default();
                                 out.extend_from_slice(&response);
+                                if plan.duplicate {
+                                    out.extend_from_slice(&response);
+                                }
                                 out
                             }
                             None => vec![ACK],

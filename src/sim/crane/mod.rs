@@ -27,7 +27,8 @@ use std::time::Duration;
 use tokio::sync::Notify;
 use tokio::task::JoinHandle;
 
-use crate::protocols::mc3e::{Bank, Device, Fault, Mc3eServer, ServerState, SharedBank, TransportKind};
+use crate::protocols::faults::{Fault, Faults};
+use crate::protocols::mc3e::{Bank, Device, Mc3eServer, ServerState, SharedBank, TransportKind};
 use engine::Engine;
 
 /// Whether a code is a business alarm of the catalogue.
@@ -53,12 +54,27 @@ impl Default for CraneSimOptions {
     }
 }
 
+/// Why a text command was refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum CommandError {
+    /// `alarm` with something other than a number.
+    #[error("not an alarm code: {0}")]
+    AlarmCode(String),
+    /// Not one of the commands.
+    #[error(
+        "unknown command {0:?} (alarm CODE, clear, heartbeat on|off, handshake on|off, force, drop, link on|off, status)"
+    )]
+    Unknown(String),
+}
+
 /// A running simulated crane.
 pub struct CraneSim {
     server: Option<Mc3eServer>,
     bank: SharedBank,
     engine: Arc<Mutex<Engine>>,
     ticker: JoinHandle<()>,
+    /// The drop rate to go back to when the link comes back on (`link on`).
+    drop_rate: Mutex<f64>,
 }
 
 impl CraneSim {
@@ -79,7 +95,7 @@ impl CraneSim {
         };
         let tick = (options.step / 5).clamp(Duration::from_millis(1), Duration::from_millis(20));
         let ticker = tokio::spawn(run_ticks(bank.clone(), engine.clone(), kick, tick));
-        Ok(CraneSim { server: Some(server), bank, engine, ticker })
+        Ok(CraneSim { server: Some(server), bank, engine, ticker, drop_rate: Mutex::new(0.0) })
     }
 
     /// The address it listens on.
@@ -127,17 +143,27 @@ impl CraneSim {
         self.engine.lock().unwrap_or_else(|p| p.into_inner()).force_complete(&mut bank)
     }
 
-    /// Closes the TCP connection (loses the next request over UDP).
-    pub fn drop_link(&self) {
+    /// Sets the standing link faults (`rackd sim crane`'s fault flags).
+    pub fn set_faults(&self, faults: Faults) {
+        *self.drop_rate.lock().unwrap_or_else(|p| p.into_inner()) = faults.drop_rate;
         if let Some(s) = &self.server {
-            s.faults().lock().unwrap_or_else(|p| p.into_inner()).push(Fault::Close);
+            s.faults().set(faults);
         }
     }
 
-    /// Ignores every request (`false`) or answers again (`true`).
-    pub fn set_link(&self, up: bool) {
+    /// Closes the TCP connection (loses the next request over UDP).
+    pub fn drop_link(&self) {
         if let Some(s) = &self.server {
-            s.faults().lock().unwrap_or_else(|p| p.into_inner()).drop_ratio = if up { 0.0 } else { 1.0 };
+            s.faults().push(Fault::Close);
+        }
+    }
+
+    /// Ignores every request (`false`) or answers again (`true`, at the configured drop
+    /// rate).
+    pub fn set_link(&self, up: bool) {
+        let configured = *self.drop_rate.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(s) = &self.server {
+            s.faults().update(|f| f.drop_rate = if up { configured } else { 1.0 });
         }
     }
 
@@ -162,11 +188,11 @@ impl CraneSim {
     }
 
     /// Runs one text command (see the module doc); returns what to print.
-    pub fn command(&self, line: &str) -> Result<String, String> {
+    pub fn command(&self, line: &str) -> Result<String, CommandError> {
         let words: Vec<&str> = line.split_whitespace().collect();
         match words.as_slice() {
             ["alarm", code] => {
-                let code: u16 = code.parse().map_err(|_| format!("not an alarm code: {code}"))?;
+                let code: u16 = code.parse().map_err(|_| CommandError::AlarmCode(code.to_string()))?;
                 self.raise_alarm(code);
                 Ok(format!("alarm {code}: {}", crate::wire::alarms::lookup(code).text))
             }
@@ -200,9 +226,7 @@ impl CraneSim {
                 self.word(220),
                 self.word(221)
             )),
-            _ => Err(format!(
-                "unknown command {line:?} (alarm CODE, clear, heartbeat on|off, handshake on|off, force, drop, link on|off, status)"
-            )),
+            _ => Err(CommandError::Unknown(line.to_string())),
         }
     }
 

@@ -5,8 +5,9 @@ use std::sync::{Arc, MutexGuard};
 
 use super::slots::{SlotMemory, SlotWords};
 use super::{Endpoint, Setup, Started};
-use crate::protocols::line::{Faults, LineServer};
+use crate::protocols::faults::SharedFaults;
 use crate::protocols::mewtocol::{self, Bank, Request, Response, ServerState, SharedBank};
+use crate::protocols::transport::StreamServer;
 
 /// The `(area word, value)` pairs a command writes into the area starting at DT `base`.
 fn writes(base: usize, request: &Request) -> Vec<(usize, u16)> {
@@ -76,17 +77,16 @@ pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io:
         }
         Ok(response)
     });
-    let mut line_faults = Faults::default();
-    faults.apply_to_line(&mut line_faults);
-    let state = ServerState { station, faults: line_faults.shared(), ..ServerState::new(bank.clone()) }
-        .with_handler(handler);
+    let state =
+        ServerState { station, faults: SharedFaults::new(faults.clone()), ..ServerState::new(bank.clone()) }
+            .with_handler(handler);
     let shared_faults = state.faults.clone();
-    let server: LineServer = match endpoint {
+    let server: StreamServer = match endpoint {
         Endpoint::Listen(at) => mewtocol::server::serve_tcp(at, state).await?,
         Endpoint::Stream(stream) => mewtocol::server::serve_stream(stream, state),
     };
     let memory: Arc<dyn SlotMemory> = Arc::new(DtMemory { bank, base });
-    Ok(Started { memory, server: super::Server::Line { server, faults: shared_faults } })
+    Ok(Started { memory, server: super::Server::Line(server), faults: shared_faults })
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@
 //! 0 → 1 → 2 in a configurable time. It keeps its own inventory and lights and rejects
 //! commands that disagree with them with failure kind 2 (retrieve from an empty position,
 //! store into a full one, move from empty or into full); it can fail tasks with kind 1 at
-//! a given rate, and drop, delay or garble replies ([`LinkFaults`]).
+//! a given rate, and inject the link faults every simulator knows ([`Faults`]).
 //!
 //! It also watches the WCS: every write into a busy slot (task id set and not finished) is
 //! a violation of rule 1, logged and counted ([`ShelfSim::violations`]). The one write
@@ -42,16 +42,16 @@ use std::sync::Arc;
 
 use tokio::task::JoinHandle;
 
-pub use options::{LinkFaults, ShelfProtocol, ShelfSimOptions, UnknownProtocol};
+pub use options::{ShelfProtocol, ShelfSimOptions, UnknownProtocol};
 
 use self::engine::Machine;
 use self::options::Family;
 use self::slots::{Core, Layout, SlotMemory};
 use crate::devices::DeviceConfig;
 use crate::domain::Location;
-use crate::protocols::line::{LineServer, SharedFaults};
-use crate::protocols::modbus::ByteStream;
+use crate::protocols::faults::{Faults, SharedFaults};
 use crate::protocols::modbus::server::ServerHandle;
+use crate::protocols::transport::{ByteStream, StreamServer};
 use crate::wire::slot::SLOT_WORDS;
 
 /// Where a transport is served.
@@ -72,19 +72,21 @@ struct Setup<'a> {
     /// The serial line's baud rate (Modbus RTU times its inter-frame silence by it).
     baud: u32,
     core: &'a Core,
-    faults: &'a LinkFaults,
+    faults: &'a Faults,
 }
 
-/// A transport adapter, serving: the slot area over its bank, and its server.
+/// A transport adapter, serving: the slot area over its bank, its server, and the
+/// server's faults.
 struct Started {
     memory: Arc<dyn SlotMemory>,
     server: Server,
+    faults: SharedFaults,
 }
 
 /// A running server of either kind.
 enum Server {
     Modbus(ServerHandle),
-    Line { server: LineServer, faults: SharedFaults },
+    Line(StreamServer),
 }
 
 /// A running simulated shelf PLC.
@@ -92,6 +94,7 @@ pub struct ShelfSim {
     core: Core,
     memory: Arc<dyn SlotMemory>,
     server: Server,
+    faults: SharedFaults,
     engine: JoinHandle<()>,
     protocol: ShelfProtocol,
     base: String,
@@ -130,29 +133,29 @@ impl ShelfSim {
         if options.slots == 0 || (stride as usize) < SLOT_WORDS {
             return Err(invalid("the slots must be at least 1 and the stride at least 35 words"));
         }
-        let f = &options.faults;
-        if ![options.fail_rate, f.drop_rate, f.garbage_rate].iter().all(|p| (0.0..=1.0).contains(p)) {
-            return Err(invalid("fail, drop and garbage rates are fractions between 0 and 1"));
+        if !(0.0..=1.0).contains(&options.fail_rate) {
+            return Err(invalid("the fail rate is a fraction between 0 and 1"));
         }
+        options.faults.check().map_err(|e| invalid(&e.to_string()))?;
         let core = Core::new(Layout { slots: options.slots, stride });
         let (protocol, base, unit) = (options.protocol, options.base_text(), options.unit_or_default());
         let baud = options.serial_or_default().baud;
         let setup = Setup { protocol, base: &base, unit, baud, core: &core, faults: &options.faults };
-        let Started { memory, server } = match protocol.family() {
+        let Started { memory, server, faults } = match protocol.family() {
             Family::Modbus => modbus::start(endpoint, &setup).await?,
             Family::Ppi => ppi::start(endpoint, &setup).await?,
             Family::Mewtocol => mewtocol::start(endpoint, &setup).await?,
         };
         let machine = Machine { task_time: options.task_time, fail_rate: options.fail_rate };
         let engine = tokio::spawn(engine::run(memory.clone(), core.clone(), machine));
-        Ok(ShelfSim { core, memory, server, engine, protocol, base, unit, options })
+        Ok(ShelfSim { core, memory, server, faults, engine, protocol, base, unit, options })
     }
 
     /// The address it answers on (`None` on a serial line).
     pub fn local_addr(&self) -> Option<SocketAddr> {
         match &self.server {
             Server::Modbus(handle) => handle.local_addr(),
-            Server::Line { server, .. } => server.local_addr(),
+            Server::Line(server) => server.local_addr(),
         }
     }
 
@@ -240,14 +243,14 @@ impl ShelfSim {
         (1..=layout.slots).contains(&k).then(|| self.memory.lock().read(layout.start(k - 1), SLOT_WORDS))
     }
 
-    /// Changes the link faults while running.
-    pub fn set_faults(&self, faults: LinkFaults) {
-        match &self.server {
-            Server::Modbus(handle) => handle.set_faults(faults.modbus()),
-            Server::Line { faults: shared, .. } => {
-                faults.apply_to_line(&mut shared.lock().unwrap_or_else(|p| p.into_inner()));
-            }
-        }
+    /// Changes the standing link faults while running (a queued script stays).
+    pub fn set_faults(&self, faults: Faults) {
+        self.faults.set(faults);
+    }
+
+    /// The server's faults, to script one-off faults or change them in place.
+    pub fn faults(&self) -> SharedFaults {
+        self.faults.clone()
     }
 
     /// Stops serving.
@@ -255,7 +258,7 @@ impl ShelfSim {
         self.engine.abort();
         match self.server {
             Server::Modbus(handle) => handle.shutdown().await,
-            Server::Line { server, .. } => server.shutdown().await,
+            Server::Line(server) => server.shutdown().await,
         }
     }
 }

@@ -113,7 +113,7 @@ pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io:
     let options = ServerOptions {
         unit,
         length0: protocol == ShelfProtocol::ModbusUdp,
-        faults: faults.modbus(),
+        faults: faults.clone(),
         ..ServerOptions::default()
     };
     let server = ModbusServer::new(Arc::new(handler), options);
@@ -125,5 +125,5 @@ pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io:
         (p, _) => return Err(invalid(format!("{p} is not served on that kind of endpoint"))),
     };
     let memory: Arc<dyn SlotMemory> = Arc::new(Holding { bank, base });
-    Ok(Started { memory, server: super::Server::Modbus(handle) })
+    Ok(Started { memory, faults: handle.faults(), server: super::Server::Modbus(handle) })
 }

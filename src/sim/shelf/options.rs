@@ -15,7 +15,9 @@
 use std::str::FromStr;
 use std::time::Duration;
 
+use crate::protocols::faults::Faults;
 use crate::protocols::serial::SerialSettings;
+use crate::protocols::{BadDeviceCode, DeviceCode, mewtocol, modbus, ppi};
 
 /// The transports the shelf simulator serves, named as a device's `protocol`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -87,6 +89,15 @@ impl ShelfProtocol {
         matches!(self, ShelfProtocol::ModbusRtu | ShelfProtocol::Ppi | ShelfProtocol::Mewtocol)
     }
 
+    /// Reads a device error code for this protocol's server, as its manual writes it.
+    pub fn device_code(self, text: &str) -> Result<DeviceCode, BadDeviceCode> {
+        match self.family() {
+            Family::Modbus => text.parse::<modbus::Exception>().map(DeviceCode::from),
+            Family::Ppi => text.parse::<ppi::ReturnCode>().map(DeviceCode::from),
+            Family::Mewtocol => text.parse::<mewtocol::ErrorCode>().map(DeviceCode::from),
+        }
+    }
+
     pub(super) fn family(self) -> Family {
         match self {
             ShelfProtocol::ModbusUdp
@@ -150,36 +161,6 @@ impl FromStr for ShelfProtocol {
     }
 }
 
-/// Link faults the simulated PLC injects, the ones every transport's server supports.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct LinkFaults {
-    /// Fraction (0..=1) of requests left unanswered, as if lost.
-    pub drop_rate: f64,
-    /// Wait before each reply.
-    pub delay: Duration,
-    /// Fraction (0..=1) of replies preceded by random bytes.
-    pub garbage_rate: f64,
-}
-
-impl LinkFaults {
-    /// The same faults for a Modbus server.
-    pub(super) fn modbus(&self) -> crate::protocols::modbus::server::Faults {
-        crate::protocols::modbus::server::Faults {
-            drop_rate: self.drop_rate,
-            delay: self.delay,
-            garbage_rate: self.garbage_rate,
-            ..Default::default()
-        }
-    }
-
-    /// Sets these faults on a PPI or MEWTOCOL server's settings, keeping a queued script.
-    pub(super) fn apply_to_line(&self, line: &mut crate::protocols::line::Faults) {
-        line.drop_ratio = self.drop_rate;
-        line.garbage_ratio = self.garbage_rate;
-        line.delay = self.delay;
-    }
-}
-
 /// How the simulated PLC is set up. `None` fields take the protocol's default (see the
 /// module documentation).
 #[derive(Clone, Debug)]
@@ -201,8 +182,8 @@ pub struct ShelfSimOptions {
     pub task_time: Duration,
     /// Fraction of tasks that fail with kind 1 (PLC fault).
     pub fail_rate: f64,
-    /// Link faults (loss, delay, noise).
-    pub faults: LinkFaults,
+    /// Link faults (loss, delay, noise, ...), as every simulator takes them.
+    pub faults: Faults,
 }
 
 impl Default for ShelfSimOptions {
@@ -216,7 +197,7 @@ impl Default for ShelfSimOptions {
             serial: None,
             task_time: Duration::from_millis(500),
             fail_rate: 0.0,
-            faults: LinkFaults::default(),
+            faults: Faults::default(),
         }
     }
 }

@@ -6,8 +6,9 @@ use std::sync::{Arc, MutexGuard};
 
 use super::slots::{SlotMemory, SlotWords};
 use super::{Endpoint, Setup, Started};
-use crate::protocols::line::{Faults, LineServer};
+use crate::protocols::faults::SharedFaults;
 use crate::protocols::ppi::{self, Bank, MemArea, Reply, Request, ServerState, SharedBank, Size};
+use crate::protocols::transport::StreamServer;
 
 /// Word `n` of the area starting at V byte `base`.
 fn word(bank: &Bank, base: usize, n: usize) -> u16 {
@@ -113,17 +114,16 @@ pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io:
         }
         reply
     });
-    let mut line_faults = Faults::default();
-    faults.apply_to_line(&mut line_faults);
-    let state = ServerState { address, faults: line_faults.shared(), ..ServerState::new(bank.clone()) }
-        .with_handler(handler);
+    let state =
+        ServerState { address, faults: SharedFaults::new(faults.clone()), ..ServerState::new(bank.clone()) }
+            .with_handler(handler);
     let shared_faults = state.faults.clone();
-    let server: LineServer = match endpoint {
+    let server: StreamServer = match endpoint {
         Endpoint::Listen(at) => ppi::server::serve_tcp(at, state).await?,
         Endpoint::Stream(stream) => ppi::server::serve_stream(stream, state),
     };
     let memory: Arc<dyn SlotMemory> = Arc::new(VMemory { bank, base });
-    Ok(Started { memory, server: super::Server::Line { server, faults: shared_faults } })
+    Ok(Started { memory, server: super::Server::Line(server), faults: shared_faults })
 }
 
 #[cfg(test)]

@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use super::*;
 use crate::domain::JobSpec;
-use crate::protocols::modbus::{ModbusClient, ModbusConfig, Transport};
-use crate::protocols::{PlcError, PlcMemory, link, mewtocol, ppi};
+use crate::protocols::modbus::{Exception, ModbusClient, ModbusConfig, Transport};
+use crate::protocols::{DeviceCode, PlcError, PlcMemory, link, mewtocol, ppi};
 use crate::wire::slot::{EXEC_STATE, FAILURE_KIND, encode_body};
 
 fn options(protocol: ShelfProtocol) -> ShelfSimOptions {
@@ -149,11 +149,14 @@ async fn the_rtu_slave_answers_like_an_s7_1200() {
     let last = plc.read_words(&at("4x5965"), 35).await.unwrap();
     assert_eq!(last.len(), 35, "slot 60 is the data block's end");
     let past = plc.read_words(&at("4x5966"), 35).await;
-    assert!(matches!(past, Err(PlcError::Device { code: 2, .. })), "{past:?}");
+    assert!(matches!(past, Err(PlcError::Device(DeviceCode::Modbus(Exception(2))))), "{past:?}");
     let written = plc.write_words(&at("4x6000"), &[1]).await;
-    assert!(matches!(written, Err(PlcError::Device { code: 2, .. })), "{written:?}");
+    assert!(matches!(written, Err(PlcError::Device(DeviceCode::Modbus(Exception(2))))), "{written:?}");
     let inputs = plc.read_words(&at("3x512"), 1).await;
-    assert!(matches!(inputs, Err(PlcError::Device { code: 2, .. })), "IW0..IW1022 only: {inputs:?}");
+    assert!(
+        matches!(inputs, Err(PlcError::Device(DeviceCode::Modbus(Exception(2))))),
+        "IW0..IW1022 only: {inputs:?}"
+    );
     plc.write_bits(&at("0x8191"), &[true]).await.unwrap();
     assert_eq!(plc.read_bits(&at("0x8191"), 1).await.unwrap(), vec![true], "Q1023.7");
 
@@ -180,7 +183,7 @@ async fn link_faults_apply_from_the_start_and_change_at_run_time() {
         let plc = link::connect(&device.link()).await.unwrap();
         let base = plc.parse_address(sim.base()).unwrap();
         assert!(matches!(plc.read_words(&base, 1).await, Err(PlcError::Timeout { .. })), "{protocol}");
-        sim.set_faults(LinkFaults { delay: Duration::from_millis(5), ..LinkFaults::default() });
+        sim.set_faults(Faults { delay: Duration::from_millis(5), ..Faults::default() });
         assert_eq!(plc.read_words(&base, 1).await.unwrap(), vec![0], "{protocol}");
         sim.shutdown().await;
     }
@@ -209,16 +212,16 @@ async fn a_ppi_write_repeated_after_a_lost_response_is_no_violation() {
     // Tasks take longer than the client's timeout: the retry finds the task running.
     let slow = ShelfSimOptions { task_time: Duration::from_millis(900), ..options(ShelfProtocol::Ppi) };
     let (sim, plc) = over_pty_with(slow).await;
-    let Server::Line { faults, .. } = &sim.server else { panic!("PPI runs on a line server") };
+    let faults = sim.faults();
     let slot1 = plc.parse_address(sim.base()).unwrap();
     let to = Location { aisle: 1, row: 1, bay: 2, level: 1, position: 1 };
     let body = encode_body(&JobSpec::Store { to }, 1, None).unwrap();
     plc.write_words(&plc.word_address(&slot1, 1), &body).await.unwrap();
     // The PLC writes the task id, then the response to the master's poll is lost: the
     // client's retry writes the same id into what is now a busy slot.
-    faults.lock().unwrap().push(crate::protocols::line::Fault::Drop);
+    faults.push(crate::protocols::faults::Fault::Drop);
     plc.write_words(&slot1, &[9]).await.unwrap();
-    assert_eq!(faults.lock().unwrap().requests_seen, 3, "body, id, the same id again");
+    assert_eq!(faults.requests_seen(), 3, "body, id, the same id again");
     assert_eq!(sim.slot(1).map(|w| w[EXEC_STATE]), Some(1), "the retry reached a running task");
     wait_state(plc.as_ref(), &slot1, 2).await;
     assert_eq!((sim.violations(), sim.received(9)), (0, 1));

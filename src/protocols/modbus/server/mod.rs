@@ -4,7 +4,8 @@
 //! ```no_run
 //! # async fn demo() -> std::io::Result<()> {
 //! use std::sync::Arc;
-//! use rackd::protocols::modbus::server::{Bank, Faults, ModbusServer, ServerOptions};
+//! use rackd::protocols::faults::Faults;
+//! use rackd::protocols::modbus::server::{Bank, ModbusServer, ServerOptions};
 //!
 //! let bank = Bank::new();
 //! bank.set_holding(4700, &[10000]);
@@ -22,24 +23,22 @@
 //! observe or veto requests, pass your own [`Handler`] that delegates to the bank.
 
 mod bank;
-mod faults;
 mod handler;
 mod rtu;
 mod tcp;
 mod udp;
 
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
 
 pub use bank::{Bank, RegisterBank, TABLE_SIZE};
-pub use faults::Faults;
 pub use handler::Handler;
 
-use faults::Plan;
-
-use super::ByteStream;
+use super::exception::Exception;
 use super::pdu::{Request, encode_exception};
+use crate::protocols::faults::{Faults, Plan, SharedFaults};
+use crate::protocols::transport::ByteStream;
 
 /// How a server presents itself.
 #[derive(Clone, Debug, PartialEq)]
@@ -68,7 +67,7 @@ pub struct ServerStats {
     pub requests: u64,
     /// Replies sent (duplicates counted once).
     pub replies: u64,
-    /// Requests ignored by the `drop_rate` fault.
+    /// Requests left unanswered by a drop fault.
     pub dropped: u64,
 }
 
@@ -81,7 +80,7 @@ pub struct ModbusServer {
 pub(crate) struct Shared {
     handler: Arc<dyn Handler>,
     options: ServerOptions,
-    faults: Mutex<Faults>,
+    faults: SharedFaults,
     requests: AtomicU64,
     replies: AtomicU64,
     dropped: AtomicU64,
@@ -103,16 +102,17 @@ impl Shared {
         if unit != self.options.unit && !broadcast {
             return None;
         }
-        let plan = self.faults.lock().unwrap_or_else(|p| p.into_inner()).plan();
-        if plan.drop {
+        let plan = self.faults.plan();
+        if plan.drop || plan.drop_ack {
             self.dropped.fetch_add(1, Ordering::Relaxed);
             return None;
         }
         let function = *pdu.first()?;
         let result = match Request::decode(pdu) {
             Ok(req) if broadcast && !req.is_write() => return None,
-            Ok(req) => match plan.exception {
-                Some(e) => Err(e),
+            // A Modbus exception is one byte: the code's low byte.
+            Ok(req) => match plan.device_error {
+                Some(code) => Err(Exception(code as u8)),
                 None => self.handler.handle(unit, &req),
             },
             Err(e) => Err(e.exception()),
@@ -125,7 +125,7 @@ impl Shared {
             Ok(response) => response.encode(&mut out),
             Err(e) => encode_exception(function, e.0, &mut out),
         }
-        Some(Outcome { unit: plan.reply_unit.unwrap_or(unit), pdu: out, plan })
+        Some(Outcome { unit: plan.wrong_unit.unwrap_or(unit), pdu: out, plan })
     }
 
     pub fn replied(&self) {
@@ -136,7 +136,7 @@ impl Shared {
 impl ModbusServer {
     /// A server that answers with `handler` (usually a [`Bank`]).
     pub fn new(handler: Arc<dyn Handler>, options: ServerOptions) -> Self {
-        let faults = Mutex::new(options.faults.clone());
+        let faults = SharedFaults::new(options.faults.clone());
         let shared = Shared {
             handler,
             options,
@@ -193,9 +193,14 @@ impl ServerHandle {
         self.local_addr
     }
 
-    /// Replaces the injected faults; applies from the next request on.
+    /// Replaces the standing faults; applies from the next request on.
     pub fn set_faults(&self, faults: Faults) {
-        *self.shared.faults.lock().unwrap_or_else(|p| p.into_inner()) = faults;
+        self.shared.faults.set(faults);
+    }
+
+    /// The server's faults, to script one-off faults or change them in place.
+    pub fn faults(&self) -> SharedFaults {
+        self.shared.faults.clone()
     }
 
     /// Traffic counters so far.

@@ -11,8 +11,8 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::time::Instant;
 
 use super::{Outcome, Shared};
-use crate::protocols::modbus::ByteStream;
 use crate::protocols::modbus::rtu::{self, Direction};
+use crate::protocols::transport::ByteStream;
 
 pub(crate) async fn serve(mut stream: Box<dyn ByteStream>, shared: Arc<Shared>, baud: u32) {
     let silence = rtu::silence(baud);

@@ -83,6 +83,7 @@ async fn serve_mbap(mut stream: TcpStream, shared: Arc<Shared>) {
             tx.extend_from_slice(garbage);
         }
         let tid = if shared.options.zero_transaction_id { 0 } else { header.transaction };
+        let tid = if plan.wrong_id { !tid } else { tid };
         let length = if shared.options.length0 { LengthField::Zero } else { LengthField::Standard };
         let start = tx.len();
         frame::encode(&mut tx, tid, unit, &pdu, length);

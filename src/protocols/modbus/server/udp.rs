@@ -34,6 +34,7 @@ pub(crate) async fn serve(socket: UdpSocket, shared: Arc<Shared>) {
             let _ = socket.send_to(garbage, peer).await;
         }
         let tid = if shared.options.zero_transaction_id { 0 } else { header.transaction };
+        let tid = if plan.wrong_id { !tid } else { tid };
         let length = if shared.options.length0 { LengthField::Zero } else { LengthField::Standard };
         tx.clear();
         frame::encode(&mut tx, tid, unit, &pdu, length);

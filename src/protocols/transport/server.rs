@@ -1,4 +1,5 @@
-//! A running line-protocol server (over TCP or one stream) and the TCP accept loop.
+//! The server side of byte-stream protocols (MEWTOCOL, PPI): a running server over TCP
+//! connections or over one stream (a serial port, a pty), and the TCP accept loop.
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -6,17 +7,17 @@ use std::net::SocketAddr;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::task::{JoinHandle, JoinSet};
 
-/// A running server; dropping it (or [`LineServer::shutdown`]) stops it and closes its
+/// A running server; dropping it (or [`StreamServer::shutdown`]) stops it and closes its
 /// connections.
-pub struct LineServer {
+pub struct StreamServer {
     local_addr: Option<SocketAddr>,
     task: JoinHandle<()>,
 }
 
-impl LineServer {
+impl StreamServer {
     /// A server running as `task`, listening on `local_addr` (None for a single stream).
     pub(crate) fn new(local_addr: Option<SocketAddr>, task: JoinHandle<()>) -> Self {
-        LineServer { local_addr, task }
+        StreamServer { local_addr, task }
     }
 
     /// The TCP address served, if any.
@@ -36,14 +37,14 @@ impl LineServer {
     }
 }
 
-impl Drop for LineServer {
+impl Drop for StreamServer {
     fn drop(&mut self) {
         self.task.abort();
     }
 }
 
 /// Binds `addr` and serves every accepted connection with `serve`.
-pub(crate) async fn spawn_tcp<F, Fut>(addr: &str, serve: F) -> std::io::Result<LineServer>
+pub(crate) async fn spawn_tcp<F, Fut>(addr: &str, serve: F) -> std::io::Result<StreamServer>
 where
     F: Fn(TcpStream) -> Fut + Send + 'static,
     Fut: Future<Output = ()> + Send + 'static,
@@ -60,11 +61,11 @@ where
                         let _ = stream.set_nodelay(true);
                         connections.spawn(serve(stream));
                     }
-                    Err(e) => tracing::warn!(error = %e, "line server: accept failed"),
+                    Err(e) => tracing::warn!(error = %e, "stream server: accept failed"),
                 },
                 Some(_) = connections.join_next(), if !connections.is_empty() => {}
             }
         }
     });
-    Ok(LineServer::new(Some(local_addr), task))
+    Ok(StreamServer::new(Some(local_addr), task))
 }

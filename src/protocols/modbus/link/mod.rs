@@ -1,22 +1,18 @@
-//! The client side of each transport: send one request, wait for its reply.
+//! The client side of each Modbus framing: send one request, wait for its reply.
 //!
-//! A [`Link`] performs single *attempts*; retries live in [`super::ModbusClient`], so every
-//! transport shares one retry policy. Each attempt either returns the decoded reply that
-//! answers this request, or says why not ([`AttemptError`]). Datagrams or frames that do not
-//! answer this request (stale transaction id, other unit) are dropped and counted.
+//! A [`Link`] performs single *attempts* over the shared transport
+//! ([`crate::protocols::transport`]); [`super::ModbusClient`] runs them under the one retry
+//! policy. Each attempt either returns the decoded reply that answers this request, or says
+//! why not. Datagrams or frames that do not answer this request (stale transaction id, other
+//! unit) are dropped and counted.
 
 mod rtu;
-mod stream;
 mod tcp;
 mod udp;
 
-use std::io;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Duration;
 
 pub(crate) use rtu::RtuLink;
-pub use stream::ByteStream;
-pub(crate) use stream::{Connection, Endpoint};
 pub(crate) use tcp::TcpLink;
 pub(crate) use udp::UdpLink;
 
@@ -24,20 +20,11 @@ use super::decode::{DecodeError, decode_response};
 use super::exception::Exception;
 use super::frame::MbapHeader;
 use super::pdu::{Request, Response};
+use crate::protocols::DeviceCode;
+use crate::protocols::transport::{Attempt, AttemptError};
 
 /// A decoded reply: data, or the device's exception.
 pub(crate) type Reply = Result<Response, Exception>;
-
-/// Why one attempt produced no reply.
-#[derive(Debug)]
-pub(crate) enum AttemptError {
-    /// Nothing that answers the request arrived in time.
-    Timeout,
-    /// The carrier failed (connection refused or lost, port gone).
-    Io(io::Error),
-    /// Something arrived that claims to answer the request but is wrong.
-    Malformed(&'static str),
-}
 
 /// One request as the links see it.
 pub(crate) struct Exchange<'a> {
@@ -47,8 +34,6 @@ pub(crate) struct Exchange<'a> {
     pub request: &'a Request,
     /// The request's encoded PDU.
     pub pdu: &'a [u8],
-    /// True for the first attempt of this request (later ones are retries).
-    pub first: bool,
 }
 
 /// Counters shared by a client and its link.
@@ -65,7 +50,7 @@ impl Counters {
     }
 }
 
-/// The transport a client owns.
+/// The link a client owns.
 pub(crate) enum Link {
     Udp(UdpLink),
     Tcp(TcpLink),
@@ -73,21 +58,21 @@ pub(crate) enum Link {
 }
 
 impl Link {
-    /// Sends the request and waits up to `timeout` for its reply.
-    pub async fn attempt(&mut self, ex: &Exchange<'_>, timeout: Duration) -> Result<Reply, AttemptError> {
+    /// Sends the request and waits until the attempt's deadline for its reply.
+    pub async fn attempt(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<Response, AttemptError> {
         match self {
-            Link::Udp(l) => l.attempt(ex, timeout).await,
-            Link::Tcp(l) => l.attempt(ex, timeout).await,
-            Link::Rtu(l) => l.attempt(ex, timeout).await,
+            Link::Udp(l) => l.attempt(ex, attempt).await,
+            Link::Tcp(l) => l.attempt(ex, attempt).await,
+            Link::Rtu(l) => l.attempt(ex, attempt).await,
         }
     }
 
     /// Sends the request without awaiting a reply (broadcast).
-    pub async fn send_only(&mut self, ex: &Exchange<'_>, timeout: Duration) -> Result<(), AttemptError> {
+    pub async fn send_only(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<(), AttemptError> {
         match self {
-            Link::Udp(l) => l.send(ex).await,
-            Link::Tcp(l) => l.send(ex, timeout).await,
-            Link::Rtu(l) => l.send(ex, timeout).await,
+            Link::Udp(l) => l.send(ex, attempt).await,
+            Link::Tcp(l) => l.send(ex, attempt).await,
+            Link::Rtu(l) => l.send(ex, attempt).await,
         }
     }
 }
@@ -129,6 +114,12 @@ pub(crate) fn judge(unit: u8, pdu: &[u8], ex: &Exchange<'_>, loose: bool) -> Ver
         }
         Err(e) => Verdict::Fail(e.message()),
     }
+}
+
+/// The attempt's outcome for a reply that answers the request: an exception is the
+/// device's answer, final for the request.
+pub(crate) fn taken(reply: Reply) -> Result<Response, AttemptError> {
+    reply.map_err(|e| AttemptError::Device(DeviceCode::Modbus(e)))
 }
 
 /// The error for an attempt that timed out after dropping frames for `reason`.

@@ -1,0 +1,197 @@
+//! An MC 3E link: one request frame out, its reply in, over TCP or UDP, under the shared
+//! transport's retry policy and reconnect.
+//!
+//! Plain 3E frames carry no serial number, so a reply cannot be matched to its request by
+//! content alone. The defences:
+//! - one request in flight per link (the client holds the link's lock for the exchange);
+//! - every exchange is exclusive: after one that did not finish (a timeout, a malformed
+//!   reply, a caller that gave up), the TCP connection is closed, or the UDP socket
+//!   dropped and the next attempt binds a new ephemeral port, so a late reply to the old
+//!   request lands on a closed socket and can never be read as the next request's answer;
+//! - UDP: before each send, datagrams already waiting are drained and discarded; every
+//!   datagram is checked for shape (subheader, route echo, data length for the points
+//!   requested, command in the error information) and discarded if it does not fit;
+//! - TCP: input already waiting before a request (a duplicated reply) is thrown away, and
+//!   the reply's length field is never trusted past the longest valid reply.
+//!
+//! Limitation (UDP with a fixed local port, `udp_local`, as some Ethernet-module open
+//! settings require): a late reply that arrives after the drain and has the same shape as
+//! the new request's reply (same command and point count) cannot be told apart and will be
+//! taken. Use ephemeral ports, or TCP, where this matters.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use tokio_util::bytes::BytesMut;
+use tokio_util::codec::Decoder;
+
+use super::end_code::EndCode;
+use super::frame::{self, RESPONSE_SUBHEADER, Route};
+use super::response::{ErrorInfo, Outcome, Response};
+use crate::protocols::transport::{
+    Attempt, AttemptError, Backoff, DatagramLink, Endpoint, RetryPolicy, StreamLink,
+};
+use crate::protocols::{DeviceCode, PlcError};
+
+/// TCP or UDP.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TransportKind {
+    /// A TCP connection, kept open and re-opened when lost.
+    Tcp,
+    /// UDP datagrams.
+    Udp,
+}
+
+/// How to reach a PLC and how hard to try.
+#[derive(Clone, Debug)]
+pub struct LinkConfig {
+    /// `HOST:PORT` of the PLC's Ethernet module.
+    pub address: String,
+    /// TCP or UDP.
+    pub transport: TransportKind,
+    /// Time allowed for one attempt (connect, send, reply).
+    pub timeout: Duration,
+    /// Further attempts after the first fails with a timeout, a lost connection or a
+    /// malformed reply (an end code is an answer and is never retried).
+    pub retries: u32,
+    /// Waits between failed TCP connects.
+    pub backoff: Backoff,
+    /// Fixed local UDP address (None: a fresh ephemeral port after each failed exchange).
+    pub udp_local: Option<SocketAddr>,
+}
+
+/// What a valid reply looks like.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Expect {
+    pub route: Route,
+    pub command: (u16, u16),
+    pub data_len: usize,
+}
+
+/// Finds one 3E response in a TCP stream. The length field is checked against the longest
+/// reply the request allows before anything is waited for.
+struct Responses {
+    max_len: usize,
+}
+
+impl Decoder for Responses {
+    type Item = BytesMut;
+    type Error = AttemptError;
+
+    fn decode(&mut self, src: &mut BytesMut) -> Result<Option<BytesMut>, AttemptError> {
+        let Some(header) = src.get(..frame::HEADER_LEN) else { return Ok(None) };
+        let (_, len) = frame::parse_header(header, RESPONSE_SUBHEADER)
+            .map_err(|_| AttemptError::Malformed("reply does not start with a 3E response header"))?;
+        if len > self.max_len {
+            return Err(AttemptError::Malformed("reply length field exceeds what the request allows"));
+        }
+        Ok((src.len() >= frame::HEADER_LEN + len).then(|| src.split_to(frame::HEADER_LEN + len)))
+    }
+}
+
+/// The carrier of a link.
+enum Carrier {
+    Tcp(StreamLink),
+    Udp(DatagramLink),
+}
+
+/// A connection (or socket) to one PLC with its retry policy.
+pub(crate) struct Link {
+    carrier: Carrier,
+    policy: RetryPolicy,
+}
+
+impl Link {
+    pub fn new(config: LinkConfig) -> Link {
+        let carrier = match config.transport {
+            TransportKind::Tcp => {
+                Carrier::Tcp(StreamLink::new(Endpoint::Tcp(config.address), config.backoff))
+            }
+            TransportKind::Udp => {
+                Carrier::Udp(DatagramLink::new(config.address, config.udp_local, config.backoff))
+            }
+        };
+        Link { carrier, policy: RetryPolicy { timeout: config.timeout, retries: config.retries } }
+    }
+
+    /// Sends `frame` and returns the reply's data, retrying as configured.
+    pub async fn exchange(&mut self, frame: &[u8], expect: &Expect) -> Result<Vec<u8>, PlcError> {
+        let mut retry = self.policy.start("mc3e");
+        while let Some(attempt) = retry.next_attempt() {
+            let outcome = match &mut self.carrier {
+                Carrier::Tcp(link) => tcp_attempt(link, frame, expect, &attempt).await,
+                Carrier::Udp(link) => udp_attempt(link, frame, expect, &attempt).await,
+            };
+            match outcome {
+                Ok(Outcome::Ok(data)) => return Ok(data),
+                Ok(Outcome::Failed { end_code, .. }) => {
+                    retry.failed(AttemptError::Device(DeviceCode::Mc3e(EndCode(end_code))))?
+                }
+                Err(e) => retry.failed(e)?,
+            }
+        }
+        Err(retry.spent())
+    }
+}
+
+async fn tcp_attempt(
+    link: &mut StreamLink,
+    frame: &[u8],
+    expect: &Expect,
+    attempt: &Attempt,
+) -> Result<Outcome, AttemptError> {
+    link.begin_exclusive();
+    // A reply already waiting (a device that answered twice) is not this request's.
+    if link.flush_stale(attempt.timeout).await? {
+        tracing::debug!("mc3e tcp: discarded stale input");
+    }
+    link.send(frame, attempt.timeout).await?;
+    let mut responses = Responses { max_len: 2 + expect.data_len.max(ErrorInfo::LEN) };
+    let Some(bytes) = link.read_frame(&mut responses, attempt.deadline).await? else {
+        return Err(AttemptError::Timeout);
+    };
+    let outcome = check(&bytes, expect).map_err(AttemptError::Malformed)?;
+    link.finished();
+    Ok(outcome)
+}
+
+async fn udp_attempt(
+    link: &mut DatagramLink,
+    frame: &[u8],
+    expect: &Expect,
+    attempt: &Attempt,
+) -> Result<Outcome, AttemptError> {
+    link.begin_exclusive();
+    let stale = link.flush_stale(attempt.timeout).await?;
+    if stale > 0 {
+        tracing::debug!(stale, "mc3e udp: discarded stale datagrams");
+    }
+    link.send(frame, attempt.timeout).await?;
+    loop {
+        let Some(datagram) = link.recv(attempt.deadline).await? else { return Err(AttemptError::Timeout) };
+        match check(datagram, expect) {
+            Ok(outcome) => {
+                link.finished();
+                return Ok(outcome);
+            }
+            Err(why) => tracing::debug!(why, "mc3e udp: discarded a datagram that is not this reply"),
+        }
+    }
+}
+
+/// Decodes a reply and checks it answers the expected request.
+fn check(bytes: &[u8], expect: &Expect) -> Result<Outcome, &'static str> {
+    let response = Response::decode(bytes).map_err(|_| "reply is not a well-formed 3E binary response")?;
+    if response.route != expect.route {
+        return Err("reply's route fields do not echo the request's");
+    }
+    match &response.outcome {
+        Outcome::Ok(data) if data.len() != expect.data_len => {
+            Err("reply's data length does not match the points requested")
+        }
+        Outcome::Failed { info: Some(info), .. } if (info.command, info.subcommand) != expect.command => {
+            Err("error information names another command")
+        }
+        _ => Ok(response.outcome),
+    }
+}

@@ -1,0 +1,127 @@
+//! Modbus TCP, client side: MBAP frames on one connection, reopened with backoff when lost.
+//!
+//! Replies are matched by transaction id like UDP ([`super::udp`]): frames with the id of an
+//! earlier request (late replies after a timeout) are read and skipped. A frame that breaks
+//! the stream (bad protocol id or length) drops the connection, since nothing after it can
+//! be trusted. Without transaction ids (the `ignore_transaction_id` quirk) every exchange is
+//! exclusive: one that did not finish closes the connection before the next request.
+
+use std::sync::Arc;
+
+use tokio_util::bytes::{Buf, BytesMut};
+use tokio_util::codec::Decoder;
+
+use super::{Counters, Exchange, Verdict, judge_mbap, taken, timed_out};
+use crate::protocols::modbus::config::Quirks;
+use crate::protocols::modbus::decode::response_pdu_len;
+use crate::protocols::modbus::frame::{self, FrameError, LengthField, MBAP_LEN, MbapHeader};
+use crate::protocols::modbus::pdu::Response;
+use crate::protocols::transport::{Attempt, AttemptError, Backoff, Endpoint, StreamLink};
+
+/// Finds MBAP frames in a byte stream; with `length0`, a length field of 0 is read as "as
+/// long as the PDU says" (the shelf PLC's habit).
+pub(crate) struct MbapDecoder {
+    pub length0: bool,
+}
+
+impl Decoder for MbapDecoder {
+    type Item = (MbapHeader, BytesMut);
+    type Error = AttemptError;
+
+    fn decode(&mut self, src: &mut BytesMut) -> Result<Option<Self::Item>, AttemptError> {
+        if src.len() < MBAP_LEN {
+            return Ok(None);
+        }
+        let header = frame::decode_header(src).map_err(|e| AttemptError::Malformed(e.message()))?;
+        let pdu_len = match header.length {
+            0 if self.length0 => match response_pdu_len(&src[MBAP_LEN..]) {
+                Ok(Some(n)) => n,
+                Ok(None) => return Ok(None),
+                Err(e) => return Err(AttemptError::Malformed(e.message())),
+            },
+            0 => return Err(AttemptError::Malformed(FrameError::BadLength.message())),
+            n => n as usize - 1,
+        };
+        if src.len() < MBAP_LEN + pdu_len {
+            return Ok(None);
+        }
+        src.advance(MBAP_LEN);
+        Ok(Some((header, src.split_to(pdu_len))))
+    }
+}
+
+/// A Modbus TCP connection to one device.
+pub(crate) struct TcpLink {
+    link: StreamLink,
+    quirks: Quirks,
+    counters: Arc<Counters>,
+    next_tid: u16,
+    tids: Vec<u16>,
+    tx: Vec<u8>,
+}
+
+impl TcpLink {
+    /// A link to `address` that connects on first use.
+    pub fn new(address: String, quirks: Quirks, counters: Arc<Counters>) -> Self {
+        TcpLink {
+            link: StreamLink::new(Endpoint::Tcp(address), Backoff::default()),
+            quirks,
+            counters,
+            next_tid: rand::random(),
+            tids: Vec::new(),
+            tx: Vec::new(),
+        }
+    }
+
+    /// Sends the request with a new transaction id.
+    pub async fn send(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<(), AttemptError> {
+        if attempt.is_first() {
+            self.tids.clear();
+        }
+        let tid = self.next_tid;
+        self.next_tid = self.next_tid.wrapping_add(1);
+        self.tids.push(tid);
+        self.tx.clear();
+        frame::encode(&mut self.tx, tid, ex.unit, ex.pdu, LengthField::Standard);
+        if self.quirks.ignore_transaction_id {
+            self.link.begin_exclusive();
+        }
+        Counters::bump(&self.counters.sends);
+        match self.link.send(&self.tx, attempt.timeout).await {
+            // Half a frame on the stream: nothing after it could be trusted.
+            Err(AttemptError::Timeout) => {
+                self.link.reset();
+                Err(AttemptError::Timeout)
+            }
+            sent => sent,
+        }
+    }
+
+    /// Sends the request and reads frames until the one that answers it.
+    pub async fn attempt(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<Response, AttemptError> {
+        self.send(ex, attempt).await?;
+        let mut decoder = MbapDecoder { length0: self.quirks.length0 };
+        let mut reason = None;
+        loop {
+            let (header, pdu) = match self.link.read_frame(&mut decoder, attempt.deadline).await {
+                Ok(Some(found)) => found,
+                Ok(None) => return Err(timed_out(reason)),
+                Err(e) => {
+                    self.link.reset();
+                    return Err(e);
+                }
+            };
+            match judge_mbap(&header, &pdu, ex, &self.tids, self.quirks.ignore_transaction_id) {
+                Verdict::Take(reply) => {
+                    self.link.finished();
+                    return taken(reply);
+                }
+                Verdict::Fail(msg) => return Err(AttemptError::Malformed(msg)),
+                Verdict::Drop(why) => {
+                    Counters::bump(&self.counters.dropped);
+                    reason = why.or(reason);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,89 @@
+//! Modbus UDP, client side: one MBAP frame per datagram, replies matched by transaction
+//! id, unit and function.
+//!
+//! Every attempt gets a fresh transaction id; a reply carrying the id of *any* attempt of
+//! the current request is taken (a retry's answer and a slow first answer are equally
+//! good), while ids of earlier requests are stale and dropped. So a late reply after a
+//! timeout is never taken for the answer to a newer request. Without ids (the
+//! `ignore_transaction_id` quirk) datagrams already queued are flushed before each request.
+
+use std::sync::Arc;
+
+use super::{Counters, Exchange, Verdict, judge_mbap, taken, timed_out};
+use crate::protocols::modbus::config::Quirks;
+use crate::protocols::modbus::frame::{self, LengthField};
+use crate::protocols::modbus::pdu::Response;
+use crate::protocols::transport::{Attempt, AttemptError, Backoff, DatagramLink};
+
+/// A UDP link to one device.
+pub(crate) struct UdpLink {
+    link: DatagramLink,
+    quirks: Quirks,
+    counters: Arc<Counters>,
+    next_tid: u16,
+    tids: Vec<u16>,
+    tx: Vec<u8>,
+}
+
+impl UdpLink {
+    /// A link to `address` from an ephemeral local port, bound on first use.
+    pub fn new(address: String, quirks: Quirks, counters: Arc<Counters>) -> Self {
+        UdpLink {
+            link: DatagramLink::new(address, None, Backoff::default()),
+            quirks,
+            counters,
+            next_tid: rand::random(),
+            tids: Vec::new(),
+            tx: Vec::with_capacity(300),
+        }
+    }
+
+    /// Binds the socket now, so a bad address is reported when the client is built.
+    pub async fn open(&mut self, timeout: std::time::Duration) -> Result<(), AttemptError> {
+        self.link.open(timeout).await
+    }
+
+    /// Sends the request in a datagram with a new transaction id.
+    pub async fn send(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<(), AttemptError> {
+        if attempt.is_first() {
+            self.tids.clear();
+            if self.quirks.ignore_transaction_id {
+                let stale = self.link.flush_stale(attempt.timeout).await?;
+                self.counters.dropped.fetch_add(stale, std::sync::atomic::Ordering::Relaxed);
+            }
+        }
+        let tid = self.next_tid;
+        self.next_tid = self.next_tid.wrapping_add(1);
+        self.tids.push(tid);
+        self.tx.clear();
+        frame::encode(&mut self.tx, tid, ex.unit, ex.pdu, LengthField::Standard);
+        Counters::bump(&self.counters.sends);
+        self.link.send(&self.tx, attempt.timeout).await
+    }
+
+    /// Sends the request and waits for the datagram that answers it.
+    pub async fn attempt(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<Response, AttemptError> {
+        self.send(ex, attempt).await?;
+        let mut reason = None;
+        loop {
+            let Some(datagram) = self.link.recv(attempt.deadline).await? else {
+                return Err(timed_out(reason));
+            };
+            let verdict = match frame::split_datagram(datagram, self.quirks.length0) {
+                Ok((header, pdu)) => {
+                    judge_mbap(&header, pdu, ex, &self.tids, self.quirks.ignore_transaction_id)
+                }
+                // Datagrams are independent: a broken one is dropped, the right one may follow.
+                Err(e) => Verdict::Drop(Some(e.message())),
+            };
+            match verdict {
+                Verdict::Take(reply) => return taken(reply),
+                Verdict::Fail(msg) => return Err(AttemptError::Malformed(msg)),
+                Verdict::Drop(why) => {
+                    Counters::bump(&self.counters.dropped);
+                    reason = why.or(reason);
+                }
+            }
+        }
+    }
+}

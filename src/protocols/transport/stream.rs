@@ -1,0 +1,206 @@
+//! A link over a byte stream (TCP, serial port, a caller's stream): send a request, find
+//! the reply's frame in the bytes that come back.
+//!
+//! Finding a frame is the protocol's [`Decoder`]: it consumes noise and frames that are not
+//! whole yet stay buffered. The link owns the buffer, the read loop against the attempt's
+//! deadline, and the flush of stale input that the half-duplex lines (and Modbus without
+//! transaction ids) rely on.
+
+use std::io;
+use std::time::Duration;
+
+use futures::FutureExt;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::time::Instant;
+use tokio_util::bytes::{Buf, BytesMut};
+use tokio_util::codec::Decoder;
+
+use super::connection::{Backoff, Connection};
+use super::endpoint::Endpoint;
+use super::retry::AttemptError;
+
+/// Input kept while no frame is found; past it, the oldest half is noise and is cut, so a
+/// babbling line cannot grow the buffer without bound.
+const MAX_BUFFER: usize = 8192;
+
+/// A byte-stream link to one device, opened on first use and reopened after a loss.
+pub(crate) struct StreamLink {
+    conn: Connection,
+    rx: BytesMut,
+    last_io: Instant,
+}
+
+impl StreamLink {
+    /// A link over `endpoint` (any but [`Endpoint::Udp`]).
+    pub fn new(endpoint: Endpoint, backoff: Backoff) -> Self {
+        StreamLink {
+            conn: Connection::new(endpoint, backoff),
+            rx: BytesMut::with_capacity(512),
+            last_io: Instant::now(),
+        }
+    }
+
+    /// Starts an exchange that must have the stream to itself: after an unfinished one the
+    /// stream is closed and its buffered input forgotten ([`Connection::begin_exclusive`]).
+    pub fn begin_exclusive(&mut self) {
+        if self.conn.begin_exclusive() {
+            self.rx.clear();
+        }
+    }
+
+    /// Marks the exclusive exchange as answered.
+    pub fn finished(&mut self) {
+        self.conn.finished();
+    }
+
+    /// When a byte was last sent or received (for line silence between frames).
+    pub fn last_io(&self) -> Instant {
+        self.last_io
+    }
+
+    /// Bytes received and not yet taken by a decoder.
+    pub fn buffered(&self) -> usize {
+        self.rx.len()
+    }
+
+    /// Throws away input already waiting (late replies to earlier requests, noise) and
+    /// anything buffered; true if there was any. Opens the stream if needed.
+    pub async fn flush_stale(&mut self, timeout: Duration) -> Result<bool, AttemptError> {
+        let mut stale = !self.rx.is_empty();
+        self.rx.clear();
+        let stream = self.conn.stream(timeout).await?;
+        loop {
+            match stream.read_buf(&mut self.rx).now_or_never() {
+                Some(Ok(n)) if n > 0 => {
+                    stale = true;
+                    self.rx.clear();
+                    self.last_io = Instant::now();
+                }
+                Some(Ok(_)) => return Err(self.lost(io::ErrorKind::UnexpectedEof.into())),
+                Some(Err(e)) => return Err(self.lost(e)),
+                None => return Ok(stale),
+            }
+        }
+    }
+
+    /// Sends `bytes` within `timeout`. A write that times out is reported as a timeout; the
+    /// caller decides whether the half-written frame means the stream must be reopened.
+    pub async fn send(&mut self, bytes: &[u8], timeout: Duration) -> Result<(), AttemptError> {
+        let stream = self.conn.stream(timeout).await?;
+        let written = async {
+            stream.write_all(bytes).await?;
+            stream.flush().await
+        };
+        match tokio::time::timeout(timeout, written).await {
+            Ok(Ok(())) => {
+                self.last_io = Instant::now();
+                Ok(())
+            }
+            Ok(Err(e)) => Err(self.lost(e)),
+            Err(_) => Err(AttemptError::Timeout),
+        }
+    }
+
+    /// Reads until `decoder` finds a frame; `Ok(None)` when `deadline` passes first. A
+    /// decoder error means the stream cannot be trusted past this point; it is returned as
+    /// is, and the caller resets the link if the protocol cannot resynchronise.
+    pub async fn read_frame<D>(
+        &mut self,
+        decoder: &mut D,
+        deadline: Instant,
+    ) -> Result<Option<D::Item>, AttemptError>
+    where
+        D: Decoder<Error = AttemptError>,
+    {
+        loop {
+            if let Some(item) = decoder.decode(&mut self.rx)? {
+                return Ok(Some(item));
+            }
+            if self.rx.len() > MAX_BUFFER {
+                let cut = self.rx.len() - MAX_BUFFER / 2;
+                self.rx.advance(cut);
+            }
+            let stream = self.conn.stream(Duration::ZERO).await?;
+            match tokio::time::timeout_at(deadline, stream.read_buf(&mut self.rx)).await {
+                Err(_) => return Ok(None),
+                Ok(Ok(0)) => return Err(self.lost(io::ErrorKind::UnexpectedEof.into())),
+                Ok(Ok(_)) => self.last_io = Instant::now(),
+                Ok(Err(e)) => return Err(self.lost(e)),
+            }
+        }
+    }
+
+    /// Closes the stream and forgets buffered input; the next use reopens it.
+    pub fn reset(&mut self) {
+        self.conn.reset();
+        self.rx.clear();
+    }
+
+    /// Resets the link after a carrier error and returns it as the attempt's failure.
+    fn lost(&mut self, e: io::Error) -> AttemptError {
+        self.reset();
+        AttemptError::Io(e)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use tokio::io::AsyncWriteExt;
+
+    use super::*;
+
+    /// Frames are lines ending in `\n`; a `!` line is refused.
+    struct Lines;
+
+    impl Decoder for Lines {
+        type Item = Vec<u8>;
+        type Error = AttemptError;
+
+        fn decode(&mut self, src: &mut BytesMut) -> Result<Option<Vec<u8>>, AttemptError> {
+            let Some(end) = src.iter().position(|&b| b == b'\n') else { return Ok(None) };
+            let line = src.split_to(end + 1);
+            if line.starts_with(b"!") {
+                return Err(AttemptError::Malformed("refused line"));
+            }
+            Ok(Some(line[..end].to_vec()))
+        }
+    }
+
+    #[tokio::test]
+    async fn stale_input_is_flushed_and_frames_are_found_across_reads() {
+        let (near, mut far) = tokio::io::duplex(64);
+        let mut link = StreamLink::new(Endpoint::given(near), Backoff::default());
+        let timeout = Duration::from_millis(200);
+        assert!(!link.flush_stale(timeout).await.unwrap(), "nothing waiting");
+        far.write_all(b"late reply\n").await.unwrap();
+        tokio::task::yield_now().await;
+        assert!(link.flush_stale(timeout).await.unwrap(), "the late reply is thrown away");
+        link.send(b"ask\n", timeout).await.unwrap();
+        far.write_all(b"part").await.unwrap();
+        let reader = tokio::spawn(async move {
+            far.write_all(b"ial\nnext").await.unwrap();
+            far
+        });
+        let deadline = Instant::now() + timeout;
+        assert_eq!(link.read_frame(&mut Lines, deadline).await.unwrap(), Some(b"partial".to_vec()));
+        let mut far = reader.await.unwrap();
+        assert_eq!(link.buffered(), 4, "the start of the next frame stays buffered");
+        assert_eq!(
+            link.read_frame(&mut Lines, Instant::now() + Duration::from_millis(20)).await.unwrap(),
+            None
+        );
+        far.write_all(b"\n!\n").await.unwrap();
+        assert_eq!(link.read_frame(&mut Lines, deadline).await.unwrap(), Some(b"next".to_vec()));
+        assert!(matches!(link.read_frame(&mut Lines, deadline).await, Err(AttemptError::Malformed(_))));
+        drop(far);
+        let err = link.read_frame(&mut Lines, deadline).await.unwrap_err();
+        assert!(
+            matches!(err, AttemptError::Io(ref e) if e.kind() == io::ErrorKind::UnexpectedEof),
+            "{err:?}"
+        );
+        assert!(
+            matches!(link.send(b"x", timeout).await, Err(AttemptError::Io(_))),
+            "a given stream is not reopened"
+        );
+    }
+}
