@@ -197,3 +197,31 @@ impl StatusCell {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::devices::DeviceKind;
+
+    #[tokio::test(start_paused = true)]
+    async fn contact_bookkeeping_reaches_watchers_at_most_every_refresh() {
+        let status = DeviceStatus::new("shelf1", DeviceKind::Shelf, "modbus-udp", "127.0.0.1:1", 60);
+        let mut cell = StatusCell::new(status, Duration::from_secs(5));
+        let mut seen = cell.subscribe();
+        seen.mark_unchanged();
+        cell.update(|s| drop(s.record_contact(Ok(()), 3, false)));
+        assert!(!seen.has_changed().unwrap(), "a first contact within the refresh is bookkeeping");
+        assert!(cell.get().last_contact.is_some(), "readers see it all the same");
+        cell.update(|s| s.online = true);
+        assert!(seen.has_changed().unwrap(), "online is a change");
+        seen.mark_unchanged();
+        tokio::time::advance(Duration::from_secs(6)).await;
+        cell.update(|s| s.last_contact = Some(OffsetDateTime::UNIX_EPOCH));
+        assert!(seen.has_changed().unwrap(), "a new contact after the refresh is told");
+        seen.mark_unchanged();
+        cell.update(|s| s.last_contact = None);
+        assert!(!seen.has_changed().unwrap(), "and then not again before the next refresh");
+        cell.update_marked(|_| true);
+        assert!(seen.has_changed().unwrap(), "a tag change is told at once");
+    }
+}

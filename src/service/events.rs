@@ -11,7 +11,7 @@
 
 use std::sync::Arc;
 
-use axum::extract::ws::Utf8Bytes;
+use bytes::Bytes;
 use tokio::sync::broadcast;
 
 use crate::store::events::StoredEvent;
@@ -67,14 +67,15 @@ pub struct Published {
     pub seq: i64,
     /// Its topic (None for a type no topic covers: sent to everyone).
     pub topic: Option<Topic>,
-    /// `{"seq", "time", "type", "data"}` as sent.
-    pub text: Utf8Bytes,
+    /// `{"seq", "time", "type", "data"}` as sent: UTF-8, serialized once and shared by
+    /// every subscriber (a clone is a reference count).
+    pub text: Bytes,
 }
 
 impl Published {
     /// A stored event, serialized for subscribers.
     pub fn new(event: &StoredEvent) -> Published {
-        Published { seq: event.seq, topic: Topic::of(&event.kind), text: event.to_json().into() }
+        Published { seq: event.seq, topic: Topic::of(&event.kind), text: Bytes::from(event.to_json()) }
     }
 }
 

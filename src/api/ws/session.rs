@@ -82,7 +82,7 @@ impl Session {
                             for event in commit.iter().filter(|e| e.seq > from) {
                                 last = event.seq;
                                 if self.wants(event.topic) {
-                                    self.feed(&mut sink, Message::Text(event.text.clone())).await?;
+                                    self.feed(&mut sink, Message::Text(text_of(&event.text))).await?;
                                     queued = true;
                                 }
                             }
@@ -187,4 +187,10 @@ impl Session {
         let frame = CloseFrame { code, reason: Utf8Bytes::from_static(reason) };
         self.send(sink, Message::Close(Some(frame))).await
     }
+}
+
+/// An event's text as a WebSocket text frame, sharing its bytes (they are the UTF-8 of a
+/// `String`, so the check never fails).
+fn text_of(bytes: &bytes::Bytes) -> Utf8Bytes {
+    Utf8Bytes::try_from(bytes.clone()).unwrap_or_default()
 }
