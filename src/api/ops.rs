@@ -33,9 +33,15 @@ pub async fn healthz() -> Json<Health> {
         (status = 503, description = "Not ready, with the reason", body = ErrorBody),
     ))]
 pub async fn readyz(State(app): State<AppState>) -> Result<Json<Health>, ApiError> {
-    crate::store::ready(&app.pool)
-        .await
-        .map_err(|reason| ApiError::new(axum::http::StatusCode::SERVICE_UNAVAILABLE, "not_ready", reason))?;
+    crate::store::ready(&app.pool).await.map_err(|e| {
+        // The cause goes to the log; the answer names no driver text.
+        tracing::error!(error = %e, "not ready");
+        let message = match e {
+            crate::store::NotReady::Unreachable(_) => "the database does not answer",
+            crate::store::NotReady::Migration { .. } => "the database schema is not up to date",
+        };
+        ApiError::new(axum::http::StatusCode::SERVICE_UNAVAILABLE, "not_ready", message)
+    })?;
     Ok(Json(Health { status: "ok" }))
 }
 

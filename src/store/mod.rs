@@ -39,14 +39,28 @@ pub async fn open(path: &Path, busy_timeout: Duration) -> Result<SqlitePool, sql
     Ok(pool)
 }
 
+/// Why the store is not ready.
+#[derive(Debug, thiserror::Error)]
+pub enum NotReady {
+    /// The database does not answer.
+    #[error("the database does not answer: {0}")]
+    Unreachable(#[from] sqlx::Error),
+    /// A migration this version needs is not applied.
+    #[error("migration {version} ({description}) is not applied")]
+    Migration {
+        /// The migration's version.
+        version: i64,
+        /// What it does.
+        description: String,
+    },
+}
+
 /// Whether the database answers and every embedded migration is applied.
-pub async fn ready(pool: &SqlitePool) -> Result<(), String> {
-    let applied: Vec<i64> = sqlx::query_scalar("SELECT version FROM _sqlx_migrations WHERE success = 1")
-        .fetch_all(pool)
-        .await
-        .map_err(|e| format!("database unreachable: {e}"))?;
+pub async fn ready(pool: &SqlitePool) -> Result<(), NotReady> {
+    let applied: Vec<i64> =
+        sqlx::query_scalar("SELECT version FROM _sqlx_migrations WHERE success = 1").fetch_all(pool).await?;
     match MIGRATOR.iter().find(|m| !applied.contains(&m.version)) {
-        Some(m) => Err(format!("migration {} ({}) not applied", m.version, m.description)),
+        Some(m) => Err(NotReady::Migration { version: m.version, description: m.description.to_string() }),
         None => Ok(()),
     }
 }
