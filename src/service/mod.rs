@@ -1,4 +1,5 @@
-//! The service layer: job intake, and later scheduling, dispatch and the event bus.
+//! The service layer: job intake, the dispatcher (which job next, on which device; cancels;
+//! control state), the device monitor (device events and alarms) and the event hub.
 
 pub mod dispatch;
 pub mod events;
