@@ -77,8 +77,12 @@ impl Application {
         device_tasks.push(tokio::spawn(retention(writer.clone(), config.events.retention_hours)));
         let rules = Rules {
             layout,
-            devices: config.devices.iter().map(|d| (d.id.clone(), d.kind.job_kinds())).collect(),
-            routes: config.devices.iter().flat_map(|d| d.aisles.iter().map(|&a| (a, d.id.clone()))).collect(),
+            devices: config.devices.iter().map(|d| (d.id().to_owned(), d.kind().job_kinds())).collect(),
+            routes: config
+                .devices
+                .iter()
+                .flat_map(|d| d.aisles().iter().map(|&a| (a, d.id().to_owned())))
+                .collect(),
         };
         let state = AppState::new(Shared {
             pool,

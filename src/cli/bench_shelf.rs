@@ -35,7 +35,7 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
     let plc_addr = sim.local_addr().context("a UDP simulator has an address")?.to_string();
     let mut device = sim.device_config("shelf1", &plc_addr, vec![1]);
     device.poll_ms = poll_ms;
-    config.devices = vec![device];
+    config.devices = vec![device.into()];
     let app = Application::build(&config, false).await?;
     let base = format!("http://{}", app.local_addr());
     let (stop, stopped) = oneshot::channel::<()>();

@@ -6,7 +6,6 @@ pub mod bench_shelf;
 pub mod bench_ws;
 pub mod demo;
 pub mod plc;
-pub mod plc_mc3e;
 pub mod sim;
 pub mod sim_crane;
 pub mod sim_line;

@@ -4,6 +4,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 
+use crate::protocols::Protocol;
 use crate::protocols::serial::SerialSettings;
 use crate::sim::shelf::{LinkFaults, ShelfProtocol, ShelfSim, ShelfSimOptions};
 
@@ -32,8 +33,8 @@ pub enum SimCommand {
 pub struct SimShelfArgs {
     /// Protocol served: modbus-udp, modbus-tcp, modbus-rtu, modbus-rtu-tcp, ppi, ppi-tcp,
     /// mewtocol or mewtocol-tcp.
-    #[arg(long, default_value = "modbus-udp")]
-    pub protocol: ShelfProtocol,
+    #[arg(long, value_enum, default_value_t = Protocol::ModbusUdp)]
+    pub protocol: Protocol,
     /// Address to answer on (UDP / TCP), or the serial device to open (modbus-rtu, ppi,
     /// mewtocol) [default: 127.0.0.1:1502 for network protocols].
     #[arg(long)]
@@ -80,7 +81,7 @@ impl SimShelfArgs {
             anyhow::ensure!((0.0..=1.0).contains(&p), "{name} must be between 0 and 1, got {p}");
         }
         Ok(ShelfSimOptions {
-            protocol: self.protocol,
+            protocol: ShelfProtocol::try_from(self.protocol)?,
             slots: self.slots,
             base: self.base.clone(),
             stride: self.stride,

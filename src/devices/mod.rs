@@ -75,7 +75,7 @@ pub type Devices = Arc<BTreeMap<String, DeviceHandle>>;
 /// A wake-up per configured device, made before the job writer so that the writer can wake
 /// a device the moment a job for it is committed.
 pub fn wakers(configs: &[DeviceConfig]) -> BTreeMap<String, Arc<Notify>> {
-    configs.iter().map(|c| (c.id.clone(), Arc::new(Notify::new()))).collect()
+    configs.iter().map(|c| (c.id().to_owned(), Arc::new(Notify::new()))).collect()
 }
 
 /// The writer hook that wakes a job's device when queued work for it is committed.
@@ -100,32 +100,34 @@ pub async fn start(
     let mut devices = BTreeMap::new();
     let mut tasks = Vec::new();
     for c in configs {
+        let id = c.id();
         let plc =
-            crate::protocols::link::connect(&c.link()).await.with_context(|| format!("device {:?}", c.id))?;
-        let slots = match c.kind {
-            DeviceKind::Shelf => c.slots,
-            DeviceKind::Crane => 1,
-            DeviceKind::Tags => 0,
+            crate::protocols::link::connect(c.link()).await.with_context(|| format!("device {id:?}"))?;
+        let slots = match c {
+            DeviceConfig::Shelf(s) => s.slots,
+            DeviceConfig::Crane(_) => 1,
+            DeviceConfig::Tags(_) => 0,
         };
-        let mut status = DeviceStatus::new(&c.id, c.kind, &c.protocol, &c.address, slots);
-        status.aisles = c.aisles.clone();
+        let link = c.link();
+        let mut status = DeviceStatus::new(id, c.kind(), link.protocol.name(), &link.address, slots);
+        status.aisles = c.aisles().to_vec();
         let status = Arc::new(Mutex::new(status));
         let (requests, inbox) = mpsc::channel(16);
-        let wake = wakers.remove(&c.id).unwrap_or_default();
-        let context = || format!("device {:?}", c.id);
+        let wake = wakers.remove(id).unwrap_or_default();
+        let context = || format!("device {id:?}");
         let mut tag_handle = None;
-        let task = match c.kind {
-            DeviceKind::Shelf => {
+        let task = match c {
+            DeviceConfig::Shelf(c) => {
                 let shelf = shelf::Shelf::new(c.clone(), plc, writer.clone(), pool.clone(), status.clone())
                     .with_context(context)?;
                 tokio::spawn(shelf.run(wake.clone(), inbox))
             }
-            DeviceKind::Crane => {
+            DeviceConfig::Crane(c) => {
                 let crane = crane::Crane::new(c.clone(), plc, writer.clone(), pool.clone(), status.clone())
                     .with_context(context)?;
                 tokio::spawn(crane.run(wake.clone(), inbox))
             }
-            DeviceKind::Tags => {
+            DeviceConfig::Tags(c) => {
                 let (device, handle) = tags::TagDevice::new(c.clone(), plc, status.clone())
                     .map_err(anyhow::Error::msg)
                     .with_context(context)?;
@@ -134,7 +136,7 @@ pub async fn start(
             }
         };
         tasks.push(task);
-        devices.insert(c.id.clone(), DeviceHandle { wake, status, requests, tags: tag_handle });
+        devices.insert(id.to_owned(), DeviceHandle { wake, status, requests, tags: tag_handle });
     }
     Ok((Arc::new(devices), tasks))
 }

@@ -55,7 +55,7 @@ use tokio::sync::{Notify, mpsc};
 use tokio::time::{Instant, sleep_until};
 
 use super::DeviceRequest;
-use super::config::DeviceConfig;
+use super::config::{Ack, CraneConfig};
 use super::status::{CraneStatus, DeviceStatus};
 use crate::domain::Failure;
 use crate::protocols::{Address, PlcError, PlcMemory};
@@ -100,7 +100,7 @@ struct Current {
 
 /// One stacker crane: its link, what it holds and the job writer.
 pub struct Crane {
-    config: DeviceConfig,
+    config: CraneConfig,
     plc: Arc<dyn PlcMemory>,
     wcs: Address,
     crane: Address,
@@ -121,7 +121,7 @@ pub struct Crane {
 impl Crane {
     /// A crane adapter; nothing is sent until [`Crane::run`].
     pub fn new(
-        config: DeviceConfig,
+        config: CraneConfig,
         plc: Arc<dyn PlcMemory>,
         writer: Writer,
         pool: SqlitePool,
@@ -129,9 +129,12 @@ impl Crane {
     ) -> Result<Crane, CraneError> {
         let wcs = plc.parse_address(&config.wcs_base)?;
         let crane = plc.parse_address(&config.crane_base)?;
-        let ack = AckReading::parse(&config.ack)
-            .ok_or_else(|| CraneError::Config(format!("unknown ack reading {:?}", config.ack)))?;
-        let stations = Stations { inbound: config.inbound_station, outbound: config.outbound_station };
+        let ack = match config.ack {
+            Ack::Handshake => AckReading::Handshake,
+            Ack::Echo => AckReading::Echo,
+        };
+        let stations =
+            Stations { inbound: config.inbound_station.words(), outbound: config.outbound_station.words() };
         let heartbeat = Heartbeat::new(
             std::time::Duration::from_millis(config.heartbeat_ms),
             std::time::Duration::from_millis(config.heartbeat_timeout_ms),

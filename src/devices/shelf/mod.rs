@@ -34,9 +34,9 @@ use tokio::sync::{Notify, mpsc};
 use tokio::time::{Instant, sleep_until};
 
 use super::DeviceRequest;
-use super::config::DeviceConfig;
+use super::config::{ShelfConfig, WordsError, check_words};
 use super::status::DeviceStatus;
-use crate::protocols::{Address, PlcError, PlcMemory};
+use crate::protocols::{Address, PlcError, PlcMemory, Protocol};
 use crate::store::writer::Writer;
 
 /// What rackd knows of one task slot.
@@ -54,7 +54,7 @@ enum Slot {
 
 /// One shelf PLC: its link, its slots and the job writer.
 pub struct Shelf {
-    config: DeviceConfig,
+    config: ShelfConfig,
     plc: Arc<dyn PlcMemory>,
     base: Address,
     writer: Writer,
@@ -68,29 +68,27 @@ pub struct Shelf {
 /// Modbus RTU: an S7-1200 Modbus_Slave, whose holding registers start at its slot data
 /// block, `4x0`, 100; PPI: an S7-200, `VW1000`, 50 (60 slots of 100 words would not fit its
 /// V memory); MEWTOCOL: `DT4000`, 100; MC: `D4000`, 100.
-pub fn default_layout(protocol: &str) -> (&'static str, u16) {
+pub fn default_layout(protocol: Protocol) -> (&'static str, u16) {
     match protocol {
-        "modbus-rtu" | "modbus-rtu-tcp" => ("4x0", 100),
-        "ppi" | "ppi-tcp" => ("VW1000", 50),
-        "mewtocol" | "mewtocol-tcp" => ("DT4000", 100),
-        "mc3e" | "mc3e-tcp" | "mc3e-udp" => ("D4000", 100),
-        _ => ("4x4000", 100),
+        Protocol::ModbusUdp | Protocol::ModbusTcp => ("4x4000", 100),
+        Protocol::ModbusRtu | Protocol::ModbusRtuTcp => ("4x0", 100),
+        Protocol::Ppi | Protocol::PpiTcp => ("VW1000", 50),
+        Protocol::Mewtocol | Protocol::MewtocolTcp => ("DT4000", 100),
+        Protocol::Mc3e | Protocol::Mc3eUdp => ("D4000", 100),
     }
 }
 
 /// Checks, without a connection, that the slot area is writable words of the protocol and
 /// that every slot fits inside its memory area.
-pub fn check_layout(config: &DeviceConfig) -> Result<(), String> {
+pub fn check_layout(config: &ShelfConfig) -> Result<(), WordsError> {
     let words = config.slots as u32 * config.slot_stride() as u32;
-    let words =
-        u16::try_from(words).map_err(|_| format!("{words} words of slots are more than any PLC area"))?;
-    super::config::check_words(&config.protocol, "base", config.slot_base(), words, true)
+    check_words(config.link.protocol, "base", config.slot_base(), words, true)
 }
 
 impl Shelf {
     /// A shelf adapter; nothing is sent until [`Shelf::run`].
     pub fn new(
-        config: DeviceConfig,
+        config: ShelfConfig,
         plc: Arc<dyn PlcMemory>,
         writer: Writer,
         pool: SqlitePool,

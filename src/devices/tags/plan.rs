@@ -87,7 +87,7 @@ mod tests {
             .enumerate()
             .map(|(i, (address, ty))| {
                 let def = TagDef { ty: *ty, ..TagDef::at(address) };
-                TagSpec::resolve(protocol, &format!("t{i}"), &def).unwrap()
+                TagSpec::resolve(protocol.parse().unwrap(), &format!("t{i}"), &def).unwrap()
             })
             .collect()
     }

@@ -20,8 +20,10 @@ impl Raw {
         let short = || "the reply held fewer items than asked for".to_owned();
         let range = offset..offset + spec.count() as usize;
         match self {
-            Raw::Bits(bits) => spec.from_bits(bits.get(range).ok_or_else(short)?),
-            Raw::Words(words) => spec.from_words(words.get(range).ok_or_else(short)?),
+            Raw::Bits(bits) => spec.from_bits(bits.get(range).ok_or_else(short)?).map_err(|e| e.to_string()),
+            Raw::Words(words) => {
+                spec.from_words(words.get(range).ok_or_else(short)?).map_err(|e| e.to_string())
+            }
         }
     }
 }

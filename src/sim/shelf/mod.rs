@@ -47,10 +47,11 @@ pub use options::{LinkFaults, ShelfProtocol, ShelfSimOptions, UnknownProtocol};
 use self::engine::Machine;
 use self::options::Family;
 use self::slots::{Core, Layout, SlotMemory};
-use crate::devices::DeviceConfig;
+use crate::devices::config::{ShelfConfig, default_shelf_quirks};
 use crate::devices::shelf::slot::SLOT_WORDS;
 use crate::domain::Location;
 use crate::protocols::line::{LineServer, SharedFaults};
+use crate::protocols::link::LinkConfig;
 use crate::protocols::modbus::ByteStream;
 use crate::protocols::modbus::server::ServerHandle;
 
@@ -178,17 +179,16 @@ impl ShelfSim {
 
     /// A `[[devices]]` entry that drives this simulator, reached at `address` (its
     /// [`ShelfSim::local_addr`], or the serial device at the other end of its line).
-    pub fn device_config(&self, id: &str, address: &str, aisles: Vec<u16>) -> DeviceConfig {
-        let mut device = DeviceConfig::shelf(id, address, aisles);
-        device.protocol = self.protocol.name().to_owned();
-        device.unit = Some(self.unit);
-        device.base = Some(self.base.clone());
-        device.stride = Some(self.stride());
+    pub fn device_config(&self, id: &str, address: &str, aisles: Vec<u16>) -> ShelfConfig {
+        let protocol = self.protocol.protocol();
+        let mut link = LinkConfig::new(protocol, address);
+        link.unit = self.unit;
+        link.serial = self.options.serial;
+        link.quirks = default_shelf_quirks(protocol); // MBAP length 0 is the UDP PLC's own habit
+        let mut device = ShelfConfig::on(id, link, aisles);
+        device.base = self.base.clone();
+        device.stride = self.stride();
         device.slots = self.core.layout.slots;
-        device.serial = self.options.serial.map(|s| s.to_string());
-        if self.protocol != ShelfProtocol::ModbusUdp {
-            device.quirks.clear(); // MBAP length 0 is the UDP PLC's own habit
-        }
         device
     }
 
