@@ -12,8 +12,15 @@ use crate::protocols::{PlcError, Protocol};
 pub struct DeviceConfigError {
     /// The entry's `id`.
     pub id: String,
-    /// What is wrong with it.
-    pub problem: Problem,
+    /// What is wrong with it (boxed: a problem can carry a PLC error and a tag's name).
+    pub problem: Box<Problem>,
+}
+
+impl DeviceConfigError {
+    /// `problem` with entry `id`.
+    pub fn new(id: &str, problem: impl Into<Problem>) -> DeviceConfigError {
+        DeviceConfigError { id: id.to_owned(), problem: Box::new(problem.into()) }
+    }
 }
 
 /// What is wrong with a `[[devices]]` entry.

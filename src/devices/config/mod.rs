@@ -165,8 +165,8 @@ impl DeviceConfig {
 
     /// Checks values that are valid TOML but make no sense, without a connection.
     pub fn check(&self) -> Result<(), DeviceConfigError> {
-        let fail = |problem| DeviceConfigError { id: self.id().to_owned(), problem };
         let id = self.id();
+        let fail = |problem: Problem| DeviceConfigError::new(id, problem);
         if id.is_empty() || !id.chars().all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c)) {
             return Err(fail(Problem::Id));
         }

@@ -121,7 +121,7 @@ impl TryFrom<RawDevice> for DeviceConfig {
     type Error = DeviceConfigError;
 
     fn try_from(raw: RawDevice) -> Result<Self, Self::Error> {
-        let fail = |problem| DeviceConfigError { id: raw.id.clone(), problem };
+        let fail = |problem: Problem| DeviceConfigError::new(&raw.id, problem);
         if let Some(&(key, owners)) = raw.foreign_keys().first() {
             return Err(fail(Problem::ForeignKey { key, owners, kind: raw.kind }));
         }

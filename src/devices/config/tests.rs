@@ -65,7 +65,7 @@ fn shared_checks() {
         .unwrap()
         .check()
         .unwrap_err();
-    assert!(matches!(err.problem, Problem::Id), "{err}");
+    assert!(matches!(*err.problem, Problem::Id), "{err}");
     let err = checked("shelf", "protocol = \"modbus-tcp\"\nquirks = [\"no-bcc\"]").unwrap_err().to_string();
     assert!(err.contains("no-bcc") && err.contains("modbus-tcp"), "{err}");
     let mut tcp = entry("shelf", "protocol = \"modbus-tcp\"\nquirks = [\"no-transaction-id\"]").unwrap();

@@ -4,7 +4,7 @@
 //! Resolution needs no connection (it uses [`notation::shape`]), so `rackd check-config`
 //! refuses a bad tag the same way startup does.
 
-use super::codec::{self, TagType, TagValue, ValueError, WordOrder};
+use super::codec::{self, TagType, TagValue, ValueError, WordOrder, number};
 use super::config::{BadTagName, TagDef, check_name};
 use crate::protocols::notation::{self, Items, Shape};
 use crate::protocols::protocol::Family;
@@ -133,18 +133,18 @@ pub enum TagProblem {
     #[error("min and max apply to numeric types only")]
     LimitsNotNumeric,
     /// `min` or `max` outside the type's range (or not finite).
-    #[error("{key} = {value} is outside the {ty} range {lo}..={hi}")]
+    #[error("{key} = {} is outside the {ty} range {}..={}", number(*value), number(*lo), number(*hi))]
     LimitOutside {
         /// `min` or `max`.
         key: &'static str,
-        /// The value, as printed.
-        value: String,
+        /// The value.
+        value: f64,
         /// The tag's type.
         ty: &'static str,
-        /// The range's low end, as printed.
-        lo: String,
-        /// The range's high end, as printed.
-        hi: String,
+        /// The range's low end.
+        lo: f64,
+        /// The range's high end.
+        hi: f64,
     },
     /// A fractional `min` or `max` on an integer type.
     #[error("{key} = {value} must be a whole number for {ty}")]
@@ -320,8 +320,7 @@ fn limits(ty: TagType, items: Items, def: &TagDef) -> Result<Option<(f64, f64)>,
     for (key, v) in [("min", def.min), ("max", def.max)] {
         let Some(v) = v else { continue };
         if !v.is_finite() || !(lo..=hi).contains(&v) {
-            let (value, lo, hi) = (codec::number(v), codec::number(lo), codec::number(hi));
-            return Err(TagProblem::LimitOutside { key, value, ty: ty.as_str(), lo, hi });
+            return Err(TagProblem::LimitOutside { key, value: v, ty: ty.as_str(), lo, hi });
         }
         if ty.is_integer() && v.fract() != 0.0 {
             return Err(TagProblem::LimitNotWhole { key, value: v, ty: ty.as_str() });
