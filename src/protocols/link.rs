@@ -10,8 +10,9 @@
 //! - **Quirks** are checked against the protocol ([`Quirk::applies_to`]): a quirk another
 //!   protocol's client knows is refused rather than silently ignored.
 //! - **Unit** ranges are the protocols' own: MEWTOCOL stations 1..=99, PPI addresses
-//!   1..=126 (0 is rackd's own master address); a Modbus unit is any byte (0 broadcasts a
-//!   write, which `rackd plc` allows).
+//!   1..=126 (0 is rackd's own master address), Modbus units 0..=247 (0 broadcasts a
+//!   write, which `rackd plc` allows; 248..=255 are reserved). Checked before connecting,
+//!   so `rackd check-config` reports them.
 
 use std::collections::BTreeSet;
 use std::sync::Arc;
@@ -112,6 +113,7 @@ impl LinkConfig {
         match self.protocol.family() {
             Family::Mewtocol if !(1..=99).contains(&self.unit) => unit("1..=99"),
             Family::Ppi if !(1..=126).contains(&self.unit) => unit("1..=126 (0 is rackd's own address)"),
+            Family::Modbus if self.unit > 247 => unit("0..=247 (0 broadcasts)"),
             _ => Ok(()),
         }
     }
@@ -230,6 +232,10 @@ mod tests {
         assert!(link(Protocol::ModbusRtu, 1, &[Quirk::Length0]).check().is_err(), "RTU has no MBAP");
         assert_eq!(link(Protocol::ModbusRtuTcp, 0, &[]).modbus().transport, Transport::RtuOverTcp);
         assert!(link(Protocol::ModbusTcp, 0, &[]).check().is_ok(), "unit 0 broadcasts");
+        assert!(matches!(
+            link(Protocol::ModbusRtu, 248, &[]).check(),
+            Err(LinkError::Unit { unit: 248, .. })
+        ));
     }
 
     #[tokio::test]
