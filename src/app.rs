@@ -59,7 +59,7 @@ impl Application {
             .with_context(|| format!("opening database {}", db.path.display()))?;
         let layout = config.layout();
         locations::seed(&mut *pool.acquire().await?, &layout, now_ms()).await.context("seeding locations")?;
-        let queues = Queues::new(config.devices.iter().map(|d| (d.id.clone(), d.dispatch_window as usize)));
+        let queues = Queues::new(config.devices.iter().map(|d| (d.id().to_owned(), d.dispatch_window())));
         let hub = Hub::new(config.events.buffer);
         let hooks = Hooks { committed: Some(queues.hook()), publish: Some(hub.hook()) };
         let (writer, writer_task) = Writer::start(
@@ -71,7 +71,7 @@ impl Application {
         )
         .context("opening the job writer's connection")?;
         let dispatcher = Dispatcher::new(queues.clone(), writer.clone(), pool.clone());
-        dispatcher.load(config.devices.iter().map(|d| d.id.as_str())).await.context("loading the queues")?;
+        dispatcher.load(config.devices.iter().map(|d| d.id())).await.context("loading the queues")?;
         let contact_refresh = Duration::from_millis(config.events.contact_refresh_ms);
         let port = |id: &str| queues.port(id, writer.clone());
         let (devices, mut device_tasks) = devices::start(&config.devices, port, contact_refresh).await?;
@@ -79,8 +79,12 @@ impl Application {
         device_tasks.push(tokio::spawn(retention(writer.clone(), config.events.retention_hours)));
         let rules = Rules {
             layout,
-            devices: config.devices.iter().map(|d| (d.id.clone(), d.kind.job_kinds())).collect(),
-            routes: config.devices.iter().flat_map(|d| d.aisles.iter().map(|&a| (a, d.id.clone()))).collect(),
+            devices: config.devices.iter().map(|d| (d.id().to_owned(), d.kind().job_kinds())).collect(),
+            routes: config
+                .devices
+                .iter()
+                .flat_map(|d| d.aisles().iter().map(|&a| (a, d.id().to_owned())))
+                .collect(),
         };
         let state = AppState::new(Shared {
             pool,

@@ -11,6 +11,27 @@ use rand::RngCore;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+/// `[auth]`: the API keys. Auth owns its configuration section, so the configuration
+/// module depends on auth and never the other way round.
+#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AuthConfig {
+    /// The API keys, stored hashed (`rackd hash-key` prints a hash).
+    pub keys: Vec<KeyConfig>,
+}
+
+/// One `[[auth.keys]]` entry.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KeyConfig {
+    /// Who holds the key, for logs.
+    pub name: String,
+    /// `viewer`, `operator` or `admin`.
+    pub role: Role,
+    /// `sha256:` and the hex SHA-256 of the key.
+    pub hash: KeyHash,
+}
+
 /// What a key may do. Each role includes the ones before it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -52,15 +73,23 @@ impl std::fmt::Display for KeyHash {
     }
 }
 
+/// Text that is not a key hash.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum KeyHashError {
+    /// Another algorithm, or a key itself.
+    #[error("a key hash starts with `sha256:` (see `rackd hash-key`)")]
+    Prefix,
+    /// Not 64 hex digits after the prefix.
+    #[error("a key hash is `sha256:` and 64 hex digits")]
+    Digits,
+}
+
 impl TryFrom<String> for KeyHash {
-    type Error = String;
-    fn try_from(text: String) -> Result<Self, String> {
-        let hex_part = text
-            .strip_prefix("sha256:")
-            .ok_or_else(|| "a key hash starts with `sha256:` (see `rackd hash-key`)".to_string())?;
+    type Error = KeyHashError;
+    fn try_from(text: String) -> Result<Self, KeyHashError> {
+        let hex_part = text.strip_prefix("sha256:").ok_or(KeyHashError::Prefix)?;
         let mut bytes = [0u8; 32];
-        hex::decode_to_slice(hex_part, &mut bytes)
-            .map_err(|_| "a key hash is `sha256:` and 64 hex digits".to_string())?;
+        hex::decode_to_slice(hex_part, &mut bytes).map_err(|_| KeyHashError::Digits)?;
         Ok(KeyHash(bytes))
     }
 }
@@ -89,7 +118,7 @@ pub struct KeyRing {
 
 impl KeyRing {
     /// A key ring from the configuration's keys.
-    pub fn new(keys: &[crate::config::KeyConfig]) -> Self {
+    pub fn new(keys: &[KeyConfig]) -> Self {
         let keys =
             keys.iter().map(|k| (k.hash.clone(), Principal { name: k.name.clone(), role: k.role })).collect();
         KeyRing { keys }

@@ -9,17 +9,18 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+mod check;
 mod events;
 
-pub use events::EventsConfig;
+pub use check::Invalid;
+pub use events::{EventsConfig, EventsConfigError};
 
-use crate::auth::KeyHash;
+pub use crate::auth::{AuthConfig, KeyConfig};
 use crate::domain::{AisleLayout, Layout};
 
 /// The whole configuration file.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-#[derive(Default)]
 pub struct Config {
     /// The HTTP server.
     pub server: ServerConfig,
@@ -38,7 +39,7 @@ pub struct Config {
 }
 
 /// `[server]`
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ServerConfig {
     /// Address and port to serve on.
@@ -50,7 +51,7 @@ pub struct ServerConfig {
 }
 
 /// `[database]`
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DatabaseConfig {
     /// Path of the SQLite file; its folder is created if missing.
@@ -60,7 +61,7 @@ pub struct DatabaseConfig {
 }
 
 /// `[intake]`: how job submissions are committed.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct IntakeConfig {
     /// Most requests committed in one transaction.
@@ -69,28 +70,8 @@ pub struct IntakeConfig {
     pub queue: usize,
 }
 
-/// `[auth]`
-#[derive(Clone, Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct AuthConfig {
-    /// The API keys, stored hashed (`rackd hash-key` prints a hash).
-    pub keys: Vec<KeyConfig>,
-}
-
-/// One `[[auth.keys]]` entry.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct KeyConfig {
-    /// Who holds the key, for logs.
-    pub name: String,
-    /// `viewer`, `operator` or `admin`.
-    pub role: crate::auth::Role,
-    /// `sha256:` and the hex SHA-256 of the key.
-    pub hash: KeyHash,
-}
-
 /// `[site]`: which locations exist.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SiteConfig {
     /// One `[[site.aisles]]` entry per aisle.
@@ -98,7 +79,7 @@ pub struct SiteConfig {
 }
 
 /// One `[[site.aisles]]` entry.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AisleConfig {
     /// The aisle's number, from 1.
@@ -132,20 +113,20 @@ pub enum ConfigError {
         source: std::io::Error,
     },
     /// The file is not valid TOML or has a wrong or unknown key.
-    #[error("{path}: {message}")]
+    #[error("{path}: {source}")]
     Parse {
         /// The file.
         path: PathBuf,
-        /// The parser's message, naming the key and line.
-        message: String,
+        /// The parser's error, naming the key and line.
+        source: toml::de::Error,
     },
     /// The values are valid TOML but make no sense together.
-    #[error("{path}: {message}")]
+    #[error("{path}: {source}")]
     Invalid {
         /// The file.
         path: PathBuf,
         /// What is wrong.
-        message: String,
+        source: Invalid,
     },
 }
 
@@ -167,49 +148,10 @@ impl Config {
 
     /// Parses and checks configuration text; `path` is only used in messages.
     pub fn parse(text: &str, path: &Path) -> Result<Config, ConfigError> {
-        let config: Config = toml::from_str(text)
-            .map_err(|e| ConfigError::Parse { path: path.to_owned(), message: e.to_string() })?;
-        config.check().map_err(|message| ConfigError::Invalid { path: path.to_owned(), message })?;
+        let config: Config =
+            toml::from_str(text).map_err(|source| ConfigError::Parse { path: path.to_owned(), source })?;
+        config.check().map_err(|source| ConfigError::Invalid { path: path.to_owned(), source })?;
         Ok(config)
-    }
-
-    fn check(&self) -> Result<(), String> {
-        let mut seen = std::collections::BTreeSet::new();
-        for a in &self.site.aisles {
-            if a.aisle == 0 || !seen.insert(a.aisle) {
-                return Err(format!("site.aisles: aisle {} is zero or listed twice", a.aisle));
-            }
-            let l = a.layout();
-            if !(1..=2).contains(&l.rows) || l.bays == 0 || l.levels == 0 || l.positions == 0 {
-                return Err(format!(
-                    "site.aisles: aisle {} needs rows 1..=2 and at least one bay, level and position",
-                    a.aisle
-                ));
-            }
-        }
-        if self.site.aisles.is_empty() {
-            return Err("site.aisles: at least one aisle is needed".into());
-        }
-        let mut ids = std::collections::BTreeSet::new();
-        let mut served = std::collections::BTreeMap::new();
-        for d in &self.devices {
-            d.check()?;
-            if !ids.insert(d.id.as_str()) {
-                return Err(format!("devices: id {:?} is used twice", d.id));
-            }
-            for &aisle in &d.aisles {
-                if !seen.contains(&aisle) {
-                    return Err(format!("devices {:?}: aisle {aisle} is not in site.aisles", d.id));
-                }
-                if let Some(other) = served.insert(aisle, d.id.as_str()) {
-                    return Err(format!("devices {:?}: aisle {aisle} is already served by {other:?}", d.id));
-                }
-            }
-        }
-        if self.intake.max_group == 0 || self.intake.queue == 0 {
-            return Err("intake.max_group and intake.queue must be at least 1".into());
-        }
-        self.events.check()
     }
 
     /// The site layout that locations are checked against.
@@ -247,42 +189,4 @@ impl Default for SiteConfig {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_example_file_loads() {
-        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/rackd.example.toml"));
-        let config = Config::load(path).unwrap();
-        assert_eq!(config.auth.keys.len(), 3);
-    }
-
-    #[test]
-    fn unknown_key_is_named_with_its_line() {
-        let err = Config::parse("[server]\nlisten = \"127.0.0.1:1\"\nlissen = 3\n", Path::new("x.toml"))
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("lissen") && err.contains("line 3"), "{err}");
-    }
-
-    #[test]
-    fn a_tags_device_table_follows_its_entry() {
-        let text = "[[devices]]\nid = \"tower1\"\nkind = \"tags\"\nprotocol = \"ppi-tcp\"\naddress = \"10.0.0.2:102\"\nunit = 2\n\
-                    [devices.tags]\nbeacon.red = \"Q0.1\"\n\"conveyor.speed\" = { address = \"VD4\", type = \"f32\", max = 2.5 }\n";
-        let config = Config::parse(text, Path::new("x.toml")).unwrap();
-        assert_eq!(config.devices[0].tags.0.len(), 2);
-        let bad = text.replace("max = 2.5", "mx = 2.5");
-        let err = Config::parse(&bad, Path::new("x.toml")).unwrap_err().to_string();
-        assert!(err.contains("conveyor.speed") && err.contains("mx") && err.contains("line"), "{err}");
-        let bad = text.replace("VD4", "VD4.1");
-        let err = Config::parse(&bad, Path::new("x.toml")).unwrap_err().to_string();
-        assert!(err.contains("tower1") && err.contains("conveyor.speed") && err.contains("VD4.1"), "{err}");
-    }
-
-    #[test]
-    fn bad_layout_is_refused() {
-        let text = "[[site.aisles]]\naisle = 1\nrows = 3\nbays = 1\nlevels = 1\npositions = 1\n";
-        let err = Config::parse(text, Path::new("x.toml")).unwrap_err().to_string();
-        assert!(err.contains("rows"), "{err}");
-    }
-}
+mod tests;

@@ -6,11 +6,12 @@ use std::time::Duration;
 use rackd::cli::sim::FaultArgs;
 use rackd::cli::sim_mc3e::{self, SimMc3eArgs, SimTransport};
 use rackd::protocols::faults::Fault;
+use rackd::protocols::link::LinkConfig;
 use rackd::protocols::mc3e::{
     Bank, Device, Mc3eClient, Mc3eConfig, Mc3eServer, ServerState, TransportKind, WriteEvent,
 };
 use rackd::protocols::transport::Backoff;
-use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
+use rackd::protocols::{DeviceCode, PlcError, PlcMemory, Protocol};
 use tokio::net::UdpSocket;
 
 const BOTH: [TransportKind; 2] = [TransportKind::Tcp, TransportKind::Udp];
@@ -225,13 +226,15 @@ async fn write_hook_sees_every_write() {
 
 #[tokio::test]
 async fn cli_pieces_build_a_client_and_a_simulator() {
-    for (transport, protocol) in [(SimTransport::Udp, "mc3e-udp"), (SimTransport::Tcp, "mc3e")] {
+    for (transport, protocol) in [(SimTransport::Udp, Protocol::Mc3eUdp), (SimTransport::Tcp, Protocol::Mc3e)]
+    {
         let args =
             SimMc3eArgs { listen: "127.0.0.1:0".parse().unwrap(), transport, faults: FaultArgs::default() };
         let sim = sim_mc3e::start(&args).await.unwrap();
         let address = sim.local_addr().to_string();
-        let plc =
-            rackd::cli::plc_mc3e::build_client(protocol, &address, Duration::from_secs(1), 1, 4).unwrap();
+        let mut link = LinkConfig::new(protocol, address);
+        (link.timeout, link.retries) = (Duration::from_secs(1), 1);
+        let plc = rackd::protocols::link::connect(&link).await.unwrap();
         let zr = plc.parse_address("ZR1000000").unwrap();
         plc.write_words(&zr, &[9, 8]).await.unwrap();
         assert_eq!(plc.read_words(&zr, 2).await.unwrap(), [9, 8]);

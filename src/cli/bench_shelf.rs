@@ -33,9 +33,9 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
     config.server.listen = "127.0.0.1:0".parse()?;
     config.database.path = dir.path().join("bench.db");
     let plc_addr = sim.local_addr().context("a UDP simulator has an address")?.to_string();
-    let mut device = sim.device_config("shelf1", &plc_addr, vec![1]);
+    let mut device = crate::cli::demo::shelf_device(&sim, "shelf1", &plc_addr, vec![1]);
     device.poll_ms = poll_ms;
-    config.devices = vec![device];
+    config.devices = vec![device.into()];
     let app = Application::build(&config, false).await?;
     let base = format!("http://{}", app.local_addr());
     let (stop, stopped) = oneshot::channel::<()>();

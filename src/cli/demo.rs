@@ -17,10 +17,24 @@ use anyhow::Context;
 
 use crate::config::Config;
 use crate::devices::DeviceConfig;
+use crate::devices::config::{CraneConfig, ShelfConfig, TagsConfig};
+use crate::devices::tags::TagTable;
+use crate::protocols::Protocol;
+use crate::protocols::link::LinkConfig;
 use crate::protocols::mc3e::TransportKind;
 use crate::sim::crane::{CraneSim, CraneSimOptions};
 use crate::sim::shelf::{ShelfSim, ShelfSimOptions};
 use crate::sim::tower::{self, TowerSim};
+
+/// A `[[devices]]` entry that drives the shelf simulator `sim`, reached at `address` (its
+/// local address, or the serial device at the other end of its line), serving `aisles`.
+pub fn shelf_device(sim: &ShelfSim, id: &str, address: &str, aisles: Vec<u16>) -> ShelfConfig {
+    let mut device = ShelfConfig::on(id, sim.link(address), aisles);
+    device.base = sim.base().to_owned();
+    device.stride = sim.stride();
+    device.slots = sim.slots();
+    device
+}
 
 /// How fast the demo's simulated machines work.
 #[derive(Clone, Copy, Debug)]
@@ -43,9 +57,10 @@ const DEMO_BOX_PERIOD: Duration = Duration::from_secs(5);
 /// The tags device `id` for a simulated light tower at `address` (Modbus TCP), with the
 /// tower's tags ([`tower::TAGS`]) and fast polling.
 pub fn tower_device(id: &str, address: &str) -> DeviceConfig {
-    let entry = format!("id = {id:?}\nkind = \"tags\"\nprotocol = \"modbus-tcp\"\naddress = {address:?}\n");
-    let text = format!("{entry}poll_ms = 100\n[tags]\n{}", tower::TAGS);
-    toml::from_str(&text).expect("a valid tags entry")
+    let tags: TagTable = toml::from_str(tower::TAGS).expect("the tower's tag table");
+    let mut device = TagsConfig::new(id, LinkConfig::new(Protocol::ModbusTcp, address), tags.0);
+    device.poll_ms = 100;
+    device.into()
 }
 
 /// Starts the demo's simulated machines and adds their devices to `config`; keep the
@@ -59,20 +74,20 @@ pub async fn start_with(config: &mut Config, pace: Pace) -> anyhow::Result<(Shel
     let options = ShelfSimOptions { task_time: pace.task_time, ..ShelfSimOptions::default() };
     let sim = ShelfSim::start("127.0.0.1:0", options).await?;
     let plc = sim.local_addr().context("a UDP simulator has an address")?;
-    let mut device = sim.device_config("shelf1", &plc.to_string(), vec![1]);
+    let mut device = shelf_device(&sim, "shelf1", &plc.to_string(), vec![1]);
     device.poll_ms = 100;
     let crane_options =
         CraneSimOptions { transport: TransportKind::Tcp, step: pace.crane_step, wcs_timeout: None };
     let crane = CraneSim::start("127.0.0.1:0", crane_options).await?;
-    let mut crane_device = DeviceConfig::crane("crane1", &crane.local_addr().to_string(), vec![2]);
+    let mut crane_device = CraneConfig::new("crane1", &crane.local_addr().to_string(), vec![2]);
     crane_device.poll_ms = 100;
     if !config.site.aisles.iter().any(|a| a.aisle == 2) {
         crane_device.aisles.clear();
     }
     let tower = TowerSim::start("127.0.0.1:0", Some(DEMO_BOX_PERIOD)).await?;
-    config.devices = vec![device];
+    config.devices = vec![device.into()];
     if !crane_device.aisles.is_empty() {
-        config.devices.push(crane_device);
+        config.devices.push(crane_device.into());
     }
     config.devices.push(tower_device("tower1", &tower.local_addr().to_string()));
     tracing::info!(

@@ -7,52 +7,31 @@
 //! rackd plc --protocol ppi-tcp --address 10.0.0.7:4001 read VW100 3
 //! ```
 //!
-//! The command builds a `Box<dyn PlcMemory>` from `--protocol` and uses only the trait, so
-//! another protocol is one more [`PlcProtocol`] value and one arm in [`connect`].
+//! The flags make a [`LinkConfig`] and the PLC is opened by the same factory as the
+//! devices' ([`crate::protocols::link::connect`]), so `rackd plc` reaches a PLC exactly as
+//! a `[[devices]]` entry with the same settings would (MC monitoring timer included). The
+//! command uses only the [`PlcMemory`] trait, apart from how addresses are printed.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{Context, anyhow, bail};
 
+use crate::protocols::link::{self, LinkConfig, LinkError};
 use crate::protocols::mc3e::Device;
-use crate::protocols::mewtocol::{self, MewtocolClient, MewtocolConfig, MewtocolTransport};
+use crate::protocols::mewtocol;
 use crate::protocols::modbus::address::{self as modbus_address, Table};
-use crate::protocols::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
-use crate::protocols::ppi::{self, PpiClient, PpiConfig, PpiTransport};
+use crate::protocols::ppi;
+use crate::protocols::protocol::Family;
 use crate::protocols::serial::SerialSettings;
-use crate::protocols::{Address, DeviceCode, PlcError, PlcMemory};
-
-/// The protocols `rackd plc` speaks.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum PlcProtocol {
-    /// Modbus TCP (MBAP over TCP).
-    ModbusTcp,
-    /// Modbus UDP (MBAP in datagrams).
-    ModbusUdp,
-    /// Modbus RTU on a serial port.
-    ModbusRtu,
-    /// Modbus RTU frames over raw TCP (serial-to-Ethernet gateway).
-    ModbusRtuTcp,
-    /// Mitsubishi MC protocol 3E binary over TCP.
-    Mc3e,
-    /// Mitsubishi MC protocol 3E binary over UDP.
-    Mc3eUdp,
-    /// Panasonic MEWTOCOL-COM on a serial port (addresses DT100, WR1, R1F, Y1A).
-    Mewtocol,
-    /// Panasonic MEWTOCOL-COM over raw TCP (serial-to-Ethernet gateway).
-    MewtocolTcp,
-    /// Siemens S7-200 PPI on a serial port (addresses VW100, VB0, V10.3, Q0.1, T37).
-    Ppi,
-    /// Siemens S7-200 PPI over raw TCP (serial-to-Ethernet gateway).
-    PpiTcp,
-}
+use crate::protocols::{Address, DeviceCode, PlcError, PlcMemory, Protocol, Quirk};
 
 /// Arguments of `rackd plc`.
 #[derive(Debug, clap::Args)]
 pub struct PlcArgs {
     /// Protocol and transport.
     #[arg(long, value_enum)]
-    pub protocol: PlcProtocol,
+    pub protocol: Protocol,
     /// HOST:PORT, or a serial device such as /dev/ttyUSB0.
     #[arg(long)]
     pub address: String,
@@ -82,6 +61,9 @@ pub struct PlcArgs {
     /// MEWTOCOL: use `<` long frames.
     #[arg(long)]
     pub long_frames: bool,
+    /// PPI: the PLC does not echo the PDU reference.
+    #[arg(long)]
+    pub no_pdu_ref: bool,
     /// Print JSON instead of `ADDRESS VALUE` lines.
     #[arg(long)]
     pub json: bool,
@@ -111,91 +93,58 @@ pub enum PlcOp {
     },
 }
 
-/// Builds the PLC memory for the arguments.
-pub async fn connect(args: &PlcArgs) -> Result<Box<dyn PlcMemory>, PlcError> {
-    let timeout = Duration::from_millis(args.timeout_ms);
-    let transport = match args.protocol {
-        PlcProtocol::ModbusTcp => Transport::Tcp,
-        PlcProtocol::ModbusUdp => Transport::Udp,
-        PlcProtocol::ModbusRtu => Transport::RtuSerial,
-        PlcProtocol::ModbusRtuTcp => Transport::RtuOverTcp,
-        PlcProtocol::Mc3e | PlcProtocol::Mc3eUdp => {
-            let name = if args.protocol == PlcProtocol::Mc3e { "mc3e" } else { "mc3e-udp" };
-            // The PLC's own monitoring timer (units of 250 ms) stays below our timeout so
-            // the module gives up first and answers with an end code.
-            let monitor = (args.timeout_ms / 250).saturating_sub(1).clamp(1, u16::MAX as u64) as u16;
-            return super::plc_mc3e::build_client(name, &args.address, timeout, args.retries, monitor)
-                .map_err(|_| PlcError::BadAddress {
-                    text: args.address.clone(),
-                    reason: "not an MC 3E protocol",
-                });
+impl PlcArgs {
+    /// The link these flags describe: unit and serial settings default by protocol, as a
+    /// device's do; each quirk flag must suit the protocol.
+    pub fn link(&self) -> LinkConfig {
+        let flags = [
+            (self.length0, Quirk::Length0),
+            (self.ignore_transaction_id, Quirk::NoTransactionId),
+            (self.no_bcc, Quirk::NoBcc),
+            (self.long_frames, Quirk::LongFrames),
+            (self.no_pdu_ref, Quirk::NoPduRef),
+        ];
+        LinkConfig {
+            unit: self.unit.unwrap_or(self.protocol.default_unit()),
+            serial: self.serial,
+            timeout: Duration::from_millis(self.timeout_ms),
+            retries: self.retries,
+            quirks: flags.into_iter().filter(|(on, _)| *on).map(|(_, q)| q).collect(),
+            ..LinkConfig::new(self.protocol, self.address.clone())
         }
-        PlcProtocol::Mewtocol | PlcProtocol::MewtocolTcp => {
-            let transport = if args.protocol == PlcProtocol::Mewtocol {
-                MewtocolTransport::Serial
-            } else {
-                MewtocolTransport::Tcp
-            };
-            let mut config = MewtocolConfig::new(transport, args.address.clone());
-            config.serial = args.serial.unwrap_or(config.serial);
-            config.station = args.unit.unwrap_or(1);
-            config.timeout = timeout;
-            config.retries = args.retries;
-            config.bcc = !args.no_bcc;
-            config.long_frames = args.long_frames;
-            return Ok(Box::new(MewtocolClient::new(config)?));
-        }
-        PlcProtocol::Ppi | PlcProtocol::PpiTcp => {
-            let transport =
-                if args.protocol == PlcProtocol::Ppi { PpiTransport::Serial } else { PpiTransport::Tcp };
-            let mut config = PpiConfig::new(transport, args.address.clone());
-            config.serial = args.serial.unwrap_or(config.serial);
-            config.plc = args.unit.unwrap_or(2);
-            config.timeout = timeout;
-            config.retries = args.retries;
-            return Ok(Box::new(PpiClient::new(config)?));
-        }
-    };
-    let mut config = ModbusConfig::new(transport, args.address.clone());
-    config.serial = args.serial.unwrap_or_default();
-    config.unit = args.unit.unwrap_or(1);
-    config.timeout = timeout;
-    config.retries = args.retries;
-    config.quirks = Quirks { length0: args.length0, ignore_transaction_id: args.ignore_transaction_id };
-    Ok(Box::new(ModbusClient::connect(config).await?))
+    }
 }
 
-/// Whether an address names a bit area, and how to print an address, per protocol.
-fn is_bit_area(protocol: PlcProtocol, address: &Address) -> bool {
-    match protocol {
-        PlcProtocol::ModbusTcp
-        | PlcProtocol::ModbusUdp
-        | PlcProtocol::ModbusRtu
-        | PlcProtocol::ModbusRtuTcp => Table::from_area(&address.area).is_some_and(|t| !t.holds_words()),
-        PlcProtocol::Mc3e | PlcProtocol::Mc3eUdp => Device::of_area(&address.area).is_ok_and(Device::is_bit),
-        PlcProtocol::Mewtocol | PlcProtocol::MewtocolTcp => mewtocol::address::is_bit_area(address),
-        PlcProtocol::Ppi | PlcProtocol::PpiTcp => ppi::address::is_bit_area(address),
+/// Opens the PLC the arguments describe.
+pub async fn connect(args: &PlcArgs) -> Result<Arc<dyn PlcMemory>, LinkError> {
+    link::connect(&args.link()).await
+}
+
+/// Whether an address names a bit area, per protocol family.
+fn is_bit_area(protocol: Protocol, address: &Address) -> bool {
+    match protocol.family() {
+        Family::Modbus => Table::from_area(&address.area).is_some_and(|t| !t.holds_words()),
+        Family::Mc3e => Device::of_area(&address.area).is_ok_and(Device::is_bit),
+        Family::Mewtocol => mewtocol::address::is_bit_area(address),
+        Family::Ppi => ppi::address::is_bit_area(address),
     }
 }
 
 /// How far apart consecutive items are in `Address.index` (PPI words step 2 bytes).
-fn step(protocol: PlcProtocol, address: &Address) -> u32 {
-    match protocol {
-        PlcProtocol::Ppi | PlcProtocol::PpiTcp => ppi::address::step(address),
+fn step(protocol: Protocol, address: &Address) -> u32 {
+    match protocol.family() {
+        Family::Ppi => ppi::address::step(address),
         _ => 1,
     }
 }
 
-fn format_address(protocol: PlcProtocol, address: &Address) -> String {
-    match protocol {
-        PlcProtocol::ModbusTcp
-        | PlcProtocol::ModbusUdp
-        | PlcProtocol::ModbusRtu
-        | PlcProtocol::ModbusRtuTcp => modbus_address::format(address),
-        PlcProtocol::Mc3e | PlcProtocol::Mc3eUdp => Device::of_area(&address.area)
+fn format_address(protocol: Protocol, address: &Address) -> String {
+    match protocol.family() {
+        Family::Modbus => modbus_address::format(address),
+        Family::Mc3e => Device::of_area(&address.area)
             .map_or_else(|_| format!("{}{}", address.area, address.index), |d| d.format(address.index)),
-        PlcProtocol::Mewtocol | PlcProtocol::MewtocolTcp => mewtocol::address::format(address),
-        PlcProtocol::Ppi | PlcProtocol::PpiTcp => ppi::address::format(address),
+        Family::Mewtocol => mewtocol::address::format(address),
+        Family::Ppi => ppi::address::format(address),
     }
 }
 
@@ -239,11 +188,11 @@ fn parse_bit(text: &str) -> anyhow::Result<bool> {
 /// Runs `rackd plc`: prints one `ADDRESS VALUE` line per item (or JSON), fails with a
 /// clear message otherwise.
 pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
-    let plc = connect(&args).await.map_err(|e| anyhow!(describe(&e)))?;
-    let name = clap::ValueEnum::to_possible_value(&args.protocol)
-        .map(|v| v.get_name().to_string())
-        .unwrap_or_default();
-    let target = format!("{name} {}", args.address);
+    let plc = connect(&args).await.map_err(|e| match e {
+        LinkError::Plc(e) => anyhow!(describe(&e)),
+        other => anyhow!(other),
+    })?;
+    let target = format!("{} {}", args.protocol, args.address);
     let (start, values): (Address, Vec<u32>) = match &args.op {
         PlcOp::Read { address, count } => {
             let start = plc.parse_address(address).map_err(|e| anyhow!(describe(&e)))?;
@@ -331,10 +280,44 @@ mod tests {
     #[test]
     fn mewtocol_and_ppi_notation() {
         let vw = ppi::address::parse("VW100").unwrap();
-        assert_eq!(format_address(PlcProtocol::Ppi, &vw.offset(step(PlcProtocol::Ppi, &vw))), "VW102");
-        assert!(is_bit_area(PlcProtocol::PpiTcp, &ppi::address::parse("Q0.1").unwrap()));
+        assert_eq!(format_address(Protocol::Ppi, &vw.offset(step(Protocol::Ppi, &vw))), "VW102");
+        assert!(is_bit_area(Protocol::PpiTcp, &ppi::address::parse("Q0.1").unwrap()));
         let y = mewtocol::address::parse("Y1A").unwrap();
-        assert!(is_bit_area(PlcProtocol::Mewtocol, &y));
-        assert_eq!(format_address(PlcProtocol::MewtocolTcp, &y.offset(6)), "Y20");
+        assert!(is_bit_area(Protocol::Mewtocol, &y));
+        assert_eq!(format_address(Protocol::MewtocolTcp, &y.offset(6)), "Y20");
+    }
+
+    #[derive(clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: PlcArgs,
+    }
+
+    fn parse(args: &[&str]) -> Result<PlcArgs, clap::Error> {
+        use clap::Parser;
+        Cli::try_parse_from(["plc"].iter().chain(args)).map(|c| c.args)
+    }
+
+    #[test]
+    fn flags_make_the_same_link_a_device_entry_would() {
+        let args =
+            parse(&["--protocol", "mc3e-udp", "--address", "10.0.0.1:8000", "--retries", "0", "read", "D0"]);
+        let link = args.unwrap().link();
+        assert_eq!((link.protocol, link.retries, link.unit), (Protocol::Mc3eUdp, 0, 1));
+        assert_eq!((link.timeout, link.mc3e_monitor_timer()), (Duration::from_millis(1000), 3));
+        let ppi = parse(&["--protocol", "ppi", "--address", "/dev/ttyS0", "--no-pdu-ref", "read", "VW0"]);
+        let link = ppi.unwrap().link();
+        assert_eq!((link.unit, link.quirks), (2, [Quirk::NoPduRef].into()));
+        let modbus = parse(&["--protocol", "modbus-udp", "--address", "x:1", "--length0", "read", "4x1"]);
+        assert_eq!(modbus.unwrap().link().quirks, [Quirk::Length0].into());
+        assert!(parse(&["--protocol", "mc3e-tcp", "--address", "x:1", "read", "D0"]).is_ok());
+        assert!(parse(&["--protocol", "mc9", "--address", "x:1", "read", "D0"]).is_err());
+    }
+
+    #[tokio::test]
+    async fn a_quirk_of_another_protocol_is_refused_before_connecting() {
+        let args = parse(&["--protocol", "mc3e", "--address", "127.0.0.1:9", "--length0", "read", "D0"]);
+        let err = connect(&args.unwrap()).await.err().unwrap();
+        assert!(matches!(err, LinkError::Quirk { quirk: Quirk::Length0, protocol: Protocol::Mc3e }), "{err}");
     }
 }

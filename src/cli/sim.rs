@@ -5,84 +5,15 @@
 //! of `--device-error` follows each protocol's manual (hexadecimal MC end codes, decimal
 //! MEWTOCOL codes).
 
-use std::str::FromStr;
 use std::time::Duration;
 
 use anyhow::Context;
 
-use crate::protocols::faults::Faults;
+pub use super::sim_faults::FaultArgs;
+use crate::protocols::Protocol;
 use crate::protocols::serial::SerialSettings;
-use crate::protocols::{BadDeviceCode, DeviceCode};
+
 use crate::sim::shelf::{ShelfProtocol, ShelfSim, ShelfSimOptions};
-
-/// The link faults of every `rackd sim` subcommand.
-#[derive(clap::Args, Clone, Debug, Default, PartialEq)]
-pub struct FaultArgs {
-    /// Fraction (0..1) of requests left unanswered.
-    #[arg(long, default_value_t = 0.0)]
-    pub drop: f64,
-    /// Milliseconds before each reply (more than the client's timeout: every reply is late).
-    #[arg(long, default_value_t = 0)]
-    pub delay_ms: u64,
-    /// Fraction (0..1) of replies preceded by random bytes (a separate datagram over UDP).
-    #[arg(long, default_value_t = 0.0)]
-    pub garbage: f64,
-    /// Fraction (0..1) of requests answered by closing the connection (UDP: dropped).
-    #[arg(long, default_value_t = 0.0)]
-    pub close: f64,
-    /// Fraction (0..1) of replies sent twice.
-    #[arg(long, default_value_t = 0.0)]
-    pub duplicate: f64,
-    /// Fraction (0..1) of replies with a wrong transaction id (Modbus TCP/UDP) or PDU
-    /// reference (PPI); no effect where frames carry none.
-    #[arg(long, default_value_t = 0.0)]
-    pub wrong_id: f64,
-    /// Answer as this unit / station / PPI address instead of the one asked (not MC 3E).
-    #[arg(long)]
-    pub wrong_unit: Option<u8>,
-    /// Answer every request with this device error code, as the protocol's manual writes
-    /// it: Modbus exception (2, 0x0B), MC end code in hexadecimal (C051), MEWTOCOL code
-    /// (63), PPI item return code (0x0A) or class x 256 + code (0x8500).
-    #[arg(long)]
-    pub device_error: Option<String>,
-}
-
-impl FaultArgs {
-    /// The faults these flags select, reading `--device-error` as a `C` code (the
-    /// protocol's code type, e.g. [`crate::protocols::mc3e::EndCode`]).
-    pub fn faults<C>(&self) -> anyhow::Result<Faults>
-    where
-        C: FromStr<Err = BadDeviceCode> + Into<DeviceCode>,
-    {
-        self.faults_with(|text| text.parse::<C>().map(Into::into))
-    }
-
-    /// The faults these flags select, reading `--device-error` with `code`.
-    pub fn faults_with(
-        &self,
-        code: impl Fn(&str) -> Result<DeviceCode, BadDeviceCode>,
-    ) -> anyhow::Result<Faults> {
-        let device_error = match &self.device_error {
-            Some(text) => {
-                let code = code(text)?;
-                Some(u16::try_from(code.number()).context("the device error code must fit 16 bits")?)
-            }
-            None => None,
-        };
-        let faults = Faults {
-            drop_rate: self.drop,
-            delay: Duration::from_millis(self.delay_ms),
-            garbage_rate: self.garbage,
-            close_rate: self.close,
-            duplicate_rate: self.duplicate,
-            wrong_id_rate: self.wrong_id,
-            wrong_unit: self.wrong_unit,
-            device_error,
-        };
-        faults.check()?;
-        Ok(faults)
-    }
-}
 
 /// The simulators.
 #[derive(clap::Subcommand, Debug)]
@@ -109,8 +40,8 @@ pub enum SimCommand {
 pub struct SimShelfArgs {
     /// Protocol served: modbus-udp, modbus-tcp, modbus-rtu, modbus-rtu-tcp, ppi, ppi-tcp,
     /// mewtocol or mewtocol-tcp.
-    #[arg(long, default_value = "modbus-udp")]
-    pub protocol: ShelfProtocol,
+    #[arg(long, value_enum, default_value_t = Protocol::ModbusUdp)]
+    pub protocol: Protocol,
     /// Address to answer on (UDP / TCP), or the serial device to open (modbus-rtu, ppi,
     /// mewtocol) [default: 127.0.0.1:1502 for network protocols].
     #[arg(long)]
@@ -154,7 +85,7 @@ impl SimShelfArgs {
         );
         let faults = self.faults.faults_with(|text| self.protocol.device_code(text))?;
         Ok(ShelfSimOptions {
-            protocol: self.protocol,
+            protocol: ShelfProtocol::try_from(self.protocol)?,
             slots: self.slots,
             base: self.base.clone(),
             stride: self.stride,
@@ -223,6 +154,7 @@ mod tests {
     use clap::Parser;
 
     use super::*;
+    use crate::protocols::faults::Faults;
 
     #[derive(clap::Parser)]
     struct Cli {

@@ -16,7 +16,7 @@ use std::time::Duration;
 
 use tokio::io::{AsyncBufReadExt, BufReader};
 
-use super::sim::FaultArgs;
+use super::sim_faults::FaultArgs;
 use super::sim_mc3e::SimTransport;
 use crate::protocols::mc3e::{EndCode, TransportKind};
 use crate::sim::crane::{CraneSim, CraneSimOptions};

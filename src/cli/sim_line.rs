@@ -1,7 +1,7 @@
 //! `rackd sim mewtocol` and `rackd sim ppi`: a simulated Panasonic or S7-200 PLC on TCP
 //! (as behind a serial-to-Ethernet gateway) or on a serial port, with optional faults.
 
-use super::sim::FaultArgs;
+use super::sim_faults::FaultArgs;
 use crate::protocols::faults::SharedFaults;
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::StreamServer;

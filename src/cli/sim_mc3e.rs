@@ -3,7 +3,7 @@
 
 use std::net::SocketAddr;
 
-use super::sim::FaultArgs;
+use super::sim_faults::FaultArgs;
 use crate::protocols::faults::SharedFaults;
 use crate::protocols::mc3e::{Bank, EndCode, Mc3eServer, ServerState};
 

@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use anyhow::Context;
 
-use super::sim::FaultArgs;
+use super::sim_faults::FaultArgs;
 use crate::protocols::modbus::Exception;
 use crate::protocols::modbus::server::{Bank, ModbusServer, ServerOptions};
 use crate::protocols::serial::SerialSettings;

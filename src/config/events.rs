@@ -3,7 +3,7 @@
 use serde::Deserialize;
 
 /// `[events]`
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EventsConfig {
     /// Events older than this many hours are deleted from the log (replay with `?since=`
@@ -38,20 +38,29 @@ impl Default for EventsConfig {
     }
 }
 
+/// An `[events]` value that cannot work.
+#[derive(Debug, thiserror::Error)]
+pub enum EventsConfigError {
+    /// A buffer or period of 0.
+    #[error("events.buffer, ping_secs, send_timeout_secs and device_period_ms must be at least 1")]
+    Zero,
+    /// A log that keeps nothing (replay with `?since=` would never work).
+    #[error("events.retention_hours must be at least 1")]
+    Retention,
+}
+
 impl EventsConfig {
     /// Checks the values make sense together.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), EventsConfigError> {
         if self.buffer == 0
             || self.ping_secs == 0
             || self.send_timeout_secs == 0
             || self.device_period_ms == 0
         {
-            return Err(
-                "events.buffer, ping_secs, send_timeout_secs and device_period_ms must be at least 1".into(),
-            );
+            return Err(EventsConfigError::Zero);
         }
         if self.retention_hours == 0 {
-            return Err("events.retention_hours must be at least 1".into());
+            return Err(EventsConfigError::Retention);
         }
         Ok(())
     }

@@ -13,6 +13,7 @@ pub mod crane;
 pub mod port;
 pub mod shelf;
 pub mod status;
+pub mod tagdef;
 pub mod tags;
 
 use std::collections::BTreeMap;
@@ -77,30 +78,32 @@ pub async fn start(
     let mut devices = BTreeMap::new();
     let mut tasks = Vec::new();
     for c in configs {
+        let id = c.id();
         let plc =
-            crate::protocols::link::connect(&c.link()).await.with_context(|| format!("device {:?}", c.id))?;
-        let slots = match c.kind {
-            DeviceKind::Shelf => c.slots,
-            DeviceKind::Crane => 1,
-            DeviceKind::Tags => 0,
+            crate::protocols::link::connect(c.link()).await.with_context(|| format!("device {id:?}"))?;
+        let slots = match c {
+            DeviceConfig::Shelf(s) => s.slots,
+            DeviceConfig::Crane(_) => 1,
+            DeviceConfig::Tags(_) => 0,
         };
-        let mut status = DeviceStatus::new(&c.id, c.kind, &c.protocol, &c.address, slots);
-        status.aisles = c.aisles.clone();
+        let link = c.link();
+        let mut status = DeviceStatus::new(id, c.kind(), link.protocol.name(), &link.address, slots);
+        status.aisles = c.aisles().to_vec();
         let status = StatusCell::new(status, contact_refresh);
         let receiver = status.subscribe();
         let (requests, inbox) = mpsc::channel(16);
-        let context = || format!("device {:?}", c.id);
+        let context = || format!("device {id:?}");
         let mut tag_handle = None;
-        let task = match c.kind {
-            DeviceKind::Shelf => {
-                let shelf = shelf::Shelf::new(c.clone(), plc, port(&c.id), status).with_context(context)?;
+        let task = match c {
+            DeviceConfig::Shelf(c) => {
+                let shelf = shelf::Shelf::new(c.clone(), plc, port(id), status).with_context(context)?;
                 tokio::spawn(shelf.run(inbox))
             }
-            DeviceKind::Crane => {
-                let crane = crane::Crane::new(c.clone(), plc, port(&c.id), status).with_context(context)?;
+            DeviceConfig::Crane(c) => {
+                let crane = crane::Crane::new(c.clone(), plc, port(id), status).with_context(context)?;
                 tokio::spawn(crane.run(inbox))
             }
-            DeviceKind::Tags => {
+            DeviceConfig::Tags(c) => {
                 let (device, handle) = tags::TagDevice::new(c.clone(), plc, status)
                     .map_err(anyhow::Error::msg)
                     .with_context(context)?;
@@ -109,7 +112,7 @@ pub async fn start(
             }
         };
         tasks.push(task);
-        devices.insert(c.id.clone(), DeviceHandle { status: receiver, requests, tags: tag_handle });
+        devices.insert(id.to_owned(), DeviceHandle { status: receiver, requests, tags: tag_handle });
     }
     Ok((Arc::new(devices), tasks))
 }

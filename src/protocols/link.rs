@@ -1,6 +1,20 @@
-//! Opening a PLC connection from configuration: protocol name, address and the protocol's
-//! settings, to a [`PlcMemory`] that device adapters use without knowing the protocol.
+//! The one place that turns a link description into a PLC client: [`connect`] opens the
+//! [`PlcMemory`] a [`LinkConfig`] describes, for the device adapters (from `[[devices]]`)
+//! and for `rackd plc` (from its flags) alike, so both reach a PLC with the same settings.
+//!
+//! Decisions the protocol documents leave open:
+//! - **MC monitoring timer**: the PLC's own wait (units of 250 ms) is set one unit below
+//!   rackd's reply timeout (at least 1), so that a CPU that cannot answer makes the module
+//!   reply with an end code before rackd gives up and resends; equal or longer, the end
+//!   code would arrive as a late reply to be thrown away.
+//! - **Quirks** are checked against the protocol ([`Quirk::applies_to`]): a quirk another
+//!   protocol's client knows is refused rather than silently ignored.
+//! - **Unit** ranges are the protocols' own: MEWTOCOL stations 1..=99, PPI addresses
+//!   1..=126 (0 is rackd's own master address), Modbus units 0..=247 (0 broadcasts a
+//!   write, which `rackd plc` allows; 248..=255 are reserved). Checked before connecting,
+//!   so `rackd check-config` reports them.
 
+use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -8,235 +22,236 @@ use super::mc3e::{Mc3eClient, Mc3eConfig, TransportKind};
 use super::mewtocol::{MewtocolClient, MewtocolConfig, MewtocolTransport};
 use super::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use super::ppi::{PpiClient, PpiConfig, PpiTransport};
+use super::protocol::{Family, Protocol, Quirk, names};
 use super::serial::SerialSettings;
 use super::{PlcError, PlcMemory};
 
-/// The protocols a device can be reached with.
-pub const PROTOCOLS: &[&str] = &[
-    "modbus-udp",
-    "modbus-tcp",
-    "modbus-rtu",
-    "modbus-rtu-tcp",
-    "mc3e",
-    "mc3e-udp",
-    "mewtocol",
-    "mewtocol-tcp",
-    "ppi",
-    "ppi-tcp",
-];
-
-/// The unit / station a protocol's PLC answers by default: 2 on PPI (an S7-200's factory
-/// address), 1 elsewhere.
-pub fn default_unit(protocol: &str) -> u8 {
-    if protocol.starts_with("ppi") { 2 } else { 1 }
-}
+/// Reply timeout per attempt when none is configured.
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(300);
+/// Resends after a timeout when none is configured.
+pub const DEFAULT_RETRIES: u32 = 2;
 
 /// How to reach one PLC.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinkConfig {
-    /// One of [`PROTOCOLS`].
-    pub protocol: String,
+    /// Protocol and transport.
+    pub protocol: Protocol,
     /// `HOST:PORT`, or a serial device path for serial protocols.
     pub address: String,
     /// Unit / station number (Modbus unit, MEWTOCOL station, PPI address of the PLC).
     pub unit: u8,
-    /// Serial settings (`9600,8E1`) for serial protocols.
-    pub serial: Option<String>,
+    /// Serial settings (`9600,8E1`); `None` takes the protocol's default (8O1 for
+    /// MEWTOCOL, 8E1 otherwise). Modbus RTU over TCP uses the baud rate for its frame gaps.
+    pub serial: Option<SerialSettings>,
     /// Reply timeout per attempt.
     pub timeout: Duration,
     /// Resends after a timeout or bad reply.
     pub retries: u32,
-    /// Protocol quirks by name: Modbus `length0`, `no-transaction-id`; MEWTOCOL `no-bcc`,
-    /// `long-frames`; PPI `no-pdu-ref`.
-    pub quirks: Vec<String>,
+    /// Habits of the PLC the client must put up with; each must apply to `protocol`.
+    pub quirks: BTreeSet<Quirk>,
 }
 
 /// Why a link configuration cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum LinkError {
-    /// The protocol name is not known.
-    #[error("unknown protocol {0:?} (known: {known})", known = PROTOCOLS.join(", "))]
-    UnknownProtocol(String),
-    /// A setting is wrong for the protocol.
-    #[error("{0}")]
-    Setting(String),
-    /// The connection could not be set up.
+    /// A quirk of another protocol.
+    #[error("quirk {quirk} is not one of {protocol}'s (its quirks: {known})", known = known_quirks(*.protocol))]
+    Quirk {
+        /// The quirk.
+        quirk: Quirk,
+        /// The link's protocol.
+        protocol: Protocol,
+    },
+    /// A unit number the protocol cannot address.
+    #[error("unit {unit} is not a {protocol} station: {range}")]
+    Unit {
+        /// The unit as configured.
+        unit: u8,
+        /// The link's protocol.
+        protocol: Protocol,
+        /// The valid range, in words.
+        range: &'static str,
+    },
+    /// The client could not be set up.
     #[error(transparent)]
     Plc(#[from] PlcError),
 }
 
+fn known_quirks(protocol: Protocol) -> String {
+    match Quirk::of(protocol) {
+        q if q.is_empty() => "none".into(),
+        q => names(&q),
+    }
+}
+
 impl LinkConfig {
+    /// A link to `address` with the protocol's default unit, [`DEFAULT_TIMEOUT`],
+    /// [`DEFAULT_RETRIES`], the protocol's serial settings and no quirks.
+    pub fn new(protocol: Protocol, address: impl Into<String>) -> LinkConfig {
+        LinkConfig {
+            protocol,
+            address: address.into(),
+            unit: protocol.default_unit(),
+            serial: None,
+            timeout: DEFAULT_TIMEOUT,
+            retries: DEFAULT_RETRIES,
+            quirks: BTreeSet::new(),
+        }
+    }
+
+    /// Whether the link has `quirk`.
+    pub fn has(&self, quirk: Quirk) -> bool {
+        self.quirks.contains(&quirk)
+    }
+
     /// Checks the settings without connecting (for `rackd check-config`).
     pub fn check(&self) -> Result<(), LinkError> {
-        match self.protocol.as_str() {
-            "mc3e" | "mc3e-tcp" | "mc3e-udp" if !self.quirks.is_empty() => {
-                Err(LinkError::Setting("mc3e links have no quirks".into()))
-            }
-            "mc3e" | "mc3e-tcp" | "mc3e-udp" => Ok(()),
-            "mewtocol" | "mewtocol-tcp" => self.mewtocol().map(|_| ()),
-            "ppi" | "ppi-tcp" => self.ppi().map(|_| ()),
-            _ => self.modbus().map(|_| ()),
+        if let Some(&quirk) = self.quirks.iter().find(|q| !q.applies_to(self.protocol)) {
+            return Err(LinkError::Quirk { quirk, protocol: self.protocol });
+        }
+        let unit = |range| Err(LinkError::Unit { unit: self.unit, protocol: self.protocol, range });
+        match self.protocol.family() {
+            Family::Mewtocol if !(1..=99).contains(&self.unit) => unit("1..=99"),
+            Family::Ppi if !(1..=126).contains(&self.unit) => unit("1..=126 (0 is rackd's own address)"),
+            Family::Modbus if self.unit > 247 => unit("0..=247 (0 broadcasts)"),
+            _ => Ok(()),
         }
     }
 
-    fn serial_or(&self, default: SerialSettings) -> Result<SerialSettings, LinkError> {
-        match &self.serial {
-            Some(text) => text
-                .parse()
-                .map_err(|e: super::serial::SerialSettingsError| LinkError::Setting(e.to_string())),
-            None => Ok(default),
-        }
+    /// The PLC's monitoring timer for MC requests (units of 250 ms): one unit below the
+    /// timeout, at least 1 (see the module documentation).
+    pub fn mc3e_monitor_timer(&self) -> u16 {
+        let units = (self.timeout.as_millis() / 250).saturating_sub(1);
+        units.clamp(1, u16::MAX as u128) as u16
     }
 
-    fn quirks_of(&self, known: &[&str]) -> Result<(), LinkError> {
-        match self.quirks.iter().find(|q| !known.contains(&q.as_str())) {
-            Some(q) => Err(LinkError::Setting(format!("unknown quirk {q:?} (known: {})", known.join(", ")))),
-            None => Ok(()),
-        }
-    }
-
-    fn mewtocol(&self) -> Result<MewtocolConfig, LinkError> {
+    fn mc3e(&self) -> Mc3eConfig {
         let transport =
-            if self.protocol == "mewtocol" { MewtocolTransport::Serial } else { MewtocolTransport::Tcp };
-        let mut config = MewtocolConfig::new(transport, self.address.clone());
-        self.quirks_of(&["no-bcc", "long-frames"])?;
-        config.serial = self.serial_or(config.serial)?;
-        config.station = self.unit;
-        config.timeout = self.timeout;
-        config.retries = self.retries;
-        config.bcc = !self.quirks.iter().any(|q| q == "no-bcc");
-        config.long_frames = self.quirks.iter().any(|q| q == "long-frames");
-        if !(1..=99).contains(&config.station) {
-            return Err(LinkError::Setting("a MEWTOCOL station (unit) is 1..=99".into()));
-        }
-        Ok(config)
-    }
-
-    fn ppi(&self) -> Result<PpiConfig, LinkError> {
-        let transport = if self.protocol == "ppi" { PpiTransport::Serial } else { PpiTransport::Tcp };
-        let mut config = PpiConfig::new(transport, self.address.clone());
-        self.quirks_of(&["no-pdu-ref"])?;
-        config.serial = self.serial_or(config.serial)?;
-        config.plc = self.unit;
-        config.timeout = self.timeout;
-        config.retries = self.retries;
-        config.match_pdu_ref = !self.quirks.iter().any(|q| q == "no-pdu-ref");
-        if config.plc == config.master || config.plc > 126 {
-            return Err(LinkError::Setting("a PPI PLC address (unit) is 1..=126".into()));
-        }
-        Ok(config)
-    }
-
-    /// The MC 3E settings, when the protocol is `mc3e` (TCP) or `mc3e-udp`.
-    fn mc3e(&self) -> Option<Mc3eConfig> {
-        let transport = match self.protocol.as_str() {
-            "mc3e" | "mc3e-tcp" => TransportKind::Tcp,
-            "mc3e-udp" => TransportKind::Udp,
-            _ => return None,
-        };
+            if self.protocol == Protocol::Mc3eUdp { TransportKind::Udp } else { TransportKind::Tcp };
         let mut config = Mc3eConfig::new(self.address.clone(), transport);
         config.link.timeout = self.timeout;
         config.link.retries = self.retries;
-        // The PLC's own monitoring timer must give up before rackd does (250 ms units).
-        config.monitor_timer = ((self.timeout.as_millis() / 250) as u16).clamp(1, 40);
-        Some(config)
+        config.monitor_timer = self.mc3e_monitor_timer();
+        config
     }
 
-    fn modbus(&self) -> Result<ModbusConfig, LinkError> {
-        let transport = match self.protocol.as_str() {
-            "modbus-udp" => Transport::Udp,
-            "modbus-tcp" => Transport::Tcp,
-            "modbus-rtu" => Transport::RtuSerial,
-            "modbus-rtu-tcp" => Transport::RtuOverTcp,
-            other => return Err(LinkError::UnknownProtocol(other.to_owned())),
+    fn mewtocol(&self) -> MewtocolConfig {
+        let transport =
+            if self.protocol.is_serial() { MewtocolTransport::Serial } else { MewtocolTransport::Tcp };
+        let mut config = MewtocolConfig::new(transport, self.address.clone());
+        config.serial = self.serial.unwrap_or(config.serial);
+        config.station = self.unit;
+        config.timeout = self.timeout;
+        config.retries = self.retries;
+        config.bcc = !self.has(Quirk::NoBcc);
+        config.long_frames = self.has(Quirk::LongFrames);
+        config
+    }
+
+    fn ppi(&self) -> PpiConfig {
+        let transport = if self.protocol.is_serial() { PpiTransport::Serial } else { PpiTransport::Tcp };
+        let mut config = PpiConfig::new(transport, self.address.clone());
+        config.serial = self.serial.unwrap_or(config.serial);
+        config.plc = self.unit;
+        config.timeout = self.timeout;
+        config.retries = self.retries;
+        config.match_pdu_ref = !self.has(Quirk::NoPduRef);
+        config
+    }
+
+    fn modbus(&self) -> ModbusConfig {
+        let transport = match self.protocol {
+            Protocol::ModbusTcp => Transport::Tcp,
+            Protocol::ModbusRtu => Transport::RtuSerial,
+            Protocol::ModbusRtuTcp => Transport::RtuOverTcp,
+            _ => Transport::Udp,
         };
         let mut config = ModbusConfig::new(transport, self.address.clone());
         config.unit = self.unit;
         config.timeout = self.timeout;
         config.retries = self.retries;
-        if let Some(serial) = &self.serial {
-            config.serial = serial
-                .parse()
-                .map_err(|e: super::serial::SerialSettingsError| LinkError::Setting(e.to_string()))?;
-        }
-        let mut quirks = Quirks::default();
-        for q in &self.quirks {
-            match q.as_str() {
-                "length0" => quirks.length0 = true,
-                "no-transaction-id" => quirks.ignore_transaction_id = true,
-                other => {
-                    return Err(LinkError::Setting(format!(
-                        "unknown quirk {other:?} (known: length0, no-transaction-id)"
-                    )));
-                }
-            }
-        }
-        config.quirks = quirks;
-        Ok(config)
+        config.serial = self.serial.unwrap_or(config.serial);
+        config.quirks = Quirks {
+            length0: self.has(Quirk::Length0),
+            ignore_transaction_id: self.has(Quirk::NoTransactionId),
+        };
+        config
     }
 }
 
-/// Opens the PLC connection a configuration describes. Connection-oriented transports
-/// connect lazily, so a PLC that is down at start does not stop rackd.
+/// Opens the PLC connection a configuration describes, after [`LinkConfig::check`].
+/// Connection-oriented transports connect lazily, so a PLC that is down at start does not
+/// stop rackd.
 pub async fn connect(config: &LinkConfig) -> Result<Arc<dyn PlcMemory>, LinkError> {
-    if let Some(mc3e) = config.mc3e() {
-        config.check()?;
-        return Ok(Arc::new(Mc3eClient::new(mc3e)));
-    }
-    match config.protocol.as_str() {
-        "mewtocol" | "mewtocol-tcp" => Ok(Arc::new(MewtocolClient::new(config.mewtocol()?)?)),
-        "ppi" | "ppi-tcp" => Ok(Arc::new(PpiClient::new(config.ppi()?)?)),
-        _ => Ok(Arc::new(ModbusClient::connect(config.modbus()?).await?)),
-    }
+    config.check()?;
+    Ok(match config.protocol.family() {
+        Family::Mc3e => Arc::new(Mc3eClient::new(config.mc3e())),
+        Family::Mewtocol => Arc::new(MewtocolClient::new(config.mewtocol())?),
+        Family::Ppi => Arc::new(PpiClient::new(config.ppi())?),
+        Family::Modbus => Arc::new(ModbusClient::connect(config.modbus()).await?),
+    })
 }
 
 #[cfg(test)]
 mod tests {
-    use std::time::Duration;
-
     use super::*;
 
-    fn link(protocol: &str, unit: u8, quirks: &[&str]) -> LinkConfig {
+    fn link(protocol: Protocol, unit: u8, quirks: &[Quirk]) -> LinkConfig {
         LinkConfig {
-            protocol: protocol.into(),
-            address: "127.0.0.1:9".into(),
             unit,
-            serial: None,
             timeout: Duration::from_millis(100),
             retries: 0,
-            quirks: quirks.iter().map(|q| q.to_string()).collect(),
+            quirks: quirks.iter().copied().collect(),
+            ..LinkConfig::new(protocol, "127.0.0.1:9")
         }
     }
 
     #[test]
     fn mewtocol_and_ppi_settings() {
-        let m = link("mewtocol-tcp", 3, &["no-bcc", "long-frames"]).mewtocol().unwrap();
+        let m = link(Protocol::MewtocolTcp, 3, &[Quirk::NoBcc, Quirk::LongFrames]).mewtocol();
         assert_eq!((m.station, m.bcc, m.long_frames, m.transport), (3, false, true, MewtocolTransport::Tcp));
         assert_eq!(m.serial.parity, tokio_serial::Parity::Odd);
-        let p = link("ppi", 2, &["no-pdu-ref"]).ppi().unwrap();
+        let p = link(Protocol::Ppi, 2, &[Quirk::NoPduRef]).ppi();
         assert_eq!((p.plc, p.match_pdu_ref, p.transport), (2, false, PpiTransport::Serial));
-        assert!(link("mewtocol", 0, &[]).check().is_err());
-        assert!(link("ppi", 0, &[]).check().is_err());
-        assert!(link("ppi-tcp", 2, &["length0"]).check().is_err());
-        assert!(link("mewtocol", 1, &[]).check().is_ok());
-        let mut serial = link("ppi", 2, &[]);
-        serial.serial = Some("187500,8E1".into());
-        assert_eq!(serial.ppi().unwrap().serial.baud, 187_500);
+        assert!(matches!(link(Protocol::Mewtocol, 0, &[]).check(), Err(LinkError::Unit { .. })));
+        assert!(matches!(link(Protocol::Ppi, 0, &[]).check(), Err(LinkError::Unit { .. })));
+        let err = link(Protocol::PpiTcp, 2, &[Quirk::Length0]).check().unwrap_err();
+        assert!(matches!(err, LinkError::Quirk { quirk: Quirk::Length0, protocol: Protocol::PpiTcp }));
+        assert!(err.to_string().contains("no-pdu-ref"), "{err}");
+        assert!(link(Protocol::Mewtocol, 1, &[]).check().is_ok());
+        let mut serial = link(Protocol::Ppi, 2, &[]);
+        serial.serial = Some("187500,8E1".parse().unwrap());
+        assert_eq!(serial.ppi().serial.baud, 187_500);
+    }
+
+    #[test]
+    fn modbus_settings_and_quirks() {
+        let m = link(Protocol::ModbusUdp, 7, &[Quirk::Length0, Quirk::NoTransactionId]).modbus();
+        assert_eq!((m.unit, m.transport), (7, Transport::Udp));
+        assert_eq!(m.quirks, Quirks { length0: true, ignore_transaction_id: true });
+        assert!(link(Protocol::ModbusRtu, 1, &[Quirk::Length0]).check().is_err(), "RTU has no MBAP");
+        assert_eq!(link(Protocol::ModbusRtuTcp, 0, &[]).modbus().transport, Transport::RtuOverTcp);
+        assert!(link(Protocol::ModbusTcp, 0, &[]).check().is_ok(), "unit 0 broadcasts");
+        assert!(matches!(
+            link(Protocol::ModbusRtu, 248, &[]).check(),
+            Err(LinkError::Unit { unit: 248, .. })
+        ));
     }
 
     #[tokio::test]
     async fn mc3e_links_over_tcp_and_udp() {
-        for p in ["mc3e", "mc3e-udp"] {
-            assert!(PROTOCOLS.contains(&p));
+        for p in [Protocol::Mc3e, Protocol::Mc3eUdp] {
             link(p, 1, &[]).check().unwrap();
             let plc = connect(&link(p, 1, &[])).await.unwrap();
             assert_eq!(plc.parse_address("D200").unwrap().index, 200);
         }
-        assert!(link("mc3e", 1, &["length0"]).check().is_err());
-        assert!(matches!(link("mc9", 1, &[]).check(), Err(LinkError::UnknownProtocol(_))));
-        let mut one_second = link("mc3e-udp", 1, &[]);
+        assert_eq!(link(Protocol::Mc3eUdp, 1, &[]).mc3e().link.transport, TransportKind::Udp);
+        assert!(link(Protocol::Mc3e, 1, &[Quirk::Length0]).check().is_err());
+        assert!(connect(&link(Protocol::Mc3e, 1, &[Quirk::NoBcc])).await.is_err());
+        let mut one_second = link(Protocol::Mc3eUdp, 1, &[]);
         one_second.timeout = Duration::from_millis(1000);
-        let timer = one_second.mc3e().unwrap().monitor_timer;
-        assert_eq!(timer, 4, "1 s timeout = 4 x 250 ms");
+        assert_eq!(one_second.mc3e().monitor_timer, 3, "750 ms: below the 1 s timeout");
+        one_second.timeout = Duration::from_millis(300);
+        assert_eq!(one_second.mc3e().monitor_timer, 1, "never 0, which waits forever");
     }
 }

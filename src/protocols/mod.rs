@@ -22,12 +22,14 @@ pub mod mewtocol;
 pub mod modbus;
 pub mod notation;
 pub mod ppi;
+pub mod protocol;
 pub mod serial;
 pub mod transport;
 
 use async_trait::async_trait;
 
 pub use error::{BadDeviceCode, DeviceCode, PlcError};
+pub use protocol::{Protocol, Quirk};
 
 /// A named memory area of a PLC in the protocol's own notation, upper-cased
 /// (`"4X"` holding registers, `"D"` data registers, `"DT"`, `"V"`, ...).

@@ -3,14 +3,15 @@
 //! [`PlcMemory::parse_address`](super::PlcMemory::parse_address) needs a client, and a
 //! client needs a link; `rackd check-config` and device adapters that map many addresses
 //! (tag I/O) want to know before connecting whether `Q0.1` is a bit, whether `VD4` holds
-//! double words and whether `1x7` can be written. [`shape`] answers that for every protocol
-//! of [`super::link::PROTOCOLS`] with the same parsers the clients use.
+//! double words and whether `1x7` can be written. [`shape`] answers that for every
+//! [`Protocol`] with the same parsers the clients use.
 
 use super::mewtocol::address::{self as mewtocol, Target as MewTarget};
 use super::mewtocol::command::ContactArea;
 use super::modbus::address::{self as modbus, Table};
 use super::ppi::address::{self as ppi, MAX_BYTE};
 use super::ppi::pdu::{MemArea, Size};
+use super::protocol::{Family, Protocol};
 use super::{Address, PlcError, mc3e};
 
 /// The kind of items an area holds, as [`super::PlcMemory`] reads them.
@@ -51,14 +52,13 @@ impl Shape {
     }
 }
 
-/// What `text` names in `protocol`'s notation (one of [`super::link::PROTOCOLS`]).
-pub fn shape(protocol: &str, text: &str) -> Result<Shape, PlcError> {
-    match protocol {
-        "modbus-udp" | "modbus-tcp" | "modbus-rtu" | "modbus-rtu-tcp" => modbus_shape(text),
-        "mc3e" | "mc3e-tcp" | "mc3e-udp" => mc3e_shape(text),
-        "mewtocol" | "mewtocol-tcp" => mewtocol_shape(text),
-        "ppi" | "ppi-tcp" => ppi_shape(text),
-        _ => Err(PlcError::BadAddress { text: text.to_owned(), reason: "unknown protocol" }),
+/// What `text` names in `protocol`'s notation.
+pub fn shape(protocol: Protocol, text: &str) -> Result<Shape, PlcError> {
+    match protocol.family() {
+        Family::Modbus => modbus_shape(text),
+        Family::Mc3e => mc3e_shape(text),
+        Family::Mewtocol => mewtocol_shape(text),
+        Family::Ppi => ppi_shape(text),
     }
 }
 
@@ -114,8 +114,12 @@ fn ppi_shape(text: &str) -> Result<Shape, PlcError> {
 mod tests {
     use super::*;
 
+    fn at(protocol: &str, text: &str) -> Result<Shape, PlcError> {
+        shape(protocol.parse().unwrap(), text)
+    }
+
     fn of(protocol: &str, text: &str) -> (Items, u32, bool) {
-        let s = shape(protocol, text).unwrap();
+        let s = at(protocol, text).unwrap();
         (s.items, s.step, s.writable)
     }
 
@@ -139,19 +143,18 @@ mod tests {
         assert_eq!(of("ppi-tcp", "VD4"), (Items::DoubleWords, 2, true));
         assert_eq!(of("ppi-tcp", "AIW0"), (Items::Words, 2, false));
         assert_eq!(of("ppi-tcp", "T37"), (Items::Words, 1, true));
-        assert!(shape("modbus-tcp", "D200").is_err());
-        assert!(shape("ppi", "4x1").is_err());
-        assert!(shape("mc9", "D1").is_err());
+        assert!(at("modbus-tcp", "D200").is_err());
+        assert!(at("ppi", "4x1").is_err());
     }
 
     #[test]
     fn fits_checks_the_end_of_the_area() {
-        assert!(shape("modbus-tcp", "4x65534").unwrap().fits(2));
-        assert!(!shape("modbus-tcp", "4x65535").unwrap().fits(2));
-        assert!(shape("ppi", "VW65534").unwrap().fits(1));
-        assert!(!shape("ppi", "VW65534").unwrap().fits(2));
-        assert!(!shape("mewtocol", "DT99999").unwrap().fits(2));
-        assert!(shape("mewtocol", "DT99998").unwrap().fits(2));
-        assert!(!shape("mc3e", "D16777215").unwrap().fits(2));
+        assert!(at("modbus-tcp", "4x65534").unwrap().fits(2));
+        assert!(!at("modbus-tcp", "4x65535").unwrap().fits(2));
+        assert!(at("ppi", "VW65534").unwrap().fits(1));
+        assert!(!at("ppi", "VW65534").unwrap().fits(2));
+        assert!(!at("mewtocol", "DT99999").unwrap().fits(2));
+        assert!(at("mewtocol", "DT99998").unwrap().fits(2));
+        assert!(!at("mc3e", "D16777215").unwrap().fits(2));
     }
 }

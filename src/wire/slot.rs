@@ -6,6 +6,7 @@
 //! a [`SlotView`]; it does no I/O.
 
 use crate::domain::{JobSpec, LightColor, Location};
+use crate::protocols::Protocol;
 
 /// Words of a slot that rackd writes and reads.
 pub const SLOT_WORDS: usize = 35;
@@ -216,6 +217,21 @@ impl Task {
             from: location_at(words, FROM),
             to: location_at(words, TO),
         })
+    }
+}
+
+/// Where the task slots sit by default on each protocol: slot 1's task id and the words
+/// from one slot to the next. Modbus UDP/TCP: the seed's PLC, `4x4000` (MW4000), 100;
+/// Modbus RTU: an S7-1200 Modbus_Slave, whose holding registers start at its slot data
+/// block, `4x0`, 100; PPI: an S7-200, `VW1000`, 50 (60 slots of 100 words would not fit its
+/// V memory); MEWTOCOL: `DT4000`, 100; MC: `D4000`, 100.
+pub fn default_layout(protocol: Protocol) -> (&'static str, u16) {
+    match protocol {
+        Protocol::ModbusUdp | Protocol::ModbusTcp => ("4x4000", 100),
+        Protocol::ModbusRtu | Protocol::ModbusRtuTcp => ("4x0", 100),
+        Protocol::Ppi | Protocol::PpiTcp => ("VW1000", 50),
+        Protocol::Mewtocol | Protocol::MewtocolTcp => ("DT4000", 100),
+        Protocol::Mc3e | Protocol::Mc3eUdp => ("D4000", 100),
     }
 }
 

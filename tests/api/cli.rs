@@ -1,4 +1,4 @@
-//! The binary's own commands: check-config, hash-key, openapi.
+//! The binary's own commands: check-config, hash-key, openapi, plc.
 
 use std::process::Command;
 
@@ -31,6 +31,33 @@ fn check_config_accepts_the_example_and_names_the_bad_key_and_line() {
     std::fs::write(&bad, "[[auth.keys]]\nname = \"x\"\nrole = \"root\"\nhash = \"sha256:00\"\n").unwrap();
     let (ok, _, err) = rackd(&["check-config", bad.to_str().unwrap()]);
     assert!(!ok && err.contains("role"), "{err}");
+}
+
+#[test]
+fn check_config_refuses_a_key_of_another_kind_and_a_quirk_of_another_protocol() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("devices.toml");
+    let crane = "[[devices]]\nid = \"crane1\"\nkind = \"crane\"\naddress = \"10.0.0.1:8000\"\n";
+    std::fs::write(&file, crane).unwrap();
+    let (ok, out, err) = rackd(&["check-config", file.to_str().unwrap()]);
+    assert!(ok && out.contains("ok"), "a crane needs no more than its address: {err}");
+
+    std::fs::write(&file, format!("{crane}stride = 1\n")).unwrap();
+    let (ok, _, err) = rackd(&["check-config", file.to_str().unwrap()]);
+    assert!(!ok && err.contains("`stride` is a key of shelf devices") && err.contains("line"), "{err}");
+
+    std::fs::write(&file, format!("{crane}quirks = [\"length0\"]\n")).unwrap();
+    let (ok, _, err) = rackd(&["check-config", file.to_str().unwrap()]);
+    assert!(!ok && err.contains("length0") && err.contains("mc3e"), "{err}");
+}
+
+#[test]
+fn plc_refuses_a_quirk_flag_of_another_protocol_before_connecting() {
+    let (ok, _, err) =
+        rackd(&["plc", "--protocol", "ppi-tcp", "--address", "127.0.0.1:9", "--no-bcc", "read", "VW0"]);
+    assert!(!ok && err.contains("no-bcc") && err.contains("ppi-tcp"), "{err}");
+    let (ok, _, err) = rackd(&["plc", "--protocol", "mc9", "--address", "127.0.0.1:9", "read", "D0"]);
+    assert!(!ok && err.contains("mc9"), "{err}");
 }
 
 #[test]

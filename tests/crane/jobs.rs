@@ -52,7 +52,7 @@ async fn every_job_kind_completes_over_udp() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn tasks_carry_the_mapped_coordinates_and_run_one_at_a_time() {
     // Stations come from the configuration.
-    let (app, sim) = crane_app(TransportKind::Tcp, 40, |d| d.outbound_station = [1, 0, 2, 2]).await;
+    let (app, sim) = crane_app(TransportKind::Tcp, 40, |d| d.outbound_station = [1, 0, 2, 2].into()).await;
     let a = submit(&app, json!({"kind": "retrieve", "from": cloc(2, 9, 6, 2)}), "one").await;
     let b = submit(&app, json!({"kind": "store", "barcode": "P", "to": cloc(1, 3, 2, 1)}), "two").await;
     wait_job(&app, a, &["running"], 5).await;
@@ -71,7 +71,7 @@ async fn tasks_carry_the_mapped_coordinates_and_run_one_at_a_time() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dropped_link_mid_task_is_survived_and_nothing_is_sent_twice() {
-    let (app, sim) = crane_app(TransportKind::Tcp, 30, |d| d.ack = "echo".into()).await;
+    let (app, sim) = crane_app(TransportKind::Tcp, 30, |d| d.ack = rackd::devices::config::Ack::Echo).await;
     let id =
         submit(&app, json!({"kind": "move", "from": cloc(1, 3, 3, 1), "to": cloc(1, 4, 4, 2)}), "drop").await;
     wait_job(&app, id, &["running"], 5).await;

@@ -12,7 +12,8 @@ mod restart;
 use std::time::{Duration, Instant};
 
 use rackd::config::{AisleConfig, Config};
-use rackd::devices::DeviceConfig;
+use rackd::devices::config::CraneConfig;
+use rackd::protocols::Protocol;
 use rackd::protocols::mc3e::TransportKind;
 use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use serde_json::{Value, json};
@@ -29,15 +30,15 @@ pub async fn crane(transport: TransportKind, step_ms: u64) -> CraneSim {
 pub fn device_for(
     sim: &CraneSim,
     transport: TransportKind,
-    edit: impl FnOnce(&mut DeviceConfig),
-) -> DeviceConfig {
-    let mut d = DeviceConfig::crane("crane1", &sim.local_addr().to_string(), vec![2]);
+    edit: impl FnOnce(&mut CraneConfig),
+) -> CraneConfig {
+    let mut d = CraneConfig::new("crane1", &sim.local_addr().to_string(), vec![2]);
     if transport == TransportKind::Udp {
-        d.protocol = "mc3e-udp".into();
+        d.link.protocol = Protocol::Mc3eUdp;
     }
     d.poll_ms = 20;
-    d.timeout_ms = 200;
-    d.retries = 3;
+    d.link.timeout = Duration::from_millis(200);
+    d.link.retries = 3;
     d.heartbeat_ms = 20;
     d.heartbeat_timeout_ms = 500;
     d.handshake_timeout_ms = 1000;
@@ -47,18 +48,18 @@ pub fn device_for(
 
 /// The demo site plus the crane aisle 2 (2 rows x 20 bays x 8 levels x 2 sides), served
 /// by `device` alone.
-pub fn with_crane(config: &mut Config, device: DeviceConfig) {
+pub fn with_crane(config: &mut Config, device: CraneConfig) {
     if !config.site.aisles.iter().any(|a| a.aisle == 2) {
         config.site.aisles.push(AisleConfig { aisle: 2, rows: 2, bays: 20, levels: 8, positions: 2 });
     }
-    config.devices = vec![device];
+    config.devices = vec![device.into()];
 }
 
 /// A crane simulator and a rackd driving it.
 pub async fn crane_app(
     transport: TransportKind,
     step_ms: u64,
-    edit: impl FnOnce(&mut DeviceConfig),
+    edit: impl FnOnce(&mut CraneConfig),
 ) -> (TestApp, CraneSim) {
     let sim = crane(transport, step_ms).await;
     let device = device_for(&sim, transport, edit);

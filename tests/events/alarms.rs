@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use rackd::devices::DeviceConfig;
+use rackd::devices::config::CraneConfig;
 use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use serde_json::Value;
 
@@ -12,13 +12,13 @@ use super::ws::Ws;
 
 async fn crane_app() -> (TestApp, CraneSim) {
     let sim = CraneSim::start("127.0.0.1:0", CraneSimOptions::default()).await.unwrap();
-    let mut device = DeviceConfig::crane("crane1", &sim.local_addr().to_string(), vec![2]);
+    let mut device = CraneConfig::new("crane1", &sim.local_addr().to_string(), vec![2]);
     device.poll_ms = 20;
-    device.timeout_ms = 100;
-    device.retries = 0;
+    device.link.timeout = Duration::from_millis(100);
+    device.link.retries = 0;
     device.offline_after = 2;
     let app = spawn_with(|c| {
-        c.devices = vec![device];
+        c.devices = vec![device.into()];
         c.events.device_period_ms = 20;
     })
     .await;
@@ -123,10 +123,10 @@ async fn an_alarm_active_at_a_restart_is_carried_over_not_raised_twice() {
     ws.close().await;
     let (db, dir) = app.stop().await;
 
-    let mut device = DeviceConfig::crane("crane1", &sim.local_addr().to_string(), vec![2]);
+    let mut device = CraneConfig::new("crane1", &sim.local_addr().to_string(), vec![2]);
     device.poll_ms = 20;
     let app = super::helpers::spawn_on(db, |c| {
-        c.devices = vec![device];
+        c.devices = vec![device.into()];
         c.events.device_period_ms = 20;
     })
     .await;

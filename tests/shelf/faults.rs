@@ -19,8 +19,8 @@ async fn with_twenty_percent_loss_every_job_completes_exactly_once() {
     let mut options = sim(0);
     options.faults = Faults { drop_rate: 0.2, ..Faults::default() };
     let (app, sim) = shelf_app(options, |d| {
-        d.timeout_ms = 40;
-        d.retries = 8;
+        d.link.timeout = Duration::from_millis(40);
+        d.link.retries = 8;
         d.offline_after = 20;
     })
     .await;
@@ -65,8 +65,8 @@ async fn plc_faults_and_rejections_fail_jobs_with_the_reason() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_silent_plc_goes_offline_and_comes_back_by_itself() {
     let (app, sim) = shelf_app(sim(0), |d| {
-        d.timeout_ms = 20;
-        d.retries = 0;
+        d.link.timeout = Duration::from_millis(20);
+        d.link.retries = 0;
         d.offline_after = 3;
     })
     .await;

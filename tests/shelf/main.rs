@@ -14,29 +14,26 @@ mod workload;
 #[path = "../common/ws.rs"]
 mod ws;
 
-use rackd::devices::DeviceConfig;
+use rackd::devices::config::ShelfConfig;
 use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
 
 use helpers::{TestApp, spawn_with};
 
 /// A simulated shelf PLC and a rackd driving it (device `shelf1`, aisle 1, fast polling).
-pub async fn shelf_app(
-    options: ShelfSimOptions,
-    edit: impl FnOnce(&mut DeviceConfig),
-) -> (TestApp, ShelfSim) {
+pub async fn shelf_app(options: ShelfSimOptions, edit: impl FnOnce(&mut ShelfConfig)) -> (TestApp, ShelfSim) {
     let sim = ShelfSim::start("127.0.0.1:0", options).await.unwrap();
     let device = device_for(&sim, edit);
-    let app = spawn_with(|c| c.devices = vec![device]).await;
+    let app = spawn_with(|c| c.devices = vec![device.into()]).await;
     (app, sim)
 }
 
 /// The device entry for a simulator.
-pub fn device_for(sim: &ShelfSim, edit: impl FnOnce(&mut DeviceConfig)) -> DeviceConfig {
+pub fn device_for(sim: &ShelfSim, edit: impl FnOnce(&mut ShelfConfig)) -> ShelfConfig {
     let address = sim.local_addr().expect("a network simulator").to_string();
-    let mut device = sim.device_config("shelf1", &address, vec![1]);
+    let mut device = rackd::cli::demo::shelf_device(&sim, "shelf1", &address, vec![1]);
     device.poll_ms = 20;
-    device.timeout_ms = 100;
-    device.retries = 3;
+    device.link.timeout = std::time::Duration::from_millis(100);
+    device.link.retries = 3;
     edit(&mut device);
     device
 }

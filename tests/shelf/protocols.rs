@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use rackd::devices::DeviceConfig;
+use rackd::devices::config::ShelfConfig;
 use rackd::domain::Location;
 use rackd::protocols::faults::Faults;
 use rackd::sim::shelf::{ShelfProtocol, ShelfSim, ShelfSimOptions};
@@ -48,11 +48,11 @@ fn options(protocol: ShelfProtocol) -> ShelfSimOptions {
 /// Runs the workload through a real rackd driving `sim` at `address` (device settings
 /// changed by `edit`), and checks that rackd's store agrees with the PLC's and that rule 1
 /// was kept.
-async fn run(sim: &ShelfSim, address: &str, edit: impl FnOnce(&mut DeviceConfig)) -> Outcome {
-    let mut device = sim.device_config("shelf1", address, vec![1]);
-    (device.poll_ms, device.timeout_ms, device.retries) = (20, 200, 3);
+async fn run(sim: &ShelfSim, address: &str, edit: impl FnOnce(&mut ShelfConfig)) -> Outcome {
+    let mut device = rackd::cli::demo::shelf_device(&sim, "shelf1", address, vec![1]);
+    (device.poll_ms, device.link.timeout, device.link.retries) = (20, Duration::from_millis(200), 3);
     edit(&mut device);
-    let app = spawn_with(|c| c.devices = vec![device]).await;
+    let app = spawn_with(|c| c.devices = vec![device.into()]).await;
     let jobs = workload();
     let (status, body) = app.post("/api/v1/jobs/batch", &json!({"jobs": jobs})).await;
     assert_eq!(status, 201, "{body}");
@@ -133,7 +133,7 @@ async fn lossy_ppi_and_mewtocol_lines_still_end_as_over_udp() {
         // Lost requests and responses, noise and late replies: rackd's retries must still
         // hand each task over once, and never write into a busy slot (run checks it).
         let outcome = run(&sim, &sim.local_addr().unwrap().to_string(), |d| {
-            (d.timeout_ms, d.retries, d.offline_after) = (40, 8, 20);
+            (d.link.timeout, d.link.retries, d.offline_after) = (Duration::from_millis(40), 8, 20);
         })
         .await;
         assert_eq!(outcome, udp, "{protocol}");

@@ -29,11 +29,11 @@ fn start_crashable(config: Config) -> (String, std::sync::mpsc::Sender<()>, std:
     (addr_rx.recv().unwrap(), kill_tx, thread)
 }
 
-fn config(db: &Path, device: rackd::devices::DeviceConfig) -> Config {
+fn config(db: &Path, device: rackd::devices::config::ShelfConfig) -> Config {
     let mut c = Config::demo();
     c.server.listen = "127.0.0.1:0".parse().unwrap();
     c.database.path = db.to_owned();
-    c.devices = vec![device];
+    c.devices = vec![device.into()];
     c
 }
 
@@ -68,7 +68,7 @@ async fn a_crash_mid_run_loses_and_repeats_nothing() {
     let (done_at_crash, _) = sim.finished();
     assert!(done_at_crash < 300, "the crash came mid-run");
 
-    let app = spawn_on(db.clone(), |c| c.devices = vec![device]).await;
+    let app = spawn_on(db.clone(), |c| c.devices = vec![device.into()]).await;
     let done = wait_ended(&app, 300, 120).await;
     crate::assert_each_completed_once(&app, &sim, &done).await;
     assert_eq!(rackd_store(&app).await.0, sim.inventory());

@@ -16,7 +16,7 @@ async fn viewers_read_tags_and_operators_write_them() {
     let (bank, server) = modbus_sim().await;
     let device = tags_device("tags1", "modbus-tcp", &server.local_addr().unwrap().to_string(), MODBUS_TAGS);
     let app = spawn_with(|c| {
-        c.devices = vec![device];
+        c.devices = vec![device.into()];
         c.auth.keys = vec![key("v", Role::Viewer), key("o", Role::Operator), key("a", Role::Admin)];
     })
     .await;

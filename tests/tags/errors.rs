@@ -1,7 +1,7 @@
 //! Every way a tag write can be refused, each with its JSON error, and none of them
 //! reaching the PLC; PLC refusals and silence as gateway errors.
 
-use rackd::devices::DeviceConfig;
+use rackd::devices::config::ShelfConfig;
 use rackd::protocols::faults::Faults;
 use rackd::protocols::modbus::Exception;
 use serde_json::json;
@@ -14,8 +14,8 @@ async fn bad_requests_get_json_errors_and_write_nothing() {
     let (bank, server) = modbus_sim().await;
     let tags = tags_device("tags1", "modbus-tcp", &server.local_addr().unwrap().to_string(), MODBUS_TAGS);
     // A shelf on a port nobody answers: a device of another kind.
-    let shelf = DeviceConfig::shelf("shelf1", "127.0.0.1:9", vec![1]);
-    let app = spawn_with(|c| c.devices = vec![tags, shelf]).await;
+    let shelf = ShelfConfig::new("shelf1", "127.0.0.1:9", vec![1]);
+    let app = spawn_with(|c| c.devices = vec![tags.into(), shelf.into()]).await;
     wait_device(&app, "tags1", |d| d["online"] == true).await;
     let before = bank.lock().clone();
 
@@ -85,7 +85,7 @@ async fn plc_refusals_are_502_and_silence_504_until_the_device_is_offline() {
     let mut device =
         tags_device("tags1", "modbus-tcp", &server.local_addr().unwrap().to_string(), MODBUS_TAGS);
     device.poll_ms = 60_000; // one poll at start, then only the writes talk to the PLC
-    let app = spawn_with(|c| c.devices = vec![device]).await;
+    let app = spawn_with(|c| c.devices = vec![device.into()]).await;
     wait_device(&app, "tags1", |d| d["online"] == true).await;
 
     server.set_faults(Faults {

@@ -22,9 +22,9 @@ async fn s7_200_tags_over_ppi() {
         "station.present" = "I0.0"
     "#;
     let mut device = tags_device("s7", "ppi-tcp", &server.local_addr().unwrap().to_string(), tags);
-    device.unit = Some(2);
-    device.timeout_ms = 300;
-    let app = spawn_with(|c| c.devices = vec![device]).await;
+    device.link.unit = 2;
+    device.link.timeout = std::time::Duration::from_millis(300);
+    let app = spawn_with(|c| c.devices = vec![device.into()]).await;
     let v = |range: std::ops::Range<usize>| state.bank.lock().unwrap().bytes(MemArea::V)[range].to_vec();
     {
         let mut bank = state.bank.lock().unwrap();
@@ -66,8 +66,8 @@ async fn panasonic_tags_over_mewtocol() {
         mode = "WR5.15"
     "#;
     let mut device = tags_device("fp", "mewtocol-tcp", &server.local_addr().unwrap().to_string(), tags);
-    device.timeout_ms = 300;
-    let app = spawn_with(|c| c.devices = vec![device]).await;
+    device.link.timeout = std::time::Duration::from_millis(300);
+    let app = spawn_with(|c| c.devices = vec![device.into()]).await;
     {
         let mut bank = state.bank.lock().unwrap();
         bank.set_word(ContactArea::X, 0, 0x0002);

@@ -17,20 +17,24 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use rackd::devices::DeviceConfig;
+use rackd::devices::config::TagsConfig;
 use rackd::protocols::modbus::server::{Bank, ModbusServer, ServerHandle, ServerOptions};
 use serde_json::{Value, json};
 
 use helpers::{TestApp, spawn_with};
 
 /// A tags device entry: fast polling, short timeouts, offline after two failed requests.
-pub fn tags_device(id: &str, protocol: &str, address: &str, tags: &str) -> DeviceConfig {
+pub fn tags_device(id: &str, protocol: &str, address: &str, tags: &str) -> TagsConfig {
     let text = format!(
         "id = {id:?}\nkind = \"tags\"\nprotocol = {protocol:?}\naddress = {address:?}\npoll_ms = 20\n\
          timeout_ms = 250\nretries = 2\noffline_after = 2\n[tags]\n{tags}"
     );
     let device: DeviceConfig = toml::from_str(&text).unwrap();
     device.check().unwrap();
-    device
+    match device {
+        DeviceConfig::Tags(tags) => tags,
+        other => panic!("not a tags device: {other:?}"),
+    }
 }
 
 /// A Modbus TCP register bank on a free port.
@@ -66,7 +70,7 @@ pub const MODBUS_TAGS: &str = r#"
 pub async fn modbus_app() -> (TestApp, Bank, ServerHandle) {
     let (bank, server) = modbus_sim().await;
     let device = tags_device("tags1", "modbus-tcp", &server.local_addr().unwrap().to_string(), MODBUS_TAGS);
-    let app = spawn_with(|c| c.devices = vec![device]).await;
+    let app = spawn_with(|c| c.devices = vec![device.into()]).await;
     (app, bank, server)
 }
 

@@ -1,38 +1,22 @@
 //! Acknowledging the crane's completion states (20 done, 30 force-completed, 40 cancelled).
 //!
 //! The spec leaves the values of D22 (WCS) and D223 (crane) open. The reading chosen by
-//! default ([`AckReading::Handshake`]): the crane sets D223 (to the completion state) and
+//! default ([`Ack::Handshake`]): the crane sets D223 (to the completion state) and
 //! D203 to 20/30/40; rackd records the outcome, then sets D22 = 1; the crane clears D223
-//! (and its task words); rackd clears D22. [`AckReading::Echo`] is the other plausible
+//! (and its task words); rackd clears D22. [`Ack::Echo`] is the other plausible
 //! reading: rackd writes D223's value back into D22 and follows it to 0. In both, rackd
 //! writes the acknowledgement only after the outcome is stored, so a crash in between
 //! records the outcome again (a no-op) instead of losing it.
 
-/// How completion is acknowledged.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum AckReading {
-    /// D22 := 1 while D223 != 0; D22 := 0 once D223 = 0.
-    Handshake,
-    /// D22 := D223.
-    Echo,
-}
+use crate::devices::config::Ack;
 
-impl AckReading {
-    /// The reading for its configuration name (`handshake` or `echo`).
-    pub fn parse(text: &str) -> Option<AckReading> {
-        match text {
-            "handshake" => Some(AckReading::Handshake),
-            "echo" => Some(AckReading::Echo),
-            _ => None,
-        }
-    }
-
+impl Ack {
     /// What to write to D22, if anything, given the crane's D223 and the D22 rackd last
     /// wrote. Only call it once any completion shown has been recorded.
     pub fn next_word(self, completion: u16, written: u16) -> Option<u16> {
         let want = match self {
-            AckReading::Handshake => u16::from(completion != 0),
-            AckReading::Echo => completion,
+            Ack::Handshake => u16::from(completion != 0),
+            Ack::Echo => completion,
         };
         (want != written).then_some(want)
     }
@@ -68,7 +52,7 @@ mod tests {
 
     #[test]
     fn handshake_sets_then_clears() {
-        let r = AckReading::Handshake;
+        let r = Ack::Handshake;
         assert_eq!(r.next_word(20, 0), Some(1));
         assert_eq!(r.next_word(20, 1), None);
         assert_eq!(r.next_word(0, 1), Some(0));
@@ -77,7 +61,7 @@ mod tests {
 
     #[test]
     fn echo_mirrors_the_completion_word() {
-        let r = AckReading::Echo;
+        let r = Ack::Echo;
         assert_eq!(r.next_word(30, 0), Some(30));
         assert_eq!(r.next_word(30, 30), None);
         assert_eq!(r.next_word(0, 30), Some(0));
@@ -89,7 +73,5 @@ mod tests {
         assert_eq!(Outcome::of(30, 0), Some(Outcome::Forced));
         assert_eq!(Outcome::of(0, 40), Some(Outcome::Cancelled));
         assert_eq!(Outcome::of(12, 0), None);
-        assert_eq!(AckReading::parse("echo"), Some(AckReading::Echo));
-        assert_eq!(AckReading::parse("x"), None);
     }
 }

@@ -52,14 +52,13 @@ use tokio::sync::mpsc;
 use tokio::time::{Instant, sleep_until};
 
 use super::DeviceRequest;
-use super::config::DeviceConfig;
+use super::config::{Ack, CraneConfig};
 use super::port::{Port, ReportError};
 use super::status::{CraneStatus, StatusCell};
 use crate::domain::{Failure, Report, Reported};
 use crate::protocols::{Address, PlcError, PlcMemory};
 use crate::wire::alarms;
 use crate::wire::registers::{self, CraneView, Stations};
-use ack::AckReading;
 use heartbeat::Heartbeat;
 
 pub use handshake::HandshakeError;
@@ -76,9 +75,6 @@ pub enum CraneError {
     /// The dispatcher could not record a report.
     #[error(transparent)]
     Report(#[from] ReportError),
-    /// A setting cannot be used.
-    #[error("configuration: {0}")]
-    Config(String),
 }
 
 /// The job the crane holds (or was just handed).
@@ -98,14 +94,14 @@ struct Current {
 
 /// One stacker crane: its link, what it holds and its port to the dispatcher.
 pub struct Crane {
-    config: DeviceConfig,
+    config: CraneConfig,
     plc: Arc<dyn PlcMemory>,
     wcs: Address,
     crane: Address,
     port: Arc<dyn Port>,
     status: StatusCell,
     stations: Stations,
-    ack: AckReading,
+    ack: Ack,
     heartbeat: Heartbeat,
     current: Option<Current>,
     ack_written: u16,
@@ -118,16 +114,16 @@ pub struct Crane {
 impl Crane {
     /// A crane adapter; nothing is sent until [`Crane::run`].
     pub fn new(
-        config: DeviceConfig,
+        config: CraneConfig,
         plc: Arc<dyn PlcMemory>,
         port: Arc<dyn Port>,
         status: StatusCell,
     ) -> Result<Crane, CraneError> {
         let wcs = plc.parse_address(&config.wcs_base)?;
         let crane = plc.parse_address(&config.crane_base)?;
-        let ack = AckReading::parse(&config.ack)
-            .ok_or_else(|| CraneError::Config(format!("unknown ack reading {:?}", config.ack)))?;
-        let stations = Stations { inbound: config.inbound_station, outbound: config.outbound_station };
+        let ack = config.ack;
+        let stations =
+            Stations { inbound: config.inbound_station.words(), outbound: config.outbound_station.words() };
         let heartbeat = Heartbeat::new(
             std::time::Duration::from_millis(config.heartbeat_ms),
             std::time::Duration::from_millis(config.heartbeat_timeout_ms),

@@ -32,7 +32,7 @@ use tokio::sync::mpsc;
 use tokio::time::{Instant, sleep_until};
 
 use super::DeviceRequest;
-use super::config::DeviceConfig;
+use super::config::ShelfConfig;
 use super::port::Port;
 use super::status::StatusCell;
 use crate::protocols::{Address, PlcError, PlcMemory};
@@ -52,7 +52,7 @@ enum Slot {
 
 /// One shelf PLC: its link, its slots and its port to the dispatcher.
 pub struct Shelf {
-    config: DeviceConfig,
+    config: ShelfConfig,
     plc: Arc<dyn PlcMemory>,
     base: Address,
     port: Arc<dyn Port>,
@@ -60,34 +60,10 @@ pub struct Shelf {
     slots: Vec<Slot>,
 }
 
-/// Where the task slots sit by default on each protocol: slot 1's task id and the words
-/// from one slot to the next. Modbus UDP/TCP: the seed's PLC, `4x4000` (MW4000), 100;
-/// Modbus RTU: an S7-1200 Modbus_Slave, whose holding registers start at its slot data
-/// block, `4x0`, 100; PPI: an S7-200, `VW1000`, 50 (60 slots of 100 words would not fit its
-/// V memory); MEWTOCOL: `DT4000`, 100; MC: `D4000`, 100.
-pub fn default_layout(protocol: &str) -> (&'static str, u16) {
-    match protocol {
-        "modbus-rtu" | "modbus-rtu-tcp" => ("4x0", 100),
-        "ppi" | "ppi-tcp" => ("VW1000", 50),
-        "mewtocol" | "mewtocol-tcp" => ("DT4000", 100),
-        "mc3e" | "mc3e-tcp" | "mc3e-udp" => ("D4000", 100),
-        _ => ("4x4000", 100),
-    }
-}
-
-/// Checks, without a connection, that the slot area is writable words of the protocol and
-/// that every slot fits inside its memory area.
-pub fn check_layout(config: &DeviceConfig) -> Result<(), String> {
-    let words = config.slots as u32 * config.slot_stride() as u32;
-    let words =
-        u16::try_from(words).map_err(|_| format!("{words} words of slots are more than any PLC area"))?;
-    super::config::check_words(&config.protocol, "base", config.slot_base(), words, true)
-}
-
 impl Shelf {
     /// A shelf adapter; nothing is sent until [`Shelf::run`].
     pub fn new(
-        config: DeviceConfig,
+        config: ShelfConfig,
         plc: Arc<dyn PlcMemory>,
         port: Arc<dyn Port>,
         status: StatusCell,

@@ -12,10 +12,10 @@ use std::time::Duration;
 
 use tokio::sync::{mpsc, oneshot, watch};
 
-use super::codec::{TagValue, ValueError};
-use super::spec::TagSpec;
-use super::state::Tag;
 use crate::devices::DeviceStatus;
+use crate::devices::tagdef::Tag;
+use crate::devices::tagdef::codec::{TagValue, ValueError};
+use crate::devices::tagdef::spec::TagSpec;
 use crate::protocols::PlcError;
 
 /// A checked write on its way to the device task.

@@ -30,13 +30,9 @@
 //! - **Jobs**: none; a tags device serves no aisle and is never routed work. Pausing one
 //!   changes nothing (pausing withholds new jobs): it keeps polling and taking writes.
 
-mod codec;
-pub mod config;
 mod handle;
 mod plan;
 mod poll;
-pub mod spec;
-mod state;
 mod write;
 
 use std::collections::BTreeMap;
@@ -46,37 +42,21 @@ use std::time::Duration;
 use tokio::sync::mpsc;
 use tokio::time::{Instant, sleep_until};
 
-use super::config::DeviceConfig;
+use super::config::TagsConfig;
 use super::status::StatusCell;
 use super::{CancelRefusal, DeviceRequest};
 use crate::protocols::{PlcError, PlcMemory};
 
-pub use codec::{TagType, TagValue, ValueError, WordOrder};
-pub use config::{TagDef, TagTable};
+pub use crate::devices::tagdef::{
+    Place, TagDef, TagSpec, TagTable, TagType, TagValue, ValueError, WordOrder,
+};
+pub use crate::devices::tagdef::{Quality, Tag, TagStatus};
 pub use handle::{TagsHandle, WriteError};
 pub use plan::Group;
-pub use spec::{Place, TagSpec};
-pub use state::{Quality, Tag, TagStatus};
-
-/// Resolves every tag of a tags device against its protocol.
-pub fn resolve(config: &DeviceConfig) -> Result<Vec<TagSpec>, String> {
-    config.tags.0.iter().map(|(name, def)| TagSpec::resolve(&config.protocol, name, def)).collect()
-}
-
-/// Checks a tags device's own settings (for [`DeviceConfig::check`]).
-pub fn check(config: &DeviceConfig) -> Result<(), String> {
-    if !config.aisles.is_empty() {
-        return Err("a tags device serves no aisles (it runs no jobs): remove `aisles`".into());
-    }
-    if config.tags.0.is_empty() {
-        return Err("a tags device needs at least one tag in [devices.tags]".into());
-    }
-    resolve(config).map(|_| ())
-}
 
 /// One tags device: its link, its tags and the reads that cover them.
 pub struct TagDevice {
-    config: DeviceConfig,
+    config: TagsConfig,
     plc: Arc<dyn PlcMemory>,
     specs: Arc<Vec<TagSpec>>,
     groups: Vec<Group>,
@@ -89,11 +69,11 @@ impl TagDevice {
     /// A tags device and the handle to write its tags; nothing is sent until
     /// [`TagDevice::run`]. Fills the status with every tag, not yet read.
     pub fn new(
-        config: DeviceConfig,
+        config: TagsConfig,
         plc: Arc<dyn PlcMemory>,
         mut status: StatusCell,
     ) -> Result<(TagDevice, TagsHandle), String> {
-        let specs = resolve(&config)?;
+        let specs = config.specs().map_err(|e| e.to_string())?;
         for spec in &specs {
             // The client parses its own notation; it must agree with the check-time parse.
             let text = match spec.place {
@@ -176,6 +156,6 @@ fn link_failed(e: &PlcError) -> bool {
 }
 
 /// How long one request may take with every retry.
-fn request_time(config: &DeviceConfig) -> Duration {
-    Duration::from_millis(config.timeout_ms) * (config.retries + 1)
+fn request_time(config: &TagsConfig) -> Duration {
+    config.link.timeout * (config.link.retries + 1)
 }

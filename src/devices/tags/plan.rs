@@ -5,7 +5,7 @@
 //! even a gap of one word, because a PLC may refuse a read that covers an address it does
 //! not have, and then every tag of the read would turn bad for no fault of its own.
 
-use super::spec::{Place, TagSpec};
+use crate::devices::tagdef::spec::{Place, TagSpec};
 use crate::protocols::Address;
 
 /// Most words in one read (one Modbus request holds 125).
@@ -79,15 +79,15 @@ fn join(group: &mut Group, spec: &TagSpec) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::tags::codec::TagType;
-    use crate::devices::tags::config::TagDef;
+    use crate::devices::tagdef::TagDef;
+    use crate::devices::tagdef::TagType;
 
     fn specs(protocol: &str, tags: &[(&str, Option<TagType>)]) -> Vec<TagSpec> {
         tags.iter()
             .enumerate()
             .map(|(i, (address, ty))| {
                 let def = TagDef { ty: *ty, ..TagDef::at(address) };
-                TagSpec::resolve(protocol, &format!("t{i}"), &def).unwrap()
+                TagSpec::resolve(protocol.parse().unwrap(), &format!("t{i}"), &def).unwrap()
             })
             .collect()
     }

@@ -1,9 +1,9 @@
 //! One poll cycle: every planned read, each tag's value from it, and all outcomes recorded
 //! in the device status under one lock, so a watcher never sees half a cycle.
 
-use super::codec::TagValue;
-use super::spec::TagSpec;
 use super::{TagDevice, link_failed};
+use crate::devices::tagdef::codec::TagValue;
+use crate::devices::tagdef::spec::TagSpec;
 use crate::protocols::{Address, PlcError};
 
 /// What one read returned.
@@ -20,8 +20,10 @@ impl Raw {
         let short = || "the reply held fewer items than asked for".to_owned();
         let range = offset..offset + spec.count() as usize;
         match self {
-            Raw::Bits(bits) => spec.from_bits(bits.get(range).ok_or_else(short)?),
-            Raw::Words(words) => spec.from_words(words.get(range).ok_or_else(short)?),
+            Raw::Bits(bits) => spec.from_bits(bits.get(range).ok_or_else(short)?).map_err(|e| e.to_string()),
+            Raw::Words(words) => {
+                spec.from_words(words.get(range).ok_or_else(short)?).map_err(|e| e.to_string())
+            }
         }
     }
 }

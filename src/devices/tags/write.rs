@@ -2,11 +2,11 @@
 //! words (a bit of a word read-modify-write), read the tag back and answer it as read.
 
 use super::TagDevice;
-use super::codec::{self, TagValue, ValueError};
 use super::handle::{WriteError, WriteRequest};
 use super::poll::Raw;
-use super::spec::Place;
-use super::state::Tag;
+use crate::devices::tagdef::Tag;
+use crate::devices::tagdef::codec::{self, TagValue, ValueError};
+use crate::devices::tagdef::spec::Place;
 use crate::protocols::{Address, PlcError};
 
 impl TagDevice {

@@ -47,11 +47,12 @@ pub use options::{ShelfProtocol, ShelfSimOptions, UnknownProtocol};
 use self::engine::Machine;
 use self::options::Family;
 use self::slots::{Core, Layout, SlotMemory};
-use crate::devices::DeviceConfig;
 use crate::domain::Location;
 use crate::protocols::faults::{Faults, SharedFaults};
+use crate::protocols::link::LinkConfig;
 use crate::protocols::modbus::server::ServerHandle;
 use crate::protocols::transport::{ByteStream, StreamServer};
+use crate::protocols::{Protocol, Quirk};
 use crate::wire::slot::SLOT_WORDS;
 
 /// Where a transport is served.
@@ -179,20 +180,23 @@ impl ShelfSim {
         self.unit
     }
 
-    /// A `[[devices]]` entry that drives this simulator, reached at `address` (its
-    /// [`ShelfSim::local_addr`], or the serial device at the other end of its line).
-    pub fn device_config(&self, id: &str, address: &str, aisles: Vec<u16>) -> DeviceConfig {
-        let mut device = DeviceConfig::shelf(id, address, aisles);
-        device.protocol = self.protocol.name().to_owned();
-        device.unit = Some(self.unit);
-        device.base = Some(self.base.clone());
-        device.stride = Some(self.stride());
-        device.slots = self.core.layout.slots;
-        device.serial = self.options.serial.map(|s| s.to_string());
-        if self.protocol != ShelfProtocol::ModbusUdp {
-            device.quirks.clear(); // MBAP length 0 is the UDP PLC's own habit
+    /// The link that reaches this simulator at `address` (its [`ShelfSim::local_addr`], or
+    /// the serial device at the other end of its line): its protocol, unit, serial settings
+    /// and, over Modbus UDP, the `length0` quirk (MBAP length 0 is the UDP PLC's own habit).
+    pub fn link(&self, address: &str) -> LinkConfig {
+        let protocol = self.protocol.protocol();
+        let mut link = LinkConfig::new(protocol, address);
+        link.unit = self.unit;
+        link.serial = self.options.serial;
+        if protocol == Protocol::ModbusUdp {
+            link.quirks.insert(Quirk::Length0);
         }
-        device
+        link
+    }
+
+    /// How many task slots it has.
+    pub fn slots(&self) -> u16 {
+        self.core.layout.slots
     }
 
     /// Boxes on the shelf and their barcodes ("" when unlabelled).

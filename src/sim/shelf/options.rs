@@ -15,6 +15,7 @@
 use std::str::FromStr;
 use std::time::Duration;
 
+use crate::protocols::Protocol;
 use crate::protocols::faults::Faults;
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::{BadDeviceCode, DeviceCode, mewtocol, modbus, ppi};
@@ -83,6 +84,20 @@ impl ShelfProtocol {
         }
     }
 
+    /// The device protocol of the same name.
+    pub fn protocol(self) -> Protocol {
+        match self {
+            ShelfProtocol::ModbusUdp => Protocol::ModbusUdp,
+            ShelfProtocol::ModbusTcp => Protocol::ModbusTcp,
+            ShelfProtocol::ModbusRtu => Protocol::ModbusRtu,
+            ShelfProtocol::ModbusRtuTcp => Protocol::ModbusRtuTcp,
+            ShelfProtocol::Ppi => Protocol::Ppi,
+            ShelfProtocol::PpiTcp => Protocol::PpiTcp,
+            ShelfProtocol::Mewtocol => Protocol::Mewtocol,
+            ShelfProtocol::MewtocolTcp => Protocol::MewtocolTcp,
+        }
+    }
+
     /// True when the simulator serves a serial device (a path or an open stream) rather
     /// than a network address.
     pub fn is_serial(self) -> bool {
@@ -116,20 +131,20 @@ impl ShelfProtocol {
 
     /// Where slot 1's task id sits by default, in the protocol's notation (see the table
     /// in the module documentation).
-    /// (The same defaults as a shelf device's: [`crate::devices::shelf::default_layout`].)
+    /// (The same defaults as a shelf device's: [`crate::wire::slot::default_layout`].)
     pub fn default_base(self) -> &'static str {
-        crate::devices::shelf::default_layout(self.name()).0
+        crate::wire::slot::default_layout(self.protocol()).0
     }
 
     /// Words from one slot to the next by default.
     pub fn default_stride(self) -> u16 {
-        crate::devices::shelf::default_layout(self.name()).1
+        crate::wire::slot::default_layout(self.protocol()).1
     }
 
     /// The unit (Modbus unit, PPI address, MEWTOCOL station) answered by default: 2 is
-    /// the S7-200's factory PPI address ([`crate::protocols::link::default_unit`]).
+    /// the S7-200's factory PPI address ([`Protocol::default_unit`]).
     pub fn default_unit(self) -> u8 {
-        crate::protocols::link::default_unit(self.name())
+        self.protocol().default_unit()
     }
 
     /// Serial settings by default: 9600,8E1 (Modbus RTU and PPI), 9600,8O1 (MEWTOCOL).
@@ -146,6 +161,17 @@ impl ShelfProtocol {
 impl std::fmt::Display for ShelfProtocol {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
+    }
+}
+
+impl TryFrom<Protocol> for ShelfProtocol {
+    type Error = UnknownProtocol;
+
+    fn try_from(protocol: Protocol) -> Result<Self, Self::Error> {
+        ShelfProtocol::ALL
+            .into_iter()
+            .find(|p| p.protocol() == protocol)
+            .ok_or_else(|| UnknownProtocol(protocol.name().to_owned()))
     }
 }
 
@@ -243,10 +269,12 @@ mod tests {
     fn names_round_trip_and_unknown_ones_are_refused() {
         for p in ShelfProtocol::ALL {
             assert_eq!(p.name().parse::<ShelfProtocol>(), Ok(p));
-            assert!(crate::protocols::link::PROTOCOLS.contains(&p.name()), "{p} is a device protocol");
+            assert_eq!(p.protocol().name(), p.name(), "{p} is a device protocol");
+            assert_eq!(ShelfProtocol::try_from(p.protocol()), Ok(p));
         }
         assert_eq!(" PPI-tcp ".parse::<ShelfProtocol>(), Ok(ShelfProtocol::PpiTcp));
         assert_eq!("mc3e".parse::<ShelfProtocol>(), Err(UnknownProtocol("mc3e".into())));
+        assert!(ShelfProtocol::try_from(Protocol::Mc3eUdp).is_err());
     }
 
     #[test]

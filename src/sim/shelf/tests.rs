@@ -19,9 +19,9 @@ fn options(protocol: ShelfProtocol) -> ShelfSimOptions {
 async fn over_network(protocol: ShelfProtocol) -> (ShelfSim, Arc<dyn PlcMemory>) {
     let sim = ShelfSim::start("127.0.0.1:0", options(protocol)).await.unwrap();
     let address = sim.local_addr().unwrap().to_string();
-    let mut device = sim.device_config("t", &address, vec![1]);
-    device.timeout_ms = 500;
-    let plc = link::connect(&device.link()).await.unwrap();
+    let mut device = sim.link(&address);
+    device.timeout = Duration::from_millis(500);
+    let plc = link::connect(&device).await.unwrap();
     (sim, plc)
 }
 
@@ -178,9 +178,9 @@ async fn link_faults_apply_from_the_start_and_change_at_run_time() {
         let mut o = options(protocol);
         o.faults.drop_rate = 1.0;
         let sim = ShelfSim::start("127.0.0.1:0", o).await.unwrap();
-        let mut device = sim.device_config("t", &sim.local_addr().unwrap().to_string(), vec![1]);
-        (device.timeout_ms, device.retries) = (50, 0);
-        let plc = link::connect(&device.link()).await.unwrap();
+        let mut device = sim.link(&sim.local_addr().unwrap().to_string());
+        (device.timeout, device.retries) = (Duration::from_millis(50), 0);
+        let plc = link::connect(&device).await.unwrap();
         let base = plc.parse_address(sim.base()).unwrap();
         assert!(matches!(plc.read_words(&base, 1).await, Err(PlcError::Timeout { .. })), "{protocol}");
         sim.set_faults(Faults { delay: Duration::from_millis(5), ..Faults::default() });
@@ -195,8 +195,8 @@ async fn the_fail_rate_fails_tasks_with_kind_one_on_every_family() {
         let sim = ShelfSim::start("127.0.0.1:0", ShelfSimOptions { fail_rate: 1.0, ..options(protocol) })
             .await
             .unwrap();
-        let device = sim.device_config("t", &sim.local_addr().unwrap().to_string(), vec![1]);
-        let plc = link::connect(&device.link()).await.unwrap();
+        let device = sim.link(&sim.local_addr().unwrap().to_string());
+        let plc = link::connect(&device).await.unwrap();
         let slot1 = plc.parse_address(sim.base()).unwrap();
         let to = Location { aisle: 1, row: 1, bay: 1, level: 1, position: 1 };
         hand_over(plc.as_ref(), &slot1, 5, &JobSpec::Store { to }).await;

@@ -116,11 +116,11 @@ impl TagStatus {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::tags::config::TagDef;
+    use crate::devices::tagdef::TagDef;
 
     #[test]
     fn only_real_changes_change_the_status() {
-        let spec = TagSpec::resolve("modbus-tcp", "t", &TagDef::at("4x1")).unwrap();
+        let spec = TagSpec::resolve(crate::protocols::Protocol::ModbusTcp, "t", &TagDef::at("4x1")).unwrap();
         let mut s = TagStatus::new(&spec);
         assert_eq!((s.quality, s.value, s.word_order, s.max), (Quality::Unknown, None, None, Some(65535.0)));
         let t0 = OffsetDateTime::UNIX_EPOCH;

@@ -11,12 +11,16 @@ fn def(address: &str, edit: impl FnOnce(&mut TagDef)) -> TagDef {
     d
 }
 
+fn resolve(protocol: &str, name: &str, def: &TagDef) -> Result<TagSpec, String> {
+    TagSpec::resolve(protocol.parse().unwrap(), name, def).map_err(|e| e.to_string())
+}
+
 fn ok(protocol: &str, address: &str, edit: impl FnOnce(&mut TagDef)) -> TagSpec {
-    TagSpec::resolve(protocol, "a.b", &def(address, edit)).unwrap()
+    resolve(protocol, "a.b", &def(address, edit)).unwrap()
 }
 
 fn err(protocol: &str, address: &str, edit: impl FnOnce(&mut TagDef)) -> String {
-    TagSpec::resolve(protocol, "a.b", &def(address, edit)).unwrap_err()
+    resolve(protocol, "a.b", &def(address, edit)).unwrap_err()
 }
 
 #[test]
@@ -78,13 +82,13 @@ fn addresses_must_parse_for_the_protocol() {
     assert!(err("modbus-tcp", "0x100.1", |_| {}).contains("16-bit word"));
     assert!(err("ppi", "VD4.1", |_| {}).contains("16-bit word"));
     assert!(err("mewtocol", "u16", |_| {}).contains("u16"));
-    assert!(TagSpec::resolve("modbus-tcp", "1bad", &TagDef::at("4x1")).unwrap_err().contains("1bad"));
+    assert!(resolve("modbus-tcp", "1bad", &TagDef::at("4x1")).unwrap_err().contains("1bad"));
 }
 
 #[test]
 fn min_and_max_are_checked() {
     let u16_tag = |min, max| {
-        TagSpec::resolve(
+        resolve(
             "modbus-tcp",
             "t",
             &def("4x1", |d| {

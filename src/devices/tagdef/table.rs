@@ -59,45 +59,74 @@ impl<'de> Deserialize<'de> for TagTable {
     }
 }
 
+/// A `[devices.tags]` entry that is not a tag.
+#[derive(Debug, thiserror::Error)]
+pub enum TagTableError {
+    /// The tag's table has a wrong or unknown key.
+    #[error("tag {name:?}: {source}")]
+    Entry {
+        /// The full dotted name.
+        name: String,
+        /// The parser's message.
+        source: toml::de::Error,
+    },
+    /// Neither an address nor a table.
+    #[error("tag {name:?}: expected an address string or a table, got a {got}")]
+    Value {
+        /// The full dotted name.
+        name: String,
+        /// The TOML type found.
+        got: &'static str,
+    },
+    /// Two spellings of one name (`"a.b"` and `a.b`).
+    #[error("tag {0:?} is defined twice")]
+    Twice(String),
+}
+
 /// Adds the tags of `table` (whose names start with `prefix`) to `out`.
-fn flatten(prefix: &str, table: toml::Table, out: &mut BTreeMap<String, TagDef>) -> Result<(), String> {
+fn flatten(
+    prefix: &str,
+    table: toml::Table,
+    out: &mut BTreeMap<String, TagDef>,
+) -> Result<(), TagTableError> {
     for (key, value) in table {
         let name = if prefix.is_empty() { key } else { format!("{prefix}.{key}") };
         let def = match value {
             toml::Value::String(address) => TagDef::at(&address),
-            toml::Value::Table(t) if t.contains_key("address") => {
-                toml::Value::Table(t).try_into().map_err(|e: toml::de::Error| format!("tag {name:?}: {e}"))?
-            }
+            toml::Value::Table(t) if t.contains_key("address") => match toml::Value::Table(t).try_into() {
+                Ok(def) => def,
+                Err(source) => return Err(TagTableError::Entry { name, source }),
+            },
             toml::Value::Table(t) => {
                 flatten(&name, t, out)?;
                 continue;
             }
-            other => {
-                return Err(format!(
-                    "tag {name:?}: expected an address string or a table, got a {}",
-                    other.type_str()
-                ));
-            }
+            other => return Err(TagTableError::Value { name, got: other.type_str() }),
         };
         if out.insert(name.clone(), def).is_some() {
-            return Err(format!("tag {name:?} is defined twice"));
+            return Err(TagTableError::Twice(name));
         }
     }
     Ok(())
 }
 
+/// A tag name that is not dot-separated identifiers.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "tag name {0:?} must be dot-separated identifiers (letters, digits, '_'; \
+     not starting with a digit), at most {MAX_NAME_LEN} characters"
+)]
+pub struct BadTagName(pub String);
+
 /// Checks a tag name: dot-separated identifiers (ASCII letters, digits and `_`, not
 /// starting with a digit), at most [`MAX_NAME_LEN`] characters.
-pub fn check_name(name: &str) -> Result<(), String> {
+pub fn check_name(name: &str) -> Result<(), BadTagName> {
     let identifier = |s: &str| {
         s.chars().next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
             && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
     };
     if name.len() > MAX_NAME_LEN || !name.split('.').all(identifier) {
-        return Err(format!(
-            "tag name {name:?} must be dot-separated identifiers (letters, digits, '_'; \
-             not starting with a digit), at most {MAX_NAME_LEN} characters"
-        ));
+        return Err(BadTagName(name.to_owned()));
     }
     Ok(())
 }
@@ -111,8 +140,8 @@ mod tests {
         tags: TagTable,
     }
 
-    fn parse(text: &str) -> Result<TagTable, String> {
-        toml::from_str::<Holder>(text).map(|h| h.tags).map_err(|e| e.to_string())
+    fn parse(text: &str) -> Result<TagTable, toml::de::Error> {
+        toml::from_str::<Holder>(text).map(|h| h.tags)
     }
 
     #[test]
@@ -139,15 +168,16 @@ mod tests {
 
     #[test]
     fn bad_entries_name_the_tag_and_key() {
-        let err = parse("[tags]\nx = { address = \"4x1\", tpye = \"u16\" }\n").unwrap_err();
+        let err = parse("[tags]\nx = { address = \"4x1\", tpye = \"u16\" }\n").unwrap_err().to_string();
         assert!(err.contains("\"x\"") && err.contains("tpye"), "{err}");
-        let err = parse("[tags]\nx = { address = \"4x1\", type = \"u64\" }\n").unwrap_err();
+        let err = parse("[tags]\nx = { address = \"4x1\", type = \"u64\" }\n").unwrap_err().to_string();
         assert!(err.contains("u64"), "{err}");
-        let err = parse("[tags]\nx = { address = \"4x1\", word_order = \"middle\" }\n").unwrap_err();
+        let err =
+            parse("[tags]\nx = { address = \"4x1\", word_order = \"middle\" }\n").unwrap_err().to_string();
         assert!(err.contains("middle"), "{err}");
-        let err = parse("[tags]\nx = 5\n").unwrap_err();
+        let err = parse("[tags]\nx = 5\n").unwrap_err().to_string();
         assert!(err.contains("\"x\"") && err.contains("integer"), "{err}");
-        let err = parse("[tags]\n\"a.b\" = \"4x1\"\na.b = \"4x2\"\n").unwrap_err();
+        let err = parse("[tags]\n\"a.b\" = \"4x1\"\na.b = \"4x2\"\n").unwrap_err().to_string();
         assert!(err.contains("twice"), "{err}");
         // A table without an address is a group: this is tag `x.type` at address "u16",
         // which the device check then refuses as an address.

@@ -1,0 +1,143 @@
+//! Loading, refusing, and the example file's claims about defaults.
+
+use std::collections::BTreeSet;
+
+use super::*;
+use crate::devices::DeviceConfig;
+
+const EXAMPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/rackd.example.toml");
+
+#[test]
+fn the_example_file_loads() {
+    let config = Config::load(Path::new(EXAMPLE)).unwrap();
+    assert_eq!(config.auth.keys.len(), 3);
+    assert_eq!(config.devices.len(), 3);
+}
+
+/// Where a key sits: the table's path (`server`, `devices.1`) and the key.
+type Place = (String, String);
+
+/// The keys of the example file: those marked `(example)` (this site's own values) and
+/// the others, which claim to show the default; whole tables marked `(example)` are left
+/// out of both.
+fn example_keys(text: &str) -> (BTreeSet<Place>, BTreeSet<Place>) {
+    let (mut examples, mut defaults) = (BTreeSet::new(), BTreeSet::new());
+    let mut counts = std::collections::BTreeMap::<String, usize>::new();
+    let mut table: Option<String> = Some(String::new());
+    for line in text.lines().map(str::trim) {
+        let (code, comment) = line.split_once('#').unwrap_or((line, ""));
+        let marked = comment.trim_start().starts_with("(example)");
+        let code = code.trim();
+        if let Some(name) = code.strip_prefix("[[").and_then(|c| c.strip_suffix("]]")) {
+            let n = counts.entry(name.to_owned()).or_default();
+            table = (!marked).then(|| format!("{name}.{n}"));
+            *n += 1;
+        } else if let Some(name) = code.strip_prefix('[').and_then(|c| c.strip_suffix(']')) {
+            let array_entry = counts.get(name.split('.').next().unwrap_or("")).map(|n| n - 1);
+            let name = match array_entry {
+                Some(n) if name.contains('.') => name.replacen('.', &format!(".{n}."), 1),
+                _ => name.to_owned(),
+            };
+            table = (!marked).then_some(name);
+        } else if let (Some(t), Some((key, _))) = (&table, code.split_once('=')) {
+            let place = (t.clone(), key.trim().to_owned());
+            if marked {
+                examples.insert(place)
+            } else {
+                defaults.insert(place)
+            };
+        }
+    }
+    (examples, defaults)
+}
+
+/// The example file marks with `(example)` the values that are its own; every other key
+/// must equal the code's default: removing all of them must load the same configuration.
+#[test]
+fn every_key_the_example_file_shows_is_its_default_unless_marked() {
+    let text = std::fs::read_to_string(EXAMPLE).unwrap();
+    let (examples, defaults) = example_keys(&text);
+    assert!(defaults.len() > 40 && examples.len() > 10, "{defaults:?} {examples:?}");
+    let mut stripped: toml::Table = toml::from_str(&text).unwrap();
+    for (path, key) in &defaults {
+        let table = resolve_arrays(&mut stripped, path);
+        assert!(table.remove(key).is_some(), "{path}.{key} is not a key the parser saw");
+    }
+    for (path, key) in &examples {
+        assert!(resolve_arrays(&mut stripped, path).contains_key(key), "{path}.{key}");
+    }
+    let full = Config::parse(&text, Path::new("example")).unwrap();
+    let defaulted = Config::parse(&toml::to_string(&stripped).unwrap(), Path::new("stripped")).unwrap();
+    assert_eq!(full.server, defaulted.server);
+    assert_eq!(full.events, defaulted.events);
+    for (a, b) in full.devices.iter().zip(&defaulted.devices) {
+        assert_eq!(a, b, "a key of device {:?} is not at its default", a.id());
+    }
+    assert_eq!(full, defaulted);
+}
+
+/// The table at `path`, where `name.N` is entry N of the array of tables `name`.
+fn resolve_arrays<'a>(root: &'a mut toml::Table, path: &str) -> &'a mut toml::Table {
+    let mut parts: Vec<&str> = path.split('.').collect();
+    let mut t = root;
+    while !parts.is_empty() {
+        let part = parts.remove(0);
+        if part.is_empty() {
+            continue;
+        }
+        t = match t.get_mut(part).unwrap_or_else(|| panic!("no {part} in {path}")) {
+            toml::Value::Array(items) => {
+                let n: usize = parts.remove(0).parse().unwrap();
+                items[n].as_table_mut().unwrap()
+            }
+            v => v.as_table_mut().unwrap(),
+        };
+    }
+    t
+}
+
+#[test]
+fn unknown_key_is_named_with_its_line() {
+    let err = Config::parse("[server]\nlisten = \"127.0.0.1:1\"\nlissen = 3\n", Path::new("x.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("lissen") && err.contains("line 3"), "{err}");
+}
+
+#[test]
+fn a_tags_device_table_follows_its_entry() {
+    let text = "[[devices]]\nid = \"tower1\"\nkind = \"tags\"\nprotocol = \"ppi-tcp\"\naddress = \"10.0.0.2:102\"\nunit = 2\n\
+                [devices.tags]\nbeacon.red = \"Q0.1\"\n\"conveyor.speed\" = { address = \"VD4\", type = \"f32\", max = 2.5 }\n";
+    let config = Config::parse(text, Path::new("x.toml")).unwrap();
+    let DeviceConfig::Tags(tags) = &config.devices[0] else { panic!("{:?}", config.devices[0]) };
+    assert_eq!(tags.tags.0.len(), 2);
+    let bad = text.replace("max = 2.5", "mx = 2.5");
+    let err = Config::parse(&bad, Path::new("x.toml")).unwrap_err().to_string();
+    assert!(err.contains("conveyor.speed") && err.contains("mx") && err.contains("line"), "{err}");
+    let bad = text.replace("VD4", "VD4.1");
+    let err = Config::parse(&bad, Path::new("x.toml")).unwrap_err().to_string();
+    assert!(err.contains("tower1") && err.contains("conveyor.speed") && err.contains("VD4.1"), "{err}");
+}
+
+#[test]
+fn bad_layout_is_refused() {
+    let text = "[[site.aisles]]\naisle = 1\nrows = 3\nbays = 1\nlevels = 1\npositions = 1\n";
+    let err = Config::parse(text, Path::new("x.toml")).unwrap_err();
+    assert!(matches!(err, ConfigError::Invalid { source: Invalid::AisleSize(1), .. }), "{err}");
+    assert!(err.to_string().contains("rows"), "{err}");
+}
+
+#[test]
+fn devices_are_checked_together() {
+    let shelf = |id: &str, aisle: u16| {
+        format!("[[devices]]\nid = {id:?}\nkind = \"shelf\"\naddress = \"127.0.0.1:1\"\naisles = [{aisle}]\n")
+    };
+    let twice = format!("{}{}", shelf("a", 1), shelf("a", 1));
+    let err = Config::parse(&twice, Path::new("x.toml")).unwrap_err();
+    assert!(matches!(err, ConfigError::Invalid { source: Invalid::DeviceId(_), .. }), "{err}");
+    let shared = format!("{}{}", shelf("a", 1), shelf("b", 1));
+    let err = Config::parse(&shared, Path::new("x.toml")).unwrap_err().to_string();
+    assert!(err.contains("already served by \"a\""), "{err}");
+    let err = Config::parse(&shelf("a", 9), Path::new("x.toml")).unwrap_err().to_string();
+    assert!(err.contains("aisle 9 is not in site.aisles"), "{err}");
+}

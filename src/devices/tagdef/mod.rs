@@ -1,0 +1,17 @@
+//! Tag definitions: what a tags device's `[devices.tags]` table says (names, addresses in
+//! the protocol's notation, types, word order, limits), each resolved and checked without
+//! a connection ([`TagSpec`]), how a tag's value maps to bits and words ([`codec`]), and a
+//! tag's latest value and quality as the device status shows it ([`TagStatus`]).
+//!
+//! Both the configuration (which checks a tags entry) and the tags adapter (which polls and
+//! writes the tags) use these; neither is used here, so the two do not depend on each other.
+
+pub mod codec;
+pub mod spec;
+pub mod state;
+pub mod table;
+
+pub use codec::{TagType, TagValue, ValueError, WordOrder};
+pub use spec::{Place, TagError, TagSpec};
+pub use state::{Quality, Tag, TagStatus};
+pub use table::{TagDef, TagTable};

@@ -1,0 +1,279 @@
+//! The closed sets a link is described with: which [`Protocol`] (and transport) a PLC is
+//! reached with, and which [`Quirk`]s of a protocol it needs.
+//!
+//! This is the one list of protocols: the configuration (serde), `rackd plc` and
+//! `rackd sim` (clap), address notation and device defaults all name a protocol with this
+//! enum, so adding one is a compile error everywhere a decision depends on it.
+//!
+//! The names are the configuration's since the first release (`modbus-udp`, ...); `mc3e`
+//! is MC 3E over TCP and also answers to `mc3e-tcp`.
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+/// A protocol and its transport.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, clap::ValueEnum,
+)]
+pub enum Protocol {
+    /// Modbus UDP (MBAP in datagrams): the seed's shelf PLC.
+    #[serde(rename = "modbus-udp")]
+    #[value(name = "modbus-udp")]
+    ModbusUdp,
+    /// Modbus TCP (MBAP over TCP).
+    #[serde(rename = "modbus-tcp")]
+    #[value(name = "modbus-tcp")]
+    ModbusTcp,
+    /// Modbus RTU on a serial port.
+    #[serde(rename = "modbus-rtu")]
+    #[value(name = "modbus-rtu")]
+    ModbusRtu,
+    /// Modbus RTU frames over raw TCP (serial-to-Ethernet gateway).
+    #[serde(rename = "modbus-rtu-tcp")]
+    #[value(name = "modbus-rtu-tcp")]
+    ModbusRtuTcp,
+    /// Mitsubishi MC protocol 3E binary over TCP.
+    #[serde(rename = "mc3e", alias = "mc3e-tcp")]
+    #[value(name = "mc3e", alias = "mc3e-tcp")]
+    Mc3e,
+    /// Mitsubishi MC protocol 3E binary over UDP.
+    #[serde(rename = "mc3e-udp")]
+    #[value(name = "mc3e-udp")]
+    Mc3eUdp,
+    /// Panasonic MEWTOCOL-COM on a serial port (addresses DT100, WR1, R1F, Y1A).
+    #[serde(rename = "mewtocol")]
+    #[value(name = "mewtocol")]
+    Mewtocol,
+    /// Panasonic MEWTOCOL-COM over raw TCP (serial-to-Ethernet gateway).
+    #[serde(rename = "mewtocol-tcp")]
+    #[value(name = "mewtocol-tcp")]
+    MewtocolTcp,
+    /// Siemens S7-200 PPI on a serial port (addresses VW100, VB0, V10.3, Q0.1, T37).
+    #[serde(rename = "ppi")]
+    #[value(name = "ppi")]
+    Ppi,
+    /// Siemens S7-200 PPI over raw TCP (serial-to-Ethernet gateway).
+    #[serde(rename = "ppi-tcp")]
+    #[value(name = "ppi-tcp")]
+    PpiTcp,
+}
+
+/// The protocol families: one frame format, one address notation, one client each.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Family {
+    /// Modbus (UDP, TCP, RTU, RTU over TCP).
+    Modbus,
+    /// MC protocol 3E (TCP, UDP).
+    Mc3e,
+    /// MEWTOCOL-COM (serial, TCP).
+    Mewtocol,
+    /// S7-200 PPI (serial, TCP).
+    Ppi,
+}
+
+impl Protocol {
+    /// Reads a device error code of this protocol (for a simulator to answer with), as the
+    /// protocol's manual writes it.
+    pub fn device_code(self, text: &str) -> Result<super::DeviceCode, super::BadDeviceCode> {
+        use super::DeviceCode;
+        match self.family() {
+            Family::Modbus => text.parse::<super::modbus::Exception>().map(DeviceCode::from),
+            Family::Mc3e => text.parse::<super::mc3e::EndCode>().map(DeviceCode::from),
+            Family::Mewtocol => text.parse::<super::mewtocol::ErrorCode>().map(DeviceCode::from),
+            Family::Ppi => text.parse::<super::ppi::ReturnCode>().map(DeviceCode::from),
+        }
+    }
+
+    /// Every protocol, in the order the documentation lists them.
+    pub const ALL: [Protocol; 10] = [
+        Protocol::ModbusUdp,
+        Protocol::ModbusTcp,
+        Protocol::ModbusRtu,
+        Protocol::ModbusRtuTcp,
+        Protocol::Mc3e,
+        Protocol::Mc3eUdp,
+        Protocol::Mewtocol,
+        Protocol::MewtocolTcp,
+        Protocol::Ppi,
+        Protocol::PpiTcp,
+    ];
+
+    /// The name the configuration and the command line write.
+    pub fn name(self) -> &'static str {
+        match self {
+            Protocol::ModbusUdp => "modbus-udp",
+            Protocol::ModbusTcp => "modbus-tcp",
+            Protocol::ModbusRtu => "modbus-rtu",
+            Protocol::ModbusRtuTcp => "modbus-rtu-tcp",
+            Protocol::Mc3e => "mc3e",
+            Protocol::Mc3eUdp => "mc3e-udp",
+            Protocol::Mewtocol => "mewtocol",
+            Protocol::MewtocolTcp => "mewtocol-tcp",
+            Protocol::Ppi => "ppi",
+            Protocol::PpiTcp => "ppi-tcp",
+        }
+    }
+
+    /// The family: which frames, notation and client.
+    pub fn family(self) -> Family {
+        match self {
+            Protocol::ModbusUdp | Protocol::ModbusTcp | Protocol::ModbusRtu | Protocol::ModbusRtuTcp => {
+                Family::Modbus
+            }
+            Protocol::Mc3e | Protocol::Mc3eUdp => Family::Mc3e,
+            Protocol::Mewtocol | Protocol::MewtocolTcp => Family::Mewtocol,
+            Protocol::Ppi | Protocol::PpiTcp => Family::Ppi,
+        }
+    }
+
+    /// Whether the address is a serial device (`/dev/ttyUSB0`) rather than `HOST:PORT`.
+    pub fn is_serial(self) -> bool {
+        matches!(self, Protocol::ModbusRtu | Protocol::Mewtocol | Protocol::Ppi)
+    }
+
+    /// The unit / station a PLC of this protocol answers by default: 2 on PPI (an S7-200's
+    /// factory address), 1 elsewhere.
+    pub fn default_unit(self) -> u8 {
+        match self.family() {
+            Family::Ppi => 2,
+            _ => 1,
+        }
+    }
+}
+
+impl fmt::Display for Protocol {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A protocol name that is not one of [`Protocol::ALL`].
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown protocol {0:?} (known: {known})", known = names(&Protocol::ALL))]
+pub struct UnknownProtocol(pub String);
+
+impl FromStr for Protocol {
+    type Err = UnknownProtocol;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let wanted = text.trim().to_ascii_lowercase();
+        match wanted.as_str() {
+            "mc3e-tcp" => Ok(Protocol::Mc3e),
+            name => Protocol::ALL
+                .into_iter()
+                .find(|p| p.name() == name)
+                .ok_or_else(|| UnknownProtocol(text.to_owned())),
+        }
+    }
+}
+
+/// A habit of some PLCs that the client must put up with, named in `quirks = [...]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Quirk {
+    /// Modbus UDP/TCP: replies carry MBAP length 0 (the seed's shelf PLC); a standard
+    /// length is still accepted.
+    Length0,
+    /// Modbus UDP/TCP: the PLC does not echo transaction ids.
+    NoTransactionId,
+    /// MEWTOCOL: the PLC is set up without the BCC check (`**` instead).
+    NoBcc,
+    /// MEWTOCOL: long `<` frames.
+    LongFrames,
+    /// PPI: the PLC does not echo the PDU reference.
+    NoPduRef,
+}
+
+impl Quirk {
+    /// Every quirk.
+    pub const ALL: [Quirk; 5] =
+        [Quirk::Length0, Quirk::NoTransactionId, Quirk::NoBcc, Quirk::LongFrames, Quirk::NoPduRef];
+
+    /// The name the configuration writes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Quirk::Length0 => "length0",
+            Quirk::NoTransactionId => "no-transaction-id",
+            Quirk::NoBcc => "no-bcc",
+            Quirk::LongFrames => "long-frames",
+            Quirk::NoPduRef => "no-pdu-ref",
+        }
+    }
+
+    /// Whether the quirk means anything on `protocol`. The MBAP quirks need an MBAP
+    /// header, which Modbus RTU has not.
+    pub fn applies_to(self, protocol: Protocol) -> bool {
+        match self {
+            Quirk::Length0 | Quirk::NoTransactionId => {
+                matches!(protocol, Protocol::ModbusUdp | Protocol::ModbusTcp)
+            }
+            Quirk::NoBcc | Quirk::LongFrames => protocol.family() == Family::Mewtocol,
+            Quirk::NoPduRef => protocol.family() == Family::Ppi,
+        }
+    }
+
+    /// The quirks `protocol` knows.
+    pub fn of(protocol: Protocol) -> Vec<Quirk> {
+        Quirk::ALL.into_iter().filter(|q| q.applies_to(protocol)).collect()
+    }
+}
+
+impl fmt::Display for Quirk {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Names joined with ", " for messages.
+pub fn names<T: fmt::Display>(items: &[T]) -> String {
+    items.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_through_text_serde_and_clap() {
+        for p in Protocol::ALL {
+            assert_eq!(p.name().parse::<Protocol>(), Ok(p));
+            assert_eq!(p.to_string(), p.name());
+            let toml: Protocol = serde_json::from_value(serde_json::json!(p.name())).unwrap();
+            assert_eq!(toml, p);
+            assert_eq!(<Protocol as clap::ValueEnum>::from_str(p.name(), false), Ok(p));
+        }
+        assert_eq!("mc3e-tcp".parse::<Protocol>(), Ok(Protocol::Mc3e));
+        assert_eq!(
+            serde_json::from_value::<Protocol>(serde_json::json!("mc3e-tcp")).unwrap(),
+            Protocol::Mc3e
+        );
+        assert_eq!(<Protocol as clap::ValueEnum>::from_str("mc3e-tcp", false), Ok(Protocol::Mc3e));
+        let err = "mc9".parse::<Protocol>().unwrap_err().to_string();
+        assert!(err.contains("mc9") && err.contains("modbus-rtu-tcp"), "{err}");
+    }
+
+    #[test]
+    fn facts_by_protocol() {
+        assert_eq!(Protocol::Ppi.default_unit(), 2);
+        assert_eq!(Protocol::PpiTcp.default_unit(), 2);
+        assert_eq!(Protocol::Mewtocol.default_unit(), 1);
+        let serial: Vec<_> = Protocol::ALL.into_iter().filter(|p| p.is_serial()).collect();
+        assert_eq!(serial, [Protocol::ModbusRtu, Protocol::Mewtocol, Protocol::Ppi]);
+        assert_eq!(Protocol::ModbusRtuTcp.family(), Family::Modbus);
+    }
+
+    #[test]
+    fn quirks_belong_to_their_protocols() {
+        assert_eq!(Quirk::of(Protocol::ModbusUdp), [Quirk::Length0, Quirk::NoTransactionId]);
+        assert!(Quirk::of(Protocol::ModbusRtu).is_empty());
+        assert!(Quirk::of(Protocol::Mc3eUdp).is_empty());
+        assert_eq!(Quirk::of(Protocol::MewtocolTcp), [Quirk::NoBcc, Quirk::LongFrames]);
+        assert_eq!(Quirk::of(Protocol::Ppi), [Quirk::NoPduRef]);
+        for q in Quirk::ALL {
+            let parsed: Quirk = serde_json::from_value(serde_json::json!(q.name())).unwrap();
+            assert_eq!(parsed, q);
+        }
+    }
+}
