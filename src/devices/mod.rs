@@ -104,9 +104,7 @@ pub async fn start(
                 tokio::spawn(crane.run(inbox))
             }
             DeviceConfig::Tags(c) => {
-                let (device, handle) = tags::TagDevice::new(c.clone(), plc, status)
-                    .map_err(anyhow::Error::msg)
-                    .with_context(context)?;
+                let (device, handle) = tags::TagDevice::new(c.clone(), plc, status).with_context(context)?;
                 tag_handle = Some(handle);
                 tokio::spawn(device.run(inbox))
             }

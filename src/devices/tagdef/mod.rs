@@ -13,5 +13,5 @@ pub mod table;
 
 pub use codec::{TagType, TagValue, ValueError, WordOrder};
 pub use spec::{Place, TagError, TagSpec};
-pub use state::{Quality, Tag, TagStatus};
+pub use state::{Quality, Tag, TagFault, TagStatus};
 pub use table::{TagDef, TagTable};

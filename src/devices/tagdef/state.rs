@@ -5,12 +5,15 @@
 //! for changes (events) sees one change per real change. `changes` counts value changes so
 //! a watcher can tell a new value from an old one seen late.
 
+use std::sync::Arc;
+
 use serde::Serialize;
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
 use super::codec::{TagType, TagValue, WordOrder};
-use super::spec::TagSpec;
+use super::spec::{ReadError, TagSpec};
+use crate::protocols::PlcError;
 
 /// How far a tag's value can be trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, ToSchema)]
@@ -92,7 +95,7 @@ impl TagStatus {
     }
 
     /// Records the outcome of reading the tag at `now`.
-    pub fn settle(&mut self, read: Result<TagValue, String>, now: OffsetDateTime) -> bool {
+    pub fn settle(&mut self, read: Result<TagValue, TagFault>, now: OffsetDateTime) -> bool {
         let before = (self.value, self.quality, self.error.clone());
         match read {
             Ok(value) => {
@@ -106,11 +109,28 @@ impl TagStatus {
             }
             Err(e) => {
                 self.quality = Quality::Bad;
-                self.error = Some(e);
+                self.error = Some(e.to_string());
             }
         }
         (self.value, self.quality, &self.error) != (before.0, before.1, &before.2)
     }
+}
+
+/// Why a poll brought no fresh value for a tag.
+#[derive(Clone, Debug, thiserror::Error)]
+pub enum TagFault {
+    /// The reply held fewer items than were asked for.
+    #[error("the reply held fewer items than asked for")]
+    Short,
+    /// The items read do not make a value of the tag's type.
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    /// The read of this tag failed (the device's own error code, or the link).
+    #[error("{0}")]
+    Plc(Arc<PlcError>),
+    /// Not read: an earlier read of the same poll found the link down.
+    #[error("not read: {0}")]
+    NotRead(Arc<PlcError>),
 }
 
 #[cfg(test)]
@@ -130,7 +150,7 @@ mod tests {
         let before = s.clone();
         s.settle(Ok(TagValue::Int(5)), t1);
         assert_eq!(s, before, "the same value again changes nothing");
-        s.settle(Err("timeout".into()), t1);
+        s.settle(Err(TagFault::Short), t1);
         assert_eq!((s.quality, s.value, s.changes), (Quality::Bad, Some(TagValue::Int(5)), 1));
         s.settle(Ok(TagValue::Int(6)), t1);
         assert_eq!(

@@ -54,6 +54,34 @@ pub use crate::devices::tagdef::{Quality, Tag, TagStatus};
 pub use handle::{TagsHandle, WriteError};
 pub use plan::Group;
 
+/// Why a tags device cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    /// A tag's definition is wrong.
+    #[error(transparent)]
+    Tag(#[from] crate::devices::tagdef::TagError),
+    /// The client does not take a tag's address.
+    #[error("tag {tag:?}: {error}")]
+    Address {
+        /// The tag.
+        tag: String,
+        /// The client's answer.
+        error: PlcError,
+    },
+    /// The client reads a tag's address otherwise than the check did.
+    #[error("tag {tag:?}: {text} parses as {parsed:?}, expected {expected:?}")]
+    Disagree {
+        /// The tag.
+        tag: String,
+        /// The address as written.
+        text: String,
+        /// How the client reads it.
+        parsed: crate::protocols::Address,
+        /// How the check read it.
+        expected: crate::protocols::Address,
+    },
+}
+
 /// One tags device: its link, its tags and the reads that cover them.
 pub struct TagDevice {
     config: TagsConfig,
@@ -72,20 +100,20 @@ impl TagDevice {
         config: TagsConfig,
         plc: Arc<dyn PlcMemory>,
         mut status: StatusCell,
-    ) -> Result<(TagDevice, TagsHandle), String> {
-        let specs = config.specs().map_err(|e| e.to_string())?;
+    ) -> Result<(TagDevice, TagsHandle), StartError> {
+        let specs = config.specs()?;
         for spec in &specs {
             // The client parses its own notation; it must agree with the check-time parse.
             let text = match spec.place {
                 Place::WordBit(_) => spec.address.trim().rsplit_once('.').map_or("", |(word, _)| word),
                 _ => spec.address.as_str(),
             };
-            let parsed = plc.parse_address(text).map_err(|e| format!("tag {:?}: {e}", spec.name))?;
+            let parsed = plc
+                .parse_address(text)
+                .map_err(|error| StartError::Address { tag: spec.name.clone(), error })?;
             if parsed != spec.at {
-                return Err(format!(
-                    "tag {:?}: {text} parses as {parsed:?}, expected {:?}",
-                    spec.name, spec.at
-                ));
+                let (tag, expected) = (spec.name.clone(), spec.at.clone());
+                return Err(StartError::Disagree { tag, text: text.to_owned(), parsed, expected });
             }
         }
         let groups = plan::plan(&specs);

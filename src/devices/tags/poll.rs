@@ -1,7 +1,10 @@
 //! One poll cycle: every planned read, each tag's value from it, and all outcomes recorded
 //! in the device status under one lock, so a watcher never sees half a cycle.
 
+use std::sync::Arc;
+
 use super::{TagDevice, link_failed};
+use crate::devices::tagdef::TagFault;
 use crate::devices::tagdef::codec::TagValue;
 use crate::devices::tagdef::spec::TagSpec;
 use crate::protocols::{Address, PlcError};
@@ -16,15 +19,12 @@ pub(super) enum Raw {
 
 impl Raw {
     /// The value of `spec`, whose first item is at `offset` in this read.
-    pub(super) fn value_of(&self, spec: &TagSpec, offset: usize) -> Result<TagValue, String> {
-        let short = || "the reply held fewer items than asked for".to_owned();
+    pub(super) fn value_of(&self, spec: &TagSpec, offset: usize) -> Result<TagValue, TagFault> {
         let range = offset..offset + spec.count() as usize;
-        match self {
-            Raw::Bits(bits) => spec.from_bits(bits.get(range).ok_or_else(short)?).map_err(|e| e.to_string()),
-            Raw::Words(words) => {
-                spec.from_words(words.get(range).ok_or_else(short)?).map_err(|e| e.to_string())
-            }
-        }
+        Ok(match self {
+            Raw::Bits(bits) => spec.from_bits(bits.get(range).ok_or(TagFault::Short)?)?,
+            Raw::Words(words) => spec.from_words(words.get(range).ok_or(TagFault::Short)?)?,
+        })
     }
 }
 
@@ -32,11 +32,11 @@ impl TagDevice {
     /// Reads every tag once and records the outcomes.
     pub(super) async fn poll(&mut self) {
         let mut outcomes = Vec::with_capacity(self.specs.len());
-        let mut link_down: Option<String> = None;
+        let mut link_down: Option<Arc<PlcError>> = None;
         for g in 0..self.groups.len() {
             let group = self.groups[g].clone();
             if let Some(e) = &link_down {
-                outcomes.extend(group.members.iter().map(|&(i, _)| (i, Err(format!("not read: {e}")))));
+                outcomes.extend(group.members.iter().map(|&(i, _)| (i, Err(TagFault::NotRead(e.clone())))));
                 continue;
             }
             match self.read(group.bits, &group.at, group.count).await {
@@ -47,10 +47,11 @@ impl TagDevice {
                     );
                 }
                 Err(e) => {
-                    let text = e.to_string();
-                    outcomes.extend(group.members.iter().map(|&(i, _)| (i, Err(text.clone()))));
-                    if link_failed(&e) {
-                        link_down = Some(text);
+                    let failed = link_failed(&e);
+                    let e = Arc::new(e);
+                    outcomes.extend(group.members.iter().map(|&(i, _)| (i, Err(TagFault::Plc(e.clone())))));
+                    if failed {
+                        link_down = Some(e);
                     }
                 }
             }
@@ -69,7 +70,7 @@ impl TagDevice {
     }
 
     /// Records read outcomes (tag index, value or why not) in the device status.
-    pub(super) fn record(&mut self, outcomes: Vec<(usize, Result<TagValue, String>)>) {
+    pub(super) fn record(&mut self, outcomes: Vec<(usize, Result<TagValue, TagFault>)>) {
         let now = crate::domain::time::from_ms(crate::domain::time::now_ms());
         let specs = &self.specs;
         self.status.update_marked(|status| {
