@@ -55,6 +55,24 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 50)]
         rate: u32,
     },
+    /// Tag devices: tag reads/s and rackd's CPU per 1000 reads, values static and changing.
+    Fleet {
+        /// Tag devices, each on its own Modbus TCP connection.
+        #[arg(long, default_value_t = 500)]
+        devices: usize,
+        /// Tags per device (adjoining u16 holding registers, one read per poll).
+        #[arg(long, default_value_t = 30)]
+        tags: u16,
+        /// Poll period of every device in milliseconds.
+        #[arg(long, default_value_t = 500)]
+        poll_ms: u64,
+        /// Seconds per measured phase.
+        #[arg(long, default_value_t = 20)]
+        seconds: u64,
+        /// Share of each device's tags that change on every poll in the second phase.
+        #[arg(long, default_value_t = 0.1)]
+        changing: f64,
+    },
 }
 
 struct Phase {
@@ -80,6 +98,10 @@ pub async fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         }
         BenchCommand::Ws { subscribers, events, rate } => {
             return super::bench_ws::run(subscribers, events, rate).await;
+        }
+        BenchCommand::Fleet { devices, tags, poll_ms, seconds, changing } => {
+            let args = super::bench_fleet::FleetArgs { devices, tags, poll_ms, seconds, changing };
+            return super::bench_fleet::run(args).await;
         }
     };
     let dir = tempfile::tempdir()?;

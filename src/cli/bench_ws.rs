@@ -58,7 +58,7 @@ pub async fn run(subscribers: usize, events: usize, rate: u32) -> anyhow::Result
     Ok(())
 }
 
-async fn wait_ready(base: &str) -> anyhow::Result<()> {
+pub(super) async fn wait_ready(base: &str) -> anyhow::Result<()> {
     let client = reqwest::Client::new();
     for _ in 0..200 {
         if client.get(format!("http://{base}/readyz")).send().await.is_ok_and(|r| r.status().is_success()) {
@@ -71,7 +71,7 @@ async fn wait_ready(base: &str) -> anyhow::Result<()> {
 
 /// CPU seconds the process has used (user + system), from `/proc/PID/stat` (in USER_HZ =
 /// 100 ticks per second on Linux).
-fn cpu_secs(pid: u32) -> anyhow::Result<f64> {
+pub(super) fn cpu_secs(pid: u32) -> anyhow::Result<f64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))?;
     // Fields after the command name (which may hold spaces) start at field 3.
     let rest = stat.rsplit_once(')').context("malformed /proc stat")?.1;

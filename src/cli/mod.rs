@@ -2,6 +2,7 @@
 //! `plc`, `sim`, `bench`.
 
 pub mod bench;
+pub mod bench_fleet;
 pub mod bench_shelf;
 pub mod bench_ws;
 pub mod demo;
