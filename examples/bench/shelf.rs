@@ -1,4 +1,4 @@
-//! `rackd bench shelf`: how fast jobs reach and run on a shelf PLC.
+//! `bench shelf`: how fast jobs reach and run on a shelf PLC.
 //!
 //! Starts the shelf simulator (zero-duration tasks) and a real server driving it over
 //! loopback UDP, then measures:
@@ -16,12 +16,12 @@ use anyhow::Context;
 use hdrhistogram::Histogram;
 use tokio::sync::oneshot;
 
-use crate::app::Application;
-use crate::config::Config;
-use crate::devices::shelf::slot::task_id_for;
-use crate::protocols::PlcMemory;
-use crate::protocols::modbus::{ModbusClient, ModbusConfig};
-use crate::sim::shelf::{ShelfSim, ShelfSimOptions};
+use rackd::app::Application;
+use rackd::config::Config;
+use rackd::devices::shelf::slot::task_id_for;
+use rackd::protocols::PlcMemory;
+use rackd::protocols::modbus::{ModbusClient, ModbusConfig};
+use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
 
 /// Runs the shelf benchmark: `latency_jobs` single jobs, then `batch_jobs` in batches.
 pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow::Result<()> {
@@ -98,7 +98,7 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
     let (done_after, _) = sim.finished();
 
     let ms = |h: &Histogram<u64>, q: f64| h.value_at_quantile(q) as f64 / 1000.0;
-    println!("rackd bench shelf: simulator with zero-duration tasks, poll every {poll_ms} ms");
+    println!("bench shelf: simulator with zero-duration tasks, poll every {poll_ms} ms");
     println!("Modbus UDP round trip (baseline)   p50 {:.3} ms  p99 {:.3} ms", ms(&rtt, 0.5), ms(&rtt, 0.99));
     println!(
         "POST -> task in slot ({latency_jobs} jobs)    p50 {:.3} ms  p99 {:.3} ms  = {:.1}x / {:.1}x three round trips",

@@ -1,7 +1,7 @@
-//! `rackd bench fleet`: the polling path under a fleet of tag devices.
+//! `bench fleet`: the polling path under a fleet of tag devices.
 //!
-//! Runs rackd as a child process (so its CPU time is read apart from everything else, from
-//! `/proc/PID/stat`) with N `kind = "tags"` devices on Modbus TCP, each with T u16 tags,
+//! Runs rackd as a child process (so its CPU time is read apart from everything else, see
+//! `child.rs`) with N `kind = "tags"` devices on Modbus TCP, each with T u16 tags,
 //! polled every P ms, against one Modbus TCP server in this process (its CPU is this
 //! process's, never counted as rackd's). The default workload, 500 devices x 30 tags every
 //! 500 ms = 30,000 tag reads/s, is that of emqx/neuron's published gateway benchmark.
@@ -30,21 +30,27 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail, ensure};
 
-use super::bench_ws::{cpu_secs, wait_ready};
-use crate::protocols::modbus::server::{Bank, ModbusServer, ServerHandle, ServerOptions};
+use rackd::protocols::modbus::server::{Bank, ModbusServer, ServerHandle, ServerOptions};
+
+use crate::child::{Server, cpu_secs};
 
 /// The benchmark's settings.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, clap::Args)]
 pub struct FleetArgs {
-    /// Tag devices.
+    /// Tag devices, each on its own Modbus TCP connection.
+    #[arg(long, default_value_t = 500)]
     pub devices: usize,
-    /// Tags per device.
+    /// Tags per device (adjoining u16 holding registers, one read per poll).
+    #[arg(long, default_value_t = 30)]
     pub tags: u16,
-    /// Poll period of every device, in milliseconds.
+    /// Poll period of every device in milliseconds.
+    #[arg(long, default_value_t = 500)]
     pub poll_ms: u64,
-    /// Length of each measured window, in seconds.
+    /// Seconds per measured phase.
+    #[arg(long, default_value_t = 20)]
     pub seconds: u64,
     /// Share of each device's tags that change on every poll in the second phase.
+    #[arg(long, default_value_t = 0.1)]
     pub changing: f64,
 }
 
@@ -84,48 +90,36 @@ pub async fn run(args: FleetArgs) -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
     let config = dir.path().join("fleet.toml");
     std::fs::write(&config, config_text(devices, tags, poll_ms, &plc.to_string()))?;
-    let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
-    let mut child = tokio::process::Command::new(std::env::current_exe()?)
-        .args(["serve", "--config"])
-        .arg(&config)
-        .args(["--listen", &format!("127.0.0.1:{port}"), "--database"])
-        .arg(dir.path().join("fleet.db"))
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .kill_on_drop(true)
-        .spawn()
-        .context("starting rackd serve")?;
-    let pid = child.id().context("the server's pid")?;
-    let base_url = format!("127.0.0.1:{port}");
-    wait_ready(&base_url).await?;
+    let rackd = Server::start(&config, dir.path()).await?;
     let client = reqwest::Client::new();
-    let devices_url = format!("http://{base_url}/api/v1/devices");
+    let devices_url = format!("http://{}/api/v1/devices", rackd.addr);
     wait_all_good(&client, &devices_url, devices * tags as usize).await?;
 
     let changing_tags = (changing * tags as f64).round() as u16;
     println!(
-        "rackd bench fleet: {devices} tag devices x {tags} u16 tags every {poll_ms} ms over Modbus TCP \
+        "bench fleet: {devices} tag devices x {tags} u16 tags every {poll_ms} ms over Modbus TCP \
          (target {:.0} tag reads/s), {seconds} s per phase, {} cores",
         target(args),
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
     println!(
         "tag reads counted at the simulator (requests x {tags} tags: one read per device poll); \
-         rackd's CPU from /proc/{pid}/stat"
+         rackd's CPU from /proc/{}/stat",
+        rackd.pid
     );
-    // Settle after the start-up burst before measuring.
-    tokio::time::sleep(Duration::from_secs(2)).await;
-    let idle = phase("static".into(), &client, &devices_url, &server, pid, seconds).await?;
+    // Settle after the start-up burst (every device coming online at once) before measuring.
+    tokio::time::sleep(Duration::from_secs(5)).await;
+    let idle = phase("static".into(), &client, &devices_url, &server, &rackd, seconds).await?;
 
     let changer = tokio::spawn(change_values(bank.clone(), devices, tags, changing_tags, poll_ms));
     tokio::time::sleep(Duration::from_millis(2 * poll_ms).max(Duration::from_secs(1))).await;
     let name = format!("changing ({changing_tags}/{tags})");
-    let busy = phase(name, &client, &devices_url, &server, pid, seconds).await?;
+    let busy = phase(name, &client, &devices_url, &server, &rackd, seconds).await?;
     changer.abort();
 
     let expected = devices as f64 * changing_tags as f64 * 1000.0 / poll_ms as f64;
     print(&idle, &busy, tags, args, expected);
-    child.kill().await.ok();
+    rackd.stop().await;
     server.shutdown().await;
     ensure!(idle.not_good == 0 && busy.not_good == 0, "some tags were not good at the end of a phase");
     Ok(())
@@ -143,7 +137,7 @@ fn target(args: FleetArgs) -> f64 {
 
 /// rackd's configuration: `devices` tags devices on the simulator at `plc`.
 fn config_text(devices: usize, tags: u16, poll_ms: u64, plc: &str) -> String {
-    let mut text = String::from("# rackd bench fleet: generated\n");
+    let mut text = String::from("# bench fleet: generated\n");
     for d in 0..devices {
         let _ = write!(
             text,
@@ -221,17 +215,17 @@ async fn phase(
     client: &reqwest::Client,
     url: &str,
     server: &ServerHandle,
-    pid: u32,
+    rackd: &Server,
     seconds: u64,
 ) -> anyhow::Result<Phase> {
     let before = tag_census(client, url).await?;
     let census_start = Instant::now();
-    let (rackd_before, sim_before) = (cpu_secs(pid)?, own_cpu_secs()?);
+    let (rackd_before, sim_before) = (rackd.cpu_secs()?, own_cpu_secs()?);
     let requests_before = server.stats().requests;
     let started = Instant::now();
     tokio::time::sleep(Duration::from_secs(seconds)).await;
     let requests = server.stats().requests - requests_before;
-    let (rackd_after, sim_after) = (cpu_secs(pid)?, own_cpu_secs()?);
+    let (rackd_after, sim_after) = (rackd.cpu_secs()?, own_cpu_secs()?);
     let wall = started.elapsed();
     let after = tag_census(client, url).await?;
     Ok(Phase {
