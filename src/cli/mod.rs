@@ -1,9 +1,6 @@
 //! The command line: `rackd serve`, `openapi`, `check-config`, `hash-key`, `healthcheck`,
-//! `plc`, `sim`, `bench`.
+//! `plc`, `sim`. The benchmarks are an example (`examples/bench/`), out of the service binary.
 
-pub mod bench;
-pub mod bench_shelf;
-pub mod bench_ws;
 pub mod demo;
 pub mod plc;
 pub mod sim;
@@ -75,9 +72,6 @@ pub enum Command {
     /// Run a device simulator alone.
     #[command(subcommand)]
     Sim(sim::SimCommand),
-    /// Benchmarks (see README).
-    #[command(subcommand)]
-    Bench(bench::BenchCommand),
 }
 
 /// `rackd serve` options.
@@ -173,7 +167,6 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Plc(args) => plc::run(args).await?,
         Command::Sim(s) => sim::run(s).await?,
-        Command::Bench(b) => bench::run(b).await?,
     }
     Ok(ExitCode::SUCCESS)
 }

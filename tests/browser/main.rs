@@ -34,6 +34,7 @@ static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(())
 
 /// The demo site's simulators.
 pub struct Sims {
+    /// The stacker crane (tests raise alarms on it).
     pub crane: CraneSim,
     _shelf: ShelfSim,
     _tower: TowerSim,
@@ -76,6 +77,7 @@ fn find_program(var: &str, names: &[&str]) -> Option<PathBuf> {
 
 /// A headless Chromium under chromedriver, closed (and its processes killed) on drop.
 pub struct Browser {
+    /// The WebDriver session.
     pub client: Client,
     _driver: Driver,
     _profile: tempfile::TempDir,

@@ -1,4 +1,4 @@
-//! `rackd bench intake`: job intake throughput and latency against a trivial route.
+//! `bench intake`: job intake throughput and latency against a trivial route.
 //!
 //! Starts a real server on a temporary database, then drives it over loopback HTTP with
 //! N concurrent keep-alive clients in three phases of equal length: `GET /healthz` (the
@@ -13,49 +13,8 @@ use anyhow::Context;
 use hdrhistogram::Histogram;
 use tokio::sync::oneshot;
 
-use crate::app::Application;
-use crate::config::Config;
-
-/// The benchmarks.
-#[derive(clap::Subcommand, Debug)]
-pub enum BenchCommand {
-    /// Intake: single POSTs, batch POSTs and a trivial route, at N concurrent clients.
-    Intake {
-        /// Concurrent clients.
-        #[arg(long, default_value_t = 64)]
-        clients: usize,
-        /// Seconds per phase.
-        #[arg(long, default_value_t = 5)]
-        seconds: u64,
-        /// Jobs per batch request.
-        #[arg(long, default_value_t = 1000)]
-        batch: usize,
-    },
-    /// Shelf PLC: POST-to-slot latency and completed jobs/s against the simulator.
-    Shelf {
-        /// Jobs sent one at a time for the latency figures.
-        #[arg(long, default_value_t = 1000)]
-        latency_jobs: usize,
-        /// Jobs sent in batches for the throughput figure.
-        #[arg(long, default_value_t = 20000)]
-        batch_jobs: usize,
-        /// The device's poll period in milliseconds.
-        #[arg(long, default_value_t = 10)]
-        poll_ms: u64,
-    },
-    /// Live events: fan-out latency and the server's CPU with 1 and with N WebSocket subscribers.
-    Ws {
-        /// Concurrent subscribers in the second phase.
-        #[arg(long, default_value_t = 1000)]
-        subscribers: usize,
-        /// Jobs (events) per phase.
-        #[arg(long, default_value_t = 500)]
-        events: usize,
-        /// Jobs posted per second.
-        #[arg(long, default_value_t = 50)]
-        rate: u32,
-    },
-}
+use rackd::app::Application;
+use rackd::config::Config;
 
 struct Phase {
     name: &'static str,
@@ -71,17 +30,8 @@ impl Phase {
     }
 }
 
-/// Runs a benchmark and prints its figures.
-pub async fn run(cmd: BenchCommand) -> anyhow::Result<()> {
-    let (clients, seconds, batch) = match cmd {
-        BenchCommand::Intake { clients, seconds, batch } => (clients, seconds, batch),
-        BenchCommand::Shelf { latency_jobs, batch_jobs, poll_ms } => {
-            return super::bench_shelf::run(latency_jobs, batch_jobs, poll_ms).await;
-        }
-        BenchCommand::Ws { subscribers, events, rate } => {
-            return super::bench_ws::run(subscribers, events, rate).await;
-        }
-    };
+/// Runs the intake benchmark and prints its figures.
+pub async fn run(clients: usize, seconds: u64, batch: usize) -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
     let mut config = Config::demo();
     config.server.listen = "127.0.0.1:0".parse()?;
@@ -95,7 +45,7 @@ pub async fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     let duration = Duration::from_secs(seconds);
     let client = reqwest::Client::builder().pool_max_idle_per_host(clients).build()?;
     println!(
-        "rackd bench intake: {clients} clients, {seconds} s per phase, batches of {batch}, {} cores",
+        "bench intake: {clients} clients, {seconds} s per phase, batches of {batch}, {} cores",
         num_cpus()
     );
     let trivial = phase("GET /healthz (ceiling)", &client, clients, duration, 1, {

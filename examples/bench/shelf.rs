@@ -1,4 +1,4 @@
-//! `rackd bench shelf`: how fast jobs reach and run on a shelf PLC.
+//! `bench shelf`: how fast jobs reach and run on a shelf PLC.
 //!
 //! Starts the shelf simulator (zero-duration tasks) and a real server driving it over
 //! loopback UDP, then measures:
@@ -16,12 +16,13 @@ use anyhow::Context;
 use hdrhistogram::Histogram;
 use tokio::sync::oneshot;
 
-use crate::app::Application;
-use crate::config::Config;
-use crate::protocols::PlcMemory;
-use crate::protocols::modbus::{ModbusClient, ModbusConfig};
-use crate::sim::shelf::{ShelfSim, ShelfSimOptions};
-use crate::wire::task_id_for;
+use rackd::app::Application;
+use rackd::cli::demo::shelf_device;
+use rackd::config::Config;
+use rackd::protocols::PlcMemory;
+use rackd::protocols::modbus::{ModbusClient, ModbusConfig};
+use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
+use rackd::wire::task_id_for;
 
 /// Runs the shelf benchmark: `latency_jobs` single jobs, then `batch_jobs` in batches.
 pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow::Result<()> {
@@ -33,7 +34,7 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
     config.server.listen = "127.0.0.1:0".parse()?;
     config.database.path = dir.path().join("bench.db");
     let plc_addr = sim.local_addr().context("a UDP simulator has an address")?.to_string();
-    let mut device = crate::cli::demo::shelf_device(&sim, "shelf1", &plc_addr, vec![1]);
+    let mut device = shelf_device(&sim, "shelf1", &plc_addr, vec![1]);
     device.poll_ms = poll_ms;
     config.devices = vec![device.into()];
     let app = Application::build(&config, false).await?;
@@ -98,7 +99,7 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
     let (done_after, _) = sim.finished();
 
     let ms = |h: &Histogram<u64>, q: f64| h.value_at_quantile(q) as f64 / 1000.0;
-    println!("rackd bench shelf: simulator with zero-duration tasks, poll every {poll_ms} ms");
+    println!("bench shelf: simulator with zero-duration tasks, poll every {poll_ms} ms");
     println!("Modbus UDP round trip (baseline)   p50 {:.3} ms  p99 {:.3} ms", ms(&rtt, 0.5), ms(&rtt, 0.99));
     println!(
         "POST -> task in slot ({latency_jobs} jobs)    p50 {:.3} ms  p99 {:.3} ms  = {:.1}x / {:.1}x three round trips",

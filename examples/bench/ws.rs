@@ -1,7 +1,7 @@
-//! `rackd bench ws`: fan-out of live events to many WebSocket subscribers.
+//! `bench ws`: fan-out of live events to many WebSocket subscribers.
 //!
 //! Starts rackd as a child process (so its CPU time can be read apart from the load
-//! generator's, from `/proc/PID/stat`) on a temporary database with no devices, then
+//! generator's, see `child.rs`) on a temporary database with no devices, then
 //! submits single jobs at a steady rate while subscribers follow `GET /api/v1/ws?topics=jobs`.
 //! A job's event latency runs from the moment its POST is sent until a subscriber has the
 //! `job.updated` event (so it includes the commit, whose own latency is printed as the
@@ -17,6 +17,8 @@ use futures::StreamExt;
 use hdrhistogram::Histogram;
 use tokio_tungstenite::tungstenite::Message;
 
+use crate::child::Server;
+
 /// What one phase measured.
 struct Phase {
     subscribers: usize,
@@ -31,65 +33,30 @@ struct Phase {
 pub async fn run(subscribers: usize, events: usize, rate: u32) -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
     let config = dir.path().join("bench.toml");
-    std::fs::write(&config, "# rackd bench ws: no devices\n")?;
-    let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
-    let mut child = tokio::process::Command::new(std::env::current_exe()?)
-        .args(["serve", "--config"])
-        .arg(&config)
-        .args(["--listen", &format!("127.0.0.1:{port}"), "--database"])
-        .arg(dir.path().join("bench.db"))
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .kill_on_drop(true)
-        .spawn()
-        .context("starting rackd serve")?;
-    let pid = child.id().context("the server's pid")?;
-    let base = format!("127.0.0.1:{port}");
-    wait_ready(&base).await?;
+    std::fs::write(&config, "# bench ws: no devices\n")?;
+    let server = Server::start(&config, dir.path()).await?;
     println!(
-        "rackd bench ws: {subscribers} subscribers, {events} events per phase at {rate}/s, {} cores",
+        "bench ws: {subscribers} subscribers, {events} events per phase at {rate}/s, {} cores",
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
     let origin = Instant::now();
-    let baseline = phase(&base, pid, 1, 0, events, rate, origin).await?;
-    let many = phase(&base, pid, subscribers, events, events, rate, origin).await?;
+    let baseline = phase(&server, 1, 0, events, rate, origin).await?;
+    let many = phase(&server, subscribers, events, events, rate, origin).await?;
     print(&baseline, &many);
-    child.kill().await.ok();
+    server.stop().await;
     Ok(())
-}
-
-async fn wait_ready(base: &str) -> anyhow::Result<()> {
-    let client = reqwest::Client::new();
-    for _ in 0..200 {
-        if client.get(format!("http://{base}/readyz")).send().await.is_ok_and(|r| r.status().is_success()) {
-            return Ok(());
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
-    bail!("the server did not become ready")
-}
-
-/// CPU seconds the process has used (user + system), from `/proc/PID/stat` (in USER_HZ =
-/// 100 ticks per second on Linux).
-fn cpu_secs(pid: u32) -> anyhow::Result<f64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))?;
-    // Fields after the command name (which may hold spaces) start at field 3.
-    let rest = stat.rsplit_once(')').context("malformed /proc stat")?.1;
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = |i: usize| fields.get(i).and_then(|f| f.parse::<u64>().ok()).unwrap_or(0);
-    Ok((ticks(11) + ticks(12)) as f64 / 100.0)
 }
 
 /// One phase: `subscribers` follow while `events` jobs numbered from `first` are posted.
 async fn phase(
-    base: &str,
-    pid: u32,
+    server: &Server,
     subscribers: usize,
     first: usize,
     events: usize,
     rate: u32,
     origin: Instant,
 ) -> anyhow::Result<Phase> {
+    let base = server.addr.as_str();
     let sent: Arc<Vec<AtomicU64>> = Arc::new((0..events).map(|_| AtomicU64::new(0)).collect());
     let seq = last_seq(base).await?;
     let mut streams = Vec::with_capacity(subscribers);
@@ -123,7 +90,7 @@ async fn phase(
     let client = reqwest::Client::new();
     let url = format!("http://{base}/api/v1/jobs");
     let mut post_us = Histogram::<u64>::new(3)?;
-    let cpu_before = cpu_secs(pid)?;
+    let cpu_before = server.cpu_secs()?;
     let started = Instant::now();
     let mut tick = tokio::time::interval(Duration::from_secs(1) / rate.max(1));
     for (n, slot) in sent.iter().enumerate() {
@@ -145,7 +112,7 @@ async fn phase(
         latency_us.add(r.await?)?;
     }
     let wall = started.elapsed();
-    let cpu_secs = cpu_secs(pid)? - cpu_before;
+    let cpu_secs = server.cpu_secs()? - cpu_before;
     Ok(Phase { subscribers, delivered: latency_us.len(), latency_us, post_us, cpu_secs, wall })
 }
 

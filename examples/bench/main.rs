@@ -1,0 +1,99 @@
+//! rackd's benchmarks, kept out of the service binary and its dependencies.
+//!
+//! ```text
+//! cargo run --release --example bench -- intake [--clients 64] [--seconds 5] [--batch 1000]
+//! cargo run --release --example bench -- shelf  [--latency-jobs 1000] [--batch-jobs 20000] [--poll-ms 10]
+//! cargo run --release --example bench -- ws     [--subscribers 1000] [--events 500] [--rate 50]
+//! cargo run --release --example bench -- fleet  [--devices 500] [--tags 30] [--poll-ms 500] [--seconds 20] [--changing 0.1]
+//! ```
+//!
+//! An example rather than a `rackd bench` subcommand, so that `cargo build --release` of
+//! the service neither compiles nor links the load generators' crates (hdrhistogram,
+//! tokio-tungstenite, tempfile are dev-dependencies), while `cargo test` and clippy still
+//! build and check it. Figures and what they mean: the README's benchmark section.
+//!
+//! `ws` and `fleet` measure the server's CPU apart from the load generator's, so they run
+//! rackd as a child process. The child is this same executable started as `bench rackd
+//! serve ...`, which hands the rest of its arguments to rackd's own command line exactly as
+//! the `rackd` binary does: `cargo run --example` does not rebuild the `rackd` binary, and
+//! a stale one beside it would silently measure old code.
+
+mod child;
+mod fleet;
+mod intake;
+mod shelf;
+mod ws;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+/// The benchmarks.
+#[derive(Parser, Debug)]
+#[command(name = "bench", about = "rackd's benchmarks (see README)")]
+enum Bench {
+    /// Intake: single POSTs, batch POSTs and a trivial route, at N concurrent clients.
+    Intake {
+        /// Concurrent clients.
+        #[arg(long, default_value_t = 64)]
+        clients: usize,
+        /// Seconds per phase.
+        #[arg(long, default_value_t = 5)]
+        seconds: u64,
+        /// Jobs per batch request.
+        #[arg(long, default_value_t = 1000)]
+        batch: usize,
+    },
+    /// Shelf PLC: POST-to-slot latency and completed jobs/s against the simulator.
+    Shelf {
+        /// Jobs sent one at a time for the latency figures.
+        #[arg(long, default_value_t = 1000)]
+        latency_jobs: usize,
+        /// Jobs sent in batches for the throughput figure.
+        #[arg(long, default_value_t = 20000)]
+        batch_jobs: usize,
+        /// The device's poll period in milliseconds.
+        #[arg(long, default_value_t = 10)]
+        poll_ms: u64,
+    },
+    /// Live events: fan-out latency and the server's CPU with 1 and with N WebSocket subscribers.
+    Ws {
+        /// Concurrent subscribers in the second phase.
+        #[arg(long, default_value_t = 1000)]
+        subscribers: usize,
+        /// Jobs (events) per phase.
+        #[arg(long, default_value_t = 500)]
+        events: usize,
+        /// Jobs posted per second.
+        #[arg(long, default_value_t = 50)]
+        rate: u32,
+    },
+    /// Tag devices: tag reads/s and rackd's CPU per 1000 reads, values static and changing.
+    Fleet(fleet::FleetArgs),
+}
+
+fn main() -> ExitCode {
+    let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    if args.get(1).is_some_and(|a| a == child::RACKD) {
+        return child::run_rackd(&args[1..]);
+    }
+    let bench = Bench::parse();
+    let runtime = tokio::runtime::Runtime::new().expect("a tokio runtime");
+    let result = runtime.block_on(async {
+        match bench {
+            Bench::Intake { clients, seconds, batch } => intake::run(clients, seconds, batch).await,
+            Bench::Shelf { latency_jobs, batch_jobs, poll_ms } => {
+                shelf::run(latency_jobs, batch_jobs, poll_ms).await
+            }
+            Bench::Ws { subscribers, events, rate } => ws::run(subscribers, events, rate).await,
+            Bench::Fleet(args) => fleet::run(args).await,
+        }
+    });
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("bench: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
