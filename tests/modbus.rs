@@ -10,6 +10,9 @@ use rackd::protocols::modbus::{Exception, ModbusClient, ModbusConfig, Quirks, Re
 use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
 use tokio::net::UdpSocket;
 
+#[path = "modbus/paused.rs"]
+mod paused;
+
 async fn serve(transport: Transport, options: ServerOptions) -> (ServerHandle, Bank, String) {
     let bank = Bank::new();
     let server = ModbusServer::new(Arc::new(bank.clone()), options);

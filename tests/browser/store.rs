@@ -200,7 +200,15 @@ async fn the_dashboard_follows_the_demo_store_live() {
             10,
         )
         .await;
-    tokio::time::sleep(std::time::Duration::from_millis(800)).await; // the marker's move ends
+    // The marker glides to its place (a CSS transition of 0.5 s): the picture waits until no
+    // transition runs.
+    browser
+        .wait(
+            "the crane's marker at rest",
+            "return !document.getAnimations().some(a => a instanceof CSSTransition && a.playState === 'running')",
+            10,
+        )
+        .await;
     let shot = browser.screenshot("dashboard.png").await;
     eprintln!("dashboard screenshot: {}", shot.display());
     crane.clear_alarm();

@@ -129,3 +129,21 @@ pub async fn wait_ended(app: &TestApp, n: usize, secs: u64) -> Vec<Value> {
         tokio::time::sleep(std::time::Duration::from_millis(50)).await;
     }
 }
+
+/// Waits (bounded: fails after `secs` seconds) until `count()` has grown by `more` from its
+/// value now. With a simulator's request counter this is the positive signal that a device
+/// task went round its loop again (each poll asks the machine, and every poll is followed by
+/// a dispatch attempt), so a test can then assert that something did NOT happen without
+/// sleeping a fixed time and hoping it was long enough.
+pub async fn wait_for_more(what: &str, more: u64, secs: u64, count: impl Fn() -> u64) {
+    let from = count();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(secs);
+    while count() < from + more {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{what}: only {} of {more} more in {secs} s",
+            count().saturating_sub(from)
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    }
+}

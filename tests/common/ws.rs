@@ -99,14 +99,6 @@ impl Ws {
         out
     }
 
-    /// Asserts nothing arrives within `wait`.
-    pub async fn quiet(&mut self, wait: Duration) {
-        match self.next(wait).await {
-            Got::Nothing => {}
-            other => panic!("expected silence, got {other:?}"),
-        }
-    }
-
     /// Sends a ping and waits up to `wait` for its pong, passing over other messages.
     pub async fn ping(&mut self, wait: Duration) -> bool {
         self.stream.send(Message::Ping(b"are you there".to_vec().into())).await.unwrap();

@@ -1,8 +1,6 @@
 //! Alarms: business alarms cancel and fail the job with their code, hardware alarms block
 //! the crane until cleared, and forced completion ends the job `forced`.
 
-use std::time::Duration;
-
 use rackd::protocols::mc3e::TransportKind;
 use rackd::wire::alarms::{self, business_codes};
 use rackd::wire::task_id_for;
@@ -49,7 +47,7 @@ async fn a_hardware_alarm_blocks_the_crane_until_it_clears() {
     assert_eq!(status["crane"]["alarm_class"], "hardware", "{status}");
     assert_eq!(status["crane"]["alarm_text"], alarms::lookup(7002).text, "{status}");
     let id = submit(&app, store_job(), "blocked").await;
-    tokio::time::sleep(Duration::from_millis(400)).await;
+    helpers::wait_for_more("polls under the alarm", POLLS, 5, || sim.requests_seen()).await;
     let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
     assert_eq!(job["state"], "queued", "no new work under a hardware alarm: {job}");
     assert_eq!(sim.received(task_id_for(id)), 0);
@@ -62,7 +60,10 @@ async fn a_hardware_alarm_blocks_the_crane_until_it_clears() {
     wait_job(&app, id, &["running"], 5).await;
     sim.raise_alarm(7011);
     let halted = sim.action();
-    tokio::time::sleep(Duration::from_millis(400)).await;
+    wait_device(&app, "showing the alarm", 5, |s| s["crane"]["alarm_code"] == 7011).await;
+    // rackd sees the alarm and keeps polling; 10 more requests (>= 5 polls of 20 ms) span
+    // several 20 ms steps in which the crane would have moved on.
+    helpers::wait_for_more("polls under the alarm", POLLS, 5, || sim.requests_seen()).await;
     let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
     assert_eq!(job["state"], "running", "a hardware alarm fails nothing by itself: {job}");
     assert_eq!(sim.action(), halted, "the crane stands still");
@@ -98,7 +99,7 @@ async fn without_auto_cancel_a_business_alarm_waits_for_an_operator() {
     wait_job(&app, id, &["running"], 5).await;
     sim.raise_alarm(7094);
     wait_device(&app, "showing the alarm", 5, |s| s["crane"]["alarm_class"] == "business").await;
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    helpers::wait_for_more("polls under the alarm", POLLS, 5, || sim.requests_seen()).await;
     assert_eq!(sim.cancels(), 0);
     let (status, job) = app.post(&format!("/api/v1/jobs/{id}/cancel"), &json!({})).await;
     assert_eq!(status, 200, "{job}");

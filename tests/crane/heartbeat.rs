@@ -35,7 +35,9 @@ async fn a_stalled_heartbeat_takes_the_crane_offline_until_it_moves_again() {
     // Configured loss time 500 ms: not before it, and well within the bounded wait.
     assert!(lost.elapsed() >= Duration::from_millis(300), "declared lost too early: {:?}", lost.elapsed());
     let id = submit(&app, json!({"kind": "travel", "to": cloc(2, 3, 1, 1)}), "hb").await;
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // The job is with the dispatcher once the POST is answered; rackd keeps polling the lost
+    // crane and tries to dispatch after every poll: let it do so a few times.
+    helpers::wait_for_more("polls of the lost crane", POLLS, 5, || sim.requests_seen()).await;
     let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
     assert_eq!(job["state"], "queued", "no work for a lost crane: {job}");
     assert_eq!(sim.received(task_id_for(id)), 0);
@@ -94,11 +96,19 @@ async fn the_crane_sees_rackds_heartbeat_and_raises_7020_only_while_rackd_is_awa
     let device = device_for(&sim, TransportKind::Tcp, |_| {});
     let app = helpers::spawn_with(|c| with_crane(c, device.clone())).await;
     wait_device(&app, "clean", 5, |s| s["online"] == true && s["crane"]["alarm_code"].is_null()).await;
-    let start = std::time::Instant::now();
-    while start.elapsed() < Duration::from_millis(1200) {
+    // rackd writes D0 at most every heartbeat_ms (20 ms), so 30 changes of D0 span more than
+    // the crane's 400 ms watchdog; the watchdog stays quiet all along.
+    let (mut moves, mut last) = (0, sim.word(0));
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while moves < 30 {
         assert_eq!(sim.word(205), 0, "rackd's heartbeat keeps the crane's watchdog quiet");
-        tokio::time::sleep(Duration::from_millis(10)).await;
+        assert!(std::time::Instant::now() < deadline, "rackd's heartbeat stalled after {moves} moves");
+        if sim.word(0) != last {
+            (moves, last) = (moves + 1, sim.word(0));
+        }
+        tokio::time::sleep(Duration::from_millis(2)).await;
     }
+    assert_eq!(sim.word(205), 0);
     let (db, _dir) = app.stop().await;
     let deadline = std::time::Instant::now() + Duration::from_secs(5);
     while sim.word(205) != 7020 {

@@ -100,10 +100,25 @@ async fn a_hand_over_the_crane_never_acknowledges_times_out_and_the_job_waits() 
     assert_eq!(status["online"], true, "{status}");
     let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
     assert_eq!(job["state"], "queued", "{job}");
-    // Paused, rackd stops retrying: the strobe of the last attempt was withdrawn.
+    // Paused, rackd stops retrying. The hand-over under way when the pause lands may still
+    // raise the strobe once (it read its job before the pause); it is withdrawn within the
+    // 200 ms hand-over timeout, and no further hand-over starts over 40 requests (at least
+    // 20 polls of 20 ms, two hand-over timeouts and more).
     let (status, _) = app.post("/api/v1/devices/crane1/pause", &json!({})).await;
     assert_eq!(status, 200);
-    tokio::time::sleep(Duration::from_millis(400)).await;
+    let (from, deadline) = (sim.requests_seen(), std::time::Instant::now() + Duration::from_secs(5));
+    let (mut rises, mut last) = (0, sim.word(21));
+    while sim.requests_seen() < from + 4 * POLLS || sim.word(21) != 0 {
+        let strobe = sim.word(21);
+        rises += u32::from(last == 0 && strobe == 1);
+        last = strobe;
+        assert!(rises <= 1, "a new hand-over started while paused");
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the strobe was never withdrawn, or rackd stopped polling"
+        );
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
     assert_eq!(sim.word(21), 0, "the strobe was withdrawn");
     sim.set_handshake(true);
     let (status, _) = app.post("/api/v1/devices/crane1/resume", &json!({})).await;

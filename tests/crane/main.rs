@@ -7,6 +7,7 @@ mod helpers;
 mod alarms;
 mod heartbeat;
 mod jobs;
+mod paused;
 mod restart;
 
 use std::time::{Duration, Instant};
@@ -19,6 +20,11 @@ use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use serde_json::{Value, json};
 
 use helpers::{TestApp, spawn_with};
+
+/// Requests to wait for, after a job is committed or a state is shown, before asserting
+/// that rackd did NOT act: at least 5 polls (a poll is one or two requests), each followed by
+/// a dispatch attempt.
+pub const POLLS: u64 = 10;
 
 /// A simulated crane with `step_ms` per action state.
 pub async fn crane(transport: TransportKind, step_ms: u64) -> CraneSim {

@@ -35,3 +35,18 @@ pub fn assert_consecutive(events: &[Value], first: i64) {
         assert_eq!(e["seq"].as_i64(), Some(first + i as i64), "event {i} of {}: {e}", events.len());
     }
 }
+
+/// Asserts that `ws` received nothing after the events it has read, the last of which had
+/// sequence number `last`: one more job is submitted (a sentinel), and since events come in
+/// order, the next message must be that job's event, numbered `last + 1`. A positive signal
+/// instead of waiting a fixed time for silence.
+pub async fn assert_nothing_more(app: &TestApp, ws: &mut ws::Ws, last: i64) {
+    let sentinel = submit(app, 1).await[0];
+    let next = ws.json().await;
+    assert_eq!(next["seq"].as_i64(), Some(last + 1), "nothing came between: {next}");
+    assert_eq!(
+        (next["type"].as_str(), next["data"]["id"].as_i64()),
+        (Some("job.updated"), Some(sentinel)),
+        "{next}"
+    );
+}

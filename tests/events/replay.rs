@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use super::helpers::{spawn_app, spawn_on};
 use super::ws::Ws;
-use super::{assert_consecutive, submit};
+use super::{assert_consecutive, assert_nothing_more, submit};
 
 #[tokio::test]
 async fn a_reconnect_with_since_misses_nothing_and_repeats_nothing() {
@@ -35,7 +35,7 @@ async fn a_reconnect_with_since_misses_nothing_and_repeats_nothing() {
     let events = ws.events(13 + 20).await;
     more.await.unwrap();
     assert_consecutive(&events, 5);
-    ws.quiet(Duration::from_millis(200)).await;
+    assert_nothing_more(&app, &mut ws, 4 + 13 + 20).await;
 }
 
 #[tokio::test]
@@ -48,7 +48,7 @@ async fn since_with_a_topic_replays_only_that_topic_and_survives_a_restart() {
     let mut ws = Ws::connect(&app.base, "?since=1&topics=jobs").await;
     let events = ws.events(4).await;
     assert_consecutive(&events, 2);
-    ws.quiet(Duration::from_millis(200)).await;
+    assert_nothing_more(&app, &mut ws, 5).await;
     drop(dir);
 }
 

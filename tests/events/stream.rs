@@ -6,7 +6,7 @@ use serde_json::json;
 
 use super::helpers::{assert_error, spawn_app, spawn_with, store};
 use super::ws::{Got, Ws};
-use super::{assert_consecutive, submit};
+use super::{assert_consecutive, assert_nothing_more, submit};
 
 #[tokio::test]
 async fn a_snapshot_then_every_event_in_order() {
@@ -38,7 +38,7 @@ async fn a_snapshot_then_every_event_in_order() {
     }
     assert_eq!(events[5]["data"]["id"], ids[0]);
     assert_eq!(events[5]["data"]["state"], "cancelled");
-    ws.quiet(Duration::from_millis(200)).await;
+    assert_nothing_more(&app, &mut ws, 8).await;
 }
 
 #[tokio::test]
@@ -56,7 +56,14 @@ async fn topics_filter_both_snapshot_and_events() {
     submit(&app, 3).await;
     let events = jobs_only.events(3).await;
     assert!(events.iter().all(|e| e["type"] == "job.updated"));
-    locations_only.quiet(Duration::from_millis(300)).await;
+    // The job events were broadcast to every session before the server stops, and a session
+    // sends what it has before it closes: the first thing locations_only hears is the close.
+    let stopping = tokio::spawn(app.stop());
+    match locations_only.next(Duration::from_secs(10)).await {
+        Got::Closed(code) => assert_eq!(code, 1001, "no job event reached the locations subscriber"),
+        other => panic!("expected only the close, got {other:?}"),
+    }
+    stopping.await.unwrap();
 }
 
 #[tokio::test]
@@ -120,10 +127,31 @@ async fn pings_go_both_ways_and_a_silent_client_is_dropped() {
     assert!(ws.ping(Duration::from_secs(2)).await, "the server answers a ping at once");
     assert!(ws.pinged(Duration::from_secs(3)).await, "the server pings every ping_secs");
 
-    // A client that reads nothing never answers a ping: dropped after two.
+    // A client that reads nothing never answers a ping: dropped after two. The gauge of live
+    // subscribers shows when its session starts and when the server drops it; only then is
+    // its stream read (reading would answer the pings).
+    let subscribers = || async {
+        let text = app.client.get(app.url("/metrics")).send().await.unwrap().text().await.unwrap();
+        let line = text.lines().find(|l| l.starts_with("rackd_ws_subscribers ")).map(str::to_owned);
+        line.and_then(|l| l.rsplit(' ').next().and_then(|n| n.parse::<i64>().ok())).expect("the gauge")
+    };
+    let wait_for = |want: i64, what: &'static str| {
+        let subscribers = &subscribers;
+        async move {
+            let deadline = std::time::Instant::now() + Duration::from_secs(10);
+            while subscribers().await != want {
+                assert!(std::time::Instant::now() < deadline, "{what}");
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        }
+    };
+    let open = subscribers().await;
+    ws.close().await;
+    wait_for(open - 1, "the closed client's session never ended").await;
     let (stream, _) =
         tokio_tungstenite::connect_async(super::ws::url(&app.base, "/api/v1/ws")).await.unwrap();
-    tokio::time::sleep(Duration::from_millis(3500)).await;
+    wait_for(open, "the silent client's session never started").await;
+    wait_for(open - 1, "the silent client was never dropped").await;
     let mut stream = stream;
     let mut closed = false;
     while let Ok(Some(message)) =

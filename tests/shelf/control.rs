@@ -9,11 +9,16 @@ use crate::{shelf_app, sim};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_paused_device_gets_no_new_work_until_resumed() {
-    let (app, _sim) = shelf_app(sim(0), |_| {}).await;
+    let (app, sim) = shelf_app(sim(0), |_| {}).await;
     let (status, device) = app.post("/api/v1/devices/shelf1/pause", &json!({})).await;
     assert_eq!((status, device["paused"].clone()), (200, json!(true)));
     let (_, job) = app.post("/api/v1/jobs", &store("PAUSED")).await;
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // The job is with the dispatcher once the POST is answered. Recovery at start reads each
+    // slot once; after it an idle shelf is polled with one request, and every poll is
+    // followed by a dispatch attempt: at least 5 of them found nothing to do.
+    let slots = device["slots_total"].as_u64().unwrap();
+    let faults = sim.faults();
+    wait_for_more("polls of the paused shelf", slots + 5, 10, || faults.requests_seen()).await;
     assert_eq!(app.get(&format!("/api/v1/jobs/{}", job["id"])).await.1["state"], "queued");
     let (status, device) = app.post("/api/v1/devices/shelf1/resume", &json!({})).await;
     assert_eq!((status, device["paused"].clone()), (200, json!(false)));

@@ -85,7 +85,9 @@ async fn a_silent_plc_goes_offline_and_comes_back_by_itself() {
     assert!(device["last_error"].as_str().unwrap().contains("no reply"), "{device}");
     // No new work while offline.
     let (_, job) = app.post("/api/v1/jobs", &store("WAITS")).await;
-    tokio::time::sleep(Duration::from_millis(200)).await;
+    // One unanswered request per poll (no retries), each poll followed by a dispatch attempt.
+    let faults = sim.faults();
+    wait_for_more("polls of the silent shelf", 5, 5, || faults.requests_seen()).await;
     assert_eq!(app.get(&format!("/api/v1/jobs/{}", job["id"])).await.1["state"], "queued");
     sim.set_faults(Faults::default());
     let done = wait_ended(&app, 1, 30).await;

@@ -1,15 +1,13 @@
 //! Tags over Modbus TCP: what the PLC holds shows in the status, writes land with the right
 //! words, and a stopped PLC takes the device offline and back.
 
-use std::time::Duration;
-
 use serde_json::{Value, json};
 
 use crate::*;
 
 #[tokio::test]
 async fn polls_show_every_type_and_only_real_changes() {
-    let (app, bank, _server) = modbus_app().await;
+    let (app, bank, server) = modbus_app().await;
     {
         let mut b = bank.lock();
         b.holding_registers[10] = 65535;
@@ -51,7 +49,10 @@ async fn polls_show_every_type_and_only_real_changes() {
 
     // Polls that find nothing new leave the tags exactly as they were.
     let before = device["tags"].clone();
-    tokio::time::sleep(Duration::from_millis(150)).await;
+    // A poll of these tags is one request per register range (four of them): 20 requests
+    // are several whole polls.
+    let faults = server.faults();
+    helpers::wait_for_more("polls of the tags", 20, 5, || faults.requests_seen()).await;
     let (_, again) = app.get("/api/v1/devices/tags1").await;
     assert_eq!(again["tags"], before, "no change without a change in the PLC");
 

@@ -182,6 +182,13 @@ impl CraneSim {
         self.engine.lock().unwrap_or_else(|p| p.into_inner()).refused
     }
 
+    /// Requests that reached the crane's server so far, dropped ones included (0 once it is
+    /// shut down). Tests wait on it to know rackd has polled the crane again, instead of
+    /// sleeping a fixed time before asserting that something did not happen.
+    pub fn requests_seen(&self) -> u64 {
+        self.server.as_ref().map_or(0, |s| s.faults().requests_seen())
+    }
+
     /// Action state (D203).
     pub fn action(&self) -> u16 {
         self.word(203)

@@ -1,0 +1,110 @@
+//! The transport's retry policy on paused time: the real Modbus RTU client and server on
+//! the two ends of an in-memory byte stream (`tokio::io::duplex`), so timeouts are exact and
+//! cost nothing. (Over a socket paused time would race the I/O; see the transport's docs.)
+//!
+//! What is checked: a request gets `retries + 1` attempts of `timeout` each and fails after
+//! exactly that long; a reply after a retry ends the request at once; the device's own
+//! answer (an exception) is never retried; a reply that comes after its request gave up is
+//! never taken for the next request's answer (flushed when it is waiting before the next
+//! request; judged malformed, and the attempt retried, when it arrives during it: RTU frames
+//! carry no transaction id, so a late reply of the same shape could not be told apart, as
+//! the transport's docs say).
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use rackd::protocols::faults::Fault;
+use rackd::protocols::modbus::server::{Bank, ModbusServer, ServerHandle, ServerOptions};
+use rackd::protocols::modbus::{Exception, ModbusClient, Transport};
+use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
+use tokio::time::Instant;
+
+const MS: fn(u64) -> Duration = Duration::from_millis;
+/// What RTU framing adds to an exchange at 115200 baud: the 1.75 ms silence before each
+/// frame, on both sides.
+const FRAMING: Duration = Duration::from_millis(10);
+
+/// An RTU server and client over an in-memory stream; each attempt may take 1 s.
+fn line(retries: u32) -> (ServerHandle, Bank, ModbusClient) {
+    let (near, far) = tokio::io::duplex(1024);
+    let bank = Bank::new();
+    let server =
+        ModbusServer::new(Arc::new(bank.clone()), ServerOptions::default()).serve_rtu_stream(far, 115200);
+    let mut c = super::config(Transport::RtuSerial, "duplex", 1000, retries);
+    c.serial.baud = 115200;
+    (server, bank, ModbusClient::rtu_over_stream(c, near).unwrap())
+}
+
+#[tokio::test(start_paused = true)]
+async fn every_attempt_gets_its_timeout_and_the_request_fails_after_all_of_them() {
+    let (server, _bank, plc) = line(2);
+    let at = plc.parse_address("4x0").unwrap();
+    server.faults().push(Fault::Drop).push(Fault::Drop).push(Fault::Drop);
+    let start = Instant::now();
+    let err = plc.read_words(&at, 2).await.unwrap_err();
+    let took = start.elapsed();
+    assert!(matches!(err, PlcError::Timeout { attempts: 3, timeout } if timeout == MS(1000)), "{err:?}");
+    assert!(took >= MS(3000) && took <= MS(3000) + FRAMING, "failed after {took:?}");
+    assert_eq!(server.faults().requests_seen(), 3, "one request per attempt");
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_answer_to_a_retry_ends_the_request_at_once() {
+    let (server, bank, plc) = line(2);
+    bank.set_holding(0, &[7, 8]);
+    let at = plc.parse_address("4x0").unwrap();
+    server.faults().push(Fault::Drop).push(Fault::Drop);
+    let start = Instant::now();
+    assert_eq!(plc.read_words(&at, 2).await.unwrap(), [7, 8]);
+    let took = start.elapsed();
+    assert!(took >= MS(2000) && took <= MS(2000) + FRAMING, "answered after {took:?}");
+    assert_eq!(plc.stats().sends, 3);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_device_exception_is_an_answer_and_never_retried() {
+    let (server, _bank, plc) = line(5);
+    let at = plc.parse_address("4x0").unwrap();
+    server.faults().push(Fault::DeviceError(0x06));
+    let start = Instant::now();
+    let err = plc.read_words(&at, 1).await.unwrap_err();
+    assert!(matches!(err, PlcError::Device(DeviceCode::Modbus(Exception::SERVER_DEVICE_BUSY))), "{err:?}");
+    assert!(start.elapsed() <= FRAMING, "at once, not after a timeout");
+    assert_eq!(server.faults().requests_seen(), 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_late_reply_is_never_taken_for_the_next_answer() {
+    let (server, bank, plc) = line(0);
+    bank.set_holding(0, &[1, 1]);
+    bank.set_holding(10, &[2, 2]);
+    let (first, second) = (plc.parse_address("4x0").unwrap(), plc.parse_address("4x10").unwrap());
+
+    // The reply comes 500 ms after the request gave up, before the next request: flushed.
+    server.faults().push(Fault::Delay(MS(1500)));
+    let start = Instant::now();
+    assert!(matches!(plc.read_words(&first, 2).await, Err(PlcError::Timeout { attempts: 1, .. })));
+    assert!(start.elapsed() >= MS(1000) && start.elapsed() <= MS(1000) + FRAMING);
+    while server.stats().replies < 1 {
+        tokio::time::sleep(MS(1)).await;
+    }
+    let dropped = plc.stats().dropped;
+    assert_eq!(plc.read_words(&second, 2).await.unwrap(), [2, 2], "its own answer");
+    assert_eq!(plc.stats().dropped, dropped + 1, "the late reply was thrown away");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_late_reply_to_an_abandoned_request_is_not_the_next_answer() {
+    let (server, bank, plc) = line(1);
+    bank.set_holding(0, &[1, 1]);
+    bank.set_holding(10, &[3, 3, 3]);
+    let (first, second) = (plc.parse_address("4x0").unwrap(), plc.parse_address("4x10").unwrap());
+    // The caller gives up after 300 ms; the reply comes at 1 s, while the next request
+    // (sent at 300 ms) waits for its own. It answers another request (2 words, not 3): that
+    // attempt fails as malformed and the retry gets the request's own answer.
+    server.faults().push(Fault::Delay(MS(1000)));
+    assert!(tokio::time::timeout(MS(300), plc.read_words(&first, 2)).await.is_err(), "abandoned");
+    let sends = plc.stats().sends;
+    assert_eq!(plc.read_words(&second, 3).await.unwrap(), [3, 3, 3], "its own answer");
+    assert_eq!(plc.stats().sends, sends + 2, "the first attempt met the late reply");
+}
