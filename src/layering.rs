@@ -128,7 +128,10 @@ fn targets(line: &str, module: &[String]) -> Vec<Vec<String>> {
 }
 
 /// Every edge between modules, at the top level and within each top-level module.
-fn edges() -> (BTreeSet<(String, String)>, BTreeSet<(String, String)>, Vec<String>) {
+/// Edges between modules (from, to).
+type Edges = BTreeSet<(String, String)>;
+
+fn edges() -> (Edges, Edges, Vec<String>) {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut all = Vec::new();
     files(&src, &mut all);
@@ -173,7 +176,7 @@ fn edges() -> (BTreeSet<(String, String)>, BTreeSet<(String, String)>, Vec<Strin
 }
 
 /// A cycle in `edges`, if there is one.
-fn cycle(edges: &BTreeSet<(String, String)>) -> Option<Vec<String>> {
+fn cycle(edges: &Edges) -> Option<Vec<String>> {
     let mut next: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
     for (a, b) in edges {
         next.entry(a).or_default().push(b);

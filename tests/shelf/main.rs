@@ -30,7 +30,7 @@ pub async fn shelf_app(options: ShelfSimOptions, edit: impl FnOnce(&mut ShelfCon
 /// The device entry for a simulator.
 pub fn device_for(sim: &ShelfSim, edit: impl FnOnce(&mut ShelfConfig)) -> ShelfConfig {
     let address = sim.local_addr().expect("a network simulator").to_string();
-    let mut device = rackd::cli::demo::shelf_device(&sim, "shelf1", &address, vec![1]);
+    let mut device = rackd::cli::demo::shelf_device(sim, "shelf1", &address, vec![1]);
     device.poll_ms = 20;
     device.link.timeout = std::time::Duration::from_millis(100);
     device.link.retries = 3;

@@ -49,7 +49,7 @@ fn options(protocol: ShelfProtocol) -> ShelfSimOptions {
 /// changed by `edit`), and checks that rackd's store agrees with the PLC's and that rule 1
 /// was kept.
 async fn run(sim: &ShelfSim, address: &str, edit: impl FnOnce(&mut ShelfConfig)) -> Outcome {
-    let mut device = rackd::cli::demo::shelf_device(&sim, "shelf1", address, vec![1]);
+    let mut device = rackd::cli::demo::shelf_device(sim, "shelf1", address, vec![1]);
     (device.poll_ms, device.link.timeout, device.link.retries) = (20, Duration::from_millis(200), 3);
     edit(&mut device);
     let app = spawn_with(|c| c.devices = vec![device.into()]).await;

@@ -21,9 +21,10 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use async_trait::async_trait;
+use rackd::devices::config::CraneConfig;
 use rackd::devices::crane::Crane;
 use rackd::devices::port::{Port, ReportError};
-use rackd::devices::{DeviceConfig, DeviceKind, DeviceRequest, DeviceStatus, StatusCell};
+use rackd::devices::{DeviceKind, DeviceRequest, DeviceStatus, StatusCell};
 use rackd::domain::report::path;
 use rackd::domain::{Job, JobSpec, JobState, Location, NewJob, Priority, Report, Reported};
 use rackd::protocols::mc3e::{Bank, Device, SharedBank, device};
@@ -173,8 +174,8 @@ impl Rig {
     /// Starts the crane (action states of `step`) and rackd's adapter for it, configured as
     /// `edit` says on top of: poll every 100 ms, heartbeat every 100 ms, lost after 10 s,
     /// each hand-over step bounded by 1 s.
-    pub fn start(step: Duration, edit: impl FnOnce(&mut DeviceConfig)) -> Rig {
-        let mut config = DeviceConfig::crane("crane1", "in-memory", vec![2]);
+    pub fn start(step: Duration, edit: impl FnOnce(&mut CraneConfig)) -> Rig {
+        let mut config = CraneConfig::new("crane1", "in-memory", vec![2]);
         config.poll_ms = 100;
         config.heartbeat_ms = 100;
         config.heartbeat_timeout_ms = 10_000;
