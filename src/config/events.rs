@@ -18,8 +18,6 @@ pub struct EventsConfig {
     pub send_timeout_secs: u64,
     /// Most non-terminal jobs in a WebSocket snapshot (the newest; `jobs_truncated` tells).
     pub snapshot_jobs: u32,
-    /// How often device statuses are looked at for changes and alarms, in milliseconds.
-    pub device_period_ms: u64,
     /// Longest time a device's new last contact goes unpublished, in milliseconds.
     pub contact_refresh_ms: u64,
 }
@@ -32,7 +30,6 @@ impl Default for EventsConfig {
             ping_secs: 20,
             send_timeout_secs: 10,
             snapshot_jobs: 5000,
-            device_period_ms: 100,
             contact_refresh_ms: 5000,
         }
     }
@@ -42,7 +39,7 @@ impl Default for EventsConfig {
 #[derive(Debug, thiserror::Error)]
 pub enum EventsConfigError {
     /// A buffer or period of 0.
-    #[error("events.buffer, ping_secs, send_timeout_secs and device_period_ms must be at least 1")]
+    #[error("events.buffer, ping_secs and send_timeout_secs must be at least 1")]
     Zero,
     /// A log that keeps nothing (replay with `?since=` would never work).
     #[error("events.retention_hours must be at least 1")]
@@ -52,11 +49,7 @@ pub enum EventsConfigError {
 impl EventsConfig {
     /// Checks the values make sense together.
     pub fn check(&self) -> Result<(), EventsConfigError> {
-        if self.buffer == 0
-            || self.ping_secs == 0
-            || self.send_timeout_secs == 0
-            || self.device_period_ms == 0
-        {
+        if self.buffer == 0 || self.ping_secs == 0 || self.send_timeout_secs == 0 {
             return Err(EventsConfigError::Zero);
         }
         if self.retention_hours == 0 {

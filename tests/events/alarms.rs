@@ -19,7 +19,6 @@ async fn crane_app() -> (TestApp, CraneSim) {
     device.offline_after = 2;
     let app = spawn_with(|c| {
         c.devices = vec![device.into()];
-        c.events.device_period_ms = 20;
     })
     .await;
     (app, sim)
@@ -127,7 +126,6 @@ async fn an_alarm_active_at_a_restart_is_carried_over_not_raised_twice() {
     device.poll_ms = 20;
     let app = super::helpers::spawn_on(db, |c| {
         c.devices = vec![device.into()];
-        c.events.device_period_ms = 20;
     })
     .await;
     let seq = raised["seq"].as_i64().unwrap();
