@@ -122,8 +122,8 @@ impl Queues {
         queues.values().find_map(|q| q.get(id).cloned())
     }
 
-    /// Keeps a queued job from being handed out while a cancel decides on it; false if
-    /// the device is not configured.
+    /// Keeps a queued job from being handed out while a cancel decides on it (`withhold`),
+    /// or lets it go again and wakes the device.
     pub fn withhold(&self, device: &str, id: i64, withhold: bool) {
         let mut queues = self.lock();
         if let Some(queue) = queues.get_mut(device) {
