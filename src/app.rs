@@ -17,7 +17,7 @@ use crate::auth::KeyRing;
 use crate::config::Config;
 use crate::devices::{self, Devices};
 use crate::domain::time::now_ms;
-use crate::service::dispatch::{Dispatcher, Queues};
+use crate::service::dispatch::{Dispatcher, Queues, Setup};
 use crate::service::events::Hub;
 use crate::service::intake::Rules;
 use crate::service::monitor;
@@ -59,9 +59,17 @@ impl Application {
             .with_context(|| format!("opening database {}", db.path.display()))?;
         let layout = config.layout();
         locations::seed(&mut *pool.acquire().await?, &layout, now_ms()).await.context("seeding locations")?;
-        let queues = Queues::new(config.devices.iter().map(|d| (d.id().to_owned(), d.dispatch_window())));
+        let queues = Queues::new(config.devices.iter().map(|d| Setup {
+            id: d.id().to_owned(),
+            window: d.dispatch_window(),
+            aisles: d.aisles().to_vec(),
+        }));
         let hub = Hub::new(config.events.buffer);
-        let hooks = Hooks { committed: Some(queues.hook()), publish: Some(hub.hook()) };
+        let hooks = Hooks {
+            locked: Some(queues.locked_hook()),
+            committed: Some(queues.hook()),
+            publish: Some(hub.hook()),
+        };
         let (writer, writer_task) = Writer::start(
             &db.path,
             Duration::from_millis(db.busy_timeout_ms),
@@ -72,6 +80,7 @@ impl Application {
         .context("opening the job writer's connection")?;
         let dispatcher = Dispatcher::new(queues.clone(), writer.clone(), pool.clone());
         dispatcher.load(config.devices.iter().map(|d| d.id())).await.context("loading the queues")?;
+        dispatcher.restore().await.context("restoring pauses and location locks")?;
         let contact_refresh = Duration::from_millis(config.events.contact_refresh_ms);
         let port = |id: &str| queues.port(id, writer.clone());
         let (devices, mut device_tasks) = devices::start(&config.devices, port, contact_refresh).await?;

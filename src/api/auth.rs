@@ -85,6 +85,9 @@ pub async fn require_key(
             format!("this needs the {} role; key {:?} is {}", needed.as_str(), who.name, who.role.as_str()),
         ));
     }
+    let who = who.clone();
+    let mut req = req;
+    req.extensions_mut().insert(who);
     Ok(next.run(req).await)
 }
 

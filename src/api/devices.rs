@@ -5,10 +5,12 @@ mod tags;
 use axum::extract::State;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
+use super::control::{ControlRequest, actor};
 use super::error::{ApiError, ErrorBody};
-use super::extract::{Json, Path};
+use super::extract::{Caller, Json, OptionalJson, Path};
 use super::state::AppState;
 use crate::devices::{DeviceHandle, DeviceStatus};
+use crate::domain::Target;
 use crate::service::monitor::{all_shown, shown};
 
 /// The routes of this resource.
@@ -25,10 +27,18 @@ fn device<'a>(app: &'a AppState, id: &str) -> Result<&'a DeviceHandle, ApiError>
     app.devices.get(id).ok_or_else(|| ApiError::not_found(format!("device {id:?} is not configured")))
 }
 
-/// Pauses or resumes a device and shows it.
-fn set_paused(app: &AppState, id: &str, paused: bool) -> Result<DeviceStatus, ApiError> {
+/// Pauses or resumes a device (stored and audited first) and shows it.
+async fn set_paused(
+    app: &AppState,
+    id: &str,
+    paused: bool,
+    by: String,
+    reason: Option<String>,
+) -> Result<DeviceStatus, ApiError> {
     let handle = device(app, id)?;
-    app.dispatcher.queues().set_paused(id, paused);
+    let actor = actor(by, reason)?;
+    tracing::info!(device = %id, paused, by = %actor.by, reason = ?actor.reason, "device pause through the API");
+    app.dispatcher.set_paused(Target::Device(id.to_owned()), paused, &actor).await?;
     Ok(shown(id, handle, app.dispatcher.queues()))
 }
 
@@ -52,30 +62,37 @@ async fn get_device(
     Ok(Json(shown(&id, device(&app, &id)?, app.dispatcher.queues())))
 }
 
-/// Pause a device: it gets no new work; what it runs goes on and is followed.
-#[utoipa::path(post, path = "/devices/{id}/pause", tag = "devices", params(("id" = String, Path, description = "Device id")),
+/// Pause a device: it gets no new work; what it runs goes on and is followed. Kept across
+/// restarts and audited (who, when, the optional reason).
+#[utoipa::path(post, path = "/devices/{id}/pause", tag = "devices", request_body(content = Option<ControlRequest>),
+    params(("id" = String, Path, description = "Device id")),
     responses(
         (status = 200, description = "Paused", body = DeviceStatus),
         (status = 404, description = "No such device", body = ErrorBody),
+        (status = 422, description = "Reason too long or unknown field", body = ErrorBody),
     ))]
 async fn pause_device(
     State(app): State<AppState>,
     Path(id): Path<String>,
+    Caller(by): Caller,
+    OptionalJson(body): OptionalJson<ControlRequest>,
 ) -> Result<Json<DeviceStatus>, ApiError> {
-    tracing::info!(device = %id, "paused through the API");
-    Ok(Json(set_paused(&app, &id, true)?))
+    Ok(Json(set_paused(&app, &id, true, by, body.reason).await?))
 }
 
 /// Resume a paused device: queued work is handed over at once.
-#[utoipa::path(post, path = "/devices/{id}/resume", tag = "devices", params(("id" = String, Path, description = "Device id")),
+#[utoipa::path(post, path = "/devices/{id}/resume", tag = "devices", request_body(content = Option<ControlRequest>),
+    params(("id" = String, Path, description = "Device id")),
     responses(
         (status = 200, description = "Resumed", body = DeviceStatus),
         (status = 404, description = "No such device", body = ErrorBody),
+        (status = 422, description = "Reason too long or unknown field", body = ErrorBody),
     ))]
 async fn resume_device(
     State(app): State<AppState>,
     Path(id): Path<String>,
+    Caller(by): Caller,
+    OptionalJson(body): OptionalJson<ControlRequest>,
 ) -> Result<Json<DeviceStatus>, ApiError> {
-    tracing::info!(device = %id, "resumed through the API");
-    Ok(Json(set_paused(&app, &id, false)?))
+    Ok(Json(set_paused(&app, &id, false, by, body.reason).await?))
 }

@@ -10,7 +10,7 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use crate::service::dispatch::CancelError;
+use crate::service::dispatch::{CancelError, ControlError};
 use crate::store::writer::WriteError;
 
 /// An error answer.
@@ -115,6 +115,17 @@ impl From<CancelError> for ApiError {
                 Self::new(StatusCode::SERVICE_UNAVAILABLE, "unavailable", message)
             }
             CancelError::Store(cause) => Self::unavailable(cause),
+        }
+    }
+}
+
+impl From<ControlError> for ApiError {
+    fn from(e: ControlError) -> Self {
+        let message = e.to_string();
+        match e {
+            ControlError::NotFound(_) => Self::not_found(message),
+            ControlError::NotFailed { .. } => Self::conflict("job_not_failed", message),
+            ControlError::Store(cause) => Self::from(cause),
         }
     }
 }

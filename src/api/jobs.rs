@@ -1,4 +1,4 @@
-//! `/api/v1/jobs`: submit, list, read, cancel and re-prioritise jobs.
+//! `/api/v1/jobs`: submit, list, read, cancel, re-prioritise and retry jobs.
 
 use axum::extract::State;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
@@ -9,10 +9,11 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::error::{ApiError, ErrorBody};
-use super::extract::{Json, Path, Query};
+use super::extract::{Caller, Json, Path, Query};
 use super::state::AppState;
 use crate::domain::time::to_ms;
 use crate::domain::{JobKind, JobState, Priority};
+use crate::service::dispatch::Actor;
 use crate::service::intake::{JobRequest, MAX_BATCH};
 use crate::store::jobs::{self, Job, JobEvent, JobFilter};
 use crate::store::writer::{Change, Outcome};
@@ -25,6 +26,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(get_job, patch_job))
         .routes(routes!(job_history))
         .routes(routes!(cancel_job))
+        .routes(routes!(retry_job))
 }
 
 /// Submit one job. Answers once the job is on disk.
@@ -187,7 +189,10 @@ async fn list_jobs(
         after_id,
         limit,
     };
-    let jobs = jobs::list(&app.pool, &filter).await?;
+    let mut jobs = jobs::list(&app.pool, &filter).await?;
+    for job in &mut jobs {
+        job.waiting = app.dispatcher.queues().waiting(job);
+    }
     let next_cursor = (jobs.len() == limit as usize).then(|| jobs.last().map(|j| j.id.to_string())).flatten();
     Ok(Json(JobPage { jobs, next_cursor }))
 }
@@ -200,10 +205,11 @@ async fn list_jobs(
         (status = 404, description = "No such job", body = ErrorBody),
     ))]
 async fn get_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<Json<Job>, ApiError> {
-    jobs::get(&app.pool, id)
+    let mut job = jobs::get(&app.pool, id)
         .await?
-        .map(Json)
-        .ok_or_else(|| ApiError::not_found(format!("job {id} does not exist")))
+        .ok_or_else(|| ApiError::not_found(format!("job {id} does not exist")))?;
+    job.waiting = app.dispatcher.queues().waiting(&job);
+    Ok(Json(job))
 }
 
 /// A change of priority.
@@ -260,4 +266,24 @@ async fn job_history(
     ))]
 async fn cancel_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<Json<Job>, ApiError> {
     Ok(Json(app.dispatcher.cancel(id, &app.devices).await?))
+}
+
+/// Retry a failed job once its locations are checked: the same job, with the same
+/// reference, goes back in the queue as its next `attempt`, its history kept. A location
+/// still locked keeps it waiting (see the job's `waiting`).
+#[utoipa::path(post, path = "/jobs/{id}/retry", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "Queued again as its next attempt", body = Job),
+        (status = 404, description = "No such job", body = ErrorBody),
+        (status = 409, description = "The job has not failed", body = ErrorBody),
+    ))]
+async fn retry_job(
+    State(app): State<AppState>,
+    Path(id): Path<i64>,
+    Caller(by): Caller,
+) -> Result<Json<Job>, ApiError> {
+    tracing::info!(job = id, %by, "retried through the API");
+    let mut job = app.dispatcher.retry(id, &Actor { by, reason: None }).await?;
+    job.waiting = app.dispatcher.queues().waiting(&job);
+    Ok(Json(job))
 }

@@ -4,8 +4,10 @@
 //! files (`/`, which asks for a key itself when keys are configured). Everything under
 //! `/api/v1` and `/metrics` needs a key once keys are configured (see [`auth`]).
 
+pub mod aisles;
 pub mod alarms;
 pub mod auth;
+pub mod control;
 pub mod dashboard;
 pub mod devices;
 pub mod error;
@@ -50,17 +52,18 @@ also submits and changes jobs, `admin` may do everything. A `201` means the job 
     servers((url = "/", description = "This server")),
     tags(
         (name = "jobs", description = "Submit and follow jobs"),
-        (name = "devices", description = "The machines: status, pause and resume; tags of tag I/O devices"),
-        (name = "locations", description = "What rackd knows of each location"),
+        (name = "devices", description = "The machines: status, pause and resume (of a device or a whole aisle, kept \
+across restarts and audited); tags of tag I/O devices"),
+        (name = "locations", description = "What rackd knows of each location; location locks"),
         (name = "alarms", description = "Device alarms, active and past"),
         (name = "events", description = "Live events over WebSocket (`GET /api/v1/ws`). A subscriber first gets a \
 `Snapshot` (or, with `?since=SEQ`, the replay of every later event), then every `Event` as it is committed, in \
 `seq` order with no gap and no duplicate. Event types and their `data`: `job.updated` (a `Job`), \
 `device.updated` (a `DeviceStatus`), `alarm.raised` and `alarm.cleared` (an `Alarm`), `location.updated` \
-(a `LocationState`). A subscriber that falls behind gets a `Resync` and the connection closes with code \
-4000: reconnect with `?since=` its `seq`. `?topics=jobs,devices,alarms,locations` filters both the \
+(a `LocationState`, with its lock), `audit.recorded` (an `AuditEntry`: a pause, resume, lock, unlock or retry). A subscriber that falls behind gets a `Resync` and the connection closes with code \
+4000: reconnect with `?since=` its `seq`. `?topics=jobs,devices,alarms,locations,audit` filters both the \
 snapshot and the events. Browsers pass the key as `?token=`."),
-        (name = "operations", description = "Health, readiness and metrics"),
+        (name = "operations", description = "Health, readiness, metrics and the audit log of operator actions"),
     ),
     components(schemas(ws::Snapshot, ws::SnapshotData, ws::Resync)),
     modifiers(&Security),
@@ -100,6 +103,8 @@ fn protected_routes() -> OpenApiRouter<AppState> {
         .merge(devices::router())
         .merge(locations::router())
         .merge(alarms::router())
+        .merge(aisles::router())
+        .merge(control::router())
         .merge(ws::router());
     OpenApiRouter::with_openapi(ApiDoc::openapi()).nest("/api/v1", v1).routes(routes!(metrics_route))
 }

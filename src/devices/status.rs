@@ -32,9 +32,14 @@ pub struct DeviceStatus {
     pub aisles: Vec<u16>,
     /// It answered recently (fewer than the configured number of consecutive failures).
     pub online: bool,
-    /// Paused by an operator: gets no new work. (Control state, kept by the service's
-    /// dispatcher and shown here; a device task never sets it.)
+    /// Paused by an operator: gets no new work (the device is paused, or every aisle it
+    /// serves is). Control state, kept by the service's dispatcher and shown here; a device
+    /// task never sets it.
     pub paused: bool,
+    /// Who paused the device, when and why; null while it is not paused itself.
+    pub pause: Option<crate::domain::Pause>,
+    /// The aisles it serves that are paused: jobs there wait.
+    pub paused_aisles: Vec<u16>,
     /// When it last answered.
     #[serde(with = "time::serde::rfc3339::option")]
     #[schema(value_type = Option<String>, format = DateTime)]
@@ -47,6 +52,11 @@ pub struct DeviceStatus {
     pub consecutive_failures: u32,
     /// The last error, if any.
     pub last_error: Option<String>,
+    /// When a shelf PLC answered with every slot empty where rackd had tasks (it lost its
+    /// memory: a power cycle?); null again once it takes new work.
+    #[serde(with = "time::serde::rfc3339::option")]
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub memory_lost_at: Option<OffsetDateTime>,
     /// What a stacker crane reports (cranes only; absent for other kinds).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub crane: Option<CraneStatus>,
@@ -63,6 +73,11 @@ pub struct CraneStatus {
     pub known: bool,
     /// The crane's heartbeat moves (false once it stalled for the configured time).
     pub heartbeat_ok: bool,
+    /// When the crane's heartbeat (D200) last changed, while it counts as stalled; null while
+    /// it moves.
+    #[serde(with = "time::serde::rfc3339::option")]
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub heartbeat_stalled_since: Option<OffsetDateTime>,
     /// Current action state (D203): 0 idle, 1..18 motion, 20/30/40 awaiting acknowledgement,
     /// 100 homing.
     pub action_state: u16,
@@ -118,11 +133,14 @@ impl DeviceStatus {
             aisles: Vec::new(),
             online: false,
             paused: false,
+            pause: None,
+            paused_aisles: Vec::new(),
             last_contact: None,
             slots_total,
             slots_in_use: 0,
             consecutive_failures: 0,
             last_error: None,
+            memory_lost_at: None,
             crane: (kind == super::DeviceKind::Crane).then(CraneStatus::default),
             tags: None,
         }
@@ -136,6 +154,7 @@ struct Shape {
     online: bool,
     slots_in_use: u16,
     last_error: Option<String>,
+    memory_lost_at: Option<OffsetDateTime>,
     crane: Option<CraneStatus>,
 }
 
@@ -145,6 +164,7 @@ impl Shape {
             online: s.online,
             slots_in_use: s.slots_in_use,
             last_error: s.last_error.clone(),
+            memory_lost_at: s.memory_lost_at,
             crane: s.crane.clone(),
         }
     }

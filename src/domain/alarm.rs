@@ -40,3 +40,60 @@ impl std::fmt::Display for AlarmClass {
         f.write_str(self.as_str())
     }
 }
+
+/// What raised an alarm: one of the device's own codes, or rackd about the device.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum AlarmKind {
+    /// The device's own alarm code (a crane's D205), with the catalogue's text.
+    Device,
+    /// The device does not answer.
+    Link,
+    /// The crane's heartbeat (D200) stopped moving.
+    Heartbeat,
+    /// The link works but loses or retries more than the configured share of requests.
+    Degraded,
+    /// A shelf PLC answered again with every slot empty where rackd had tasks.
+    MemoryLost,
+}
+
+impl AlarmKind {
+    /// Every kind.
+    pub const ALL: [AlarmKind; 5] = [
+        AlarmKind::Device,
+        AlarmKind::Link,
+        AlarmKind::Heartbeat,
+        AlarmKind::Degraded,
+        AlarmKind::MemoryLost,
+    ];
+
+    /// The kind's name as the API writes it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AlarmKind::Device => "device",
+            AlarmKind::Link => "link",
+            AlarmKind::Heartbeat => "heartbeat",
+            AlarmKind::Degraded => "degraded",
+            AlarmKind::MemoryLost => "memory_lost",
+        }
+    }
+
+    /// The kind with this name.
+    pub fn parse(text: &str) -> Option<AlarmKind> {
+        AlarmKind::ALL.into_iter().find(|k| k.as_str() == text)
+    }
+
+    /// Who resolves an alarm of this kind that is not the device's own code.
+    pub fn class(self) -> AlarmClass {
+        match self {
+            AlarmKind::Link | AlarmKind::Degraded => AlarmClass::Link,
+            AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost => AlarmClass::Hardware,
+        }
+    }
+}
+
+impl std::fmt::Display for AlarmKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}

@@ -201,6 +201,12 @@ pub struct Job {
     pub forced: bool,
     /// Why the job failed, when it did.
     pub failure: Option<Failure>,
+    /// Which attempt this is: 1, and one more each time an operator retries the failed job.
+    pub attempt: u32,
+    /// Why a queued job is not handed out now: a paused device or aisle, a locked location.
+    /// Shown by `GET /jobs` and `GET /jobs/{id}`; absent when nothing holds it back.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub waiting: Option<String>,
     /// When rackd accepted the job.
     #[serde(with = "time::serde::rfc3339")]
     #[schema(value_type = String, format = DateTime)]
@@ -279,6 +285,8 @@ impl NewJob {
             state: JobState::Queued,
             forced: false,
             failure: None,
+            attempt: 1,
+            waiting: None,
             created_at: at,
             updated_at: at,
         };

@@ -4,6 +4,7 @@
 //! says in one place what valid means.
 
 pub mod alarm;
+pub mod control;
 pub mod job;
 pub mod location;
 pub mod report;
@@ -11,7 +12,8 @@ pub mod state;
 pub mod time;
 pub mod values;
 
-pub use alarm::AlarmClass;
+pub use alarm::{AlarmClass, AlarmKind};
+pub use control::{LocationLock, Pause, Target};
 pub use job::{Job, JobKind, JobSpec, LightColor, NewJob};
 pub use location::{AisleLayout, Layout, Location};
 pub use report::{Report, Reported};

@@ -7,7 +7,9 @@
 //! ```
 //! Any non-terminal state may fail; a device may report completion of work it had already
 //! finished before a poll saw it running (dispatched → completed) or before a cancel reached
-//! it (cancelling → completed). Terminal states never change.
+//! it (cancelling → completed). Terminal states never change, with one exception an
+//! operator asks for: a failed job may be retried (failed → queued), a new attempt of the
+//! same job with its history kept.
 
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
@@ -47,6 +49,8 @@ pub enum Transition {
     RequestCancel,
     /// The job is cancelled (at once while queued, or confirmed by the device).
     Cancel,
+    /// An operator puts a failed job back in the queue as a new attempt.
+    Retry,
 }
 
 /// The class of a failure: what the operator has to look at.
@@ -89,6 +93,13 @@ impl FailureKind {
     /// The kind with this name.
     pub fn parse(text: &str) -> Option<FailureKind> {
         FailureKind::ALL.into_iter().find(|k| k.as_str() == text)
+    }
+
+    /// Whether a job failing this way leaves its locations untrustworthy, so they lock
+    /// until a person checks them: the device lost the task, faulted, refused it for
+    /// disagreeing data, or an alarm stopped it. (`unsupported` sent nothing.)
+    pub fn locks(self) -> bool {
+        !matches!(self, FailureKind::Unsupported)
     }
 }
 
@@ -159,6 +170,7 @@ impl JobState {
         use JobState::*;
         use Transition::*;
         let next = match (self, t) {
+            (Failed, Retry) => Some(Queued),
             (s, _) if s.is_terminal() => None,
             (Queued, Dispatch) => Some(Dispatched),
             (Dispatched, Start) => Some(Running),
@@ -184,7 +196,7 @@ mod tests {
     use super::Transition::*;
     use super::*;
 
-    const ALL_T: [Transition; 6] = [Dispatch, Start, Complete, Fail, RequestCancel, Cancel];
+    const ALL_T: [Transition; 7] = [Dispatch, Start, Complete, Fail, RequestCancel, Cancel, Retry];
 
     #[test]
     fn the_normal_life() {
@@ -193,11 +205,18 @@ mod tests {
     }
 
     #[test]
-    fn terminal_states_never_change() {
+    fn terminal_states_never_change_but_a_failed_job_may_be_retried() {
         for s in [Completed, Failed, Cancelled] {
             for t in ALL_T {
-                assert!(s.apply(t).is_err(), "{s} accepted {t:?}");
+                if (s, t) == (Failed, Retry) {
+                    assert_eq!(s.apply(t), Ok(Queued));
+                } else {
+                    assert!(s.apply(t).is_err(), "{s} accepted {t:?}");
+                }
             }
+        }
+        for s in [Queued, Dispatched, Running, Cancelling, Completed, Cancelled] {
+            assert!(s.apply(Retry).is_err(), "only a failed job is retried, not a {s} one");
         }
     }
 

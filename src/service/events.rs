@@ -27,11 +27,14 @@ pub enum Topic {
     Alarms,
     /// `location.updated`
     Locations,
+    /// `audit.recorded`: an operator's pause, resume, lock, unlock or retry (no snapshot
+    /// part: the log is `GET /api/v1/audit`).
+    Audit,
 }
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 4] = [Topic::Jobs, Topic::Devices, Topic::Alarms, Topic::Locations];
+    pub const ALL: [Topic; 5] = [Topic::Jobs, Topic::Devices, Topic::Alarms, Topic::Locations, Topic::Audit];
 
     /// The topic of an event type.
     pub fn of(kind: &str) -> Option<Topic> {
@@ -40,6 +43,7 @@ impl Topic {
             "device" => Some(Topic::Devices),
             "alarm" => Some(Topic::Alarms),
             "location" => Some(Topic::Locations),
+            "audit" => Some(Topic::Audit),
             _ => None,
         }
     }
@@ -51,6 +55,7 @@ impl Topic {
             Topic::Devices => "devices",
             Topic::Alarms => "alarms",
             Topic::Locations => "locations",
+            Topic::Audit => "audit",
         }
     }
 

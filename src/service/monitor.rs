@@ -6,9 +6,14 @@
 //! - `device.updated` with the device as the API shows it (status with its control state);
 //!   the device's [`StatusCell`](crate::devices::StatusCell) wakes the watch at once for
 //!   real changes and at most every `events.contact_refresh_ms` for a new last contact;
-//! - alarms, raised and cleared: a crane's alarm code (D205), with the catalogue's text and
-//!   class, and a `link` alarm (code 0) while a device does not answer. An alarm is judged
-//!   only on what is known: while a device is offline its own alarms stay as they were.
+//! - alarms, raised and cleared, one per kind and code: a crane's own code (D205, kind
+//!   `device`) with the catalogue's text and class, whenever its block is read (a crane
+//!   whose heartbeat stalled still answers, so its 7020 is listed); `link` while a device
+//!   does not answer, in plain words ("no answer from 10.0.0.5:5000 for 3 polls") with the
+//!   protocol's error in `detail`; `heartbeat` while the crane's D200 stands still (the
+//!   seconds since it last moved); `memory_lost` when a shelf PLC came back without its
+//!   tasks, until it takes new work. An alarm is judged only on what is known: while a
+//!   device does not answer, its own alarms and its heartbeat stay as they were.
 //!
 //! Alarms still active from before a restart are picked up from the database, so a
 //! restart neither raises them twice nor forgets to clear them; those of devices no longer
@@ -21,24 +26,29 @@ use tokio::sync::watch;
 
 use super::dispatch::{Control, Queues};
 use crate::devices::{DeviceHandle, DeviceStatus, Devices};
-use crate::domain::AlarmClass;
+use crate::domain::{AlarmClass, AlarmKind};
 use crate::store::alarms::{self, NewAlarm};
 use crate::store::writer::{Record, WriteError, Writer};
 
-/// The code of the alarm raised while a device does not answer.
+/// The code of the alarms rackd raises about a device (all but kind `device`).
 pub const LINK_ALARM: u16 = 0;
 
-/// A device as the API shows it: what it reports, with the control state set on it.
-pub fn view(status: &DeviceStatus, control: Control) -> DeviceStatus {
+/// A device as the API shows it: what it reports, with the control state set on it. It
+/// counts as paused when it is, or when every aisle it serves is.
+pub fn view(status: &DeviceStatus, control: &Control) -> DeviceStatus {
     let mut view = status.clone();
-    view.paused = control.paused;
+    let every_aisle =
+        !status.aisles.is_empty() && status.aisles.iter().all(|a| control.paused_aisles.contains(a));
+    view.paused = control.pause.is_some() || every_aisle;
+    view.pause = control.pause.clone();
+    view.paused_aisles = control.paused_aisles.clone();
     view
 }
 
 /// One device as the API shows it.
 pub fn shown(id: &str, handle: &DeviceHandle, queues: &Queues) -> DeviceStatus {
-    let control = queues.control(id).map(|c| *c.borrow()).unwrap_or_default();
-    view(&handle.status.borrow(), control)
+    let control = queues.control(id).map(|c| c.borrow().clone()).unwrap_or_default();
+    view(&handle.status.borrow(), &control)
 }
 
 /// Every device as the API shows it, by id.
@@ -53,14 +63,14 @@ pub async fn start(
     writer: Writer,
     pool: &SqlitePool,
 ) -> Vec<tokio::task::JoinHandle<()>> {
-    let mut active: HashMap<String, BTreeSet<u16>> = HashMap::new();
+    let mut active: HashMap<String, BTreeSet<Key>> = HashMap::new();
     match alarms::active(pool).await {
         Ok(found) => {
             for alarm in found {
                 if devices.contains_key(&alarm.device) {
-                    active.entry(alarm.device).or_default().insert(alarm.code);
+                    active.entry(alarm.device).or_default().insert((alarm.kind, alarm.code));
                 } else {
-                    let record = Record::AlarmCleared { device: alarm.device, code: alarm.code };
+                    let record = Record::AlarmCleared { device: alarm.device, key: (alarm.kind, alarm.code) };
                     if let Err(e) = writer.record(record).await {
                         tracing::warn!(error = %e, "clearing an alarm of a device no longer configured");
                     }
@@ -82,12 +92,12 @@ pub async fn start(
 async fn watch_device(
     handle: DeviceHandle,
     mut control: watch::Receiver<Control>,
-    mut alarms: BTreeSet<u16>,
+    mut alarms: BTreeSet<Key>,
     writer: Writer,
 ) {
     let mut status = handle.status;
     loop {
-        let device = view(&status.borrow_and_update(), *control.borrow_and_update());
+        let device = view(&status.borrow_and_update(), &control.borrow_and_update());
         match record(&device, &mut alarms, &writer).await {
             Ok(()) => {}
             Err(WriteError::Closed) => return,
@@ -103,58 +113,77 @@ async fn watch_device(
 /// Records the device's status and the alarms it raises or clears, given those active.
 async fn record(
     status: &DeviceStatus,
-    active: &mut BTreeSet<u16>,
+    active: &mut BTreeSet<Key>,
     writer: &Writer,
 ) -> Result<(), WriteError> {
     let (raise, clear) = alarm_changes(status, active);
-    for code in clear {
-        writer.record(Record::AlarmCleared { device: status.id.clone(), code }).await?;
-        active.remove(&code);
+    for key in clear {
+        writer.record(Record::AlarmCleared { device: status.id.clone(), key }).await?;
+        active.remove(&key);
     }
     for alarm in raise {
-        let code = alarm.code;
+        let key = alarm.key();
         writer.record(Record::AlarmRaised(alarm)).await?;
-        active.insert(code);
+        active.insert(key);
     }
     let json = serde_json::to_string(status).unwrap_or_default();
     writer.record(Record::Device { status: json }).await
 }
 
-/// The alarms to raise and the codes to clear, given the active codes.
-fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<u16>) -> (Vec<NewAlarm>, Vec<u16>) {
-    let mut wanted: BTreeMap<u16, NewAlarm> = BTreeMap::new();
-    let mut known: BTreeSet<u16> = BTreeSet::new();
-    let alarm = |code: u16, class: AlarmClass, text: String| NewAlarm {
-        device: status.id.clone(),
-        code,
-        class,
-        text,
+/// An active alarm's identity on its device.
+type Key = (AlarmKind, u16);
+
+/// The alarms to raise and the keys to clear, given those active.
+///
+/// A device's own codes are judged only while its registers are read (the link answers
+/// and, for a crane, its block was read since the start): a crane whose heartbeat stalled
+/// still answers, so its 7020 reaches the list. What rackd raises about a device is judged
+/// on what it knows: the link alarm while requests fail, the heartbeat alarm while the
+/// crane's D200 stands still, the memory alarm until the PLC takes new work.
+fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<Key>) -> (Vec<NewAlarm>, Vec<Key>) {
+    let mut wanted: BTreeMap<Key, NewAlarm> = BTreeMap::new();
+    let mut known: BTreeSet<Key> = BTreeSet::new();
+    let mut want = |kind: AlarmKind, code: u16, class: AlarmClass, text: String, detail: Option<String>| {
+        let alarm = NewAlarm { device: status.id.clone(), kind, code, class, text, detail };
+        wanted.insert(alarm.key(), alarm);
     };
-    if status.online {
-        known.insert(LINK_ALARM);
-        // Online and its alarm register read (a crane's just after a start may not be yet):
-        // every code is known.
+    let answers = status.consecutive_failures == 0 && status.last_contact.is_some();
+    if answers {
+        known.insert((AlarmKind::Link, LINK_ALARM));
         if status.crane.as_ref().is_none_or(|c| c.known) {
-            known.extend(active.iter().copied());
+            known.extend(active.iter().copied().filter(|(kind, _)| *kind == AlarmKind::Device));
         }
         if let Some(crane) = &status.crane
             && let Some(code) = crane.alarm_code
         {
             let class = crane.alarm_class.unwrap_or(AlarmClass::Hardware);
             let text = crane.alarm_text.clone().unwrap_or_else(|| format!("alarm {code}"));
-            wanted.insert(code, alarm(code, class, text));
+            want(AlarmKind::Device, code, class, text, None);
         }
     } else if status.consecutive_failures > 0 {
-        known.insert(LINK_ALARM);
-        let why = status.last_error.as_deref().unwrap_or("no reply");
-        wanted.insert(
-            LINK_ALARM,
-            alarm(LINK_ALARM, AlarmClass::Link, format!("the device does not answer: {why}")),
-        );
+        known.insert((AlarmKind::Link, LINK_ALARM));
+        let n = status.consecutive_failures;
+        let text = format!("no answer from {} for {n} poll{}", status.address, if n == 1 { "" } else { "s" });
+        want(AlarmKind::Link, LINK_ALARM, AlarmClass::Link, text, status.last_error.clone());
+    }
+    if let Some(crane) = status.crane.as_ref().filter(|c| c.known && answers) {
+        known.insert((AlarmKind::Heartbeat, 0));
+        if let Some(since) = crane.heartbeat_stalled_since {
+            let seconds = (time::OffsetDateTime::now_utc() - since).whole_seconds();
+            let text = format!("the crane's heartbeat (D200) has not changed for {} s", seconds.max(0));
+            want(AlarmKind::Heartbeat, 0, AlarmKind::Heartbeat.class(), text, None);
+        }
+    }
+    known.insert((AlarmKind::MemoryLost, 0));
+    if status.memory_lost_at.is_some() {
+        let text = "the PLC lost its task memory: power cycle? Its tasks failed as lost and their locations \
+                    are locked for a person to check"
+            .to_owned();
+        want(AlarmKind::MemoryLost, 0, AlarmKind::MemoryLost.class(), text, None);
     }
     let clear =
-        active.iter().copied().filter(|code| known.contains(code) && !wanted.contains_key(code)).collect();
-    let raise = wanted.into_iter().filter(|(code, _)| !active.contains(code)).map(|(_, a)| a).collect();
+        active.iter().copied().filter(|key| known.contains(key) && !wanted.contains_key(key)).collect();
+    let raise = wanted.into_iter().filter(|(key, _)| !active.contains(key)).map(|(_, a)| a).collect();
     (raise, clear)
 }
 
@@ -164,10 +193,18 @@ mod tests {
     use crate::devices::DeviceKind;
     use crate::devices::status::CraneStatus;
 
+    const LINK: Key = (AlarmKind::Link, LINK_ALARM);
+    const HEARTBEAT: Key = (AlarmKind::Heartbeat, 0);
+
+    fn own(code: u16) -> Key {
+        (AlarmKind::Device, code)
+    }
+
     fn crane(online: bool, failures: u32, alarm: Option<u16>) -> DeviceStatus {
-        let mut s = DeviceStatus::new("crane1", DeviceKind::Crane, "mc3e", "127.0.0.1:1", 1);
+        let mut s = DeviceStatus::new("crane1", DeviceKind::Crane, "mc3e", "10.0.0.5:5000", 1);
         s.online = online;
         s.consecutive_failures = failures;
+        s.last_contact = Some(time::OffsetDateTime::UNIX_EPOCH);
         s.crane = Some(CraneStatus {
             known: true,
             alarm_code: alarm,
@@ -178,49 +215,100 @@ mod tests {
         s
     }
 
-    fn codes(raise: &[NewAlarm]) -> Vec<u16> {
-        raise.iter().map(|a| a.code).collect()
+    fn keys(raise: &[NewAlarm]) -> Vec<Key> {
+        raise.iter().map(NewAlarm::key).collect()
     }
 
     #[test]
     fn a_crane_alarm_is_raised_then_cleared() {
         let (raise, clear) = alarm_changes(&crane(true, 0, Some(41)), &BTreeSet::new());
-        assert_eq!((codes(&raise), clear), (vec![41], vec![]));
+        assert_eq!((keys(&raise), clear), (vec![own(41)], vec![]));
         assert_eq!(raise[0].text, "text 41");
-        let (raise, clear) = alarm_changes(&crane(true, 0, Some(41)), &BTreeSet::from([41]));
-        assert_eq!((codes(&raise), clear), (vec![], vec![]));
-        let (raise, clear) = alarm_changes(&crane(true, 0, None), &BTreeSet::from([41]));
-        assert_eq!((codes(&raise), clear), (vec![], vec![41]));
+        let (raise, clear) = alarm_changes(&crane(true, 0, Some(41)), &BTreeSet::from([own(41)]));
+        assert_eq!((keys(&raise), clear), (vec![], vec![]));
+        let (raise, clear) = alarm_changes(&crane(true, 0, None), &BTreeSet::from([own(41)]));
+        assert_eq!((keys(&raise), clear), (vec![], vec![own(41)]));
     }
 
     #[test]
-    fn while_offline_only_the_link_alarm_changes() {
-        let (raise, clear) = alarm_changes(&crane(false, 3, None), &BTreeSet::from([41]));
-        assert_eq!((codes(&raise), clear), (vec![LINK_ALARM], vec![]));
+    fn while_it_does_not_answer_only_the_link_alarm_changes() {
+        let (raise, clear) = alarm_changes(&crane(false, 3, None), &BTreeSet::from([own(41), HEARTBEAT]));
+        assert_eq!((keys(&raise), clear), (vec![LINK], vec![]));
         assert_eq!(raise[0].class, AlarmClass::Link);
-        let (raise, clear) = alarm_changes(&crane(true, 0, None), &BTreeSet::from([LINK_ALARM, 41]));
-        assert_eq!((codes(&raise), clear), (vec![], vec![LINK_ALARM, 41]));
+        assert_eq!(raise[0].text, "no answer from 10.0.0.5:5000 for 3 polls");
+        let (raise, clear) = alarm_changes(&crane(true, 0, None), &BTreeSet::from([LINK, own(41)]));
+        assert_eq!((keys(&raise), clear), (vec![], vec![own(41), LINK]));
     }
 
     #[test]
-    fn a_crane_online_but_not_yet_read_clears_nothing() {
+    fn the_link_alarm_keeps_the_protocol_words_apart() {
+        let mut status = crane(false, 1, None);
+        status.last_error = Some("MC 3E: no reply after 3 attempts".into());
+        let (raise, _) = alarm_changes(&status, &BTreeSet::new());
+        assert_eq!(raise[0].text, "no answer from 10.0.0.5:5000 for 1 poll");
+        assert_eq!(raise[0].detail.as_deref(), Some("MC 3E: no reply after 3 attempts"));
+    }
+
+    #[test]
+    fn a_crane_whose_heartbeat_stalled_still_reports_its_own_codes() {
+        let mut status = crane(false, 0, Some(7020));
+        let stalled = time::OffsetDateTime::now_utc() - time::Duration::seconds(12);
+        status.crane.as_mut().unwrap().heartbeat_stalled_since = Some(stalled);
+        let (raise, clear) = alarm_changes(&status, &BTreeSet::new());
+        assert_eq!((keys(&raise), clear), (vec![own(7020), HEARTBEAT], vec![]));
+        assert_eq!(raise[1].text, "the crane's heartbeat (D200) has not changed for 12 s");
+        assert_eq!(raise[1].class, AlarmClass::Hardware);
+        let (raise, clear) = alarm_changes(&crane(true, 0, None), &BTreeSet::from([own(7020), HEARTBEAT]));
+        assert_eq!((keys(&raise), clear), (vec![], vec![own(7020), HEARTBEAT]));
+    }
+
+    #[test]
+    fn a_crane_answering_but_not_yet_read_clears_only_the_link() {
         let mut status = crane(true, 0, None);
         status.crane.as_mut().unwrap().known = false;
-        let (raise, clear) = alarm_changes(&status, &BTreeSet::from([41, LINK_ALARM]));
+        let (raise, clear) = alarm_changes(&status, &BTreeSet::from([own(41), LINK, HEARTBEAT]));
         assert!(raise.is_empty());
-        assert_eq!(clear, vec![LINK_ALARM]);
+        assert_eq!(clear, vec![LINK]);
     }
 
     #[test]
     fn a_device_not_yet_tried_changes_nothing() {
-        let (raise, clear) = alarm_changes(&crane(false, 0, None), &BTreeSet::from([41, LINK_ALARM]));
+        let mut status = crane(false, 0, None);
+        status.last_contact = None;
+        let (raise, clear) = alarm_changes(&status, &BTreeSet::from([own(41), LINK]));
         assert!(raise.is_empty() && clear.is_empty());
     }
 
     #[test]
+    fn a_plc_that_lost_its_memory_raises_one_alarm_until_it_works_again() {
+        let mut status = DeviceStatus::new("shelf1", DeviceKind::Shelf, "modbus-udp", "10.0.0.6:502", 60);
+        status.last_contact = Some(time::OffsetDateTime::UNIX_EPOCH);
+        status.memory_lost_at = Some(time::OffsetDateTime::UNIX_EPOCH);
+        let lost = (AlarmKind::MemoryLost, 0);
+        let (raise, clear) = alarm_changes(&status, &BTreeSet::new());
+        assert_eq!((keys(&raise), clear), (vec![lost], vec![]));
+        assert!(raise[0].text.starts_with("the PLC lost its task memory: power cycle?"));
+        status.memory_lost_at = None;
+        let (raise, clear) = alarm_changes(&status, &BTreeSet::from([lost]));
+        assert_eq!((keys(&raise), clear), (vec![], vec![lost]));
+    }
+
+    #[test]
     fn the_view_carries_the_control_state() {
-        let status = crane(true, 0, None);
-        assert!(!view(&status, Control::default()).paused);
-        assert!(view(&status, Control { paused: true }).paused);
+        let mut status = crane(true, 0, None);
+        status.aisles = vec![1, 2];
+        assert!(!view(&status, &Control::default()).paused);
+        let pause = crate::domain::Pause {
+            by: "ops".into(),
+            reason: Some("inspection".into()),
+            at: time::OffsetDateTime::UNIX_EPOCH,
+        };
+        let shown = view(&status, &Control { pause: Some(pause.clone()), paused_aisles: vec![] });
+        assert!(shown.paused);
+        assert_eq!(shown.pause, Some(pause));
+        let one = view(&status, &Control { pause: None, paused_aisles: vec![2] });
+        assert!(!one.paused, "aisle 1 still works");
+        assert_eq!(one.paused_aisles, vec![2]);
+        assert!(view(&status, &Control { pause: None, paused_aisles: vec![1, 2] }).paused);
     }
 }

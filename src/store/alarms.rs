@@ -7,24 +7,28 @@ use sqlx::SqliteExecutor;
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
-use crate::domain::AlarmClass;
 use crate::domain::time::from_ms;
+use crate::domain::{AlarmClass, AlarmKind};
 
 /// One alarm, active (no `cleared_at`) or past.
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
-#[schema(example = json!({"id": 3, "device": "crane1", "code": 41, "class": "hardware",
-    "text": "travel motor overload", "raised_at": "2026-11-21T08:00:00.000Z", "cleared_at": null}))]
+#[schema(example = json!({"id": 3, "device": "crane1", "kind": "device", "code": 41, "class": "hardware",
+    "text": "travel motor overload", "detail": null, "raised_at": "2026-11-21T08:00:00.000Z", "cleared_at": null}))]
 pub struct Alarm {
     /// The alarm's number.
     pub id: i64,
     /// The device that raised it.
     pub device: String,
-    /// The device's own alarm code; 0 for `link` alarms (the device stopped answering).
+    /// What raised it: the device's own code (`device`) or rackd about the device.
+    pub kind: AlarmKind,
+    /// The device's own alarm code (kind `device`); 0 for the other kinds.
     pub code: u16,
-    /// `business` (rackd resolves it), `hardware` (needs a person) or `link` (no answer).
+    /// `business` (rackd resolves it), `hardware` (needs a person) or `link` (the link).
     pub class: AlarmClass,
-    /// The alarm in words.
+    /// The alarm in words, for people.
     pub text: String,
+    /// The protocol's or device's own words, when the text leaves them out.
+    pub detail: Option<String>,
     /// When it was raised.
     #[serde(with = "time::serde::rfc3339")]
     #[schema(value_type = String, format = DateTime)]
@@ -40,21 +44,34 @@ pub struct Alarm {
 pub struct NewAlarm {
     /// The device.
     pub device: String,
-    /// Its code (0 = link lost).
+    /// What raised it.
+    pub kind: AlarmKind,
+    /// The device's own code (kind `device`); 0 otherwise.
     pub code: u16,
     /// Who resolves it.
     pub class: AlarmClass,
     /// In words.
     pub text: String,
+    /// The protocol's words, if any.
+    pub detail: Option<String>,
+}
+
+impl NewAlarm {
+    /// The alarm's identity on its device: one active alarm per kind and code.
+    pub fn key(&self) -> (AlarmKind, u16) {
+        (self.kind, self.code)
+    }
 }
 
 #[derive(sqlx::FromRow)]
 struct Row {
     id: i64,
     device: String,
+    kind: String,
     code: i64,
     class: String,
     text: String,
+    detail: Option<String>,
     raised_at: i64,
     cleared_at: Option<i64>,
 }
@@ -64,17 +81,20 @@ impl From<Row> for Alarm {
         Alarm {
             id: r.id,
             device: r.device,
+            // A kind this version does not know is the device's own.
+            kind: AlarmKind::parse(&r.kind).unwrap_or(AlarmKind::Device),
             code: r.code.clamp(0, u16::MAX as i64) as u16,
             // A class this version does not know (a hand-edited row) needs a person.
             class: AlarmClass::parse(&r.class).unwrap_or(AlarmClass::Hardware),
             text: r.text,
+            detail: r.detail,
             raised_at: from_ms(r.raised_at),
             cleared_at: r.cleared_at.map(from_ms),
         }
     }
 }
 
-const COLUMNS: &str = "id, device, code, class, text, raised_at, cleared_at";
+const COLUMNS: &str = "id, device, kind, code, class, text, detail, raised_at, cleared_at";
 
 /// Which alarms to list. Alarms come newest first.
 #[derive(Clone, Debug, Default)]
@@ -117,46 +137,62 @@ pub async fn active(db: impl SqliteExecutor<'_>) -> Result<Vec<Alarm>, sqlx::Err
 /// Records a raised alarm (writer thread); None when the same alarm is already active.
 pub(crate) fn raise(tx: &Transaction<'_>, new: &NewAlarm, now: i64) -> rusqlite::Result<Option<Alarm>> {
     let active: Option<i64> = tx
-        .prepare_cached("SELECT id FROM alarms WHERE device = ?1 AND code = ?2 AND cleared_at IS NULL")?
-        .query_row(params![new.device, new.code], |r| r.get(0))
+        .prepare_cached(
+            "SELECT id FROM alarms WHERE device = ?1 AND kind = ?2 AND code = ?3 AND cleared_at IS NULL",
+        )?
+        .query_row(params![new.device, new.kind.as_str(), new.code], |r| r.get(0))
         .optional()?;
     if active.is_some() {
         return Ok(None);
     }
     tx.prepare_cached(
-        "INSERT INTO alarms (device, code, class, text, raised_at) VALUES (?1, ?2, ?3, ?4, ?5)",
+        "INSERT INTO alarms (device, kind, code, class, text, detail, raised_at) \
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
     )?
-    .execute(params![new.device, new.code, new.class.as_str(), new.text, now])?;
+    .execute(params![
+        new.device,
+        new.kind.as_str(),
+        new.code,
+        new.class.as_str(),
+        new.text,
+        new.detail,
+        now
+    ])?;
     Ok(Some(Alarm {
         id: tx.last_insert_rowid(),
         device: new.device.clone(),
+        kind: new.kind,
         code: new.code,
         class: new.class,
         text: new.text.clone(),
+        detail: new.detail.clone(),
         raised_at: from_ms(now),
         cleared_at: None,
     }))
 }
 
-/// Clears the device's active alarm with this code (writer thread); None when none is active.
+/// Clears the device's active alarm of this kind and code (writer thread); None when none
+/// is active.
 pub(crate) fn clear(
     tx: &Transaction<'_>,
     device: &str,
-    code: u16,
+    (kind, code): (AlarmKind, u16),
     now: i64,
 ) -> rusqlite::Result<Option<Alarm>> {
     let row = tx
         .prepare_cached(&format!(
-            "SELECT {COLUMNS} FROM alarms WHERE device = ?1 AND code = ?2 AND cleared_at IS NULL"
+            "SELECT {COLUMNS} FROM alarms WHERE device = ?1 AND kind = ?2 AND code = ?3 AND cleared_at IS NULL"
         ))?
-        .query_row(params![device, code], |r| {
+        .query_row(params![device, kind.as_str(), code], |r| {
             Ok(Row {
                 id: r.get(0)?,
                 device: r.get(1)?,
-                code: r.get(2)?,
-                class: r.get(3)?,
-                text: r.get(4)?,
-                raised_at: r.get(5)?,
+                kind: r.get(2)?,
+                code: r.get(3)?,
+                class: r.get(4)?,
+                text: r.get(5)?,
+                detail: r.get(6)?,
+                raised_at: r.get(7)?,
                 cleared_at: None,
             })
         })

@@ -59,6 +59,7 @@ pub(crate) struct JobRow {
     failure_text: Option<String>,
     created_at: i64,
     updated_at: i64,
+    attempt: i64,
 }
 
 impl JobRow {
@@ -78,13 +79,14 @@ impl JobRow {
             failure_text: row.get(first + 10)?,
             created_at: row.get(first + 11)?,
             updated_at: row.get(first + 12)?,
+            attempt: row.get(first + 13)?,
         })
     }
 }
 
 /// The columns [`JobRow`] reads, in a SELECT list.
 pub(crate) const COLUMNS: &str = "id, reference, priority, barcode, spec, device, state, forced, \
-    failure_kind, failure_code, failure_text, created_at, updated_at";
+    failure_kind, failure_code, failure_text, created_at, updated_at, attempt";
 
 /// A stored row that does not make a valid job (a damaged or hand-edited database).
 #[derive(Debug, thiserror::Error)]
@@ -110,6 +112,8 @@ impl TryFrom<JobRow> for Job {
         job.state = state;
         job.forced = row.forced;
         job.updated_at = from_ms(row.updated_at);
+        job.attempt =
+            u32::try_from(row.attempt).ok().filter(|&a| a >= 1).ok_or_else(|| corrupt("attempt"))?;
         job.failure = match row.failure_kind {
             Some(kind) => Some(Failure {
                 kind: FailureKind::parse(&kind).ok_or_else(|| corrupt("failure kind"))?,

@@ -7,7 +7,7 @@ use time::OffsetDateTime;
 use utoipa::ToSchema;
 
 use crate::domain::time::from_ms;
-use crate::domain::{JobSpec, Layout, LightColor, Location};
+use crate::domain::{JobSpec, Layout, LightColor, Location, LocationLock};
 
 /// A location and what rackd knows of it.
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
@@ -25,6 +25,8 @@ pub struct LocationState {
     pub green: bool,
     /// The job that has reserved the location while it runs.
     pub reserved_by: Option<i64>,
+    /// Locked: no job touching it is handed out until a person unlocks it; null when not.
+    pub lock: Option<LocationLock>,
     /// When this last changed.
     #[serde(with = "time::serde::rfc3339")]
     #[schema(value_type = String, format = DateTime)]
@@ -45,6 +47,10 @@ struct Row {
     green: bool,
     reserved_by: Option<i64>,
     updated_at: i64,
+    locked_at: Option<i64>,
+    locked_by: Option<String>,
+    lock_reason: Option<String>,
+    lock_job: Option<i64>,
 }
 
 impl From<Row> for LocationState {
@@ -63,6 +69,12 @@ impl From<Row> for LocationState {
             red: r.red,
             green: r.green,
             reserved_by: r.reserved_by,
+            lock: r.locked_at.map(|at| LocationLock {
+                by: r.locked_by.unwrap_or_default(),
+                reason: r.lock_reason.unwrap_or_default(),
+                job: r.lock_job,
+                at: from_ms(at),
+            }),
             updated_at: from_ms(r.updated_at),
         }
     }
@@ -115,8 +127,8 @@ fn key(l: Location) -> [i64; 5] {
 pub(crate) fn state(db: &rusqlite::Connection, l: Location) -> rusqlite::Result<Option<LocationState>> {
     use rusqlite::OptionalExtension;
     let sql = format!(
-        "SELECT aisle, row, bay, level, position, occupied, barcode, red, green, reserved_by, updated_at \
-         FROM locations WHERE {KEY}"
+        "SELECT aisle, row, bay, level, position, occupied, barcode, red, green, reserved_by, updated_at, \
+         locked_at, locked_by, lock_reason, lock_job FROM locations WHERE {KEY}"
     );
     db.prepare_cached(&sql)?
         .query_row(rusqlite::params_from_iter(key(l)), |r| {
@@ -132,10 +144,77 @@ pub(crate) fn state(db: &rusqlite::Connection, l: Location) -> rusqlite::Result<
                 green: r.get(8)?,
                 reserved_by: r.get(9)?,
                 updated_at: r.get(10)?,
+                locked_at: r.get(11)?,
+                locked_by: r.get(12)?,
+                lock_reason: r.get(13)?,
+                lock_job: r.get(14)?,
             })
         })
         .optional()
         .map(|row| row.map(LocationState::from))
+}
+
+/// Every locked location with its lock (at start, for the dispatcher).
+pub async fn locked(db: impl SqliteExecutor<'_>) -> Result<Vec<(Location, LocationLock)>, sqlx::Error> {
+    let rows: Vec<Row> =
+        sqlx::query_as("SELECT * FROM locations WHERE locked_at IS NOT NULL").fetch_all(db).await?;
+    Ok(rows
+        .into_iter()
+        .map(LocationState::from)
+        .filter_map(|s| s.lock.map(|lock| (s.location, lock)))
+        .collect())
+}
+
+/// One location as it stands, if the layout has it.
+pub async fn get(db: impl SqliteExecutor<'_>, l: Location) -> Result<Option<LocationState>, sqlx::Error> {
+    let row: Option<Row> =
+        sqlx::query_as(sqlx::AssertSqlSafe(format!("SELECT * FROM locations WHERE {KEY}")))
+            .bind(l.aisle as i64)
+            .bind(l.row as i64)
+            .bind(l.bay as i64)
+            .bind(l.level as i64)
+            .bind(l.position as i64)
+            .fetch_optional(db)
+            .await?;
+    Ok(row.map(LocationState::from))
+}
+
+/// Locks `l` unless it is locked already (the first reason stands); whether it did.
+pub(crate) fn lock(
+    db: &rusqlite::Connection,
+    l: Location,
+    lock: &LocationLock,
+    now: i64,
+) -> rusqlite::Result<bool> {
+    let sql = format!(
+        "UPDATE locations SET locked_at = ?6, locked_by = ?7, lock_reason = ?8, lock_job = ?9, updated_at = ?10 \
+         WHERE {KEY} AND locked_at IS NULL"
+    );
+    let [a, r, b, v, p] = key(l);
+    let at = crate::domain::time::to_ms(lock.at);
+    let n = db.prepare_cached(&sql)?.execute(rusqlite::params![
+        a,
+        r,
+        b,
+        v,
+        p,
+        at,
+        lock.by,
+        lock.reason,
+        lock.job,
+        now
+    ])?;
+    Ok(n > 0)
+}
+
+/// Unlocks `l`; whether it was locked.
+pub(crate) fn unlock(db: &rusqlite::Connection, l: Location, now: i64) -> rusqlite::Result<bool> {
+    let sql = format!(
+        "UPDATE locations SET locked_at = NULL, locked_by = NULL, lock_reason = NULL, lock_job = NULL, \
+         updated_at = ?6 WHERE {KEY} AND locked_at IS NOT NULL"
+    );
+    let [a, r, b, v, p] = key(l);
+    Ok(db.prepare_cached(&sql)?.execute(rusqlite::params![a, r, b, v, p, now])? > 0)
 }
 
 /// Marks `locations` reserved by `job`.

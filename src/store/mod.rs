@@ -5,6 +5,7 @@
 //! writer task ([`writer::Writer`]) that commits many requests per transaction.
 
 pub mod alarms;
+pub mod controls;
 pub mod events;
 pub mod jobs;
 pub mod locations;

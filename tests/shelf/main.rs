@@ -10,6 +10,7 @@ mod faults;
 mod protocols;
 mod reservations;
 mod restart;
+mod safety;
 mod workload;
 #[path = "../common/ws.rs"]
 mod ws;

@@ -256,9 +256,11 @@ impl Crane {
         let alarm = (v.alarm != 0).then(|| alarms::lookup(v.alarm));
         self.status.update(|s| {
             let heartbeat_ok = s.crane.as_ref().is_some_and(|c| c.heartbeat_ok);
+            let heartbeat_stalled_since = s.crane.as_ref().and_then(|c| c.heartbeat_stalled_since);
             s.crane = Some(CraneStatus {
                 known: true,
                 heartbeat_ok,
+                heartbeat_stalled_since,
                 action_state: v.action,
                 action: registers::action_text(v.action).to_owned(),
                 travel_position: v.travel,

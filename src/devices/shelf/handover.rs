@@ -46,6 +46,10 @@ impl Shelf {
                 }
             }
         }
+        if !taken.is_empty() && self.status.get().memory_lost_at.is_some() {
+            tracing::info!(device = %self.config.id, "the PLC takes work again after losing its memory");
+            self.status.update(|s| s.memory_lost_at = None);
+        }
         // Recorded together, so one commit covers the whole round.
         self.port.report(taken).await?;
         failed.map_or(Ok(()), |e| Err(e.into()))

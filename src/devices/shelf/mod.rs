@@ -21,7 +21,14 @@
 //!   shows it and the cancel is refused. Sites whose PLC may not have ids cleared turn
 //!   `withdraw` off; cancels of tasks in slots are then refused with the reason.
 //! - **Lost work**: a slot that no longer holds rackd's task id fails the job with kind
-//!   `lost`, for an operator to check.
+//!   `lost`, for an operator to check (its locations lock: see the service's dispatcher).
+//! - **A PLC that lost its memory** (a power cycle: registers back to zero): when every slot
+//!   rackd had a task in reads empty at once, and at least two did, that is one decision:
+//!   every such job fails as `lost` with the words "the PLC lost its task memory (power
+//!   cycle?)", their locations lock for a person to check, and the device status carries
+//!   `memory_lost_at` (one `memory_lost` alarm) until the PLC takes new work. The same
+//!   holds at a restart that finds every task gone. Jobs not yet handed over stay queued
+//!   (those on a locked location wait), so no cascade of rejections follows.
 
 mod handover;
 mod poll;

@@ -13,6 +13,14 @@ use crate::protocols::PlcError;
 use crate::wire::slot::{ExecState, SLOT_WORDS, SlotView};
 use crate::wire::task_id_for;
 
+/// How many of rackd's tasks must vanish together to call it a lost memory: with one,
+/// a task gone missing and a power cycle look the same (and end the same way, but for the
+/// alarm).
+pub const MEMORY_LOSS_SLOTS: usize = 2;
+
+/// What rackd says of a PLC that lost its task memory.
+pub const MEMORY_LOST: &str = "the PLC lost its task memory (power cycle?)";
+
 /// The failure a PLC failure kind stands for.
 pub fn failure(kind: u16) -> Failure {
     let (class, text) = match kind {
@@ -62,6 +70,9 @@ impl Shelf {
     /// together.
     async fn settle(&mut self, reads: Vec<(usize, Vec<u16>)>) -> Result<(), DispatchError> {
         let unfinished: HashMap<i64, Job> = self.port.unfinished().into_iter().map(|j| (j.id, j)).collect();
+        if self.forgot(&reads) {
+            return self.memory_lost(&unfinished).await;
+        }
         let mut seen = Vec::new();
         for (k, words) in reads {
             let view = SlotView::parse(&words).ok_or(PlcError::Malformed("short slot read"))?;
@@ -79,6 +90,40 @@ impl Shelf {
                 self.slots[report.slot] = Slot::Free;
             }
         }
+        Ok(())
+    }
+
+    /// Whether these reads show every slot rackd had a task in empty, and at least
+    /// [`MEMORY_LOSS_SLOTS`] of them: the PLC lost its memory (a power cycle), rather than
+    /// one task gone missing.
+    fn forgot(&self, reads: &[(usize, Vec<u16>)]) -> bool {
+        let held: Vec<usize> =
+            (0..self.slots.len()).filter(|&k| matches!(self.slots[k], Slot::Held { .. })).collect();
+        let empty = |k: usize| {
+            reads.iter().any(|(r, words)| *r == k && SlotView::parse(words).is_some_and(|v| v.task_id == 0))
+        };
+        held.len() >= MEMORY_LOSS_SLOTS && held.iter().all(|&k| empty(k))
+    }
+
+    /// One decision for every task the PLC forgot: each job fails as `lost` with the same
+    /// words (which locks its locations for a person to check), its slot is free, and the
+    /// device status says so (one `memory_lost` alarm) until the PLC takes new work.
+    async fn memory_lost(&mut self, unfinished: &HashMap<i64, Job>) -> Result<(), DispatchError> {
+        let mut reports = Vec::new();
+        for k in 0..self.slots.len() {
+            let Slot::Held { job, task, .. } = self.slots[k] else { continue };
+            self.slots[k] = Slot::Free;
+            if unfinished.contains_key(&job) {
+                let text =
+                    format!("{MEMORY_LOST}: slot {} no longer holds task {task}; check the location", k + 1);
+                let lost = Failure { kind: FailureKind::Lost, code: None, text: text.clone() };
+                reports.push(Report::new(job, Reported::Failed(lost), text));
+            }
+        }
+        tracing::error!(device = %self.config.id, tasks = reports.len(), "{MEMORY_LOST}");
+        self.status
+            .update(|s| s.memory_lost_at = Some(crate::domain::time::from_ms(crate::domain::time::now_ms())));
+        self.port.report(reports).await?;
         Ok(())
     }
 
@@ -174,10 +219,26 @@ impl Shelf {
             .filter(|j| j.state != JobState::Queued)
             .filter(|j| !self.slots.iter().any(|s| matches!(s, Slot::Held { job, .. } if *job == j.id)))
             .collect();
+        // rackd's tasks all gone and the slots empty: the PLC forgot them while rackd was
+        // down, one decision as in `memory_lost`.
+        let forgot =
+            lost.len() >= MEMORY_LOSS_SLOTS && !self.slots.iter().any(|s| matches!(s, Slot::Held { .. }));
+        if forgot {
+            tracing::error!(device = %self.config.id, tasks = lost.len(), "{MEMORY_LOST}");
+            self.status.update(|s| {
+                s.memory_lost_at = Some(crate::domain::time::from_ms(crate::domain::time::now_ms()))
+            });
+        }
         let lost = lost
             .into_iter()
             .map(|job| {
-                let text = format!("after a restart no slot holds task {}", task_id_for(job.id));
+                let text = match forgot {
+                    true => format!(
+                        "{MEMORY_LOST}: after a restart no slot holds task {}; check the location",
+                        task_id_for(job.id)
+                    ),
+                    false => format!("after a restart no slot holds task {}", task_id_for(job.id)),
+                };
                 let failure = Failure { kind: FailureKind::Lost, code: None, text: text.clone() };
                 Report::new(job.id, Reported::Failed(failure), text)
             })

@@ -8,16 +8,19 @@
 //! report: a paused device is simply offered no work.
 
 pub mod cancel;
+pub mod control;
 pub mod order;
 pub mod queues;
 
 use sqlx::SqlitePool;
 
 pub use cancel::CancelError;
-pub use queues::{Control, Queues};
+pub use control::{Actor, ControlError};
+pub use queues::{Control, Queues, Setup};
 
-use crate::store::jobs;
+use crate::domain::Target;
 use crate::store::writer::Writer;
+use crate::store::{controls, jobs, locations};
 
 /// The dispatcher as the API uses it: cancels and control state.
 #[derive(Clone)]
@@ -40,6 +43,34 @@ impl Dispatcher {
             let unfinished = jobs::unfinished(&self.pool, device).await?;
             self.queues.load(device, unfinished);
         }
+        Ok(())
+    }
+
+    /// Restores what operators set before the restart (at start, before any device runs):
+    /// paused devices and aisles, locked locations. A pause of a device no longer
+    /// configured is left in the store and logged.
+    pub async fn restore(&self) -> Result<(), sqlx::Error> {
+        for (target, pause) in controls::paused(&self.pool).await? {
+            match target {
+                Target::Device(id) => {
+                    if self.queues.set_paused(&id, Some(pause)) {
+                        tracing::info!(device = %id, "paused before the restart: stays paused");
+                    } else {
+                        tracing::warn!(device = %id, "a paused device is no longer configured");
+                    }
+                }
+                Target::Aisle(aisle) => {
+                    tracing::info!(aisle, "paused before the restart: stays paused");
+                    self.queues.set_aisle_paused(aisle, Some(pause));
+                }
+            }
+        }
+        let locks: Vec<_> =
+            locations::locked(&self.pool).await?.into_iter().map(|(l, lock)| (l, Some(lock))).collect();
+        if !locks.is_empty() {
+            tracing::info!(locations = locks.len(), "locked locations wait for a person");
+        }
+        self.queues.locked(&locks);
         Ok(())
     }
 

@@ -8,6 +8,11 @@
 //! Per device, jobs on the machine (`active`) are kept apart from `queued` ones, so a
 //! dispatch round weighs every active job and only the oldest `dispatch_window` queued
 //! ones: a backlog of a hundred thousand jobs costs each round no more than a thousand.
+//!
+//! What operators set is kept here too, as the store has it (restored at start): a paused
+//! device is offered nothing; a job touching a paused aisle or a locked location waits
+//! (it is not handed out, keeps later jobs off its locations, and [`Queues::waiting`] says
+//! why). The writer hands over every lock change of a commit ([`Queues::locked_hook`]).
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -17,14 +22,16 @@ use tokio::sync::{Notify, watch};
 
 use super::order::next_jobs;
 use crate::devices::port::{Port, ReportError};
-use crate::domain::{Job, JobState, Report};
-use crate::store::writer::{Committed, WriteError, Writer};
+use crate::domain::{Job, JobState, Location, LocationLock, Pause, Report};
+use crate::store::writer::{Committed, Locked, WriteError, Writer};
 
-/// What an operator set for a device, apart from what the device reports.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// What operators set for a device, apart from what the device reports.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Control {
-    /// Paused: the device gets no new work; what it runs goes on and is followed.
-    pub paused: bool,
+    /// The device's own pause: it gets no new work; what it runs goes on and is followed.
+    pub pause: Option<Pause>,
+    /// The aisles it serves that are paused: jobs there wait.
+    pub paused_aisles: Vec<u16>,
 }
 
 /// One device's unfinished jobs.
@@ -43,6 +50,41 @@ struct Lane {
     wake: Arc<Notify>,
     control: watch::Sender<Control>,
     window: usize,
+    aisles: Vec<u16>,
+}
+
+/// What holds jobs back whichever device serves them.
+#[derive(Default)]
+struct Holds {
+    aisles: BTreeMap<u16, Pause>,
+    locks: HashMap<Location, LocationLock>,
+}
+
+impl Holds {
+    /// Why `job` may not start now, if something here holds it.
+    fn why(&self, job: &Job) -> Option<String> {
+        let locations = job.spec().map(|s| s.locations()).unwrap_or_default();
+        for l in &locations {
+            if let Some(lock) = self.locks.get(l) {
+                return Some(format!(
+                    "location {}/{}/{}/{}/{} is locked: {}",
+                    l.aisle, l.row, l.bay, l.level, l.position, lock.reason
+                ));
+            }
+        }
+        locations.iter().find_map(|l| {
+            let pause = self.aisles.get(&l.aisle)?;
+            Some(format!("aisle {} is paused{}", l.aisle, because(pause)))
+        })
+    }
+}
+
+/// ": REASON (by WHO)", or " (by WHO)" without a reason.
+fn because(pause: &Pause) -> String {
+    match &pause.reason {
+        Some(r) => format!(": {r} (by {})", pause.by),
+        None => format!(" (by {})", pause.by),
+    }
 }
 
 /// The unfinished jobs of every configured device.
@@ -52,19 +94,35 @@ pub struct Queues(Arc<Inner>);
 struct Inner {
     queues: Mutex<HashMap<String, Queue>>,
     lanes: HashMap<String, Lane>,
+    holds: Mutex<Holds>,
+}
+
+/// A device as the dispatcher sees it: its id, its dispatch window and the aisles it serves.
+pub struct Setup {
+    /// The device's id.
+    pub id: String,
+    /// How many of the oldest queued jobs a dispatch round weighs.
+    pub window: usize,
+    /// The aisles whose locations it serves.
+    pub aisles: Vec<u16>,
 }
 
 impl Queues {
-    /// Empty queues for these devices, each with its dispatch window.
-    pub fn new(devices: impl IntoIterator<Item = (String, usize)>) -> Queues {
+    /// Empty queues for these devices.
+    pub fn new(devices: impl IntoIterator<Item = Setup>) -> Queues {
         let mut queues = HashMap::new();
         let mut lanes = HashMap::new();
-        for (id, window) in devices {
+        for Setup { id, window, aisles } in devices {
             queues.insert(id.clone(), Queue::default());
-            let lane = Lane { wake: Arc::new(Notify::new()), control: watch::Sender::default(), window };
+            let lane =
+                Lane { wake: Arc::new(Notify::new()), control: watch::Sender::default(), window, aisles };
             lanes.insert(id, lane);
         }
-        Queues(Arc::new(Inner { queues: Mutex::new(queues), lanes }))
+        Queues(Arc::new(Inner { queues: Mutex::new(queues), lanes, holds: Mutex::default() }))
+    }
+
+    fn holds(&self) -> MutexGuard<'_, Holds> {
+        self.0.holds.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     fn lock(&self) -> MutexGuard<'_, HashMap<String, Queue>> {
@@ -143,12 +201,89 @@ impl Queues {
         self.0.lanes.get(device).map(|lane| lane.control.subscribe())
     }
 
-    /// Pauses or resumes a device; false if it is not configured.
-    pub fn set_paused(&self, device: &str, paused: bool) -> bool {
+    /// Whether `device` is configured.
+    pub fn has(&self, device: &str) -> bool {
+        self.0.lanes.contains_key(device)
+    }
+
+    /// Pauses (`Some`) or resumes a device; false if it is not configured.
+    pub fn set_paused(&self, device: &str, pause: Option<Pause>) -> bool {
         let Some(lane) = self.0.lanes.get(device) else { return false };
-        lane.control.send_if_modified(|c| std::mem::replace(&mut c.paused, paused) != paused);
+        lane.control.send_if_modified(|c| {
+            let changed = c.pause.is_some() != pause.is_some();
+            c.pause = pause;
+            changed
+        });
         lane.wake.notify_one();
         true
+    }
+
+    /// Pauses (`Some`) or resumes an aisle: jobs touching it wait, whichever device serves
+    /// it; the devices that serve it show it.
+    pub fn set_aisle_paused(&self, aisle: u16, pause: Option<Pause>) {
+        {
+            let mut holds = self.holds();
+            match pause {
+                Some(p) => holds.aisles.insert(aisle, p),
+                None => holds.aisles.remove(&aisle),
+            };
+        }
+        let paused: Vec<u16> = self.holds().aisles.keys().copied().collect();
+        for lane in self.0.lanes.values().filter(|l| l.aisles.contains(&aisle)) {
+            let mine: Vec<u16> = lane.aisles.iter().copied().filter(|a| paused.contains(a)).collect();
+            lane.control.send_if_modified(|c| std::mem::replace(&mut c.paused_aisles, mine.clone()) != mine);
+            lane.wake.notify_one();
+        }
+    }
+
+    /// The paused aisles, with who paused them.
+    pub fn paused_aisles(&self) -> BTreeMap<u16, Pause> {
+        self.holds().aisles.clone()
+    }
+
+    /// The writer hook for lock changes: a lock holds jobs back at once; an unlock wakes
+    /// every device, since any may have work waiting on the location.
+    pub fn locked_hook(&self) -> Locked {
+        let queues = self.clone();
+        Arc::new(move |changes: &[(Location, Option<LocationLock>)]| queues.locked(changes))
+    }
+
+    /// Takes in locks (`Some`) and unlocks (at start: every lock the store holds).
+    pub fn locked(&self, changes: &[(Location, Option<LocationLock>)]) {
+        let unlocked = {
+            let mut holds = self.holds();
+            let mut unlocked = false;
+            for (l, lock) in changes {
+                match lock {
+                    Some(lock) => drop(holds.locks.insert(*l, lock.clone())),
+                    None => unlocked |= holds.locks.remove(l).is_some(),
+                }
+            }
+            unlocked
+        };
+        if unlocked {
+            for lane in self.0.lanes.values() {
+                lane.wake.notify_one();
+            }
+        }
+    }
+
+    /// Why a queued job is not handed out now, if an operator's control holds it: its
+    /// device or aisle paused, one of its locations locked.
+    pub fn waiting(&self, job: &Job) -> Option<String> {
+        if job.state != JobState::Queued {
+            return None;
+        }
+        if let Some(pause) = job
+            .device
+            .as_deref()
+            .and_then(|d| self.0.lanes.get(d))
+            .and_then(|l| l.control.borrow().pause.clone())
+        {
+            let device = job.device.as_deref().unwrap_or_default();
+            return Some(format!("device {device} is paused{}", because(&pause)));
+        }
+        self.holds().why(job)
     }
 
     /// The port through which `device` gets its work and reports it.
@@ -206,13 +341,21 @@ impl Port for DevicePort {
 
     fn next(&self, free: usize, holding: &HashSet<i64>) -> Vec<Job> {
         let Some(lane) = self.queues.0.lanes.get(&self.device) else { return Vec::new() };
-        if free == 0 || lane.control.borrow().paused {
+        if free == 0 || lane.control.borrow().pause.is_some() {
             return Vec::new();
         }
         let queues = self.queues.lock();
         let Some(queue) = queues.get(&self.device) else { return Vec::new() };
-        let held: HashSet<i64> = queue.withheld.union(holding).copied().collect();
-        next_jobs(queue.window(lane.window), &held, free).into_iter().cloned().collect()
+        let window = queue.window(lane.window);
+        let mut held: HashSet<i64> = queue.withheld.union(holding).copied().collect();
+        {
+            let holds = self.queues.holds();
+            if !holds.locks.is_empty() || !holds.aisles.is_empty() {
+                let waiting = window.iter().filter(|j| j.state == JobState::Queued && holds.why(j).is_some());
+                held.extend(waiting.map(|j| j.id));
+            }
+        }
+        next_jobs(window, &held, free).into_iter().cloned().collect()
     }
 
     async fn work_waiting(&self) {

@@ -247,6 +247,20 @@ impl ShelfSim {
         (1..=layout.slots).contains(&k).then(|| self.memory.lock().read(layout.start(k - 1), SLOT_WORDS))
     }
 
+    /// A power cycle: every word of the slot area back to 0, as a PLC without retained
+    /// memory comes back; the boxes stay where they are, and a task under way is not
+    /// finished (its slot no longer holds it).
+    pub fn power_cycle(&self) {
+        let layout = self.core.layout;
+        let mut words = self.memory.lock();
+        for n in 0..layout.words() {
+            words.set(n, 0);
+        }
+        drop(words);
+        tracing::warn!("power cycle: the slot area is cleared");
+        self.core.wake.notify_one();
+    }
+
     /// Changes the standing link faults while running (a queued script stays).
     pub fn set_faults(&self, faults: Faults) {
         self.faults.set(faults);

@@ -7,11 +7,11 @@ use rusqlite::{OptionalExtension, Transaction, params};
 use super::{Change, Command, Outcome, Record, WriteError};
 use crate::domain::report::path;
 use crate::domain::time::{from_ms, now_ms, to_ms};
-use crate::domain::{Failure, JobState, Location, Transition};
-use crate::store::alarms;
+use crate::domain::{Failure, JobState, Location, LocationLock, Transition};
 use crate::store::events::StoredEvent;
 use crate::store::jobs::{COLUMNS, Job, JobRow, NewJob};
 use crate::store::locations;
+use crate::store::{alarms, controls};
 
 /// What the writer answers for one command.
 pub(super) enum Answer {
@@ -40,17 +40,25 @@ impl Answer {
     }
 }
 
-/// The events a group appends, in sequence order.
-type Events = Vec<StoredEvent>;
+/// What a group produced besides its answers.
+#[derive(Default)]
+pub(super) struct Out {
+    /// The events it appended, in sequence order.
+    pub(super) events: Vec<StoredEvent>,
+    /// The locations it locked (`Some`) or unlocked.
+    pub(super) locks: Vec<(Location, Option<LocationLock>)>,
+}
+
+type Events = Out;
 
 /// Applies a group in one transaction; any database error rolls back the whole group.
 /// `next_id` is the writer's id counter, read from the table when unknown. Returns the
-/// answers and the events the group appended.
+/// answers, and the events and lock changes of the group.
 pub(super) fn commit(
     db: &mut rusqlite::Connection,
     group: &[Command],
     next_id: &mut Option<i64>,
-) -> rusqlite::Result<(Vec<Answer>, Events)> {
+) -> rusqlite::Result<(Vec<Answer>, Out)> {
     let tx = db.transaction_with_behavior(rusqlite::TransactionBehavior::Immediate)?;
     let now = now_ms();
     let mut id = match *next_id {
@@ -59,7 +67,7 @@ pub(super) fn commit(
     };
     let mut known: HashMap<String, (String, Job)> = HashMap::new();
     let mut answers = Vec::with_capacity(group.len());
-    let mut events = Vec::new();
+    let mut events = Out::default();
     let ev = &mut events;
     for cmd in group {
         answers.push(match cmd {
@@ -89,14 +97,37 @@ pub(super) fn commit(
 /// Records a change that is not a job's.
 fn record(tx: &Transaction<'_>, record: &Record, now: i64, events: &mut Events) -> rusqlite::Result<()> {
     match record {
-        Record::Device { status } => events.push(append(tx, "device.updated", status.clone(), now)?),
+        Record::Device { status } => events.events.push(append(tx, "device.updated", status.clone(), now)?),
+        Record::Pause { target, paused, by } => {
+            controls::set(tx, target, paused.then_some(by))?;
+            let action = if *paused { "pause" } else { "resume" };
+            let entry = controls::append(tx, &by.by, action, &target.key(), by.reason.as_deref(), now)?;
+            event(tx, "audit.recorded", &entry, now, events)?;
+        }
+        Record::Lock { location, lock } => {
+            let entry =
+                controls::append(tx, &lock.by, "lock", &location_key(*location), Some(&lock.reason), now)?;
+            event(tx, "audit.recorded", &entry, now, events)?;
+            if locations::lock(tx, *location, lock, now)? {
+                events.locks.push((*location, Some(lock.clone())));
+                location_events(tx, &[*location], now, events)?;
+            }
+        }
+        Record::Unlock { location, by, reason } => {
+            let entry = controls::append(tx, by, "unlock", &location_key(*location), reason.as_deref(), now)?;
+            event(tx, "audit.recorded", &entry, now, events)?;
+            if locations::unlock(tx, *location, now)? {
+                events.locks.push((*location, None));
+                location_events(tx, &[*location], now, events)?;
+            }
+        }
         Record::AlarmRaised(new) => {
             if let Some(alarm) = alarms::raise(tx, new, now)? {
                 event(tx, "alarm.raised", &alarm, now, events)?;
             }
         }
-        Record::AlarmCleared { device, code } => {
-            if let Some(alarm) = alarms::clear(tx, device, *code, now)? {
+        Record::AlarmCleared { device, key } => {
+            if let Some(alarm) = alarms::clear(tx, device, *key, now)? {
                 event(tx, "alarm.cleared", &alarm, now, events)?;
             }
         }
@@ -214,7 +245,7 @@ fn event(
     events: &mut Events,
 ) -> rusqlite::Result<()> {
     let data = serde_json::to_string(data).map_err(|e| rusqlite::Error::ToSqlConversionFailure(e.into()))?;
-    events.push(append(tx, kind, data, now)?);
+    events.events.push(append(tx, kind, data, now)?);
     Ok(())
 }
 
@@ -270,6 +301,14 @@ fn apply(
                 }
             }
         }
+        Change::Retry { by } => {
+            let cause = format!("retried by {by} (attempt {})", job.attempt + 1);
+            if let Err(e) = step(tx, &mut job, Transition::Retry, &cause, None, false, now, events)? {
+                return Ok(Err(e));
+            }
+            let entry = controls::append(tx, by, "retry", &format!("job:{id}"), None, now)?;
+            event(tx, "audit.recorded", &entry, now, events)?;
+        }
         Change::Priority(p) => {
             if job.state != JobState::Queued {
                 return Ok(Err(WriteError::Unexpected { id, state: job.state }));
@@ -305,6 +344,10 @@ fn step(
     if transition == Transition::Fail {
         job.failure = failure.cloned();
     }
+    if transition == Transition::Retry {
+        job.failure = None;
+        job.attempt += 1;
+    }
     if transition == Transition::Dispatch
         && let Some(spec) = job.spec()
     {
@@ -318,6 +361,20 @@ fn step(
             (JobState::Completed, Some(spec)) => locations::complete(tx, spec, job.barcode.as_deref(), now)?,
             _ => Vec::new(),
         };
+        if let (Some(f), Some(spec)) = (job.failure.as_ref().filter(|f| f.kind.locks()), &spec) {
+            let lock = LocationLock {
+                by: "rackd".into(),
+                reason: format!("job {id} failed ({}): {}", f.kind, f.text),
+                job: Some(id),
+                at: from_ms(now),
+            };
+            for l in spec.locations() {
+                if locations::lock(tx, l, &lock, now)? {
+                    events.locks.push((l, Some(lock.clone())));
+                    touched.push(l);
+                }
+            }
+        }
         if locations::release(tx, id)? > 0 {
             let held = spec.map(|s| s.locations()).unwrap_or_default();
             for l in held {
@@ -344,7 +401,7 @@ fn save(
     let f = job.failure.as_ref();
     tx.prepare_cached(
         "UPDATE jobs SET state = ?1, priority = ?2, forced = ?3, failure_kind = ?4, failure_code = ?5, \
-         failure_text = ?6, updated_at = ?7 WHERE id = ?8",
+         failure_text = ?6, updated_at = ?7, attempt = ?9 WHERE id = ?8",
     )?
     .execute(params![
         job.state.as_str(),
@@ -354,9 +411,15 @@ fn save(
         f.and_then(|f| f.code),
         f.map(|f| &f.text),
         now,
-        job.id
+        job.id,
+        job.attempt
     ])?;
     history(tx, job.id, job.state, cause, now)?;
     event(tx, "job.updated", job, now, events)?;
     Ok(())
+}
+
+/// A location as audited: `location:A/R/B/L/P`.
+fn location_key(l: Location) -> String {
+    format!("location:{}/{}/{}/{}/{}", l.aisle, l.row, l.bay, l.level, l.position)
 }

@@ -27,7 +27,9 @@ use super::alarms::NewAlarm;
 use super::events::StoredEvent;
 use super::jobs::{Job, NewJob};
 use crate::domain::state::IllegalTransition;
-use crate::domain::{Failure, JobState, Priority, Report, Reported, Transition};
+use crate::domain::{
+    Failure, JobState, Location, LocationLock, Pause, Priority, Report, Reported, Target, Transition,
+};
 
 /// A change to one stored job.
 #[derive(Clone, Debug)]
@@ -55,6 +57,11 @@ pub enum Change {
         /// Why, for the history.
         cause: String,
     },
+    /// Put a failed job back in the queue as its next attempt (audited).
+    Retry {
+        /// The API key's name.
+        by: String,
+    },
 }
 
 impl Change {
@@ -80,12 +87,38 @@ pub enum Record {
     },
     /// An alarm is raised (ignored if the same device and code is already active).
     AlarmRaised(NewAlarm),
-    /// The device's active alarm with this code is cleared (ignored if none is active).
+    /// The device's active alarm of this kind and code is cleared (ignored if none is
+    /// active).
     AlarmCleared {
         /// The device.
         device: String,
-        /// The alarm code.
-        code: u16,
+        /// The alarm's kind and code.
+        key: (crate::domain::AlarmKind, u16),
+    },
+    /// A device or an aisle is paused or resumed, audited.
+    Pause {
+        /// What.
+        target: Target,
+        /// Paused (true) or resumed.
+        paused: bool,
+        /// Who did it, why and when.
+        by: Pause,
+    },
+    /// A location is locked by hand (audited); one already locked keeps its first lock.
+    Lock {
+        /// Where.
+        location: Location,
+        /// Who, why and when.
+        lock: LocationLock,
+    },
+    /// A location is unlocked (audited).
+    Unlock {
+        /// Where.
+        location: Location,
+        /// The API key's name.
+        by: String,
+        /// Why, if given.
+        reason: Option<String>,
     },
     /// Retention: delete events committed before this time (Unix ms), always keeping the
     /// newest so that sequence numbers are never reused.
@@ -140,9 +173,15 @@ pub type Committed = Arc<dyn Fn(&[&Job]) + Send + Sync>;
 /// forwards them to subscribers). Only committed events are passed on.
 pub type Publish = Arc<dyn Fn(Vec<StoredEvent>) + Send + Sync>;
 
+/// Called after each commit, before [`Committed`], with every location the commit locked
+/// (`Some`) or unlocked (`None`), so the dispatcher holds back jobs on locked locations.
+pub type Locked = Arc<dyn Fn(&[(Location, Option<LocationLock>)]) + Send + Sync>;
+
 /// What the writer calls after each commit.
 #[derive(Clone, Default)]
 pub struct Hooks {
+    /// Hands the dispatcher every location locked or unlocked.
+    pub locked: Option<Locked>,
     /// Hands every committed job to the dispatcher.
     pub committed: Option<Committed>,
     /// Publishes the committed events.
@@ -234,9 +273,12 @@ fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group:
             "group committed"
         );
         let answers = match result {
-            Ok((answers, events)) => {
-                if let Some(publish) = hooks.publish.as_ref().filter(|_| !events.is_empty()) {
-                    publish(events);
+            Ok((answers, out)) => {
+                if let Some(locked) = hooks.locked.as_ref().filter(|_| !out.locks.is_empty()) {
+                    locked(&out.locks);
+                }
+                if let Some(publish) = hooks.publish.as_ref().filter(|_| !out.events.is_empty()) {
+                    publish(out.events);
                 }
                 answers
             }
