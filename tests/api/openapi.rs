@@ -39,7 +39,9 @@ async fn every_request_example_is_accepted_by_the_demo_site() {
             let (_, job) = app.post("/api/v1/jobs", &store(&format!("example-{tried}"))).await;
             let path = match path.strip_prefix("/api/v1/devices/{id}/tags/") {
                 Some("{tag}") => "/api/v1/devices/tower1/tags/tower.green".to_owned(),
-                _ => path.replace("{id}", &job["id"].to_string()),
+                _ => ["{aisle}", "{row}", "{bay}", "{level}", "{position}"]
+                    .iter()
+                    .fold(path.replace("{id}", &job["id"].to_string()), |p, k| p.replace(k, "1")),
             };
             let r = app
                 .client
