@@ -160,7 +160,7 @@ fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<Key>) -> (Vec<NewAlarm
             let text = crane.alarm_text.clone().unwrap_or_else(|| format!("alarm {code}"));
             want(AlarmKind::Device, code, class, text, None);
         }
-    } else if status.consecutive_failures > 0 {
+    } else if status.consecutive_failures > 0 && !status.online {
         known.insert((AlarmKind::Link, LINK_ALARM));
         let n = status.consecutive_failures;
         let text = format!("no answer from {} for {n} poll{}", status.address, if n == 1 { "" } else { "s" });
@@ -232,6 +232,8 @@ mod tests {
 
     #[test]
     fn while_it_does_not_answer_only_the_link_alarm_changes() {
+        let (raise, clear) = alarm_changes(&crane(true, 1, None), &BTreeSet::from([own(41)]));
+        assert!(raise.is_empty() && clear.is_empty(), "one lost reply is no lost link, and judges nothing");
         let (raise, clear) = alarm_changes(&crane(false, 3, None), &BTreeSet::from([own(41), HEARTBEAT]));
         assert_eq!((keys(&raise), clear), (vec![LINK], vec![]));
         assert_eq!(raise[0].class, AlarmClass::Link);
