@@ -29,6 +29,22 @@ async fn every_business_alarm_cancels_the_task_and_fails_the_job_with_its_code()
         assert_eq!(sim.word(205), 0, "the crane cleared alarm {code}");
         let states: Vec<String> = history(&app, id).await.into_iter().map(|(s, _)| s).collect();
         assert!(states.contains(&"cancelling".to_owned()), "{states:?}");
+        // The store cannot be trusted there: the location locked itself until a person
+        // checks it.
+        let (_, all) = app.get("/api/v1/locations?aisle=2").await;
+        let lock = all
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|l| l["row"] == 1 && l["bay"] == 4 && l["level"] == 2 && l["position"] == 1)
+            .unwrap()["lock"]
+            .clone();
+        assert_eq!((lock["by"].clone(), lock["job"].clone()), (json!("rackd"), json!(id)), "{lock}");
+        let (status, place) =
+            app.post("/api/v1/locations/2/1/4/2/1/unlock", &json!({"reason": "checked"})).await;
+        assert_eq!(status, 200, "{place}");
+        let audit = app.get("/api/v1/audit?limit=1").await.1;
+        assert_eq!(audit["entries"][0]["target"], "location:2/1/4/2/1", "{audit}");
     }
     // The crane is clean again: the next job completes.
     let id = submit(&app, store_job(), "after-alarms").await;

@@ -79,12 +79,21 @@ async fn a_silent_device_raises_a_link_alarm_until_it_answers_again() {
     ws.json().await;
     sim.set_link(false);
     let raised = next_of(&mut ws, "alarm.raised").await;
-    assert_eq!((raised["data"]["class"].clone(), raised["data"]["kind"].clone()), (json!("link"), json!("link")));
+    assert_eq!(
+        (raised["data"]["class"].clone(), raised["data"]["kind"].clone()),
+        (json!("link"), json!("link"))
+    );
     assert_eq!(raised["data"]["code"], 0);
     let text = raised["data"]["text"].as_str().unwrap();
     let address = sim.local_addr().to_string();
-    assert!(text.starts_with(&format!("no answer from {address} for ")) && text.contains(" poll"), "plain words: {text}");
-    assert!(raised["data"]["detail"].as_str().is_some_and(|d| !d.is_empty()), "the protocol's words apart: {raised}");
+    assert!(
+        text.starts_with(&format!("no answer from {address} for ")) && text.contains(" poll"),
+        "plain words: {text}"
+    );
+    assert!(
+        raised["data"]["detail"].as_str().is_some_and(|d| !d.is_empty()),
+        "the protocol's words apart: {raised}"
+    );
     let (_, device) = app.get("/api/v1/devices/crane1").await;
     assert_eq!(device["online"], false, "{device}");
     sim.set_link(true);
