@@ -101,6 +101,13 @@ async fn the_dashboard_follows_the_demo_store_live() {
     wait_state(&browser, light, "completed", 30).await;
     browser.wait("the red light", &has_class("1-1-2-3-1", "red"), 10).await;
 
+    // A location an operator locks shows it, with the reason in its tooltip.
+    let (status, _) = app.post("/api/v1/locations/1/2/5/5/2/lock", &json!({"reason": "box damaged"})).await;
+    assert_eq!(status, 200);
+    browser.wait("the locked location", &has_class("1-2-5-5-2", "locked"), 10).await;
+    let title = browser.js("return document.querySelector('.pos[data-loc=\"1-2-5-5-2\"]').title").await;
+    assert!(title.as_str().unwrap().contains("LOCKED by anonymous: box damaged"), "{title}");
+
     let barcode = browser.text(&format!("tr[data-job-id=\"{}\"] .c-barcode", jobs[0].0)).await;
     assert_eq!(barcode, json!(tricky), "the barcode is shown as text");
     let markup = browser.js("return document.querySelectorAll('#jobs i, .racks i').length").await;

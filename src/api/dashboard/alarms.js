@@ -35,10 +35,11 @@ export class Alarms {
         'div',
         { class: 'alarm-head' },
         el('span', { class: 'alarm-device', text: a.device }),
-        el('span', { class: 'code', text: a.code ? String(a.code) : 'link' }),
+        el('span', { class: 'code', text: a.kind === 'device' || !a.kind ? String(a.code) : a.kind.replace('_', ' ') }),
         el('span', { class: 'class', text: a.class }),
       ),
       el('div', { class: 'alarm-text', text: a.text }),
+      a.detail ? el('div', { class: 'alarm-detail', text: a.detail }) : '',
       el('div', { class: 'alarm-times' }, `raised ${clock(a.raised_at)} · `, el('span', { class: 'lasted', text: lasted })),
     );
   }

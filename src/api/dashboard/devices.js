@@ -103,7 +103,9 @@ export class Devices {
     setText(t.kind, KINDS[d.kind] || d.kind);
     setText(t.link, d.online ? 'online' : 'offline');
     t.link.className = `badge ${d.online ? 'online' : 'offline'}`;
-    t.paused.hidden = !d.paused;
+    t.paused.hidden = !d.paused && !(d.paused_aisles && d.paused_aisles.length);
+    setText(t.paused, d.pause ? `paused by ${d.pause.by}${d.pause.reason ? `: ${d.pause.reason}` : ''}`
+      : d.paused_aisles && d.paused_aisles.length ? `aisle ${d.paused_aisles.join(', ')} paused` : 'paused');
     t.root.classList.toggle('is-offline', !d.online);
     t.root.classList.toggle('is-paused', d.paused);
     setText(t.contact, ago(d.last_contact));

@@ -128,7 +128,9 @@ export class Racks {
     pos.classList.toggle('res', l.reserved_by !== null && l.reserved_by !== undefined);
     pos.classList.toggle('red', l.red);
     pos.classList.toggle('green', l.green);
+    pos.classList.toggle('locked', Boolean(l.lock));
     const lines = [locName(l), l.occupied ? `box ${l.barcode || '(no barcode)'}` : 'empty'];
+    if (l.lock) lines.push(`LOCKED by ${l.lock.by}: ${l.lock.reason}`);
     if (l.reserved_by) lines.push(`reserved by job ${l.reserved_by}`);
     if (l.red) lines.push('red light on');
     if (l.green) lines.push('green light on');
