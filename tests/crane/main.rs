@@ -7,6 +7,7 @@ mod helpers;
 mod alarms;
 mod heartbeat;
 mod jobs;
+mod pause_restart;
 mod paused;
 mod restart;
 
