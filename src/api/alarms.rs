@@ -6,7 +6,7 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::error::{ApiError, ErrorBody};
-use super::extract::{Json, Query};
+use super::extract::{Json, Query, page};
 use super::state::AppState;
 use crate::store::alarms::{self, Alarm, AlarmFilter};
 
@@ -54,18 +54,7 @@ async fn list_alarms(
     State(app): State<AppState>,
     Query(p): Query<AlarmParams>,
 ) -> Result<Json<AlarmPage>, ApiError> {
-    let limit = p.limit.unwrap_or(100);
-    if !(1..=1000).contains(&limit) {
-        return Err(ApiError::bad_request("bad_query", format!("limit must be 1..=1000, got {limit}")));
-    }
-    let before_id = p
-        .cursor
-        .map(|c| {
-            c.parse::<i64>().ok().filter(|&id| id > 0).ok_or_else(|| {
-                ApiError::bad_request("bad_cursor", format!("cursor {c:?} is not one this server gave"))
-            })
-        })
-        .transpose()?;
+    let (limit, before_id) = page(p.limit, p.cursor, 1)?;
     let filter = AlarmFilter { active: p.active, device: p.device, before_id, limit };
     let alarms = alarms::list(&app.pool, &filter).await?;
     let next_cursor =

@@ -7,7 +7,7 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::error::{ApiError, ErrorBody};
-use super::extract::{Json, Query};
+use super::extract::{Json, Query, page};
 use super::state::AppState;
 use crate::service::dispatch::Actor;
 use crate::store::controls::{self, AuditEntry};
@@ -82,18 +82,7 @@ async fn list_audit(
     State(app): State<AppState>,
     Query(p): Query<AuditParams>,
 ) -> Result<Json<AuditPage>, ApiError> {
-    let limit = p.limit.unwrap_or(100);
-    if !(1..=1000).contains(&limit) {
-        return Err(ApiError::bad_request("bad_query", format!("limit must be 1..=1000, got {limit}")));
-    }
-    let before_id = p
-        .cursor
-        .map(|c| {
-            c.parse::<i64>().ok().filter(|&id| id > 0).ok_or_else(|| {
-                ApiError::bad_request("bad_cursor", format!("cursor {c:?} is not one this server gave"))
-            })
-        })
-        .transpose()?;
+    let (limit, before_id) = page(p.limit, p.cursor, 1)?;
     let entries = controls::audit(&app.pool, before_id, limit).await?;
     let next_cursor =
         (entries.len() == limit as usize).then(|| entries.last().map(|e| e.id.to_string())).flatten();

@@ -100,3 +100,20 @@ impl From<QueryRejection> for ApiError {
         ApiError::bad_request("bad_query", r.body_text())
     }
 }
+
+/// A page's size (`limit`, 1..=1000, default 100) and where it starts (`cursor`: an id this
+/// server gave, at least `min_id`), from a list's query.
+pub fn page(limit: Option<u32>, cursor: Option<String>, min_id: i64) -> Result<(u32, Option<i64>), ApiError> {
+    let limit = limit.unwrap_or(100);
+    if !(1..=1000).contains(&limit) {
+        return Err(ApiError::bad_request("bad_query", format!("limit must be 1..=1000, got {limit}")));
+    }
+    let at = cursor
+        .map(|c| {
+            c.parse::<i64>().ok().filter(|&id| id >= min_id).ok_or_else(|| {
+                ApiError::bad_request("bad_cursor", format!("cursor {c:?} is not one this server gave"))
+            })
+        })
+        .transpose()?;
+    Ok((limit, at))
+}

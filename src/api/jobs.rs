@@ -9,7 +9,7 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::error::{ApiError, ErrorBody};
-use super::extract::{Caller, Json, Path, Query};
+use super::extract::{Caller, Json, Path, Query, page};
 use super::state::AppState;
 use crate::domain::time::to_ms;
 use crate::domain::{JobKind, JobState, Priority};
@@ -167,18 +167,7 @@ async fn list_jobs(
     State(app): State<AppState>,
     Query(p): Query<ListParams>,
 ) -> Result<Json<JobPage>, ApiError> {
-    let limit = p.limit.unwrap_or(100);
-    if !(1..=1000).contains(&limit) {
-        return Err(ApiError::bad_request("bad_query", format!("limit must be 1..=1000, got {limit}")));
-    }
-    let after_id = p
-        .cursor
-        .map(|c| {
-            c.parse::<i64>().ok().filter(|&id| id >= 0).ok_or_else(|| {
-                ApiError::bad_request("bad_cursor", format!("cursor {c:?} is not one this server gave"))
-            })
-        })
-        .transpose()?;
+    let (limit, after_id) = page(p.limit, p.cursor, 0)?;
     let filter = JobFilter {
         state: p.state,
         kind: p.kind,

@@ -19,7 +19,10 @@ async fn a_paused_crane_runs_nothing_after_a_restart_until_resumed() {
 
     let app = spawn_on(db, |c| with_crane(c, device)).await;
     let shown = wait_device(&app, "online", 5, |s| s["online"] == true).await;
-    assert_eq!((shown["paused"].clone(), shown["pause"]["reason"].clone()), (json!(true), json!("aisle walk")));
+    assert_eq!(
+        (shown["paused"].clone(), shown["pause"]["reason"].clone()),
+        (json!(true), json!("aisle walk"))
+    );
     wait_for_more("polls of the paused crane", POLLS, 10, || sim.requests_seen()).await;
     let job = wait_job(&app, id, &["queued", "dispatched", "running", "completed"], 5).await;
     assert_eq!(job["state"], "queued", "{job}");
