@@ -49,7 +49,9 @@ fn is_tag_write(path: &str) -> bool {
 fn presented_key(req: &Request) -> Option<Cow<'_, str>> {
     let headers = req.headers();
     if let Some(v) = headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()) {
-        return v.strip_prefix("Bearer ").map(|k| Cow::Borrowed(k.trim()));
+        // The scheme is case-insensitive (RFC 9110 11.1): `bearer KEY` is as good.
+        let (scheme, key) = v.trim().split_once(' ')?;
+        return scheme.eq_ignore_ascii_case("bearer").then(|| Cow::Borrowed(key.trim()));
     }
     if let Some(v) = headers.get("x-api-key").and_then(|v| v.to_str().ok()) {
         return Some(Cow::Borrowed(v.trim()));
@@ -58,14 +60,35 @@ fn presented_key(req: &Request) -> Option<Cow<'_, str>> {
     form_urlencoded::parse(query.as_bytes()).find(|(k, _)| k == "token").map(|(_, v)| v)
 }
 
-/// Middleware: answers 401 without a known key and 403 when the key's role is too low.
+/// The request without `token` in its query, so that handlers never see (nor refuse, nor
+/// log) a key passed that way.
+fn without_token(mut req: Request) -> Request {
+    let Some(query) = req.uri().query() else { return req };
+    if !form_urlencoded::parse(query.as_bytes()).any(|(k, _)| k == "token") {
+        return req;
+    }
+    let kept: String = form_urlencoded::Serializer::new(String::new())
+        .extend_pairs(form_urlencoded::parse(query.as_bytes()).filter(|(k, _)| k != "token"))
+        .finish();
+    let path = req.uri().path();
+    let rebuilt = if kept.is_empty() { path.to_owned() } else { format!("{path}?{kept}") };
+    let mut parts = req.uri().clone().into_parts();
+    parts.path_and_query = rebuilt.parse().ok();
+    if let Ok(uri) = axum::http::Uri::from_parts(parts) {
+        *req.uri_mut() = uri;
+    }
+    req
+}
+
+/// Middleware: answers 401 without a known key and 403 when the key's role is too low; a
+/// `?token=` is taken out of the query before the request goes on.
 pub async fn require_key(
     State(app): State<AppState>,
     req: Request,
     next: Next,
 ) -> Result<Response, ApiError> {
     if app.keys.is_empty() {
-        return Ok(next.run(req).await);
+        return Ok(next.run(without_token(req)).await);
     }
     let needed = required_role(req.method(), req.uri().path());
     let Some(key) = presented_key(&req) else {
@@ -86,7 +109,7 @@ pub async fn require_key(
         ));
     }
     let who = who.clone();
-    let mut req = req;
+    let mut req = without_token(req);
     req.extensions_mut().insert(who);
     Ok(next.run(req).await)
 }

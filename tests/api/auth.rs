@@ -29,6 +29,12 @@ async fn each_role_reaches_exactly_its_routes() {
         ("POST", "/api/v1/jobs/batch", Some(json!({"jobs": [store("AUTH-2")]})), Some(Role::Operator)),
         ("PATCH", "/api/v1/jobs/1", Some(json!({"priority": 1})), Some(Role::Operator)),
         ("POST", "/api/v1/jobs/1/cancel", None, Some(Role::Operator)),
+        ("POST", "/api/v1/jobs/1/retry", None, Some(Role::Operator)),
+        ("POST", "/api/v1/aisles/1/pause", None, Some(Role::Operator)),
+        ("POST", "/api/v1/locations/1/1/1/1/1/lock", Some(json!({"reason": "auth"})), Some(Role::Operator)),
+        ("POST", "/api/v1/locations/1/1/1/1/1/unlock", None, Some(Role::Operator)),
+        ("GET", "/api/v1/audit", None, Some(Role::Viewer)),
+        ("GET", "/api/v1/aisles", None, Some(Role::Viewer)),
         ("GET", "/api/v1/alarms", None, Some(Role::Viewer)),
         // A method the route lacks: the key is checked first, so strangers learn nothing.
         ("POST", "/api/v1/alarms", None, Some(Role::Operator)),
@@ -65,6 +71,34 @@ async fn each_role_reaches_exactly_its_routes() {
     assert_eq!(r.status(), 200, "X-Api-Key works too");
     let r = app.client.get(app.url("/api/v1/jobs")).send().await.unwrap();
     assert_eq!(r.headers()["www-authenticate"], "Bearer");
+    let r =
+        app.client.get(app.url("/api/v1/jobs")).header("authorization", "bearer key-v").send().await.unwrap();
+    assert_eq!(r.status(), 200, "the scheme is case-insensitive");
+    // `?token=` works wherever a key does, and no list refuses it as an unknown filter.
+    for path in [
+        "/api/v1/jobs?token=key-v&limit=5",
+        "/api/v1/alarms?token=key-v",
+        "/api/v1/locations?token=key-v&aisle=1",
+        "/api/v1/audit?token=key-v",
+    ] {
+        let (status, body) = split(app.client.get(app.url(path)).send().await.unwrap()).await;
+        assert_eq!(status, 200, "{path}: {body}");
+    }
+    assert_error(
+        &split(app.client.get(app.url("/api/v1/jobs?token=nope")).send().await.unwrap()).await,
+        401,
+        "unauthorized",
+    );
+    // The audit names the key that acted.
+    let r = app.client.post(app.url("/api/v1/aisles/1/pause")).bearer_auth("key-o").send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let (_, audit) =
+        split(app.client.get(app.url("/api/v1/audit?limit=1")).bearer_auth("key-v").send().await.unwrap())
+            .await;
+    assert_eq!(
+        (audit["entries"][0]["by"].clone(), audit["entries"][0]["action"].clone()),
+        (json!("o"), json!("pause"))
+    );
 }
 
 #[tokio::test]
