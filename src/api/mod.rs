@@ -134,7 +134,13 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
     Router::new()
         .merge(protected)
         .merge(public)
-        .merge(SwaggerUi::new("/docs").url("/openapi.json", doc))
+        // No validator: Swagger UI would otherwise ask validator.swagger.io to fetch our spec,
+        // leaking its URL and failing in an offline plant.
+        .merge(
+            SwaggerUi::new("/docs")
+                .url("/openapi.json", doc)
+                .config(utoipa_swagger_ui::Config::default().validator_url("none")),
+        )
         .merge(dashboard::router())
         .fallback(ops::not_found)
         .method_not_allowed_fallback(ops::method_not_allowed)

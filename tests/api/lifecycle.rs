@@ -72,4 +72,8 @@ async fn health_readiness_and_metrics() {
     let docs = app.client.get(app.url("/docs/")).send().await.unwrap();
     assert_eq!(docs.status(), 200);
     assert!(docs.text().await.unwrap().contains("swagger"), "the docs page is served from the binary");
+    let init =
+        app.client.get(app.url("/docs/swagger-initializer.js")).send().await.unwrap().text().await.unwrap();
+    assert!(init.contains(r#""validatorUrl": "none""#), "no spec sent to validator.swagger.io: {init}");
+    assert!(!init.contains("swagger.io"), "{init}");
 }
