@@ -124,7 +124,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             app.run_until(shutdown_signal()).await?;
         }
         Command::Openapi => {
-            println!("{}", crate::api::openapi().to_pretty_json().context("encoding OpenAPI")?);
+            say(crate::api::openapi().to_pretty_json().context("encoding OpenAPI")?);
         }
         Command::CheckConfig { file } => match Config::load(&file) {
             Ok(_) => println!("{}: ok", file.display()),
@@ -169,4 +169,17 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Sim(s) => sim::run(s).await?,
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Prints a line to stdout; a reader that went away (`rackd openapi | head`) ends the
+/// program quietly, as Unix tools do, instead of a panic.
+pub fn say(line: impl std::fmt::Display) {
+    use std::io::Write;
+    if let Err(e) = writeln!(std::io::stdout().lock(), "{line}") {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("rackd: writing to stdout: {e}");
+        std::process::exit(1);
+    }
 }

@@ -237,10 +237,10 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
     if args.json {
         let json: Vec<_> =
             items.iter().map(|(a, v)| serde_json::json!({ "address": a, "value": v })).collect();
-        println!("{}", serde_json::Value::Array(json));
+        super::say(serde_json::Value::Array(json));
     } else {
         for (address, value) in items {
-            println!("{address} {value}");
+            super::say(format!("{address} {value}"));
         }
     }
     Ok(())
