@@ -63,7 +63,7 @@ pub enum Command {
     },
     /// Exit 0 if the server at URL answers /healthz (for container health checks).
     Healthcheck {
-        /// The server's base URL.
+        /// The server's base URL (`/healthz` is added) or the full URL to check.
         #[arg(long, env = "RACKD_HEALTHCHECK_URL", default_value = "http://127.0.0.1:8080")]
         url: String,
     },
@@ -151,7 +151,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             println!("{}{}", if generate { "hash: " } else { "" }, crate::auth::KeyHash::of(&key));
         }
         Command::Healthcheck { url } => {
-            let url = format!("{}/healthz", url.trim_end_matches('/'));
+            let url = health_url(&url);
             let client = reqwest::Client::builder().timeout(std::time::Duration::from_secs(3)).build()?;
             match client.get(&url).send().await {
                 Ok(r) if r.status().is_success() => println!("{url}: ok"),
@@ -181,5 +181,24 @@ pub fn say(line: impl std::fmt::Display) {
         }
         eprintln!("rackd: writing to stdout: {e}");
         std::process::exit(1);
+    }
+}
+
+/// The URL `healthcheck` asks: a base URL gets `/healthz`; one with a path is taken as is.
+fn health_url(given: &str) -> String {
+    match reqwest::Url::parse(given) {
+        Ok(url) if !matches!(url.path(), "" | "/") => url.to_string(),
+        _ => format!("{}/healthz", given.trim_end_matches('/')),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn healthcheck_takes_a_base_or_a_full_url() {
+        assert_eq!(super::health_url("http://h:8080"), "http://h:8080/healthz");
+        assert_eq!(super::health_url("http://h:8080/"), "http://h:8080/healthz");
+        assert_eq!(super::health_url("http://h:8080/healthz"), "http://h:8080/healthz");
+        assert_eq!(super::health_url("http://h:8080/readyz"), "http://h:8080/readyz");
     }
 }
