@@ -42,6 +42,13 @@ impl Application {
     /// Without API keys, rackd refuses to listen on anything but loopback unless
     /// `insecure` is set: an open WCS on a plant network would let anyone move boxes.
     pub async fn build(config: &Config, insecure: bool) -> anyhow::Result<Application> {
+        let listener = bind(config.server.listen).await?;
+        Application::build_on(config, listener, insecure).await
+    }
+
+    /// As [`Application::build`], serving on `listener` (bound by the caller before it
+    /// starts anything else, so a port in use is the first thing reported).
+    pub async fn build_on(config: &Config, listener: TcpListener, insecure: bool) -> anyhow::Result<Application> {
         let keys = KeyRing::new(&config.auth.keys);
         let listen = config.server.listen;
         if keys.is_empty() {
@@ -108,7 +115,6 @@ impl Application {
         });
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);
-        let listener = TcpListener::bind(listen).await.with_context(|| format!("binding {listen}"))?;
         Ok(Application { listener, router, writer_task, device_tasks, devices, keep: Vec::new() })
     }
 
@@ -191,4 +197,9 @@ pub async fn shutdown_signal() {
     let term = std::future::pending::<()>();
     tokio::select! { _ = ctrl_c => {}, _ = term => {} }
     tracing::info!("shutdown requested");
+}
+
+/// Binds the API's listener.
+pub async fn bind(listen: SocketAddr) -> anyhow::Result<TcpListener> {
+    TcpListener::bind(listen).await.with_context(|| format!("binding {listen} (is another rackd running?)"))
 }

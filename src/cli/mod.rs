@@ -113,11 +113,13 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command.unwrap_or(Command::Serve(ServeArgs::default())) {
         Command::Serve(args) => {
             let mut config = args.config()?;
+            // Bound first: a port in use is reported before any simulator or device starts.
+            let listener = crate::app::bind(config.server.listen).await?;
             let sim = match args.config {
                 Some(_) => None,
                 None => Some(demo::start(&mut config).await?),
             };
-            let mut app = Application::build(&config, args.insecure).await?;
+            let mut app = Application::build_on(&config, listener, args.insecure).await?;
             if let Some(sim) = sim {
                 app.keep(sim);
             }

@@ -95,3 +95,20 @@ fn a_reader_that_goes_away_ends_the_output_quietly() {
     assert!(status.success(), "{status}: {err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn a_port_in_use_is_reported_before_anything_starts() {
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = taken.local_addr().unwrap().to_string();
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("rackd.db");
+    let out = Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .args(["serve", "--listen", &addr, "--database", db.to_str().unwrap()])
+        .env("RUST_LOG", "info")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains(&format!("binding {addr}")), "{err}");
+    assert!(!db.exists(), "nothing was started, not even the database: {err}");
+}
