@@ -48,7 +48,11 @@ impl Application {
 
     /// As [`Application::build`], serving on `listener` (bound by the caller before it
     /// starts anything else, so a port in use is the first thing reported).
-    pub async fn build_on(config: &Config, listener: TcpListener, insecure: bool) -> anyhow::Result<Application> {
+    pub async fn build_on(
+        config: &Config,
+        listener: TcpListener,
+        insecure: bool,
+    ) -> anyhow::Result<Application> {
         let keys = KeyRing::new(&config.auth.keys);
         let listen = config.server.listen;
         if keys.is_empty() {

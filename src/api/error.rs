@@ -85,6 +85,9 @@ impl IntoResponse for ApiError {
         if self.status == StatusCode::UNAUTHORIZED {
             response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
+        if self.code == "overloaded" {
+            response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from_static("1"));
+        }
         response
     }
 }
@@ -97,6 +100,11 @@ impl From<WriteError> for ApiError {
             WriteError::Unexpected { .. } | WriteError::Illegal(_) => {
                 Self::conflict("invalid_state", e.to_string())
             }
+            WriteError::Overloaded => Self::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "overloaded",
+                "rackd is taking in more jobs than it can store right now; retry in a second",
+            ),
             WriteError::Closed | WriteError::Database(_) => Self::unavailable(e),
         }
     }

@@ -39,6 +39,8 @@ pub fn router() -> OpenApiRouter<AppState> {
         (status = 413, description = "Body too large", body = ErrorBody),
         (status = 415, description = "Not `application/json`", body = ErrorBody),
         (status = 422, description = "Unknown or missing field, wrong type, location outside the layout", body = ErrorBody),
+        (status = 503, description = "`overloaded`: more jobs arrive than rackd can store now; retry after `Retry-After` seconds", body = ErrorBody,
+            headers(("Retry-After" = String, description = "Seconds to wait"))),
     ))]
 async fn create_job(State(app): State<AppState>, Json(req): Json<JobRequest>) -> Result<Response, ApiError> {
     let job = app.rules.check(req).map_err(|e| ApiError::invalid("invalid_job", e.0))?;
@@ -86,6 +88,8 @@ pub struct BatchResponse {
         (status = 413, description = "Body too large", body = ErrorBody),
         (status = 415, description = "Not `application/json`", body = ErrorBody),
         (status = 422, description = "A job is invalid (its index is named); nothing stored", body = ErrorBody),
+        (status = 503, description = "`overloaded`: more jobs arrive than rackd can store now; retry after `Retry-After` seconds", body = ErrorBody,
+            headers(("Retry-After" = String, description = "Seconds to wait"))),
     ))]
 async fn create_batch(
     State(app): State<AppState>,

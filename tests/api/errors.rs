@@ -132,3 +132,46 @@ fn arb_json() -> impl Strategy<Value = serde_json::Value> {
             json!({"kind": k, "from": from, "to": to, "priority": priority, "barcode": barcode, "reference": barcode})
         })
 }
+
+#[tokio::test]
+async fn a_full_intake_queue_is_refused_at_once_with_retry_after() {
+    // The writer's queue holds one request; another connection holds the database's write
+    // lock, so the writer is stuck on its first group and the queue fills.
+    let app = spawn_with(|c| {
+        c.intake.queue = 1;
+        c.intake.max_group = 1;
+        c.database.busy_timeout_ms = 3_000;
+    })
+    .await;
+    let blocker = rusqlite::Connection::open(&app.db).unwrap();
+    blocker.execute_batch("BEGIN IMMEDIATE").unwrap();
+    let first = tokio::spawn({
+        let (client, url) = (app.client.clone(), app.url("/api/v1/jobs"));
+        async move { client.post(url).json(&store("Q-1")).send().await.unwrap().status().as_u16() }
+    });
+    let started = std::time::Instant::now();
+    let mut refused = None;
+    for k in 2..50 {
+        let r = app
+            .client
+            .post(app.url("/api/v1/jobs"))
+            .json(&store(&format!("Q-{k}")))
+            .timeout(std::time::Duration::from_secs(10));
+        let pending = tokio::spawn(r.send());
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+        if pending.is_finished() {
+            let r = pending.await.unwrap().unwrap();
+            if r.status() == 503 {
+                refused = Some(r);
+                break;
+            }
+        }
+    }
+    let r = refused.expect("a request was refused while the queue was full");
+    assert!(started.elapsed() < std::time::Duration::from_secs(2), "refused at once, not after a timeout");
+    assert_eq!(r.headers()["retry-after"], "1");
+    let body: serde_json::Value = r.json().await.unwrap();
+    assert_eq!(body["error"]["code"], "overloaded", "{body}");
+    blocker.execute_batch("ROLLBACK").unwrap();
+    assert!([201, 503].contains(&first.await.unwrap()));
+}

@@ -160,6 +160,10 @@ pub enum WriteError {
     /// The writer has stopped (the server is shutting down).
     #[error("the job writer has stopped")]
     Closed,
+    /// The writer's queue is full: a submission is refused at once rather than left
+    /// waiting (`intake.queue`).
+    #[error("the job writer is overloaded")]
+    Overloaded,
     /// The database failed; nothing of the group was written.
     #[error("database error: {0}")]
     Database(Arc<rusqlite::Error>),
@@ -223,10 +227,15 @@ impl Writer {
         Ok((Writer { tx }, task))
     }
 
-    /// Stores `jobs` all or nothing, answering once they are on disk.
+    /// Stores `jobs` all or nothing, answering once they are on disk; refused at once with
+    /// [`WriteError::Overloaded`] while the writer's queue is full (the caller says "try
+    /// again" instead of holding a request for a queue that does not move).
     pub async fn submit(&self, jobs: Vec<NewJob>) -> Result<Vec<Outcome>, WriteError> {
         let (reply, answer) = oneshot::channel();
-        self.tx.send(Command::Submit { jobs, reply }).await.map_err(|_| WriteError::Closed)?;
+        self.tx.try_send(Command::Submit { jobs, reply }).map_err(|e| match e {
+            mpsc::error::TrySendError::Full(_) => WriteError::Overloaded,
+            mpsc::error::TrySendError::Closed(_) => WriteError::Closed,
+        })?;
         answer.await.map_err(|_| WriteError::Closed)?
     }
 
