@@ -77,3 +77,16 @@ async fn health_readiness_and_metrics() {
     assert!(init.contains(r#""validatorUrl": "none""#), "no spec sent to validator.swagger.io: {init}");
     assert!(!init.contains("swagger.io"), "{init}");
 }
+
+#[tokio::test]
+async fn the_page_has_a_favicon_from_the_binary() {
+    let app = spawn_app().await;
+    for path in ["/favicon.ico", "/favicon.svg"] {
+        let r = app.client.get(app.url(path)).send().await.unwrap();
+        assert_eq!(r.status(), 200, "{path}");
+        assert_eq!(r.headers()["content-type"], "image/svg+xml");
+        assert!(r.text().await.unwrap().starts_with("<svg"));
+    }
+    let page = app.client.get(app.url("/")).send().await.unwrap().text().await.unwrap();
+    assert!(page.contains(r#"<link rel="icon" href="/favicon.svg""#));
+}

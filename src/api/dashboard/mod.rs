@@ -17,6 +17,7 @@ use axum::routing::get;
 const HTML: &str = "text/html; charset=utf-8";
 const JS: &str = "text/javascript; charset=utf-8";
 const CSS: &str = "text/css; charset=utf-8";
+const SVG: &str = "image/svg+xml";
 
 /// Everything the page loads, by path.
 const FILES: &[(&str, &str, &str)] = &[
@@ -31,6 +32,9 @@ const FILES: &[(&str, &str, &str)] = &[
     ("/dashboard/devices.js", JS, include_str!("devices.js")),
     ("/dashboard/jobs.js", JS, include_str!("jobs.js")),
     ("/dashboard/alarms.js", JS, include_str!("alarms.js")),
+    // Browsers ask for /favicon.ico whatever the page says; an SVG answers both.
+    ("/favicon.svg", SVG, include_str!("favicon.svg")),
+    ("/favicon.ico", SVG, include_str!("favicon.svg")),
 ];
 
 /// Only this server's own files and WebSocket: data from the WMS (barcodes, references) is
