@@ -18,7 +18,7 @@ async fn main() -> ExitCode {
     match rackd::cli::run(cli).await {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("rackd: {e:#}");
+            eprintln!("rackd: {}", rackd::cli::describe(&e));
             ExitCode::FAILURE
         }
     }

@@ -186,6 +186,23 @@ pub fn say(line: impl std::fmt::Display) {
     }
 }
 
+/// An error and its causes on one line, each cause once: many errors already name their
+/// cause in their own words, and the chain would repeat it.
+pub fn describe(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
+}
+
 /// The URL `healthcheck` asks: a base URL gets `/healthz`; one with a path is taken as is.
 fn health_url(given: &str) -> String {
     match reqwest::Url::parse(given) {
@@ -196,6 +213,20 @@ fn health_url(given: &str) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn each_cause_is_said_once() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("the database does not answer: {0}")]
+        struct Outer(#[source] std::io::Error);
+        let io = std::io::Error::new(std::io::ErrorKind::PermissionDenied, "unable to open database file");
+        let e = anyhow::Error::new(Outer(io)).context("opening database data/rackd.db");
+        assert_eq!(
+            super::describe(&e),
+            "opening database data/rackd.db: the database does not answer: unable to open database file"
+        );
+        assert_eq!(format!("{e:#}").matches("unable to open").count(), 2, "what anyhow alone prints");
+    }
+
     #[test]
     fn healthcheck_takes_a_base_or_a_full_url() {
         assert_eq!(super::health_url("http://h:8080"), "http://h:8080/healthz");
