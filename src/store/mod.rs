@@ -27,6 +27,7 @@ pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
 pub async fn open(path: &Path, busy_timeout: Duration) -> Result<SqlitePool, sqlx::Error> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
+        writable(dir)?;
     }
     let options = SqliteConnectOptions::from_str("sqlite:")?
         .filename(path)
@@ -38,6 +39,36 @@ pub async fn open(path: &Path, busy_timeout: Duration) -> Result<SqlitePool, sql
     let pool = SqlitePoolOptions::new().max_connections(8).connect_with(options).await?;
     MIGRATOR.run(&pool).await?;
     Ok(pool)
+}
+
+/// Checks that rackd may create files in `dir` (SQLite needs the database's directory for
+/// its journal), so that a volume owned by another user is named with the fix instead of
+/// SQLite's "unable to open database file".
+fn writable(dir: &Path) -> std::io::Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let probe = dir.join(format!(".rackd-write-test-{}", std::process::id()));
+    match std::fs::OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(_) => std::fs::remove_file(&probe),
+        Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
+            let meta = std::fs::metadata(dir)?;
+            // /proc/self belongs to the process's effective user.
+            let me =
+                std::fs::metadata("/proc/self").map(|m| m.uid().to_string()).unwrap_or_else(|_| "?".into());
+            Err(std::io::Error::new(
+                e.kind(),
+                format!(
+                    "cannot write in {}: it belongs to uid {} (mode {:o}) and rackd runs as uid {me}; \
+                     give the directory to that uid (chown {me} {}) or mount one it can write \
+                     (the container runs as uid 10001)",
+                    dir.display(),
+                    meta.uid(),
+                    meta.mode() & 0o7777,
+                    dir.display()
+                ),
+            ))
+        }
+        Err(e) => Err(e),
+    }
 }
 
 /// Why the store is not ready.
