@@ -140,3 +140,35 @@ fn a_database_directory_rackd_cannot_write_is_named_with_the_fix() {
     assert!(err.contains(&format!("cannot write in {}", data.display())), "{err}");
     assert!(err.contains("rackd runs as uid") && err.contains("chown"), "{err}");
 }
+
+#[test]
+fn logs_to_a_pipe_carry_no_colour_and_the_format_comes_from_the_environment() {
+    // A PLC that accepts the connection and never answers: `plc read` logs its attempts.
+    let silent = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = silent.local_addr().unwrap().to_string();
+    let read =
+        ["plc", "--protocol", "modbus-tcp", "--address", &addr, "--timeout-ms", "50", "--retries", "0"];
+    let out = Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .args(read)
+        .args(["read", "4x0", "1"])
+        .env("RACKD_LOG", "debug")
+        .env("RACKD_LOG_FORMAT", "json")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    let json_lines: Vec<&str> = err.lines().filter(|l| l.starts_with('{')).collect();
+    assert!(!json_lines.is_empty(), "RACKD_LOG_FORMAT=json gives JSON lines: {err}");
+    for line in json_lines {
+        serde_json::from_str::<serde_json::Value>(line).unwrap_or_else(|e| panic!("{e}: {line}"));
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .args(read)
+        .args(["read", "4x0", "1"])
+        .env("RACKD_LOG", "debug")
+        .env_remove("NO_COLOR")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(text.contains("DEBUG") || text.contains("WARN"), "text logs: {text}");
+    assert!(!text.contains('\u{1b}'), "no ANSI escapes into a pipe: {text:?}");
+}
