@@ -63,6 +63,11 @@ pub struct CraneStatus {
     pub known: bool,
     /// The crane's heartbeat moves (false once it stalled for the configured time).
     pub heartbeat_ok: bool,
+    /// While the heartbeat counts as lost: when the crane's D200 last changed (or, if it
+    /// has not changed since rackd started watching, that start). Null while it moves.
+    #[serde(with = "time::serde::rfc3339::option")]
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub heartbeat_stalled_since: Option<OffsetDateTime>,
     /// Current action state (D203): 0 idle, 1..18 motion, 20/30/40 awaiting acknowledgement,
     /// 100 homing.
     pub action_state: u16,

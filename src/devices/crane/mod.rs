@@ -9,12 +9,16 @@
 //! - **Modes**: store = transfer from the inbound station into the rack, retrieve = transfer
 //!   from the rack to the outbound station, move = transfer rack to rack, travel = mode 1
 //!   with "from" zero. The location's position is the crane's side (1 near, 2 far).
-//! - **Hand-over**: only to an idle, clean crane (D203 = 0, D208 = 0, D223 = 0, no alarm),
-//!   heartbeat alive, link up, not paused. Words D8..D17 in one write, then STB := 1, wait
-//!   ACK = 1, STB := 0, wait ACK = 0, each wait bounded by `handshake_timeout_ms`. A
-//!   timeout or link failure withdraws the strobe (retried at every poll until it is down)
-//!   and leaves the job queued; if the crane took the data
-//!   after all, its D208 echo shows the task and rackd follows it (never sends it twice).
+//! - **Hand-over**: only to a strictly idle, clean crane (ACK D225 = 0, D203 = 0, D208 =
+//!   0, D223 = 0, no alarm; rackd's strobe down, no earlier hand-over pending), heartbeat
+//!   alive, link up, not paused. Words D8..D17 in one write, then STB := 1, wait ACK = 1,
+//!   STB := 0, wait ACK = 0, each wait bounded by `handshake_timeout_ms`. A step that fails
+//!   (timeout, link loss) does NOT lower the strobe at once (that would start a task a
+//!   crane latched): the hand-over stays pending and each poll carries it on by the table
+//!   in [`interrupted`]; without ACK the strobe is withdrawn after the timeout and the job
+//!   stays *possibly latched* (followed, not handed over again, no other task) until the
+//!   crane shows strictly idle a handshake timeout later; a task the crane latched is
+//!   followed and never sent twice.
 //! - **Acknowledgement**: see [`ack`]; the outcome is stored before D22 is written.
 //! - **Alarms**: see [`alarms`]. A business alarm with `auto_cancel` sends mode 3 through
 //!   the same handshake and moves the job to `cancelling`; when the crane reports 40 the job
@@ -33,17 +37,25 @@
 //!   its text, positions D220/D221, load D206, task D208, alarm code/text/class); each new
 //!   action state of the held task is logged, and the first one is the `running` cause in
 //!   the job's history.
-//! - **Recovery**: on start rackd reads both blocks; its own D0 and D22 are taken as
-//!   written, a strobe left at 1 by a crash is withdrawn, and a task the crane holds whose
-//!   number belongs to an unfinished job is followed (its pending completion is recorded and
-//!   acknowledged). Unfinished jobs past `queued` that the crane does not hold fail as
-//!   `lost`. A cancel under way for a business alarm is not remembered across a restart:
-//!   such a job ends `cancelled` rather than `failed`.
+//! - **Recovery**: on start, before anything may be dispatched, rackd reads both blocks;
+//!   its own D0 and D22 are taken as written, a task the crane holds (D208) whose number
+//!   belongs to an unfinished job is followed (its pending completion is recorded and
+//!   acknowledged), and an interrupted hand-over is rebuilt from D8..D17, D21, D225 and
+//!   D208 and finished by the same table ([`interrupted`]): STB=1 ACK=0 waits for the
+//!   crane's ACK as that job (then withdraws, possibly latched); STB=1 ACK=1 lowers the
+//!   strobe (the crane latched D8's task) and follows the job; STB=0 ACK=1 follows the
+//!   job while the crane starts it; mode 3 ends with the job `cancelling`. A strobe found
+//!   up for words that are no unfinished job of rackd's is left alone: nothing is
+//!   dispatched and `last_error` says so until a person clears D21. Unfinished jobs past
+//!   `queued` that the crane does not hold fail as `lost`. A cancel under way for a
+//!   business alarm is not remembered across a restart: such a job ends `cancelled`
+//!   rather than `failed`.
 
 pub mod ack;
 mod follow;
 mod handshake;
 pub mod heartbeat;
+mod interrupted;
 mod work;
 
 use std::sync::Arc;
@@ -107,8 +119,12 @@ pub struct Crane {
     ack_written: u16,
     link_ok: bool,
     view: Option<CraneView>,
-    /// rackd's strobe (D21) may still be 1 after a failed hand-over.
-    strobe_up: bool,
+    /// A hand-over not known to be over (see [`interrupted`]): no other until it is.
+    handing: Option<interrupted::Handing>,
+    /// Why no work may be handed over until a person clears rackd's strobe at the crane.
+    blocked: Option<String>,
+    /// Wall-clock time the crane's heartbeat (D200) last changed (or rackd began to watch).
+    heartbeat_moved: time::OffsetDateTime,
 }
 
 impl Crane {
@@ -143,7 +159,9 @@ impl Crane {
             ack_written: 0,
             link_ok: false,
             view: None,
-            strobe_up: false,
+            handing: None,
+            blocked: None,
+            heartbeat_moved: crate::domain::time::from_ms(crate::domain::time::now_ms()),
         })
     }
 
@@ -187,11 +205,14 @@ impl Crane {
         }
     }
 
-    /// New work only to a reachable, live, idle crane without alarm (the dispatcher offers
-    /// none while the crane is paused).
+    /// New work only to a reachable, live, strictly idle crane without alarm: rackd's
+    /// strobe down with no hand-over under way or unaccounted for, no completion being
+    /// acknowledged, and the crane's ACK, task echo, action state and D223 at 0 (the
+    /// dispatcher offers none while the crane is paused).
     fn may_dispatch(&self) -> bool {
         let idle = self.view.is_some_and(|v| v.is_idle());
-        self.status.get().online && self.current.is_none() && idle && self.ack_written == 0 && !self.strobe_up
+        let clear = self.handing.is_none() && self.blocked.is_none() && self.ack_written == 0;
+        self.status.get().online && self.current.is_none() && idle && clear
     }
 
     /// Word `n` of the block the WCS writes (D0..), in the protocol's addressing.
@@ -232,6 +253,7 @@ impl Crane {
     fn show_online(&mut self) {
         let lost = self.heartbeat.is_lost(Instant::now());
         let (id, link_ok) = (self.config.id.clone(), self.link_ok);
+        let stalled_since = lost.then_some(self.heartbeat_moved);
         self.status.update(|s| {
             let online = link_ok && !lost;
             if lost {
@@ -247,6 +269,7 @@ impl Crane {
             s.online = online;
             if let Some(c) = s.crane.as_mut() {
                 c.heartbeat_ok = !lost;
+                c.heartbeat_stalled_since = stalled_since;
             }
         });
     }
@@ -256,9 +279,11 @@ impl Crane {
         let alarm = (v.alarm != 0).then(|| alarms::lookup(v.alarm));
         self.status.update(|s| {
             let heartbeat_ok = s.crane.as_ref().is_some_and(|c| c.heartbeat_ok);
+            let heartbeat_stalled_since = s.crane.as_ref().and_then(|c| c.heartbeat_stalled_since);
             s.crane = Some(CraneStatus {
                 known: true,
                 heartbeat_ok,
+                heartbeat_stalled_since,
                 action_state: v.action,
                 action: registers::action_text(v.action).to_owned(),
                 travel_position: v.travel,
