@@ -72,8 +72,18 @@ fn travel() -> Value {
     json!({"kind": "travel", "to": cloc(1, 9, 4, 1)})
 }
 
+/// Cuts the hand-over at `cut`, with a crane that echoes the task words as it takes them,
+/// then with a slow one that shows them only as it starts the task, a step after it
+/// cleared ACK.
 async fn restart_at(cut: Cut) {
+    for late_start in [false, true] {
+        restart_once(cut, late_start).await;
+    }
+}
+
+async fn restart_once(cut: Cut, late_start: bool) {
     let (app, sim) = crane_app(TransportKind::Tcp, 20, |d| d.handshake_timeout_ms = 3000).await;
+    sim.set_late_start(late_start);
     let device = device_for(&sim, TransportKind::Tcp, |d| d.handshake_timeout_ms = 3000);
     wait_device(&app, "online", 5, |s| s["online"] == true).await;
     match cut {
@@ -94,7 +104,7 @@ async fn restart_at(cut: Cut) {
     until("cut", 5, || sim.link_cut()).await;
     match cut {
         Cut::Latched => until("latched", 5, || sim.word(225) == 1).await,
-        Cut::Started => until("started", 5, || sim.action() != 0).await,
+        Cut::Started => until("started", 5, || sim.word(208) == task).await,
         _ => {}
     }
     let (db, _dir) = app.stop().await;
@@ -106,6 +116,10 @@ async fn restart_at(cut: Cut) {
         Cut::StrobeDown => (0, 1),
     };
     assert_eq!((stb, ack), want, "{cut:?}: STB and ACK when rackd stopped");
+    if matches!(cut, Cut::Latched | Cut::StrobeDown) {
+        let echo = if late_start { 0 } else { task };
+        assert_eq!(sim.word(208), echo, "{cut:?}, late start {late_start}: D208");
+    }
     assert_eq!(sim.word(8), task, "{cut:?}: D8 holds the first task");
     sim.set_link(true);
     let app = spawn_on(db, |c| with_crane(c, device)).await;
@@ -213,5 +227,15 @@ async fn a_strobe_up_for_a_task_that_is_no_job_blocks_work_until_a_person_clears
     assert_eq!(job["state"], "completed", "{job}");
     assert_eq!((sim.received(999), sim.received(task_id_for(id))), (1, 1));
     assert_eq!(sim.violations(), 0, "{:?}", sim.violation_log());
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_crane_that_shows_its_task_only_a_step_after_the_hand_over_gets_one_task_at_a_time() {
+    let (app, sim) = crane_app(TransportKind::Udp, 30, |_| {}).await;
+    sim.set_late_start(true);
+    let first = submit(&app, transfer(), "first").await;
+    let second = submit(&app, travel(), "second").await;
+    assert_one_after_the_other(&app, &sim, first, second).await;
     app.stop().await;
 }

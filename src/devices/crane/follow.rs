@@ -50,8 +50,13 @@ impl Crane {
                 // Handed over, or possibly latched: followed until the hand-over is over.
                 return Ok(());
             }
+            let showing = c.latched_at.is_some_and(|at| at.elapsed() < self.handshake_timeout());
+            if !c.seen && showing {
+                // Latched; the crane shows it once it starts (a step after ACK = 0, say).
+                return Ok(());
+            }
             self.current = None;
-            if c.seen && !job.state.is_terminal() {
+            if (c.seen || c.latched_at.is_some()) && !job.state.is_terminal() {
                 let text = format!("the crane no longer holds task {} (it shows {})", c.task.number, v.task);
                 let lost = Failure { kind: FailureKind::Lost, code: None, text: text.clone() };
                 self.record(job.id, Reported::Failed(lost), text).await?;
@@ -107,6 +112,7 @@ impl Crane {
             job: job.id,
             task,
             seen: true,
+            latched_at: None,
             cancel_sent: job.state == JobState::Cancelling,
             alarm: None,
             action: 0,

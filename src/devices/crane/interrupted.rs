@@ -122,7 +122,7 @@ impl Crane {
             );
             return self.record(h.job, Reported::Cancelling, cause).await;
         }
-        c.seen = true;
+        c.latched_at = Some(Instant::now());
         let cause = format!(
             "the crane latched task {} (mode {}); hand-over finished after an interruption",
             h.task.number, h.task.mode as u16
@@ -181,6 +181,7 @@ impl Crane {
                         job: job.id,
                         task,
                         seen: false,
+                        latched_at: None,
                         cancel_sent: job.state == JobState::Cancelling,
                         alarm: None,
                         action: 0,

@@ -96,6 +96,10 @@ struct Current {
     task: registers::Task,
     /// The crane was seen holding it (its D208 showed the number).
     seen: bool,
+    /// When the crane was known to have latched it (ACK = 1 for its words): a crane may
+    /// show the task in D208 only as it starts it, so until a handshake timeout later an
+    /// empty D208 is not taken for a lost task.
+    latched_at: Option<Instant>,
     /// A cancel (mode 3) was handed over.
     cancel_sent: bool,
     /// The business alarm that cancelled it: the job fails with this at 40.

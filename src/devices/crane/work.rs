@@ -23,11 +23,18 @@ impl Crane {
             }
         };
         // From the first write on the crane may take the task: follow it whatever happens.
-        self.current =
-            Some(Current { job: job.id, task, seen: false, cancel_sent: false, alarm: None, action: 0 });
+        self.current = Some(Current {
+            job: job.id,
+            task,
+            seen: false,
+            latched_at: None,
+            cancel_sent: false,
+            alarm: None,
+            action: 0,
+        });
         self.hand_over(job.id, &task).await?;
         if let Some(c) = self.current.as_mut() {
-            c.seen = true;
+            c.latched_at = Some(tokio::time::Instant::now());
         }
         let cause = format!("handed to the crane as task {} (mode {})", task.number, task.mode as u16);
         self.record(job.id, Reported::Taken, cause).await

@@ -36,7 +36,8 @@ fn set(bank: &mut Bank, n: u32, v: u16) {
 /// What the crane took at hand-over step 2, applied at step 4.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Taken {
-    Task,
+    /// A task, with its words D8..D17 as taken.
+    Task([u16; 10]),
     Cancel,
     Refused,
 }
@@ -72,6 +73,12 @@ pub struct Engine {
     pub handshake_on: bool,
     /// Where its side of the hand-over stops, if held.
     pub hold: Option<Hold>,
+    /// A slow crane program: it shows the task words (D208..D217) only when it starts the
+    /// task, and starts one `step` after it cleared ACK (step 4), so for that step its
+    /// block shows nothing of the task it holds. The spec leaves both moments open.
+    pub late_start: bool,
+    /// A task taken and ACK cleared, to start at that instant (`late_start`).
+    starting: Option<([u16; 10], Instant)>,
     /// The crane's watchdog on the WCS heartbeat (D0): alarm 7020 when D0 stays the same
     /// this long; cleared by the crane once D0 moves again. None: no watchdog.
     pub wcs_timeout: Option<Duration>,
@@ -103,6 +110,8 @@ impl Engine {
             heartbeat_on: true,
             handshake_on: true,
             hold: None,
+            late_start: false,
+            starting: None,
             wcs_timeout: None,
             wcs_seen: None,
             wcs_changed: Instant::now(),
@@ -131,6 +140,13 @@ impl Engine {
         self.watchdog(bank, now);
         self.check_interface(bank);
         self.handshake(bank, now);
+        if let Some((words, at)) = self.starting
+            && now >= at
+        {
+            self.starting = None;
+            echo(bank, &words);
+            self.start(bank, now);
+        }
         self.motion(bank, now);
         if d(bank, 223) != 0 && d(bank, 22) != 0 {
             self.acknowledged(bank, now);
@@ -161,6 +177,7 @@ impl Engine {
     fn busy(&self, bank: &Bank) -> bool {
         self.motion.is_some()
             || self.taken.is_some()
+            || self.starting.is_some()
             || d(bank, 223) != 0
             || d(bank, 208) != 0
             || self.homing_until.is_some()
@@ -199,7 +216,10 @@ impl Engine {
         }
         match (d(bank, 21), d(bank, 225)) {
             (1, 0) if self.hold != Some(Hold::BeforeAck) => {
-                let words: Vec<u16> = (8..18).map(|n| d(bank, n)).collect();
+                let mut words = [0u16; 10];
+                for (k, w) in words.iter_mut().enumerate() {
+                    *w = d(bank, 8 + k as u32);
+                }
                 let taken = if words[1] == 3 {
                     self.cancels += 1;
                     Taken::Cancel
@@ -208,10 +228,10 @@ impl Engine {
                     Taken::Refused
                 } else {
                     *self.received.entry(words[0]).or_default() += 1;
-                    for (k, w) in words.iter().enumerate() {
-                        set(bank, 208 + k as u32, *w);
+                    if !self.late_start {
+                        echo(bank, &words);
                     }
-                    Taken::Task
+                    Taken::Task(words)
                 };
                 self.taken = Some(taken);
                 set(bank, 225, 1);
@@ -219,7 +239,13 @@ impl Engine {
             (0, 1) if self.hold != Some(Hold::BeforeStart) => {
                 set(bank, 225, 0);
                 match self.taken.take() {
-                    Some(Taken::Task) => self.start(bank, now),
+                    Some(Taken::Task(words)) if self.late_start => {
+                        self.starting = Some((words, now + self.step))
+                    }
+                    Some(Taken::Task(words)) => {
+                        echo(bank, &words);
+                        self.start(bank, now);
+                    }
                     Some(Taken::Cancel) => self.cancel(bank, now),
                     _ => {}
                 }
@@ -301,6 +327,13 @@ impl Engine {
         set(bank, 203, 30);
         set(bank, 223, 30);
         true
+    }
+}
+
+/// Shows task words in D208..D217.
+fn echo(bank: &mut Bank, words: &[u16; 10]) {
+    for (k, w) in words.iter().enumerate() {
+        set(bank, 208 + k as u32, *w);
     }
 }
 

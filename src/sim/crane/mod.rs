@@ -166,6 +166,12 @@ impl CraneSim {
         self.engine.lock().unwrap_or_else(|p| p.into_inner()).hold = hold;
     }
 
+    /// A slow crane program: task words shown in D208..D217 only when the task starts,
+    /// one step after ACK was cleared (step 4), instead of as soon as they are taken.
+    pub fn set_late_start(&self, on: bool) {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).late_start = on;
+    }
+
     /// Takes the link down (as `link off`) right after the next write of the WCS that
     /// leaves D register `n` at `value`; that write is carried out and answered, nothing
     /// after it until [`CraneSim::set_link`] brings the link back.
