@@ -82,7 +82,8 @@ impl Crane {
                 let down = *h.withdrawn.get_or_insert(now);
                 let settled = now.duration_since(down) >= timeout;
                 if settled && (h.task.mode == Mode::Cancel || v.is_idle()) {
-                    return Ok(self.not_taken(h));
+                    self.not_taken(h);
+                    return Ok(());
                 }
                 self.handing = Some(h);
             }

@@ -27,14 +27,23 @@
 //!   device status; a crane with an alarm gets no new work.
 //! - **Cancel through the API**: a queued job is cancelled at once; the job the crane holds
 //!   gets mode 3 (job `cancelling`), and `cancelled` once 40 is acknowledged. A crane that
-//!   completes before it sees the cancel completes the job (cancelling → completed).
+//!   completes before it sees the cancel completes the job (cancelling → completed). A job
+//!   whose hand-over is pending (possibly latched) is refused as not taken until the
+//!   hand-over is over: only then is it known whether the crane holds it.
+//! - **When the crane shows its task**: the spec does not say whether D208 echoes the task
+//!   at step 2 or only when it starts. rackd takes either: a task the crane latched (it
+//!   answered ACK = 1) is held without D208 for up to a handshake timeout after the
+//!   hand-over before it counts as lost, and no other task is handed over meanwhile.
 //! - **Heartbeat**: see [`heartbeat`]. While lost the device is offline (no new work) and
 //!   the status says so; a task under way is not failed, since the crane may still be
 //!   running it; rackd follows it again once the heartbeat moves.
 //! - **Words left alone**: D20 (execute action) stays 0, since the spec gives it no role in
 //!   the hand-over; D201, D202 and D224 are read but not interpreted.
-//! - **Status**: the device status carries a `crane` object (heartbeat, action state and
-//!   its text, positions D220/D221, load D206, task D208, alarm code/text/class); each new
+//! - **Status**: the device status carries a `crane` object (heartbeat, and while it is
+//!   lost `heartbeat_stalled_since`, the wall-clock time D200 last changed; action state and
+//!   its text, positions D220/D221, load D206, task D208, alarm code/text/class). The
+//!   crane's block is read and shown at every poll that the link answers, heartbeat or
+//!   not, so an alarm such as 7020 reaches the status while the device is offline. Each new
 //!   action state of the held task is logged, and the first one is the `running` cause in
 //!   the job's history.
 //! - **Recovery**: on start, before anything may be dispatched, rackd reads both blocks;

@@ -18,7 +18,8 @@
 //! lose the next request), `link off|on` (ignore every request), `status` (with the
 //! violations counted). For tests, [`CraneSim::cut_link_after`] takes the link down right
 //! after a chosen write of the WCS (its reply still goes out), which stops a WCS between
-//! two steps of the hand-over as a crash would.
+//! two steps of the hand-over as a crash would, and [`CraneSim::set_late_start`] makes a
+//! slow crane program that shows a task only as it starts it, a step after clearing ACK.
 //! With `wcs_timeout` set the crane watches rackd's heartbeat too and raises 7020 when D0
 //! stalls; it clears 7020 itself once D0 moves again (a simplification: a real crane may
 //! want a reset).
