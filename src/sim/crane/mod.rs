@@ -332,3 +332,24 @@ async fn run_ticks(bank: SharedBank, engine: Arc<Mutex<Engine>>, kick: Arc<Notif
         engine.lock().unwrap_or_else(|p| p.into_inner()).tick(&mut bank, tokio::time::Instant::now());
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn text_commands_hold_the_hand_over_and_status_counts_violations() {
+        let sim = CraneSim::start("127.0.0.1:0", CraneSimOptions::default()).await.unwrap();
+        let hold = || sim.engine.lock().unwrap().hold;
+        assert_eq!(sim.command("hold ack").unwrap(), "hold ack");
+        assert_eq!(hold(), Some(Hold::BeforeAck));
+        assert_eq!(sim.command("hold start").unwrap(), "hold start");
+        assert_eq!(hold(), Some(Hold::BeforeStart));
+        assert_eq!(sim.command("hold off").unwrap(), "hold off");
+        assert_eq!(hold(), None);
+        assert!(matches!(sim.command("hold later"), Err(CommandError::Unknown(_))));
+        let status = sim.command("status").unwrap();
+        assert!(status.ends_with("stb 0 ack 0 violations 0"), "{status}");
+        sim.shutdown().await;
+    }
+}
