@@ -73,8 +73,8 @@ pub struct CraneStatus {
     pub known: bool,
     /// The crane's heartbeat moves (false once it stalled for the configured time).
     pub heartbeat_ok: bool,
-    /// When the crane's heartbeat (D200) last changed, while it counts as stalled; null while
-    /// it moves.
+    /// While the heartbeat counts as lost: when the crane's D200 last changed (or, if it
+    /// has not changed since rackd started watching, that start). Null while it moves.
     #[serde(with = "time::serde::rfc3339::option")]
     #[schema(value_type = Option<String>, format = DateTime)]
     pub heartbeat_stalled_since: Option<OffsetDateTime>,

@@ -69,9 +69,12 @@ impl CraneView {
         })
     }
 
-    /// Idle and clean: no task, nothing to acknowledge, not moving, no alarm.
+    /// Idle and clean, as far as the crane's own block tells: no hand-over answered
+    /// (ACK D225 = 0), no task (D208 = 0), nothing to acknowledge (D223 = 0), not moving
+    /// nor homing (D203 = 0), no alarm. rackd's side (its strobe D21 down, no hand-over of
+    /// its own under way) is the adapter's to check.
     pub fn is_idle(&self) -> bool {
-        self.task == 0 && self.completion == 0 && self.action == 0 && self.alarm == 0
+        self.ack == 0 && self.task == 0 && self.completion == 0 && self.action == 0 && self.alarm == 0
     }
 }
 
@@ -85,6 +88,18 @@ pub enum Mode {
     Transfer = 2,
     /// Cancel the task.
     Cancel = 3,
+}
+
+impl Mode {
+    /// The mode a D9 word names, if any.
+    pub fn of(word: u16) -> Option<Mode> {
+        match word {
+            1 => Some(Mode::Travel),
+            2 => Some(Mode::Transfer),
+            3 => Some(Mode::Cancel),
+            _ => None,
+        }
+    }
 }
 
 /// A crane coordinate: row (1 left, 2 right), bay (0 = station), level, side (1 near, 2 far).
@@ -121,6 +136,15 @@ impl Task {
         w[2..6].copy_from_slice(&self.from);
         w[6..10].copy_from_slice(&self.to);
         w
+    }
+
+    /// The task the ten words D8..D17 hold (as found in the PLC after a restart); None if
+    /// fewer words, no task number or no known mode.
+    pub fn from_words(w: &[u16]) -> Option<Task> {
+        let w: &[u16; TASK_WORDS] = w.get(..TASK_WORDS)?.try_into().ok()?;
+        let mode = Mode::of(w[1])?;
+        let coord = |k: usize| [w[k], w[k + 1], w[k + 2], w[k + 3]];
+        (w[0] != 0).then(|| Task { number: w[0], mode, from: coord(2), to: coord(6) })
     }
 
     /// The cancel (mode 3) of this task: same number and coordinates.
@@ -196,6 +220,11 @@ mod tests {
         let t = task_for(&JobSpec::Travel { to: loc(1, 4, 2, 1) }, 10, &ST).unwrap();
         assert_eq!(t.words(), [10, 1, 0, 0, 0, 0, 1, 4, 2, 1]);
         assert_eq!(t.cancel().words()[1], 3);
+        assert_eq!(Task::from_words(&t.words()), Some(t));
+        assert_eq!(Task::from_words(&t.cancel().words()), Some(t.cancel()));
+        assert_eq!(Task::from_words(&[0, 2, 0, 0, 0, 0, 0, 0, 0, 0]), None, "no task number");
+        assert_eq!(Task::from_words(&[5, 4, 0, 0, 0, 0, 0, 0, 0, 0]), None, "no such mode");
+        assert_eq!(Task::from_words(&[5, 2]), None, "too few words");
         assert!(task_for(&JobSpec::Clear { location: loc(1, 1, 1, 1) }, 1, &ST).is_err());
     }
 
@@ -217,5 +246,8 @@ mod tests {
         assert!(!v.is_idle());
         assert!(CraneView::parse(&w[..39]).is_none());
         assert!(CraneView::parse(&[0; 40]).unwrap().is_idle());
+        let mut w = [0u16; 40];
+        w[25] = 1;
+        assert!(!CraneView::parse(&w).unwrap().is_idle(), "a crane that answered ACK holds a hand-over");
     }
 }

@@ -122,3 +122,43 @@ async fn the_crane_sees_rackds_heartbeat_and_raises_7020_only_while_rackd_is_awa
     assert_eq!(sim.word(205), 0);
     app.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stalled_heartbeat_shows_since_when_and_the_crane_block_stays_shown() {
+    let (app, sim) = crane_app(TransportKind::Tcp, 10, |_| {}).await;
+    let healthy =
+        wait_device(&app, "online", 5, |s| s["online"] == true && s["crane"]["heartbeat_ok"] == true).await;
+    assert!(healthy["crane"]["heartbeat_stalled_since"].is_null(), "{healthy}");
+    let before = time::OffsetDateTime::now_utc();
+    sim.set_heartbeat(false);
+    // The crane's own watchdog would raise 7020 too; the link still answers.
+    sim.raise_alarm(7020);
+    let lost = wait_device(&app, "lost with the alarm shown", 5, |s| {
+        s["crane"]["heartbeat_ok"] == false && s["crane"]["alarm_code"] == 7020
+    })
+    .await;
+    let after = time::OffsetDateTime::now_utc();
+    assert_eq!(lost["online"], false, "{lost}");
+    assert_eq!(lost["crane"]["known"], true, "{lost}");
+    assert_eq!(lost["crane"]["alarm_class"], "hardware", "{lost}");
+    let since = lost["crane"]["heartbeat_stalled_since"].clone();
+    let at = time::OffsetDateTime::parse(
+        since.as_str().unwrap_or(""),
+        &time::format_description::well_known::Rfc3339,
+    )
+    .unwrap_or_else(|e| panic!("{since}: {e}"));
+    // D200 last moved shortly before it was stopped (rackd polls every 20 ms).
+    assert!(at <= after && at >= before - Duration::from_secs(1), "{at} not near {before}");
+    // The stall time stays put, poll after poll.
+    helpers::wait_for_more("polls of the stalled crane", POLLS, 5, || sim.requests_seen()).await;
+    let (_, still) = app.get("/api/v1/devices/crane1").await;
+    assert_eq!(still["crane"]["heartbeat_stalled_since"], since, "{still}");
+    assert_eq!(still["crane"]["alarm_code"], 7020, "{still}");
+    sim.clear_alarm();
+    sim.set_heartbeat(true);
+    let back =
+        wait_device(&app, "back", 5, |s| s["online"] == true && s["crane"]["heartbeat_ok"] == true).await;
+    assert!(back["crane"]["heartbeat_stalled_since"].is_null(), "{back}");
+    assert!(back["crane"]["alarm_code"].is_null(), "{back}");
+    app.stop().await;
+}

@@ -5,6 +5,7 @@
 mod helpers;
 
 mod alarms;
+mod handover;
 mod heartbeat;
 mod jobs;
 mod pause_restart;

@@ -75,3 +75,37 @@ async fn a_crash_mid_run_loses_and_repeats_nothing() {
     assert_eq!(sim.inventory(), model.boxes);
     assert_eq!(sim.violations(), 0);
 }
+
+/// rackd wrote a task into a slot (the body while the id is 0, then the id) and stopped
+/// before the id write's reply came back, so the job is still `queued`: on restart the slot
+/// is found to hold the job's task, the job follows the slot, and the PLC gets it once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_slot_written_just_before_a_stop_is_found_on_restart_and_not_written_again() {
+    use rackd::domain::{JobSpec, Location};
+
+    let sim = rackd::sim::shelf::ShelfSim::start("127.0.0.1:0", crate::sim(50)).await.unwrap();
+    let device = device_for(&sim, |_| {});
+    let app = spawn_with(|c| c.devices = vec![device.clone().into()]).await;
+    let (status, _) = app.post("/api/v1/devices/shelf1/pause", &json!({})).await;
+    assert_eq!(status, 200);
+    let (status, job) = app.post("/api/v1/jobs", &store("cut")).await;
+    assert_eq!(status, 201, "{job}");
+    let id = job["id"].as_i64().unwrap();
+    let (db, _dir) = app.stop().await;
+    // What rackd writes, in its order: the body while the id is 0, then the id alone.
+    let plc = rackd::protocols::link::connect(&device.link).await.unwrap();
+    let at = plc.parse_address(device.slot_base()).unwrap();
+    let spec = JobSpec::Store { to: Location { aisle: 1, row: 1, bay: 2, level: 3, position: 1 } };
+    let priority = job["priority"].as_u64().unwrap() as u8;
+    let body = rackd::wire::slot::encode_body(&spec, priority, Some("BOX-1")).unwrap();
+    plc.write_words(&plc.word_address(&at, 1), &body).await.unwrap();
+    let task = rackd::wire::task_id_for(id);
+    plc.write_words(&at, &[task]).await.unwrap();
+    assert_eq!(sim.received(task), 1, "the PLC took the task");
+
+    let app = spawn_on(db, |c| c.devices = vec![device.into()]).await;
+    let done = wait_ended(&app, 1, 10).await;
+    crate::assert_each_completed_once(&app, &sim, &done).await;
+    assert_eq!(sim.violations(), 0);
+    app.stop().await;
+}

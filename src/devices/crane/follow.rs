@@ -14,18 +14,19 @@ impl Crane {
     /// One poll: read the crane's block, step the heartbeat, follow the task, acknowledge
     /// a recorded completion, react to alarms.
     pub(super) async fn poll(&mut self) -> Result<(), CraneError> {
-        if self.strobe_up {
-            self.withdraw_strobe().await;
-        }
         let words = self.read(&self.crane.clone(), BLOCK_WORDS).await?;
         let view = CraneView::parse(&words).ok_or(PlcError::Malformed("short crane block"))?;
         let now = Instant::now();
+        if self.view.is_none_or(|v| v.heartbeat != view.heartbeat) {
+            self.heartbeat_moved = wall_now();
+        }
         if let Some(word) = self.heartbeat.observe(view.heartbeat, now) {
             self.write(&self.wcs_word(wcs::HEARTBEAT), &[word]).await?;
             self.heartbeat.wrote(word, now);
         }
         self.view = Some(view);
         self.show(&view);
+        self.advance_handing(&view).await?;
         self.follow(&view).await?;
         if let Some(word) = self.ack.next_word(view.completion, self.ack_written) {
             self.write(&self.wcs_word(wcs::ACK), &[word]).await?;
@@ -45,8 +46,17 @@ impl Crane {
             return Ok(());
         };
         if v.task != c.task.number {
+            if self.handing.as_ref().is_some_and(|h| h.job == c.job) {
+                // Handed over, or possibly latched: followed until the hand-over is over.
+                return Ok(());
+            }
+            let showing = c.latched_at.is_some_and(|at| at.elapsed() < self.handshake_timeout());
+            if !c.seen && showing {
+                // Latched; the crane shows it once it starts (a step after ACK = 0, say).
+                return Ok(());
+            }
             self.current = None;
-            if c.seen && !job.state.is_terminal() {
+            if (c.seen || c.latched_at.is_some()) && !job.state.is_terminal() {
                 let text = format!("the crane no longer holds task {} (it shows {})", c.task.number, v.task);
                 let lost = Failure { kind: FailureKind::Lost, code: None, text: text.clone() };
                 self.record(job.id, Reported::Failed(lost), text).await?;
@@ -102,6 +112,7 @@ impl Crane {
             job: job.id,
             task,
             seen: true,
+            latched_at: None,
             cancel_sent: job.state == JobState::Cancelling,
             alarm: None,
             action: 0,
@@ -109,8 +120,9 @@ impl Crane {
         Ok(())
     }
 
-    /// On start: read both blocks, take rackd's own words as found, withdraw a strobe a
-    /// crash left up, follow the crane's task if it is ours, fail the rest as `lost`.
+    /// On start: read both blocks, take rackd's own words as found, follow the crane's
+    /// task if it is ours, carry on an interrupted hand-over ([`Crane::reconstruct`]), fail
+    /// the rest as `lost`.
     pub(super) async fn recover(&mut self) -> Result<(), CraneError> {
         let mine = self.read(&self.wcs.clone(), BLOCK_WORDS).await?;
         let words = self.read(&self.crane.clone(), BLOCK_WORDS).await?;
@@ -118,15 +130,13 @@ impl Crane {
         let word = |k: u32| mine.get(k as usize).copied().unwrap_or(0);
         self.heartbeat.found(word(wcs::HEARTBEAT));
         self.ack_written = word(wcs::ACK);
-        if word(wcs::STB) != 0 {
-            tracing::warn!(device = %self.config.id, "a hand-over was interrupted; withdrawing the strobe");
-            self.strobe_up = true;
-            self.withdraw_strobe().await;
-        }
         self.current = None;
+        self.handing = None;
+        self.blocked = None;
         if view.task != 0 {
             self.adopt(view.task).await?;
         }
+        self.reconstruct(&mine, &view).await?;
         let unfinished = self.port.unfinished();
         let held = self.current.as_ref().map(|c| c.job);
         for job in unfinished.iter().filter(|j| j.state != JobState::Queued && Some(j.id) != held) {
@@ -138,7 +148,12 @@ impl Crane {
             let lost = Failure { kind: FailureKind::Lost, code: None, text: text.clone() };
             self.record(job.id, Reported::Failed(lost), text).await?;
         }
-        tracing::info!(device = %self.config.id, task = view.task, "crane recovered");
+        tracing::info!(device = %self.config.id, task = view.task, stb = word(wcs::STB), ack = view.ack, "crane recovered");
         self.poll().await
     }
+}
+
+/// The wall-clock time now.
+fn wall_now() -> time::OffsetDateTime {
+    crate::domain::time::from_ms(crate::domain::time::now_ms())
 }

@@ -1,10 +1,12 @@
 //! The STB/ACK 4-step hand-over (D21 written by rackd, D225 by the crane), each wait
-//! bounded by the configured timeout.
+//! bounded by the configured timeout. A hand-over that stops half-way is not undone here:
+//! it stays [`Handing`] and [`super::interrupted`] carries it on at each poll.
 
 use std::time::Duration;
 
 use tokio::time::Instant;
 
+use super::interrupted::Handing;
 use super::{Crane, CraneError};
 use crate::protocols::PlcError;
 use crate::wire::registers::{Task, wcs};
@@ -16,6 +18,12 @@ pub enum HandshakeError {
     /// else's, or a crane that did not finish the last one).
     #[error("the crane's ACK (D225) is already 1; not handing over")]
     AckStuck,
+    /// An earlier hand-over has not run to its end: no second one meanwhile.
+    #[error("the hand-over of task {task} has not run to its end; not handing over another")]
+    Pending {
+        /// The task number of the earlier hand-over.
+        task: u16,
+    },
     /// The crane did not reach the expected ACK in time at `step` (2: ACK = 1, 4: ACK = 0).
     #[error("hand-over step {step}: ACK did not become {want} within {waited:?}")]
     Timeout {
@@ -29,22 +37,26 @@ pub enum HandshakeError {
 }
 
 impl Crane {
-    /// Hands `task` over: task words, STB := 1, ACK = 1, STB := 0, ACK = 0. Whatever fails,
-    /// the strobe is left at 0 when the link allows.
-    pub(super) async fn hand_over(&mut self, task: &Task) -> Result<(), CraneError> {
+    /// Hands `task` of `job` over: task words, STB := 1, ACK = 1, STB := 0, ACK = 0.
+    /// Should a step fail, the hand-over stays pending (the strobe is NOT lowered here:
+    /// lowering it tells a crane that latched the task to start it) and each poll carries
+    /// it on ([`Crane::advance_handing`]).
+    pub(super) async fn hand_over(&mut self, job: i64, task: &Task) -> Result<(), CraneError> {
+        if let Some(h) = &self.handing {
+            return Err(HandshakeError::Pending { task: h.task.number }.into());
+        }
         let ack_at = self.crane_word(25);
         if self.read(&ack_at, 1).await?.first().copied().unwrap_or(0) != 0 {
             return Err(HandshakeError::AckStuck.into());
         }
         let task_at = self.wcs_word(wcs::TASK);
+        // The crane takes nothing before the strobe: a failed write of the words is harmless.
         self.write(&task_at, &task.words()).await?;
         // From here the strobe may be up (a write whose reply was lost still happened).
-        self.strobe_up = true;
-        let result = self.strobe().await;
-        if result.is_err() {
-            self.withdraw_strobe().await;
-        }
-        result
+        self.handing = Some(Handing::new(job, *task, Instant::now()));
+        self.strobe().await?;
+        self.handing = None;
+        Ok(())
     }
 
     /// Steps 1 to 4 once the task words are written.
@@ -52,23 +64,16 @@ impl Crane {
         let stb = self.wcs_word(wcs::STB);
         self.write(&stb, &[1]).await?;
         self.wait_ack(1, 2).await?;
-        self.write(&stb, &[0]).await?;
-        self.strobe_up = false;
-        self.wait_ack(0, 4).await
-    }
-
-    /// Lowers a strobe a failed hand-over may have left up; if the link fails, the next
-    /// poll tries again before anything else. Should the crane have taken the data, it
-    /// starts the task now, and its D208 echo leads rackd to follow it.
-    pub(super) async fn withdraw_strobe(&mut self) {
-        if self.write(&self.wcs_word(wcs::STB), &[0]).await.is_ok() {
-            self.strobe_up = false;
+        if let Some(h) = self.handing.as_mut() {
+            h.latched = true;
         }
+        self.write(&stb, &[0]).await?;
+        self.wait_ack(0, 4).await
     }
 
     /// Polls D225 until it equals `want`, within the handshake timeout.
     async fn wait_ack(&mut self, want: u16, step: u8) -> Result<(), CraneError> {
-        let timeout = Duration::from_millis(self.config.handshake_timeout_ms);
+        let timeout = self.handshake_timeout();
         let pause = self.config.poll().min(Duration::from_millis(10));
         let start = Instant::now();
         let ack_at = self.crane_word(25);
@@ -83,5 +88,10 @@ impl Crane {
             }
             tokio::time::sleep(pause).await;
         }
+    }
+
+    /// How long the crane has for each reaction of the hand-over.
+    pub(super) fn handshake_timeout(&self) -> Duration {
+        Duration::from_millis(self.config.handshake_timeout_ms)
     }
 }

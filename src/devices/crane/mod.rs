@@ -9,12 +9,16 @@
 //! - **Modes**: store = transfer from the inbound station into the rack, retrieve = transfer
 //!   from the rack to the outbound station, move = transfer rack to rack, travel = mode 1
 //!   with "from" zero. The location's position is the crane's side (1 near, 2 far).
-//! - **Hand-over**: only to an idle, clean crane (D203 = 0, D208 = 0, D223 = 0, no alarm),
-//!   heartbeat alive, link up, not paused. Words D8..D17 in one write, then STB := 1, wait
-//!   ACK = 1, STB := 0, wait ACK = 0, each wait bounded by `handshake_timeout_ms`. A
-//!   timeout or link failure withdraws the strobe (retried at every poll until it is down)
-//!   and leaves the job queued; if the crane took the data
-//!   after all, its D208 echo shows the task and rackd follows it (never sends it twice).
+//! - **Hand-over**: only to a strictly idle, clean crane (ACK D225 = 0, D203 = 0, D208 =
+//!   0, D223 = 0, no alarm; rackd's strobe down, no earlier hand-over pending), heartbeat
+//!   alive, link up, not paused. Words D8..D17 in one write, then STB := 1, wait ACK = 1,
+//!   STB := 0, wait ACK = 0, each wait bounded by `handshake_timeout_ms`. A step that fails
+//!   (timeout, link loss) does NOT lower the strobe at once (that would start a task a
+//!   crane latched): the hand-over stays pending and each poll carries it on by the table
+//!   in [`interrupted`]; without ACK the strobe is withdrawn after the timeout and the job
+//!   stays *possibly latched* (followed, not handed over again, no other task) until the
+//!   crane shows strictly idle a handshake timeout later; a task the crane latched is
+//!   followed and never sent twice.
 //! - **Acknowledgement**: see [`ack`]; the outcome is stored before D22 is written.
 //! - **Alarms**: see [`alarms`]. A business alarm with `auto_cancel` sends mode 3 through
 //!   the same handshake and moves the job to `cancelling`; when the crane reports 40 the job
@@ -23,27 +27,44 @@
 //!   device status; a crane with an alarm gets no new work.
 //! - **Cancel through the API**: a queued job is cancelled at once; the job the crane holds
 //!   gets mode 3 (job `cancelling`), and `cancelled` once 40 is acknowledged. A crane that
-//!   completes before it sees the cancel completes the job (cancelling → completed).
+//!   completes before it sees the cancel completes the job (cancelling → completed). A job
+//!   whose hand-over is pending (possibly latched) is refused as not taken until the
+//!   hand-over is over: only then is it known whether the crane holds it.
+//! - **When the crane shows its task**: the spec does not say whether D208 echoes the task
+//!   at step 2 or only when it starts. rackd takes either: a task the crane latched (it
+//!   answered ACK = 1) is held without D208 for up to a handshake timeout after the
+//!   hand-over before it counts as lost, and no other task is handed over meanwhile.
 //! - **Heartbeat**: see [`heartbeat`]. While lost the device is offline (no new work) and
 //!   the status says so; a task under way is not failed, since the crane may still be
 //!   running it; rackd follows it again once the heartbeat moves.
 //! - **Words left alone**: D20 (execute action) stays 0, since the spec gives it no role in
 //!   the hand-over; D201, D202 and D224 are read but not interpreted.
-//! - **Status**: the device status carries a `crane` object (heartbeat, action state and
-//!   its text, positions D220/D221, load D206, task D208, alarm code/text/class); each new
+//! - **Status**: the device status carries a `crane` object (heartbeat, and while it is
+//!   lost `heartbeat_stalled_since`, the wall-clock time D200 last changed; action state and
+//!   its text, positions D220/D221, load D206, task D208, alarm code/text/class). The
+//!   crane's block is read and shown at every poll that the link answers, heartbeat or
+//!   not, so an alarm such as 7020 reaches the status while the device is offline. Each new
 //!   action state of the held task is logged, and the first one is the `running` cause in
 //!   the job's history.
-//! - **Recovery**: on start rackd reads both blocks; its own D0 and D22 are taken as
-//!   written, a strobe left at 1 by a crash is withdrawn, and a task the crane holds whose
-//!   number belongs to an unfinished job is followed (its pending completion is recorded and
-//!   acknowledged). Unfinished jobs past `queued` that the crane does not hold fail as
-//!   `lost`. A cancel under way for a business alarm is not remembered across a restart:
-//!   such a job ends `cancelled` rather than `failed`.
+//! - **Recovery**: on start, before anything may be dispatched, rackd reads both blocks;
+//!   its own D0 and D22 are taken as written, a task the crane holds (D208) whose number
+//!   belongs to an unfinished job is followed (its pending completion is recorded and
+//!   acknowledged), and an interrupted hand-over is rebuilt from D8..D17, D21, D225 and
+//!   D208 and finished by the same table ([`interrupted`]): STB=1 ACK=0 waits for the
+//!   crane's ACK as that job (then withdraws, possibly latched); STB=1 ACK=1 lowers the
+//!   strobe (the crane latched D8's task) and follows the job; STB=0 ACK=1 follows the
+//!   job while the crane starts it; mode 3 ends with the job `cancelling`. A strobe found
+//!   up for words that are no unfinished job of rackd's is left alone: nothing is
+//!   dispatched and `last_error` says so until a person clears D21. Unfinished jobs past
+//!   `queued` that the crane does not hold fail as `lost`. A cancel under way for a
+//!   business alarm is not remembered across a restart: such a job ends `cancelled`
+//!   rather than `failed`.
 
 pub mod ack;
 mod follow;
 mod handshake;
 pub mod heartbeat;
+mod interrupted;
 mod work;
 
 use std::sync::Arc;
@@ -84,6 +105,10 @@ struct Current {
     task: registers::Task,
     /// The crane was seen holding it (its D208 showed the number).
     seen: bool,
+    /// When the crane was known to have latched it (ACK = 1 for its words): a crane may
+    /// show the task in D208 only as it starts it, so until a handshake timeout later an
+    /// empty D208 is not taken for a lost task.
+    latched_at: Option<Instant>,
     /// A cancel (mode 3) was handed over.
     cancel_sent: bool,
     /// The business alarm that cancelled it: the job fails with this at 40.
@@ -107,8 +132,12 @@ pub struct Crane {
     ack_written: u16,
     link_ok: bool,
     view: Option<CraneView>,
-    /// rackd's strobe (D21) may still be 1 after a failed hand-over.
-    strobe_up: bool,
+    /// A hand-over not known to be over (see [`interrupted`]): no other until it is.
+    handing: Option<interrupted::Handing>,
+    /// Why no work may be handed over until a person clears rackd's strobe at the crane.
+    blocked: Option<String>,
+    /// Wall-clock time the crane's heartbeat (D200) last changed (or rackd began to watch).
+    heartbeat_moved: time::OffsetDateTime,
 }
 
 impl Crane {
@@ -143,7 +172,9 @@ impl Crane {
             ack_written: 0,
             link_ok: false,
             view: None,
-            strobe_up: false,
+            handing: None,
+            blocked: None,
+            heartbeat_moved: crate::domain::time::from_ms(crate::domain::time::now_ms()),
         })
     }
 
@@ -187,11 +218,14 @@ impl Crane {
         }
     }
 
-    /// New work only to a reachable, live, idle crane without alarm (the dispatcher offers
-    /// none while the crane is paused).
+    /// New work only to a reachable, live, strictly idle crane without alarm: rackd's
+    /// strobe down with no hand-over under way or unaccounted for, no completion being
+    /// acknowledged, and the crane's ACK, task echo, action state and D223 at 0 (the
+    /// dispatcher offers none while the crane is paused).
     fn may_dispatch(&self) -> bool {
         let idle = self.view.is_some_and(|v| v.is_idle());
-        self.status.get().online && self.current.is_none() && idle && self.ack_written == 0 && !self.strobe_up
+        let clear = self.handing.is_none() && self.blocked.is_none() && self.ack_written == 0;
+        self.status.get().online && self.current.is_none() && idle && clear
     }
 
     /// Word `n` of the block the WCS writes (D0..), in the protocol's addressing.
@@ -232,6 +266,7 @@ impl Crane {
     fn show_online(&mut self) {
         let lost = self.heartbeat.is_lost(Instant::now());
         let (id, link_ok) = (self.config.id.clone(), self.link_ok);
+        let stalled_since = lost.then_some(self.heartbeat_moved);
         self.status.update(|s| {
             let online = link_ok && !lost;
             if lost {
@@ -247,6 +282,7 @@ impl Crane {
             s.online = online;
             if let Some(c) = s.crane.as_mut() {
                 c.heartbeat_ok = !lost;
+                c.heartbeat_stalled_since = stalled_since;
             }
         });
     }

@@ -23,11 +23,18 @@ impl Crane {
             }
         };
         // From the first write on the crane may take the task: follow it whatever happens.
-        self.current =
-            Some(Current { job: job.id, task, seen: false, cancel_sent: false, alarm: None, action: 0 });
-        self.hand_over(&task).await?;
+        self.current = Some(Current {
+            job: job.id,
+            task,
+            seen: false,
+            latched_at: None,
+            cancel_sent: false,
+            alarm: None,
+            action: 0,
+        });
+        self.hand_over(job.id, &task).await?;
         if let Some(c) = self.current.as_mut() {
-            c.seen = true;
+            c.latched_at = Some(tokio::time::Instant::now());
         }
         let cause = format!("handed to the crane as task {} (mode {})", task.number, task.mode as u16);
         self.record(job.id, Reported::Taken, cause).await
@@ -64,7 +71,7 @@ impl Crane {
     /// Reacts to the alarm the crane shows: a business alarm on the held task cancels it
     /// (when `auto_cancel`), so that the job fails with the alarm once 40 comes back.
     pub(super) async fn on_alarm(&mut self, v: &CraneView) -> Result<(), CraneError> {
-        if v.alarm == 0 || !self.config.auto_cancel {
+        if v.alarm == 0 || !self.config.auto_cancel || self.handing.is_some() {
             return Ok(());
         }
         let alarm = alarms::lookup(v.alarm);
@@ -85,7 +92,7 @@ impl Crane {
 
     /// Hands over the cancel (mode 3) of the held task and remembers it was sent.
     async fn send_cancel(&mut self, c: &Current) -> Result<(), CraneError> {
-        self.hand_over(&c.task.cancel()).await?;
+        self.hand_over(c.job, &c.task.cancel()).await?;
         if let Some(held) = self.current.as_mut().filter(|h| h.job == c.job) {
             held.cancel_sent = true;
         }

@@ -29,6 +29,16 @@
 //!   `memory_lost_at` (one `memory_lost` alarm) until the PLC takes new work. The same
 //!   holds at a restart that finds every task gone. Jobs not yet handed over stay queued
 //!   (those on a locked location wait), so no cascade of rejections follows.
+//! - **A hand-over cut by a restart** (slot written, reply lost, rackd stopped before it
+//!   recorded the job as dispatched): safe, decided from the slots alone, and unlike the
+//!   crane's strobe nothing of rackd's own needs undoing. The PLC acts on a slot only once
+//!   its task id is set, and the id is the last write; so on start a slot showing the
+//!   job's task id is the job's (`recover` marks it held, the job moves to dispatched or
+//!   running as the slot shows, and the slot is never written while it holds the task),
+//!   while a slot showing id 0 only holds a body the PLC never looked at: the job is still
+//!   queued and is handed over again, into whatever slot is free, with the body rewritten
+//!   before the id. A restart cannot make rackd write into a slot the PLC holds, since
+//!   only a slot read back free (id 0 or state 2) is written.
 
 mod handover;
 mod poll;

@@ -2,6 +2,13 @@
 //! hand-over, motion through the action states, completion and its acknowledgement,
 //! cancel, homing, alarms and forced completion. Pure: it works on a [`Bank`] and an
 //! instant, so every step is deterministic.
+//!
+//! It also watches the WCS keep the interface's rules and counts each breach in
+//! [`Engine::violations`] (tests assert none): a strobe raised while ACK is still 1, a
+//! strobe raised for a task (mode 1/2) while the crane holds one (latched or running, D208
+//! set, D223 set, or homing), and task words D8..D17 changed while the strobe is up.
+//! [`Engine::hold`] freezes its side of the hand-over at a chosen step, so a test can stop
+//! and restart the WCS with the crane at exactly that step.
 
 use std::collections::HashMap;
 use std::time::Duration;
@@ -29,9 +36,21 @@ fn set(bank: &mut Bank, n: u32, v: u16) {
 /// What the crane took at hand-over step 2, applied at step 4.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Taken {
-    Task,
+    /// A task, with its words D8..D17 as taken.
+    Task([u16; 10]),
     Cancel,
     Refused,
+}
+
+/// Where the crane's side of the hand-over stops while held (tests staging a WCS cut at
+/// one step).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Hold {
+    /// Step 2 withheld: the crane does not take the data (ACK stays 0).
+    BeforeAck,
+    /// Step 4 withheld: the crane took the data (ACK = 1, D208 set) but does not see the
+    /// strobe go down, so neither clears ACK nor starts.
+    BeforeStart,
 }
 
 /// A task in motion.
@@ -52,6 +71,14 @@ pub struct Engine {
     pub heartbeat_on: bool,
     /// Whether it answers the strobe (off: a crane deaf to hand-overs).
     pub handshake_on: bool,
+    /// Where its side of the hand-over stops, if held.
+    pub hold: Option<Hold>,
+    /// A slow crane program: it shows the task words (D208..D217) only when it starts the
+    /// task, and starts one `step` after it cleared ACK (step 4), so for that step its
+    /// block shows nothing of the task it holds. The spec leaves both moments open.
+    pub late_start: bool,
+    /// A task taken and ACK cleared, to start at that instant (`late_start`).
+    starting: Option<([u16; 10], Instant)>,
     /// The crane's watchdog on the WCS heartbeat (D0): alarm 7020 when D0 stays the same
     /// this long; cleared by the crane once D0 moves again. None: no watchdog.
     pub wcs_timeout: Option<Duration>,
@@ -67,6 +94,12 @@ pub struct Engine {
     pub cancels: u32,
     /// Hand-overs refused because the crane was busy.
     pub refused: u32,
+    /// Each breach of the interface by the WCS, in words, in order.
+    pub violations: Vec<String>,
+    /// The strobe (D21) at the last tick, to see it rise.
+    last_stb: u16,
+    /// The task words D8..D17 when the strobe rose.
+    strobed_words: Option<Vec<u16>>,
 }
 
 impl Engine {
@@ -76,6 +109,9 @@ impl Engine {
             step,
             heartbeat_on: true,
             handshake_on: true,
+            hold: None,
+            late_start: false,
+            starting: None,
             wcs_timeout: None,
             wcs_seen: None,
             wcs_changed: Instant::now(),
@@ -86,6 +122,9 @@ impl Engine {
             received: HashMap::new(),
             cancels: 0,
             refused: 0,
+            violations: Vec::new(),
+            last_stb: 0,
+            strobed_words: None,
         }
     }
 
@@ -99,7 +138,15 @@ impl Engine {
             }
         }
         self.watchdog(bank, now);
+        self.check_interface(bank);
         self.handshake(bank, now);
+        if let Some((words, at)) = self.starting
+            && now >= at
+        {
+            self.starting = None;
+            echo(bank, &words);
+            self.start(bank, now);
+        }
         self.motion(bank, now);
         if d(bank, 223) != 0 && d(bank, 22) != 0 {
             self.acknowledged(bank, now);
@@ -128,7 +175,39 @@ impl Engine {
     }
 
     fn busy(&self, bank: &Bank) -> bool {
-        self.motion.is_some() || d(bank, 223) != 0 || d(bank, 208) != 0 || self.homing_until.is_some()
+        self.motion.is_some()
+            || self.taken.is_some()
+            || self.starting.is_some()
+            || d(bank, 223) != 0
+            || d(bank, 208) != 0
+            || self.homing_until.is_some()
+    }
+
+    /// Counts the WCS's breaches of the hand-over rules (see the module doc).
+    fn check_interface(&mut self, bank: &Bank) {
+        let stb = d(bank, 21);
+        let words: Vec<u16> = (8..18).map(|n| d(bank, n)).collect();
+        if stb != 0 && self.last_stb == 0 {
+            if d(bank, 225) != 0 {
+                self.violations
+                    .push(format!("strobe raised for task {} while ACK (D225) is still 1", words[0]));
+            }
+            if matches!(words[1], 1 | 2) && self.busy(bank) {
+                self.violations.push(format!(
+                    "task {} (mode {}) strobed while the crane holds a task (D208 {}, D203 {}, D223 {})",
+                    words[0],
+                    words[1],
+                    d(bank, 208),
+                    d(bank, 203),
+                    d(bank, 223)
+                ));
+            }
+            self.strobed_words = Some(words);
+        } else if stb != 0 && self.strobed_words.as_ref() != Some(&words) {
+            self.violations.push(format!("task words D8..D17 changed to {words:?} while STB = 1"));
+            self.strobed_words = Some(words);
+        }
+        self.last_stb = stb;
     }
 
     fn handshake(&mut self, bank: &mut Bank, now: Instant) {
@@ -136,8 +215,11 @@ impl Engine {
             return;
         }
         match (d(bank, 21), d(bank, 225)) {
-            (1, 0) => {
-                let words: Vec<u16> = (8..18).map(|n| d(bank, n)).collect();
+            (1, 0) if self.hold != Some(Hold::BeforeAck) => {
+                let mut words = [0u16; 10];
+                for (k, w) in words.iter_mut().enumerate() {
+                    *w = d(bank, 8 + k as u32);
+                }
                 let taken = if words[1] == 3 {
                     self.cancels += 1;
                     Taken::Cancel
@@ -146,18 +228,24 @@ impl Engine {
                     Taken::Refused
                 } else {
                     *self.received.entry(words[0]).or_default() += 1;
-                    for (k, w) in words.iter().enumerate() {
-                        set(bank, 208 + k as u32, *w);
+                    if !self.late_start {
+                        echo(bank, &words);
                     }
-                    Taken::Task
+                    Taken::Task(words)
                 };
                 self.taken = Some(taken);
                 set(bank, 225, 1);
             }
-            (0, 1) => {
+            (0, 1) if self.hold != Some(Hold::BeforeStart) => {
                 set(bank, 225, 0);
                 match self.taken.take() {
-                    Some(Taken::Task) => self.start(bank, now),
+                    Some(Taken::Task(words)) if self.late_start => {
+                        self.starting = Some((words, now + self.step))
+                    }
+                    Some(Taken::Task(words)) => {
+                        echo(bank, &words);
+                        self.start(bank, now);
+                    }
                     Some(Taken::Cancel) => self.cancel(bank, now),
                     _ => {}
                 }
@@ -242,6 +330,13 @@ impl Engine {
     }
 }
 
+/// Shows task words in D208..D217.
+fn echo(bank: &mut Bank, words: &[u16; 10]) {
+    for (k, w) in words.iter().enumerate() {
+        set(bank, 208 + k as u32, *w);
+    }
+}
+
 /// Puts the axes at a coordinate: travel = bay x 1000, lift = level x 500.
 fn place(bank: &mut Bank, at: [u16; 4]) {
     set(bank, 220, at[1].saturating_mul(1000));
@@ -279,6 +374,42 @@ mod tests {
         e.tick(&mut bank, now);
         assert_eq!((d(&bank, 203), d(&bank, 223), d(&bank, 208)), (0, 0, 0));
         assert_eq!(e.received[&5], 1);
+    }
+
+    fn strobe(e: &mut Engine, bank: &mut Bank, now: Instant, words: [u16; 10]) {
+        for (k, w) in words.iter().enumerate() {
+            bank.set_word(Device::D, 8 + k as u32, *w);
+        }
+        bank.set_word(Device::D, 21, 1);
+        e.tick(bank, now);
+    }
+
+    #[test]
+    fn a_hold_freezes_the_hand_over_at_its_step_and_breaches_are_counted() {
+        let mut bank = Bank::default();
+        let mut e = Engine::new(Duration::from_millis(10));
+        let now = Instant::now();
+        e.hold = Some(Hold::BeforeAck);
+        strobe(&mut e, &mut bank, now, [5, 1, 0, 0, 0, 0, 1, 3, 1, 1]);
+        assert_eq!(d(&bank, 225), 0, "held before step 2");
+        e.hold = Some(Hold::BeforeStart);
+        e.tick(&mut bank, now);
+        assert_eq!((d(&bank, 225), d(&bank, 208)), (1, 5), "latched");
+        bank.set_word(Device::D, 21, 0);
+        e.tick(&mut bank, now);
+        assert_eq!((d(&bank, 225), d(&bank, 203)), (1, 0), "held before step 4: not started");
+        assert!(e.violations.is_empty(), "{:?}", e.violations);
+        // A WCS that hands over another task now breaks the scheme twice over.
+        strobe(&mut e, &mut bank, now, [6, 2, 0, 0, 0, 0, 1, 3, 1, 1]);
+        assert_eq!(e.violations.len(), 2, "{:?}", e.violations);
+        bank.set_word(Device::D, 15, 9);
+        e.tick(&mut bank, now);
+        assert_eq!(e.violations.len(), 3, "words changed under the strobe: {:?}", e.violations);
+        bank.set_word(Device::D, 21, 0);
+        e.hold = None;
+        e.tick(&mut bank, now);
+        assert_eq!((d(&bank, 225), d(&bank, 203)), (0, 1), "released: starts the task it latched");
+        assert_eq!(e.received.get(&6), None, "the second task was never taken");
     }
 
     #[test]

@@ -8,12 +8,18 @@
 //! and clears D223 and its task words once D22 is non-zero, and homes (state 100 for one
 //! step) after a cancel. An alarm (D205 non-zero) halts motion; a cancel (mode 3) ends the
 //! task in 40 and clears the alarm. It refuses (acknowledges but ignores) a task handed over
-//! while it is busy, and counts tasks received per task number.
+//! while it is busy, counts tasks received per task number, and counts every breach of the
+//! interface by the WCS ([`CraneSim::violations`]; see [`engine`]).
 //!
 //! Controls, as methods ([`CraneSim::raise_alarm`], ...) and as text commands
 //! ([`CraneSim::command`], read from stdin by `rackd sim crane`): `alarm CODE`, `clear`,
-//! `heartbeat off|on`, `handshake off|on` (ignore the strobe), `force`, `drop` (close the connection / lose the next request),
-//! `link off|on` (ignore every request), `status`.
+//! `heartbeat off|on`, `handshake off|on` (ignore the strobe), `hold ack|start|off` (freeze
+//! the hand-over before step 2 / before step 4), `force`, `drop` (close the connection /
+//! lose the next request), `link off|on` (ignore every request), `status` (with the
+//! violations counted). For tests, [`CraneSim::cut_link_after`] takes the link down right
+//! after a chosen write of the WCS (its reply still goes out), which stops a WCS between
+//! two steps of the hand-over as a crash would, and [`CraneSim::set_late_start`] makes a
+//! slow crane program that shows a task only as it starts it, a step after clearing ACK.
 //! With `wcs_timeout` set the crane watches rackd's heartbeat too and raises 7020 when D0
 //! stalls; it clears 7020 itself once D0 moves again (a simplification: a real crane may
 //! want a reset).
@@ -27,9 +33,10 @@ use std::time::Duration;
 use tokio::sync::Notify;
 use tokio::task::JoinHandle;
 
-use crate::protocols::faults::{Fault, Faults};
-use crate::protocols::mc3e::{Bank, Device, Mc3eServer, ServerState, SharedBank, TransportKind};
+use crate::protocols::faults::{Fault, Faults, SharedFaults};
+use crate::protocols::mc3e::{Bank, Device, Mc3eServer, ServerState, SharedBank, TransportKind, WriteEvent};
 use engine::Engine;
+pub use engine::Hold;
 
 /// Whether a code is a business alarm of the catalogue.
 pub fn is_business(code: u16) -> bool {
@@ -62,7 +69,7 @@ pub enum CommandError {
     AlarmCode(String),
     /// Not one of the commands.
     #[error(
-        "unknown command {0:?} (alarm CODE, clear, heartbeat on|off, handshake on|off, force, drop, link on|off, status)"
+        "unknown command {0:?} (alarm CODE, clear, heartbeat on|off, handshake on|off, hold ack|start|off, force, drop, link on|off, status)"
     )]
     Unknown(String),
 }
@@ -75,6 +82,8 @@ pub struct CraneSim {
     ticker: JoinHandle<()>,
     /// The drop rate to go back to when the link comes back on (`link on`).
     drop_rate: Mutex<f64>,
+    /// A write (register, value) after which the link goes down, once.
+    cut: Arc<Mutex<Option<(u32, u16)>>>,
 }
 
 impl CraneSim {
@@ -87,15 +96,31 @@ impl CraneSim {
         engine.wcs_timeout = options.wcs_timeout;
         let engine = Arc::new(Mutex::new(engine));
         let kick = Arc::new(Notify::new());
-        let hook_kick = kick.clone();
-        let state = ServerState::new(bank.clone()).on_write(Arc::new(move |_| hook_kick.notify_one()));
+        let faults = SharedFaults::default();
+        let cut: Arc<Mutex<Option<(u32, u16)>>> = Arc::default();
+        let hook = {
+            let (kick, bank, faults, cut) = (kick.clone(), bank.clone(), faults.clone(), cut.clone());
+            move |w: WriteEvent| {
+                let mut armed = cut.lock().unwrap_or_else(|p| p.into_inner());
+                if let Some((n, v)) = *armed
+                    && w.device == Device::D
+                    && (w.start..w.start + w.points).contains(&n)
+                    && bank.lock().unwrap_or_else(|p| p.into_inner()).word(Device::D, n) == v
+                {
+                    faults.update(|f| f.drop_rate = 1.0);
+                    *armed = None;
+                }
+                kick.notify_one();
+            }
+        };
+        let state = ServerState::new(bank.clone()).with_faults(faults).on_write(Arc::new(hook));
         let server = match options.transport {
             TransportKind::Tcp => Mc3eServer::bind_tcp(addr, state).await?,
             TransportKind::Udp => Mc3eServer::bind_udp(addr, state).await?,
         };
         let tick = (options.step / 5).clamp(Duration::from_millis(1), Duration::from_millis(20));
         let ticker = tokio::spawn(run_ticks(bank.clone(), engine.clone(), kick, tick));
-        Ok(CraneSim { server: Some(server), bank, engine, ticker, drop_rate: Mutex::new(0.0) })
+        Ok(CraneSim { server: Some(server), bank, engine, ticker, drop_rate: Mutex::new(0.0), cut })
     }
 
     /// The address it listens on.
@@ -135,6 +160,39 @@ impl CraneSim {
     /// Stops or restarts answering the hand-over strobe.
     pub fn set_handshake(&self, on: bool) {
         self.engine.lock().unwrap_or_else(|p| p.into_inner()).handshake_on = on;
+    }
+
+    /// Freezes the crane's side of the hand-over at a step (`None`: reacts again, at once).
+    pub fn hold(&self, hold: Option<Hold>) {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).hold = hold;
+    }
+
+    /// A slow crane program: task words shown in D208..D217 only when the task starts,
+    /// one step after ACK was cleared (step 4), instead of as soon as they are taken.
+    pub fn set_late_start(&self, on: bool) {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).late_start = on;
+    }
+
+    /// Takes the link down (as `link off`) right after the next write of the WCS that
+    /// leaves D register `n` at `value`; that write is carried out and answered, nothing
+    /// after it until [`CraneSim::set_link`] brings the link back.
+    pub fn cut_link_after(&self, n: u32, value: u16) {
+        *self.cut.lock().unwrap_or_else(|p| p.into_inner()) = Some((n, value));
+    }
+
+    /// Whether an armed [`CraneSim::cut_link_after`] has fired.
+    pub fn link_cut(&self) -> bool {
+        self.cut.lock().unwrap_or_else(|p| p.into_inner()).is_none()
+    }
+
+    /// Breaches of the interface by the WCS so far (tests assert none).
+    pub fn violations(&self) -> u32 {
+        self.violation_log().len() as u32
+    }
+
+    /// The breaches, in words, in order.
+    pub fn violation_log(&self) -> Vec<String> {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner()).violations.clone()
     }
 
     /// Presses "force complete": the task under way ends in state 30. False if none.
@@ -215,6 +273,14 @@ impl CraneSim {
                 self.set_handshake(*on == "on");
                 format!("handshake {on}")
             }),
+            ["hold", at @ ("ack" | "start" | "off")] => Ok({
+                self.hold(match *at {
+                    "ack" => Some(Hold::BeforeAck),
+                    "start" => Some(Hold::BeforeStart),
+                    _ => None,
+                });
+                format!("hold {at}")
+            }),
             ["force"] => Ok(if self.force_complete() { "force-completed (30)" } else { "no task" }.into()),
             ["drop"] => Ok({
                 self.drop_link();
@@ -225,13 +291,16 @@ impl CraneSim {
                 format!("link {on}")
             }),
             ["status"] => Ok(format!(
-                "action {} task {} alarm {} load {} travel {} lift {}",
+                "action {} task {} alarm {} load {} travel {} lift {} stb {} ack {} violations {}",
                 self.word(203),
                 self.word(208),
                 self.word(205),
                 self.word(206),
                 self.word(220),
-                self.word(221)
+                self.word(221),
+                self.word(21),
+                self.word(225),
+                self.violations()
             )),
             _ => Err(CommandError::Unknown(line.to_string())),
         }
@@ -261,5 +330,26 @@ async fn run_ticks(bank: SharedBank, engine: Arc<Mutex<Engine>>, kick: Arc<Notif
         }
         let mut bank = bank.lock().unwrap_or_else(|p| p.into_inner());
         engine.lock().unwrap_or_else(|p| p.into_inner()).tick(&mut bank, tokio::time::Instant::now());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn text_commands_hold_the_hand_over_and_status_counts_violations() {
+        let sim = CraneSim::start("127.0.0.1:0", CraneSimOptions::default()).await.unwrap();
+        let hold = || sim.engine.lock().unwrap().hold;
+        assert_eq!(sim.command("hold ack").unwrap(), "hold ack");
+        assert_eq!(hold(), Some(Hold::BeforeAck));
+        assert_eq!(sim.command("hold start").unwrap(), "hold start");
+        assert_eq!(hold(), Some(Hold::BeforeStart));
+        assert_eq!(sim.command("hold off").unwrap(), "hold off");
+        assert_eq!(hold(), None);
+        assert!(matches!(sim.command("hold later"), Err(CommandError::Unknown(_))));
+        let status = sim.command("status").unwrap();
+        assert!(status.ends_with("stb 0 ack 0 violations 0"), "{status}");
+        sim.shutdown().await;
     }
 }
