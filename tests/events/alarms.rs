@@ -17,6 +17,8 @@ async fn crane_app() -> (TestApp, CraneSim) {
     device.link.timeout = Duration::from_millis(100);
     device.link.retries = 0;
     device.offline_after = 2;
+    device.heartbeat_ms = 20;
+    device.heartbeat_timeout_ms = 300;
     let app = spawn_with(|c| {
         c.devices = vec![device.into()];
     })
@@ -96,9 +98,21 @@ async fn a_silent_device_raises_a_link_alarm_until_it_answers_again() {
     );
     let (_, device) = app.get("/api/v1/devices/crane1").await;
     assert_eq!(device["online"], false, "{device}");
+    // Down for longer than the heartbeat timeout.
+    tokio::time::sleep(Duration::from_millis(500)).await;
     sim.set_link(true);
     let cleared = next_of(&mut ws, "alarm.cleared").await;
     assert_eq!(cleared["data"]["id"], raised["data"]["id"]);
+    // The heartbeat was unseen while the link was down, not stalled: once the crane
+    // answers, no heartbeat alarm follows the outage.
+    let seen = sim.requests_seen();
+    while sim.requests_seen() < seen + 30 {
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    let (_, page) = app.get("/api/v1/alarms?device=crane1").await;
+    let kinds: Vec<&str> =
+        page["alarms"].as_array().unwrap().iter().map(|a| a["kind"].as_str().unwrap()).collect();
+    assert_eq!(kinds, vec!["link"], "{page}");
 }
 
 #[tokio::test]

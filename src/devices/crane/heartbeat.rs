@@ -46,6 +46,12 @@ impl Heartbeat {
         self.written_at = Some(now);
     }
 
+    /// Starts the loss clock again at `now`: after the link was down rackd could not see
+    /// the word move, so the crane gets a whole timeout to show it moves.
+    pub fn restart(&mut self, now: Instant) {
+        self.changed_at = now;
+    }
+
     /// The crane's word has not moved for the loss timeout.
     pub fn is_lost(&self, now: Instant) -> bool {
         now.duration_since(self.changed_at) >= self.timeout

@@ -258,6 +258,11 @@ impl Crane {
         self.status.update(|s| {
             link_ok = s.record_contact(result, offline_after, link_ok);
         });
+        if link_ok && !self.link_ok {
+            // Unseen while the link was down is not stalled: no heartbeat alarm after every
+            // outage.
+            self.heartbeat.restart(Instant::now());
+        }
         self.link_ok = link_ok;
         self.show_online();
     }
