@@ -154,11 +154,42 @@ async fn a_stalled_heartbeat_shows_since_when_and_the_crane_block_stays_shown() 
     let (_, still) = app.get("/api/v1/devices/crane1").await;
     assert_eq!(still["crane"]["heartbeat_stalled_since"], since, "{still}");
     assert_eq!(still["crane"]["alarm_code"], 7020, "{still}");
+    // Both reach the alarm list: the heartbeat alarm of rackd's, and the crane's own 7020
+    // though the device is offline.
+    let active = wait_alarms(&app, |kinds| kinds.len() == 2).await;
+    assert_eq!(
+        active.iter().map(|a| (a["kind"].as_str().unwrap(), a["code"].as_u64().unwrap())).collect::<Vec<_>>(),
+        vec![("heartbeat", 0), ("device", 7020)],
+        "newest first: {active:?}"
+    );
+    let text = active[0]["text"].as_str().unwrap();
+    let secs: f64 = text
+        .trim_start_matches("the crane's heartbeat (D200) has not changed for ")
+        .trim_end_matches(" s")
+        .parse()
+        .unwrap_or_else(|_| panic!("{text}"));
+    assert!(secs >= 0.5, "at least the 500 ms timeout: {text}");
     sim.clear_alarm();
     sim.set_heartbeat(true);
     let back =
         wait_device(&app, "back", 5, |s| s["online"] == true && s["crane"]["heartbeat_ok"] == true).await;
     assert!(back["crane"]["heartbeat_stalled_since"].is_null(), "{back}");
     assert!(back["crane"]["alarm_code"].is_null(), "{back}");
+    wait_alarms(&app, |kinds| kinds.is_empty()).await;
     app.stop().await;
+}
+
+/// Waits (bounded) until the active alarms' kinds satisfy `pred`; returns them.
+async fn wait_alarms(app: &helpers::TestApp, pred: impl Fn(&[String]) -> bool) -> Vec<serde_json::Value> {
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    loop {
+        let (_, page) = app.get("/api/v1/alarms?active=true").await;
+        let alarms = page["alarms"].as_array().unwrap().clone();
+        let kinds: Vec<String> = alarms.iter().map(|a| a["kind"].as_str().unwrap().to_owned()).collect();
+        if pred(&kinds) {
+            return alarms;
+        }
+        assert!(std::time::Instant::now() < deadline, "alarms: {alarms:?}");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
 }
