@@ -9,6 +9,10 @@
 //!   code would arrive as a late reply to be thrown away.
 //! - **Quirks** are checked against the protocol ([`Quirk::applies_to`]): a quirk another
 //!   protocol's client knows is refused rather than silently ignored.
+//! - **Adaptive timeouts**: `timeout` is the ceiling of each client's RFC 6298 timer and
+//!   `tuning.min_timeout` its floor (see the transport's `health.rs`); a floor above the
+//!   ceiling, shares outside 0..=1 or a `degraded_below` above `degraded_above` are refused
+//!   by [`LinkConfig::check`].
 //! - **Unit** ranges are the protocols' own: MEWTOCOL stations 1..=99, PPI addresses
 //!   1..=126 (0 is rackd's own master address), Modbus units 0..=247 (0 broadcasts a
 //!   write, which `rackd plc` allows; 248..=255 are reserved). Checked before connecting,
@@ -24,6 +28,7 @@ use super::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use super::ppi::{PpiClient, PpiConfig, PpiTransport};
 use super::protocol::{Family, Protocol, Quirk, names};
 use super::serial::SerialSettings;
+use super::transport::LinkTuning;
 use super::{PlcError, PlcMemory};
 
 /// Reply timeout per attempt when none is configured.
@@ -49,6 +54,9 @@ pub struct LinkConfig {
     pub retries: u32,
     /// Habits of the PLC the client must put up with; each must apply to `protocol`.
     pub quirks: BTreeSet<Quirk>,
+    /// The adaptive timeout's floor (`timeout` is its ceiling) and when the link counts as
+    /// degraded.
+    pub tuning: LinkTuning,
 }
 
 /// Why a link configuration cannot be used.
@@ -72,6 +80,9 @@ pub enum LinkError {
         /// The valid range, in words.
         range: &'static str,
     },
+    /// Adaptive timeout or degraded settings that make no sense.
+    #[error("{0}")]
+    Tuning(&'static str),
     /// The client could not be set up.
     #[error(transparent)]
     Plc(#[from] PlcError),
@@ -96,6 +107,7 @@ impl LinkConfig {
             timeout: DEFAULT_TIMEOUT,
             retries: DEFAULT_RETRIES,
             quirks: BTreeSet::new(),
+            tuning: LinkTuning::default(),
         }
     }
 
@@ -108,6 +120,19 @@ impl LinkConfig {
     pub fn check(&self) -> Result<(), LinkError> {
         if let Some(&quirk) = self.quirks.iter().find(|q| !q.applies_to(self.protocol)) {
             return Err(LinkError::Quirk { quirk, protocol: self.protocol });
+        }
+        let t = &self.tuning;
+        if t.min_timeout > self.timeout {
+            return Err(LinkError::Tuning("min_timeout_ms must not exceed timeout_ms"));
+        }
+        if !(0.0..=1.0).contains(&t.degraded_above) || !(0.0..=1.0).contains(&t.degraded_below) {
+            return Err(LinkError::Tuning("degraded_above and degraded_below are shares between 0 and 1"));
+        }
+        if t.degraded_below > t.degraded_above {
+            return Err(LinkError::Tuning("degraded_below must not exceed degraded_above"));
+        }
+        if t.degraded_window == 0 {
+            return Err(LinkError::Tuning("degraded_window must be at least 1"));
         }
         let unit = |range| Err(LinkError::Unit { unit: self.unit, protocol: self.protocol, range });
         match self.protocol.family() {
@@ -131,6 +156,7 @@ impl LinkConfig {
         let mut config = Mc3eConfig::new(self.address.clone(), transport);
         config.link.timeout = self.timeout;
         config.link.retries = self.retries;
+        config.link.tuning = self.tuning;
         config.monitor_timer = self.mc3e_monitor_timer();
         config
     }
@@ -143,6 +169,7 @@ impl LinkConfig {
         config.station = self.unit;
         config.timeout = self.timeout;
         config.retries = self.retries;
+        config.tuning = self.tuning;
         config.bcc = !self.has(Quirk::NoBcc);
         config.long_frames = self.has(Quirk::LongFrames);
         config
@@ -155,6 +182,7 @@ impl LinkConfig {
         config.plc = self.unit;
         config.timeout = self.timeout;
         config.retries = self.retries;
+        config.tuning = self.tuning;
         config.match_pdu_ref = !self.has(Quirk::NoPduRef);
         config
     }
@@ -170,6 +198,7 @@ impl LinkConfig {
         config.unit = self.unit;
         config.timeout = self.timeout;
         config.retries = self.retries;
+        config.tuning = self.tuning;
         config.serial = self.serial.unwrap_or(config.serial);
         config.quirks = Quirks {
             length0: self.has(Quirk::Length0),

@@ -221,8 +221,9 @@ impl Crane {
     fn contact(&mut self, result: Result<(), &PlcError>) {
         let offline_after = self.config.offline_after;
         let mut link_ok = self.link_ok;
+        let link = self.plc.link_stats();
         self.status.update(|s| {
-            link_ok = s.record_contact(result, offline_after, link_ok);
+            link_ok = s.record_contact(result, offline_after, link_ok, link);
         });
         self.link_ok = link_ok;
         self.show_online();
