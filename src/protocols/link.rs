@@ -10,9 +10,11 @@
 //! - **Quirks** are checked against the protocol ([`Quirk::applies_to`]): a quirk another
 //!   protocol's client knows is refused rather than silently ignored.
 //! - **Adaptive timeouts**: `timeout` is the ceiling of each client's RFC 6298 timer and
-//!   `tuning.min_timeout` its floor (see the transport's `health.rs`); a floor above the
-//!   ceiling, shares outside 0..=1 or a `degraded_below` above `degraded_above` are refused
-//!   by [`LinkConfig::check`].
+//!   `tuning.min_timeout` its floor (see the transport's `health.rs`). A floor at or above
+//!   the ceiling is allowed and means a fixed timeout (the way to turn adaptation off; a
+//!   device with `timeout_ms` below the default floor simply gets a fixed timeout).
+//!   Shares outside 0..=1, a `degraded_below` above `degraded_above` or an empty window
+//!   are refused by [`LinkConfig::check`].
 //! - **Unit** ranges are the protocols' own: MEWTOCOL stations 1..=99, PPI addresses
 //!   1..=126 (0 is rackd's own master address), Modbus units 0..=247 (0 broadcasts a
 //!   write, which `rackd plc` allows; 248..=255 are reserved). Checked before connecting,
@@ -122,9 +124,6 @@ impl LinkConfig {
             return Err(LinkError::Quirk { quirk, protocol: self.protocol });
         }
         let t = &self.tuning;
-        if t.min_timeout > self.timeout {
-            return Err(LinkError::Tuning("min_timeout_ms must not exceed timeout_ms"));
-        }
         if !(0.0..=1.0).contains(&t.degraded_above) || !(0.0..=1.0).contains(&t.degraded_below) {
             return Err(LinkError::Tuning("degraded_above and degraded_below are shares between 0 and 1"));
         }
@@ -251,6 +250,21 @@ mod tests {
         let mut serial = link(Protocol::Ppi, 2, &[]);
         serial.serial = Some("187500,8E1".parse().unwrap());
         assert_eq!(serial.ppi().serial.baud, 187_500);
+    }
+
+    #[test]
+    fn tuning_is_checked_and_a_floor_above_the_timeout_fixes_it() {
+        let mut l = link(Protocol::ModbusUdp, 1, &[]);
+        l.tuning.min_timeout = Duration::from_secs(5);
+        assert!(l.check().is_ok(), "a fixed timeout");
+        l.tuning.degraded_below = 0.5;
+        assert!(matches!(l.check(), Err(LinkError::Tuning(_))), "below above `above`");
+        l.tuning.degraded_below = 0.0;
+        l.tuning.degraded_above = 1.5;
+        assert!(matches!(l.check(), Err(LinkError::Tuning(_))));
+        l.tuning.degraded_above = 0.1;
+        l.tuning.degraded_window = 0;
+        assert!(matches!(l.check(), Err(LinkError::Tuning(_))));
     }
 
     #[test]
