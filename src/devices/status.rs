@@ -8,9 +8,11 @@
 //!
 //! The link's health ([`LinkStats`], from the protocol client) is copied in with each
 //! contact. Its counters, round trip and timeout are bookkeeping too; `degraded` flipping
-//! is told at once (the service raises a warning alarm on it). `last_error` clears on the
-//! next successful request, so a device that recovered does not keep showing an old
-//! failure; `last_error_at` keeps when the last one happened.
+//! is told at once (the service raises a warning alarm on it). A link error in
+//! `last_error` clears on the next successful request, so a device that recovered does not
+//! keep showing an old failure (an error an adapter sets while the link answers, such as a
+//! crane's handshake timeout, stays until the adapter clears it); `last_error_at` keeps
+//! when the last error was set, whoever set it ([`StatusCell`] stamps it).
 
 use std::time::Duration;
 
@@ -103,8 +105,8 @@ pub struct CraneStatus {
 impl DeviceStatus {
     /// Records the outcome of one request to the device (time of contact, failures in a
     /// row, last error, the link's health as `link` says after it) and returns whether the
-    /// link is up now, given whether it was: an answer brings it up and clears the last
-    /// error; it goes down after `offline_after` failures in a row.
+    /// link is up now, given whether it was: an answer brings it up and, after failures,
+    /// clears the last error; it goes down after `offline_after` failures in a row.
     pub fn record_contact(
         &mut self,
         result: Result<(), &crate::protocols::PlcError>,
@@ -116,9 +118,13 @@ impl DeviceStatus {
         let now = || crate::domain::time::from_ms(crate::domain::time::now_ms());
         match result {
             Ok(()) => {
+                // The link recovered: its error goes. An error the adapter set itself while
+                // the link answered (a crane's handshake timeout) is the adapter's to clear.
+                if self.consecutive_failures > 0 {
+                    self.last_error = None;
+                }
                 self.consecutive_failures = 0;
                 self.last_contact = Some(now());
-                self.last_error = None;
                 true
             }
             Err(e) => {
@@ -216,6 +222,9 @@ impl StatusCell {
         self.tx.send_if_modified(|s| {
             let (before, contact) = (Shape::of(s), s.last_contact);
             let tags_changed = f(s);
+            if s.last_error.is_some() && s.last_error != before.last_error {
+                s.last_error_at = Some(crate::domain::time::from_ms(crate::domain::time::now_ms()));
+            }
             told = tags_changed || Shape::of(s) != before || (stale && s.last_contact != contact);
             told
         });
@@ -283,5 +292,16 @@ mod tests {
         assert!(at.is_some());
         assert!(s.record_contact(Ok(()), 3, true, LinkStats::default()));
         assert_eq!((s.last_error.as_deref(), s.last_error_at), (None, at), "cleared; its time kept");
+        s.last_error = Some("handshake timed out".into());
+        s.record_contact(Ok(()), 3, true, LinkStats::default());
+        assert!(s.last_error.is_some(), "not a link error: the adapter's to clear");
+    }
+
+    #[test]
+    fn the_cell_stamps_every_new_error() {
+        let status = DeviceStatus::new("crane1", DeviceKind::Crane, "mc3e", "127.0.0.1:1", 1);
+        let mut cell = StatusCell::new(status, Duration::from_secs(5));
+        cell.update(|s| s.last_error = Some("heartbeat stopped".into()));
+        assert!(cell.get().last_error_at.is_some());
     }
 }

@@ -6,7 +6,9 @@
 //! - **MC monitoring timer**: the PLC's own wait (units of 250 ms) is set one unit below
 //!   rackd's reply timeout (at least 1), so that a CPU that cannot answer makes the module
 //!   reply with an end code before rackd gives up and resends; equal or longer, the end
-//!   code would arrive as a late reply to be thrown away.
+//!   code would arrive as a late reply to be thrown away. It follows the configured
+//!   timeout, not the adaptive one: a CPU that was fast so far and is slow now makes rackd
+//!   give up first, and the end code lands on the closed exclusive connection, harmless.
 //! - **Quirks** are checked against the protocol ([`Quirk::applies_to`]): a quirk another
 //!   protocol's client knows is refused rather than silently ignored.
 //! - **Adaptive timeouts**: `timeout` is the ceiling of each client's RFC 6298 timer and
