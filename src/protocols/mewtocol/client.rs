@@ -195,7 +195,7 @@ impl MewtocolClient {
             self.health.dropped(DropReason::Stale);
         }
         link.send(tx, attempt.timeout).await?;
-        let attempt = &attempt.from_now();
+        let attempt = &attempt.restarted();
         let mut reason = None;
         loop {
             let Some(scanned) = link.read_frame(&mut Frames, attempt.deadline).await? else {

@@ -217,7 +217,7 @@ impl PpiClient {
             self.health.dropped(DropReason::Stale);
         }
         link.send(&tx, attempt.timeout).await?;
-        let attempt = &attempt.from_now();
+        let attempt = &attempt.restarted();
         // Step 1: the short acknowledgement. Whole frames before it are stale and skipped.
         loop {
             match link.read_frame(&mut Frames, attempt.deadline).await? {

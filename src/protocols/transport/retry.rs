@@ -139,7 +139,7 @@ impl Attempt {
 
     /// The attempt with its reply window starting now: for links that held the line
     /// before sending, so the hold does not eat the wait for the reply.
-    pub fn from_now(&self) -> Attempt {
+    pub fn restarted(&self) -> Attempt {
         Attempt { deadline: Instant::now() + self.reply_window, ..*self }
     }
 }

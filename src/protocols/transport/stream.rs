@@ -94,7 +94,7 @@ impl StreamLink {
     /// a retry, waits until nothing has arrived for the configured timeout (counted from
     /// the last byte sent or received), dropping whatever arrives. Returns the replies dropped and how
     /// long the line was held (not part of the attempt's round trip; the caller starts the
-    /// attempt's reply window after its send, [`Attempt::from_now`]). A retry leaves the
+    /// attempt's reply window after its send, [`Attempt::restarted`]). A retry leaves the
     /// line unsettled, so the request after it is held too.
     pub async fn settle(&mut self, attempt: &Attempt) -> Result<Settled, AttemptError> {
         let started = Instant::now();

@@ -85,7 +85,7 @@ impl RtuLink {
     /// Sends the request and waits for a valid frame that answers it.
     pub async fn attempt(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<Response, AttemptError> {
         self.send(ex, attempt).await?;
-        let attempt = &attempt.from_now();
+        let attempt = &attempt.restarted();
         let mut decoder = RtuDecoder { direction: Direction::Response };
         let mut reason = None;
         loop {
