@@ -3,7 +3,8 @@
 //! ```text
 //! cargo run --release --example bench -- intake [--clients 64] [--seconds 5] [--batch 1000]
 //! cargo run --release --example bench -- shelf  [--latency-jobs 1000] [--batch-jobs 20000] [--poll-ms 10]
-//!                                               [--drop 0.2 [--lossy-jobs 1000] [--fixed-timeout]]
+//!                                               [--drop 0.2 [--lossy-jobs 1000] [--fixed-timeout]
+//!                                                [--min-timeout-ms 20]]
 //! cargo run --release --example bench -- ws     [--subscribers 1000] [--events 500] [--rate 50]
 //! cargo run --release --example bench -- fleet  [--devices 500] [--tags 30] [--poll-ms 500] [--seconds 20] [--changing 0.1]
 //! ```
@@ -67,6 +68,9 @@ enum Bench {
         /// issue 12, for comparison.
         #[arg(long)]
         fixed_timeout: bool,
+        /// The adaptive timeout's floor for the device (`min_timeout_ms`; default 20).
+        #[arg(long)]
+        min_timeout_ms: Option<u64>,
     },
     /// Live events: fan-out latency and the server's CPU with 1 and with N WebSocket subscribers.
     Ws {
@@ -94,8 +98,17 @@ fn main() -> ExitCode {
     let result = runtime.block_on(async {
         match bench {
             Bench::Intake { clients, seconds, batch } => intake::run(clients, seconds, batch).await,
-            Bench::Shelf { latency_jobs, batch_jobs, poll_ms, drop, lossy_jobs, fixed_timeout } => {
-                let lossy = drop.map(|rate| shelf::Lossy { rate, jobs: lossy_jobs, fixed_timeout });
+            Bench::Shelf {
+                latency_jobs,
+                batch_jobs,
+                poll_ms,
+                drop,
+                lossy_jobs,
+                fixed_timeout,
+                min_timeout_ms,
+            } => {
+                let lossy =
+                    drop.map(|rate| shelf::Lossy { rate, jobs: lossy_jobs, fixed_timeout, min_timeout_ms });
                 shelf::run(latency_jobs, batch_jobs, poll_ms, lossy).await
             }
             Bench::Ws { subscribers, events, rate } => ws::run(subscribers, events, rate).await,

@@ -40,6 +40,8 @@ pub struct Lossy {
     pub jobs: usize,
     /// No adaptive timer (as before issue 12).
     pub fixed_timeout: bool,
+    /// The adaptive timer's floor, if not the default.
+    pub min_timeout_ms: Option<u64>,
 }
 
 /// Runs the shelf benchmark: `latency_jobs` single jobs, then `batch_jobs` in batches; or,
@@ -60,6 +62,9 @@ pub async fn run(
     let plc_addr = sim.local_addr().context("a UDP simulator has an address")?.to_string();
     let mut device = shelf_device(&sim, "shelf1", &plc_addr, vec![1]);
     device.poll_ms = poll_ms;
+    if let Some(ms) = lossy.as_ref().and_then(|l| l.min_timeout_ms) {
+        device.link.tuning.min_timeout = Duration::from_millis(ms);
+    }
     if lossy.as_ref().is_some_and(|l| l.fixed_timeout) {
         device.link.tuning.min_timeout = device.link.timeout;
     }
@@ -78,7 +83,11 @@ pub async fn run(
         let dropped = batch(&client, &base, &sim, lossy.jobs, lossy.jobs).await?;
         let device: serde_json::Value =
             client.get(format!("{base}/api/v1/devices/shelf1")).send().await?.json().await?;
-        let timer = if lossy.fixed_timeout { "fixed timeout" } else { "adaptive timeout" };
+        let timer = match (lossy.fixed_timeout, lossy.min_timeout_ms) {
+            (true, _) => "fixed timeout".to_owned(),
+            (false, Some(ms)) => format!("adaptive timeout, floor {ms} ms"),
+            (false, None) => "adaptive timeout, default floor".to_owned(),
+        };
         println!(
             "bench shelf --drop {}: {} jobs per run, poll every {poll_ms} ms, {timer}",
             lossy.rate, lossy.jobs
