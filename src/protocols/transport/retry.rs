@@ -252,6 +252,7 @@ impl<'a> Retry<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::protocols::DropReason;
 
     fn health(retries: u32) -> LinkHealth {
         LinkHealth::new(RetryPolicy::new(Duration::from_millis(100), retries))
@@ -281,6 +282,39 @@ mod tests {
         retry.failed(AttemptError::Malformed("bad")).unwrap();
         assert!(retry.next_attempt().is_none());
         assert!(matches!(retry.spent(), PlcError::Malformed("bad")));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn karns_rule_no_round_trip_from_a_retried_request_unless_matched_by_id() {
+        let h = health(2);
+        let mut retry = h.start("test");
+        retry.next_attempt().unwrap();
+        retry.failed(AttemptError::Timeout).unwrap();
+        retry.next_attempt().unwrap();
+        tokio::time::advance(Duration::from_millis(5)).await;
+        retry.succeeded();
+        assert_eq!(h.stats().srtt_ms, None, "ambiguous: which attempt was answered?");
+        let mut retry = h.start("test");
+        retry.next_attempt().unwrap();
+        retry.failed(AttemptError::Timeout).unwrap();
+        retry.next_attempt().unwrap();
+        tokio::time::advance(Duration::from_millis(5)).await;
+        retry.succeeded_by(1);
+        assert_eq!(h.stats().srtt_ms, Some(5.0), "the retry's own id: a clean sample");
+        let mut retry = h.start("test");
+        retry.next_attempt().unwrap();
+        h.dropped(DropReason::Unit);
+        h.dropped(DropReason::TransactionId);
+        h.dropped(DropReason::TransactionId);
+        retry.failed(AttemptError::Timeout).unwrap();
+        let err = retry.spent();
+        let dropped = Some(Dropped { count: 2, reason: DropReason::TransactionId });
+        assert!(
+            matches!(err, PlcError::Timeout { dropped: d, .. } if d == dropped),
+            "the commonest: {err:?}"
+        );
+        let stats = h.stats();
+        assert_eq!((stats.requests, stats.retries, stats.foreign), (3, 2, 3));
     }
 
     #[test]
