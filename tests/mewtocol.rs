@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use rackd::protocols::faults::Fault;
+use rackd::protocols::faults::{Fault, Faults};
 use rackd::protocols::mewtocol::ErrorCode;
 use rackd::protocols::mewtocol::server::{self, ServerState};
 use rackd::protocols::mewtocol::{Bank, ContactArea, MewtocolClient, MewtocolConfig, MewtocolTransport};
@@ -215,4 +215,53 @@ async fn bcc_errors_and_missing_bcc_in_replies() {
         }
         other => panic!("{other:?}"),
     }
+}
+
+/// A read split into four commands (27 words each, the last shorter) whose first command
+/// is answered late once (80 ms after the 400 ms timeout), after which the PLC keeps a 30 ms
+/// turnaround: the late reply and the duplicate answer to the retry are never taken for a
+/// later command's answer. The timer is fixed at the timeout (`min_timeout` = `timeout`),
+/// as for a one-off `rackd plc` read, so the retry catches the late reply and the next
+/// command meets the duplicate.
+async fn late_replies_are_never_another_commands_answer(plc: &MewtocolClient, state: &ServerState) {
+    let late =
+        Faults { delay: Duration::from_millis(30), late: Duration::from_millis(450), ..Faults::default() };
+    let at = plc.parse_address("DT0").unwrap();
+    let values: Vec<u16> = (0..100).map(|i| i * 3 + 1).collect();
+    plc.write_words(&at, &values).await.unwrap();
+    let mut answered = 0;
+    for round in 0..4 {
+        state.faults.set(late.clone());
+        match plc.read_words(&at, 100).await {
+            Ok(got) => {
+                assert_eq!(got, values, "round {round}: another command's answer");
+                answered += 1;
+            }
+            Err(e) => assert!(matches!(e, PlcError::Timeout { .. }), "round {round}: {e:?}"),
+        }
+    }
+    assert_eq!(answered, 4, "the late reply answers the retry; the duplicate is drained");
+    let stats = plc.link_stats();
+    assert!(stats.stale >= 1, "late replies and duplicates were drained: {stats:?}");
+    state.faults.set(Faults::default());
+    assert_eq!(plc.read_words(&at, 100).await.unwrap(), values, "and the line is clean after");
+}
+
+fn fixed_400_ms(c: &mut MewtocolConfig) {
+    c.timeout = Duration::from_millis(400);
+    c.tuning.min_timeout = c.timeout;
+}
+
+#[tokio::test]
+async fn a_late_reply_is_never_the_next_commands_answer_over_tcp() {
+    let s = state();
+    let (_server, plc) = tcp(&s, fixed_400_ms).await;
+    late_replies_are_never_another_commands_answer(&plc, &s).await;
+}
+
+#[tokio::test]
+async fn a_late_reply_is_never_the_next_commands_answer_on_a_serial_line() {
+    let s = state();
+    let (_server, plc) = pty(&s, fixed_400_ms);
+    late_replies_are_never_another_commands_answer(&plc, &s).await;
 }

@@ -4,10 +4,10 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use rackd::protocols::faults::Faults;
+use rackd::protocols::faults::{Faults, SharedFaults};
 use rackd::protocols::modbus::server::{Bank, ModbusServer, ServerHandle, ServerOptions};
 use rackd::protocols::modbus::{Exception, ModbusClient, ModbusConfig, Quirks, Request, Response, Transport};
-use rackd::protocols::{DeviceCode, PlcError, PlcMemory};
+use rackd::protocols::{DeviceCode, DropReason, Dropped, PlcError, PlcMemory};
 use tokio::net::UdpSocket;
 
 #[path = "modbus/paused.rs"]
@@ -40,10 +40,14 @@ async fn client(transport: Transport, address: &str, timeout_ms: u64, retries: u
 
 /// An RTU server and client on the two ends of a pty pair.
 fn pty(options: ServerOptions, timeout_ms: u64, retries: u32) -> (ServerHandle, Bank, ModbusClient) {
+    pty_with(options, config(Transport::RtuSerial, "pty", timeout_ms, retries))
+}
+
+/// An RTU server and a client configured with `c` on the two ends of a pty pair.
+fn pty_with(options: ServerOptions, mut c: ModbusConfig) -> (ServerHandle, Bank, ModbusClient) {
     let (a, b) = tokio_serial::SerialStream::pair().expect("pty pair");
     let bank = Bank::new();
     let handle = ModbusServer::new(Arc::new(bank.clone()), options).serve_rtu_stream(a, 115200);
-    let mut c = config(Transport::RtuSerial, "pty", timeout_ms, retries);
     c.serial.baud = 115200;
     (handle, bank, ModbusClient::rtu_over_stream(c, b).unwrap())
 }
@@ -197,7 +201,17 @@ async fn length0_replies_are_read_with_the_quirk() {
         c.quirks = Quirks::default();
         let strict = ModbusClient::connect(c).await.unwrap();
         let err = strict.read_words(&strict.parse_address("4x4700").unwrap(), 1).await.unwrap_err();
-        assert!(matches!(err, PlcError::Malformed(_)), "{transport:?}: {err:?}");
+        match transport {
+            // Each datagram stands alone: the replies are dropped, and the timeout names the
+            // quirk that would take them.
+            Transport::Udp => {
+                let length0 = Some(Dropped { count: 1, reason: DropReason::LengthZero });
+                assert!(matches!(err, PlcError::Timeout { dropped, .. } if dropped == length0), "{err:?}");
+                assert!(err.to_string().contains("the `length0` quirk would take them"), "{err}");
+            }
+            // On a stream a bad length breaks the framing: malformed, and the link reopened.
+            _ => assert!(matches!(err, PlcError::Malformed(_)), "{transport:?}: {err:?}"),
+        }
     }
 }
 
@@ -326,4 +340,106 @@ async fn raw_requests_and_write_echo() {
     assert_eq!(echo, Response::WriteSingleRegister { address: 9, value: 99 });
     let too_many = Request::ReadHoldingRegisters { address: 0, count: 126 };
     assert!(matches!(plc.call(&too_many).await, Err(PlcError::OutOfRange(_))));
+}
+
+#[tokio::test]
+async fn a_fast_lossy_udp_link_retries_within_milliseconds_and_is_flagged_degraded() {
+    let (server, bank, address) = serve(Transport::Udp, ServerOptions::default()).await;
+    bank.set_holding(0, &[1, 2]);
+    let plc = client(Transport::Udp, &address, 1000, 8).await;
+    let at = plc.parse_address("4x0").unwrap();
+    assert_eq!(plc.link_stats().timeout_ms, 1000.0, "the ceiling until a round trip is known");
+    for _ in 0..60 {
+        plc.read_words(&at, 2).await.unwrap();
+    }
+    let clean = plc.link_stats();
+    assert!(!clean.degraded, "{clean:?}");
+    assert!(clean.srtt_ms.is_some_and(|ms| ms < 20.0), "{clean:?}");
+    assert!(clean.timeout_ms < 100.0, "learned from the round trips: {clean:?}");
+
+    server.set_faults(Faults { drop_rate: 0.2, ..Faults::default() });
+    let start = std::time::Instant::now();
+    for i in 0..200 {
+        assert_eq!(plc.read_words(&at, 2).await.unwrap(), [1, 2], "read {i}");
+    }
+    // About 40 lost requests: 40 s with the fixed 1 s timeout.
+    let took = start.elapsed();
+    assert!(took < Duration::from_secs(10), "retried within milliseconds: {took:?}");
+    let lossy = plc.link_stats();
+    assert!(lossy.degraded, "{lossy:?}");
+    assert!(lossy.retries > 10 && lossy.timeouts >= lossy.retries, "{lossy:?}");
+    assert_eq!(lossy.requests, 260);
+
+    server.set_faults(Faults::default());
+    for _ in 0..60 {
+        plc.read_words(&at, 2).await.unwrap();
+    }
+    assert!(!plc.link_stats().degraded, "healthy again once the window is clean");
+}
+
+#[tokio::test]
+async fn replies_with_another_transaction_id_are_named_in_the_timeout() {
+    let faults = Faults { wrong_id_rate: 1.0, ..Faults::default() };
+    let (_server, _bank, address) =
+        serve(Transport::Udp, ServerOptions { faults, ..ServerOptions::default() }).await;
+    let plc = client(Transport::Udp, &address, 200, 2).await;
+    let err = plc.read_words(&plc.parse_address("4x0").unwrap(), 1).await.unwrap_err();
+    let three = Some(Dropped { count: 3, reason: DropReason::TransactionId });
+    assert!(matches!(err, PlcError::Timeout { attempts: 3, dropped, .. } if dropped == three), "{err:?}");
+    assert!(
+        err.to_string().ends_with(
+            "(3 replies arrived with another transaction id: the `no-transaction-id` quirk would take them)"
+        ),
+        "{err}"
+    );
+    assert_eq!(plc.link_stats().foreign, 3);
+}
+
+/// A split read (250 registers: two requests of 125, same function and size) whose first
+/// request is answered late once (80 ms after the 400 ms timeout), after which the PLC
+/// keeps a 30 ms turnaround: the late reply and the duplicate answer to the retry must never
+/// become the second request's values (tokio-modbus issue #324). Every read returns its own
+/// data or an error. The timer is fixed at the timeout (`min_timeout` = `timeout`), as for
+/// a one-off `rackd plc` read, so the retry catches the late reply and the second request
+/// meets the duplicate.
+async fn late_replies_are_never_another_requests_answer(plc: &ModbusClient, faults: &SharedFaults) {
+    let late =
+        Faults { delay: Duration::from_millis(30), late: Duration::from_millis(450), ..Faults::default() };
+    let at = plc.parse_address("4x0").unwrap();
+    let values: Vec<u16> = (0..250).map(|i| i * 3 + 1).collect();
+    plc.write_words(&at, &values[..100]).await.unwrap();
+    plc.write_words(&plc.parse_address("4x100").unwrap(), &values[100..]).await.unwrap();
+    let mut answered = 0;
+    for round in 0..4 {
+        faults.set(late.clone());
+        match plc.read_words(&at, 250).await {
+            Ok(got) => {
+                assert_eq!(got, values, "round {round}: another request's answer");
+                answered += 1;
+            }
+            Err(e) => assert!(matches!(e, PlcError::Timeout { .. }), "round {round}: {e:?}"),
+        }
+    }
+    assert_eq!(answered, 4, "the late reply answers the retry; the duplicate is drained");
+    let stats = plc.link_stats();
+    assert!(stats.stale >= 1, "late replies and duplicates were drained: {stats:?}");
+    faults.set(Faults::default());
+    assert_eq!(plc.read_words(&at, 250).await.unwrap(), values, "and the line is clean after");
+}
+
+#[tokio::test]
+async fn rtu_over_tcp_never_takes_a_late_reply_for_the_next_answer() {
+    let (server, _bank, address) = serve(Transport::RtuOverTcp, ServerOptions::default()).await;
+    let mut c = config(Transport::RtuOverTcp, &address, 400, 1);
+    c.tuning.min_timeout = c.timeout;
+    let plc = ModbusClient::connect(c).await.unwrap();
+    late_replies_are_never_another_requests_answer(&plc, &server.faults()).await;
+}
+
+#[tokio::test]
+async fn rtu_on_a_serial_line_never_takes_a_late_reply_for_the_next_answer() {
+    let mut c = config(Transport::RtuSerial, "pty", 400, 1);
+    c.tuning.min_timeout = c.timeout;
+    let (server, _bank, plc) = pty_with(ServerOptions::default(), c);
+    late_replies_are_never_another_requests_answer(&plc, &server.faults()).await;
 }

@@ -3,6 +3,8 @@
 //! ```text
 //! cargo run --release --example bench -- intake [--clients 64] [--seconds 5] [--batch 1000]
 //! cargo run --release --example bench -- shelf  [--latency-jobs 1000] [--batch-jobs 20000] [--poll-ms 10]
+//!                                               [--drop 0.2 [--lossy-jobs 1000] [--fixed-timeout]
+//!                                                [--min-timeout-ms 20]]
 //! cargo run --release --example bench -- ws     [--subscribers 1000] [--events 500] [--rate 50]
 //! cargo run --release --example bench -- fleet  [--devices 500] [--tags 30] [--poll-ms 500] [--seconds 20] [--changing 0.1]
 //! ```
@@ -55,6 +57,20 @@ enum Bench {
         /// The device's poll period in milliseconds.
         #[arg(long, default_value_t = 10)]
         poll_ms: u64,
+        /// Also run `lossy_jobs` jobs with this share of datagrams lost (the simulator
+        /// drops requests), next to as many on the clean link, and print both rates.
+        #[arg(long)]
+        drop: Option<f64>,
+        /// Jobs in each of the clean and the lossy runs of `--drop`.
+        #[arg(long, default_value_t = 1000)]
+        lossy_jobs: usize,
+        /// Keep the reply timeout fixed at `timeout_ms` (no adaptive timer), as before
+        /// issue 12, for comparison.
+        #[arg(long)]
+        fixed_timeout: bool,
+        /// The adaptive timeout's floor for the device (`min_timeout_ms`; default 20).
+        #[arg(long)]
+        min_timeout_ms: Option<u64>,
     },
     /// Live events: fan-out latency and the server's CPU with 1 and with N WebSocket subscribers.
     Ws {
@@ -82,8 +98,18 @@ fn main() -> ExitCode {
     let result = runtime.block_on(async {
         match bench {
             Bench::Intake { clients, seconds, batch } => intake::run(clients, seconds, batch).await,
-            Bench::Shelf { latency_jobs, batch_jobs, poll_ms } => {
-                shelf::run(latency_jobs, batch_jobs, poll_ms).await
+            Bench::Shelf {
+                latency_jobs,
+                batch_jobs,
+                poll_ms,
+                drop,
+                lossy_jobs,
+                fixed_timeout,
+                min_timeout_ms,
+            } => {
+                let lossy =
+                    drop.map(|rate| shelf::Lossy { rate, jobs: lossy_jobs, fixed_timeout, min_timeout_ms });
+                shelf::run(latency_jobs, batch_jobs, poll_ms, lossy).await
             }
             Bench::Ws { subscribers, events, rate } => ws::run(subscribers, events, rate).await,
             Bench::Fleet(args) => fleet::run(args).await,

@@ -9,6 +9,13 @@
 //! The baseline, measured in the same run, is one Modbus UDP read round trip to the same
 //! simulator: a hand-over needs at least three (read the slot, write the body, write the
 //! id), so `latency / (3 x round trip)` says how close dispatch is to the wire's floor.
+//!
+//! With `--drop P` (issue 12), the latency and sustained phases are skipped: the same
+//! number of jobs runs on the clean link and then with the simulator dropping a share P of
+//! requests, and both completed-jobs rates are printed with their ratio (the goal: at least
+//! half the clean rate under 20% loss), with the device's link health after the lossy run.
+//! `--fixed-timeout` pins the reply timeout at `timeout_ms` (the floor raised to the
+//! ceiling), which is how rackd behaved before the adaptive timer.
 
 use std::time::{Duration, Instant};
 
@@ -20,12 +27,31 @@ use rackd::app::Application;
 use rackd::cli::demo::shelf_device;
 use rackd::config::Config;
 use rackd::protocols::PlcMemory;
+use rackd::protocols::faults::Faults;
 use rackd::protocols::modbus::{ModbusClient, ModbusConfig};
 use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
 use rackd::wire::task_id_for;
 
-/// Runs the shelf benchmark: `latency_jobs` single jobs, then `batch_jobs` in batches.
-pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow::Result<()> {
+/// The lossy comparison of `--drop`.
+pub struct Lossy {
+    /// Share of requests the simulator drops.
+    pub rate: f64,
+    /// Jobs in each run.
+    pub jobs: usize,
+    /// No adaptive timer (as before issue 12).
+    pub fixed_timeout: bool,
+    /// The adaptive timer's floor, if not the default.
+    pub min_timeout_ms: Option<u64>,
+}
+
+/// Runs the shelf benchmark: `latency_jobs` single jobs, then `batch_jobs` in batches; or,
+/// with `lossy`, the clean and lossy runs.
+pub async fn run(
+    latency_jobs: usize,
+    batch_jobs: usize,
+    poll_ms: u64,
+    lossy: Option<Lossy>,
+) -> anyhow::Result<()> {
     let sim =
         ShelfSim::start("127.0.0.1:0", ShelfSimOptions { task_time: Duration::ZERO, ..Default::default() })
             .await?;
@@ -36,6 +62,12 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
     let plc_addr = sim.local_addr().context("a UDP simulator has an address")?.to_string();
     let mut device = shelf_device(&sim, "shelf1", &plc_addr, vec![1]);
     device.poll_ms = poll_ms;
+    if let Some(ms) = lossy.as_ref().and_then(|l| l.min_timeout_ms) {
+        device.link.tuning.min_timeout = Duration::from_millis(ms);
+    }
+    if lossy.as_ref().is_some_and(|l| l.fixed_timeout) {
+        device.link.tuning.min_timeout = device.link.timeout;
+    }
     config.devices = vec![device.into()];
     let app = Application::build(&config, false).await?;
     let base = format!("http://{}", app.local_addr());
@@ -44,6 +76,31 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
         let _ = stopped.await;
     }));
     let client = reqwest::Client::new();
+
+    if let Some(lossy) = lossy {
+        let clean = batch(&client, &base, &sim, 0, lossy.jobs).await?;
+        sim.set_faults(Faults { drop_rate: lossy.rate, ..Faults::default() });
+        let dropped = batch(&client, &base, &sim, lossy.jobs, lossy.jobs).await?;
+        let device: serde_json::Value =
+            client.get(format!("{base}/api/v1/devices/shelf1")).send().await?.json().await?;
+        let timer = match (lossy.fixed_timeout, lossy.min_timeout_ms) {
+            (true, _) => "fixed timeout".to_owned(),
+            (false, Some(ms)) => format!("adaptive timeout, floor {ms} ms"),
+            (false, None) => "adaptive timeout, default floor".to_owned(),
+        };
+        println!(
+            "bench shelf --drop {}: {} jobs per run, poll every {poll_ms} ms, {timer}",
+            lossy.rate, lossy.jobs
+        );
+        println!("clean link:          {clean:.1} completed jobs/s");
+        println!("{:>3.0}% requests lost:  {dropped:.1} completed jobs/s", lossy.rate * 100.0);
+        println!("ratio lossy / clean: {:.1}%", 100.0 * dropped / clean);
+        println!("device link after the lossy run: {}", device["link"]);
+        let _ = stop.send(());
+        server.await??;
+        sim.shutdown().await;
+        return Ok(());
+    }
 
     let plc = ModbusClient::connect(ModbusConfig::shelf_plc(plc_addr)).await?;
     let at = plc.parse_address("4x4000")?;
@@ -119,6 +176,42 @@ pub async fn run(latency_jobs: usize, batch_jobs: usize, poll_ms: u64) -> anyhow
     server.await??;
     sim.shutdown().await;
     Ok(())
+}
+
+/// Posts `count` light jobs (numbered from `first`) in batches and waits until every one
+/// has completed; returns completed jobs per second.
+async fn batch(
+    client: &reqwest::Client,
+    base: &str,
+    sim: &ShelfSim,
+    first: usize,
+    count: usize,
+) -> anyhow::Result<f64> {
+    let jobs: Vec<_> = (0..count).map(|n| light(n + first)).collect();
+    let (done_before, _) = sim.finished();
+    let t = Instant::now();
+    for chunk in jobs.chunks(1000) {
+        let r = client
+            .post(format!("{base}/api/v1/jobs/batch"))
+            .json(&serde_json::json!({ "jobs": chunk }))
+            .send()
+            .await?;
+        anyhow::ensure!(r.status() == 201, "batch: {}", r.status());
+    }
+    let deadline = Instant::now() + Duration::from_secs(1800);
+    loop {
+        let r: serde_json::Value =
+            client.get(format!("{base}/api/v1/jobs?state=queued&limit=1")).send().await?.json().await?;
+        let running: serde_json::Value =
+            client.get(format!("{base}/api/v1/devices/shelf1")).send().await?.json().await?;
+        if r["jobs"].as_array().is_some_and(|a| a.is_empty()) && running["slots_in_use"] == 0 {
+            break;
+        }
+        anyhow::ensure!(Instant::now() < deadline, "the batch did not finish");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let (done_after, _) = sim.finished();
+    Ok((done_after - done_before) as f64 / t.elapsed().as_secs_f64())
 }
 
 /// A light job on the demo site; consecutive jobs use different locations.

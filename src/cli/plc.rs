@@ -104,14 +104,17 @@ impl PlcArgs {
             (self.long_frames, Quirk::LongFrames),
             (self.no_pdu_ref, Quirk::NoPduRef),
         ];
-        LinkConfig {
+        let mut link = LinkConfig {
             unit: self.unit.unwrap_or(self.protocol.default_unit()),
             serial: self.serial,
             timeout: Duration::from_millis(self.timeout_ms),
             retries: self.retries,
             quirks: flags.into_iter().filter(|(on, _)| *on).map(|(_, q)| q).collect(),
             ..LinkConfig::new(self.protocol, self.address.clone())
-        }
+        };
+        // A one-off request has no round trips to learn from; the floor only has to fit.
+        link.tuning.min_timeout = link.tuning.min_timeout.min(link.timeout);
+        link
     }
 }
 
@@ -162,8 +165,9 @@ pub fn describe(error: &PlcError) -> String {
                 format!("item return code {code:02X} \"{}\"", c.meaning())
             }
         },
-        PlcError::Timeout { attempts, timeout } => {
-            format!("timeout: no reply after {attempts} tries of {} ms", timeout.as_millis())
+        PlcError::Timeout { attempts, timeout, dropped } => {
+            let note = dropped.map_or_else(String::new, |d| format!(" ({d})"));
+            format!("timeout: no reply after {attempts} tries of {} ms{note}", timeout.as_millis())
         }
         other => other.to_string(),
     }
@@ -264,8 +268,16 @@ mod tests {
     fn errors_read_like_the_device_manual() {
         let e: PlcError = crate::protocols::modbus::Exception(2).into();
         assert_eq!(describe(&e), "exception 02 \"illegal data address\"");
-        let t = PlcError::Timeout { attempts: 3, timeout: Duration::from_millis(200) };
+        let t = PlcError::Timeout { attempts: 3, timeout: Duration::from_millis(200), dropped: None };
         assert_eq!(describe(&t), "timeout: no reply after 3 tries of 200 ms");
+        let dropped =
+            Some(crate::protocols::Dropped { count: 2, reason: crate::protocols::DropReason::TransactionId });
+        let t = PlcError::Timeout { attempts: 3, timeout: Duration::from_millis(200), dropped };
+        assert_eq!(
+            describe(&t),
+            "timeout: no reply after 3 tries of 200 ms (2 replies arrived with another transaction id: \
+             the `no-transaction-id` quirk would take them)"
+        );
         assert_eq!(describe(&mewtocol::error_code::device_error(63)), "error 63 \"PLC mode error\"");
         assert_eq!(
             describe(&ppi::return_code::item_error(0x0A)),

@@ -175,11 +175,11 @@ mod tests {
 
     #[test]
     fn every_simulator_takes_the_same_fault_flags() {
-        let flags =
-            "--drop 0.5 --delay-ms 7 --garbage 0.1 --close 0.2 --duplicate 0.3 --wrong-id 0.4 --wrong-unit 9";
+        let flags = "--drop 0.5 --delay-ms 7 --late-ms 90 --garbage 0.1 --close 0.2 --duplicate 0.3 --wrong-id 0.4 --wrong-unit 9";
         let expected = Faults {
             drop_rate: 0.5,
             delay: Duration::from_millis(7),
+            late: Duration::from_millis(90),
             garbage_rate: 0.1,
             close_rate: 0.2,
             duplicate_rate: 0.3,

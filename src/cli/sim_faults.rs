@@ -18,6 +18,10 @@ pub struct FaultArgs {
     /// Milliseconds before each reply (more than the client's timeout: every reply is late).
     #[arg(long, default_value_t = 0)]
     pub delay_ms: u64,
+    /// Milliseconds added to the first reply only: a PLC late once, then answering after
+    /// `--delay-ms` again (the late reply and a retry's answer both arrive).
+    #[arg(long, default_value_t = 0)]
+    pub late_ms: u64,
     /// Fraction (0..1) of replies preceded by random bytes (a separate datagram over UDP).
     #[arg(long, default_value_t = 0.0)]
     pub garbage: f64,
@@ -66,6 +70,7 @@ impl FaultArgs {
         let faults = Faults {
             drop_rate: self.drop,
             delay: Duration::from_millis(self.delay_ms),
+            late: Duration::from_millis(self.late_ms),
             garbage_rate: self.garbage,
             close_rate: self.close,
             duplicate_rate: self.duplicate,

@@ -5,6 +5,14 @@
 //! each change. What changes on every poll (last contact, failures in a row) is contact
 //! bookkeeping: it is always current for readers, but wakes watchers at most every
 //! `refresh`, so a fleet of devices polled twice a second does not publish twice a second.
+//!
+//! The link's health ([`LinkStats`], from the protocol client) is copied in with each
+//! contact. Its counters, round trip and timeout are bookkeeping too; `degraded` flipping
+//! is told at once (the service raises a warning alarm on it). A link error in
+//! `last_error` clears on the next successful request, so a device that recovered does not
+//! keep showing an old failure (an error an adapter sets while the link answers, such as a
+//! crane's handshake timeout, stays until the adapter clears it); `last_error_at` keeps
+//! when the last error was set, whoever set it ([`StatusCell`] stamps it).
 
 use std::time::Duration;
 
@@ -14,11 +22,15 @@ use tokio::sync::watch;
 use tokio::time::Instant;
 use utoipa::ToSchema;
 
+use crate::protocols::transport::LinkStats;
+
 /// What rackd knows of a device right now.
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
 #[schema(example = json!({"id": "shelf1", "kind": "shelf", "protocol": "modbus-udp", "address": "127.0.0.1:1502",
     "aisles": [1], "online": true, "paused": false, "last_contact": "2026-11-21T08:00:00.000Z", "slots_total": 60,
-    "slots_in_use": 3, "consecutive_failures": 0, "last_error": null}))]
+    "slots_in_use": 3, "consecutive_failures": 0, "last_error": null, "last_error_at": "2026-11-21T07:58:12.000Z",
+    "link": {"degraded": false, "requests": 1200, "retries": 3, "timeouts": 3, "stale": 0, "foreign": 0,
+    "malformed": 0, "srtt_ms": 0.41, "timeout_ms": 20.0}}))]
 pub struct DeviceStatus {
     /// The device's id from the configuration.
     pub id: String,
@@ -50,8 +62,14 @@ pub struct DeviceStatus {
     pub slots_in_use: u16,
     /// Requests in a row that failed.
     pub consecutive_failures: u32,
-    /// The last error, if any.
+    /// The last error, while it lasts: cleared by the next successful request.
     pub last_error: Option<String>,
+    /// When the last error happened (kept after it cleared).
+    #[serde(with = "time::serde::rfc3339::option")]
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub last_error_at: Option<OffsetDateTime>,
+    /// The link's health: adaptive timeout, degraded flag and counters.
+    pub link: LinkStats,
     /// When a shelf PLC answered with every slot empty where rackd had tasks (it lost its
     /// memory: a power cycle?); null again once it takes new work.
     #[serde(with = "time::serde::rfc3339::option")]
@@ -101,23 +119,33 @@ pub struct CraneStatus {
 
 impl DeviceStatus {
     /// Records the outcome of one request to the device (time of contact, failures in a
-    /// row, last error) and returns whether the link is up now, given whether it was: an
-    /// answer brings it up; it goes down after `offline_after` failures in a row.
+    /// row, last error, the link's health as `link` says after it) and returns whether the
+    /// link is up now, given whether it was: an answer brings it up and, after failures,
+    /// clears the last error; it goes down after `offline_after` failures in a row.
     pub fn record_contact(
         &mut self,
         result: Result<(), &crate::protocols::PlcError>,
         offline_after: u32,
         was_up: bool,
+        link: LinkStats,
     ) -> bool {
+        self.link = link;
+        let now = || crate::domain::time::from_ms(crate::domain::time::now_ms());
         match result {
             Ok(()) => {
+                // The link recovered: its error goes. An error the adapter set itself while
+                // the link answered (a crane's handshake timeout) is the adapter's to clear.
+                if self.consecutive_failures > 0 {
+                    self.last_error = None;
+                }
                 self.consecutive_failures = 0;
-                self.last_contact = Some(crate::domain::time::from_ms(crate::domain::time::now_ms()));
+                self.last_contact = Some(now());
                 true
             }
             Err(e) => {
                 self.consecutive_failures += 1;
                 self.last_error = Some(e.to_string());
+                self.last_error_at = Some(now());
                 was_up && self.consecutive_failures < offline_after
             }
         }
@@ -140,6 +168,8 @@ impl DeviceStatus {
             slots_in_use: 0,
             consecutive_failures: 0,
             last_error: None,
+            last_error_at: None,
+            link: LinkStats::default(),
             memory_lost_at: None,
             crane: (kind == super::DeviceKind::Crane).then(CraneStatus::default),
             tags: None,
@@ -147,11 +177,13 @@ impl DeviceStatus {
     }
 }
 
-/// What watchers must hear of at once: everything but the contact bookkeeping and the
-/// tags (whose changes the tags device reports itself).
+/// What watchers must hear of at once: everything but the contact bookkeeping (last
+/// contact, failures in a row, the link's counters) and the tags (whose changes the tags
+/// device reports itself).
 #[derive(PartialEq)]
 struct Shape {
     online: bool,
+    degraded: bool,
     slots_in_use: u16,
     last_error: Option<String>,
     memory_lost_at: Option<OffsetDateTime>,
@@ -162,6 +194,7 @@ impl Shape {
     fn of(s: &DeviceStatus) -> Shape {
         Shape {
             online: s.online,
+            degraded: s.link.degraded,
             slots_in_use: s.slots_in_use,
             last_error: s.last_error.clone(),
             memory_lost_at: s.memory_lost_at,
@@ -209,6 +242,9 @@ impl StatusCell {
         self.tx.send_if_modified(|s| {
             let (before, contact) = (Shape::of(s), s.last_contact);
             let tags_changed = f(s);
+            if s.last_error.is_some() && s.last_error != before.last_error {
+                s.last_error_at = Some(crate::domain::time::from_ms(crate::domain::time::now_ms()));
+            }
             told = tags_changed || Shape::of(s) != before || (stale && s.last_contact != contact);
             told
         });
@@ -230,7 +266,7 @@ mod tests {
         let mut seen = cell.subscribe();
         seen.mark_unchanged();
         cell.update(|s| {
-            s.record_contact(Ok(()), 3, false);
+            s.record_contact(Ok(()), 3, false, LinkStats::default());
         });
         assert!(!seen.has_changed().unwrap(), "a first contact within the refresh is bookkeeping");
         assert!(cell.get().last_contact.is_some(), "readers see it all the same");
@@ -245,5 +281,47 @@ mod tests {
         assert!(!seen.has_changed().unwrap(), "and then not again before the next refresh");
         cell.update_marked(|_| true);
         assert!(seen.has_changed().unwrap(), "a tag change is told at once");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn link_counters_are_bookkeeping_but_degraded_is_told_at_once() {
+        let status = DeviceStatus::new("shelf1", DeviceKind::Shelf, "modbus-udp", "127.0.0.1:1", 60);
+        let mut cell = StatusCell::new(status, Duration::from_secs(5));
+        let mut seen = cell.subscribe();
+        seen.mark_unchanged();
+        let busy = LinkStats { requests: 10, retries: 2, timeouts: 2, ..LinkStats::default() };
+        cell.update(|s| {
+            s.record_contact(Ok(()), 3, true, busy.clone());
+        });
+        assert!(!seen.has_changed().unwrap(), "counters are bookkeeping");
+        assert_eq!(cell.get().link, busy, "readers see them all the same");
+        let degraded = LinkStats { degraded: true, ..busy };
+        cell.update(|s| {
+            s.record_contact(Ok(()), 3, true, degraded);
+        });
+        assert!(seen.has_changed().unwrap(), "degraded is told at once");
+    }
+
+    #[test]
+    fn the_last_error_clears_on_recovery_and_its_time_stays() {
+        let mut s = DeviceStatus::new("shelf1", DeviceKind::Shelf, "modbus-udp", "127.0.0.1:1", 60);
+        let e = crate::protocols::PlcError::Malformed("bad");
+        assert!(s.record_contact(Err(&e), 3, true, LinkStats::default()));
+        assert_eq!(s.last_error.as_deref(), Some("malformed reply: bad"));
+        let at = s.last_error_at;
+        assert!(at.is_some());
+        assert!(s.record_contact(Ok(()), 3, true, LinkStats::default()));
+        assert_eq!((s.last_error.as_deref(), s.last_error_at), (None, at), "cleared; its time kept");
+        s.last_error = Some("handshake timed out".into());
+        s.record_contact(Ok(()), 3, true, LinkStats::default());
+        assert!(s.last_error.is_some(), "not a link error: the adapter's to clear");
+    }
+
+    #[test]
+    fn the_cell_stamps_every_new_error() {
+        let status = DeviceStatus::new("crane1", DeviceKind::Crane, "mc3e", "127.0.0.1:1", 1);
+        let mut cell = StatusCell::new(status, Duration::from_secs(5));
+        cell.update(|s| s.last_error = Some("heartbeat stopped".into()));
+        assert!(cell.get().last_error_at.is_some());
     }
 }

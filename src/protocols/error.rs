@@ -11,13 +11,18 @@ use super::{mc3e, mewtocol, modbus, ppi};
 /// Why a PLC request failed.
 #[derive(Debug, thiserror::Error)]
 pub enum PlcError {
-    /// No valid reply arrived within the timeout, after every retry.
-    #[error("no reply after {attempts} attempt(s) of {timeout:?} each")]
+    /// No valid reply arrived within the timeout, after every retry. When replies did
+    /// arrive but were dropped (another transaction id, another unit, late replies to
+    /// earlier requests), `dropped` says how many and why, and the message names the quirk
+    /// that would take them, if one would.
+    #[error("no reply after {attempts} attempt(s) of {timeout:?} each{}", note(.dropped))]
     Timeout {
         /// How many times the request was sent.
         attempts: u32,
-        /// The timeout of each attempt.
+        /// The timeout of the last attempt (adaptive timeouts make them differ).
         timeout: Duration,
+        /// Replies that arrived during the request but were dropped, if any.
+        dropped: Option<Dropped>,
     },
     /// The connection could not be made or was lost.
     #[error("connection lost: {0}")]
@@ -39,6 +44,74 @@ pub enum PlcError {
         /// What is wrong with it.
         reason: &'static str,
     },
+}
+
+/// Why a reply that arrived was not taken as the answer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum DropReason {
+    /// It carried another transaction id (Modbus TCP/UDP).
+    TransactionId,
+    /// It carried the PDU reference of an earlier request (PPI).
+    PduReference,
+    /// It came from another unit or station.
+    Unit,
+    /// Its MBAP length field was 0 (Modbus TCP/UDP without the `length0` quirk).
+    LengthZero,
+    /// A late reply to an earlier request, or one that does not match this request
+    /// (another function, command or size).
+    Stale,
+    /// It could not be decoded at all.
+    Malformed,
+}
+
+impl DropReason {
+    /// The quirk that would take such replies, if one would.
+    pub fn quirk(self) -> Option<super::Quirk> {
+        match self {
+            DropReason::TransactionId => Some(super::Quirk::NoTransactionId),
+            DropReason::LengthZero => Some(super::Quirk::Length0),
+            DropReason::PduReference => Some(super::Quirk::NoPduRef),
+            DropReason::Unit | DropReason::Stale | DropReason::Malformed => None,
+        }
+    }
+
+    fn words(self) -> &'static str {
+        match self {
+            DropReason::TransactionId => "with another transaction id",
+            DropReason::PduReference => "with another PDU reference",
+            DropReason::Unit => "from another unit",
+            DropReason::LengthZero => "with MBAP length 0",
+            DropReason::Stale => "that answer another request",
+            DropReason::Malformed => "that could not be decoded",
+        }
+    }
+}
+
+/// Replies dropped during one request: how many, and the commonest reason.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Dropped {
+    /// Replies dropped for `reason`.
+    pub count: u32,
+    /// Why they were dropped.
+    pub reason: DropReason,
+}
+
+impl std::fmt::Display for Dropped {
+    /// `4 replies arrived with another transaction id: the `no-transaction-id` quirk would
+    /// take them`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let Dropped { count, reason } = *self;
+        let replies = if count == 1 { "reply" } else { "replies" };
+        write!(f, "{count} {replies} arrived {}", reason.words())?;
+        match reason.quirk() {
+            Some(q) => write!(f, ": the `{q}` quirk would take them"),
+            None => Ok(()),
+        }
+    }
+}
+
+fn note(dropped: &Option<Dropped>) -> String {
+    dropped.map_or_else(String::new, |d| format!(" ({d})"))
 }
 
 /// A device's own error code, typed by the protocol that carried it.
@@ -162,6 +235,25 @@ mod tests {
         for (code, text) in cases {
             assert_eq!(PlcError::Device(code).to_string(), text);
         }
+    }
+
+    #[test]
+    fn a_timeout_says_which_replies_were_dropped_and_which_quirk_takes_them() {
+        let timeout = Duration::from_millis(300);
+        let plain = PlcError::Timeout { attempts: 3, timeout, dropped: None };
+        assert_eq!(plain.to_string(), "no reply after 3 attempt(s) of 300ms each");
+        let dropped = Some(Dropped { count: 4, reason: DropReason::TransactionId });
+        assert_eq!(
+            PlcError::Timeout { attempts: 3, timeout, dropped }.to_string(),
+            "no reply after 3 attempt(s) of 300ms each (4 replies arrived with another transaction id: \
+             the `no-transaction-id` quirk would take them)"
+        );
+        let dropped = Some(Dropped { count: 1, reason: DropReason::Unit });
+        assert!(
+            PlcError::Timeout { attempts: 1, timeout, dropped }
+                .to_string()
+                .ends_with("(1 reply arrived from another unit)")
+        );
     }
 
     #[test]

@@ -18,6 +18,11 @@
 //!   byte), an MC end code, a MEWTOCOL error code (below 100), a PPI item return code below
 //!   0x100 or a refusal as error class x 256 + code (0x8500).
 //! - [`Fault::DropAck`] is PPI's lost short acknowledgement; elsewhere it is a drop.
+//! - `late`: the first request after the setting is made is answered this much later than
+//!   `delay`, once; every later one after `delay` alone. A PLC that was busy once and then
+//!   keeps its usual turnaround: with `late` beyond the client's timeout, the client's
+//!   retry gets a late answer *and* a prompt one, the duplicate that must not be taken for
+//!   the next request's answer (tokio-modbus issue #324).
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -32,6 +37,8 @@ pub struct Faults {
     pub drop_rate: f64,
     /// Wait before each reply; longer than the client's timeout, every reply is late.
     pub delay: Duration,
+    /// Extra wait before the first reply only (zero: none); see the module docs.
+    pub late: Duration,
     /// Fraction (0..=1) of replies preceded by random bytes (a separate datagram on UDP).
     pub garbage_rate: f64,
     /// Fraction (0..=1) of requests answered by closing the connection.
@@ -177,6 +184,8 @@ struct State {
     faults: Faults,
     script: VecDeque<Fault>,
     requests_seen: u64,
+    /// The `late` reply of the standing settings was planned.
+    late_done: bool,
 }
 
 /// The fault settings of a running server, shared with whoever drives it.
@@ -196,7 +205,9 @@ impl SharedFaults {
 
     /// Replaces the standing settings from the next request on (the script stays).
     pub fn set(&self, faults: Faults) {
-        self.state().faults = faults;
+        let mut state = self.state();
+        state.faults = faults;
+        state.late_done = false;
     }
 
     /// The standing settings.
@@ -206,7 +217,12 @@ impl SharedFaults {
 
     /// Changes the standing settings in place.
     pub fn update(&self, change: impl FnOnce(&mut Faults)) {
-        change(&mut self.state().faults);
+        let mut state = self.state();
+        let late = state.faults.late;
+        change(&mut state.faults);
+        if state.faults.late != late {
+            state.late_done = false;
+        }
     }
 
     /// Queues a fault for an upcoming request.
@@ -231,7 +247,12 @@ impl SharedFaults {
         if state.faults == Faults::default() {
             return Plan::default();
         }
-        state.faults.roll()
+        let mut plan = state.faults.roll();
+        if !state.faults.late.is_zero() && !state.late_done {
+            state.late_done = true;
+            plan.delay += state.faults.late;
+        }
+        plan
     }
 }
 
@@ -257,6 +278,18 @@ mod tests {
         faults.set(Faults::default());
         assert_eq!(faults.plan(), Plan::default());
         assert_eq!(faults.requests_seen(), 6);
+    }
+
+    #[test]
+    fn a_late_reply_comes_once_then_the_usual_turnaround() {
+        let ms = Duration::from_millis;
+        let faults = SharedFaults::new(Faults { delay: ms(30), late: ms(1100), ..Faults::default() });
+        assert_eq!(faults.plan().delay, ms(1130), "late once");
+        assert_eq!(faults.plan().delay, ms(30));
+        assert_eq!(faults.plan().delay, ms(30));
+        faults.update(|f| f.late = ms(500));
+        assert_eq!(faults.plan().delay, ms(530), "a new lateness fires again");
+        assert_eq!(faults.plan().delay, ms(30));
     }
 
     #[test]

@@ -6,9 +6,17 @@
 //! - **MC monitoring timer**: the PLC's own wait (units of 250 ms) is set one unit below
 //!   rackd's reply timeout (at least 1), so that a CPU that cannot answer makes the module
 //!   reply with an end code before rackd gives up and resends; equal or longer, the end
-//!   code would arrive as a late reply to be thrown away.
+//!   code would arrive as a late reply to be thrown away. It follows the configured
+//!   timeout, not the adaptive one: a CPU that was fast so far and is slow now makes rackd
+//!   give up first, and the end code lands on the closed exclusive connection, harmless.
 //! - **Quirks** are checked against the protocol ([`Quirk::applies_to`]): a quirk another
 //!   protocol's client knows is refused rather than silently ignored.
+//! - **Adaptive timeouts**: `timeout` is the ceiling of each client's RFC 6298 timer and
+//!   `tuning.min_timeout` its floor (see the transport's `health.rs`). A floor at or above
+//!   the ceiling is allowed and means a fixed timeout (the way to turn adaptation off; a
+//!   device with `timeout_ms` below the default floor simply gets a fixed timeout).
+//!   Shares outside 0..=1, a `degraded_below` above `degraded_above` or an empty window
+//!   are refused by [`LinkConfig::check`].
 //! - **Unit** ranges are the protocols' own: MEWTOCOL stations 1..=99, PPI addresses
 //!   1..=126 (0 is rackd's own master address), Modbus units 0..=247 (0 broadcasts a
 //!   write, which `rackd plc` allows; 248..=255 are reserved). Checked before connecting,
@@ -24,6 +32,7 @@ use super::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use super::ppi::{PpiClient, PpiConfig, PpiTransport};
 use super::protocol::{Family, Protocol, Quirk, names};
 use super::serial::SerialSettings;
+use super::transport::LinkTuning;
 use super::{PlcError, PlcMemory};
 
 /// Reply timeout per attempt when none is configured.
@@ -49,6 +58,9 @@ pub struct LinkConfig {
     pub retries: u32,
     /// Habits of the PLC the client must put up with; each must apply to `protocol`.
     pub quirks: BTreeSet<Quirk>,
+    /// The adaptive timeout's floor (`timeout` is its ceiling) and when the link counts as
+    /// degraded.
+    pub tuning: LinkTuning,
 }
 
 /// Why a link configuration cannot be used.
@@ -72,6 +84,9 @@ pub enum LinkError {
         /// The valid range, in words.
         range: &'static str,
     },
+    /// Adaptive timeout or degraded settings that make no sense.
+    #[error("{0}")]
+    Tuning(&'static str),
     /// The client could not be set up.
     #[error(transparent)]
     Plc(#[from] PlcError),
@@ -96,6 +111,7 @@ impl LinkConfig {
             timeout: DEFAULT_TIMEOUT,
             retries: DEFAULT_RETRIES,
             quirks: BTreeSet::new(),
+            tuning: LinkTuning::default(),
         }
     }
 
@@ -108,6 +124,16 @@ impl LinkConfig {
     pub fn check(&self) -> Result<(), LinkError> {
         if let Some(&quirk) = self.quirks.iter().find(|q| !q.applies_to(self.protocol)) {
             return Err(LinkError::Quirk { quirk, protocol: self.protocol });
+        }
+        let t = &self.tuning;
+        if !(0.0..=1.0).contains(&t.degraded_above) || !(0.0..=1.0).contains(&t.degraded_below) {
+            return Err(LinkError::Tuning("degraded_above and degraded_below are shares between 0 and 1"));
+        }
+        if t.degraded_below > t.degraded_above {
+            return Err(LinkError::Tuning("degraded_below must not exceed degraded_above"));
+        }
+        if t.degraded_window == 0 {
+            return Err(LinkError::Tuning("degraded_window must be at least 1"));
         }
         let unit = |range| Err(LinkError::Unit { unit: self.unit, protocol: self.protocol, range });
         match self.protocol.family() {
@@ -131,6 +157,7 @@ impl LinkConfig {
         let mut config = Mc3eConfig::new(self.address.clone(), transport);
         config.link.timeout = self.timeout;
         config.link.retries = self.retries;
+        config.link.tuning = self.tuning;
         config.monitor_timer = self.mc3e_monitor_timer();
         config
     }
@@ -143,6 +170,7 @@ impl LinkConfig {
         config.station = self.unit;
         config.timeout = self.timeout;
         config.retries = self.retries;
+        config.tuning = self.tuning;
         config.bcc = !self.has(Quirk::NoBcc);
         config.long_frames = self.has(Quirk::LongFrames);
         config
@@ -155,6 +183,7 @@ impl LinkConfig {
         config.plc = self.unit;
         config.timeout = self.timeout;
         config.retries = self.retries;
+        config.tuning = self.tuning;
         config.match_pdu_ref = !self.has(Quirk::NoPduRef);
         config
     }
@@ -170,6 +199,7 @@ impl LinkConfig {
         config.unit = self.unit;
         config.timeout = self.timeout;
         config.retries = self.retries;
+        config.tuning = self.tuning;
         config.serial = self.serial.unwrap_or(config.serial);
         config.quirks = Quirks {
             length0: self.has(Quirk::Length0),
@@ -222,6 +252,21 @@ mod tests {
         let mut serial = link(Protocol::Ppi, 2, &[]);
         serial.serial = Some("187500,8E1".parse().unwrap());
         assert_eq!(serial.ppi().serial.baud, 187_500);
+    }
+
+    #[test]
+    fn tuning_is_checked_and_a_floor_above_the_timeout_fixes_it() {
+        let mut l = link(Protocol::ModbusUdp, 1, &[]);
+        l.tuning.min_timeout = Duration::from_secs(5);
+        assert!(l.check().is_ok(), "a fixed timeout");
+        l.tuning.degraded_below = 0.5;
+        assert!(matches!(l.check(), Err(LinkError::Tuning(_))), "below above `above`");
+        l.tuning.degraded_below = 0.0;
+        l.tuning.degraded_above = 1.5;
+        assert!(matches!(l.check(), Err(LinkError::Tuning(_))));
+        l.tuning.degraded_above = 0.1;
+        l.tuning.degraded_window = 0;
+        assert!(matches!(l.check(), Err(LinkError::Tuning(_))));
     }
 
     #[test]

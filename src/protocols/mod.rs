@@ -28,7 +28,7 @@ pub mod transport;
 
 use async_trait::async_trait;
 
-pub use error::{BadDeviceCode, DeviceCode, PlcError};
+pub use error::{BadDeviceCode, DeviceCode, DropReason, Dropped, PlcError};
 pub use protocol::{Protocol, Quirk};
 
 /// A named memory area of a PLC in the protocol's own notation, upper-cased
@@ -100,4 +100,11 @@ pub trait PlcMemory: Send + Sync {
 
     /// Writes consecutive bits starting at `start`.
     async fn write_bits(&self, start: &Address, values: &[bool]) -> Result<(), PlcError>;
+
+    /// The link's health: adaptive timeout, degraded flag and counters. Every client of
+    /// rackd's protocols keeps one; the default (all zeros, never degraded) is for memories
+    /// without a link.
+    fn link_stats(&self) -> transport::LinkStats {
+        transport::LinkStats::default()
+    }
 }

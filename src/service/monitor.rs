@@ -11,8 +11,10 @@
 //!   whose heartbeat stalled still answers, so its 7020 is listed); `link` while a device
 //!   does not answer, in plain words ("no answer from 10.0.0.5:5000 for 3 polls") with the
 //!   protocol's error in `detail`; `heartbeat` while the crane's D200 stands still (the
-//!   seconds since it last moved); `memory_lost` when a shelf PLC came back without its
-//!   tasks, until it takes new work. An alarm is judged only on what is known: while a
+//!   seconds since it last moved); `degraded` while the link works but too many of its
+//!   recent requests need a retry (a warning: the device keeps working; cleared with the
+//!   link's hysteresis); `memory_lost` when a shelf PLC came back without its tasks, until
+//!   it takes new work. An alarm is judged only on what is known: while a
 //!   device does not answer, its own alarms and its heartbeat stay as they were.
 //!
 //! Alarms still active from before a restart are picked up from the database, so a
@@ -174,6 +176,23 @@ fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<Key>) -> (Vec<NewAlarm
             want(AlarmKind::Heartbeat, 0, AlarmKind::Heartbeat.class(), text, None);
         }
     }
+    if answers && status.online {
+        known.insert((AlarmKind::Degraded, 0));
+        if status.link.degraded {
+            let l = &status.link;
+            let text = format!(
+                "the link to {} is degraded: too many recent requests needed a retry; the device keeps working",
+                status.address
+            );
+            let round_trip = l.srtt_ms.map_or("not measured".to_owned(), |ms| format!("{ms:.2} ms"));
+            let detail = format!(
+                "{} requests, {} retries, {} timeouts; dropped replies: {} stale, {} foreign, {} malformed; \
+                 smoothed round trip {round_trip}, timeout {:.1} ms",
+                l.requests, l.retries, l.timeouts, l.stale, l.foreign, l.malformed, l.timeout_ms
+            );
+            want(AlarmKind::Degraded, 0, AlarmKind::Degraded.class(), text, Some(detail));
+        }
+    }
     known.insert((AlarmKind::MemoryLost, 0));
     if status.memory_lost_at.is_some() {
         let text = "the PLC lost its task memory: power cycle? Its tasks failed as lost and their locations \
@@ -297,6 +316,23 @@ mod tests {
         status.memory_lost_at = None;
         let (raise, clear) = alarm_changes(&status, &BTreeSet::from([lost]));
         assert_eq!((keys(&raise), clear), (vec![], vec![lost]));
+    }
+
+    #[test]
+    fn a_degraded_link_is_a_warning_alarm_until_it_recovers() {
+        let degraded = (AlarmKind::Degraded, 0);
+        let mut status = crane(true, 0, None);
+        status.link.degraded = true;
+        status.link.retries = 12;
+        let (raise, clear) = alarm_changes(&status, &BTreeSet::new());
+        assert_eq!((keys(&raise), clear), (vec![degraded], vec![]));
+        assert_eq!(raise[0].class, AlarmClass::Link);
+        assert!(raise[0].text.starts_with("the link to 10.0.0.5:5000 is degraded"), "{}", raise[0].text);
+        assert!(raise[0].detail.as_deref().is_some_and(|d| d.contains("12 retries")));
+        let (raise, clear) = alarm_changes(&crane(false, 3, None), &BTreeSet::from([degraded]));
+        assert_eq!((keys(&raise), clear), (vec![LINK], vec![]), "offline: unknown, kept");
+        let (raise, clear) = alarm_changes(&crane(true, 0, None), &BTreeSet::from([degraded]));
+        assert_eq!((keys(&raise), clear), (vec![], vec![degraded]));
     }
 
     #[test]

@@ -5,10 +5,9 @@
 //! What is checked: a request gets `retries + 1` attempts of `timeout` each and fails after
 //! exactly that long; a reply after a retry ends the request at once; the device's own
 //! answer (an exception) is never retried; a reply that comes after its request gave up is
-//! never taken for the next request's answer (flushed when it is waiting before the next
-//! request; judged malformed, and the attempt retried, when it arrives during it: RTU frames
-//! carry no transaction id, so a late reply of the same shape could not be told apart, as
-//! the transport's docs say).
+//! never taken for the next request's answer (the line is held silent for the reply window
+//! before the next request, draining it; one of another size arriving later is dropped as
+//! stale), and the adaptive timeout learns the line's round trip.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -43,7 +42,7 @@ async fn every_attempt_gets_its_timeout_and_the_request_fails_after_all_of_them(
     let start = Instant::now();
     let err = plc.read_words(&at, 2).await.unwrap_err();
     let took = start.elapsed();
-    assert!(matches!(err, PlcError::Timeout { attempts: 3, timeout } if timeout == MS(1000)), "{err:?}");
+    assert!(matches!(err, PlcError::Timeout { attempts: 3, timeout, .. } if timeout == MS(1000)), "{err:?}");
     assert!(took >= MS(3000) && took <= MS(3000) + FRAMING, "failed after {took:?}");
     assert_eq!(server.faults().requests_seen(), 3, "one request per attempt");
 }
@@ -99,12 +98,40 @@ async fn a_late_reply_to_an_abandoned_request_is_not_the_next_answer() {
     bank.set_holding(0, &[1, 1]);
     bank.set_holding(10, &[3, 3, 3]);
     let (first, second) = (plc.parse_address("4x0").unwrap(), plc.parse_address("4x10").unwrap());
-    // The caller gives up after 300 ms; the reply comes at 1 s, while the next request
-    // (sent at 300 ms) waits for its own. It answers another request (2 words, not 3): that
-    // attempt fails as malformed and the retry gets the request's own answer.
+    // The caller gives up after 300 ms; the reply comes at 1 s. The abandoned request's
+    // answer was never taken, so the next request holds the line until it has been silent
+    // for the reply window (from the abandoned send), and the late reply, whether it comes
+    // during the hold or just after it, is dropped as stale (2 words, not 3): the next
+    // request's first attempt gets its own answer.
     server.faults().push(Fault::Delay(MS(1000)));
     assert!(tokio::time::timeout(MS(300), plc.read_words(&first, 2)).await.is_err(), "abandoned");
-    let sends = plc.stats().sends;
+    let (sends, dropped) = (plc.stats().sends, plc.stats().dropped);
     assert_eq!(plc.read_words(&second, 3).await.unwrap(), [3, 3, 3], "its own answer");
-    assert_eq!(plc.stats().sends, sends + 2, "the first attempt met the late reply");
+    assert_eq!(plc.stats().sends, sends + 1, "sent once");
+    assert_eq!(plc.stats().dropped, dropped + 1, "the late reply was dropped");
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_timer_learns_the_round_trip_but_a_retry_waits_out_the_configured_silence() {
+    let (server, bank, plc) = line(2);
+    bank.set_holding(0, &[4, 4]);
+    let at = plc.parse_address("4x0").unwrap();
+    assert_eq!(plc.link_stats().timeout_ms, 1000.0, "the ceiling before any round trip");
+    for _ in 0..30 {
+        plc.read_words(&at, 2).await.unwrap();
+    }
+    let learned = plc.link_stats();
+    // A few ms of RTU framing per exchange: the timer settles near the 20 ms floor.
+    assert!(learned.timeout_ms <= 30.0, "{learned:?}");
+    assert!(learned.srtt_ms.is_some_and(|ms| ms < 10.0), "{learned:?}");
+    // A lost request times out after the learned timeout, but on a line without ids the
+    // retry goes out only after the configured timeout of silence (a late reply would be
+    // drained in it).
+    server.faults().push(Fault::Drop);
+    let start = Instant::now();
+    assert_eq!(plc.read_words(&at, 2).await.unwrap(), [4, 4]);
+    let took = start.elapsed();
+    assert!(took >= MS(1000) && took <= MS(1000) + FRAMING, "retried after {took:?}");
+    let after = plc.link_stats();
+    assert_eq!((after.timeouts, after.retries), (1, 1), "{after:?}");
 }

@@ -15,6 +15,7 @@ use super::{DeviceConfig, DeviceKind};
 use crate::devices::tagdef::TagTable;
 use crate::protocols::link::{DEFAULT_RETRIES, DEFAULT_TIMEOUT, LinkConfig};
 use crate::protocols::serial::SerialSettings;
+use crate::protocols::transport::LinkTuning;
 use crate::protocols::{Protocol, Quirk};
 
 /// Every key any kind has; unknown keys are refused here, keys of another kind in
@@ -30,6 +31,10 @@ pub(super) struct RawDevice {
     serial: Option<String>,
     timeout_ms: Option<u64>,
     retries: Option<u32>,
+    min_timeout_ms: Option<u64>,
+    degraded_window: Option<u32>,
+    degraded_above: Option<f64>,
+    degraded_below: Option<f64>,
     quirks: Option<BTreeSet<Quirk>>,
     poll_ms: Option<u64>,
     offline_after: Option<u32>,
@@ -105,6 +110,7 @@ impl RawDevice {
         quirks: BTreeSet<Quirk>,
     ) -> Result<LinkConfig, Problem> {
         let serial = self.serial.as_deref().map(str::parse::<SerialSettings>).transpose()?;
+        let d = LinkTuning::default();
         Ok(LinkConfig {
             protocol,
             address: self.address.clone(),
@@ -113,6 +119,12 @@ impl RawDevice {
             timeout: self.timeout_ms.map_or(timeout, Duration::from_millis),
             retries: self.retries.unwrap_or(DEFAULT_RETRIES),
             quirks: self.quirks.clone().unwrap_or(quirks),
+            tuning: LinkTuning {
+                min_timeout: self.min_timeout_ms.map_or(d.min_timeout, Duration::from_millis),
+                degraded_window: self.degraded_window.unwrap_or(d.degraded_window),
+                degraded_above: self.degraded_above.unwrap_or(d.degraded_above),
+                degraded_below: self.degraded_below.unwrap_or(d.degraded_below),
+            },
         })
     }
 }

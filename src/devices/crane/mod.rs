@@ -255,8 +255,9 @@ impl Crane {
     fn contact(&mut self, result: Result<(), &PlcError>) {
         let offline_after = self.config.offline_after;
         let mut link_ok = self.link_ok;
+        let link = self.plc.link_stats();
         self.status.update(|s| {
-            link_ok = s.record_contact(result, offline_after, link_ok);
+            link_ok = s.record_contact(result, offline_after, link_ok, link);
         });
         if link_ok && !self.link_ok {
             // Unseen while the link was down is not stalled: no heartbeat alarm after every

@@ -154,8 +154,9 @@ impl Shelf {
     fn contact(&mut self, result: Result<(), &PlcError>) {
         let offline_after = self.config.offline_after;
         let id = self.config.id.clone();
+        let link = self.plc.link_stats();
         self.status.update(|s| {
-            let up = s.record_contact(result, offline_after, s.online);
+            let up = s.record_contact(result, offline_after, s.online, link);
             if up != s.online {
                 match up {
                     true => tracing::info!(device = %id, "device online"),

@@ -164,8 +164,9 @@ impl TagDevice {
         };
         let (offline_after, id, was_up) = (self.config.offline_after, &self.config.id, self.link_ok);
         let mut up = was_up;
+        let link = self.plc.link_stats();
         self.status.update(|status| {
-            up = status.record_contact(outcome, offline_after, was_up);
+            up = status.record_contact(outcome, offline_after, was_up, link);
             if up != status.online {
                 match up {
                     true => tracing::info!(device = %id, "device online"),

@@ -39,6 +39,7 @@ impl Mc3eConfig {
                 transport,
                 timeout: Duration::from_millis(1500),
                 retries: 2,
+                tuning: crate::protocols::transport::LinkTuning::default(),
                 backoff: Backoff::default(),
                 udp_local: None,
             },
@@ -53,15 +54,18 @@ pub struct Mc3eClient {
     route: Route,
     monitor_timer: u16,
     link: Mutex<Link>,
+    health: std::sync::Arc<crate::protocols::transport::LinkHealth>,
 }
 
 impl Mc3eClient {
     /// A client for `config`; it connects on the first request.
     pub fn new(config: Mc3eConfig) -> Mc3eClient {
+        let link = Link::new(config.link);
         Mc3eClient {
             route: config.route,
             monitor_timer: config.monitor_timer,
-            link: Mutex::new(Link::new(config.link)),
+            health: link.health(),
+            link: Mutex::new(link),
         }
     }
 
@@ -189,6 +193,10 @@ impl PlcMemory for Mc3eClient {
 
     async fn write_bits(&self, start: &Address, values: &[bool]) -> Result<(), PlcError> {
         self.write_device_bits(Device::of_area(&start.area)?, start.index, values).await
+    }
+
+    fn link_stats(&self) -> crate::protocols::transport::LinkStats {
+        self.health.stats()
     }
 }
 

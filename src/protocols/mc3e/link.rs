@@ -20,6 +20,7 @@
 //! taken. Use ephemeral ports, or TCP, where this matters.
 
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::time::Duration;
 
 use tokio_util::bytes::BytesMut;
@@ -29,9 +30,9 @@ use super::end_code::EndCode;
 use super::frame::{self, RESPONSE_SUBHEADER, Route};
 use super::response::{ErrorInfo, Outcome, Response};
 use crate::protocols::transport::{
-    Attempt, AttemptError, Backoff, DatagramLink, Endpoint, RetryPolicy, StreamLink,
+    Attempt, AttemptError, Backoff, DatagramLink, Endpoint, LinkHealth, LinkTuning, RetryPolicy, StreamLink,
 };
-use crate::protocols::{DeviceCode, PlcError};
+use crate::protocols::{DeviceCode, DropReason, PlcError};
 
 /// TCP or UDP.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -54,6 +55,8 @@ pub struct LinkConfig {
     /// Further attempts after the first fails with a timeout, a lost connection or a
     /// malformed reply (an end code is an answer and is never retried).
     pub retries: u32,
+    /// The adaptive timeout's floor and when the link counts as degraded.
+    pub tuning: LinkTuning,
     /// Waits between failed TCP connects.
     pub backoff: Backoff,
     /// Fixed local UDP address (None: a fresh ephemeral port after each failed exchange).
@@ -95,10 +98,10 @@ enum Carrier {
     Udp(DatagramLink),
 }
 
-/// A connection (or socket) to one PLC with its retry policy.
+/// A connection (or socket) to one PLC with its retry policy and health.
 pub(crate) struct Link {
     carrier: Carrier,
-    policy: RetryPolicy,
+    health: Arc<LinkHealth>,
 }
 
 impl Link {
@@ -111,19 +114,29 @@ impl Link {
                 Carrier::Udp(DatagramLink::new(config.address, config.udp_local, config.backoff))
             }
         };
-        Link { carrier, policy: RetryPolicy { timeout: config.timeout, retries: config.retries } }
+        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
+        Link { carrier, health: Arc::new(LinkHealth::new(policy)) }
+    }
+
+    /// The link's health, shared with the client (read without the link's lock).
+    pub fn health(&self) -> Arc<LinkHealth> {
+        self.health.clone()
     }
 
     /// Sends `frame` and returns the reply's data, retrying as configured.
     pub async fn exchange(&mut self, frame: &[u8], expect: &Expect) -> Result<Vec<u8>, PlcError> {
-        let mut retry = self.policy.start("mc3e");
+        let health = self.health.clone();
+        let mut retry = health.start("mc3e");
         while let Some(attempt) = retry.next_attempt() {
             let outcome = match &mut self.carrier {
                 Carrier::Tcp(link) => tcp_attempt(link, frame, expect, &attempt).await,
-                Carrier::Udp(link) => udp_attempt(link, frame, expect, &attempt).await,
+                Carrier::Udp(link) => udp_attempt(link, frame, expect, &health, &attempt).await,
             };
             match outcome {
-                Ok(Outcome::Ok(data)) => return Ok(data),
+                Ok(Outcome::Ok(data)) => {
+                    retry.succeeded();
+                    return Ok(data);
+                }
                 Ok(Outcome::Failed { end_code, .. }) => {
                     retry.failed(AttemptError::Device(DeviceCode::Mc3e(EndCode(end_code))))?
                 }
@@ -159,12 +172,14 @@ async fn udp_attempt(
     link: &mut DatagramLink,
     frame: &[u8],
     expect: &Expect,
+    health: &LinkHealth,
     attempt: &Attempt,
 ) -> Result<Outcome, AttemptError> {
     link.begin_exclusive();
     let stale = link.flush_stale(attempt.timeout).await?;
     if stale > 0 {
         tracing::debug!(stale, "mc3e udp: discarded stale datagrams");
+        health.dropped_n(DropReason::Stale, stale);
     }
     link.send(frame, attempt.timeout).await?;
     loop {
@@ -174,7 +189,10 @@ async fn udp_attempt(
                 link.finished();
                 return Ok(outcome);
             }
-            Err(why) => tracing::debug!(why, "mc3e udp: discarded a datagram that is not this reply"),
+            Err(why) => {
+                tracing::debug!(why, "mc3e udp: discarded a datagram that is not this reply");
+                health.dropped(DropReason::Stale);
+            }
         }
     }
 }

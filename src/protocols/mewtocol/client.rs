@@ -12,9 +12,10 @@ use super::error_code::{self, ErrorCode};
 use super::frame::{self, Bcc, Frame, FrameError, Kind, MAX_LONG, MAX_SHORT, Scan};
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
-    Attempt, AttemptError, Backoff, ByteStream, Endpoint, RetryPolicy, StreamLink,
+    Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, RetryPolicy,
+    StreamLink,
 };
-use crate::protocols::{DeviceCode, PlcError};
+use crate::protocols::{DeviceCode, DropReason, PlcError};
 
 /// How the PLC is reached.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -40,6 +41,8 @@ pub struct MewtocolConfig {
     pub timeout: Duration,
     /// Resends after a timeout or a bad reply (never after an error reply).
     pub retries: u32,
+    /// The adaptive timeout's floor and when the link counts as degraded.
+    pub tuning: LinkTuning,
     /// Send a BCC and require one in replies; false sends `**` (PLCs set up without the
     /// check) and also accepts `**` in replies.
     pub bcc: bool,
@@ -58,6 +61,7 @@ impl MewtocolConfig {
             station: 1,
             timeout: Duration::from_secs(1),
             retries: 2,
+            tuning: LinkTuning::default(),
             bcc: true,
             long_frames: false,
         }
@@ -108,7 +112,7 @@ impl Decoder for Frames {
 /// time. Implements [`crate::protocols::PlcMemory`] (see `memory.rs`).
 pub struct MewtocolClient {
     config: MewtocolConfig,
-    policy: RetryPolicy,
+    health: LinkHealth,
     link: Mutex<StreamLink>,
 }
 
@@ -136,8 +140,14 @@ impl MewtocolClient {
 
     fn with(config: MewtocolConfig, endpoint: Endpoint) -> Result<Self, PlcError> {
         check_station(config.station)?;
-        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries };
-        Ok(MewtocolClient { config, policy, link: Mutex::new(StreamLink::new(endpoint, Backoff::default())) })
+        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
+        let health = LinkHealth::new(policy);
+        Ok(MewtocolClient { config, health, link: Mutex::new(StreamLink::new(endpoint, Backoff::default())) })
+    }
+
+    /// The link's health (adaptive timeout, degraded flag, counters).
+    pub fn link_stats(&self) -> LinkStats {
+        self.health.stats()
     }
 
     /// The configuration.
@@ -158,17 +168,21 @@ impl MewtocolClient {
             return Err(PlcError::OutOfRange("command longer than one frame"));
         }
         let mut link = self.link.lock().await;
-        let mut retry = self.policy.start("mewtocol");
+        let mut retry = self.health.start("mewtocol");
         while let Some(attempt) = retry.next_attempt() {
             match self.attempt(&mut link, &tx, request, &attempt).await {
-                Ok(response) => return Ok(response),
+                Ok(response) => {
+                    retry.succeeded();
+                    return Ok(response);
+                }
                 Err(e) => retry.failed(e)?,
             }
         }
         Err(retry.spent())
     }
 
-    /// One attempt: flush stale input, send, and wait for this station's reply.
+    /// One attempt: hold the line after a timeout or retry, flush stale input, send, and
+    /// wait for this station's reply.
     async fn attempt(
         &self,
         link: &mut StreamLink,
@@ -176,42 +190,62 @@ impl MewtocolClient {
         request: &Request,
         attempt: &Attempt,
     ) -> Result<Response, AttemptError> {
-        link.flush_stale(attempt.timeout).await?;
+        self.health.settled(link.settle(attempt).await?);
+        if link.flush_stale(attempt.timeout).await? {
+            self.health.dropped(DropReason::Stale);
+        }
         link.send(tx, attempt.timeout).await?;
+        let attempt = &attempt.restarted();
         let mut reason = None;
         loop {
             let Some(scanned) = link.read_frame(&mut Frames, attempt.deadline).await? else {
                 return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed));
             };
             let Ok(frame) = scanned else {
+                self.health.dropped(DropReason::Malformed);
                 reason = Some("reply is not a MEWTOCOL frame");
                 continue;
             };
-            // Our own command echoed by a 2-wire RS-485 adapter, or another station.
-            if frame.kind == Kind::Command || frame.station != self.config.station {
+            // Our own command echoed by a 2-wire RS-485 adapter.
+            if frame.kind == Kind::Command {
+                continue;
+            }
+            if frame.station != self.config.station {
+                self.health.dropped(DropReason::Unit);
                 continue;
             }
             match frame.bcc {
                 Bcc::Wrong { .. } => {
+                    self.health.dropped(DropReason::Malformed);
                     reason = Some("BCC error in the reply");
                     continue;
                 }
                 Bcc::Skipped if self.config.bcc => {
+                    self.health.dropped(DropReason::Malformed);
                     reason = Some("reply without a BCC (`**`) while BCC is required");
                     continue;
                 }
                 _ => {}
             }
             if frame.kind == Kind::Error {
+                link.answered();
                 return Err(match error_code::parse(&frame.body) {
                     Some(code) => AttemptError::Device(DeviceCode::Mewtocol(ErrorCode(code))),
                     None => AttemptError::Malformed("error reply without a 2-digit code"),
                 });
             }
             match request.decode_response(&frame.body) {
-                Ok(response) => return Ok(response),
-                // A reply to another command (a late one): keep waiting for ours.
-                Err(msg) => reason = Some(msg),
+                Ok(response) => {
+                    link.answered();
+                    return Ok(response);
+                }
+                // A reply to another command or size (a late one): dropped as stale, never
+                // data; the line is held before the next request.
+                Err(msg) => {
+                    self.health.dropped(DropReason::Stale);
+                    link.unsettle();
+                    reason = Some(msg);
+                }
             }
         }
     }

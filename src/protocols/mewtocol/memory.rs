@@ -31,6 +31,10 @@ impl MewtocolClient {
 
 #[async_trait]
 impl PlcMemory for MewtocolClient {
+    fn link_stats(&self) -> crate::protocols::transport::LinkStats {
+        self.link_stats()
+    }
+
     fn parse_address(&self, text: &str) -> Result<Address, PlcError> {
         address::parse(text)
     }

@@ -10,7 +10,9 @@ use super::link::{Counters, Exchange, Link, RtuLink, TcpLink, UdpLink};
 use super::pdu::{self, Request, Response};
 use super::rtu;
 use crate::protocols::PlcError;
-use crate::protocols::transport::{Backoff, ByteStream, Endpoint, RetryPolicy, StreamLink};
+use crate::protocols::transport::{
+    Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, RetryPolicy, StreamLink,
+};
 
 /// Counters of a client's traffic, for diagnostics and tests.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -39,8 +41,8 @@ impl ModbusClient {
     /// device that is down when the client is built does not fail construction.
     pub async fn connect(config: ModbusConfig) -> Result<Self, PlcError> {
         check_unit(config.unit)?;
-        let counters = Arc::new(Counters::default());
-        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries };
+        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
+        let counters = Arc::new(Counters::new(LinkHealth::new(policy)));
         let link = match config.transport {
             Transport::Udp => {
                 let mut udp = UdpLink::new(config.address.clone(), config.quirks, counters.clone());
@@ -70,10 +72,10 @@ impl ModbusClient {
         stream: impl ByteStream + 'static,
     ) -> Result<Self, PlcError> {
         check_unit(config.unit)?;
-        let counters = Arc::new(Counters::default());
+        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
+        let counters = Arc::new(Counters::new(LinkHealth::new(policy)));
         let link = StreamLink::new(Endpoint::given(stream), Backoff::default());
         let link = Link::Rtu(RtuLink::new(link, rtu::silence(config.serial.baud), counters.clone()));
-        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries };
         Ok(ModbusClient { config, policy, link: Mutex::new(link), counters })
     }
 
@@ -89,6 +91,11 @@ impl ModbusClient {
             sends: self.counters.sends.load(Ordering::Relaxed),
             dropped: self.counters.dropped.load(Ordering::Relaxed),
         }
+    }
+
+    /// The link's health (adaptive timeout, degraded flag, counters).
+    pub fn link_stats(&self) -> LinkStats {
+        self.counters.health.stats()
     }
 
     /// Sends one request (within the per-function limits) to the configured unit under the
@@ -112,10 +119,16 @@ impl ModbusClient {
                 Err(e) => Err(self.policy.once(e)),
             };
         }
-        let mut retry = self.policy.start("modbus");
+        let mut retry = self.counters.health.start("modbus");
         while let Some(attempt) = retry.next_attempt() {
             match link.attempt(&ex, &attempt).await {
-                Ok(response) => return Ok(response),
+                Ok((response, answered)) => {
+                    match answered {
+                        Some(number) => retry.succeeded_by(number),
+                        None => retry.succeeded(),
+                    }
+                    return Ok(response);
+                }
                 Err(e) => retry.failed(e)?,
             }
         }

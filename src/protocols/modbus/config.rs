@@ -3,6 +3,7 @@
 use std::time::Duration;
 
 use crate::protocols::serial::SerialSettings;
+use crate::protocols::transport::LinkTuning;
 
 /// The framing and carrier of a Modbus link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -45,6 +46,8 @@ pub struct ModbusConfig {
     pub timeout: Duration,
     /// How many times to resend after a timeout or a bad reply (0 = send once).
     pub retries: u32,
+    /// The adaptive timeout's floor and when the link counts as degraded.
+    pub tuning: LinkTuning,
     /// Quirks of this device.
     pub quirks: Quirks,
 }
@@ -60,6 +63,7 @@ impl ModbusConfig {
             unit: 1,
             timeout: Duration::from_secs(1),
             retries: 2,
+            tuning: LinkTuning::default(),
             quirks: Quirks::default(),
         }
     }

@@ -39,6 +39,10 @@ fn chunks(first: u16, count: usize, max: u16) -> impl Iterator<Item = (u16, u16)
 
 #[async_trait]
 impl PlcMemory for ModbusClient {
+    fn link_stats(&self) -> crate::protocols::transport::LinkStats {
+        self.link_stats()
+    }
+
     fn parse_address(&self, text: &str) -> Result<Address, PlcError> {
         address::parse(text)
     }

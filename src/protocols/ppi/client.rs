@@ -13,9 +13,10 @@ use super::pdu::{Item, Reply, Request};
 use super::return_code::ReturnCode;
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
-    Attempt, AttemptError, Backoff, ByteStream, Endpoint, RetryPolicy, StreamLink,
+    Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, RetryPolicy,
+    StreamLink,
 };
-use crate::protocols::{DeviceCode, PlcError};
+use crate::protocols::{DeviceCode, DropReason, PlcError};
 
 /// How the PLC is reached.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,6 +44,8 @@ pub struct PpiConfig {
     pub timeout: Duration,
     /// Resends after a timeout or bad reply (never after a return code from the PLC).
     pub retries: u32,
+    /// The adaptive timeout's floor and when the link counts as degraded.
+    pub tuning: LinkTuning,
     /// Take only responses carrying the PDU reference of this request's attempts. Turn off
     /// for a device that answers with reference 0 whatever it was sent.
     pub match_pdu_ref: bool,
@@ -59,6 +62,7 @@ impl PpiConfig {
             master: 0,
             timeout: Duration::from_secs(1),
             retries: 2,
+            tuning: LinkTuning::default(),
             match_pdu_ref: true,
         }
     }
@@ -94,7 +98,7 @@ impl Decoder for Frames {
 /// Implements [`crate::protocols::PlcMemory`] (see `memory.rs`).
 pub struct PpiClient {
     config: PpiConfig,
-    policy: RetryPolicy,
+    health: LinkHealth,
     link: Mutex<StreamLink>,
     next_ref: AtomicU16,
 }
@@ -126,7 +130,11 @@ impl PpiClient {
     fn with(config: PpiConfig, endpoint: Endpoint) -> Result<Self, PlcError> {
         check(&config)?;
         Ok(PpiClient {
-            policy: RetryPolicy { timeout: config.timeout, retries: config.retries },
+            health: LinkHealth::new(RetryPolicy {
+                timeout: config.timeout,
+                retries: config.retries,
+                tuning: config.tuning,
+            }),
             config,
             link: Mutex::new(StreamLink::new(endpoint, Backoff::default())),
             next_ref: AtomicU16::new(rand::random()),
@@ -136,6 +144,11 @@ impl PpiClient {
     /// The configuration.
     pub fn config(&self) -> &PpiConfig {
         &self.config
+    }
+
+    /// The link's health (adaptive timeout, degraded flag, counters).
+    pub fn link_stats(&self) -> LinkStats {
+        self.health.stats()
     }
 
     /// Reads one item; the item's return code, if not success, is the error.
@@ -166,8 +179,8 @@ impl PpiClient {
     pub async fn call(&self, request: &Request) -> Result<Reply, PlcError> {
         request.check().map_err(PlcError::OutOfRange)?;
         let mut link = self.link.lock().await;
-        let mut refs = Vec::with_capacity(self.policy.attempts().min(8) as usize);
-        let mut retry = self.policy.start("ppi");
+        let mut refs = Vec::with_capacity(self.health.policy().attempts().min(8) as usize);
+        let mut retry = self.health.start("ppi");
         while let Some(attempt) = retry.next_attempt() {
             refs.push(self.next_ref.fetch_add(1, Ordering::Relaxed));
             match self.attempt(&mut link, request, &refs, &attempt).await {
@@ -175,7 +188,10 @@ impl PpiClient {
                 Ok(Reply::Refused { class, code }) => {
                     retry.failed(device(ReturnCode::Refused { class, code }))?
                 }
-                Ok(reply) => return Ok(reply),
+                Ok(reply) => {
+                    retry.succeeded();
+                    return Ok(reply);
+                }
                 Err(e) => retry.failed(e)?,
             }
         }
@@ -196,14 +212,21 @@ impl PpiClient {
         request.encode(*refs.last().unwrap_or(&0), &mut pdu);
         let mut tx = Vec::with_capacity(pdu.len() + 9);
         frame::encode_long(&mut tx, c.plc, c.master, request.fc(), &pdu);
-        link.flush_stale(attempt.timeout).await?;
+        self.health.settled(link.settle(attempt).await?);
+        if link.flush_stale(attempt.timeout).await? {
+            self.health.dropped(DropReason::Stale);
+        }
         link.send(&tx, attempt.timeout).await?;
+        let attempt = &attempt.restarted();
         // Step 1: the short acknowledgement. Whole frames before it are stale and skipped.
         loop {
             match link.read_frame(&mut Frames, attempt.deadline).await? {
                 None => return Err(AttemptError::Timeout),
                 Some(Ok(Frame::Ack(_))) => break,
-                Some(_) => {}
+                Some(_) => {
+                    self.health.dropped(DropReason::Stale);
+                    link.unsettle();
+                }
             }
         }
         // Step 2: the poll, and the response frame.
@@ -216,16 +239,35 @@ impl PpiClient {
                 None => return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed)),
                 Some(Ok(Frame::Long { da, sa, fc: FC_RESPONSE, payload })) => {
                     if da != c.master || sa != c.plc {
+                        self.health.dropped(DropReason::Unit);
                         continue;
                     }
                     match Reply::decode(&payload, request) {
-                        Ok((r, reply)) if !c.match_pdu_ref || refs.contains(&r) => return Ok(reply),
-                        Ok(_) => reason = Some("stale reply (PDU reference of an earlier request)"),
-                        Err(e) => reason = Some(pdu_message(e)),
+                        Ok((r, reply)) if !c.match_pdu_ref || refs.contains(&r) => {
+                            link.answered();
+                            return Ok(reply);
+                        }
+                        Ok(_) => {
+                            self.health.dropped(DropReason::PduReference);
+                            reason = Some("stale reply (PDU reference of an earlier request)");
+                        }
+                        Err(e) => {
+                            let why = if matches!(e, super::pdu::PduError::Mismatch) {
+                                link.unsettle();
+                                DropReason::Stale
+                            } else {
+                                DropReason::Malformed
+                            };
+                            self.health.dropped(why);
+                            reason = Some(pdu_message(e));
+                        }
                     }
                 }
                 Some(Ok(_)) => {}
-                Some(Err(FrameError::BadFcs)) => reason = Some("FCS error in the response"),
+                Some(Err(FrameError::BadFcs)) => {
+                    self.health.dropped(DropReason::Malformed);
+                    reason = Some("FCS error in the response");
+                }
                 Some(Err(_)) => {}
             }
         }

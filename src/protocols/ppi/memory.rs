@@ -48,6 +48,10 @@ fn to_words(size: Size, bytes: &[u8]) -> Vec<u16> {
 
 #[async_trait]
 impl PlcMemory for PpiClient {
+    fn link_stats(&self) -> crate::protocols::transport::LinkStats {
+        self.link_stats()
+    }
+
     fn parse_address(&self, text: &str) -> Result<Address, PlcError> {
         address::parse(text)
     }

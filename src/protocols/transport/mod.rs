@@ -36,25 +36,42 @@
 //!   finish (timed out, malformed, or abandoned by its caller), the TCP connection is
 //!   closed, or the UDP socket rebound on a new port, before the next request, so the late
 //!   reply lands on a closed socket.
-//! - **Flushing.** On the half-duplex lines (Modbus RTU, MEWTOCOL, PPI) a carrier cannot be
-//!   reopened at will, so input already waiting is thrown away before each request, and a
-//!   reply must match the request's station, command and length. A reply so late that it
-//!   arrives after the *next* request went out cannot be told apart when those agree: the
-//!   protocols have no way to, so such links need a timeout above the device's worst reply
-//!   time (see each protocol's module docs).
+//! - **Flushing and holding.** On the half-duplex lines (Modbus RTU on serial or over TCP,
+//!   MEWTOCOL, PPI) a carrier cannot be reopened at will, so input already waiting is thrown
+//!   away before each request, and a reply must match the request's station, command and
+//!   length (a mismatch is dropped as stale, never taken as data). After an attempt timed
+//!   out, and after a request that needed a retry, the line is also *held*: the next request
+//!   goes out only once nothing has arrived for the configured timeout (not the adaptive
+//!   one: the silence must cover every reply the configuration allows, so on these lines
+//!   a retry waits as long as before the adaptive timer); whatever arrives meanwhile is
+//!   read, dropped and counted as stale
+//!   ([`StreamLink::settle`]). A late reply, and the duplicate answer to the retry it
+//!   provoked, are so drained before the next request. What is left is a device whose reply
+//!   comes later than `timeout_ms` of silence after everything else: no protocol
+//!   without ids can tell that apart, and such a device needs a longer `timeout_ms`.
+//!
+//! # Adaptive timeouts and link health
+//! Each client keeps one [`LinkHealth`] (see `health.rs` and `rtt.rs`): an RFC 6298
+//! retransmission timer between `min_timeout_ms` and `timeout_ms`, a degraded flag with
+//! hysteresis over recent requests, and counters ([`LinkStats`]) that the device status
+//! shows. The retry loop feeds it; links report the replies they drop and why.
 
 mod connection;
 mod datagram;
 mod endpoint;
+mod health;
 mod retry;
+mod rtt;
 mod server;
 mod stream;
 
 pub use connection::Backoff;
 pub(crate) use datagram::DatagramLink;
 pub use endpoint::{ByteStream, Endpoint};
+pub(crate) use health::LinkHealth;
+pub use health::{LinkStats, LinkTuning};
 pub use retry::RetryPolicy;
 pub(crate) use retry::{Attempt, AttemptError};
 pub use server::StreamServer;
 pub(crate) use server::spawn_tcp;
-pub(crate) use stream::StreamLink;
+pub(crate) use stream::{Settled, StreamLink};

@@ -1,6 +1,12 @@
 //! The one retry policy of every client: how many attempts, how long each may take, which
 //! failures are worth another attempt, and the error once they are spent.
 //!
+//! Each attempt waits for its reply up to the link's adaptive timeout ([`super::health`]),
+//! at most `timeout`; the retry loop feeds the link's health with every outcome. A
+//! request's timeout error names the replies dropped while it waited
+//! ([`crate::protocols::Dropped`]), so a device answering with the wrong transaction id
+//! does not look silent.
+//!
 //! Modelled on rodbus's split between a request's timeout and the reconnect strategy
 //! (`retry.rs` there covers reconnects; here that is [`super::Backoff`]): a request gets
 //! `retries + 1` attempts of `timeout` each. Timeouts, lost connections and malformed
@@ -13,10 +19,13 @@
 //! per-request state (transaction ids of earlier attempts) in plain locals:
 //!
 //! ```text
-//! let mut retry = self.policy.start("modbus");
+//! let mut retry = self.health.start("modbus");
 //! while let Some(attempt) = retry.next_attempt() {
 //!     match link.attempt(&exchange, &attempt).await {
-//!         Ok(reply) => return Ok(reply),
+//!         Ok(reply) => {
+//!             retry.succeeded();
+//!             return Ok(reply);
+//!         }
 //!         Err(e) => retry.failed(e)?,
 //!     }
 //! }
@@ -28,7 +37,8 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
-use crate::protocols::{DeviceCode, PlcError};
+use super::health::{LinkHealth, LinkTuning};
+use crate::protocols::{DeviceCode, Dropped, PlcError};
 
 /// Why one attempt produced no answer.
 #[derive(Debug)]
@@ -50,9 +60,9 @@ impl AttemptError {
     }
 
     /// The error a request reports when this was its last failure after `attempts` tries.
-    fn into_plc_error(self, attempts: u32, timeout: Duration) -> PlcError {
+    fn into_plc_error(self, attempts: u32, timeout: Duration, dropped: Option<Dropped>) -> PlcError {
         match self {
-            AttemptError::Timeout => PlcError::Timeout { attempts, timeout },
+            AttemptError::Timeout => PlcError::Timeout { attempts, timeout, dropped },
             AttemptError::Io(e) => PlcError::Connection(e),
             AttemptError::Malformed(what) => PlcError::Malformed(what),
             AttemptError::Device(code) => PlcError::Device(code),
@@ -72,34 +82,39 @@ impl From<DeviceCode> for AttemptError {
     }
 }
 
-/// How hard a client tries: `retries + 1` attempts of `timeout` each.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// How hard a client tries: `retries + 1` attempts, each waiting for its reply up to
+/// `timeout` (less once round trips are known: [`LinkTuning`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RetryPolicy {
-    /// Time allowed for one attempt (connect, send and the whole reply).
+    /// Time allowed for one attempt (connect, send and the whole reply); the ceiling of
+    /// the adaptive reply timeout.
     pub timeout: Duration,
     /// Further attempts after a retryable failure (0 = send once).
     pub retries: u32,
+    /// The adaptive timeout's floor and the degraded judgement.
+    pub tuning: LinkTuning,
 }
 
 impl RetryPolicy {
+    /// A policy with the default [`LinkTuning`].
+    pub fn new(timeout: Duration, retries: u32) -> Self {
+        RetryPolicy { timeout, retries, tuning: LinkTuning::default() }
+    }
+
     /// Every attempt a request gets.
     pub fn attempts(&self) -> u32 {
         self.retries.saturating_add(1)
     }
 
-    /// Starts the attempts of one request; `protocol` names it in debug logs.
-    pub(crate) fn start(&self, protocol: &'static str) -> Retry {
-        Retry { policy: *self, protocol, made: 0, last: None }
-    }
-
     /// One attempt outside any retry loop: a broadcast, sent once and never answered.
     pub(crate) fn single(&self) -> Attempt {
-        Attempt { number: 0, deadline: Instant::now() + self.timeout, timeout: self.timeout }
+        let now = Instant::now();
+        Attempt { number: 0, deadline: now + self.timeout, timeout: self.timeout, reply_window: self.timeout }
     }
 
     /// The error of a request whose single, unretried attempt failed (a broadcast).
     pub(crate) fn once(&self, e: AttemptError) -> PlcError {
-        e.into_plc_error(1, self.timeout)
+        e.into_plc_error(1, self.timeout, None)
     }
 }
 
@@ -108,10 +123,12 @@ impl RetryPolicy {
 pub(crate) struct Attempt {
     /// 0 for the first attempt, 1 for the first retry, ...
     pub number: u32,
-    /// When this attempt gives up.
+    /// When this attempt stops waiting for its reply.
     pub deadline: Instant,
-    /// The policy's timeout (for steps that take a duration rather than a deadline).
+    /// The policy's timeout, for connecting and sending (which do not adapt).
     pub timeout: Duration,
+    /// How long this attempt waits for its reply (the adaptive timeout).
+    pub reply_window: Duration,
 }
 
 impl Attempt {
@@ -119,60 +136,132 @@ impl Attempt {
     pub fn is_first(&self) -> bool {
         self.number == 0
     }
+
+    /// The attempt with its reply window starting now: for links that held the line
+    /// before sending, so the hold does not eat the wait for the reply.
+    pub fn restarted(&self) -> Attempt {
+        Attempt { deadline: Instant::now() + self.reply_window, ..*self }
+    }
 }
 
-/// The attempts of one request under way.
+/// The attempts of one request under way ([`LinkHealth::start`]).
 #[derive(Debug)]
-pub(crate) struct Retry {
-    policy: RetryPolicy,
+pub(crate) struct Retry<'a> {
+    health: &'a LinkHealth,
     protocol: &'static str,
     made: u32,
+    /// When each attempt was sent (for round trips).
+    sent: Vec<Instant>,
+    last_window: Duration,
     last: Option<AttemptError>,
 }
 
-impl Retry {
+impl<'a> Retry<'a> {
+    pub(super) fn new(health: &'a LinkHealth, protocol: &'static str) -> Self {
+        Retry {
+            health,
+            protocol,
+            made: 0,
+            sent: Vec::new(),
+            last_window: health.policy().timeout,
+            last: None,
+        }
+    }
+
     /// The next attempt, with its deadline from now; `None` once every attempt was made.
     pub fn next_attempt(&mut self) -> Option<Attempt> {
-        if self.made >= self.policy.attempts() {
+        let policy = self.health.policy();
+        if self.made >= policy.attempts() {
             return None;
         }
+        if self.made > 0 {
+            self.health.retried();
+        }
+        let now = Instant::now();
+        let window = self.health.timeout();
         let attempt = Attempt {
             number: self.made,
-            deadline: Instant::now() + self.policy.timeout,
-            timeout: self.policy.timeout,
+            deadline: now + window,
+            timeout: policy.timeout,
+            reply_window: window,
         };
+        self.sent.push(now);
+        self.last_window = window;
         self.made += 1;
         Some(attempt)
     }
 
+    /// The request was answered during the current attempt by a reply that cannot be
+    /// attributed to one transmission (no transaction id): by Karn's rule it gives a round
+    /// trip only when there was no earlier attempt.
+    pub fn succeeded(self) {
+        let clean = self.made == 1;
+        if clean {
+            self.sample(0);
+        }
+        self.health.finished(!clean);
+    }
+
+    /// The request was answered by a reply matched by id to attempt `number`: an
+    /// unambiguous round trip from that attempt's transmission, retried or not.
+    pub fn succeeded_by(self, number: u32) {
+        self.sample(number);
+        self.health.finished(self.made > 1);
+    }
+
+    fn sample(&self, number: u32) {
+        if let Some(sent) = self.sent.get(number as usize) {
+            // Only the first attempt is ever held before a sample is taken from it (ids are
+            // matched on links that never hold), so the held time is its own.
+            let held = if number == 0 { self.health.held() } else { Duration::ZERO };
+            self.health.sample(sent.elapsed().saturating_sub(held));
+        }
+    }
+
     /// Records a failed attempt: a retryable failure is kept for the final report, a final
-    /// one (the device's own code) is returned as the request's error at once.
+    /// one (the device's own code, an answer: it gives a round trip as
+    /// [`Retry::succeeded`] does) is returned as the request's error at once.
     pub fn failed(&mut self, e: AttemptError) -> Result<(), PlcError> {
         if !e.is_retryable() {
-            return Err(e.into_plc_error(self.made, self.policy.timeout));
+            let clean = self.made == 1;
+            if clean {
+                self.sample(0);
+            }
+            self.health.finished(!clean);
+            return Err(e.into_plc_error(self.made, self.last_window, None));
+        }
+        match &e {
+            AttemptError::Timeout => self.health.timed_out(),
+            AttemptError::Malformed(_) => self.health.malformed(),
+            AttemptError::Io(_) | AttemptError::Device(_) => {}
         }
         tracing::debug!(protocol = self.protocol, attempt = self.made, error = ?e, "attempt failed");
         self.last = Some(e);
         Ok(())
     }
 
-    /// The request's error once every attempt failed: the last failure.
+    /// The request's error once every attempt failed: the last failure, with the replies
+    /// dropped meanwhile when it is a timeout.
     pub fn spent(self) -> PlcError {
-        self.last.unwrap_or(AttemptError::Timeout).into_plc_error(self.made, self.policy.timeout)
+        self.health.finished(true);
+        let dropped = self.health.dropped_this_request();
+        self.last.unwrap_or(AttemptError::Timeout).into_plc_error(self.made, self.last_window, dropped)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::protocols::DropReason;
 
-    fn policy(retries: u32) -> RetryPolicy {
-        RetryPolicy { timeout: Duration::from_millis(100), retries }
+    fn health(retries: u32) -> LinkHealth {
+        LinkHealth::new(RetryPolicy::new(Duration::from_millis(100), retries))
     }
 
     #[test]
     fn retryable_failures_use_every_attempt_and_report_the_last() {
-        let mut retry = policy(2).start("test");
+        let h = health(2);
+        let mut retry = h.start("test");
         let mut numbers = Vec::new();
         while let Some(attempt) = retry.next_attempt() {
             numbers.push((attempt.number, attempt.is_first()));
@@ -180,10 +269,13 @@ mod tests {
         }
         assert_eq!(numbers, [(0, true), (1, false), (2, false)]);
         assert!(
-            matches!(retry.spent(), PlcError::Timeout { attempts: 3, timeout } if timeout.as_millis() == 100)
+            matches!(retry.spent(), PlcError::Timeout { attempts: 3, timeout, dropped: None } if timeout.as_millis() == 100)
         );
+        let stats = h.stats();
+        assert_eq!((stats.requests, stats.retries, stats.timeouts), (1, 2, 3));
 
-        let mut retry = policy(1).start("test");
+        let h = health(1);
+        let mut retry = h.start("test");
         retry.next_attempt().unwrap();
         retry.failed(AttemptError::Timeout).unwrap();
         retry.next_attempt().unwrap();
@@ -192,12 +284,46 @@ mod tests {
         assert!(matches!(retry.spent(), PlcError::Malformed("bad")));
     }
 
+    #[tokio::test(start_paused = true)]
+    async fn karns_rule_no_round_trip_from_a_retried_request_unless_matched_by_id() {
+        let h = health(2);
+        let mut retry = h.start("test");
+        retry.next_attempt().unwrap();
+        retry.failed(AttemptError::Timeout).unwrap();
+        retry.next_attempt().unwrap();
+        tokio::time::advance(Duration::from_millis(5)).await;
+        retry.succeeded();
+        assert_eq!(h.stats().srtt_ms, None, "ambiguous: which attempt was answered?");
+        let mut retry = h.start("test");
+        retry.next_attempt().unwrap();
+        retry.failed(AttemptError::Timeout).unwrap();
+        retry.next_attempt().unwrap();
+        tokio::time::advance(Duration::from_millis(5)).await;
+        retry.succeeded_by(1);
+        assert_eq!(h.stats().srtt_ms, Some(5.0), "the retry's own id: a clean sample");
+        let mut retry = h.start("test");
+        retry.next_attempt().unwrap();
+        h.dropped(DropReason::Unit);
+        h.dropped(DropReason::TransactionId);
+        h.dropped(DropReason::TransactionId);
+        retry.failed(AttemptError::Timeout).unwrap();
+        let err = retry.spent();
+        let dropped = Some(Dropped { count: 2, reason: DropReason::TransactionId });
+        assert!(
+            matches!(err, PlcError::Timeout { dropped: d, .. } if d == dropped),
+            "the commonest: {err:?}"
+        );
+        let stats = h.stats();
+        assert_eq!((stats.requests, stats.retries, stats.foreign), (3, 2, 3));
+    }
+
     #[test]
     fn a_device_code_ends_the_request_at_once() {
-        let mut retry = policy(5).start("test");
+        let h = health(5);
+        let mut retry = h.start("test");
         retry.next_attempt().unwrap();
         let code = DeviceCode::Modbus(crate::protocols::modbus::Exception(2));
         assert!(matches!(retry.failed(AttemptError::Device(code)), Err(PlcError::Device(c)) if c == code));
-        assert_eq!(policy(u32::MAX).attempts(), u32::MAX, "no overflow");
+        assert_eq!(RetryPolicy::new(Duration::ZERO, u32::MAX).attempts(), u32::MAX, "no overflow");
     }
 }

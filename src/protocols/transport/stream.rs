@@ -5,6 +5,16 @@
 //! whole yet stay buffered. The link owns the buffer, the read loop against the attempt's
 //! deadline, and the flush of stale input that the half-duplex lines (and Modbus without
 //! transaction ids) rely on.
+//!
+//! After an attempt timed out or a request was retried, the link is *unsettled*: before
+//! the next request [`StreamLink::settle`] holds the line until it has been silent for the
+//! configured timeout (the adaptive timer's ceiling, not its current value: on a line
+//! without ids the silence is the only defence, and it must cover every reply the
+//! configuration allows), reading and dropping whatever arrives (late replies, and the duplicate
+//! answers to retries they provoke). Dropped input is counted in bursts: bytes that arrive
+//! within [`BURST_GAP`] of each other are one reply. A line that never falls silent is held
+//! at most [`MAX_HOLD`] timeouts, then used anyway (the flush and the reply checks
+//! still apply).
 
 use std::io;
 use std::time::Duration;
@@ -17,17 +27,41 @@ use tokio_util::codec::Decoder;
 
 use super::connection::{Backoff, Connection};
 use super::endpoint::Endpoint;
-use super::retry::AttemptError;
+use super::retry::{Attempt, AttemptError};
 
 /// Input kept while no frame is found; past it, the oldest half is noise and is cut, so a
 /// babbling line cannot grow the buffer without bound.
 const MAX_BUFFER: usize = 8192;
+
+/// Input arriving within this of the previous input counts as the same reply.
+const BURST_GAP: Duration = Duration::from_millis(5);
+
+/// The longest hold, in configured timeouts.
+const MAX_HOLD: u32 = 4;
+
+/// What holding the line did ([`StreamLink::settle`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Settled {
+    /// Replies that arrived while the line was held, dropped.
+    pub replies: u64,
+    /// How long the line was held.
+    pub held: Duration,
+}
 
 /// A byte-stream link to one device, opened on first use and reopened after a loss.
 pub(crate) struct StreamLink {
     conn: Connection,
     rx: BytesMut,
     last_io: Instant,
+    /// A timeout or a retry happened since the line was last held silent.
+    unsettled: bool,
+    /// A request went out and its answer was not taken ([`StreamLink::answered`]): it
+    /// timed out, failed, or its caller gave up on it, so its reply may still come.
+    pending: bool,
+    /// The configured timeout from the last send: how long a reply under way may take.
+    ceiling: Instant,
+    /// A byte arrived since the last send.
+    replying: bool,
 }
 
 impl StreamLink {
@@ -37,6 +71,70 @@ impl StreamLink {
             conn: Connection::new(endpoint, backoff),
             rx: BytesMut::with_capacity(512),
             last_io: Instant::now(),
+            unsettled: false,
+            pending: false,
+            ceiling: Instant::now(),
+            replying: false,
+        }
+    }
+
+    /// Marks the line as possibly carrying a late reply (a reply was dropped as stale):
+    /// the next request holds it first ([`StreamLink::settle`]).
+    pub fn unsettle(&mut self) {
+        self.unsettled = true;
+    }
+
+    /// The reply to the last request sent was taken: nothing more is due.
+    pub fn answered(&mut self) {
+        self.pending = false;
+    }
+
+    /// Before sending `attempt`: when the line is unsettled (a timeout, a stale reply, or
+    /// a request whose answer was never taken, as when its caller gave up) or `attempt` is
+    /// a retry, waits until nothing has arrived for the configured timeout (counted from
+    /// the last byte sent or received), dropping whatever arrives. Returns the replies dropped and how
+    /// long the line was held (not part of the attempt's round trip; the caller starts the
+    /// attempt's reply window after its send, [`Attempt::restarted`]). A retry leaves the
+    /// line unsettled, so the request after it is held too.
+    pub async fn settle(&mut self, attempt: &Attempt) -> Result<Settled, AttemptError> {
+        let started = Instant::now();
+        let replies = self.hold(attempt).await?;
+        Ok(Settled { replies, held: started.elapsed() })
+    }
+
+    async fn hold(&mut self, attempt: &Attempt) -> Result<u64, AttemptError> {
+        let hold = self.unsettled || self.pending || !attempt.is_first();
+        self.unsettled = !attempt.is_first();
+        if !hold {
+            return Ok(0);
+        }
+        // The configured timeout, not the adaptive one: a reply is only late beyond what
+        // the configuration allows, and the adaptive timer must not shrink the silence that
+        // drains it (a 20 ms window would let a reply 30 ms late through).
+        let window = attempt.timeout;
+        let give_up = Instant::now() + window * MAX_HOLD;
+        let mut replies = u64::from(!self.rx.is_empty());
+        self.rx.clear();
+        self.conn.stream(attempt.timeout).await?;
+        loop {
+            let quiet = (self.last_io + window).min(give_up);
+            if Instant::now() >= quiet {
+                return Ok(replies);
+            }
+            let stream = self.conn.stream(Duration::ZERO).await?;
+            match tokio::time::timeout_at(quiet, stream.read_buf(&mut self.rx)).await {
+                Err(_) => {}
+                Ok(Ok(0)) => return Err(self.lost(io::ErrorKind::UnexpectedEof.into())),
+                Ok(Ok(_)) => {
+                    let now = Instant::now();
+                    if replies == 0 || now - self.last_io >= BURST_GAP {
+                        replies += 1;
+                    }
+                    self.rx.clear();
+                    self.last_io = now;
+                }
+                Ok(Err(e)) => return Err(self.lost(e)),
+            }
         }
     }
 
@@ -94,6 +192,9 @@ impl StreamLink {
         match tokio::time::timeout(timeout, written).await {
             Ok(Ok(())) => {
                 self.last_io = Instant::now();
+                self.ceiling = self.last_io + timeout;
+                self.replying = false;
+                self.pending = true;
                 Ok(())
             }
             Ok(Err(e)) => Err(self.lost(e)),
@@ -101,8 +202,10 @@ impl StreamLink {
         }
     }
 
-    /// Reads until `decoder` finds a frame; `Ok(None)` when `deadline` passes first. A
-    /// decoder error means the stream cannot be trusted past this point; it is returned as
+    /// Reads until `decoder` finds a frame; `Ok(None)` when `deadline` passes first with
+    /// nothing received since the last send. Once bytes arrive, the reply is under way and
+    /// may take until the send's own timeout (the adaptive timeout bounds the wait for the
+    /// reply to begin, not a long reply at a low baud rate). A decoder error means the stream cannot be trusted past this point; it is returned as
     /// is, and the caller resets the link if the protocol cannot resynchronise.
     pub async fn read_frame<D>(
         &mut self,
@@ -121,10 +224,17 @@ impl StreamLink {
                 self.rx.advance(cut);
             }
             let stream = self.conn.stream(Duration::ZERO).await?;
-            match tokio::time::timeout_at(deadline, stream.read_buf(&mut self.rx)).await {
-                Err(_) => return Ok(None),
+            let until = if self.replying { deadline.max(self.ceiling) } else { deadline };
+            match tokio::time::timeout_at(until, stream.read_buf(&mut self.rx)).await {
+                Err(_) => {
+                    self.unsettled = true;
+                    return Ok(None);
+                }
                 Ok(Ok(0)) => return Err(self.lost(io::ErrorKind::UnexpectedEof.into())),
-                Ok(Ok(_)) => self.last_io = Instant::now(),
+                Ok(Ok(_)) => {
+                    self.last_io = Instant::now();
+                    self.replying = true;
+                }
                 Ok(Err(e)) => return Err(self.lost(e)),
             }
         }
@@ -134,6 +244,9 @@ impl StreamLink {
     pub fn reset(&mut self) {
         self.conn.reset();
         self.rx.clear();
+        // A new connection carries nothing late.
+        self.unsettled = false;
+        self.pending = false;
     }
 
     /// Resets the link after a carrier error and returns it as the attempt's failure.

@@ -4,7 +4,11 @@
 //! ([`crate::protocols::transport`]); [`super::ModbusClient`] runs them under the one retry
 //! policy. Each attempt either returns the decoded reply that answers this request, or says
 //! why not. Datagrams or frames that do not answer this request (stale transaction id, other
-//! unit) are dropped and counted.
+//! unit) are dropped and counted, in the client's counters and in the link's health with a
+//! [`DropReason`]. Without a transaction id to go by (RTU, and MBAP with the
+//! `no-transaction-id` quirk), a reply that does not match the request (another function,
+//! a byte count other than the request's, a write echo of another address or quantity) is
+//! taken for a late reply to an earlier request: dropped and counted as stale, never data.
 
 mod rtu;
 mod tcp;
@@ -20,8 +24,8 @@ use super::decode::{DecodeError, decode_response};
 use super::exception::Exception;
 use super::frame::MbapHeader;
 use super::pdu::{Request, Response};
-use crate::protocols::DeviceCode;
-use crate::protocols::transport::{Attempt, AttemptError};
+use crate::protocols::transport::{Attempt, AttemptError, LinkHealth};
+use crate::protocols::{DeviceCode, DropReason};
 
 /// A decoded reply: data, or the device's exception.
 pub(crate) type Reply = Result<Response, Exception>;
@@ -36,17 +40,34 @@ pub(crate) struct Exchange<'a> {
     pub pdu: &'a [u8],
 }
 
-/// Counters shared by a client and its link.
-#[derive(Debug, Default)]
+/// Counters shared by a client and its link, and the link's health.
+#[derive(Debug)]
 pub(crate) struct Counters {
     pub requests: AtomicU64,
     pub sends: AtomicU64,
     pub dropped: AtomicU64,
+    pub health: LinkHealth,
 }
 
 impl Counters {
+    /// Zero counters and a fresh health under `health`'s policy.
+    pub fn new(health: LinkHealth) -> Self {
+        Counters { requests: AtomicU64::new(0), sends: AtomicU64::new(0), dropped: AtomicU64::new(0), health }
+    }
+
     pub fn bump(counter: &AtomicU64) {
         counter.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// A frame or datagram dropped for `reason`.
+    pub fn dropped(&self, reason: DropReason) {
+        self.dropped_n(reason, 1);
+    }
+
+    /// `n` frames or datagrams dropped for `reason`.
+    pub fn dropped_n(&self, reason: DropReason, n: u64) {
+        self.dropped.fetch_add(n, Ordering::Relaxed);
+        self.health.dropped_n(reason, n);
     }
 }
 
@@ -58,12 +79,18 @@ pub(crate) enum Link {
 }
 
 impl Link {
-    /// Sends the request and waits until the attempt's deadline for its reply.
-    pub async fn attempt(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<Response, AttemptError> {
+    /// Sends the request and waits until the attempt's deadline for its reply. With the
+    /// reply, the number of the attempt it answers when its transaction id says so (for an
+    /// unambiguous round trip), `None` when it cannot be told.
+    pub async fn attempt(
+        &mut self,
+        ex: &Exchange<'_>,
+        attempt: &Attempt,
+    ) -> Result<(Response, Option<u32>), AttemptError> {
         match self {
             Link::Udp(l) => l.attempt(ex, attempt).await,
             Link::Tcp(l) => l.attempt(ex, attempt).await,
-            Link::Rtu(l) => l.attempt(ex, attempt).await,
+            Link::Rtu(l) => l.attempt(ex, attempt).await.map(|r| (r, None)),
         }
     }
 
@@ -81,8 +108,9 @@ impl Link {
 pub(crate) enum Verdict {
     /// It answers the request.
     Take(Reply),
-    /// It is not ours: drop it and keep waiting; the reason is kept for the timeout report.
-    Drop(Option<&'static str>),
+    /// It is not ours: drop it and keep waiting. The message, if any, is kept for the
+    /// attempt's report (a malformed reply rather than a timeout).
+    Drop(DropReason, Option<&'static str>),
     /// It claims to answer the request but is wrong.
     Fail(&'static str),
 }
@@ -96,22 +124,23 @@ pub(crate) fn judge_mbap(
     ignore_tid: bool,
 ) -> Verdict {
     if !ignore_tid && !tids.contains(&header.transaction) {
-        return Verdict::Drop(None);
+        return Verdict::Drop(DropReason::TransactionId, None);
     }
     judge(header.unit, pdu, ex, ignore_tid)
 }
 
 /// Judges a frame's unit and PDU against the request. Without a transaction id to go by
-/// (`loose`), a reply to another function is taken for a stale one and dropped.
+/// (`loose`), a reply that answers another request (function, byte count, write echo) is
+/// taken for a stale one and dropped.
 pub(crate) fn judge(unit: u8, pdu: &[u8], ex: &Exchange<'_>, loose: bool) -> Verdict {
     if unit != ex.unit {
-        return Verdict::Drop(Some("reply from the wrong unit"));
+        return Verdict::Drop(DropReason::Unit, Some("reply from the wrong unit"));
     }
     match decode_response(pdu, ex.request) {
         Ok(reply) => Verdict::Take(reply),
-        Err(DecodeError::FunctionMismatch) if loose => {
-            Verdict::Drop(Some("function code in the reply differs from the request"))
-        }
+        Err(
+            e @ (DecodeError::FunctionMismatch | DecodeError::ByteCountMismatch | DecodeError::EchoMismatch),
+        ) if loose => Verdict::Drop(DropReason::Stale, Some(e.message())),
         Err(e) => Verdict::Fail(e.message()),
     }
 }

@@ -5,9 +5,13 @@
 //! away and the line must have been quiet for 3.5 characters. While waiting, the buffer is
 //! scanned for the first frame with a valid CRC ([`RtuDecoder`]), so garbage before a reply
 //! is skipped. RTU has no transaction id: a reply is matched by unit, function, byte count
-//! and write echo. A reply so late that it arrives after the *next* request has gone out
-//! cannot be told from that request's answer when function and size agree: RTU itself has
-//! no way to tell, so keep the timeout above the device's worst reply time on such links.
+//! and write echo, and one that does not match is dropped as stale (never taken as data).
+//! After a timeout or a retry the line is held silent for the configured timeout before the
+//! next request ([`StreamLink::settle`]), so a late reply and the duplicate answer to the
+//! retry it provoked are drained, not read as the next request's answer (tokio-modbus
+//! #324). A reply later than a whole silent timeout still cannot be told from the next
+//! answer when function and size agree: RTU has no way to, so keep the timeout above the
+//! device's worst reply time on such links.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -16,6 +20,7 @@ use tokio_util::bytes::{Buf, BytesMut};
 use tokio_util::codec::Decoder;
 
 use super::{Counters, Exchange, Verdict, judge, taken, timed_out};
+use crate::protocols::DropReason;
 use crate::protocols::modbus::pdu::Response;
 use crate::protocols::modbus::rtu::{self, Direction};
 use crate::protocols::transport::{Attempt, AttemptError, StreamLink};
@@ -61,12 +66,16 @@ impl RtuLink {
         RtuLink { link, silence, counters, tx: Vec::new() }
     }
 
-    /// Flushes stale input, waits for the inter-frame silence and sends the request.
+    /// Holds the line after a timeout or retry, flushes stale input, waits for the
+    /// inter-frame silence and sends the request.
     pub async fn send(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<(), AttemptError> {
         self.tx.clear();
         rtu::encode(&mut self.tx, ex.unit, ex.pdu);
+        let settled = self.link.settle(attempt).await?;
+        self.counters.dropped.fetch_add(settled.replies, std::sync::atomic::Ordering::Relaxed);
+        self.counters.health.settled(settled);
         if self.link.flush_stale(attempt.timeout).await? {
-            Counters::bump(&self.counters.dropped);
+            self.counters.dropped(DropReason::Stale);
         }
         tokio::time::sleep_until(self.link.last_io() + self.silence).await;
         Counters::bump(&self.counters.sends);
@@ -76,6 +85,7 @@ impl RtuLink {
     /// Sends the request and waits for a valid frame that answers it.
     pub async fn attempt(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<Response, AttemptError> {
         self.send(ex, attempt).await?;
+        let attempt = &attempt.restarted();
         let mut decoder = RtuDecoder { direction: Direction::Response };
         let mut reason = None;
         loop {
@@ -87,12 +97,19 @@ impl RtuLink {
                 }
                 return Err(timed_out(reason));
             };
-            match judge(unit, &pdu, ex, false) {
-                Verdict::Take(reply) => return taken(reply),
-                Verdict::Fail(msg) => return Err(AttemptError::Malformed(msg)),
-                Verdict::Drop(why) => {
-                    Counters::bump(&self.counters.dropped);
-                    reason = why.or(reason);
+            match judge(unit, &pdu, ex, true) {
+                Verdict::Take(reply) => {
+                    self.link.answered();
+                    return taken(reply);
+                }
+                Verdict::Fail(msg) => {
+                    self.link.unsettle();
+                    return Err(AttemptError::Malformed(msg));
+                }
+                Verdict::Drop(why, msg) => {
+                    self.counters.dropped(why);
+                    self.link.unsettle();
+                    reason = msg.or(reason);
                 }
             }
         }

@@ -97,8 +97,13 @@ impl TcpLink {
         }
     }
 
-    /// Sends the request and reads frames until the one that answers it.
-    pub async fn attempt(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<Response, AttemptError> {
+    /// Sends the request and reads frames until the one that answers it; with it, the
+    /// number of the attempt whose transaction id it carries (none under the quirk).
+    pub async fn attempt(
+        &mut self,
+        ex: &Exchange<'_>,
+        attempt: &Attempt,
+    ) -> Result<(Response, Option<u32>), AttemptError> {
         self.send(ex, attempt).await?;
         let mut decoder = MbapDecoder { length0: self.quirks.length0 };
         let mut reason = None;
@@ -114,12 +119,16 @@ impl TcpLink {
             match judge_mbap(&header, &pdu, ex, &self.tids, self.quirks.ignore_transaction_id) {
                 Verdict::Take(reply) => {
                     self.link.finished();
-                    return taken(reply);
+                    let answered = match self.quirks.ignore_transaction_id {
+                        true => None,
+                        false => self.tids.iter().position(|&t| t == header.transaction).map(|i| i as u32),
+                    };
+                    return taken(reply).map(|r| (r, answered));
                 }
                 Verdict::Fail(msg) => return Err(AttemptError::Malformed(msg)),
-                Verdict::Drop(why) => {
-                    Counters::bump(&self.counters.dropped);
-                    reason = why.or(reason);
+                Verdict::Drop(why, msg) => {
+                    self.counters.dropped(why);
+                    reason = msg.or(reason);
                 }
             }
         }

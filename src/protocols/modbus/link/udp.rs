@@ -10,8 +10,9 @@
 use std::sync::Arc;
 
 use super::{Counters, Exchange, Verdict, judge_mbap, taken, timed_out};
+use crate::protocols::DropReason;
 use crate::protocols::modbus::config::Quirks;
-use crate::protocols::modbus::frame::{self, LengthField};
+use crate::protocols::modbus::frame::{self, FrameError, LengthField};
 use crate::protocols::modbus::pdu::Response;
 use crate::protocols::transport::{Attempt, AttemptError, Backoff, DatagramLink};
 
@@ -49,7 +50,7 @@ impl UdpLink {
             self.tids.clear();
             if self.quirks.ignore_transaction_id {
                 let stale = self.link.flush_stale(attempt.timeout).await?;
-                self.counters.dropped.fetch_add(stale, std::sync::atomic::Ordering::Relaxed);
+                self.counters.dropped_n(DropReason::Stale, stale);
             }
         }
         let tid = self.next_tid;
@@ -61,27 +62,44 @@ impl UdpLink {
         self.link.send(&self.tx, attempt.timeout).await
     }
 
-    /// Sends the request and waits for the datagram that answers it.
-    pub async fn attempt(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<Response, AttemptError> {
+    /// Sends the request and waits for the datagram that answers it; with it, the number
+    /// of the attempt whose transaction id it carries (none under the quirk).
+    pub async fn attempt(
+        &mut self,
+        ex: &Exchange<'_>,
+        attempt: &Attempt,
+    ) -> Result<(Response, Option<u32>), AttemptError> {
         self.send(ex, attempt).await?;
         let mut reason = None;
         loop {
             let Some(datagram) = self.link.recv(attempt.deadline).await? else {
                 return Err(timed_out(reason));
             };
+            let mut tid = None;
             let verdict = match frame::split_datagram(datagram, self.quirks.length0) {
                 Ok((header, pdu)) => {
+                    tid = Some(header.transaction);
                     judge_mbap(&header, pdu, ex, &self.tids, self.quirks.ignore_transaction_id)
                 }
+                // A standard length field of 0: what the `length0` quirk takes.
+                Err(FrameError::BadLength) if datagram.get(4..6) == Some(&[0, 0]) => {
+                    Verdict::Drop(DropReason::LengthZero, None)
+                }
                 // Datagrams are independent: a broken one is dropped, the right one may follow.
-                Err(e) => Verdict::Drop(Some(e.message())),
+                Err(e) => Verdict::Drop(DropReason::Malformed, Some(e.message())),
             };
             match verdict {
-                Verdict::Take(reply) => return taken(reply),
+                Verdict::Take(reply) => {
+                    let answered = match self.quirks.ignore_transaction_id {
+                        true => None,
+                        false => tid.and_then(|t| self.tids.iter().position(|&x| x == t)).map(|i| i as u32),
+                    };
+                    return taken(reply).map(|r| (r, answered));
+                }
                 Verdict::Fail(msg) => return Err(AttemptError::Malformed(msg)),
-                Verdict::Drop(why) => {
-                    Counters::bump(&self.counters.dropped);
-                    reason = why.or(reason);
+                Verdict::Drop(why, msg) => {
+                    self.counters.dropped(why);
+                    reason = msg.or(reason);
                 }
             }
         }
