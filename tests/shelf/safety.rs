@@ -260,3 +260,34 @@ async fn a_pause_outlasts_a_restart_and_an_aisle_pause_holds_its_jobs() {
     assert_eq!(sim.violations(), 0);
     drop(dir);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_lossy_link_is_a_degraded_warning_that_keeps_working_and_clears() {
+    let (app, sim) = shelf_app(sim(0), |_| {}).await;
+    sim.set_faults(rackd::protocols::faults::Faults { drop_rate: 0.3, ..Default::default() });
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    let alarm = loop {
+        let found = active_alarms(&app).await.into_iter().find(|a| a["kind"] == "degraded");
+        if let Some(a) = found {
+            break a;
+        }
+        assert!(std::time::Instant::now() < deadline, "never degraded: {}", app.get("/api/v1/devices/shelf1").await.1);
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    };
+    assert_eq!(alarm["class"], "link", "{alarm}");
+    assert!(alarm["detail"].as_str().unwrap().contains("retries"), "{alarm}");
+    let (_, device) = app.get("/api/v1/devices/shelf1").await;
+    assert_eq!((device["link"]["degraded"].clone(), device["online"].clone()), (json!(true), json!(true)), "{device}");
+    assert!(device["link"]["retries"].as_u64().unwrap() > 0, "{device}");
+    // A warning, not a stop: work goes on over the lossy link.
+    let (_, job) = app.post("/api/v1/jobs", &store("LOSSY-1")).await;
+    assert_eq!(wait_job(&app, &job["id"], 30, |j| j["state"] == "completed").await["state"], "completed");
+    sim.set_faults(rackd::protocols::faults::Faults::default());
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    while active_alarms(&app).await.iter().any(|a| a["kind"] == "degraded") {
+        assert!(std::time::Instant::now() < deadline, "the warning never cleared");
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    assert_eq!(app.get("/api/v1/devices/shelf1").await.1["link"]["degraded"], false);
+    assert_eq!(sim.violations(), 0);
+}
