@@ -68,7 +68,7 @@ enum Bench {
         /// issue 12, for comparison.
         #[arg(long)]
         fixed_timeout: bool,
-        /// The adaptive timeout's floor for the device (`min_timeout_ms`; default 20).
+        /// The adaptive timeout's floor for the device (`min_timeout_ms`; default 2 on Modbus UDP).
         #[arg(long)]
         min_timeout_ms: Option<u64>,
     },

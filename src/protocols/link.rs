@@ -111,7 +111,7 @@ impl LinkConfig {
             timeout: DEFAULT_TIMEOUT,
             retries: DEFAULT_RETRIES,
             quirks: BTreeSet::new(),
-            tuning: LinkTuning::default(),
+            tuning: LinkTuning::for_protocol(protocol),
         }
     }
 

@@ -116,6 +116,13 @@ impl Protocol {
         }
     }
 
+    /// Whether a reply names the request it answers (Modbus TCP and UDP: the transaction
+    /// id), so that a late reply can never pass for another request's answer and a resend
+    /// costs only the request itself.
+    pub fn matches_replies(self) -> bool {
+        matches!(self, Protocol::ModbusUdp | Protocol::ModbusTcp)
+    }
+
     /// The family: which frames, notation and client.
     pub fn family(self) -> Family {
         match self {

@@ -110,7 +110,7 @@ impl RawDevice {
         quirks: BTreeSet<Quirk>,
     ) -> Result<LinkConfig, Problem> {
         let serial = self.serial.as_deref().map(str::parse::<SerialSettings>).transpose()?;
-        let d = LinkTuning::default();
+        let d = LinkTuning::for_protocol(protocol);
         Ok(LinkConfig {
             protocol,
             address: self.address.clone(),

@@ -41,6 +41,17 @@ pub struct LinkTuning {
     pub degraded_below: f64,
 }
 
+impl LinkTuning {
+    /// The tuning a protocol gets by default: the floor is 2 ms where replies name their
+    /// request (Modbus TCP and UDP), since a resend there costs one request and a late
+    /// reply is dropped by its transaction id; 20 ms elsewhere, where a timeout costs a
+    /// `timeout_ms` of silence on the line (or, on MC 3E, a new connection).
+    pub fn for_protocol(protocol: crate::protocols::Protocol) -> LinkTuning {
+        let floor = if protocol.matches_replies() { 2 } else { 20 };
+        LinkTuning { min_timeout: Duration::from_millis(floor), ..LinkTuning::default() }
+    }
+}
+
 impl Default for LinkTuning {
     /// 20 ms floor; degraded above 10% troubled requests of the last 50, healthy again at
     /// 2% (one in 50) or less.
