@@ -271,13 +271,21 @@ async fn a_lossy_link_is_a_degraded_warning_that_keeps_working_and_clears() {
         if let Some(a) = found {
             break a;
         }
-        assert!(std::time::Instant::now() < deadline, "never degraded: {}", app.get("/api/v1/devices/shelf1").await.1);
+        assert!(
+            std::time::Instant::now() < deadline,
+            "never degraded: {}",
+            app.get("/api/v1/devices/shelf1").await.1
+        );
         tokio::time::sleep(std::time::Duration::from_millis(20)).await;
     };
     assert_eq!(alarm["class"], "link", "{alarm}");
     assert!(alarm["detail"].as_str().unwrap().contains("retries"), "{alarm}");
     let (_, device) = app.get("/api/v1/devices/shelf1").await;
-    assert_eq!((device["link"]["degraded"].clone(), device["online"].clone()), (json!(true), json!(true)), "{device}");
+    assert_eq!(
+        (device["link"]["degraded"].clone(), device["online"].clone()),
+        (json!(true), json!(true)),
+        "{device}"
+    );
     assert!(device["link"]["retries"].as_u64().unwrap() > 0, "{device}");
     // A warning, not a stop: work goes on over the lossy link.
     let (_, job) = app.post("/api/v1/jobs", &store("LOSSY-1")).await;
