@@ -54,15 +54,16 @@ enum Bench {
         /// Jobs sent in batches for the throughput figure.
         #[arg(long, default_value_t = 20000)]
         batch_jobs: usize,
-        /// The device's poll period in milliseconds.
-        #[arg(long, default_value_t = 10)]
-        poll_ms: u64,
+        /// The device's poll period in milliseconds (default 10; with `--drop`, the shelf's
+        /// configured default, 200).
+        #[arg(long)]
+        poll_ms: Option<u64>,
         /// Also run `lossy_jobs` jobs with this share of datagrams lost (the simulator
         /// drops requests), next to as many on the clean link, and print both rates.
         #[arg(long)]
         drop: Option<f64>,
         /// Jobs in each of the clean and the lossy runs of `--drop`.
-        #[arg(long, default_value_t = 1000)]
+        #[arg(long, default_value_t = 500)]
         lossy_jobs: usize,
         /// Keep the reply timeout fixed at `timeout_ms` (no adaptive timer), as before
         /// issue 12, for comparison.
@@ -109,6 +110,7 @@ fn main() -> ExitCode {
             } => {
                 let lossy =
                     drop.map(|rate| shelf::Lossy { rate, jobs: lossy_jobs, fixed_timeout, min_timeout_ms });
+                let poll_ms = poll_ms.unwrap_or(if lossy.is_some() { 200 } else { 10 });
                 shelf::run(latency_jobs, batch_jobs, poll_ms, lossy).await
             }
             Bench::Ws { subscribers, events, rate } => ws::run(subscribers, events, rate).await,

@@ -105,8 +105,11 @@ impl Shelf {
                 Some(request) = requests.recv() => self.handle(request).await,
                 _ = port.work_waiting() => {}
                 _ = sleep_until(next_poll) => {
+                    // Polls keep their pace: time a poll spends on retries comes out of
+                    // the wait for the next one, not on top of it.
+                    let started = Instant::now();
                     self.poll().await;
-                    next_poll = Instant::now() + period;
+                    next_poll = (started + period).max(Instant::now());
                 }
             }
             if self.may_dispatch()
