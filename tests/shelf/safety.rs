@@ -299,3 +299,32 @@ async fn a_lossy_link_is_a_degraded_warning_that_keeps_working_and_clears() {
     assert_eq!(app.get("/api/v1/devices/shelf1").await.1["link"]["degraded"], false);
     assert_eq!(sim.violations(), 0);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn started_on_a_lossy_link_it_recovers_and_works_at_once() {
+    // The shipped timings (200 ms poll, 300 ms timeout, 2 retries) on a link that loses a
+    // fifth of the requests from the start: recovery reads all 60 slots through the loss.
+    let options = rackd::sim::shelf::ShelfSimOptions {
+        faults: rackd::protocols::faults::Faults { drop_rate: 0.2, ..Default::default() },
+        ..sim(0)
+    };
+    let (app, sim) = shelf_app(options, |d| {
+        d.poll_ms = 200;
+        d.link.timeout = std::time::Duration::from_millis(300);
+        d.link.retries = 2;
+    })
+    .await;
+    let started = std::time::Instant::now();
+    let mut ids = Vec::new();
+    for k in 0..30u16 {
+        let to = loc(1 + k / 24, 1 + (k / 4) % 6, 1 + k % 4, 1);
+        let (status, j) = app.post("/api/v1/jobs", &json!({"kind": "store", "to": to})).await;
+        assert_eq!(status, 201, "{j}");
+        ids.push(j["id"].clone());
+    }
+    for id in &ids {
+        wait_job(&app, id, 20, |j| j["state"] == "completed").await;
+    }
+    assert!(started.elapsed() < std::time::Duration::from_secs(20), "{:?}", started.elapsed());
+    assert_eq!(sim.violations(), 0);
+}
