@@ -78,9 +78,9 @@ pub async fn run(
     let client = reqwest::Client::new();
 
     if let Some(lossy) = lossy {
-        let clean = batch(&client, &base, &sim, 0, lossy.jobs).await?;
+        let clean = rate(batch(&client, &base, &sim, 0, lossy.jobs).await?);
         sim.set_faults(Faults { drop_rate: lossy.rate, ..Faults::default() });
-        let dropped = batch(&client, &base, &sim, lossy.jobs, lossy.jobs).await?;
+        let dropped = rate(batch(&client, &base, &sim, lossy.jobs, lossy.jobs).await?);
         let device: serde_json::Value =
             client.get(format!("{base}/api/v1/devices/shelf1")).send().await?.json().await?;
         let timer = match (lossy.fixed_timeout, lossy.min_timeout_ms) {
@@ -129,31 +129,7 @@ pub async fn run(
         handover.record((landed - t).as_micros() as u64)?;
     }
 
-    let jobs: Vec<_> = (0..batch_jobs).map(|n| light(n + latency_jobs)).collect();
-    let (done_before, _) = sim.finished();
-    let t = Instant::now();
-    for chunk in jobs.chunks(1000) {
-        let r = client
-            .post(format!("{base}/api/v1/jobs/batch"))
-            .json(&serde_json::json!({ "jobs": chunk }))
-            .send()
-            .await?;
-        anyhow::ensure!(r.status() == 201, "batch: {}", r.status());
-    }
-    let deadline = Instant::now() + Duration::from_secs(600);
-    loop {
-        let r: serde_json::Value =
-            client.get(format!("{base}/api/v1/jobs?state=queued&limit=1")).send().await?.json().await?;
-        let running: serde_json::Value =
-            client.get(format!("{base}/api/v1/devices/shelf1")).send().await?.json().await?;
-        if r["jobs"].as_array().is_some_and(|a| a.is_empty()) && running["slots_in_use"] == 0 {
-            break;
-        }
-        anyhow::ensure!(Instant::now() < deadline, "the batch did not finish");
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
-    let elapsed = t.elapsed();
-    let (done_after, _) = sim.finished();
+    let (done, elapsed) = batch(&client, &base, &sim, latency_jobs, batch_jobs).await?;
 
     let ms = |h: &Histogram<u64>, q: f64| h.value_at_quantile(q) as f64 / 1000.0;
     println!("bench shelf: simulator with zero-duration tasks, poll every {poll_ms} ms");
@@ -166,10 +142,9 @@ pub async fn run(
         ms(&handover, 0.99) / (3.0 * ms(&rtt, 0.5)),
     );
     println!(
-        "sustained: {} jobs completed in {:.2} s = {:.0} jobs/s ({} slots)",
-        done_after - done_before,
+        "sustained: {done} jobs completed in {:.2} s = {:.0} jobs/s ({} slots)",
         elapsed.as_secs_f64(),
-        (done_after - done_before) as f64 / elapsed.as_secs_f64(),
+        done as f64 / elapsed.as_secs_f64(),
         60
     );
     let _ = stop.send(());
@@ -179,14 +154,14 @@ pub async fn run(
 }
 
 /// Posts `count` light jobs (numbered from `first`) in batches and waits until every one
-/// has completed; returns completed jobs per second.
+/// has completed; returns how many the simulator completed and how long it took.
 async fn batch(
     client: &reqwest::Client,
     base: &str,
     sim: &ShelfSim,
     first: usize,
     count: usize,
-) -> anyhow::Result<f64> {
+) -> anyhow::Result<(u64, Duration)> {
     let jobs: Vec<_> = (0..count).map(|n| light(n + first)).collect();
     let (done_before, _) = sim.finished();
     let t = Instant::now();
@@ -211,7 +186,12 @@ async fn batch(
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
     let (done_after, _) = sim.finished();
-    Ok((done_after - done_before) as f64 / t.elapsed().as_secs_f64())
+    Ok((done_after - done_before, t.elapsed()))
+}
+
+/// Completed jobs per second of a [`batch`].
+fn rate((done, elapsed): (u64, Duration)) -> f64 {
+    done as f64 / elapsed.as_secs_f64()
 }
 
 /// A light job on the demo site; consecutive jobs use different locations.
