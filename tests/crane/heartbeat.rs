@@ -175,6 +175,8 @@ async fn a_stalled_heartbeat_shows_since_when_and_the_crane_block_stays_shown() 
         wait_device(&app, "back", 5, |s| s["online"] == true && s["crane"]["heartbeat_ok"] == true).await;
     assert!(back["crane"]["heartbeat_stalled_since"].is_null(), "{back}");
     assert!(back["crane"]["alarm_code"].is_null(), "{back}");
+    assert!(back["last_error"].is_null(), "the heartbeat's error is over: {back}");
+    assert!(back["last_error_at"].is_string(), "its time stays: {back}");
     wait_alarms(&app, |kinds| kinds.is_empty()).await;
     app.stop().await;
 }

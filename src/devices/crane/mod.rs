@@ -84,6 +84,9 @@ use heartbeat::Heartbeat;
 
 pub use handshake::HandshakeError;
 
+/// The device's error while the crane's heartbeat stands still.
+const HEARTBEAT_LOST: &str = "the crane's heartbeat (D200) stopped moving: crane lost";
+
 /// Why a step of the crane adapter stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum CraneError {
@@ -276,7 +279,10 @@ impl Crane {
         self.status.update(|s| {
             let online = link_ok && !lost;
             if lost {
-                s.last_error = Some("the crane's heartbeat (D200) stopped moving: crane lost".into());
+                s.last_error = Some(HEARTBEAT_LOST.into());
+            } else if s.last_error.as_deref() == Some(HEARTBEAT_LOST) {
+                // The heartbeat moves again: its error is over (`last_error_at` keeps when).
+                s.last_error = None;
             }
             if online != s.online {
                 if online {
