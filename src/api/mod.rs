@@ -12,6 +12,7 @@ pub mod dashboard;
 pub mod devices;
 pub mod error;
 pub mod extract;
+pub mod health;
 pub mod jobs;
 pub mod locations;
 pub mod metrics;
@@ -105,6 +106,7 @@ fn protected_routes() -> OpenApiRouter<AppState> {
         .merge(alarms::router())
         .merge(aisles::router())
         .merge(control::router())
+        .merge(health::router())
         .merge(ws::router());
     OpenApiRouter::with_openapi(ApiDoc::openapi()).nest("/api/v1", v1).routes(routes!(metrics_route))
 }

@@ -26,7 +26,8 @@ pub async fn healthz() -> Json<Health> {
     Json(Health { status: "ok" })
 }
 
-/// Readiness: the database answers and every migration is applied.
+/// Readiness: the database answers, every migration is applied and the job writer runs
+/// (the devices are not judged here: see `GET /api/v1/health`).
 #[utoipa::path(get, path = "/readyz", tag = "operations", security(()),
     responses(
         (status = 200, description = "Ready", body = Health),
@@ -42,6 +43,14 @@ pub async fn readyz(State(app): State<AppState>) -> Result<Json<Health>, ApiErro
         };
         ApiError::new(axum::http::StatusCode::SERVICE_UNAVAILABLE, "not_ready", message)
     })?;
+    if !app.writer.is_running() {
+        tracing::error!("not ready: the job writer has stopped");
+        return Err(ApiError::new(
+            axum::http::StatusCode::SERVICE_UNAVAILABLE,
+            "not_ready",
+            "the job writer has stopped",
+        ));
+    }
     Ok(Json(Health { status: "ok" }))
 }
 

@@ -328,3 +328,34 @@ async fn started_on_a_lossy_link_it_recovers_and_works_at_once() {
     assert!(started.elapsed() < std::time::Duration::from_secs(20), "{:?}", started.elapsed());
     assert_eq!(sim.violations(), 0);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_site_health_names_a_device_that_does_not_answer() {
+    let (app, sim) = shelf_app(sim(0), |d| d.offline_after = 2).await;
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    let healthy = loop {
+        let (status, h) = app.get("/api/v1/health").await;
+        if h["status"] == "ok" {
+            break (status, h);
+        }
+        assert!(std::time::Instant::now() < deadline, "never healthy: {h}");
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    };
+    assert_eq!(healthy.0, 200);
+    assert_eq!(healthy.1["store"], "ok");
+    assert_eq!(healthy.1["devices"][0]["id"], "shelf1");
+    assert!(healthy.1["devices"][0]["seconds_since_contact"].as_f64().unwrap() < 5.0, "{}", healthy.1);
+    sim.set_faults(rackd::protocols::faults::Faults { drop_rate: 1.0, ..Default::default() });
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    loop {
+        let (status, h) = app.get("/api/v1/health").await;
+        if h["status"] == "degraded" {
+            assert_eq!(status, 200, "the store works: still 200");
+            assert_eq!(h["devices"][0]["online"], false, "{h}");
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "never degraded: {h}");
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    assert_eq!(app.get("/readyz").await.0, 200, "readiness is the store's, not the devices'");
+}

@@ -227,6 +227,11 @@ impl Writer {
         Ok((Writer { tx }, task))
     }
 
+    /// Whether the writer thread still takes commands.
+    pub fn is_running(&self) -> bool {
+        !self.tx.is_closed()
+    }
+
     /// Stores `jobs` all or nothing, answering once they are on disk; refused at once with
     /// [`WriteError::Overloaded`] while the writer's queue is full (the caller says "try
     /// again" instead of holding a request for a queue that does not move).
