@@ -4,6 +4,7 @@
 //! files (`/`, which asks for a key itself when keys are configured). Everything under
 //! `/api/v1` and `/metrics` needs a key once keys are configured (see [`auth`]).
 
+pub mod access;
 pub mod aisles;
 pub mod alarms;
 pub mod auth;
@@ -150,6 +151,9 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
         .layer(DefaultBodyLimit::max(body_limit))
         .layer(
             ServiceBuilder::new()
+                // Outermost: the line shows the answer the client got, a timeout's or a
+                // panic's included.
+                .layer(middleware::from_fn(access::log))
                 .layer(CatchPanicLayer::custom(|_| {
                     tracing::error!("a handler panicked");
                     axum::response::IntoResponse::into_response(ApiError::new(

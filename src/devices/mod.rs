@@ -11,6 +11,7 @@ pub mod cancel;
 pub mod config;
 pub mod crane;
 pub mod port;
+pub mod repeats;
 pub mod shelf;
 pub mod status;
 pub mod tagdef;
@@ -21,6 +22,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::sync::{mpsc, oneshot, watch};
+use tracing::Instrument;
 
 pub use cancel::{CancelRefusal, Withdrawal};
 pub use config::{DeviceConfig, DeviceKind};
@@ -94,19 +96,21 @@ pub async fn start(
         let (requests, inbox) = mpsc::channel(16);
         let context = || format!("device {id:?}");
         let mut tag_handle = None;
+        // Everything the device task logs carries the device's id from this span.
+        let span = tracing::info_span!("device", device = %id);
         let task = match c {
             DeviceConfig::Shelf(c) => {
                 let shelf = shelf::Shelf::new(c.clone(), plc, port(id), status).with_context(context)?;
-                tokio::spawn(shelf.run(inbox))
+                tokio::spawn(shelf.run(inbox).instrument(span))
             }
             DeviceConfig::Crane(c) => {
                 let crane = crane::Crane::new(c.clone(), plc, port(id), status).with_context(context)?;
-                tokio::spawn(crane.run(inbox))
+                tokio::spawn(crane.run(inbox).instrument(span))
             }
             DeviceConfig::Tags(c) => {
                 let (device, handle) = tags::TagDevice::new(c.clone(), plc, status).with_context(context)?;
                 tag_handle = Some(handle);
-                tokio::spawn(device.run(inbox))
+                tokio::spawn(device.run(inbox).instrument(span))
             }
         };
         tasks.push(task);

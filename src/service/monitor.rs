@@ -25,6 +25,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use sqlx::SqlitePool;
 use tokio::sync::watch;
+use tracing::Instrument;
 
 use super::dispatch::{Control, Queues};
 use crate::devices::{DeviceHandle, DeviceStatus, Devices};
@@ -85,7 +86,10 @@ pub async fn start(
     for (id, handle) in devices.iter() {
         let control = queues.control(id).unwrap_or_else(|| watch::Sender::default().subscribe());
         let alarms = active.remove(id).unwrap_or_default();
-        tasks.push(tokio::spawn(watch_device(handle.clone(), control, alarms, writer.clone())));
+        let span = tracing::info_span!("device", device = %id);
+        tasks.push(tokio::spawn(
+            watch_device(handle.clone(), control, alarms, writer.clone()).instrument(span),
+        ));
     }
     tasks
 }
@@ -103,7 +107,7 @@ async fn watch_device(
         match record(&device, &mut alarms, &writer).await {
             Ok(()) => {}
             Err(WriteError::Closed) => return,
-            Err(e) => tracing::warn!(device = %device.id, error = %e, "recording device status"),
+            Err(e) => tracing::warn!(error = %e, "recording device status"),
         }
         tokio::select! {
             changed = status.changed() => if changed.is_err() { return },

@@ -8,5 +8,6 @@ mod errors;
 mod helpers;
 mod jobs;
 mod lifecycle;
+mod logs;
 mod openapi;
 mod paging;

@@ -92,7 +92,7 @@ impl Crane {
                 v.lift,
                 v.load
             );
-            tracing::debug!(device = %self.config.id, job = job.id, "{cause}");
+            tracing::debug!("{cause}");
             self.record(job.id, Reported::Running, cause).await?;
             c.action = v.action;
         }
@@ -106,7 +106,7 @@ impl Crane {
         let Some(job) = unfinished.into_iter().find(|j| task_id_for(j.id) == task) else { return Ok(()) };
         let Some(spec) = job.spec() else { return Ok(()) };
         let Ok(task) = registers::task_for(&spec, task, &self.stations) else { return Ok(()) };
-        tracing::info!(device = %self.config.id, job = job.id, task = task.number, "following the crane's task");
+        tracing::info!(job = job.id, task = task.number, "following the crane's task");
         self.record(job.id, Reported::Taken, format!("the crane holds it as task {}", task.number)).await?;
         self.current = Some(Current {
             job: job.id,
@@ -148,7 +148,7 @@ impl Crane {
             let lost = Failure { kind: FailureKind::Lost, code: None, text: text.clone() };
             self.record(job.id, Reported::Failed(lost), text).await?;
         }
-        tracing::info!(device = %self.config.id, task = view.task, stb = word(wcs::STB), ack = view.ack, "crane recovered");
+        tracing::info!(task = view.task, stb = word(wcs::STB), ack = view.ack, "crane recovered");
         self.poll().await
     }
 }

@@ -90,13 +90,12 @@ impl Crane {
             (0, _) => self.handing = Some(h),
             _ if h.latched => {
                 self.handing = Some(h);
-                tracing::info!(device = %self.config.id, "the crane latched the task: STB := 0 (step 3)");
+                tracing::info!("the crane latched the task: STB := 0 (step 3)");
                 self.write(&self.wcs_word(wcs::STB), &[0]).await?;
             }
             _ if now.duration_since(h.since) >= timeout => {
                 self.handing = Some(h);
                 tracing::warn!(
-                    device = %self.config.id,
                     task = self.handing.as_ref().map_or(0, |h| h.task.number),
                     "no ACK within the handshake timeout: withdrawing the strobe; the task stays possibly latched"
                 );
@@ -134,7 +133,7 @@ impl Crane {
     /// The crane did not take the task: the job is free to be handed over again.
     fn not_taken(&mut self, h: Handing) {
         self.handing = None;
-        tracing::info!(device = %self.config.id, job = h.job, task = h.task.number, "the crane did not take the task");
+        tracing::info!(job = h.job, task = h.task.number, "the crane did not take the task");
         if h.task.mode != Mode::Cancel && self.current.as_ref().is_some_and(|c| c.job == h.job && !c.seen) {
             self.current = None;
         }
@@ -145,7 +144,7 @@ impl Crane {
     async fn check_blocked(&mut self, v: &CraneView) -> Result<(), CraneError> {
         let Some(why) = self.blocked.clone() else { return Ok(()) };
         if self.read_stb().await? == 0 && v.is_idle() {
-            tracing::info!(device = %self.config.id, "the strobe was cleared and the crane is idle: work resumes");
+            tracing::info!("the strobe was cleared and the crane is idle: work resumes");
             self.blocked = None;
             self.status.update(|s| s.last_error = None);
         } else {
@@ -167,16 +166,27 @@ impl Crane {
         let unfinished = self.port.unfinished();
         let job = task.and_then(|t| unfinished.into_iter().find(|j| task_id_for(j.id) == t.number));
         let held = self.current.as_ref().map(|c| c.job);
-        let id = self.config.id.clone();
         match (task, job) {
             (Some(task), job) if task.mode == Mode::Cancel => {
                 let job = job.map_or(0, |j| j.id);
-                tracing::warn!(device = %id, stb, ack = v.ack, job, task = task.number, "a cancel hand-over was interrupted: finishing it");
+                tracing::warn!(
+                    stb,
+                    ack = v.ack,
+                    job,
+                    task = task.number,
+                    "a cancel hand-over was interrupted: finishing it"
+                );
                 self.handing =
                     Some(Handing { latched: v.ack == 1, ..Handing::new(job, task, Instant::now()) });
             }
             (Some(task), Some(job)) if held.is_none_or(|h| h == job.id) => {
-                tracing::warn!(device = %id, stb, ack = v.ack, job = job.id, task = task.number, "a hand-over was interrupted: carrying it on as that job");
+                tracing::warn!(
+                    stb,
+                    ack = v.ack,
+                    job = job.id,
+                    task = task.number,
+                    "a hand-over was interrupted: carrying it on as that job"
+                );
                 if held.is_none() {
                     self.current = Some(Current {
                         job: job.id,
@@ -198,7 +208,7 @@ impl Crane {
                     v.ack,
                     v.task
                 );
-                tracing::error!(device = %id, "{why}");
+                tracing::error!("{why}");
                 self.status.update(|s| s.last_error = Some(why.clone()));
                 self.blocked = Some(why);
             }
@@ -207,7 +217,7 @@ impl Crane {
                     "the crane is starting task words {:?} that are no unfinished job of rackd's; no work until it is idle",
                     mine.get(at..at + TASK_WORDS).unwrap_or(&[])
                 );
-                tracing::warn!(device = %id, "{why}");
+                tracing::warn!("{why}");
                 self.status.update(|s| s.last_error = Some(why));
             }
         }

@@ -71,10 +71,12 @@ use std::sync::Arc;
 
 use tokio::sync::mpsc;
 use tokio::time::{Instant, sleep_until};
+use tracing::Instrument;
 
 use super::DeviceRequest;
 use super::config::{Ack, CraneConfig};
 use super::port::{Port, ReportError};
+use super::repeats::Repeats;
 use super::status::{CraneStatus, StatusCell};
 use crate::domain::{Failure, Report, Reported};
 use crate::protocols::{Address, PlcError, PlcMemory};
@@ -141,6 +143,8 @@ pub struct Crane {
     blocked: Option<String>,
     /// Wall-clock time the crane's heartbeat (D200) last changed (or rackd began to watch).
     heartbeat_moved: time::OffsetDateTime,
+    /// Failures of recovery, polls and hand-overs, logged without flooding.
+    repeats: Repeats,
 }
 
 impl Crane {
@@ -178,6 +182,7 @@ impl Crane {
             handing: None,
             blocked: None,
             heartbeat_moved: crate::domain::time::from_ms(crate::domain::time::now_ms()),
+            repeats: Repeats::default(),
         })
     }
 
@@ -186,20 +191,25 @@ impl Crane {
     pub async fn run(mut self, mut requests: mpsc::Receiver<DeviceRequest>) {
         let period = self.config.poll();
         while let Err(e) = self.recover().await {
-            tracing::warn!(device = %self.config.id, error = %e, "crane recovery failed; retrying");
+            self.repeats.failed("crane recovery failed; retrying", &e);
             self.status.update(|s| s.last_error = Some(e.to_string()));
             tokio::time::sleep(period).await;
         }
+        self.repeats.recovered();
         let mut next_poll = Instant::now() + period;
         loop {
             let port = self.port.clone();
+            let span = self.job_span();
             tokio::select! {
-                Some(request) = requests.recv() => self.handle(request).await,
+                Some(request) = requests.recv() => self.handle(request).instrument(span).await,
                 _ = port.work_waiting() => {}
                 _ = sleep_until(next_poll) => {
-                    if let Err(e) = self.poll().await {
-                        tracing::warn!(device = %self.config.id, error = %e, "crane poll failed");
-                        self.status.update(|s| s.last_error = Some(e.to_string()));
+                    match self.poll().instrument(span).await {
+                        Ok(()) => self.repeats.recovered(),
+                        Err(e) => {
+                            self.repeats.failed("crane poll failed", &e);
+                            self.status.update(|s| s.last_error = Some(e.to_string()));
+                        }
                     }
                     next_poll = Instant::now() + period;
                 }
@@ -207,9 +217,18 @@ impl Crane {
             if self.may_dispatch()
                 && let Err(e) = self.dispatch().await
             {
-                tracing::warn!(device = %self.config.id, error = %e, "crane hand-over stopped");
+                self.repeats.failed("crane hand-over stopped", &e);
                 self.status.update(|s| s.last_error = Some(e.to_string()));
             }
+        }
+    }
+
+    /// The span of the job the crane holds, so that what is logged about it carries its
+    /// id; none while it holds nothing of rackd's.
+    fn job_span(&self) -> tracing::Span {
+        match &self.current {
+            Some(c) => tracing::info_span!("job", job = c.job),
+            None => tracing::Span::none(),
         }
     }
 
@@ -274,7 +293,7 @@ impl Crane {
     /// Online = the link answers and the crane's heartbeat moves.
     fn show_online(&mut self) {
         let lost = self.heartbeat.is_lost(Instant::now());
-        let (id, link_ok) = (self.config.id.clone(), self.link_ok);
+        let link_ok = self.link_ok;
         let stalled_since = lost.then_some(self.heartbeat_moved);
         self.status.update(|s| {
             let online = link_ok && !lost;
@@ -286,9 +305,9 @@ impl Crane {
             }
             if online != s.online {
                 if online {
-                    tracing::info!(device = %id, "crane online");
+                    tracing::info!("crane online");
                 } else {
-                    tracing::warn!(device = %id, link_ok, heartbeat_lost = lost, "crane offline");
+                    tracing::warn!(link_ok, heartbeat_lost = lost, "crane offline");
                 }
             }
             s.online = online;

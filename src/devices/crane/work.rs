@@ -3,9 +3,11 @@
 
 use std::collections::HashSet;
 
+use tracing::Instrument;
+
 use super::{Crane, CraneError, Current};
 use crate::devices::cancel::{CancelRefusal, Withdrawal};
-use crate::domain::{Failure, FailureKind, Reported};
+use crate::domain::{Failure, FailureKind, Job, Reported};
 use crate::wire::alarms::{self, AlarmClass};
 use crate::wire::registers::{self, CraneView};
 use crate::wire::task_id_for;
@@ -14,6 +16,11 @@ impl Crane {
     /// Hands the best eligible queued job to the idle crane.
     pub(super) async fn dispatch(&mut self) -> Result<(), CraneError> {
         let Some(job) = self.port.next(1, &HashSet::new()).into_iter().next() else { return Ok(()) };
+        let span = tracing::info_span!("job", job = job.id);
+        self.dispatch_job(job).instrument(span).await
+    }
+
+    async fn dispatch_job(&mut self, job: Job) -> Result<(), CraneError> {
         let Some(spec) = job.spec() else { return Ok(()) };
         let task = match registers::task_for(&spec, task_id_for(job.id), &self.stations) {
             Ok(task) => task,
@@ -56,7 +63,7 @@ impl Crane {
             Err(CraneError::Plc(e)) => return Err(CancelRefusal::Link(e)),
             Err(CraneError::Report(e)) => return Err(CancelRefusal::Report(e)),
             Err(e) => {
-                tracing::warn!(device = %self.config.id, job = id, error = %e, "the crane did not take the cancel");
+                tracing::warn!(error = %e, "the crane did not take the cancel");
                 return Err(CancelRefusal::NotTaken);
             }
         }
@@ -79,7 +86,7 @@ impl Crane {
         if alarm.class != AlarmClass::Business || c.cancel_sent || v.task != c.task.number {
             return Ok(());
         }
-        tracing::warn!(device = %self.config.id, job = c.job, code = alarm.code, "business alarm: cancelling the task");
+        tracing::warn!(code = alarm.code, "business alarm: cancelling the task");
         self.send_cancel(&c).await?;
         let failure =
             Failure { kind: FailureKind::Alarm, code: Some(alarm.code as i64), text: alarm.text.clone() };

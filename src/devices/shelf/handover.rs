@@ -2,6 +2,8 @@
 
 use std::collections::HashSet;
 
+use tracing::Instrument;
+
 use super::{Shelf, Slot};
 use crate::devices::cancel::{CancelRefusal, Withdrawal};
 use crate::devices::port::ReportError;
@@ -37,7 +39,7 @@ impl Shelf {
         let mut taken = Vec::new();
         let mut failed = None;
         for (k, job) in free.into_iter().zip(&candidates) {
-            match self.hand_over(k, job).await {
+            match self.hand_over(k, job).instrument(tracing::info_span!("job", job = job.id)).await {
                 Ok(Some(report)) => taken.push(report),
                 Ok(None) => {}
                 Err(e) => {
@@ -47,7 +49,7 @@ impl Shelf {
             }
         }
         if !taken.is_empty() && self.status.get().memory_lost_at.is_some() {
-            tracing::info!(device = %self.config.id, "the PLC takes work again after losing its memory");
+            tracing::info!("the PLC takes work again after losing its memory");
             self.status.update(|s| s.memory_lost_at = None);
         }
         // Recorded together, so one commit covers the whole round.
@@ -72,7 +74,7 @@ impl Shelf {
         let words = self.read(&at, SLOT_WORDS as u16).await?;
         let view = SlotView::parse(&words).ok_or(PlcError::Malformed("short slot read"))?;
         if !view.is_free() {
-            tracing::warn!(device = %self.config.id, slot = k + 1, task = view.task_id, "slot busy with unknown work");
+            tracing::warn!(slot = k + 1, task = view.task_id, "slot busy with unknown work");
             self.slots[k] = Slot::Foreign;
             return Ok(None);
         }

@@ -51,6 +51,7 @@ use tokio::time::{Instant, sleep_until};
 use super::DeviceRequest;
 use super::config::ShelfConfig;
 use super::port::Port;
+use super::repeats::Repeats;
 use super::status::StatusCell;
 use crate::protocols::{Address, PlcError, PlcMemory};
 
@@ -75,6 +76,8 @@ pub struct Shelf {
     port: Arc<dyn Port>,
     status: StatusCell,
     slots: Vec<Slot>,
+    /// Failures of recovery, polls and hand-overs, logged without flooding.
+    repeats: Repeats,
 }
 
 impl Shelf {
@@ -87,7 +90,7 @@ impl Shelf {
     ) -> Result<Shelf, PlcError> {
         let base = plc.parse_address(config.slot_base())?;
         let slots = vec![Slot::Unknown; config.slots as usize];
-        Ok(Shelf { config, plc, base, port, status, slots })
+        Ok(Shelf { config, plc, base, port, status, slots, repeats: Repeats::default() })
     }
 
     /// Runs the device until the task is aborted: recover, then dispatch whenever work may
@@ -95,9 +98,10 @@ impl Shelf {
     pub async fn run(mut self, mut requests: mpsc::Receiver<DeviceRequest>) {
         let period = self.config.poll();
         while let Err(e) = self.recover().await {
-            tracing::warn!(device = %self.config.id, error = %e, "recovery failed; retrying");
+            self.repeats.failed("recovery failed; retrying", &e);
             tokio::time::sleep(period).await;
         }
+        self.repeats.recovered();
         let mut next_poll = Instant::now() + period;
         loop {
             let port = self.port.clone();
@@ -115,7 +119,7 @@ impl Shelf {
             if self.may_dispatch()
                 && let Err(e) = self.dispatch().await
             {
-                tracing::warn!(device = %self.config.id, error = %e, "dispatch stopped");
+                self.repeats.failed("dispatch stopped", &e);
             }
             let in_use = self.slots.iter().filter(|s| matches!(s, Slot::Held { .. })).count() as u16;
             self.status.update(|s| s.slots_in_use = in_use);
@@ -156,14 +160,13 @@ impl Shelf {
 
     fn contact(&mut self, result: Result<(), &PlcError>) {
         let offline_after = self.config.offline_after;
-        let id = self.config.id.clone();
         let link = self.plc.link_stats();
         self.status.update(|s| {
             let up = s.record_contact(result, offline_after, s.online, link);
             if up != s.online {
                 match up {
-                    true => tracing::info!(device = %id, "device online"),
-                    false => tracing::warn!(device = %id, error = ?s.last_error, "device offline"),
+                    true => tracing::info!("device online"),
+                    false => tracing::warn!(error = ?s.last_error, "device offline"),
                 }
             }
             s.online = up;

@@ -51,18 +51,27 @@ impl Shelf {
             .filter(|&k| matches!(self.slots[k], Slot::Held { .. } | Slot::Foreign | Slot::Unknown))
             .collect();
         if watched.is_empty() {
-            let _ = self.read(&self.base.clone(), 1).await;
+            match self.read(&self.base.clone(), 1).await {
+                Ok(_) => self.repeats.recovered(),
+                Err(e) => self.repeats.failed("polling failed", &e),
+            }
             return;
         }
         let mut reads = Vec::with_capacity(watched.len());
+        let mut link = Ok(());
         for k in watched {
             match self.read(&self.slot_address(k), SLOT_WORDS as u16).await {
                 Ok(words) => reads.push((k, words)),
-                Err(_) => break, // the link is down: the contact status says so
+                Err(e) => {
+                    link = Err(e);
+                    break; // the link is down: the rest would fail too
+                }
             }
         }
-        if let Err(e) = self.settle(reads).await {
-            tracing::warn!(device = %self.config.id, error = %e, "following the slots failed");
+        match (self.settle(reads).await, link) {
+            (Err(e), _) => self.repeats.failed("following the slots failed", &e),
+            (Ok(()), Err(e)) => self.repeats.failed("polling failed", &e),
+            (Ok(()), Ok(())) => self.repeats.recovered(),
         }
     }
 
@@ -120,7 +129,7 @@ impl Shelf {
                 reports.push(Report::new(job, Reported::Failed(lost), text));
             }
         }
-        tracing::error!(device = %self.config.id, tasks = reports.len(), "{MEMORY_LOST}");
+        tracing::error!(tasks = reports.len(), "{MEMORY_LOST}");
         self.status
             .update(|s| s.memory_lost_at = Some(crate::domain::time::from_ms(crate::domain::time::now_ms())));
         self.port.report(reports).await?;
@@ -208,7 +217,7 @@ impl Shelf {
                     self.slots[k] = Slot::Free;
                 }
                 None => {
-                    tracing::warn!(device = %self.config.id, slot = k + 1, task = view.task_id, "slot holds unknown work");
+                    tracing::warn!(slot = k + 1, task = view.task_id, "slot holds unknown work");
                     self.slots[k] = Slot::Foreign;
                 }
             }
@@ -224,7 +233,7 @@ impl Shelf {
         let forgot =
             lost.len() >= MEMORY_LOSS_SLOTS && !self.slots.iter().any(|s| matches!(s, Slot::Held { .. }));
         if forgot {
-            tracing::error!(device = %self.config.id, tasks = lost.len(), "{MEMORY_LOST}");
+            tracing::error!(tasks = lost.len(), "{MEMORY_LOST}");
             self.status.update(|s| {
                 s.memory_lost_at = Some(crate::domain::time::from_ms(crate::domain::time::now_ms()))
             });
@@ -244,7 +253,7 @@ impl Shelf {
             })
             .collect();
         self.port.report(lost).await?;
-        tracing::info!(device = %self.config.id, slots = self.slots.len(), "recovered");
+        tracing::info!(slots = self.slots.len(), "recovered");
         Ok(())
     }
 }

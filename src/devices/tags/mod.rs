@@ -162,15 +162,15 @@ impl TagDevice {
             Err(e @ (PlcError::Timeout { .. } | PlcError::Connection(_) | PlcError::Malformed(_))) => Err(e),
             Err(PlcError::OutOfRange(_) | PlcError::BadAddress { .. }) => return,
         };
-        let (offline_after, id, was_up) = (self.config.offline_after, &self.config.id, self.link_ok);
+        let (offline_after, was_up) = (self.config.offline_after, self.link_ok);
         let mut up = was_up;
         let link = self.plc.link_stats();
         self.status.update(|status| {
             up = status.record_contact(outcome, offline_after, was_up, link);
             if up != status.online {
                 match up {
-                    true => tracing::info!(device = %id, "device online"),
-                    false => tracing::warn!(device = %id, error = ?status.last_error, "device offline"),
+                    true => tracing::info!("device online"),
+                    false => tracing::warn!(error = ?status.last_error, "device offline"),
                 }
             }
             status.online = up;

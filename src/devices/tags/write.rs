@@ -12,20 +12,20 @@ use crate::protocols::{Address, PlcError};
 impl TagDevice {
     /// Performs one write request and answers it.
     pub(super) async fn write(&mut self, request: WriteRequest) {
-        let (id, name) = (self.config.id.clone(), self.specs[request.tag].name.clone());
+        let name = self.specs[request.tag].name.clone();
         if request.reply.is_closed() {
             // The caller stopped waiting: a write arriving later would surprise whoever
             // asked, so it is not made at all.
-            tracing::warn!(device = %id, tag = %name, "tag write dropped: its caller gave up");
+            tracing::warn!(tag = %name, "tag write dropped: its caller gave up");
             return;
         }
         let result = self.perform(request.tag, request.value).await;
         match &result {
             Ok(tag) => {
                 let read_back = tag.status.value.map(|v| v.to_string()).unwrap_or_default();
-                tracing::info!(device = %id, tag = %name, asked = %request.value, %read_back, "tag written");
+                tracing::info!(tag = %name, asked = %request.value, %read_back, "tag written");
             }
-            Err(e) => tracing::warn!(device = %id, tag = %name, error = %e, "tag write failed"),
+            Err(e) => tracing::warn!(tag = %name, error = %e, "tag write failed"),
         }
         let _ = request.reply.send(result);
     }
