@@ -8,6 +8,7 @@ pub mod access;
 pub mod aisles;
 pub mod alarms;
 pub mod auth;
+pub mod contract;
 pub mod control;
 pub mod dashboard;
 pub mod devices;
@@ -121,6 +122,7 @@ fn public_routes() -> OpenApiRouter<AppState> {
 pub fn openapi() -> utoipa::openapi::OpenApi {
     let mut doc = protected_routes().into_openapi();
     doc.merge(public_routes().into_openapi());
+    contract::complete(&mut doc);
     doc
 }
 
@@ -129,6 +131,7 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
     let (protected, mut doc) = protected_routes().split_for_parts();
     let (public, public_doc) = public_routes().split_for_parts();
     doc.merge(public_doc);
+    contract::complete(&mut doc);
     // The 405 fallback is set before the key check is layered on, so that a wrong method
     // on a protected route is refused for a missing key first.
     let protected = protected

@@ -12,9 +12,19 @@ use crate::domain::{JobSpec, Layout, LightColor, Location, LocationLock};
 /// A location and what rackd knows of it.
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
 pub struct LocationState {
-    /// Where.
-    #[serde(flatten)]
-    pub location: Location,
+    // The place's five numbers are fields of their own rather than a flattened `Location`:
+    // `Location` refuses unknown keys as a request body, and its schema says so, which a
+    // flattened schema would impose on this answer's other fields too.
+    /// Aisle, from 1.
+    pub aisle: u16,
+    /// Row: 1 = A (left), 2 = B (right).
+    pub row: u16,
+    /// Bay along the aisle, from 1; 0 is the aisle's station.
+    pub bay: u16,
+    /// Level, bottom-up from 1.
+    pub level: u16,
+    /// Box position along the level, or depth (1 near, 2 far), from 1.
+    pub position: u16,
     /// A box is there.
     pub occupied: bool,
     /// The box's barcode, when known.
@@ -53,17 +63,28 @@ struct Row {
     lock_job: Option<i64>,
 }
 
+impl LocationState {
+    /// The place.
+    pub fn location(&self) -> Location {
+        Location {
+            aisle: self.aisle,
+            row: self.row,
+            bay: self.bay,
+            level: self.level,
+            position: self.position,
+        }
+    }
+}
+
 impl From<Row> for LocationState {
     fn from(r: Row) -> Self {
         let n = |v: i64| v.clamp(0, u16::MAX as i64) as u16;
         LocationState {
-            location: Location {
-                aisle: n(r.aisle),
-                row: n(r.row),
-                bay: n(r.bay),
-                level: n(r.level),
-                position: n(r.position),
-            },
+            aisle: n(r.aisle),
+            row: n(r.row),
+            bay: n(r.bay),
+            level: n(r.level),
+            position: n(r.position),
             occupied: r.occupied,
             barcode: r.barcode,
             red: r.red,
@@ -161,7 +182,7 @@ pub async fn locked(db: impl SqliteExecutor<'_>) -> Result<Vec<(Location, Locati
     Ok(rows
         .into_iter()
         .map(LocationState::from)
-        .filter_map(|s| s.lock.map(|lock| (s.location, lock)))
+        .filter_map(|s| s.lock.clone().map(|lock| (s.location(), lock)))
         .collect())
 }
 

@@ -88,7 +88,7 @@ impl WordOrder {
 }
 
 /// A tag's value: a bool, an integer or a float, as JSON shows it.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, ToSchema)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum TagValue {
     /// A bool tag's value.
@@ -99,6 +99,25 @@ pub enum TagValue {
     /// (0.1, not 0.100000001490116).
     Float(f64),
 }
+
+// The schema is written by hand: derived, an untagged enum is a `oneOf` of boolean, integer
+// and number, and since JSON Schema counts 0.0 as an integer too, a float tag reading 0.0
+// matched two branches and so none. A boolean or any number says the same, exactly once.
+impl utoipa::PartialSchema for TagValue {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        use utoipa::openapi::schema::{AnyOfBuilder, ObjectBuilder, Type};
+        AnyOfBuilder::new()
+            .item(ObjectBuilder::new().schema_type(Type::Boolean).description(Some("A bool tag's value.")))
+            .item(ObjectBuilder::new().schema_type(Type::Number).description(Some(
+                "An integer tag's value, or an f32 tag's, widened to the shortest decimal that reads \
+                 back as the same f32 (0.1, not 0.100000001490116).",
+            )))
+            .description(Some("A tag's value: a bool, an integer or a float, as JSON shows it."))
+            .into()
+    }
+}
+
+impl ToSchema for TagValue {}
 
 impl std::fmt::Display for TagValue {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
