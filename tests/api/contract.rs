@@ -2,6 +2,9 @@
 //! fuzzer, installed by `.ci/run` into `.ci/venv`) runs against the demo site with its
 //! examples, fuzzing and stateful phases, and any failure of its five checks fails the test.
 //!
+//! The run is seeded (`RACKD_SCHEMATHESIS_SEED`, default 1), so that CI repeats the same
+//! cases and a failure can be replayed; `RACKD_SCHEMATHESIS_SEED=random` explores anew.
+//!
 //! Its coverage phase is left out: with this machine's CPython 3.11.7 it stops on an
 //! interpreter bug ("AST constructor recursion depth mismatch", fixed in 3.11.8) in the
 //! fuzzer itself, not on an answer of ours.
@@ -42,7 +45,9 @@ fn the_openapi_document_is_what_the_server_answers() {
         assert!(Instant::now() < deadline, "the demo server did not come up");
         std::thread::sleep(Duration::from_millis(100));
     }
-    let out = Command::new(tool)
+    let seed = std::env::var("RACKD_SCHEMATHESIS_SEED").unwrap_or_else(|_| "1".into());
+    let mut command = Command::new(tool);
+    command
         .current_dir(dir.path())
         .args(["run", &format!("{base}/openapi.json"), "--wait-for-schema", "30"])
         .args([
@@ -51,9 +56,11 @@ fn the_openapi_document_is_what_the_server_answers() {
              response_schema_conformance,negative_data_rejection",
         ])
         .args(["--phases", "examples,fuzzing,stateful", "--max-time", "60", "--workers", "2"])
-        .args(["--no-color"])
-        .output()
-        .unwrap();
+        .args(["--no-color"]);
+    if seed != "random" {
+        command.args(["--seed", &seed]);
+    }
+    let out = command.output().unwrap();
     let _ = server.kill();
     let _ = server.wait();
     let report = String::from_utf8_lossy(&out.stdout);
