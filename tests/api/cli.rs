@@ -139,6 +139,9 @@ fn a_database_directory_rackd_cannot_write_is_named_with_the_fix() {
     assert!(!out.status.success(), "{err}");
     assert!(err.contains(&format!("cannot write in {}", data.display())), "{err}");
     assert!(err.contains("rackd runs as uid") && err.contains("chown"), "{err}");
+    let owner = std::os::unix::fs::MetadataExt::uid(&std::fs::metadata(&data).unwrap());
+    assert!(err.contains(&format!("it belongs to uid {owner}")), "{err}");
+    assert!(err.contains("named volume") && err.contains("uid 10001"), "the container's fix: {err}");
 }
 
 #[test]

@@ -3,6 +3,7 @@
 
 mod auth;
 mod cli;
+mod container;
 mod errors;
 #[path = "../common/helpers.rs"]
 mod helpers;
