@@ -26,7 +26,14 @@ pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
 /// Opens (creating if needed) the database at `path` and applies pending migrations.
 pub async fn open(path: &Path, busy_timeout: Duration) -> Result<SqlitePool, sqlx::Error> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)?;
+        if let Err(e) = std::fs::create_dir_all(dir) {
+            // A folder to create inside one rackd cannot write (a root-owned volume with
+            // the database in a subfolder): name that folder, not just "permission denied".
+            if let Some(existing) = dir.ancestors().find(|a| a.is_dir()) {
+                writable(existing)?;
+            }
+            return Err(e.into());
+        }
         writable(dir)?;
     }
     let options = SqliteConnectOptions::from_str("sqlite:")?
