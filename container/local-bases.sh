@@ -67,7 +67,7 @@ tar -C "$work/build" --numeric-owner -c . |
         --change "ENV CARGO_HOME=/usr/local/cargo" --change 'CMD ["bash"]' - "$build_image"
 
 rm -rf "$work"
-podman image ls "$runtime_image" "$build_image"
+podman image ls --filter 'reference=localhost/rackd-base/*'
 echo
 echo "Base images ready. Build rackd with:"
 echo "  podman build --format docker --build-arg RUST_IMAGE=$build_image \\"
