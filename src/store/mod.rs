@@ -26,7 +26,14 @@ pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
 /// Opens (creating if needed) the database at `path` and applies pending migrations.
 pub async fn open(path: &Path, busy_timeout: Duration) -> Result<SqlitePool, sqlx::Error> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)?;
+        if let Err(e) = std::fs::create_dir_all(dir) {
+            // A folder to create inside one rackd cannot write (a root-owned volume with
+            // the database in a subfolder): name that folder, not just "permission denied".
+            if let Some(existing) = dir.ancestors().find(|a| a.is_dir()) {
+                writable(existing)?;
+            }
+            return Err(e.into());
+        }
         writable(dir)?;
     }
     let options = SqliteConnectOptions::from_str("sqlite:")?
@@ -43,7 +50,9 @@ pub async fn open(path: &Path, busy_timeout: Duration) -> Result<SqlitePool, sql
 
 /// Checks that rackd may create files in `dir` (SQLite needs the database's directory for
 /// its journal), so that a volume owned by another user is named with the fix instead of
-/// SQLite's "unable to open database file".
+/// SQLite's "unable to open database file". The message names the directory, its owner and
+/// rackd's own uid, and the fixes a container user has: give the directory to rackd's uid,
+/// mount a named volume (which the image prepares for uid 10001), or run as the owner.
 fn writable(dir: &Path) -> std::io::Result<()> {
     use std::os::unix::fs::MetadataExt;
     let probe = dir.join(format!(".rackd-write-test-{}", std::process::id()));
@@ -54,16 +63,20 @@ fn writable(dir: &Path) -> std::io::Result<()> {
             // /proc/self belongs to the process's effective user.
             let me =
                 std::fs::metadata("/proc/self").map(|m| m.uid().to_string()).unwrap_or_else(|_| "?".into());
+            let (dir, owner) = (dir.display(), meta.uid());
+            // Running as root to write a root-owned folder is not a fix worth offering.
+            let as_owner = if owner == 0 {
+                String::new()
+            } else {
+                format!(", or run rackd as uid {owner} (--user {owner})")
+            };
             Err(std::io::Error::new(
                 e.kind(),
                 format!(
-                    "cannot write in {}: it belongs to uid {} (mode {:o}) and rackd runs as uid {me}; \
-                     give the directory to that uid (chown {me} {}) or mount one it can write \
-                     (the container runs as uid 10001)",
-                    dir.display(),
-                    meta.uid(),
+                    "cannot write in {dir}: it belongs to uid {owner} (mode {:o}) and rackd runs as uid {me}; \
+                     give it to uid {me} (chown {me} {dir}, on the host folder of a bind mount), or mount a \
+                     named volume there (-v rackd-data:{dir}; the image runs as uid 10001){as_owner}",
                     meta.mode() & 0o7777,
-                    dir.display()
                 ),
             ))
         }

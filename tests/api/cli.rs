@@ -122,23 +122,28 @@ fn a_database_directory_rackd_cannot_write_is_named_with_the_fix() {
     // Readable and enterable by everyone, writable by its owner only.
     std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
     std::fs::set_permissions(&data, std::fs::Permissions::from_mode(0o555)).unwrap();
-    let db = data.join("rackd.db");
-    let args = ["serve", "--listen", "127.0.0.1:0", "--database", db.to_str().unwrap()];
     let root = std::fs::metadata("/proc/self").map(|m| std::os::unix::fs::MetadataExt::uid(&m) == 0).unwrap();
     // Root writes anywhere: the check runs as `nobody` then, on a copy of the binary it
     // can reach wherever the checkout is.
-    let out = if root {
-        let bin = dir.path().join("rackd");
-        std::fs::copy(env!("CARGO_BIN_EXE_rackd"), &bin).unwrap();
-        Command::new("runuser").args(["-u", "nobody", "--", bin.to_str().unwrap()]).args(args).output()
-    } else {
-        Command::new(env!("CARGO_BIN_EXE_rackd")).args(args).output()
+    let bin = dir.path().join("rackd");
+    std::fs::copy(env!("CARGO_BIN_EXE_rackd"), &bin).unwrap();
+    // The database in the folder itself, and in a subfolder rackd would have to create there.
+    for db in [data.join("rackd.db"), data.join("site").join("rackd.db")] {
+        let args = ["serve", "--listen", "127.0.0.1:0", "--database", db.to_str().unwrap()];
+        let out = if root {
+            Command::new("runuser").args(["-u", "nobody", "--", bin.to_str().unwrap()]).args(args).output()
+        } else {
+            Command::new(&bin).args(args).output()
+        }
+        .expect("runuser (util-linux) runs the check as an unprivileged user when the tests run as root");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{err}");
+        assert!(err.contains(&format!("cannot write in {}:", data.display())), "{err}");
+        assert!(err.contains("rackd runs as uid") && err.contains("chown"), "{err}");
+        let owner = std::os::unix::fs::MetadataExt::uid(&std::fs::metadata(&data).unwrap());
+        assert!(err.contains(&format!("it belongs to uid {owner}")), "{err}");
+        assert!(err.contains("named volume") && err.contains("uid 10001"), "the container's fix: {err}");
     }
-    .expect("runuser (util-linux) runs the check as an unprivileged user when the tests run as root");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
-    assert!(err.contains(&format!("cannot write in {}", data.display())), "{err}");
-    assert!(err.contains("rackd runs as uid") && err.contains("chown"), "{err}");
 }
 
 #[test]

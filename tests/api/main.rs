@@ -3,6 +3,7 @@
 
 mod auth;
 mod cli;
+mod container;
 mod contract;
 mod errors;
 #[path = "../common/helpers.rs"]
