@@ -114,7 +114,7 @@ fn a_tags_device_table_follows_its_entry() {
     let bad = text.replace("max = 2.5", "mx = 2.5");
     let err = Config::parse(&bad, Path::new("x.toml")).unwrap_err().to_string();
     assert!(err.contains("conveyor.speed") && err.contains("mx"), "{err}");
-    assert!(err.starts_with("x.toml:7:1: devices[0].tags: "), "the line of [devices.tags]: {err}");
+    assert!(err.starts_with("x.toml:7:10: devices[0].tags: "), "the line of [devices.tags]: {err}");
     let bad = text.replace("VD4", "VD4.1");
     let err = Config::parse(&bad, Path::new("x.toml")).unwrap_err().to_string();
     assert!(err.contains("tower1") && err.contains("conveyor.speed") && err.contains("VD4.1"), "{err}");
