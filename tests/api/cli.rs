@@ -28,9 +28,15 @@ fn check_config_accepts_the_example_and_names_the_bad_key_and_line() {
     let (ok, _, err) = rackd(&["check-config", bad.to_str().unwrap()]);
     assert!(!ok && err.contains("bad.toml:2:1: server.listen: "), "{err}");
 
-    std::fs::write(&bad, "[[auth.keys]]\nname = \"x\"\nrole = \"root\"\nhash = \"sha256:00\"\n").unwrap();
+    // Each problem of an entry alone: the layers read its keys in name order, so a bad
+    // hash would be reported before the role.
+    let key = format!("[[auth.keys]]\nname = \"x\"\nrole = \"root\"\nhash = \"sha256:{}\"\n", "0".repeat(64));
+    std::fs::write(&bad, &key).unwrap();
     let (ok, _, err) = rackd(&["check-config", bad.to_str().unwrap()]);
-    assert!(!ok && err.contains("role"), "{err}");
+    assert!(!ok && err.contains("bad.toml:3:1: auth.keys[0].role: ") && err.contains("root"), "{err}");
+    std::fs::write(&bad, key.replace("root", "admin").replace(&"0".repeat(64), "00")).unwrap();
+    let (ok, _, err) = rackd(&["check-config", bad.to_str().unwrap()]);
+    assert!(!ok && err.contains("bad.toml:4:1: auth.keys[0].hash: "), "{err}");
 }
 
 #[test]
