@@ -25,8 +25,9 @@ pub enum ConfigError {
     /// A value of the wrong type, or an unknown key.
     #[error("{origin}: {key}: {message}")]
     Parse {
-        /// Where the value was set (for an unknown key: the key itself).
-        origin: Origin,
+        /// Where the value was set (for an unknown key: the key itself); boxed to keep
+        /// results small.
+        origin: Box<Origin>,
         /// The key.
         key: String,
         /// What is wrong, in the reader's words.
@@ -35,8 +36,8 @@ pub enum ConfigError {
     /// Values that are valid alone but cannot be run.
     #[error("{origin}: {key}: {source}")]
     Invalid {
-        /// Where the value was set.
-        origin: Origin,
+        /// Where the value was set; boxed to keep results small.
+        origin: Box<Origin>,
         /// The key.
         key: String,
         /// What is wrong.

@@ -92,7 +92,7 @@ impl Sources {
         let mut config: Config = figment.extract().map_err(|e| loaded.parse_error(&figment, e))?;
         loaded.add_keys_file(&mut config)?;
         let invalid = |(key, source): (String, Invalid), loaded: &Loaded| ConfigError::Invalid {
-            origin: loaded.locate(&key),
+            origin: Box::new(loaded.locate(&key)),
             key,
             source,
         };
@@ -152,15 +152,14 @@ impl Loaded {
             let expected: Vec<String> = expected.iter().map(|k| format!("`{k}`")).collect();
             message = format!("unknown field `{field}`, expected one of {}", expected.join(", "));
         }
-        if let [devices, index] = parts.as_slice() {
-            if let Some((key, why)) = (devices == "devices").then(|| device_problem(figment, index)).flatten()
-            {
-                parts.push(key);
-                message = why;
-            }
+        if let [devices, index] = parts.as_slice()
+            && let Some((key, why)) = (devices == "devices").then(|| device_problem(figment, index)).flatten()
+        {
+            parts.push(key);
+            message = why;
         }
         let key = join(&parts);
-        ConfigError::Parse { origin: self.locate(&key), key, message }
+        ConfigError::Parse { origin: Box::new(self.locate(&key)), key, message }
     }
 
     /// Reads `auth.keys_file` and adds its keys to `auth.keys`.
@@ -172,7 +171,7 @@ impl Loaded {
             let offset = e.span().map_or(0, |s| s.start);
             let key = lines.key_at(offset).unwrap_or("keys").to_owned();
             ConfigError::Parse {
-                origin: Origin::in_file(&path, &text, offset),
+                origin: Box::new(Origin::in_file(&path, &text, offset)),
                 key,
                 message: e.message().into(),
             }
@@ -180,7 +179,7 @@ impl Loaded {
         if file.keys.is_empty() {
             let key = "auth.keys_file".to_owned();
             return Err(ConfigError::Invalid {
-                origin: self.locate(&key),
+                origin: Box::new(self.locate(&key)),
                 key,
                 source: Invalid::NoKeysInFile(path),
             });
