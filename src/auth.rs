@@ -4,8 +4,14 @@
 //! a slow password hash would protect nothing more for a 32-byte random key and would cost
 //! milliseconds on every request. `rackd hash-key` prints the hash of a key, and with
 //! `--generate` makes a new random key first.
+//!
+//! Keys come from `[[auth.keys]]` in the configuration and from `auth.keys_file`, a TOML
+//! file of the same `[[keys]]` entries (`name`, `role`, `hash`) for a container secret
+//! (`/run/secrets/rackd_keys`); the configuration merges both, refusing a name or a hash
+//! that appears twice, and a keys file that names no key (most likely the wrong file).
 
 use std::collections::HashMap;
+use std::path::PathBuf;
 
 use rand::RngCore;
 use serde::{Deserialize, Serialize};
@@ -13,15 +19,48 @@ use sha2::{Digest, Sha256};
 
 /// `[auth]`: the API keys. Auth owns its configuration section, so the configuration
 /// module depends on auth and never the other way round.
-#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AuthConfig {
-    /// The API keys, stored hashed (`rackd hash-key` prints a hash).
+    /// The API keys, stored hashed (`rackd hash-key` prints a hash). Once loaded, those of
+    /// `keys_file` too.
+    pub keys: Vec<KeyConfig>,
+    /// A TOML file of more `[[keys]]` entries, relative to the working directory like
+    /// `database.path`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub keys_file: Option<PathBuf>,
+}
+
+/// The contents of an `auth.keys_file`: `[[keys]]` entries as in `[[auth.keys]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KeysFile {
+    /// The keys.
+    #[serde(default)]
     pub keys: Vec<KeyConfig>,
 }
 
+impl KeysFile {
+    /// Reads a keys file's text; the error carries the position of the problem.
+    pub fn parse(text: &str) -> Result<KeysFile, toml::de::Error> {
+        toml::from_str(text)
+    }
+}
+
+/// The first key (by index) whose name or hash an earlier key has, with that earlier
+/// key's index and which of the two repeats (`"name"` or `"hash"`).
+pub fn repeated_key(keys: &[KeyConfig]) -> Option<(usize, usize, &'static str)> {
+    keys.iter().enumerate().skip(1).find_map(|(j, k)| {
+        keys[..j].iter().enumerate().find_map(|(i, earlier)| {
+            (earlier.name == k.name)
+                .then_some((j, i, "name"))
+                .or_else(|| (earlier.hash == k.hash).then_some((j, i, "hash")))
+        })
+    })
+}
+
 /// One `[[auth.keys]]` entry.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct KeyConfig {
     /// Who holds the key, for logs.
@@ -64,6 +103,12 @@ impl KeyHash {
     /// The hash of a key as presented by a client.
     pub fn of(key: &str) -> KeyHash {
         KeyHash(Sha256::digest(key.as_bytes()).into())
+    }
+}
+
+impl Serialize for KeyHash {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
     }
 }
 
@@ -146,6 +191,26 @@ mod tests {
         assert!(h.to_string().ends_with("2bb80d537b1da3e38bd30361aa855686bde0eacd7162fef6a25fe97bf527a25b"));
         assert!(KeyHash::try_from("md5:00".to_string()).is_err());
         assert!(KeyHash::try_from("sha256:zz".to_string()).is_err());
+    }
+
+    #[test]
+    fn a_keys_file_has_the_entries_of_auth_keys_and_repeats_are_found() {
+        let text = "[[keys]]\nname = \"a\"\nrole = \"admin\"\nhash = \"sha256:00\"\n";
+        let err = KeysFile::parse(text).unwrap_err();
+        assert!(err.message().contains("sha256:"), "{err}");
+        let hash = KeyHash::of("k");
+        let key = |name: &str, hash: &KeyHash| KeyConfig {
+            name: name.into(),
+            role: Role::Viewer,
+            hash: hash.clone(),
+        };
+        let other = KeyHash::of("other");
+        assert_eq!(repeated_key(&[key("a", &hash), key("b", &other)]), None);
+        assert_eq!(
+            repeated_key(&[key("a", &hash), key("b", &other), key("a", &KeyHash::of("x"))]),
+            Some((2, 0, "name"))
+        );
+        assert_eq!(repeated_key(&[key("a", &hash), key("b", &hash)]), Some((1, 0, "hash")));
     }
 
     #[test]

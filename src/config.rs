@@ -1,25 +1,38 @@
-//! Configuration: one TOML file, every key documented in `config/rackd.example.toml`.
+//! Configuration: every key documented in `config/rackd.example.toml`, in layers
+//! (lowest first): the defaults, one TOML file, the environment (`RACKD_<SECTION>__<KEY>`,
+//! see [`env`]), the command line (`--listen`, `--database`). [`layers`] merges them with
+//! figment and says where each value came from ([`Origin`]).
 //!
-//! With no file, [`Config::demo`] describes the demo site. Unknown keys are errors, so a
-//! typo is reported with its key and line rather than silently ignored.
+//! With no file, [`Config::demo`] describes the demo site (the environment and command
+//! line still apply). Unknown keys are errors, in the file and in the environment, so a
+//! typo is reported with its key and line (or variable) rather than silently ignored.
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 mod check;
+pub mod env;
+mod error;
 mod events;
+mod explain;
+pub mod layers;
+pub mod origin;
 
 pub use check::Invalid;
+pub use env::EnvError;
+pub use error::ConfigError;
 pub use events::{EventsConfig, EventsConfigError};
+pub use layers::{Loaded, Sources};
+pub use origin::Origin;
 
 pub use crate::auth::{AuthConfig, KeyConfig};
 use crate::domain::{AisleLayout, Layout};
 
 /// The whole configuration file.
-#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Config {
     /// The HTTP server.
@@ -35,11 +48,21 @@ pub struct Config {
     /// The event log and live subscribers.
     pub events: EventsConfig,
     /// The machines, one `[[devices]]` entry each.
+    #[serde(serialize_with = "flat_devices")]
     pub devices: Vec<crate::devices::DeviceConfig>,
 }
 
+/// Devices written as the file writes them, every key of their kind filled in.
+fn flat_devices<S: serde::Serializer>(
+    devices: &[crate::devices::DeviceConfig],
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    use crate::devices::config::RawDevice;
+    s.collect_seq(devices.iter().map(RawDevice::from))
+}
+
 /// `[server]`
-#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ServerConfig {
     /// Address and port to serve on.
@@ -51,7 +74,7 @@ pub struct ServerConfig {
 }
 
 /// `[database]`
-#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DatabaseConfig {
     /// Path of the SQLite file; its folder is created if missing.
@@ -61,7 +84,7 @@ pub struct DatabaseConfig {
 }
 
 /// `[intake]`: how job submissions are committed.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct IntakeConfig {
     /// Most requests committed in one transaction.
@@ -71,7 +94,7 @@ pub struct IntakeConfig {
 }
 
 /// `[site]`: which locations exist.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SiteConfig {
     /// One `[[site.aisles]]` entry per aisle.
@@ -79,7 +102,7 @@ pub struct SiteConfig {
 }
 
 /// One `[[site.aisles]]` entry.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct AisleConfig {
     /// The aisle's number, from 1.
@@ -101,35 +124,6 @@ impl AisleConfig {
     }
 }
 
-/// A configuration that could not be loaded, with the key and line when known.
-#[derive(Debug, thiserror::Error)]
-pub enum ConfigError {
-    /// The file could not be read.
-    #[error("cannot read {path}: {source}")]
-    Read {
-        /// The file.
-        path: PathBuf,
-        /// Why.
-        source: std::io::Error,
-    },
-    /// The file is not valid TOML or has a wrong or unknown key.
-    #[error("{path}: {source}")]
-    Parse {
-        /// The file.
-        path: PathBuf,
-        /// The parser's error, naming the key and line.
-        source: toml::de::Error,
-    },
-    /// The values are valid TOML but make no sense together.
-    #[error("{path}: {source}")]
-    Invalid {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        source: Invalid,
-    },
-}
-
 impl Config {
     /// The demo site: shelf aisle 1 of 2 rows x 10 bays x 6 levels x 4 positions, and
     /// crane aisle 2 of 2 rows x 20 bays x 8 levels x 2 depths (sides).
@@ -139,19 +133,14 @@ impl Config {
         config
     }
 
-    /// Loads and checks a configuration file.
+    /// Loads and checks a configuration file alone: no environment, no command line.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ConfigError::Read { path: path.to_owned(), source })?;
-        Self::parse(&text, path)
+        Ok(Sources::file(path).load()?.config)
     }
 
-    /// Parses and checks configuration text; `path` is only used in messages.
+    /// Parses and checks configuration text alone; `path` is only used in messages.
     pub fn parse(text: &str, path: &Path) -> Result<Config, ConfigError> {
-        let config: Config =
-            toml::from_str(text).map_err(|source| ConfigError::Parse { path: path.to_owned(), source })?;
-        config.check().map_err(|source| ConfigError::Invalid { path: path.to_owned(), source })?;
-        Ok(config)
+        Ok(Sources::file(path).load_text(Some(text.to_owned()))?.config)
     }
 
     /// The site layout that locations are checked against.
@@ -188,5 +177,7 @@ impl Default for SiteConfig {
     }
 }
 
+#[cfg(test)]
+mod layers_tests;
 #[cfg(test)]
 mod tests;

@@ -18,7 +18,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 
 use crate::app::{Application, shutdown_signal};
-use crate::config::Config;
+use crate::config::{Config, Sources};
 
 /// rackd: a warehouse control system.
 #[derive(Parser, Debug)]
@@ -48,10 +48,14 @@ pub enum Command {
     Serve(ServeArgs),
     /// Print the OpenAPI document.
     Openapi,
-    /// Check a configuration file and report the first error with its key and line.
+    /// Check a configuration file (with the RACKD_<SECTION>__<KEY> environment) and report
+    /// the first error as FILE:LINE:COL: KEY: MESSAGE (or env VAR: KEY: MESSAGE).
     CheckConfig {
         /// The file.
         file: PathBuf,
+        /// Print the effective configuration, every key, with where each value came from.
+        #[arg(long)]
+        explain: bool,
     },
     /// Print the hash of an API key for `[[auth.keys]]` (key from the argument or stdin).
     HashKey {
@@ -74,17 +78,18 @@ pub enum Command {
     Sim(sim::SimCommand),
 }
 
-/// `rackd serve` options.
+/// `rackd serve` options. Settings come from the defaults, the file, the environment
+/// (`RACKD_<SECTION>__<KEY>`) and these flags, each overriding the one before.
 #[derive(clap::Args, Debug, Default)]
 pub struct ServeArgs {
     /// Configuration file; without one rackd runs the demo site.
     #[arg(long, env = "RACKD_CONFIG")]
     pub config: Option<PathBuf>,
-    /// Listen address, overriding the config's server.listen.
-    #[arg(long, env = "RACKD_LISTEN")]
+    /// Listen address, overriding server.listen of the file and RACKD_SERVER__LISTEN.
+    #[arg(long)]
     pub listen: Option<SocketAddr>,
-    /// Database file, overriding the config's database.path.
-    #[arg(long, env = "RACKD_DATABASE")]
+    /// Database file, overriding database.path of the file and RACKD_DATABASE__PATH.
+    #[arg(long)]
     pub database: Option<PathBuf>,
     /// Allow serving without API keys on a non-loopback address.
     #[arg(long)]
@@ -92,19 +97,15 @@ pub struct ServeArgs {
 }
 
 impl ServeArgs {
-    /// The configuration these options select.
+    /// The configuration these options and the environment select.
     pub fn config(&self) -> anyhow::Result<Config> {
-        let mut config = match &self.config {
-            Some(path) => Config::load(path)?,
-            None => Config::demo(),
+        let sources = Sources {
+            file: self.config.clone(),
+            listen: self.listen,
+            database: self.database.clone(),
+            ..Sources::default()
         };
-        if let Some(listen) = self.listen {
-            config.server.listen = listen;
-        }
-        if let Some(db) = &self.database {
-            config.database.path = db.clone();
-        }
-        Ok(config)
+        Ok(sources.with_process_env().load()?.config)
     }
 }
 
@@ -128,7 +129,8 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Openapi => {
             say(crate::api::openapi().to_pretty_json().context("encoding OpenAPI")?);
         }
-        Command::CheckConfig { file } => match Config::load(&file) {
+        Command::CheckConfig { file, explain } => match Sources::file(&file).with_process_env().load() {
+            Ok(loaded) if explain => say(loaded.explain()),
             Ok(_) => println!("{}: ok", file.display()),
             Err(e) => {
                 eprintln!("{e}");

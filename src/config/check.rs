@@ -1,8 +1,10 @@
 //! Checks of a configuration that parsed: values that make no sense alone or together.
+//! Each failure names the key it is about, so that the loader can say where it was set.
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::path::PathBuf;
 
-use super::{Config, EventsConfigError};
+use super::{Config, EventsConfigError, Origin};
 use crate::devices::config::DeviceConfigError;
 
 /// A configuration that parses but cannot be run.
@@ -47,45 +49,71 @@ pub enum Invalid {
     /// `[events]`.
     #[error(transparent)]
     Events(#[from] EventsConfigError),
+    /// An `auth.keys_file` without a single key (most likely the wrong file).
+    #[error("{} names no key (expected [[keys]] entries with name, role and hash)", .0.display())]
+    NoKeysInFile(PathBuf),
+    /// Two API keys with one name or one hash.
+    #[error("this key's {what} is also the {what} of the key at {first}")]
+    KeyTwice {
+        /// `name` or `hash`.
+        what: &'static str,
+        /// Where the first one is.
+        first: Origin,
+    },
 }
+
+/// A failed check: the key it is about, and why.
+pub(super) type Flaw = (String, Invalid);
 
 impl Config {
     /// Checks values that are valid TOML but make no sense.
-    pub(super) fn check(&self) -> Result<(), Invalid> {
+    pub(super) fn check(&self) -> Result<(), Flaw> {
         let mut seen = BTreeSet::new();
-        for a in &self.site.aisles {
+        for (i, a) in self.site.aisles.iter().enumerate() {
             if a.aisle == 0 || !seen.insert(a.aisle) {
-                return Err(Invalid::AisleNumber(a.aisle));
+                return Err((format!("site.aisles[{i}].aisle"), Invalid::AisleNumber(a.aisle)));
             }
-            let l = a.layout();
-            if !(1..=2).contains(&l.rows) || l.bays == 0 || l.levels == 0 || l.positions == 0 {
-                return Err(Invalid::AisleSize(a.aisle));
+            let sizes =
+                [("rows", a.rows), ("bays", a.bays), ("levels", a.levels), ("positions", a.positions)];
+            if let Some((key, _)) = sizes.iter().find(|&&(key, n)| n == 0 || (key == "rows" && n > 2)) {
+                return Err((format!("site.aisles[{i}].{key}"), Invalid::AisleSize(a.aisle)));
             }
         }
         if self.site.aisles.is_empty() {
-            return Err(Invalid::NoAisles);
+            return Err(("site.aisles".into(), Invalid::NoAisles));
         }
         let mut ids = BTreeSet::new();
         let mut served = BTreeMap::new();
-        for d in &self.devices {
-            d.check()?;
+        for (i, d) in self.devices.iter().enumerate() {
+            let at = |key: &str| format!("devices[{i}].{key}");
+            d.check().map_err(|e| (at(&e.problem.key()), e.into()))?;
             let device = d.id();
             if !ids.insert(device) {
-                return Err(Invalid::DeviceId(device.to_owned()));
+                return Err((at("id"), Invalid::DeviceId(device.to_owned())));
             }
             for &aisle in d.aisles() {
                 if !seen.contains(&aisle) {
-                    return Err(Invalid::UnknownAisle { device: device.to_owned(), aisle });
+                    return Err((at("aisles"), Invalid::UnknownAisle { device: device.to_owned(), aisle }));
                 }
                 if let Some(other) = served.insert(aisle, device) {
                     let (device, other) = (device.to_owned(), other.to_owned());
-                    return Err(Invalid::AisleServedTwice { device, aisle, other });
+                    return Err((at("aisles"), Invalid::AisleServedTwice { device, aisle, other }));
                 }
             }
         }
         if self.intake.max_group == 0 || self.intake.queue == 0 {
-            return Err(Invalid::Intake);
+            let key = if self.intake.max_group == 0 { "intake.max_group" } else { "intake.queue" };
+            return Err((key.into(), Invalid::Intake));
         }
-        Ok(self.events.check()?)
+        self.events.check().map_err(|e| {
+            let ev = &self.events;
+            let key = match e {
+                EventsConfigError::Retention => "retention_hours",
+                EventsConfigError::Zero if ev.buffer == 0 => "buffer",
+                EventsConfigError::Zero if ev.ping_secs == 0 => "ping_secs",
+                EventsConfigError::Zero => "send_timeout_secs",
+            };
+            (format!("events.{key}"), e.into())
+        })
     }
 }

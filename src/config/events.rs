@@ -1,9 +1,9 @@
 //! `[events]`: the event log, live subscribers and the device monitor.
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 /// `[events]`
-#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EventsConfig {
     /// Events older than this many hours are deleted from the log (replay with `?since=`

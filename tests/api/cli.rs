@@ -22,15 +22,21 @@ fn check_config_accepts_the_example_and_names_the_bad_key_and_line() {
     std::fs::write(&bad, "[server]\nlisten = \"127.0.0.1:8080\"\n\n[database]\npaht = \"x.db\"\n").unwrap();
     let (ok, _, err) = rackd(&["check-config", bad.to_str().unwrap()]);
     assert!(!ok);
-    assert!(err.contains("paht") && err.contains("line 5"), "{err}");
+    assert!(err.contains("bad.toml:5:1: database.paht: unknown field `paht`"), "{err}");
 
     std::fs::write(&bad, "[server]\nlisten = \"nowhere\"\n").unwrap();
     let (ok, _, err) = rackd(&["check-config", bad.to_str().unwrap()]);
-    assert!(!ok && err.contains("listen") && err.contains("line 2"), "{err}");
+    assert!(!ok && err.contains("bad.toml:2:1: server.listen: "), "{err}");
 
-    std::fs::write(&bad, "[[auth.keys]]\nname = \"x\"\nrole = \"root\"\nhash = \"sha256:00\"\n").unwrap();
+    // Each problem of an entry alone: the layers read its keys in name order, so a bad
+    // hash would be reported before the role.
+    let key = format!("[[auth.keys]]\nname = \"x\"\nrole = \"root\"\nhash = \"sha256:{}\"\n", "0".repeat(64));
+    std::fs::write(&bad, &key).unwrap();
     let (ok, _, err) = rackd(&["check-config", bad.to_str().unwrap()]);
-    assert!(!ok && err.contains("role"), "{err}");
+    assert!(!ok && err.contains("bad.toml:3:1: auth.keys[0].role: ") && err.contains("root"), "{err}");
+    std::fs::write(&bad, key.replace("root", "admin").replace(&"0".repeat(64), "00")).unwrap();
+    let (ok, _, err) = rackd(&["check-config", bad.to_str().unwrap()]);
+    assert!(!ok && err.contains("bad.toml:4:1: auth.keys[0].hash: "), "{err}");
 }
 
 #[test]
@@ -44,11 +50,141 @@ fn check_config_refuses_a_key_of_another_kind_and_a_quirk_of_another_protocol() 
 
     std::fs::write(&file, format!("{crane}stride = 1\n")).unwrap();
     let (ok, _, err) = rackd(&["check-config", file.to_str().unwrap()]);
-    assert!(!ok && err.contains("`stride` is a key of shelf devices") && err.contains("line"), "{err}");
+    assert!(!ok && err.contains("`stride` is a key of shelf devices"), "{err}");
+    assert!(err.contains("devices.toml:5:1: devices[0].stride: "), "{err}");
 
     std::fs::write(&file, format!("{crane}quirks = [\"length0\"]\n")).unwrap();
     let (ok, _, err) = rackd(&["check-config", file.to_str().unwrap()]);
     assert!(!ok && err.contains("length0") && err.contains("mc3e"), "{err}");
+}
+
+#[test]
+fn check_config_names_the_line_of_a_bad_address_and_an_environment_variable() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("site.toml");
+    let shelf =
+        "[[devices]]\nid = \"shelf1\"\nkind = \"shelf\"\naisles = [1]\naddress = \"192.168.1.300:502\"\n";
+    std::fs::write(&file, shelf).unwrap();
+    let (ok, _, err) = rackd(&["check-config", file.to_str().unwrap()]);
+    assert!(!ok && err.contains("site.toml:5:1: devices[0].address: ") && err.contains("IPv4"), "{err}");
+
+    std::fs::write(&file, shelf.replace(".300", ".30")).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .args(["check-config", file.to_str().unwrap()])
+        .env("RACKD_INTAKE__QUEUE", "many")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("env RACKD_INTAKE__QUEUE: intake.queue: "), "{err}");
+}
+
+#[test]
+fn check_config_explain_prints_every_value_with_its_origin() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("site.toml");
+    std::fs::write(&file, "[server]\nlisten = \"127.0.0.1:9999\"\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .args(["check-config", file.to_str().unwrap(), "--explain"])
+        .env("RACKD_INTAKE__QUEUE", "77")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let line = |start: &str| {
+        text.lines().find(|l| l.starts_with(start)).unwrap_or_else(|| panic!("{start}: {text}"))
+    };
+    assert!(line("listen = \"127.0.0.1:9999\"").ends_with(&format!("# {}:2:1", file.display())), "{text}");
+    assert!(line("queue = 77").ends_with("# env RACKD_INTAKE__QUEUE"), "{text}");
+    assert!(line("busy_timeout_ms = 5000").ends_with("# default"), "{text}");
+    assert!(text.contains("[events]") && text.contains("retention_hours = 168"), "{text}");
+}
+
+/// A free port on loopback (bound, then released for the server to take).
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+/// `rackd serve` in the background, killed when dropped.
+struct Server(std::process::Child);
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// The status of `GET path` at `port`, with `headers`; waits up to 20 s for the server.
+fn status(port: u16, path: &str, headers: &str) -> u16 {
+    use std::io::{Read, Write};
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    loop {
+        if let Ok(mut s) = std::net::TcpStream::connect(("127.0.0.1", port)) {
+            write!(s, "GET {path} HTTP/1.0\r\nhost: x\r\n{headers}\r\n").unwrap();
+            let mut reply = String::new();
+            let _ = s.read_to_string(&mut reply);
+            if let Some(code) = reply.split(' ').nth(1).and_then(|c| c.parse().ok()) {
+                return code;
+            }
+        }
+        assert!(std::time::Instant::now() < deadline, "nothing answers on port {port}");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn the_environment_decides_where_serve_listens_over_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("site.toml");
+    let (in_file, in_env) = (free_port(), free_port());
+    let db = dir.path().join("rackd.db");
+    std::fs::write(&file, format!("[server]\nlisten = \"127.0.0.1:{in_file}\"\n[database]\npath = {db:?}\n"))
+        .unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .args(["serve", "--config", file.to_str().unwrap()])
+        .env("RACKD_SERVER__LISTEN", format!("127.0.0.1:{in_env}"))
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let _server = Server(child);
+    assert_eq!(status(in_env, "/healthz", ""), 200);
+    assert!(std::net::TcpStream::connect(("127.0.0.1", in_file)).is_err(), "the file's port is not used");
+}
+
+#[test]
+fn the_old_listen_variable_is_refused_not_silently_applied() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .args(["serve", "--database", dir.path().join("x.db").to_str().unwrap()])
+        .env("RACKD_LISTEN", "127.0.0.1:0")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("RACKD_SERVER__LISTEN"), "{err}");
+}
+
+#[test]
+fn a_keyed_server_takes_its_keys_from_auth_keys_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let keys = dir.path().join("rackd_keys");
+    let hash = "sha256:2bb80d537b1da3e38bd30361aa855686bde0eacd7162fef6a25fe97bf527a25b"; // "secret"
+    std::fs::write(&keys, format!("[[keys]]\nname = \"wms\"\nrole = \"operator\"\nhash = \"{hash}\"\n"))
+        .unwrap();
+    let file = dir.path().join("site.toml");
+    let port = free_port();
+    let db = dir.path().join("rackd.db");
+    std::fs::write(&file, format!("[server]\nlisten = \"127.0.0.1:{port}\"\n[database]\npath = {db:?}\n"))
+        .unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .args(["serve", "--config", file.to_str().unwrap()])
+        .env("RACKD_AUTH__KEYS_FILE", &keys)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let _server = Server(child);
+    assert_eq!(status(port, "/api/v1/jobs", ""), 401);
+    assert_eq!(status(port, "/api/v1/jobs", "authorization: Bearer wrong\r\n"), 401);
+    assert_eq!(status(port, "/api/v1/jobs", "authorization: Bearer secret\r\n"), 200);
 }
 
 #[test]

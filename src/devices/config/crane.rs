@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::defaults::{OFFLINE_AFTER, POLL_MS};
 use super::error::{WordsError, check_words};
@@ -15,7 +15,7 @@ use crate::wire::registers::BLOCK_WORDS;
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(1500);
 
 /// How completion is acknowledged (see `devices::crane::ack`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Ack {
     /// D22 := 1 while D223 != 0; D22 := 0 once D223 = 0.
@@ -26,8 +26,8 @@ pub enum Ack {
 }
 
 /// A station (pick-and-drop point) of the crane, written `[row, bay, level, side]`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
-#[serde(from = "[u16; 4]")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(from = "[u16; 4]", into = "[u16; 4]")]
 pub struct Station {
     /// Row (1 = A, 2 = B).
     pub row: u16,
@@ -42,6 +42,12 @@ pub struct Station {
 impl From<[u16; 4]> for Station {
     fn from([row, bay, level, side]: [u16; 4]) -> Self {
         Station { row, bay, level, side }
+    }
+}
+
+impl From<Station> for [u16; 4] {
+    fn from(s: Station) -> Self {
+        s.words()
     }
 }
 

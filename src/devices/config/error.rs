@@ -1,6 +1,6 @@
 //! Why a `[[devices]]` entry cannot be used, and the word-area check the kinds share.
 
-use super::{CraneConfigError, DeviceKind, ShelfConfigError, TagsConfigError};
+use super::{AddressError, CraneConfigError, DeviceKind, ShelfConfigError, TagsConfigError};
 use crate::protocols::link::LinkError;
 use crate::protocols::notation::{Items, shape};
 use crate::protocols::serial::SerialSettingsError;
@@ -42,6 +42,9 @@ pub enum Problem {
     /// `serial` does not parse.
     #[error("serial: {0}")]
     Serial(#[from] SerialSettingsError),
+    /// `address`, `unit` or `serial` does not suit the protocol.
+    #[error(transparent)]
+    Address(#[from] AddressError),
     /// A count or time that must be above 0.
     #[error("{0} must be at least 1")]
     Zero(&'static str),
@@ -57,6 +60,43 @@ pub enum Problem {
     /// A tags device setting or tag.
     #[error(transparent)]
     Tags(#[from] TagsConfigError),
+}
+
+impl Problem {
+    /// The entry's key the problem is about (`tags.beacon.red` for one tag), for
+    /// pointing at its line.
+    pub fn key(&self) -> String {
+        use crate::devices::tagdef::TagError;
+        let words = |e: &WordsError| match e {
+            WordsError::Address { key, .. }
+            | WordsError::NotWords { key, .. }
+            | WordsError::NotWritable { key, .. }
+            | WordsError::PastEnd { key, .. } => *key,
+        };
+        match self {
+            Problem::Id => "id".into(),
+            Problem::ForeignKey { key, .. } | Problem::Zero(key) => (*key).into(),
+            Problem::Serial(_) | Problem::Address(AddressError::SerialUnused(_)) => "serial".into(),
+            Problem::Address(AddressError::Unit { .. }) | Problem::Link(LinkError::Unit { .. }) => {
+                "unit".into()
+            }
+            Problem::Address(_) | Problem::Link(LinkError::Plc(_)) => "address".into(),
+            Problem::Link(LinkError::Quirk { .. }) => "quirks".into(),
+            Problem::Link(LinkError::Tuning(text)) => {
+                let keys = ["degraded_window", "degraded_below", "degraded_above"];
+                keys.into_iter().find(|k| text.starts_with(k)).unwrap_or("degraded_above").into()
+            }
+            Problem::Shelf(ShelfConfigError::NoSlots) => "slots".into(),
+            Problem::Shelf(ShelfConfigError::Stride(_)) => "stride".into(),
+            Problem::Shelf(ShelfConfigError::Area(e)) | Problem::Crane(CraneConfigError::Block(e)) => {
+                words(e).into()
+            }
+            Problem::Crane(CraneConfigError::ZeroTimeout(key)) => (*key).into(),
+            Problem::Tags(TagsConfigError::NoTags) => "tags".into(),
+            Problem::Tags(TagsConfigError::Tag(TagError::Name(name))) => format!("tags.{}", name.0),
+            Problem::Tags(TagsConfigError::Tag(TagError::Def { name, .. })) => format!("tags.{name}"),
+        }
+    }
 }
 
 /// An area of words that does not suit what rackd does with it.

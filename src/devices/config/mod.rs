@@ -9,10 +9,13 @@
 //! saying which kind it belongs to.
 //!
 //! Reading refuses what the file cannot mean (unknown keys, values of the wrong type,
-//! unknown protocols, quirks or `ack` readings, bad serial settings); [`DeviceConfig::check`]
-//! then refuses values that parse but make no sense (a quirk of another protocol, a slot
-//! area the protocol cannot write, a tag on an input), all without a connection, so
-//! `rackd check-config` finds them.
+//! unknown protocols, quirks or `ack` readings, bad serial settings, a unit outside the
+//! protocol's range); [`DeviceConfig::check`] then refuses values that parse but make no
+//! sense (an address that is not `HOST:PORT` or a serial device as the protocol needs,
+//! `serial` on a network protocol, a quirk of another protocol, a slot area the protocol
+//! cannot write, a tag on an input), all without a connection, so `rackd check-config`
+//! finds them. Every problem names its key ([`Problem::key`]), so that the configuration
+//! can point at its line. The ranges and address forms are explained in [`address`].
 //!
 //! Defaults that differ by kind or protocol, and why:
 //! - **Shelf quirks**: `["length0"]` over Modbus UDP, none elsewhere. The seed's PLC
@@ -29,6 +32,7 @@
 //! - **Unit**: the protocol's ([`crate::protocols::Protocol::default_unit`]); shelf slot
 //!   layout: the protocol's ([`crate::wire::slot::default_layout`]).
 
+mod address;
 mod crane;
 mod error;
 mod raw;
@@ -40,8 +44,10 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+pub use address::{AddressError, check_address, check_serial, check_unit};
 pub use crane::{Ack, CraneConfig, CraneConfigError, Station};
 pub use error::{DeviceConfigError, Problem, WordsError, check_words};
+pub use raw::RawDevice;
 pub use shelf::{ShelfConfig, ShelfConfigError, default_shelf_quirks};
 pub use tags::{TagsConfig, TagsConfigError};
 
@@ -187,7 +193,11 @@ impl DeviceConfig {
         if offline_after == 0 {
             return Err(fail(Problem::Zero("offline_after")));
         }
-        self.link().check().map_err(|e| fail(e.into()))?;
+        let link = self.link();
+        check_address(link.protocol, &link.address).map_err(|e| fail(e.into()))?;
+        check_unit(link.protocol, link.unit.into()).map_err(|e| fail(e.into()))?;
+        check_serial(link.protocol, link.serial.is_some()).map_err(|e| fail(e.into()))?;
+        link.check().map_err(|e| fail(e.into()))?;
         match self {
             DeviceConfig::Shelf(c) => c.check().map_err(|e| fail(e.into())),
             DeviceConfig::Crane(c) => c.check().map_err(|e| fail(e.into())),

@@ -5,8 +5,9 @@
 use std::collections::BTreeSet;
 use std::time::Duration;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
+use super::address::check_unit;
 use super::crane::{self, Ack, CraneConfig, Station};
 use super::error::{DeviceConfigError, Problem};
 use super::shelf::{ShelfConfig, default_shelf_quirks};
@@ -19,45 +20,82 @@ use crate::protocols::transport::LinkTuning;
 use crate::protocols::{Protocol, Quirk};
 
 /// Every key any kind has; unknown keys are refused here, keys of another kind in
-/// [`TryFrom`].
-#[derive(Debug, Deserialize)]
+/// [`TryFrom`]. Written back ([`From<&DeviceConfig>`]) with every key of the entry's kind
+/// filled in, it is what `rackd check-config --explain` prints.
+#[derive(Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct RawDevice {
+pub struct RawDevice {
     id: String,
     kind: DeviceKind,
     address: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
     protocol: Option<Protocol>,
-    unit: Option<u8>,
+    /// Wider than any protocol's unit, so that `unit = 300` is refused with the protocol's
+    /// range rather than serde's "expected u8".
+    #[serde(skip_serializing_if = "Option::is_none")]
+    unit: Option<i64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     serial: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     timeout_ms: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     retries: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     min_timeout_ms: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     degraded_window: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     degraded_above: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     degraded_below: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     quirks: Option<BTreeSet<Quirk>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     poll_ms: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     offline_after: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     aisles: Option<Vec<u16>>,
     // Shelf.
+    #[serde(skip_serializing_if = "Option::is_none")]
     dispatch_window: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     slots: Option<u16>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     base: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     stride: Option<u16>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     clear_finished: Option<bool>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     withdraw: Option<bool>,
     // Crane.
+    #[serde(skip_serializing_if = "Option::is_none")]
     wcs_base: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     crane_base: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     inbound_station: Option<Station>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     outbound_station: Option<Station>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     heartbeat_ms: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     heartbeat_timeout_ms: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     handshake_timeout_ms: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     auto_cancel: Option<bool>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     ack: Option<Ack>,
     // Tags.
+    #[serde(serialize_with = "tag_map")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     tags: Option<TagTable>,
+}
+
+fn tag_map<S: serde::Serializer>(tags: &Option<TagTable>, s: S) -> Result<S::Ok, S::Error> {
+    tags.as_ref().map(|t| &t.0).serialize(s)
 }
 
 impl RawDevice {
@@ -110,11 +148,15 @@ impl RawDevice {
         quirks: BTreeSet<Quirk>,
     ) -> Result<LinkConfig, Problem> {
         let serial = self.serial.as_deref().map(str::parse::<SerialSettings>).transpose()?;
+        let unit = match self.unit {
+            Some(unit) => check_unit(protocol, unit)?,
+            None => protocol.default_unit(),
+        };
         let d = LinkTuning::for_protocol(protocol);
         Ok(LinkConfig {
             protocol,
             address: self.address.clone(),
-            unit: self.unit.unwrap_or(protocol.default_unit()),
+            unit,
             serial,
             timeout: self.timeout_ms.map_or(timeout, Duration::from_millis),
             retries: self.retries.unwrap_or(DEFAULT_RETRIES),
@@ -179,5 +221,76 @@ impl TryFrom<RawDevice> for DeviceConfig {
                 DeviceConfig::Tags(c)
             }
         })
+    }
+}
+
+impl RawDevice {
+    /// The link's keys, every one set.
+    fn with_link(link: &LinkConfig, id: &str, kind: DeviceKind) -> RawDevice {
+        RawDevice {
+            id: id.to_owned(),
+            kind,
+            address: link.address.clone(),
+            protocol: Some(link.protocol),
+            unit: Some(link.unit.into()),
+            serial: link.serial.map(|s| s.to_string()),
+            timeout_ms: Some(link.timeout.as_millis() as u64),
+            retries: Some(link.retries),
+            min_timeout_ms: Some(link.tuning.min_timeout.as_millis() as u64),
+            degraded_window: Some(link.tuning.degraded_window),
+            degraded_above: Some(link.tuning.degraded_above),
+            degraded_below: Some(link.tuning.degraded_below),
+            quirks: Some(link.quirks.clone()),
+            poll_ms: None,
+            offline_after: None,
+            aisles: None,
+            dispatch_window: None,
+            slots: None,
+            base: None,
+            stride: None,
+            clear_finished: None,
+            withdraw: None,
+            wcs_base: None,
+            crane_base: None,
+            inbound_station: None,
+            outbound_station: None,
+            heartbeat_ms: None,
+            heartbeat_timeout_ms: None,
+            handshake_timeout_ms: None,
+            auto_cancel: None,
+            ack: None,
+            tags: None,
+        }
+    }
+}
+
+impl From<&DeviceConfig> for RawDevice {
+    fn from(device: &DeviceConfig) -> RawDevice {
+        let mut raw = RawDevice::with_link(device.link(), device.id(), device.kind());
+        match device {
+            DeviceConfig::Shelf(c) => {
+                (raw.poll_ms, raw.offline_after) = (Some(c.poll_ms), Some(c.offline_after));
+                raw.aisles = Some(c.aisles.clone());
+                raw.dispatch_window = Some(c.dispatch_window);
+                (raw.slots, raw.base, raw.stride) = (Some(c.slots), Some(c.base.clone()), Some(c.stride));
+                (raw.clear_finished, raw.withdraw) = (Some(c.clear_finished), Some(c.withdraw));
+            }
+            DeviceConfig::Crane(c) => {
+                (raw.poll_ms, raw.offline_after) = (Some(c.poll_ms), Some(c.offline_after));
+                raw.aisles = Some(c.aisles.clone());
+                (raw.wcs_base, raw.crane_base) = (Some(c.wcs_base.clone()), Some(c.crane_base.clone()));
+                (raw.inbound_station, raw.outbound_station) =
+                    (Some(c.inbound_station), Some(c.outbound_station));
+                raw.heartbeat_ms = Some(c.heartbeat_ms);
+                raw.heartbeat_timeout_ms = Some(c.heartbeat_timeout_ms);
+                raw.handshake_timeout_ms = Some(c.handshake_timeout_ms);
+                (raw.auto_cancel, raw.ack) = (Some(c.auto_cancel), Some(c.ack));
+            }
+            DeviceConfig::Tags(c) => {
+                (raw.poll_ms, raw.offline_after) = (Some(c.poll_ms), Some(c.offline_after));
+                raw.tags = Some(c.tags.clone());
+            }
+        }
+        raw
     }
 }

@@ -10,7 +10,7 @@
 
 use std::collections::BTreeMap;
 
-use serde::{Deserialize, Deserializer};
+use serde::{Deserialize, Deserializer, Serialize};
 
 use super::codec::{TagType, WordOrder};
 
@@ -18,7 +18,7 @@ use super::codec::{TagType, WordOrder};
 pub const MAX_NAME_LEN: usize = 100;
 
 /// One tag as configured; only `address` is required.
-#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct TagDef {
     /// Where the value lives, in the device protocol's notation; `ADDRESS.N` (bit 0..=15)
@@ -27,15 +27,20 @@ pub struct TagDef {
     /// The value's type; default bool on a bit (or a bit of a word), u16 on a word, u32 on
     /// an S7 double word (`VD`).
     #[serde(rename = "type")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub ty: Option<TagType>,
     /// 32-bit types: which word holds the high half; default the protocol's own order
     /// (high-first for Modbus and S7, low-first for MC and MEWTOCOL).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub word_order: Option<WordOrder>,
     /// Smallest value a write may set (numeric types).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub min: Option<f64>,
     /// Largest value a write may set (numeric types).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub max: Option<f64>,
     /// Whether the API may write it; default true, except on inputs, which cannot be.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub writable: Option<bool>,
 }
 
