@@ -94,8 +94,11 @@ impl Modify for Security {
 /// `/metrics`, documented.
 #[utoipa::path(get, path = "/metrics", tag = "operations",
     responses((status = 200, description = "Prometheus text: rackd_http_requests_total, rackd_jobs, rackd_intake_seconds", content_type = "text/plain")))]
-async fn metrics_route(state: axum::extract::State<AppState>) -> Result<axum::response::Response, ApiError> {
-    ops::metrics(state).await
+async fn metrics_route(
+    state: axum::extract::State<AppState>,
+    headers: axum::http::HeaderMap,
+) -> Result<axum::response::Response, ApiError> {
+    metrics::serve(&state.0, headers.get(axum::http::header::ACCEPT)).await
 }
 
 /// Routes that need a key once keys are configured.

@@ -1,9 +1,9 @@
-//! Operations: liveness, readiness, metrics, fallbacks.
+//! Operations: liveness, readiness, fallbacks (`/metrics` is [`super::metrics`]).
 
 use axum::extract::{MatchedPath, Request, State};
-use axum::http::{Method, Uri, header};
+use axum::http::{Method, Uri};
 use axum::middleware::Next;
-use axum::response::{IntoResponse, Response};
+use axum::response::Response;
 use serde::Serialize;
 use utoipa::ToSchema;
 
@@ -75,14 +75,4 @@ pub async fn count_requests(State(app): State<AppState>, req: Request, next: Nex
     let response = next.run(req).await;
     app.metrics.count_request(method, route, response.status().as_u16());
     response
-}
-
-/// `GET /metrics`: Prometheus text.
-pub async fn metrics(State(app): State<AppState>) -> Result<Response, ApiError> {
-    let counts = crate::store::jobs::count_by_state(&app.pool).await?;
-    let text = app
-        .metrics
-        .encode(&counts, app.hub.subscribers())
-        .map_err(|e| ApiError::unavailable(format!("metrics encoding: {e}")))?;
-    Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4; charset=utf-8")], text).into_response())
 }

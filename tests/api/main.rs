@@ -8,5 +8,6 @@ mod errors;
 mod helpers;
 mod jobs;
 mod lifecycle;
+mod metrics;
 mod openapi;
 mod paging;
