@@ -121,6 +121,10 @@ impl Default for Metrics {
             ws_resyncs.clone(),
         );
         let ws_snapshots = Family::<ReasonLabels, Counter>::default();
+        // Each reason's series from the start, at zero, for `rate()` and alerts.
+        for reason in ["requested", "since_expired", "since_unknown"] {
+            ws_snapshots.get_or_create(&ReasonLabels { reason });
+        }
         r.register(
             "ws_snapshots",
             "Snapshots sent to WebSocket subscribers, by reason (requested, since_expired, since_unknown)",
