@@ -98,7 +98,7 @@ async fn metrics_route(
     state: axum::extract::State<AppState>,
     headers: axum::http::HeaderMap,
 ) -> Result<axum::response::Response, ApiError> {
-    metrics::serve(&state.0, headers.get(axum::http::header::ACCEPT)).await
+    ops::metrics(state, headers).await
 }
 
 /// Routes that need a key once keys are configured.

@@ -1,9 +1,9 @@
-//! Operations: liveness, readiness, fallbacks (`/metrics` is [`super::metrics`]).
+//! Operations: liveness, readiness, metrics, fallbacks.
 
 use axum::extract::{MatchedPath, Request, State};
-use axum::http::{Method, Uri};
+use axum::http::{HeaderMap, Method, Uri, header};
 use axum::middleware::Next;
-use axum::response::Response;
+use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
@@ -75,4 +75,19 @@ pub async fn count_requests(State(app): State<AppState>, req: Request, next: Nex
     let response = next.run(req).await;
     app.metrics.count_request(method, route, response.status().as_u16());
     response
+}
+
+/// `GET /metrics`: every family (see [`super::metrics`]), in the format `Accept` asks for.
+pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<Response, ApiError> {
+    use super::metrics::{format::Format, scrape::Scrape};
+    let format = Format::negotiate(headers.get(header::ACCEPT));
+    let scrape = Scrape {
+        devices: crate::service::monitor::all_shown(&app.devices, app.dispatcher.queues()),
+        jobs: crate::store::jobs::count_by_device_and_state(&app.pool).await?,
+        alarms: crate::store::alarms::count_active(&app.pool).await?,
+        now: time::OffsetDateTime::now_utc(),
+        started: app.metrics.started(),
+    };
+    let body = app.metrics.render(scrape, app.hub.subscribers(), format)?;
+    Ok(([(header::CONTENT_TYPE, format.content_type())], body).into_response())
 }

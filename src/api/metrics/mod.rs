@@ -21,8 +21,6 @@ pub mod scrape;
 
 use std::sync::Arc;
 
-use axum::http::{HeaderValue, header};
-use axum::response::{IntoResponse, Response};
 use prometheus_client::encoding::EncodeLabelSet;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
@@ -33,7 +31,6 @@ use prometheus_client::registry::Registry;
 use time::OffsetDateTime;
 
 use super::error::ApiError;
-use super::state::AppState;
 use crate::store::writer::{GroupStats, JobTiming, Observe};
 use format::Format;
 
@@ -123,7 +120,7 @@ impl Default for Metrics {
         let ws_snapshots = Family::<ReasonLabels, Counter>::default();
         // Each reason's series from the start, at zero, for `rate()` and alerts.
         for reason in ["requested", "since_expired", "since_unknown"] {
-            ws_snapshots.get_or_create(&ReasonLabels { reason });
+            ws_snapshots.get_or_create(&ReasonLabels { reason }).inc_by(0);
         }
         r.register(
             "ws_snapshots",
@@ -221,28 +218,29 @@ impl Metrics {
         text::encode_eof(&mut out)?;
         Ok(out)
     }
-}
 
-/// `GET /metrics`: every family, in the format the `Accept` header asks for.
-pub async fn serve(app: &AppState, accept: Option<&HeaderValue>) -> Result<Response, ApiError> {
-    let format = Format::negotiate(accept);
-    let scrape = scrape::Scrape {
-        devices: crate::service::monitor::all_shown(&app.devices, app.dispatcher.queues()),
-        jobs: crate::store::jobs::count_by_device_and_state(&app.pool).await?,
-        alarms: crate::store::alarms::count_active(&app.pool).await?,
-        now: OffsetDateTime::now_utc(),
-        started: app.metrics.started,
-    };
-    let failed = |e: &dyn std::fmt::Display| {
-        tracing::error!(error = %e, "encoding metrics");
-        ApiError::unavailable("the metrics could not be encoded")
-    };
-    let openmetrics = app.metrics.encode(scrape, app.hub.subscribers()).map_err(|e| failed(&e))?;
-    let body = match format {
-        Format::OpenMetrics => openmetrics,
-        Format::Prometheus => format::to_prometheus(&openmetrics).map_err(|e| failed(&e))?,
-    };
-    Ok(([(header::CONTENT_TYPE, format.content_type())], body).into_response())
+    /// When rackd started (the age of a device never heard from).
+    pub fn started(&self) -> OffsetDateTime {
+        self.started
+    }
+
+    /// The body of `GET /metrics` in `format`: the counted families, then `scrape`'s.
+    pub fn render(
+        &self,
+        scrape: scrape::Scrape,
+        subscribers: usize,
+        format: Format,
+    ) -> Result<String, ApiError> {
+        let failed = |e: &dyn std::fmt::Display| {
+            tracing::error!(error = %e, "encoding metrics");
+            ApiError::unavailable("the metrics could not be encoded")
+        };
+        let openmetrics = self.encode(scrape, subscribers).map_err(|e| failed(&e))?;
+        match format {
+            Format::OpenMetrics => Ok(openmetrics),
+            Format::Prometheus => format::to_prometheus(&openmetrics).map_err(|e| failed(&e)),
+        }
+    }
 }
 
 #[cfg(test)]
