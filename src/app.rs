@@ -76,10 +76,12 @@ impl Application {
             aisles: d.aisles().to_vec(),
         }));
         let hub = Hub::new(config.events.buffer);
+        let metrics = Arc::new(Metrics::default());
         let hooks = Hooks {
             locked: Some(queues.locked_hook()),
             committed: Some(queues.hook()),
             publish: Some(hub.hook()),
+            observe: Some(metrics.writer_hook()),
         };
         let (writer, writer_task) = Writer::start(
             &db.path,
@@ -111,7 +113,7 @@ impl Application {
             writer,
             rules: Arc::new(rules),
             keys: Arc::new(keys),
-            metrics: Arc::new(Metrics::default()),
+            metrics,
             devices: devices.clone(),
             dispatcher,
             hub,

@@ -95,9 +95,17 @@ impl Modify for Security {
 
 /// `/metrics`, documented.
 #[utoipa::path(get, path = "/metrics", tag = "operations",
-    responses((status = 200, description = "Prometheus text: rackd_http_requests_total, rackd_jobs, rackd_intake_seconds", content_type = "text/plain")))]
-async fn metrics_route(state: axum::extract::State<AppState>) -> Result<axum::response::Response, ApiError> {
-    ops::metrics(state).await
+    responses((status = 200, description = "The metrics (README: Metrics): Prometheus text format 0.0.4 \
+(`text/plain; version=0.0.4; charset=utf-8`), or OpenMetrics 1.0.0 (`application/openmetrics-text; version=1.0.0; \
+charset=utf-8`) when the `Accept` header asks for it", content(
+        (String = "text/plain"),
+        (String = "application/openmetrics-text"),
+    ))))]
+async fn metrics_route(
+    state: axum::extract::State<AppState>,
+    headers: axum::http::HeaderMap,
+) -> Result<axum::response::Response, ApiError> {
+    ops::metrics(state, headers).await
 }
 
 /// Routes that need a key once keys are configured.

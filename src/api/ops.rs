@@ -1,7 +1,7 @@
 //! Operations: liveness, readiness, metrics, fallbacks.
 
 use axum::extract::{MatchedPath, Request, State};
-use axum::http::{Method, Uri, header};
+use axum::http::{HeaderMap, Method, Uri, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
@@ -77,12 +77,17 @@ pub async fn count_requests(State(app): State<AppState>, req: Request, next: Nex
     response
 }
 
-/// `GET /metrics`: Prometheus text.
-pub async fn metrics(State(app): State<AppState>) -> Result<Response, ApiError> {
-    let counts = crate::store::jobs::count_by_state(&app.pool).await?;
-    let text = app
-        .metrics
-        .encode(&counts, app.hub.subscribers())
-        .map_err(|e| ApiError::unavailable(format!("metrics encoding: {e}")))?;
-    Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4; charset=utf-8")], text).into_response())
+/// `GET /metrics`: every family (see [`super::metrics`]), in the format `Accept` asks for.
+pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<Response, ApiError> {
+    use super::metrics::{format::Format, scrape::Scrape};
+    let format = Format::negotiate(headers.get(header::ACCEPT));
+    let scrape = Scrape {
+        devices: crate::service::monitor::all_shown(&app.devices, app.dispatcher.queues()),
+        jobs: crate::store::jobs::count_by_device_and_state(&app.pool).await?,
+        alarms: crate::store::alarms::count_active(&app.pool).await?,
+        now: time::OffsetDateTime::now_utc(),
+        started: app.metrics.started(),
+    };
+    let body = app.metrics.render(scrape, app.hub.subscribers(), format)?;
+    Ok(([(header::CONTENT_TYPE, format.content_type())], body).into_response())
 }

@@ -134,6 +134,15 @@ pub async fn active(db: impl SqliteExecutor<'_>) -> Result<Vec<Alarm>, sqlx::Err
     Ok(rows.into_iter().map(Alarm::from).collect())
 }
 
+/// Active alarms counted by device and class, in one grouped query.
+pub async fn count_active(db: impl SqliteExecutor<'_>) -> Result<Vec<(String, String, i64)>, sqlx::Error> {
+    sqlx::query_as(
+        "SELECT device, class, COUNT(*) FROM alarms WHERE cleared_at IS NULL GROUP BY device, class",
+    )
+    .fetch_all(db)
+    .await
+}
+
 /// Records a raised alarm (writer thread); None when the same alarm is already active.
 pub(crate) fn raise(tx: &Transaction<'_>, new: &NewAlarm, now: i64) -> rusqlite::Result<Option<Alarm>> {
     let active: Option<i64> = tx

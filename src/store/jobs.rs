@@ -193,9 +193,13 @@ pub async fn history(db: impl SqliteExecutor<'_>, id: i64) -> Result<Vec<JobEven
         .collect()
 }
 
-/// How many jobs are in each state.
-pub async fn count_by_state(db: impl SqliteExecutor<'_>) -> Result<Vec<(String, i64)>, sqlx::Error> {
-    sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetch_all(db).await
+/// Jobs counted by device (empty: not routed to one) and state, in one grouped query.
+pub async fn count_by_device_and_state(
+    db: impl SqliteExecutor<'_>,
+) -> Result<Vec<(String, String, i64)>, sqlx::Error> {
+    sqlx::query_as("SELECT COALESCE(device, ''), state, COUNT(*) FROM jobs GROUP BY device, state")
+        .fetch_all(db)
+        .await
 }
 
 /// The jobs with these ids that exist, in id order.

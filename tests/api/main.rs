@@ -11,5 +11,6 @@ mod helpers;
 mod jobs;
 mod lifecycle;
 mod logs;
+mod metrics;
 mod openapi;
 mod paging;

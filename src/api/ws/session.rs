@@ -44,6 +44,7 @@ pub struct Session {
     ping: Duration,
     send_timeout: Duration,
     snapshot_jobs: u32,
+    metrics: std::sync::Arc<crate::api::metrics::Metrics>,
 }
 
 type Sink = SplitSink<WebSocket, Message>;
@@ -62,6 +63,7 @@ impl Session {
             ping: Duration::from_secs(options.ping_secs),
             send_timeout: Duration::from_secs(options.send_timeout_secs),
             snapshot_jobs: options.snapshot_jobs,
+            metrics: app.metrics.clone(),
         }
     }
 
@@ -94,6 +96,7 @@ impl Session {
                             let reason = format!("fell {missed} commits behind; reconnect with since={last}");
                             let resync = super::Resync { kind: "resync", seq: last, reason };
                             let text = serde_json::to_string(&resync).unwrap_or_default();
+                            self.metrics.count_resync();
                             self.send(&mut sink, Message::Text(text.into())).await?;
                             return self.close(&mut sink, CLOSE_RESYNC, "resync").await;
                         }
@@ -143,6 +146,7 @@ impl Session {
         .await?;
         let text = serde_json::to_string(&snapshot).unwrap_or_default();
         self.send(sink, Message::Text(text.into())).await?;
+        self.metrics.count_snapshot(reason);
         Ok(snapshot.seq)
     }
 

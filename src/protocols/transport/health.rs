@@ -14,6 +14,8 @@
 //! - **Counters** are totals since the client was built; the device status copies them
 //!   after each request as contact bookkeeping, so they never wake watchers by themselves
 //!   (only `degraded` flipping does).
+//! - **Round trips** that feed the timer are also counted by bucket ([`RoundTrips`]), for
+//!   the request latency histogram of `/metrics`.
 //! - A request abandoned by its caller (its future dropped) counts as a request, but its
 //!   outcome is unknown, so it does not enter the degraded window.
 
@@ -24,6 +26,7 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use super::retry::{Retry, RetryPolicy};
+use super::round_trips::RoundTrips;
 use super::rtt::{LossWindow, RttEstimator};
 use crate::protocols::{DropReason, Dropped};
 
@@ -88,12 +91,16 @@ pub struct LinkStats {
     pub srtt_ms: Option<f64>,
     /// The reply timeout the next attempt gets, in milliseconds.
     pub timeout_ms: f64,
+    /// Round trips of clean replies by bucket, for `/metrics` (not in the JSON).
+    #[serde(skip)]
+    pub round_trips: RoundTrips,
 }
 
 /// Totals and the per-request tally of dropped replies.
 #[derive(Debug)]
 struct State {
     rtt: RttEstimator,
+    round_trips: RoundTrips,
     window: LossWindow,
     requests: u64,
     retries: u64,
@@ -131,6 +138,7 @@ impl LinkHealth {
             policy,
             state: Mutex::new(State {
                 rtt: RttEstimator::new(t.min_timeout, policy.timeout),
+                round_trips: RoundTrips::default(),
                 window: LossWindow::new(t.degraded_window, t.degraded_above, t.degraded_below),
                 requests: 0,
                 retries: 0,
@@ -222,7 +230,9 @@ impl LinkHealth {
     }
 
     pub(super) fn sample(&self, rtt: Duration) {
-        self.state().rtt.sample(rtt);
+        let mut s = self.state();
+        s.rtt.sample(rtt);
+        s.round_trips.observe(rtt);
     }
 
     /// A request finished; `troubled` if it needed a retry or failed.
@@ -248,6 +258,7 @@ impl LinkHealth {
             malformed: s.malformed,
             srtt_ms: s.rtt.srtt().map(|d| d.as_secs_f64() * 1000.0),
             timeout_ms: s.rtt.timeout().as_secs_f64() * 1000.0,
+            round_trips: s.round_trips,
         }
     }
 }

@@ -4,6 +4,7 @@ use std::collections::HashMap;
 
 use rusqlite::{OptionalExtension, Transaction, params};
 
+use super::timing::{self, JobTiming};
 use super::{Change, Command, Outcome, Record, WriteError};
 use crate::domain::report::path;
 use crate::domain::time::{from_ms, now_ms, to_ms};
@@ -47,6 +48,8 @@ pub(super) struct Out {
     pub(super) events: Vec<StoredEvent>,
     /// The locations it locked (`Some`) or unlocked.
     pub(super) locks: Vec<(Location, Option<LocationLock>)>,
+    /// Timed transitions, for `/metrics`.
+    pub(super) timings: Vec<JobTiming>,
 }
 
 type Events = Out;
@@ -340,6 +343,16 @@ fn step(
         Ok(state) => state,
         Err(e) => return Ok(Err(e.into())),
     };
+    // Looked up before `save` writes this transition's own history entry.
+    if transition == Transition::Dispatch || job.state.is_terminal() {
+        let since = timing::last_start(tx, id)?.unwrap_or(to_ms(job.created_at));
+        let (kind, elapsed) = (job.kind, timing::between(since, now));
+        events.timings.push(if transition == Transition::Dispatch {
+            JobTiming::Dispatched { kind, waited: elapsed }
+        } else {
+            JobTiming::Ended { kind, state: job.state, took: elapsed }
+        });
+    }
     job.forced = forced && job.state == JobState::Completed;
     if transition == Transition::Fail {
         job.failure = failure.cloned();

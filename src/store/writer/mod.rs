@@ -15,6 +15,7 @@
 //! link the same SQLite (libsqlite3-sys), and WAL mode lets the pool read while it writes.
 
 mod commit;
+mod timing;
 
 use std::path::Path;
 use std::sync::Arc;
@@ -22,6 +23,8 @@ use std::time::Duration;
 
 use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
+
+pub use timing::{GroupStats, JobTiming, Observe};
 
 use super::alarms::NewAlarm;
 use super::events::StoredEvent;
@@ -190,6 +193,8 @@ pub struct Hooks {
     pub committed: Option<Committed>,
     /// Publishes the committed events.
     pub publish: Option<Publish>,
+    /// Tells `/metrics` about each group (size, commit time, timed transitions).
+    pub observe: Option<Observe>,
 }
 
 enum Command {
@@ -281,11 +286,12 @@ fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group:
         }
         let started = std::time::Instant::now();
         let result = commit::commit(&mut db, &group, &mut next_id);
-        tracing::trace!(
-            requests = group.len(),
-            micros = started.elapsed().as_micros() as u64,
-            "group committed"
-        );
+        let took = started.elapsed();
+        tracing::trace!(requests = group.len(), micros = took.as_micros() as u64, "group committed");
+        let timings = result.as_ref().map(|(_, out)| out.timings.as_slice()).unwrap_or_default();
+        if let Some(observe) = &hooks.observe {
+            observe(&GroupStats { commands: group.len(), took, jobs: timings });
+        }
         let answers = match result {
             Ok((answers, out)) => {
                 if let Some(locked) = hooks.locked.as_ref().filter(|_| !out.locks.is_empty()) {

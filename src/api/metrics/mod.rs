@@ -1,0 +1,287 @@
+//! `/metrics`: what a site's monitoring scrapes and alerts on, in the Prometheus conventions
+//! (a `rackd_` prefix, `_total` counters, base units in the name, help on every family).
+//!
+//! Two kinds of figures:
+//! - **counted as they happen** (this module's [`Metrics`]): HTTP requests, intake latency,
+//!   WebSocket subscribers, resyncs and snapshots, the job writer's group size and commit
+//!   time, and the dispatch latency and duration of jobs, observed by the writer when it
+//!   commits the transition ([`crate::store::writer::JobTiming`]);
+//! - **read at scrape time** ([`scrape`]): each device's status and link counters, active
+//!   alarms and jobs by device, and the process figures ([`process`]).
+//!
+//! Content negotiation ([`format`]): OpenMetrics when the scraper's `Accept` asks for it,
+//! Prometheus text 0.0.4 otherwise; each is served exactly, with its own content type.
+//!
+//! The full list of families is in the README's "Metrics" section.
+
+pub mod format;
+#[cfg(target_os = "linux")]
+pub mod process;
+pub mod scrape;
+
+use std::sync::Arc;
+
+use prometheus_client::encoding::EncodeLabelSet;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
+use prometheus_client::metrics::info::Info;
+use prometheus_client::registry::Registry;
+use time::OffsetDateTime;
+
+use super::error::ApiError;
+use crate::store::writer::{GroupStats, JobTiming, Observe};
+use format::Format;
+
+/// Labels of the request counter.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct RequestLabels {
+    method: String,
+    route: String,
+    status: u16,
+}
+
+/// Labels of the job dispatch histogram.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct KindLabels {
+    kind: &'static str,
+}
+
+/// Labels of the job duration histogram.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct EndLabels {
+    kind: &'static str,
+    state: &'static str,
+}
+
+/// Labels of the snapshot counter.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct ReasonLabels {
+    reason: &'static str,
+}
+
+type Histograms<L> = Family<L, Histogram, fn() -> Histogram>;
+
+/// From 10 ms to an hour: a job waits for a free device as long as the site is busy.
+fn dispatch_buckets() -> Histogram {
+    Histogram::new([0.01, 0.05, 0.1, 0.5, 1.0, 5.0, 10.0, 30.0, 60.0, 300.0, 900.0, 3600.0])
+}
+
+/// From 100 ms (a light) to an hour (a crane's long move behind a relocation).
+fn duration_buckets() -> Histogram {
+    Histogram::new([0.1, 0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0, 3600.0])
+}
+
+/// The service's metrics counted as they happen, and the registry they are served from.
+pub struct Metrics {
+    registry: Registry,
+    requests: Family<RequestLabels, Counter>,
+    subscribers: Gauge,
+    ws_resyncs: Counter,
+    ws_snapshots: Family<ReasonLabels, Counter>,
+    group_size: Histogram,
+    commit_seconds: Histogram,
+    dispatch_seconds: Histograms<KindLabels>,
+    job_seconds: Histograms<EndLabels>,
+    started: OffsetDateTime,
+    /// Seconds from a submission reaching the writer to its commit.
+    pub intake_seconds: Histogram,
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        let mut registry = Registry::default();
+        #[cfg(target_os = "linux")]
+        registry.register_collector(Box::new(process::Process));
+        let r = registry.sub_registry_with_prefix("rackd");
+        let version = [
+            ("version".to_owned(), env!("CARGO_PKG_VERSION").to_owned()),
+            ("os".to_owned(), std::env::consts::OS.to_owned()),
+            ("arch".to_owned(), std::env::consts::ARCH.to_owned()),
+        ];
+        r.register(
+            "build",
+            "The running rackd: version, operating system and architecture",
+            Info::new(version),
+        );
+        let requests = Family::<RequestLabels, Counter>::default();
+        r.register("http_requests", "HTTP requests by method, route and status", requests.clone());
+        let intake_seconds = Histogram::new(exponential_buckets(0.0001, 2.0, 16));
+        r.register("intake_seconds", "Time from submission to durable commit", intake_seconds.clone());
+        let subscribers = Gauge::default();
+        r.register("ws_subscribers", "WebSocket subscribers to live events", subscribers.clone());
+        let ws_resyncs = Counter::default();
+        r.register(
+            "ws_resyncs",
+            "WebSocket subscribers that fell too far behind and were told to resync",
+            ws_resyncs.clone(),
+        );
+        let ws_snapshots = Family::<ReasonLabels, Counter>::default();
+        // Each reason's series from the start, at zero, for `rate()` and alerts.
+        for reason in ["requested", "since_expired", "since_unknown"] {
+            ws_snapshots.get_or_create(&ReasonLabels { reason }).inc_by(0);
+        }
+        r.register(
+            "ws_snapshots",
+            "Snapshots sent to WebSocket subscribers, by reason (requested, since_expired, since_unknown)",
+            ws_snapshots.clone(),
+        );
+        let group_size = Histogram::new(exponential_buckets(1.0, 2.0, 12));
+        r.register(
+            "writer_group_size",
+            "Commands the job writer committed together in one transaction",
+            group_size.clone(),
+        );
+        let commit_seconds = Histogram::new(exponential_buckets(0.0001, 2.0, 16));
+        r.register(
+            "writer_commit_seconds",
+            "Time the job writer took to apply and commit one group",
+            commit_seconds.clone(),
+        );
+        let dispatch_seconds: Histograms<KindLabels> = Family::new_with_constructor(dispatch_buckets);
+        r.register(
+            "job_dispatch_seconds",
+            "Time jobs waited from queued to dispatched, by kind",
+            dispatch_seconds.clone(),
+        );
+        let job_seconds: Histograms<EndLabels> = Family::new_with_constructor(duration_buckets);
+        r.register(
+            "job_duration_seconds",
+            "Time from dispatched (or queued, if never dispatched) to the end, by kind and final state",
+            job_seconds.clone(),
+        );
+        Metrics {
+            registry,
+            requests,
+            subscribers,
+            ws_resyncs,
+            ws_snapshots,
+            group_size,
+            commit_seconds,
+            dispatch_seconds,
+            job_seconds,
+            started: OffsetDateTime::now_utc(),
+            intake_seconds,
+        }
+    }
+}
+
+impl Metrics {
+    /// Counts one answered request.
+    pub fn count_request(&self, method: String, route: String, status: u16) {
+        self.requests.get_or_create(&RequestLabels { method, route, status }).inc();
+    }
+
+    /// Counts a WebSocket subscriber told to resync.
+    pub fn count_resync(&self) {
+        self.ws_resyncs.inc();
+    }
+
+    /// Counts a snapshot sent to a WebSocket subscriber, by its `reason`.
+    pub fn count_snapshot(&self, reason: &'static str) {
+        self.ws_snapshots.get_or_create(&ReasonLabels { reason }).inc();
+    }
+
+    /// The job writer's hook: group size, commit time and timed transitions.
+    pub fn writer_hook(self: &Arc<Self>) -> Observe {
+        let metrics = Arc::clone(self);
+        Arc::new(move |group: &GroupStats<'_>| metrics.observe_group(group))
+    }
+
+    fn observe_group(&self, group: &GroupStats<'_>) {
+        self.group_size.observe(group.commands as f64);
+        self.commit_seconds.observe(group.took.as_secs_f64());
+        for timing in group.jobs {
+            match *timing {
+                JobTiming::Dispatched { kind, waited } => self
+                    .dispatch_seconds
+                    .get_or_create(&KindLabels { kind: kind.as_str() })
+                    .observe(waited.as_secs_f64()),
+                JobTiming::Ended { kind, state, took } => self
+                    .job_seconds
+                    .get_or_create(&EndLabels { kind: kind.as_str(), state: state.as_str() })
+                    .observe(took.as_secs_f64()),
+            }
+        }
+    }
+
+    /// OpenMetrics text of everything: the counted families, then `scrape`'s.
+    pub fn encode(&self, scrape: scrape::Scrape, subscribers: usize) -> Result<String, std::fmt::Error> {
+        use prometheus_client::encoding::text;
+        self.subscribers.set(subscribers as i64);
+        let mut now = Registry::with_prefix("rackd");
+        now.register_collector(Box::new(scrape));
+        let mut out = String::with_capacity(16 * 1024);
+        text::encode_registry(&mut out, &self.registry)?;
+        text::encode_registry(&mut out, &now)?;
+        text::encode_eof(&mut out)?;
+        Ok(out)
+    }
+
+    /// When rackd started (the age of a device never heard from).
+    pub fn started(&self) -> OffsetDateTime {
+        self.started
+    }
+
+    /// The body of `GET /metrics` in `format`: the counted families, then `scrape`'s.
+    pub fn render(
+        &self,
+        scrape: scrape::Scrape,
+        subscribers: usize,
+        format: Format,
+    ) -> Result<String, ApiError> {
+        let failed = |e: &dyn std::fmt::Display| {
+            tracing::error!(error = %e, "encoding metrics");
+            ApiError::unavailable("the metrics could not be encoded")
+        };
+        let openmetrics = self.encode(scrape, subscribers).map_err(|e| failed(&e))?;
+        match format {
+            Format::OpenMetrics => Ok(openmetrics),
+            Format::Prometheus => format::to_prometheus(&openmetrics).map_err(|e| failed(&e)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_family_converts_to_0_0_4() {
+        let metrics = Arc::new(Metrics::default());
+        metrics.count_request("GET".into(), "/x".into(), 200);
+        metrics.count_resync();
+        metrics.count_snapshot("requested");
+        let kind = crate::domain::JobKind::Store;
+        let jobs = [
+            JobTiming::Dispatched { kind, waited: std::time::Duration::from_millis(30) },
+            JobTiming::Ended {
+                kind,
+                state: crate::domain::JobState::Completed,
+                took: std::time::Duration::from_secs(2),
+            },
+        ];
+        (metrics.writer_hook())(&GroupStats {
+            commands: 3,
+            took: std::time::Duration::from_millis(2),
+            jobs: &jobs,
+        });
+        let now = OffsetDateTime::now_utc();
+        let scrape =
+            scrape::Scrape { devices: Vec::new(), jobs: Vec::new(), alarms: Vec::new(), now, started: now };
+        let text = metrics.encode(scrape, 2).unwrap();
+        assert!(text.ends_with("# EOF\n"), "{text}");
+        assert!(text.contains("rackd_build_info{version=\""), "{text}");
+        assert!(text.contains("rackd_job_dispatch_seconds_count{kind=\"store\"} 1"), "{text}");
+        assert!(
+            text.contains("rackd_job_duration_seconds_count{kind=\"store\",state=\"completed\"} 1"),
+            "{text}"
+        );
+        assert!(text.contains("rackd_writer_group_size_count 1"), "{text}");
+        let old = format::to_prometheus(&text).unwrap();
+        assert!(!old.contains("# EOF") && !old.contains(" info\n"), "{old}");
+        assert!(old.contains("# TYPE rackd_ws_resyncs_total counter\nrackd_ws_resyncs_total 1\n"), "{old}");
+        assert!(old.contains("# TYPE rackd_build_info gauge\n"), "{old}");
+    }
+}

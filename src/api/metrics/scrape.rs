@@ -1,0 +1,258 @@
+//! What `/metrics` reads at scrape time rather than counting as it happens: each device's
+//! status (the snapshot `/api/v1/devices` serves, its link counters and round trips
+//! included), active alarms and jobs from the store.
+//!
+//! Decisions:
+//! - **No second bookkeeping.** The link's counters are totals since rackd started and only
+//!   grow, so they are served as counters straight from the status; the gauges are the
+//!   status itself. Nothing is copied into the registry between scrapes.
+//! - **Small, fixed label sets.** Every device family has the one label `device`; its kind,
+//!   protocol and address are on `rackd_device_info` (join on `device` when needed). Jobs
+//!   have `device` and `state`, alarms `device` and `class`; every configured device gets a
+//!   sample for each state and class, zero included, so an alert never waits for a first
+//!   occurrence to have a series.
+//! - **A device never heard from** counts its seconds since contact from rackd's start: it
+//!   has been silent at least that long, and an alert on the age fires for it too.
+
+use std::collections::BTreeMap;
+
+use prometheus_client::collector::Collector;
+use prometheus_client::encoding::{
+    DescriptorEncoder, EncodeGaugeValue, EncodeLabelSet, EncodeLabelValue, LabelValueEncoder, NoLabelSet,
+};
+use prometheus_client::metrics::MetricType;
+use time::OffsetDateTime;
+
+use crate::devices::DeviceStatus;
+use crate::domain::{AlarmClass, JobState};
+use crate::protocols::transport::ROUND_TRIP_BOUNDS;
+
+/// A label value from outside the code (a device id, an address): escaped as both text
+/// formats want (prometheus-client writes label values as they are).
+#[derive(Clone, Debug, Hash, PartialEq, Eq)]
+pub struct Text(pub String);
+
+impl EncodeLabelValue for Text {
+    fn encode(&self, encoder: &mut LabelValueEncoder) -> Result {
+        use std::fmt::Write;
+        for c in self.0.chars() {
+            match c {
+                '\\' => encoder.write_str("\\\\")?,
+                '"' => encoder.write_str("\\\"")?,
+                '\n' => encoder.write_str("\\n")?,
+                c => encoder.write_char(c)?,
+            }
+        }
+        Ok(())
+    }
+}
+
+#[derive(EncodeLabelSet, Debug, Clone, PartialEq, Eq, Hash)]
+struct Device {
+    device: Text,
+}
+
+#[derive(EncodeLabelSet, Debug, Clone, PartialEq, Eq, Hash)]
+struct DeviceInfo {
+    device: Text,
+    kind: &'static str,
+    protocol: Text,
+    address: Text,
+}
+
+#[derive(EncodeLabelSet, Debug, Clone, PartialEq, Eq, Hash)]
+struct Dropped {
+    device: Text,
+    reason: &'static str,
+}
+
+#[derive(EncodeLabelSet, Debug, Clone, PartialEq, Eq, Hash)]
+struct JobCount {
+    device: Text,
+    state: Text,
+}
+
+#[derive(EncodeLabelSet, Debug, Clone, PartialEq, Eq, Hash)]
+struct AlarmCount {
+    device: Text,
+    class: Text,
+}
+
+/// One scrape's worth of state, encoded as rackd's scrape-time families.
+#[derive(Debug)]
+pub struct Scrape {
+    /// Every device's status, as the API shows it.
+    pub devices: Vec<DeviceStatus>,
+    /// Jobs by (device, state), from the store.
+    pub jobs: Vec<(String, String, i64)>,
+    /// Active alarms by (device, class), from the store.
+    pub alarms: Vec<(String, String, i64)>,
+    /// Now.
+    pub now: OffsetDateTime,
+    /// When rackd started (the age of a device never heard from).
+    pub started: OffsetDateTime,
+}
+
+type Result = std::result::Result<(), std::fmt::Error>;
+
+fn gauge<L: EncodeLabelSet, V: EncodeGaugeValue>(
+    e: &mut DescriptorEncoder,
+    name: &str,
+    help: &str,
+    samples: impl IntoIterator<Item = (L, V)>,
+) -> Result {
+    let mut m = e.encode_descriptor(name, help, None, MetricType::Gauge)?;
+    for (labels, v) in samples {
+        m.encode_family(&labels)?.encode_gauge(&v)?;
+    }
+    Ok(())
+}
+
+fn counter<L: EncodeLabelSet>(
+    e: &mut DescriptorEncoder,
+    name: &str,
+    help: &str,
+    samples: impl IntoIterator<Item = (L, u64)>,
+) -> Result {
+    let mut m = e.encode_descriptor(name, help, None, MetricType::Counter)?;
+    for (labels, v) in samples {
+        m.encode_family(&labels)?.encode_counter::<NoLabelSet, _, u64>(&v, None)?;
+    }
+    Ok(())
+}
+
+/// Counts from grouped rows, with a zero for each configured device and each of `all`.
+fn counts(
+    rows: &[(String, String, i64)],
+    devices: &[DeviceStatus],
+    all: &[&str],
+) -> BTreeMap<(String, String), i64> {
+    let mut map = BTreeMap::new();
+    for d in devices {
+        for a in all {
+            map.insert((d.id.clone(), (*a).to_owned()), 0);
+        }
+    }
+    for (device, what, n) in rows {
+        *map.entry((device.clone(), what.clone())).or_insert(0) += n;
+    }
+    map
+}
+
+impl Scrape {
+    fn each<L, V>(&self, f: impl Fn(&DeviceStatus) -> (L, V)) -> Vec<(L, V)> {
+        self.devices.iter().map(f).collect()
+    }
+
+    fn devices(&self, e: &mut DescriptorEncoder) -> Result {
+        let id = |s: &DeviceStatus| Device { device: Text(s.id.clone()) };
+        let flag = |b: bool| i64::from(b);
+        let mut m = e.encode_descriptor(
+            "device",
+            "A configured device: its kind, protocol and address.",
+            None,
+            MetricType::Info,
+        )?;
+        for s in &self.devices {
+            let info = DeviceInfo {
+                device: Text(s.id.clone()),
+                kind: s.kind.as_str(),
+                protocol: Text(s.protocol.clone()),
+                address: Text(s.address.clone()),
+            };
+            m.encode_info(&info)?;
+        }
+        gauge(
+            e,
+            "device_online",
+            "1 while the device answers, 0 while it is offline.",
+            self.each(|s| (id(s), flag(s.online))),
+        )?;
+        gauge(
+            e,
+            "device_degraded",
+            "1 while the device's link needs too many retries (a warning).",
+            self.each(|s| (id(s), flag(s.link.degraded))),
+        )?;
+        gauge(
+            e,
+            "device_paused",
+            "1 while an operator has paused the device (or all its aisles).",
+            self.each(|s| (id(s), flag(s.paused))),
+        )?;
+        let age =
+            |s: &DeviceStatus| (self.now - s.last_contact.unwrap_or(self.started)).as_seconds_f64().max(0.0);
+        gauge(
+            e,
+            "device_seconds_since_contact",
+            "Seconds since the device last answered (since rackd started if it never did).",
+            self.each(|s| (id(s), age(s))),
+        )?;
+        counter(
+            e,
+            "device_link_requests",
+            "Requests rackd asked of the device's link.",
+            self.each(|s| (id(s), s.link.requests)),
+        )?;
+        counter(
+            e,
+            "device_link_retries",
+            "Requests sent again after a timeout or a bad reply.",
+            self.each(|s| (id(s), s.link.retries)),
+        )?;
+        counter(
+            e,
+            "device_link_timeouts",
+            "Attempts that got no reply in time.",
+            self.each(|s| (id(s), s.link.timeouts)),
+        )?;
+        let dropped = self.devices.iter().flat_map(|s| {
+            [("stale", s.link.stale), ("foreign", s.link.foreign), ("malformed", s.link.malformed)]
+                .map(|(reason, n)| (Dropped { device: Text(s.id.clone()), reason }, n))
+        });
+        counter(
+            e,
+            "device_link_dropped_replies",
+            "Replies dropped: stale (late or for another request), foreign (another id or unit) or malformed.",
+            dropped,
+        )?;
+        let mut m = e.encode_descriptor(
+            "device_link_round_trip_seconds",
+            "Round trips of the device's clean replies (those the adaptive timeout learns from).",
+            None,
+            MetricType::Histogram,
+        )?;
+        for s in &self.devices {
+            let r = &s.link.round_trips;
+            let buckets: Vec<(f64, u64)> =
+                ROUND_TRIP_BOUNDS.iter().copied().chain([f64::MAX]).zip(r.counts).collect();
+            m.encode_family(&id(s))?.encode_histogram::<NoLabelSet>(
+                r.sum_seconds,
+                r.count(),
+                &buckets,
+                None,
+            )?;
+        }
+        Ok(())
+    }
+}
+
+impl Collector for Scrape {
+    fn encode(&self, mut e: DescriptorEncoder) -> Result {
+        self.devices(&mut e)?;
+        let states: Vec<&str> = JobState::ALL.iter().map(|s| s.as_str()).collect();
+        let jobs = counts(&self.jobs, &self.devices, &states);
+        let jobs = jobs.into_iter().map(|((d, s), n)| (JobCount { device: Text(d), state: Text(s) }, n));
+        gauge(&mut e, "jobs", "Jobs in the store by device and state.", jobs)?;
+        let classes: Vec<&str> = AlarmClass::ALL.iter().map(|c| c.as_str()).collect();
+        let alarms = counts(&self.alarms, &self.devices, &classes);
+        let alarms =
+            alarms.into_iter().map(|((d, c), n)| (AlarmCount { device: Text(d), class: Text(c) }, n));
+        gauge(
+            &mut e,
+            "alarms_active",
+            "Active alarms by device and class (business, hardware, link).",
+            alarms,
+        )
+    }
+}
