@@ -6,7 +6,7 @@
 //! cases and a failure can be replayed; `RACKD_SCHEMATHESIS_SEED=random` explores anew.
 //!
 //! Its coverage phase is left out: with this machine's CPython 3.11.7 it stops on an
-//! interpreter bug ("AST constructor recursion depth mismatch", fixed in 3.11.8) in the
+//! interpreter error ("AST constructor recursion depth mismatch") inside the
 //! fuzzer itself, not on an answer of ours.
 
 use std::path::PathBuf;
