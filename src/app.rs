@@ -65,11 +65,12 @@ impl Application {
             tracing::warn!(%listen, "no API keys configured: every request is allowed");
         }
         let db = &config.database;
-        let pool = store::open(&db.path, Duration::from_millis(db.busy_timeout_ms))
+        let database = store::database(db);
+        let pool = store::open(&database, Duration::from_millis(db.busy_timeout_ms))
             .await
-            .with_context(|| format!("opening database {}", db.path.display()))?;
+            .with_context(|| format!("opening database {}", database.display()))?;
         let layout = config.layout();
-        locations::seed(&mut *pool.acquire().await?, &layout, now_ms()).await.context("seeding locations")?;
+        locations::seed(&pool, &layout, now_ms()).await.context("seeding locations")?;
         let queues = Queues::new(config.devices.iter().map(|d| Setup {
             id: d.id().to_owned(),
             window: d.dispatch_window(),
@@ -83,14 +84,9 @@ impl Application {
             publish: Some(hub.hook()),
             observe: Some(metrics.writer_hook()),
         };
-        let (writer, writer_task) = Writer::start(
-            &db.path,
-            Duration::from_millis(db.busy_timeout_ms),
-            config.intake.max_group,
-            config.intake.queue,
-            hooks,
-        )
-        .context("opening the job writer's connection")?;
+        let (writer, writer_task) = Writer::start(&pool, config.intake.max_group, config.intake.queue, hooks)
+            .await
+            .context("opening the job writer's connection")?;
         let dispatcher = Dispatcher::new(queues.clone(), writer.clone(), pool.clone());
         dispatcher.load(config.devices.iter().map(|d| d.id())).await.context("loading the queues")?;
         dispatcher.restore().await.context("restoring pauses and location locks")?;

@@ -37,7 +37,7 @@ use crate::domain::{AisleLayout, Layout};
 pub struct Config {
     /// The HTTP server.
     pub server: ServerConfig,
-    /// The SQLite database.
+    /// The database: a SQLite file (the default) or a PostgreSQL server.
     pub database: DatabaseConfig,
     /// Job intake (group commit).
     pub intake: IntakeConfig,
@@ -77,8 +77,11 @@ pub struct ServerConfig {
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DatabaseConfig {
-    /// Path of the SQLite file; its folder is created if missing.
+    /// Path of the SQLite file; its folder is created if missing. Not used when `url` is set.
     pub path: PathBuf,
+    /// A PostgreSQL server instead of the SQLite file: `postgres://user:password@host/db`
+    /// (any libpq-style URL sqlx accepts, with `?sslmode=` and the rest).
+    pub url: Option<String>,
     /// How long a statement waits for a lock before failing, in milliseconds.
     pub busy_timeout_ms: u64,
 }
@@ -161,7 +164,7 @@ impl Default for ServerConfig {
 
 impl Default for DatabaseConfig {
     fn default() -> Self {
-        DatabaseConfig { path: PathBuf::from("data/rackd.db"), busy_timeout_ms: 5000 }
+        DatabaseConfig { path: PathBuf::from("data/rackd.db"), url: None, busy_timeout_ms: 5000 }
     }
 }
 

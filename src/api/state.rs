@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use sqlx::SqlitePool;
+use crate::store::Pool;
 
 use super::metrics::Metrics;
 use crate::auth::KeyRing;
@@ -32,7 +32,7 @@ impl std::ops::Deref for AppState {
 /// What [`AppState`] holds.
 pub struct Shared {
     /// The database, for reads.
-    pub pool: SqlitePool,
+    pub pool: Pool,
     /// The one writer of jobs.
     pub writer: Writer,
     /// What job requests are checked against.

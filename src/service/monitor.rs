@@ -23,7 +23,7 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
-use sqlx::SqlitePool;
+use crate::store::Pool;
 use tokio::sync::watch;
 use tracing::Instrument;
 
@@ -64,7 +64,7 @@ pub async fn start(
     devices: &Devices,
     queues: &Queues,
     writer: Writer,
-    pool: &SqlitePool,
+    pool: &Pool,
 ) -> Vec<tokio::task::JoinHandle<()>> {
     let mut active: HashMap<String, BTreeSet<Key>> = HashMap::new();
     match alarms::active(pool).await {

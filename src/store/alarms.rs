@@ -1,12 +1,11 @@
-//! Device alarms as recorded: raised and cleared by the writer thread (with their events),
+//! Device alarms as recorded: raised and cleared by the writer (with their events),
 //! read through the pool by the API and the WebSocket snapshot.
 
-use rusqlite::{OptionalExtension, Transaction, params};
 use serde::Serialize;
-use sqlx::SqliteExecutor;
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
+use super::{Reader, read};
 use crate::domain::time::from_ms;
 use crate::domain::{AlarmClass, AlarmKind};
 
@@ -63,17 +62,18 @@ impl NewAlarm {
     }
 }
 
-#[derive(sqlx::FromRow)]
-struct Row {
-    id: i64,
-    device: String,
-    kind: String,
-    code: i64,
-    class: String,
-    text: String,
-    detail: Option<String>,
-    raised_at: i64,
-    cleared_at: Option<i64>,
+/// An alarm as stored (the same on both engines).
+#[derive(Clone, Serialize, sqlx::FromRow)]
+pub(crate) struct Row {
+    pub(crate) id: i64,
+    pub(crate) device: String,
+    pub(crate) kind: String,
+    pub(crate) code: i64,
+    pub(crate) class: String,
+    pub(crate) text: String,
+    pub(crate) detail: Option<String>,
+    pub(crate) raised_at: i64,
+    pub(crate) cleared_at: Option<i64>,
 }
 
 impl From<Row> for Alarm {
@@ -94,7 +94,8 @@ impl From<Row> for Alarm {
     }
 }
 
-const COLUMNS: &str = "id, device, kind, code, class, text, detail, raised_at, cleared_at";
+/// The columns [`Row`] reads.
+pub(crate) const COLUMNS: &str = "id, device, kind, code, class, text, detail, raised_at, cleared_at";
 
 /// Which alarms to list. Alarms come newest first.
 #[derive(Clone, Debug, Default)]
@@ -110,104 +111,33 @@ pub struct AlarmFilter {
 }
 
 /// Alarms matching `filter`, newest first.
-pub async fn list(db: impl SqliteExecutor<'_>, filter: &AlarmFilter) -> Result<Vec<Alarm>, sqlx::Error> {
-    let rows: Vec<Row> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
-        "SELECT {COLUMNS} FROM alarms WHERE (?1 IS NULL OR (cleared_at IS NULL) = ?1) \
-         AND (?2 IS NULL OR device = ?2) AND (?3 IS NULL OR id < ?3) ORDER BY id DESC LIMIT ?4"
-    )))
-    .bind(filter.active)
-    .bind(&filter.device)
-    .bind(filter.before_id)
-    .bind(filter.limit)
-    .fetch_all(db)
-    .await?;
+pub async fn list(db: impl Into<Reader<'_>>, filter: &AlarmFilter) -> Result<Vec<Alarm>, sqlx::Error> {
+    let sql = sqlx::AssertSqlSafe(format!(
+        "SELECT {COLUMNS} FROM alarms WHERE ($1 IS NULL OR (cleared_at IS NULL) = $1) \
+         AND ($2 IS NULL OR device = $2) AND ($3 IS NULL OR id < $3) ORDER BY id DESC LIMIT $4"
+    ));
+    let rows: Vec<Row> = read!(db.into(), p => {
+        sqlx::query_as(sql)
+            .bind(filter.active)
+            .bind(&filter.device)
+            .bind(filter.before_id)
+            .bind(filter.limit as i64)
+            .fetch_all(p)
+            .await
+    })?;
     Ok(rows.into_iter().map(Alarm::from).collect())
 }
 
 /// Every active alarm, oldest first.
-pub async fn active(db: impl SqliteExecutor<'_>) -> Result<Vec<Alarm>, sqlx::Error> {
-    let rows: Vec<Row> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
-        "SELECT {COLUMNS} FROM alarms WHERE cleared_at IS NULL ORDER BY id"
-    )))
-    .fetch_all(db)
-    .await?;
+pub async fn active(db: impl Into<Reader<'_>>) -> Result<Vec<Alarm>, sqlx::Error> {
+    let sql =
+        sqlx::AssertSqlSafe(format!("SELECT {COLUMNS} FROM alarms WHERE cleared_at IS NULL ORDER BY id"));
+    let rows: Vec<Row> = read!(db.into(), p => sqlx::query_as(sql).fetch_all(p).await)?;
     Ok(rows.into_iter().map(Alarm::from).collect())
 }
 
 /// Active alarms counted by device and class, in one grouped query.
-pub async fn count_active(db: impl SqliteExecutor<'_>) -> Result<Vec<(String, String, i64)>, sqlx::Error> {
-    sqlx::query_as(
-        "SELECT device, class, COUNT(*) FROM alarms WHERE cleared_at IS NULL GROUP BY device, class",
-    )
-    .fetch_all(db)
-    .await
-}
-
-/// Records a raised alarm (writer thread); None when the same alarm is already active.
-pub(crate) fn raise(tx: &Transaction<'_>, new: &NewAlarm, now: i64) -> rusqlite::Result<Option<Alarm>> {
-    let active: Option<i64> = tx
-        .prepare_cached(
-            "SELECT id FROM alarms WHERE device = ?1 AND kind = ?2 AND code = ?3 AND cleared_at IS NULL",
-        )?
-        .query_row(params![new.device, new.kind.as_str(), new.code], |r| r.get(0))
-        .optional()?;
-    if active.is_some() {
-        return Ok(None);
-    }
-    tx.prepare_cached(
-        "INSERT INTO alarms (device, kind, code, class, text, detail, raised_at) \
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
-    )?
-    .execute(params![
-        new.device,
-        new.kind.as_str(),
-        new.code,
-        new.class.as_str(),
-        new.text,
-        new.detail,
-        now
-    ])?;
-    Ok(Some(Alarm {
-        id: tx.last_insert_rowid(),
-        device: new.device.clone(),
-        kind: new.kind,
-        code: new.code,
-        class: new.class,
-        text: new.text.clone(),
-        detail: new.detail.clone(),
-        raised_at: from_ms(now),
-        cleared_at: None,
-    }))
-}
-
-/// Clears the device's active alarm of this kind and code (writer thread); None when none
-/// is active.
-pub(crate) fn clear(
-    tx: &Transaction<'_>,
-    device: &str,
-    (kind, code): (AlarmKind, u16),
-    now: i64,
-) -> rusqlite::Result<Option<Alarm>> {
-    let row = tx
-        .prepare_cached(&format!(
-            "SELECT {COLUMNS} FROM alarms WHERE device = ?1 AND kind = ?2 AND code = ?3 AND cleared_at IS NULL"
-        ))?
-        .query_row(params![device, kind.as_str(), code], |r| {
-            Ok(Row {
-                id: r.get(0)?,
-                device: r.get(1)?,
-                kind: r.get(2)?,
-                code: r.get(3)?,
-                class: r.get(4)?,
-                text: r.get(5)?,
-                detail: r.get(6)?,
-                raised_at: r.get(7)?,
-                cleared_at: None,
-            })
-        })
-        .optional()?;
-    let Some(mut row) = row else { return Ok(None) };
-    tx.prepare_cached("UPDATE alarms SET cleared_at = ?1 WHERE id = ?2")?.execute(params![now, row.id])?;
-    row.cleared_at = Some(now);
-    Ok(Some(row.into()))
+pub async fn count_active(db: impl Into<Reader<'_>>) -> Result<Vec<(String, String, i64)>, sqlx::Error> {
+    let sql = "SELECT device, class, COUNT(*) FROM alarms WHERE cleared_at IS NULL GROUP BY device, class";
+    read!(db.into(), p => sqlx::query_as(sql).fetch_all(p).await)
 }

@@ -1,12 +1,13 @@
 //! The event log: every job, device, alarm and location change, in one gapless sequence.
 //!
-//! Events are appended by the writer thread only (see [`super::writer`]), inside the same
+//! Events are appended by the writer only (see [`super::writer`]), inside the same
 //! transaction as the change they describe, so the log never tells of a change that was
-//! rolled back and never misses one that was committed. `seq` is the table's rowid: only
-//! committed rows take a number and there is one writer, so numbers have no gaps. Pruning
-//! (retention) always keeps the newest event, so a restart never reuses a number.
+//! rolled back and never misses one that was committed. `seq` is numbered by the one
+//! writer, from the highest committed number, and a group that rolls back gives its numbers
+//! back, so numbers have no gaps on either engine. Pruning (retention) always keeps the
+//! newest event, so a restart never reuses a number.
 
-use sqlx::SqliteExecutor;
+use super::{Reader, read};
 
 use crate::domain::time::from_ms;
 
@@ -43,20 +44,18 @@ pub fn json(seq: i64, at: i64, kind: &str, data: &str) -> String {
 
 /// Up to `limit` events after `since`, oldest first.
 pub async fn after(
-    db: impl SqliteExecutor<'_>,
+    db: impl Into<Reader<'_>>,
     since: i64,
     limit: u32,
 ) -> Result<Vec<StoredEvent>, sqlx::Error> {
-    sqlx::query_as("SELECT seq, at, type, data FROM events WHERE seq > ?1 ORDER BY seq LIMIT ?2")
-        .bind(since)
-        .bind(limit)
-        .fetch_all(db)
-        .await
+    let sql = "SELECT seq, at, type, data FROM events WHERE seq > $1 ORDER BY seq LIMIT $2";
+    read!(db.into(), p => sqlx::query_as(sql).bind(since).bind(limit as i64).fetch_all(p).await)
 }
 
 /// The first and last sequence numbers in the log (0, 0 when it is empty).
-pub async fn bounds(db: impl SqliteExecutor<'_>) -> Result<(i64, i64), sqlx::Error> {
-    sqlx::query_as("SELECT COALESCE(MIN(seq), 0), COALESCE(MAX(seq), 0) FROM events").fetch_one(db).await
+pub async fn bounds(db: impl Into<Reader<'_>>) -> Result<(i64, i64), sqlx::Error> {
+    let sql = "SELECT COALESCE(MIN(seq), 0), COALESCE(MAX(seq), 0) FROM events";
+    read!(db.into(), p => sqlx::query_as(sql).fetch_one(p).await)
 }
 
 #[cfg(test)]

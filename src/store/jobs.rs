@@ -1,10 +1,11 @@
 //! Job rows: the API's view of a job, and the queries that read them.
 
 use serde::Serialize;
-use sqlx::{QueryBuilder, Sqlite, SqliteExecutor};
+use sqlx::QueryBuilder;
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
+use super::{Pool, Reader, read};
 use crate::domain::time::from_ms;
 use crate::domain::{Failure, FailureKind, JobKind, JobSpec, JobState, Priority};
 pub use crate::domain::{Job, NewJob};
@@ -43,7 +44,7 @@ pub struct JobFilter {
     pub limit: u32,
 }
 
-/// A job as stored, column by column (read through sqlx or, by the writer, rusqlite).
+/// A job as stored, column by column (the same on both engines).
 #[derive(sqlx::FromRow)]
 pub(crate) struct JobRow {
     id: i64,
@@ -60,28 +61,6 @@ pub(crate) struct JobRow {
     created_at: i64,
     updated_at: i64,
     attempt: i64,
-}
-
-impl JobRow {
-    /// Reads the row from a rusqlite row whose columns start with [`COLUMNS`] at `first`.
-    pub(crate) fn from_rusqlite(row: &rusqlite::Row<'_>, first: usize) -> rusqlite::Result<JobRow> {
-        Ok(JobRow {
-            id: row.get(first)?,
-            reference: row.get(first + 1)?,
-            priority: row.get(first + 2)?,
-            barcode: row.get(first + 3)?,
-            spec: row.get(first + 4)?,
-            device: row.get(first + 5)?,
-            state: row.get(first + 6)?,
-            forced: row.get(first + 7)?,
-            failure_kind: row.get(first + 8)?,
-            failure_code: row.get(first + 9)?,
-            failure_text: row.get(first + 10)?,
-            created_at: row.get(first + 11)?,
-            updated_at: row.get(first + 12)?,
-            attempt: row.get(first + 13)?,
-        })
-    }
 }
 
 /// The columns [`JobRow`] reads, in a SELECT list.
@@ -127,20 +106,22 @@ impl TryFrom<JobRow> for Job {
 }
 
 /// One job by id.
-pub async fn get(db: impl SqliteExecutor<'_>, id: i64) -> Result<Option<Job>, sqlx::Error> {
-    let sql = format!("SELECT {COLUMNS} FROM jobs WHERE id = ?");
-    let row: Option<JobRow> = sqlx::query_as(sqlx::AssertSqlSafe(sql)).bind(id).fetch_optional(db).await?;
+pub async fn get(db: impl Into<Reader<'_>>, id: i64) -> Result<Option<Job>, sqlx::Error> {
+    let sql = format!("SELECT {COLUMNS} FROM jobs WHERE id = $1");
+    let row: Option<JobRow> =
+        read!(db.into(), p => sqlx::query_as(sqlx::AssertSqlSafe(sql)).bind(id).fetch_optional(p).await)?;
     row.map(Job::try_from).transpose().map_err(decode)
 }
 
 /// A corrupt row as the sqlx error the read functions return.
-fn decode(e: CorruptRow) -> sqlx::Error {
+pub(crate) fn decode(e: CorruptRow) -> sqlx::Error {
     sqlx::Error::Decode(e.into())
 }
 
 /// Jobs matching `filter`, in id order.
-pub async fn list(db: impl SqliteExecutor<'_>, filter: &JobFilter) -> Result<Vec<Job>, sqlx::Error> {
-    let mut q = QueryBuilder::<Sqlite>::new(format!("SELECT {COLUMNS} FROM jobs WHERE 1 = 1"));
+pub async fn list(db: impl Into<Reader<'_>>, filter: &JobFilter) -> Result<Vec<Job>, sqlx::Error> {
+    read!(db.into(), p => {
+    let mut q = QueryBuilder::new(format!("SELECT {COLUMNS} FROM jobs WHERE 1 = 1"));
     if let Some(s) = filter.state {
         q.push(" AND state = ").push_bind(s.as_str());
     }
@@ -163,27 +144,27 @@ pub async fn list(db: impl SqliteExecutor<'_>, filter: &JobFilter) -> Result<Vec
         q.push(" AND id > ").push_bind(id);
     }
     q.push(" ORDER BY id LIMIT ").push_bind(filter.limit as i64);
-    let rows: Vec<JobRow> = q.build_query_as().fetch_all(db).await?;
+    let rows: Vec<JobRow> = q.build_query_as().fetch_all(p).await?;
     rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
+    })
 }
 
 /// Up to `limit` jobs not yet ended (queued, dispatched, running, cancelling), newest first.
-pub async fn active(db: impl SqliteExecutor<'_>, limit: u32) -> Result<Vec<Job>, sqlx::Error> {
+pub async fn active(db: impl Into<Reader<'_>>, limit: u32) -> Result<Vec<Job>, sqlx::Error> {
     let sql = format!(
         "SELECT {COLUMNS} FROM jobs WHERE state NOT IN ('completed', 'failed', 'cancelled') \
-         ORDER BY id DESC LIMIT ?"
+         ORDER BY id DESC LIMIT $1"
     );
-    let rows: Vec<JobRow> = sqlx::query_as(sqlx::AssertSqlSafe(sql)).bind(limit).fetch_all(db).await?;
+    let q = sqlx::AssertSqlSafe(sql);
+    let rows: Vec<JobRow> = read!(db.into(), p => sqlx::query_as(q).bind(limit as i64).fetch_all(p).await)?;
     rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
 }
 
 /// A job's history, oldest first.
-pub async fn history(db: impl SqliteExecutor<'_>, id: i64) -> Result<Vec<JobEvent>, sqlx::Error> {
+pub async fn history(db: impl Into<Reader<'_>>, id: i64) -> Result<Vec<JobEvent>, sqlx::Error> {
+    let sql = "SELECT state, cause, at FROM job_history WHERE job_id = $1 ORDER BY id";
     let rows: Vec<(String, String, i64)> =
-        sqlx::query_as("SELECT state, cause, at FROM job_history WHERE job_id = ? ORDER BY id")
-            .bind(id)
-            .fetch_all(db)
-            .await?;
+        read!(db.into(), p => sqlx::query_as(sql).bind(id).fetch_all(p).await)?;
     rows.into_iter()
         .map(|(state, cause, at)| {
             let state = JobState::parse(&state)
@@ -195,59 +176,54 @@ pub async fn history(db: impl SqliteExecutor<'_>, id: i64) -> Result<Vec<JobEven
 
 /// Jobs counted by device (empty: not routed to one) and state, in one grouped query.
 pub async fn count_by_device_and_state(
-    db: impl SqliteExecutor<'_>,
+    db: impl Into<Reader<'_>>,
 ) -> Result<Vec<(String, String, i64)>, sqlx::Error> {
-    sqlx::query_as("SELECT COALESCE(device, ''), state, COUNT(*) FROM jobs GROUP BY device, state")
-        .fetch_all(db)
-        .await
+    let sql = "SELECT COALESCE(device, ''), state, COUNT(*) FROM jobs GROUP BY device, state";
+    read!(db.into(), p => sqlx::query_as(sql).fetch_all(p).await)
 }
 
 /// The jobs with these ids that exist, in id order.
-pub async fn many(db: impl SqliteExecutor<'_>, ids: &[i64]) -> Result<Vec<Job>, sqlx::Error> {
+pub async fn many(db: impl Into<Reader<'_>>, ids: &[i64]) -> Result<Vec<Job>, sqlx::Error> {
     if ids.is_empty() {
         return Ok(Vec::new());
     }
-    let mut q = QueryBuilder::<Sqlite>::new(format!("SELECT {COLUMNS} FROM jobs WHERE id IN ("));
-    let mut list = q.separated(", ");
-    for id in ids {
-        list.push_bind(*id);
-    }
-    q.push(") ORDER BY id");
-    let rows: Vec<JobRow> = q.build_query_as().fetch_all(db).await?;
-    rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
+    read!(db.into(), p => {
+        let mut q = QueryBuilder::new(format!("SELECT {COLUMNS} FROM jobs WHERE id IN ("));
+        let mut list = q.separated(", ");
+        for id in ids {
+            list.push_bind(*id);
+        }
+        q.push(") ORDER BY id");
+        let rows: Vec<JobRow> = q.build_query_as().fetch_all(p).await?;
+        rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
+    })
 }
 
 /// The unfinished jobs of `device` a dispatcher considers: every one on the device, and the
 /// oldest `window` queued ones, oldest first. Since the queued ones are a prefix by age,
 /// every older job that could block one of them (same location) is among them too.
-pub async fn dispatch_window(
-    db: impl SqliteExecutor<'_> + Copy,
-    device: &str,
-    window: u32,
-) -> Result<Vec<Job>, sqlx::Error> {
+pub async fn dispatch_window(db: &Pool, device: &str, window: u32) -> Result<Vec<Job>, sqlx::Error> {
     let on_device = format!(
-        "SELECT {COLUMNS} FROM jobs WHERE device = ? AND state IN ('dispatched', 'running', 'cancelling') ORDER BY id"
+        "SELECT {COLUMNS} FROM jobs WHERE device = $1 AND state IN ('dispatched', 'running', 'cancelling') ORDER BY id"
     );
     let queued =
-        format!("SELECT {COLUMNS} FROM jobs WHERE device = ? AND state = 'queued' ORDER BY id LIMIT ?");
+        format!("SELECT {COLUMNS} FROM jobs WHERE device = $1 AND state = 'queued' ORDER BY id LIMIT $2");
+    let (on_device, queued) = (sqlx::AssertSqlSafe(on_device), sqlx::AssertSqlSafe(queued));
     let mut rows: Vec<JobRow> =
-        sqlx::query_as(sqlx::AssertSqlSafe(on_device)).bind(device).fetch_all(db).await?;
-    rows.extend(
-        sqlx::query_as::<_, JobRow>(sqlx::AssertSqlSafe(queued))
-            .bind(device)
-            .bind(window as i64)
-            .fetch_all(db)
-            .await?,
-    );
+        read!(Reader::from(db), p => sqlx::query_as(on_device).bind(device).fetch_all(p).await)?;
+    rows.extend(read!(Reader::from(db), p => {
+        sqlx::query_as::<_, JobRow>(queued).bind(device).bind(window as i64).fetch_all(p).await
+    })?);
     rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
 }
 
 /// Every job of `device` that has not ended, oldest first.
-pub async fn unfinished(db: impl SqliteExecutor<'_>, device: &str) -> Result<Vec<Job>, sqlx::Error> {
+pub async fn unfinished(db: impl Into<Reader<'_>>, device: &str) -> Result<Vec<Job>, sqlx::Error> {
     let sql = format!(
-        "SELECT {COLUMNS} FROM jobs WHERE device = ? \
+        "SELECT {COLUMNS} FROM jobs WHERE device = $1 \
          AND state IN ('queued', 'dispatched', 'running', 'cancelling') ORDER BY id"
     );
-    let rows: Vec<JobRow> = sqlx::query_as(sqlx::AssertSqlSafe(sql)).bind(device).fetch_all(db).await?;
+    let q = sqlx::AssertSqlSafe(sql);
+    let rows: Vec<JobRow> = read!(db.into(), p => sqlx::query_as(q).bind(device).fetch_all(p).await)?;
     rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
 }

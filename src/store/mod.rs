@@ -1,86 +1,174 @@
-//! SQLite storage through sqlx: jobs, job history, locations and the event log.
+//! The store: jobs, job history, locations, alarms, controls and the event log, on one of
+//! two engines through sqlx: SQLite (embedded, the default: `database.path`) or PostgreSQL
+//! (`database.url`, for sites that outgrow one machine).
 //!
-//! The database runs in WAL mode with `synchronous=FULL`, so a commit is on disk when it
-//! returns: a 201 means the job survives a power cut. Every change to jobs goes through one
-//! writer task ([`writer::Writer`]) that commits many requests per transaction.
+//! Decisions:
+//! - **One enum over the two pools** ([`Pool`]) rather than a trait with a crate per engine:
+//!   every query is written once, with `$1` placeholders both engines accept, and the
+//!   [`on!`] macro compiles it for each engine (sqlx checks the types per engine, and the
+//!   row types derive `FromRow` for both). The few statements whose text must differ (the
+//!   writer's set-based statements, which read their rows from one JSON parameter) are
+//!   built in one place, [`engine`].
+//! - **Both schemas use the same types**: every integer column is 64-bit (`INTEGER` in
+//!   SQLite, `BIGINT` in PostgreSQL) and every flag a boolean (0/1 in SQLite), so one row
+//!   type per table reads both. Migrations are per engine, in `migrations/sqlite` and
+//!   `migrations/postgres`.
+//! - **No `query!` macros**: they check a query against one engine's schema at build time,
+//!   and every query here runs on two; the tests run every query on both engines instead
+//!   (tests/store and the API suite on each), which also needs no database at build time.
+//! - Durability: SQLite runs in WAL mode with `synchronous=FULL`; PostgreSQL with its
+//!   defaults (`synchronous_commit=on`). Either way a commit is on disk when it returns, so
+//!   a 201 means the job survives a power cut. Every change goes through one writer
+//!   ([`writer::Writer`]) that commits many requests per transaction.
 
 pub mod alarms;
 pub mod controls;
+pub mod copy;
+pub mod engine;
 pub mod events;
 pub mod jobs;
 pub mod locations;
 pub mod writer;
 
-use std::path::Path;
-use std::str::FromStr;
+use std::path::PathBuf;
 use std::time::Duration;
 
-use sqlx::SqlitePool;
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
+use sqlx::{PgPool, SqlitePool};
 
+pub use engine::{Database, Engine, OpenError};
 pub use jobs::{Job, JobEvent, JobFilter};
 
-/// The migrations in `migrations/`, embedded in the binary.
-pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
+/// The migrations of each engine, embedded in the binary.
+pub static SQLITE_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations/sqlite");
+/// See [`SQLITE_MIGRATOR`].
+pub static POSTGRES_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations/postgres");
 
-/// Opens (creating if needed) the database at `path` and applies pending migrations.
-pub async fn open(path: &Path, busy_timeout: Duration) -> Result<SqlitePool, sqlx::Error> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        if let Err(e) = std::fs::create_dir_all(dir) {
-            // A folder to create inside one rackd cannot write (a root-owned volume with
-            // the database in a subfolder): name that folder, not just "permission denied".
-            if let Some(existing) = dir.ancestors().find(|a| a.is_dir()) {
-                writable(existing)?;
-            }
-            return Err(e.into());
+/// A connection pool to the store, on either engine.
+#[derive(Clone, Debug)]
+pub enum Pool {
+    /// An embedded SQLite file.
+    Sqlite(SqlitePool),
+    /// A PostgreSQL server.
+    Postgres(PgPool),
+}
+
+/// Runs `$body` with `$p` bound to the engine's own value of `$value` (a [`Pool`] or any
+/// enum with the same two variants), compiling it once per engine.
+macro_rules! on {
+    ($ty:ident, $value:expr, $p:ident => $body:expr) => {
+        match $value {
+            $ty::Sqlite($p) => $body,
+            $ty::Postgres($p) => $body,
         }
-        writable(dir)?;
+    };
+}
+pub(crate) use on;
+
+/// Where a read runs: on the pool, or inside a read transaction ([`Pool::read_tx`]).
+pub enum Reader<'a> {
+    /// A SQLite pool.
+    Sqlite(&'a SqlitePool),
+    /// A PostgreSQL pool.
+    Postgres(&'a PgPool),
+    /// A SQLite read transaction.
+    SqliteTx(&'a mut sqlx::SqliteConnection),
+    /// A PostgreSQL read transaction.
+    PostgresTx(&'a mut sqlx::PgConnection),
+}
+
+/// Runs `$body` with `$p` bound to the executor of `$reader` (a [`Reader`]), compiling it
+/// once per engine and kind of executor.
+macro_rules! read {
+    ($reader:expr, $p:ident => $body:expr) => {
+        match $reader {
+            $crate::store::Reader::Sqlite($p) => $body,
+            $crate::store::Reader::Postgres($p) => $body,
+            $crate::store::Reader::SqliteTx($p) => $body,
+            $crate::store::Reader::PostgresTx($p) => $body,
+        }
+    };
+}
+pub(crate) use read;
+
+impl<'a> From<&'a Pool> for Reader<'a> {
+    fn from(pool: &'a Pool) -> Reader<'a> {
+        match pool {
+            Pool::Sqlite(p) => Reader::Sqlite(p),
+            Pool::Postgres(p) => Reader::Postgres(p),
+        }
     }
-    let options = SqliteConnectOptions::from_str("sqlite:")?
-        .filename(path)
-        .create_if_missing(true)
-        .journal_mode(SqliteJournalMode::Wal)
-        .synchronous(SqliteSynchronous::Full)
-        .busy_timeout(busy_timeout)
-        .foreign_keys(true);
-    let pool = SqlitePoolOptions::new().max_connections(8).connect_with(options).await?;
-    MIGRATOR.run(&pool).await?;
+}
+
+/// A read transaction: every read in it sees the store as of one moment.
+pub enum ReadTx {
+    /// On SQLite (a deferred transaction holds one WAL snapshot from its first read).
+    Sqlite(sqlx::Transaction<'static, sqlx::Sqlite>),
+    /// On PostgreSQL (`REPEATABLE READ, READ ONLY`).
+    Postgres(sqlx::Transaction<'static, sqlx::Postgres>),
+}
+
+impl ReadTx {
+    /// Reads inside the transaction.
+    pub fn reader(&mut self) -> Reader<'_> {
+        match self {
+            ReadTx::Sqlite(tx) => Reader::SqliteTx(&mut *tx),
+            ReadTx::Postgres(tx) => Reader::PostgresTx(&mut *tx),
+        }
+    }
+
+    /// Ends the transaction.
+    pub async fn finish(self) -> Result<(), sqlx::Error> {
+        on!(ReadTx, self, tx => tx.commit().await)
+    }
+}
+
+impl Pool {
+    /// Which engine this is.
+    pub fn engine(&self) -> Engine {
+        match self {
+            Pool::Sqlite(_) => Engine::Sqlite,
+            Pool::Postgres(_) => Engine::Postgres,
+        }
+    }
+
+    /// The migrations this engine's schema is made of.
+    pub fn migrator(&self) -> &'static sqlx::migrate::Migrator {
+        self.engine().migrator()
+    }
+
+    /// Starts a read transaction (see [`ReadTx`]).
+    pub async fn read_tx(&self) -> Result<ReadTx, sqlx::Error> {
+        Ok(match self {
+            Pool::Sqlite(p) => ReadTx::Sqlite(p.begin().await?),
+            Pool::Postgres(p) => {
+                let mut tx = p.begin().await?;
+                sqlx::raw_sql("SET TRANSACTION ISOLATION LEVEL REPEATABLE READ, READ ONLY")
+                    .execute(&mut *tx)
+                    .await?;
+                ReadTx::Postgres(tx)
+            }
+        })
+    }
+
+    /// Closes every connection (waits for the ones in use).
+    pub async fn close(&self) {
+        on!(Pool, self, p => p.close().await)
+    }
+}
+
+/// Opens (creating a SQLite file if needed) the store and applies pending migrations; a
+/// PostgreSQL server older than [`engine::MIN_POSTGRES`] is refused.
+pub async fn open(database: &Database, busy_timeout: Duration) -> Result<Pool, OpenError> {
+    let pool = engine::connect(database, busy_timeout, 8).await?;
+    on!(Pool, &pool, p => pool.migrator().run(p).await)?;
     Ok(pool)
 }
 
-/// Checks that rackd may create files in `dir` (SQLite needs the database's directory for
-/// its journal), so that a volume owned by another user is named with the fix instead of
-/// SQLite's "unable to open database file". The message names the directory, its owner and
-/// rackd's own uid, and the fixes a container user has: give the directory to rackd's uid,
-/// mount a named volume (which the image prepares for uid 10001), or run as the owner.
-fn writable(dir: &Path) -> std::io::Result<()> {
-    use std::os::unix::fs::MetadataExt;
-    let probe = dir.join(format!(".rackd-write-test-{}", std::process::id()));
-    match std::fs::OpenOptions::new().write(true).create_new(true).open(&probe) {
-        Ok(_) => std::fs::remove_file(&probe),
-        Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
-            let meta = std::fs::metadata(dir)?;
-            // /proc/self belongs to the process's effective user.
-            let me =
-                std::fs::metadata("/proc/self").map(|m| m.uid().to_string()).unwrap_or_else(|_| "?".into());
-            let (dir, owner) = (dir.display(), meta.uid());
-            // Running as root to write a root-owned folder is not a fix worth offering.
-            let as_owner = if owner == 0 {
-                String::new()
-            } else {
-                format!(", or run rackd as uid {owner} (--user {owner})")
-            };
-            Err(std::io::Error::new(
-                e.kind(),
-                format!(
-                    "cannot write in {dir}: it belongs to uid {owner} (mode {:o}) and rackd runs as uid {me}; \
-                     give it to uid {me} (chown {me} {dir}, on the host folder of a bind mount), or mount a \
-                     named volume there (-v rackd-data:{dir}; the image runs as uid 10001){as_owner}",
-                    meta.mode() & 0o7777,
-                ),
-            ))
-        }
-        Err(e) => Err(e),
+/// Where the store of `config` is.
+pub fn database(config: &crate::config::DatabaseConfig) -> Database {
+    match &config.url {
+        Some(url) => Database::Postgres(url.clone()),
+        None => Database::Sqlite(PathBuf::from(&config.path)),
     }
 }
 
@@ -101,10 +189,10 @@ pub enum NotReady {
 }
 
 /// Whether the database answers and every embedded migration is applied.
-pub async fn ready(pool: &SqlitePool) -> Result<(), NotReady> {
-    let applied: Vec<i64> =
-        sqlx::query_scalar("SELECT version FROM _sqlx_migrations WHERE success = 1").fetch_all(pool).await?;
-    match MIGRATOR.iter().find(|m| !applied.contains(&m.version)) {
+pub async fn ready(pool: &Pool) -> Result<(), NotReady> {
+    let sql = "SELECT version FROM _sqlx_migrations WHERE success = TRUE";
+    let applied: Vec<i64> = on!(Pool, pool, p => sqlx::query_scalar(sql).fetch_all(p).await)?;
+    match pool.migrator().iter().find(|m| !applied.contains(&m.version)) {
         Some(m) => Err(NotReady::Migration { version: m.version, description: m.description.to_string() }),
         None => Ok(()),
     }

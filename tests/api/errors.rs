@@ -143,8 +143,7 @@ async fn a_full_intake_queue_is_refused_at_once_with_retry_after() {
         c.database.busy_timeout_ms = 3_000;
     })
     .await;
-    let blocker = rusqlite::Connection::open(&app.db).unwrap();
-    blocker.execute_batch("BEGIN IMMEDIATE").unwrap();
+    let blocker = crate::helpers::WriteLock::take(&app.db).await;
     let first = tokio::spawn({
         let (client, url) = (app.client.clone(), app.url("/api/v1/jobs"));
         async move { client.post(url).json(&store("Q-1")).send().await.unwrap().status().as_u16() }
@@ -172,6 +171,6 @@ async fn a_full_intake_queue_is_refused_at_once_with_retry_after() {
     assert_eq!(r.headers()["retry-after"], "1");
     let body: serde_json::Value = r.json().await.unwrap();
     assert_eq!(body["error"]["code"], "overloaded", "{body}");
-    blocker.execute_batch("ROLLBACK").unwrap();
+    blocker.release().await;
     assert!([201, 503].contains(&first.await.unwrap()));
 }

@@ -6,6 +6,9 @@ mod cli;
 mod container;
 mod contract;
 mod errors;
+/// The engine these tests run the store on.
+pub const ENGINE: rackd::store::Engine = rackd::store::Engine::Sqlite;
+
 #[path = "../common/helpers.rs"]
 mod helpers;
 mod jobs;
@@ -14,3 +17,5 @@ mod logs;
 mod metrics;
 mod openapi;
 mod paging;
+#[path = "../common/postgres.rs"]
+mod postgres;

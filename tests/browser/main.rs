@@ -6,8 +6,13 @@
 //! found on the PATH or at `$CHROMIUM` and `$CHROMEDRIVER`; without them the tests fail,
 //! unless `RACKD_SKIP_BROWSER=1` is set, which skips them loudly. The screenshot of the main test is kept at `target/artefacts/dashboard.png`.
 
+/// The engine these tests run the store on.
+pub const ENGINE: rackd::store::Engine = rackd::store::Engine::Sqlite;
+
 #[path = "../common/helpers.rs"]
 mod helpers;
+#[path = "../common/postgres.rs"]
+mod postgres;
 
 mod keys;
 mod store;

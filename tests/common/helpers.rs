@@ -1,10 +1,9 @@
 #![allow(dead_code)] // shared by several test binaries; each uses a part
 //! Starting and stopping a real rackd for a test.
 
-use std::path::PathBuf;
-
 use rackd::app::Application;
 use rackd::config::Config;
+use rackd::store::{Database, Engine};
 use serde_json::{Value, json};
 use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
@@ -13,7 +12,7 @@ use tokio::task::JoinHandle;
 pub struct TestApp {
     pub base: String,
     pub client: reqwest::Client,
-    pub db: PathBuf,
+    pub db: Database,
     stop: Option<oneshot::Sender<()>>,
     task: Option<JoinHandle<anyhow::Result<()>>>,
     _dir: Option<tempfile::TempDir>,
@@ -24,20 +23,43 @@ pub async fn spawn_app() -> TestApp {
     spawn_with(|_| {}).await
 }
 
+/// The engine this test binary runs on (each binary's `ENGINE`).
+pub fn engine() -> Engine {
+    crate::ENGINE
+}
+
+/// A fresh, empty database on this binary's engine, and the folder to keep while it is used.
+pub async fn fresh_database() -> (Database, Option<tempfile::TempDir>) {
+    match engine() {
+        Engine::Sqlite => {
+            let dir = tempfile::tempdir().unwrap();
+            (Database::Sqlite(dir.path().join("rackd.db")), Some(dir))
+        }
+        Engine::Postgres => (Database::Postgres(crate::postgres::database().await), None),
+    }
+}
+
 /// Starts a server with the demo config changed by `edit`, on a fresh temporary database.
 pub async fn spawn_with(edit: impl FnOnce(&mut Config)) -> TestApp {
-    let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("rackd.db");
+    let (db, dir) = fresh_database().await;
     let mut app = spawn_on(db, edit).await;
-    app._dir = Some(dir);
+    app._dir = dir;
     app
 }
 
-/// Starts a server on an existing database file.
-pub async fn spawn_on(db: PathBuf, edit: impl FnOnce(&mut Config)) -> TestApp {
+/// Puts `db` into `config`.
+pub fn use_database(config: &mut Config, db: &Database) {
+    match db {
+        Database::Sqlite(path) => (config.database.path, config.database.url) = (path.clone(), None),
+        Database::Postgres(url) => config.database.url = Some(url.clone()),
+    }
+}
+
+/// Starts a server on an existing database.
+pub async fn spawn_on(db: Database, edit: impl FnOnce(&mut Config)) -> TestApp {
     let mut config = Config::demo();
     config.server.listen = "127.0.0.1:0".parse().unwrap();
-    config.database.path = db.clone();
+    use_database(&mut config, &db);
     edit(&mut config);
     let app = Application::build(&config, false).await.expect("server starts");
     let base = format!("http://{}", app.local_addr());
@@ -50,7 +72,7 @@ pub async fn spawn_on(db: PathBuf, edit: impl FnOnce(&mut Config)) -> TestApp {
 
 impl TestApp {
     /// Stops the server gracefully and waits until it has finished; keeps the database.
-    pub async fn stop(mut self) -> (PathBuf, Option<tempfile::TempDir>) {
+    pub async fn stop(mut self) -> (Database, Option<tempfile::TempDir>) {
         let _ = self.stop.take().unwrap().send(());
         self.task.take().unwrap().await.unwrap().unwrap();
         (self.db.clone(), self._dir.take())
@@ -145,5 +167,38 @@ pub async fn wait_for_more(what: &str, more: u64, secs: u64, count: impl Fn() ->
             count().saturating_sub(from)
         );
         tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    }
+}
+
+/// Another connection holding the database's write lock (SQLite: `BEGIN IMMEDIATE`;
+/// PostgreSQL: an exclusive lock on `jobs`), so that rackd's writer waits.
+pub enum WriteLock {
+    Sqlite(sqlx::SqliteConnection),
+    Postgres(sqlx::PgConnection),
+}
+
+impl WriteLock {
+    pub async fn take(db: &Database) -> WriteLock {
+        use sqlx::Connection;
+        match db {
+            Database::Sqlite(path) => {
+                let mut c =
+                    sqlx::SqliteConnection::connect(&format!("sqlite:{}", path.display())).await.unwrap();
+                sqlx::raw_sql("BEGIN IMMEDIATE").execute(&mut c).await.unwrap();
+                WriteLock::Sqlite(c)
+            }
+            Database::Postgres(url) => {
+                let mut c = sqlx::PgConnection::connect(url).await.unwrap();
+                sqlx::raw_sql("BEGIN; LOCK TABLE jobs IN EXCLUSIVE MODE").execute(&mut c).await.unwrap();
+                WriteLock::Postgres(c)
+            }
+        }
+    }
+
+    pub async fn release(self) {
+        match self {
+            WriteLock::Sqlite(mut c) => drop(sqlx::raw_sql("ROLLBACK").execute(&mut c).await.unwrap()),
+            WriteLock::Postgres(mut c) => drop(sqlx::raw_sql("ROLLBACK").execute(&mut c).await.unwrap()),
+        }
     }
 }

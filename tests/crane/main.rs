@@ -1,8 +1,13 @@
 //! The stacker crane end to end: the real server on 127.0.0.1:0 with a temporary database,
 //! driving the real crane simulator over real MC 3E TCP and UDP.
 
+/// The engine these tests run the store on.
+pub const ENGINE: rackd::store::Engine = rackd::store::Engine::Sqlite;
+
 #[path = "../common/helpers.rs"]
 mod helpers;
+#[path = "../common/postgres.rs"]
+mod postgres;
 
 mod alarms;
 mod handover;

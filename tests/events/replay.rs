@@ -72,11 +72,13 @@ async fn retention_keeps_the_newest_event_so_numbers_are_never_reused() {
     submit(&app, 5).await;
     let (db, dir) = app.stop().await;
     // Prune everything up to now, as the retention task does with old events.
-    let (writer, task) = Writer::start(&db, Duration::from_secs(5), 16, 16, Hooks::default()).unwrap();
+    let pool = rackd::store::open(&db, Duration::from_secs(5)).await.unwrap();
+    let (writer, task) = Writer::start(&pool, 16, 16, Hooks::default()).await.unwrap();
     let now = rackd::domain::time::now_ms() + 1;
     writer.record(Record::Prune { before_ms: now }).await.unwrap();
     drop(writer);
     task.await.unwrap();
+    pool.close().await;
 
     let app = spawn_on(db, |_| {}).await;
     let mut ws = Ws::connect(&app.base, "?since=2").await;

@@ -2,8 +2,13 @@
 //! driving the real shelf simulator over real UDP (and, in `protocols`, over every other
 //! transport: TCP, RTU on a pty, PPI, MEWTOCOL).
 
+/// The engine these tests run the store on.
+pub const ENGINE: rackd::store::Engine = rackd::store::Engine::Sqlite;
+
 #[path = "../common/helpers.rs"]
 mod helpers;
+#[path = "../common/postgres.rs"]
+mod postgres;
 
 mod control;
 mod faults;

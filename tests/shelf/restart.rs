@@ -68,7 +68,7 @@ async fn a_crash_mid_run_loses_and_repeats_nothing() {
     let (done_at_crash, _) = sim.finished();
     assert!(done_at_crash < 300, "the crash came mid-run");
 
-    let app = spawn_on(db.clone(), |c| c.devices = vec![device.into()]).await;
+    let app = spawn_on(rackd::store::Database::Sqlite(db.clone()), |c| c.devices = vec![device.into()]).await;
     let done = wait_ended(&app, 300, 120).await;
     crate::assert_each_completed_once(&app, &sim, &done).await;
     assert_eq!(rackd_store(&app).await.0, sim.inventory());

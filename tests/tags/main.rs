@@ -2,8 +2,13 @@
 //! and writing tags of real simulators over real sockets (Modbus TCP, PPI and MEWTOCOL over
 //! TCP).
 
+/// The engine these tests run the store on.
+pub const ENGINE: rackd::store::Engine = rackd::store::Engine::Sqlite;
+
 #[path = "../common/helpers.rs"]
 mod helpers;
+#[path = "../common/postgres.rs"]
+mod postgres;
 #[path = "../common/ws.rs"]
 mod ws;
 

@@ -3,10 +3,10 @@
 
 use std::time::Duration;
 
+use crate::store::Pool;
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket};
 use futures::stream::SplitSink;
 use futures::{SinkExt, StreamExt};
-use sqlx::SqlitePool;
 use tokio::sync::broadcast::{Receiver, error::RecvError};
 
 use crate::api::state::AppState;
@@ -35,7 +35,7 @@ enum End {
 /// Everything a session needs, taken from the app state before the upgrade (a session must
 /// not hold the job writer, or shutdown would wait for subscribers).
 pub struct Session {
-    pool: SqlitePool,
+    pool: Pool,
     devices: Devices,
     queues: Queues,
     events: Receiver<Commit>,

@@ -1,7 +1,7 @@
 //! The state a new subscriber starts from, consistent with one event sequence number.
 
+use crate::store::Pool;
 use serde::Serialize;
-use sqlx::SqlitePool;
 use utoipa::ToSchema;
 
 use crate::devices::{DeviceStatus, Devices};
@@ -52,28 +52,28 @@ pub struct SnapshotData {
 /// the same `seq`. Device statuses come from memory and may be a little newer, which is
 /// harmless: a `device.updated` event carries the whole status and replaces it.
 pub async fn read(
-    pool: &SqlitePool,
+    pool: &Pool,
     devices: (&Devices, &Queues),
     topics: &[Topic],
     job_limit: u32,
     reason: &'static str,
 ) -> Result<Snapshot, sqlx::Error> {
-    let mut tx = pool.begin().await?;
-    let (_, seq) = events::bounds(&mut *tx).await?;
+    let mut tx = pool.read_tx().await?;
+    let (_, seq) = events::bounds(tx.reader()).await?;
     let mut data = SnapshotData::default();
     if topics.contains(&Topic::Jobs) {
-        let mut active = jobs::active(&mut *tx, job_limit.saturating_add(1)).await?;
+        let mut active = jobs::active(tx.reader(), job_limit.saturating_add(1)).await?;
         data.jobs_truncated = Some(active.len() > job_limit as usize);
         active.truncate(job_limit as usize);
         data.jobs = Some(active);
     }
     if topics.contains(&Topic::Alarms) {
-        data.alarms = Some(alarms::active(&mut *tx).await?);
+        data.alarms = Some(alarms::active(tx.reader()).await?);
     }
     if topics.contains(&Topic::Locations) {
-        data.locations = Some(locations::list(&mut *tx, None).await?);
+        data.locations = Some(locations::list(tx.reader(), None).await?);
     }
-    tx.commit().await?;
+    tx.finish().await?;
     if topics.contains(&Topic::Devices) {
         data.devices = Some(all_shown(devices.0, devices.1));
     }

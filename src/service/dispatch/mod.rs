@@ -12,7 +12,7 @@ pub mod control;
 pub mod order;
 pub mod queues;
 
-use sqlx::SqlitePool;
+use crate::store::Pool;
 
 pub use cancel::CancelError;
 pub use control::{Actor, ControlError};
@@ -27,12 +27,12 @@ use crate::store::{controls, jobs, locations};
 pub struct Dispatcher {
     queues: Queues,
     writer: Writer,
-    pool: SqlitePool,
+    pool: Pool,
 }
 
 impl Dispatcher {
     /// The dispatcher over `queues` (already handed to the writer as its hook).
-    pub fn new(queues: Queues, writer: Writer, pool: SqlitePool) -> Dispatcher {
+    pub fn new(queues: Queues, writer: Writer, pool: Pool) -> Dispatcher {
         Dispatcher { queues, writer, pool }
     }
 

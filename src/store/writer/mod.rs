@@ -1,31 +1,30 @@
-//! The one writer of jobs: group commit on a thread of its own.
+//! The one writer of jobs: group commit on a connection of its own.
 //!
 //! Every change to a job (a submission, a state transition, a new priority) is a
-//! [`Command`] sent to one thread, which takes everything waiting, applies it in ONE
+//! [`Command`] sent to one task, which takes everything waiting, applies it in ONE
 //! transaction and answers each caller only after the commit is on disk. Under load a single
 //! fsync covers hundreds of requests; with one request waiting it commits at once, so a lone
-//! request pays no extra latency. One writer also means no lock contention between writers
-//! and job ids allocated in memory.
+//! request pays no extra latency. One writer also means no lock contention between writers,
+//! and ids and event sequence numbers numbered in memory, without gaps.
 //!
-//! Why rusqlite here and sqlx everywhere else: sqlx's SQLite driver runs each connection on
-//! a worker thread and hands every statement over through a channel, which costs a thread
-//! wake-up each way (100 µs and more on this kind of VM). A group needs several statements,
-//! so those hand-offs, not SQLite, set the pace. The writer owns its connection on its own
-//! thread and pays one hand-off per group instead; reads stay on sqlx's async pool. Both
-//! link the same SQLite (libsqlite3-sys), and WAL mode lets the pool read while it writes.
-
+//! A group is set-based (see [`commit`]): a constant number of statements however many jobs
+//! it holds, each carrying all its rows in one parameter. That matters most on SQLite, whose
+//! sqlx driver runs a connection on a worker thread and hands every statement over through a
+//! channel: the hand-offs, not SQLite, would otherwise set the pace.
+mod apply;
 mod commit;
+mod load;
+mod save;
 mod timing;
 
-use std::path::Path;
 use std::sync::Arc;
-use std::time::Duration;
 
 use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
 
 pub use timing::{GroupStats, JobTiming, Observe};
 
+use super::Pool;
 use super::alarms::NewAlarm;
 use super::events::StoredEvent;
 use super::jobs::{Job, NewJob};
@@ -167,9 +166,9 @@ pub enum WriteError {
     /// waiting (`intake.queue`).
     #[error("the job writer is overloaded")]
     Overloaded,
-    /// The database failed; nothing of the group was written.
+    /// The database failed; nothing of the request was written.
     #[error("database error: {0}")]
-    Database(Arc<rusqlite::Error>),
+    Database(Arc<sqlx::Error>),
 }
 
 /// Called after each commit with every job the commit created or changed, as committed (the
@@ -211,28 +210,25 @@ pub struct Writer {
 }
 
 impl Writer {
-    /// Opens a connection to the (already migrated) database at `path` and starts the
-    /// writer thread. It stops once every handle is dropped and what was sent before is
-    /// committed; await the returned handle to know when.
-    pub fn start(
-        path: &Path,
-        busy_timeout: Duration,
+    /// Takes a connection of its own from `pool` (already migrated) and starts the writer
+    /// task. It stops once every handle is dropped and what was sent before is committed;
+    /// await the returned handle to know when.
+    pub async fn start(
+        pool: &Pool,
         max_group: usize,
         queue: usize,
         hooks: Hooks,
-    ) -> rusqlite::Result<(Writer, JoinHandle<()>)> {
-        let db = rusqlite::Connection::open(path)?;
-        db.busy_timeout(busy_timeout)?;
-        db.pragma_update(None, "journal_mode", "WAL")?;
-        db.pragma_update(None, "synchronous", "FULL")?;
-        db.pragma_update(None, "foreign_keys", true)?;
-        db.set_prepared_statement_cache_capacity(64);
+    ) -> Result<(Writer, JoinHandle<()>), sqlx::Error> {
+        let conn = match pool {
+            Pool::Sqlite(p) => Conn::Sqlite(p.acquire().await?.detach()),
+            Pool::Postgres(p) => Conn::Postgres(p.acquire().await?.detach()),
+        };
         let (tx, rx) = mpsc::channel(queue);
-        let task = tokio::task::spawn_blocking(move || run(db, rx, max_group.max(1), hooks));
+        let task = tokio::spawn(run(conn, rx, max_group.max(1), hooks));
         Ok((Writer { tx }, task))
     }
 
-    /// Whether the writer thread still takes commands.
+    /// Whether the writer still takes commands.
     pub fn is_running(&self) -> bool {
         !self.tx.is_closed()
     }
@@ -272,20 +268,19 @@ impl Writer {
     }
 }
 
-/// The writer thread: take what waits, commit it, answer, repeat until every handle is gone.
-fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group: usize, hooks: Hooks) {
-    let mut next_id = None;
+/// The writer's own connection, on either engine.
+pub(crate) enum Conn {
+    Sqlite(sqlx::SqliteConnection),
+    Postgres(sqlx::PgConnection),
+}
+
+/// The writer: take what waits, commit it, answer, repeat until every handle is gone.
+async fn run(mut db: Conn, mut rx: mpsc::Receiver<Command>, max_group: usize, hooks: Hooks) {
+    let mut next = None;
     let mut group = Vec::with_capacity(max_group);
-    while let Some(first) = rx.blocking_recv() {
-        group.push(first);
-        while group.len() < max_group {
-            match rx.try_recv() {
-                Ok(cmd) => group.push(cmd),
-                Err(_) => break,
-            }
-        }
+    while rx.recv_many(&mut group, max_group).await > 0 {
         let started = std::time::Instant::now();
-        let result = commit::commit(&mut db, &group, &mut next_id);
+        let result = commit::commit(&mut db, &group, &mut next).await;
         let took = started.elapsed();
         tracing::trace!(requests = group.len(), micros = took.as_micros() as u64, "group committed");
         let timings = result.as_ref().map(|(_, out)| out.timings.as_slice()).unwrap_or_default();
@@ -304,32 +299,32 @@ fn run(mut db: rusqlite::Connection, mut rx: mpsc::Receiver<Command>, max_group:
             }
             Err(e) => {
                 tracing::error!(error = %e, requests = group.len(), "group commit failed");
-                next_id = None;
+                next = None;
                 let e = WriteError::Database(Arc::new(e));
-                group.iter().map(|_| commit::Answer::Failed(e.clone())).collect()
+                group.iter().map(|_| apply::Answer::Failed(e.clone())).collect()
             }
         };
         if let Some(committed) = &hooks.committed {
-            let jobs: Vec<&Job> = answers.iter().flat_map(commit::Answer::jobs).collect();
+            let jobs: Vec<&Job> = answers.iter().flat_map(apply::Answer::jobs).collect();
             if !jobs.is_empty() {
                 committed(&jobs);
             }
         }
         for (cmd, answer) in group.drain(..).zip(answers) {
             match (cmd, answer) {
-                (Command::Submit { reply, .. }, commit::Answer::Submitted(r)) => drop(reply.send(r)),
-                (Command::Change { reply, .. }, commit::Answer::Changed(r)) => drop(reply.send(r)),
-                (Command::Record { reply, .. }, commit::Answer::Recorded) => drop(reply.send(Ok(()))),
-                (Command::Reports { reply, .. }, commit::Answer::Reported(r)) => drop(reply.send(r)),
-                (Command::Reports { reply, reports }, commit::Answer::Failed(e)) => {
+                (Command::Submit { reply, .. }, apply::Answer::Submitted(r)) => drop(reply.send(r)),
+                (Command::Change { reply, .. }, apply::Answer::Changed(r)) => drop(reply.send(r)),
+                (Command::Record { reply, .. }, apply::Answer::Recorded) => drop(reply.send(Ok(()))),
+                (Command::Reports { reply, .. }, apply::Answer::Reported(r)) => drop(reply.send(r)),
+                (Command::Reports { reply, reports }, apply::Answer::Failed(e)) => {
                     drop(reply.send(reports.iter().map(|_| Err(e.clone())).collect()))
                 }
                 (Command::Reports { reply, reports }, _) => {
                     drop(reply.send(reports.iter().map(|_| Err(WriteError::Closed)).collect()))
                 }
-                (Command::Submit { reply, .. }, commit::Answer::Failed(e)) => drop(reply.send(Err(e))),
-                (Command::Change { reply, .. }, commit::Answer::Failed(e)) => drop(reply.send(Err(e))),
-                (Command::Record { reply, .. }, commit::Answer::Failed(e)) => drop(reply.send(Err(e))),
+                (Command::Submit { reply, .. }, apply::Answer::Failed(e)) => drop(reply.send(Err(e))),
+                (Command::Change { reply, .. }, apply::Answer::Failed(e)) => drop(reply.send(Err(e))),
+                (Command::Record { reply, .. }, apply::Answer::Failed(e)) => drop(reply.send(Err(e))),
                 (Command::Submit { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
                 (Command::Change { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
                 (Command::Record { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),

@@ -9,15 +9,13 @@
 //! - **Queued since** the job's latest `queued` history entry (its acceptance, or the retry
 //!   that queued it again); **dispatched since** its latest `dispatched` entry. A job that
 //!   ends without having been dispatched in its current attempt (cancelled while queued)
-//!   is timed from its `queued` entry. One indexed lookup of the job's history, made only
-//!   for dispatches and ends, never for submissions (the intake path).
+//!   is timed from its `queued` entry. The group reads these times for the jobs its changes
+//!   name in one statement, never for submissions (the intake path).
 //! - The store does not know Prometheus: it calls a hook ([`Observe`]) that the API's
 //!   metrics provide, as the dispatcher and event hub get theirs.
 
 use std::sync::Arc;
 use std::time::Duration;
-
-use rusqlite::{OptionalExtension, Transaction};
 
 use crate::domain::{JobKind, JobState};
 
@@ -55,16 +53,6 @@ pub struct GroupStats<'a> {
 
 /// Called after each group with what it did (see the module doc).
 pub type Observe = Arc<dyn Fn(&GroupStats<'_>) + Send + Sync>;
-
-/// When the job entered its latest `queued` or `dispatched` state (Unix ms).
-pub(super) fn last_start(tx: &Transaction<'_>, id: i64) -> rusqlite::Result<Option<i64>> {
-    tx.prepare_cached(
-        "SELECT at FROM job_history WHERE job_id = ?1 AND state IN ('queued', 'dispatched') \
-         ORDER BY id DESC LIMIT 1",
-    )?
-    .query_row([id], |r| r.get(0))
-    .optional()
-}
 
 /// The time from `since` to `now` (Unix ms); zero if the clock went back.
 pub(super) fn between(since: i64, now: i64) -> Duration {

@@ -1,0 +1,288 @@
+//! What differs between the two engines, in one place: how to connect (SQLite's pragmas,
+//! PostgreSQL's version check), and the text of the writer's set-based statements.
+//!
+//! The writer hands a whole group's rows to the database as ONE JSON array parameter
+//! (`$1`), so a statement's text stays the same however many rows it carries (one prepared
+//! statement, cached) and no engine's limit on bound parameters is ever reached. SQLite
+//! reads the array with `json_each` and `->>`, PostgreSQL with `json_populate_recordset`
+//! over the table's own row type, which also converts every field to its column's type.
+
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::time::Duration;
+
+use sqlx::postgres::{PgConnectOptions, PgPoolOptions};
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
+
+use super::Pool;
+
+/// The oldest PostgreSQL server rackd runs on (`server_version_num`): 14, the oldest
+/// release its community still supported when this was written.
+pub const MIN_POSTGRES: i64 = 140000;
+
+/// Where the store is.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Database {
+    /// A SQLite file (created, with its folder, if missing).
+    Sqlite(PathBuf),
+    /// A PostgreSQL server's URL.
+    Postgres(String),
+}
+
+impl Database {
+    /// `sqlite:PATH` or a `postgres://` / `postgresql://` URL.
+    pub fn parse(text: &str) -> Result<Database, String> {
+        if text.starts_with("postgres://") || text.starts_with("postgresql://") {
+            PgConnectOptions::from_str(text).map_err(|e| format!("not a PostgreSQL URL: {e}"))?;
+            Ok(Database::Postgres(text.to_owned()))
+        } else if let Some(path) = text.strip_prefix("sqlite:") {
+            let path = path.strip_prefix("//").unwrap_or(path);
+            if path.is_empty() {
+                return Err("sqlite: needs a file's path (sqlite:data/rackd.db)".into());
+            }
+            Ok(Database::Sqlite(PathBuf::from(path)))
+        } else {
+            Err(format!("{text:?} is neither sqlite:PATH nor a postgres:// URL"))
+        }
+    }
+
+    /// Which engine it is.
+    pub fn engine(&self) -> Engine {
+        match self {
+            Database::Sqlite(_) => Engine::Sqlite,
+            Database::Postgres(_) => Engine::Postgres,
+        }
+    }
+
+    /// For messages: the file's path, or the URL without its password.
+    pub fn display(&self) -> String {
+        match self {
+            Database::Sqlite(path) => path.display().to_string(),
+            Database::Postgres(url) => redact(url),
+        }
+    }
+}
+
+/// `url` with the password, if any, replaced by `***`.
+fn redact(url: &str) -> String {
+    let Some((scheme, rest)) = url.split_once("://") else { return url.to_owned() };
+    let (authority, tail) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
+    match authority.rsplit_once('@') {
+        Some((user, host)) if user.contains(':') => {
+            let name = user.split(':').next().unwrap_or_default();
+            format!("{scheme}://{name}:***@{host}{tail}")
+        }
+        _ => url.to_owned(),
+    }
+}
+
+/// One of the two engines.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Engine {
+    /// SQLite.
+    Sqlite,
+    /// PostgreSQL.
+    Postgres,
+}
+
+/// Why the store could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// The database (or its folder) cannot be reached or created.
+    #[error(transparent)]
+    Database(#[from] sqlx::Error),
+    /// The folder of the SQLite file cannot be written.
+    #[error(transparent)]
+    Folder(#[from] std::io::Error),
+    /// A migration failed.
+    #[error("migrating the schema: {0}")]
+    Migrate(#[from] sqlx::migrate::MigrateError),
+    /// The PostgreSQL server is too old.
+    #[error(
+        "PostgreSQL {found} is not supported: rackd needs PostgreSQL 14 or newer (server_version_num {MIN_POSTGRES} and up)"
+    )]
+    Version {
+        /// What the server says it is.
+        found: String,
+    },
+}
+
+impl Engine {
+    /// The migrations of this engine's schema.
+    pub fn migrator(self) -> &'static sqlx::migrate::Migrator {
+        match self {
+            Engine::Sqlite => &super::SQLITE_MIGRATOR,
+            Engine::Postgres => &super::POSTGRES_MIGRATOR,
+        }
+    }
+
+    /// A derived table of the rows of the JSON array bound as `$1`, one column per name in
+    /// `columns` (each a column of `table`, whose type it takes).
+    pub fn json_rows(self, table: &str, columns: &[&str]) -> String {
+        match self {
+            Engine::Sqlite => {
+                let list: Vec<String> = columns.iter().map(|c| format!("value->>'{c}' AS {c}")).collect();
+                format!("SELECT {} FROM json_each($1)", list.join(", "))
+            }
+            Engine::Postgres => {
+                format!("SELECT {} FROM json_populate_recordset(NULL::{table}, $1::json)", columns.join(", "))
+            }
+        }
+    }
+
+    /// `INSERT INTO table (columns) SELECT ...` the rows of the JSON array bound as `$1`.
+    pub fn insert_json(self, table: &str, columns: &[&str]) -> String {
+        format!("INSERT INTO {table} ({}) {}", columns.join(", "), self.json_rows(table, columns))
+    }
+
+    /// `UPDATE table SET` every column of `set` from the rows of the JSON array bound as
+    /// `$1`, matching the table's rows on the `key` columns.
+    pub fn update_json(self, table: &str, key: &[&str], set: &[&str]) -> String {
+        let all: Vec<&str> = key.iter().chain(set).copied().collect();
+        let assign: Vec<String> = set.iter().map(|c| format!("{c} = r.{c}")).collect();
+        let on: Vec<String> = key.iter().map(|c| format!("{table}.{c} = r.{c}")).collect();
+        format!(
+            "UPDATE {table} SET {} FROM ({}) AS r WHERE {}",
+            assign.join(", "),
+            self.json_rows(table, &all),
+            on.join(" AND ")
+        )
+    }
+
+    /// The bare name, for messages and the command line.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Engine::Sqlite => "sqlite",
+            Engine::Postgres => "postgres",
+        }
+    }
+}
+
+/// A pool of at most `max` connections to `database`, with every engine setting made here
+/// (and only here); a PostgreSQL server's version is checked.
+pub async fn connect(database: &Database, busy_timeout: Duration, max: u32) -> Result<Pool, OpenError> {
+    match database {
+        Database::Sqlite(path) => {
+            prepare_folder(path)?;
+            let options = sqlite_options(path, busy_timeout)?;
+            Ok(Pool::Sqlite(SqlitePoolOptions::new().max_connections(max).connect_with(options).await?))
+        }
+        Database::Postgres(url) => {
+            let options = PgConnectOptions::from_str(url)?.application_name("rackd");
+            let pool = PgPoolOptions::new()
+                .max_connections(max)
+                .acquire_timeout(busy_timeout.max(Duration::from_secs(5)))
+                .connect_with(options)
+                .await?;
+            let version: String = sqlx::query_scalar("SHOW server_version_num").fetch_one(&pool).await?;
+            if version.trim().parse::<i64>().map_or(true, |v| v < MIN_POSTGRES) {
+                let found =
+                    sqlx::query_scalar("SHOW server_version").fetch_one(&pool).await.unwrap_or(version);
+                return Err(OpenError::Version { found });
+            }
+            Ok(Pool::Postgres(pool))
+        }
+    }
+}
+
+/// SQLite's settings: WAL, `synchronous=FULL` (a commit is on disk), foreign keys, and how
+/// long a statement waits for another connection's lock.
+fn sqlite_options(path: &Path, busy_timeout: Duration) -> Result<SqliteConnectOptions, sqlx::Error> {
+    Ok(SqliteConnectOptions::from_str("sqlite:")?
+        .filename(path)
+        .create_if_missing(true)
+        .journal_mode(SqliteJournalMode::Wal)
+        .synchronous(SqliteSynchronous::Full)
+        .busy_timeout(busy_timeout)
+        .foreign_keys(true)
+        .statement_cache_capacity(128))
+}
+
+/// Creates the SQLite file's folder, naming the fix when rackd may not write there.
+fn prepare_folder(path: &Path) -> std::io::Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if let Err(e) = std::fs::create_dir_all(dir) {
+            // A folder to create inside one rackd cannot write (a root-owned volume with
+            // the database in a subfolder): name that folder, not just "permission denied".
+            if let Some(existing) = dir.ancestors().find(|a| a.is_dir()) {
+                writable(existing)?;
+            }
+            return Err(e);
+        }
+        writable(dir)?;
+    }
+    Ok(())
+}
+
+/// Checks that rackd may create files in `dir` (SQLite needs the database's directory for
+/// its journal), so that a volume owned by another user is named with the fix instead of
+/// SQLite's "unable to open database file". The message names the directory, its owner and
+/// rackd's own uid, and the fixes a container user has: give the directory to rackd's uid,
+/// mount a named volume (which the image prepares for uid 10001), or run as the owner.
+fn writable(dir: &Path) -> std::io::Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let probe = dir.join(format!(".rackd-write-test-{}", std::process::id()));
+    match std::fs::OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(_) => std::fs::remove_file(&probe),
+        Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
+            let meta = std::fs::metadata(dir)?;
+            // /proc/self belongs to the process's effective user.
+            let me =
+                std::fs::metadata("/proc/self").map(|m| m.uid().to_string()).unwrap_or_else(|_| "?".into());
+            let (dir, owner) = (dir.display(), meta.uid());
+            // Running as root to write a root-owned folder is not a fix worth offering.
+            let as_owner = if owner == 0 {
+                String::new()
+            } else {
+                format!(", or run rackd as uid {owner} (--user {owner})")
+            };
+            Err(std::io::Error::new(
+                e.kind(),
+                format!(
+                    "cannot write in {dir}: it belongs to uid {owner} (mode {:o}) and rackd runs as uid {me}; \
+                     give it to uid {me} (chown {me} {dir}, on the host folder of a bind mount), or mount a \
+                     named volume there (-v rackd-data:{dir}; the image runs as uid 10001){as_owner}",
+                    meta.mode() & 0o7777,
+                ),
+            ))
+        }
+        Err(e) => Err(e),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn databases_parse_from_the_command_line() {
+        assert_eq!(Database::parse("sqlite:data/x.db"), Ok(Database::Sqlite("data/x.db".into())));
+        assert_eq!(Database::parse("sqlite:///tmp/x.db"), Ok(Database::Sqlite("/tmp/x.db".into())));
+        assert!(matches!(Database::parse("postgres://u:p@h/db"), Ok(Database::Postgres(_))));
+        assert!(Database::parse("mysql://h/db").is_err());
+        assert!(Database::parse("sqlite:").is_err());
+    }
+
+    #[test]
+    fn passwords_stay_out_of_messages() {
+        let db = Database::Postgres("postgres://rackd:s3cret@db.plant:5432/rackd?sslmode=require".into());
+        assert_eq!(db.display(), "postgres://rackd:***@db.plant:5432/rackd?sslmode=require");
+        assert_eq!(redact("postgres://h/db"), "postgres://h/db");
+        assert_eq!(redact("postgres://u@h/db"), "postgres://u@h/db");
+    }
+
+    #[test]
+    fn set_statements_take_one_json_parameter() {
+        let sql = Engine::Sqlite.insert_json("audit", &["id", "by"]);
+        assert_eq!(
+            sql,
+            "INSERT INTO audit (id, by) SELECT value->>'id' AS id, value->>'by' AS by FROM json_each($1)"
+        );
+        let sql = Engine::Postgres.update_json("jobs", &["id"], &["state"]);
+        assert_eq!(
+            sql,
+            "UPDATE jobs SET state = r.state FROM (SELECT id, state FROM json_populate_recordset(NULL::jobs, $1::json)) \
+             AS r WHERE jobs.id = r.id"
+        );
+    }
+}

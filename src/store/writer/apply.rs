@@ -1,0 +1,531 @@
+//! One group applied in memory: submissions planned, changes put through the state machine,
+//! their effects on locations, alarms, controls and the audit log worked out, every row to
+//! write and every event to append collected. Nothing here touches the database: [`super::load`]
+//! reads what a group needs first, [`super::save`] writes what it produced after.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+
+use super::timing::{self, JobTiming};
+use super::{Change, Command, Outcome, Record, WriteError};
+use crate::domain::report::path;
+use crate::domain::time::{from_ms, to_ms};
+use crate::domain::{Failure, JobState, LightColor, Location, LocationLock, Pause, Transition};
+use crate::store::alarms::{self, Alarm};
+use crate::store::controls::AuditEntry;
+use crate::store::events::StoredEvent;
+use crate::store::jobs::{Job, NewJob};
+use crate::store::locations::{self, LocationState};
+
+/// What the writer answers for one command.
+pub(super) enum Answer {
+    Submitted(Result<Vec<Outcome>, WriteError>),
+    Changed(Result<Job, WriteError>),
+    Reported(Vec<Result<Job, WriteError>>),
+    Recorded,
+    Failed(WriteError),
+}
+
+impl Answer {
+    /// The jobs this answer created or changed.
+    pub(super) fn jobs(&self) -> Vec<&Job> {
+        match self {
+            Answer::Submitted(Ok(outcomes)) => outcomes
+                .iter()
+                .filter_map(|o| match o {
+                    Outcome::Created(job) => Some(job),
+                    Outcome::Existing(_) => None,
+                })
+                .collect(),
+            Answer::Changed(Ok(job)) => vec![job],
+            Answer::Reported(jobs) => jobs.iter().filter_map(|r| r.as_ref().ok()).collect(),
+            _ => Vec::new(),
+        }
+    }
+}
+
+/// What a group produced besides its answers, handed on after the commit.
+#[derive(Default)]
+pub(super) struct Out {
+    /// The events it appended, in sequence order.
+    pub(super) events: Vec<StoredEvent>,
+    /// The locations it locked (`Some`) or unlocked.
+    pub(super) locks: Vec<(Location, Option<LocationLock>)>,
+    /// Timed transitions, for `/metrics`.
+    pub(super) timings: Vec<JobTiming>,
+}
+
+/// The next id of each numbered table, allocated here (one writer: no gaps, no races).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Next {
+    pub(super) job: i64,
+    pub(super) seq: i64,
+    pub(super) audit: i64,
+    pub(super) alarm: i64,
+}
+
+/// What a group reads before it is applied (see [`super::load`]).
+#[derive(Default)]
+pub(super) struct Loaded {
+    /// Stored jobs with the references the group's submissions use, with their requests.
+    pub(super) by_reference: HashMap<String, (String, Job)>,
+    /// Stored jobs the group's changes name.
+    pub(super) jobs: HashMap<i64, Job>,
+    /// The locations the group may touch.
+    pub(super) locations: HashMap<Location, locations::Row>,
+    /// When each loaded job entered its latest `queued` or `dispatched` state (Unix ms).
+    pub(super) starts: HashMap<i64, i64>,
+    /// Every active alarm (only when the group raises or clears one).
+    pub(super) alarms: Vec<alarms::Row>,
+}
+
+/// One history entry to write.
+#[derive(serde::Serialize)]
+pub(super) struct History {
+    pub(super) job_id: i64,
+    pub(super) state: &'static str,
+    pub(super) cause: String,
+    pub(super) at: i64,
+}
+
+/// A group being applied: what it read, how that changed, and what to write.
+pub(super) struct Group {
+    pub(super) now: i64,
+    pub(super) next: Next,
+    known: HashMap<String, (String, Job)>,
+    /// Every job loaded or created, as it now is.
+    pub(super) jobs: HashMap<i64, Job>,
+    /// Jobs created by this group, with their canonical requests, in id order.
+    pub(super) created: BTreeMap<i64, String>,
+    /// Stored jobs this group changed.
+    pub(super) changed: BTreeSet<i64>,
+    pub(super) locations: HashMap<Location, locations::Row>,
+    /// Locations this group changed.
+    pub(super) touched: BTreeSet<Location>,
+    starts: HashMap<i64, i64>,
+    /// Active alarms (stored ones, and those raised by this group).
+    active: Vec<alarms::Row>,
+    /// Alarms raised by this group (as they end up: possibly cleared again).
+    pub(super) raised: Vec<alarms::Row>,
+    /// Stored alarms this group cleared: (id, when).
+    pub(super) cleared: Vec<(i64, i64)>,
+    /// Pauses set (`Some`) or lifted (`None`) by this group, by target key, as they end up.
+    pub(super) controls: BTreeMap<String, Option<Pause>>,
+    pub(super) audit: Vec<AuditEntry>,
+    pub(super) history: Vec<History>,
+    /// Retention: events before this time go.
+    pub(super) prune: Option<i64>,
+    pub(super) out: Out,
+}
+
+impl Group {
+    /// A group starting from what it read.
+    pub(super) fn new(loaded: Loaded, next: Next, now: i64) -> Group {
+        Group {
+            now,
+            next,
+            known: loaded.by_reference,
+            jobs: loaded.jobs,
+            created: BTreeMap::new(),
+            changed: BTreeSet::new(),
+            locations: loaded.locations,
+            touched: BTreeSet::new(),
+            starts: loaded.starts,
+            active: loaded.alarms,
+            raised: Vec::new(),
+            cleared: Vec::new(),
+            controls: BTreeMap::new(),
+            audit: Vec::new(),
+            history: Vec::new(),
+            prune: None,
+            out: Out::default(),
+        }
+    }
+
+    /// Applies one command and answers it.
+    pub(super) fn command(&mut self, cmd: &Command) -> Answer {
+        match cmd {
+            Command::Submit { jobs, .. } => Answer::Submitted(self.submit(jobs)),
+            Command::Change { id, change, .. } => Answer::Changed(self.apply(*id, change)),
+            Command::Reports { reports, .. } => Answer::Reported(
+                reports
+                    .iter()
+                    .map(|r| self.apply(r.job, &Change::Report { to: r.to.clone(), cause: r.cause.clone() }))
+                    .collect(),
+            ),
+            Command::Record { record, .. } => {
+                self.record(record);
+                Answer::Recorded
+            }
+        }
+    }
+
+    /// Records a change that is not a job's.
+    fn record(&mut self, record: &Record) {
+        let now = self.now;
+        match record {
+            Record::Device { status } => self.append("device.updated", status.clone()),
+            Record::Pause { target, paused, by } => {
+                self.controls.insert(target.key(), paused.then(|| by.clone()));
+                let action = if *paused { "pause" } else { "resume" };
+                self.audit(&by.by, action, &target.key(), by.reason.as_deref());
+            }
+            Record::Lock { location, lock } => {
+                self.audit(&lock.by, "lock", &location_key(*location), Some(&lock.reason));
+                if self.lock(*location, lock) {
+                    self.out.locks.push((*location, Some(lock.clone())));
+                    self.location_events(&[*location]);
+                }
+            }
+            Record::Unlock { location, by, reason } => {
+                self.audit(by, "unlock", &location_key(*location), reason.as_deref());
+                let unlocked = match self.locations.get_mut(location) {
+                    Some(row) if row.locked_at.is_some() => {
+                        (row.locked_at, row.locked_by, row.lock_reason, row.lock_job) =
+                            (None, None, None, None);
+                        row.updated_at = now;
+                        true
+                    }
+                    _ => false,
+                };
+                if unlocked {
+                    self.touched.insert(*location);
+                    self.out.locks.push((*location, None));
+                    self.location_events(&[*location]);
+                }
+            }
+            Record::AlarmRaised(new) => {
+                let active = |a: &&alarms::Row| {
+                    a.device == new.device && a.kind == new.kind.as_str() && a.code == new.code as i64
+                };
+                if self.active.iter().find(active).is_none() {
+                    let row = alarms::Row {
+                        id: self.next.alarm,
+                        device: new.device.clone(),
+                        kind: new.kind.as_str().to_owned(),
+                        code: new.code as i64,
+                        class: new.class.as_str().to_owned(),
+                        text: new.text.clone(),
+                        detail: new.detail.clone(),
+                        raised_at: now,
+                        cleared_at: None,
+                    };
+                    self.next.alarm += 1;
+                    self.active.push(row.clone());
+                    self.raised.push(row.clone());
+                    self.event("alarm.raised", &Alarm::from(row));
+                }
+            }
+            Record::AlarmCleared { device, key: (kind, code) } => {
+                let found = self
+                    .active
+                    .iter()
+                    .position(|a| a.device == *device && a.kind == kind.as_str() && a.code == *code as i64);
+                if let Some(i) = found {
+                    let mut row = self.active.remove(i);
+                    row.cleared_at = Some(now);
+                    match self.raised.iter_mut().find(|r| r.id == row.id) {
+                        Some(raised) => raised.cleared_at = Some(now),
+                        None => self.cleared.push((row.id, now)),
+                    }
+                    self.event("alarm.cleared", &Alarm::from(row));
+                }
+            }
+            Record::Prune { before_ms } => self.prune = Some(*before_ms),
+        }
+    }
+
+    /// Stores one submission, all or nothing: a reference used with a different request
+    /// refuses the whole submission before anything of it is written.
+    fn submit(&mut self, jobs: &[NewJob]) -> Result<Vec<Outcome>, WriteError> {
+        let mut outcomes = Vec::with_capacity(jobs.len());
+        let mut created: Vec<(String, Job)> = Vec::new();
+        let mut local: HashMap<&str, usize> = HashMap::new();
+        for new in jobs {
+            let request = new.canonical();
+            if let Some(reference) = new.reference.as_deref() {
+                let seen = match local.get(reference) {
+                    Some(&i) => Some(&created[i]),
+                    None => self.known.get(reference),
+                };
+                if let Some((stored, job)) = seen {
+                    if *stored != request {
+                        return Err(WriteError::Conflict(reference.to_owned()));
+                    }
+                    outcomes.push(Outcome::Existing(job.clone()));
+                    continue;
+                }
+                local.insert(reference, created.len());
+            }
+            let job = new.accepted(self.next.job + created.len() as i64, self.now);
+            outcomes.push(Outcome::Created(job.clone()));
+            created.push((request, job));
+        }
+        self.next.job += created.len() as i64;
+        for (request, job) in created {
+            self.history(job.id, JobState::Queued, "accepted");
+            self.event("job.updated", &job);
+            if let Some(r) = job.reference.clone() {
+                self.known.insert(r, (request.clone(), job.clone()));
+            }
+            self.created.insert(job.id, request);
+            self.jobs.insert(job.id, job);
+        }
+        Ok(outcomes)
+    }
+
+    /// Applies one change to a job, with its effects on the location model.
+    fn apply(&mut self, id: i64, change: &Change) -> Result<Job, WriteError> {
+        let Some(mut job) = self.jobs.get(&id).cloned() else { return Err(WriteError::NotFound(id)) };
+        let result = self.change(&mut job, change);
+        // What was applied before a refusal stays, as each step is saved when it is made.
+        if let Some(stored) = self.jobs.get_mut(&id) {
+            *stored = job.clone();
+        }
+        result.map(|()| job)
+    }
+
+    fn change(&mut self, job: &mut Job, change: &Change) -> Result<(), WriteError> {
+        let id = job.id;
+        match change {
+            Change::Transition { transition, cause, expect, failure, forced } => {
+                if expect.as_ref().is_some_and(|states| !states.contains(&job.state)) {
+                    return Err(WriteError::Unexpected { id, state: job.state });
+                }
+                self.step(job, *transition, cause, failure.as_ref(), *forced)
+            }
+            Change::Report { to, cause } => {
+                for transition in path(job.state, to) {
+                    self.step(job, transition, cause, to.failure(), to.forced())?;
+                }
+                Ok(())
+            }
+            Change::Retry { by } => {
+                let cause = format!("retried by {by} (attempt {})", job.attempt + 1);
+                self.step(job, Transition::Retry, &cause, None, false)?;
+                self.audit(by, "retry", &format!("job:{id}"), None);
+                Ok(())
+            }
+            Change::Priority(p) => {
+                if job.state != JobState::Queued {
+                    return Err(WriteError::Unexpected { id, state: job.state });
+                }
+                let cause = format!("priority {} -> {}", job.priority, p.get());
+                job.priority = p.get();
+                self.save(job, &cause);
+                Ok(())
+            }
+        }
+    }
+
+    /// Moves `job` through one transition and saves it, with the transition's effects on
+    /// the location model: a dispatch reserves the job's locations, an end releases them
+    /// (and a completion changes their contents).
+    fn step(
+        &mut self,
+        job: &mut Job,
+        transition: Transition,
+        cause: &str,
+        failure: Option<&Failure>,
+        forced: bool,
+    ) -> Result<(), WriteError> {
+        let (id, now) = (job.id, self.now);
+        job.state = job.state.apply(transition)?;
+        // Read before `save` notes this transition's own history entry.
+        if transition == Transition::Dispatch || job.state.is_terminal() {
+            let since = self.starts.get(&id).copied().unwrap_or(to_ms(job.created_at));
+            let (kind, elapsed) = (job.kind, timing::between(since, now));
+            self.out.timings.push(if transition == Transition::Dispatch {
+                JobTiming::Dispatched { kind, waited: elapsed }
+            } else {
+                JobTiming::Ended { kind, state: job.state, took: elapsed }
+            });
+        }
+        job.forced = forced && job.state == JobState::Completed;
+        if transition == Transition::Fail {
+            job.failure = failure.cloned();
+        }
+        if transition == Transition::Retry {
+            job.failure = None;
+            job.attempt += 1;
+        }
+        if transition == Transition::Dispatch
+            && let Some(spec) = job.spec()
+        {
+            for l in spec.locations() {
+                if let Some(row) = self.locations.get_mut(&l) {
+                    row.reserved_by = Some(id);
+                    self.touched.insert(l);
+                }
+            }
+            self.location_events(&spec.locations());
+        }
+        if job.state.is_terminal() {
+            // Released before the events are made, so that they show the location free.
+            let spec = job.spec();
+            let mut touched = match (job.state, &spec) {
+                (JobState::Completed, Some(spec)) => self.complete(spec, job.barcode.as_deref()),
+                _ => Vec::new(),
+            };
+            if let (Some(f), Some(spec)) = (job.failure.as_ref().filter(|f| f.kind.locks()), &spec) {
+                let lock = LocationLock {
+                    by: "rackd".into(),
+                    reason: format!("job {id} failed ({}): {}", f.kind, f.text),
+                    job: Some(id),
+                    at: from_ms(now),
+                };
+                for l in spec.locations() {
+                    if self.lock(l, &lock) {
+                        self.out.locks.push((l, Some(lock.clone())));
+                        touched.push(l);
+                    }
+                }
+            }
+            let held: Vec<Location> = self
+                .locations
+                .iter_mut()
+                .filter(|(_, row)| row.reserved_by == Some(id))
+                .map(|(l, row)| {
+                    row.reserved_by = None;
+                    *l
+                })
+                .collect();
+            for l in held {
+                self.touched.insert(l);
+                if !touched.contains(&l) {
+                    touched.push(l);
+                }
+            }
+            self.location_events(&touched);
+        }
+        self.save(job, cause);
+        Ok(())
+    }
+
+    /// Notes the job's new row, a history entry and a `job.updated` event.
+    fn save(&mut self, job: &mut Job, cause: &str) {
+        job.updated_at = from_ms(self.now);
+        if !self.created.contains_key(&job.id) {
+            self.changed.insert(job.id);
+        }
+        self.history(job.id, job.state, cause);
+        self.event("job.updated", job);
+    }
+
+    fn history(&mut self, id: i64, state: JobState, cause: &str) {
+        if matches!(state, JobState::Queued | JobState::Dispatched) {
+            self.starts.insert(id, self.now);
+        }
+        self.history.push(History {
+            job_id: id,
+            state: state.as_str(),
+            cause: cause.to_owned(),
+            at: self.now,
+        });
+    }
+
+    /// Locks `l` unless it is locked already (the first reason stands); whether it did.
+    fn lock(&mut self, l: Location, lock: &LocationLock) -> bool {
+        match self.locations.get_mut(&l) {
+            Some(row) if row.locked_at.is_none() => {
+                row.locked_at = Some(to_ms(lock.at));
+                row.locked_by = Some(lock.by.clone());
+                row.lock_reason = Some(lock.reason.clone());
+                row.lock_job = lock.job;
+                row.updated_at = self.now;
+                self.touched.insert(l);
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Applies what a completed job did to the locations it touched; returns them.
+    ///
+    /// store: the target is occupied with the job's barcode; retrieve and clear: the
+    /// location is empty; move: the box (and its barcode) goes from source to target;
+    /// light: the light's state; travel: nothing.
+    fn complete(&mut self, spec: &crate::domain::JobSpec, barcode: Option<&str>) -> Vec<Location> {
+        use crate::domain::JobSpec;
+        match *spec {
+            JobSpec::Store { to } => {
+                self.set_box(to, true, barcode.map(str::to_owned));
+                vec![to]
+            }
+            JobSpec::Retrieve { from: l } | JobSpec::Clear { location: l } => {
+                self.set_box(l, false, None);
+                vec![l]
+            }
+            JobSpec::Move { from, to } => {
+                let moved = match barcode {
+                    Some(b) => Some(b.to_owned()),
+                    None => self.locations.get(&from).and_then(|r| r.barcode.clone()),
+                };
+                self.set_box(from, false, None);
+                self.set_box(to, true, moved);
+                vec![from, to]
+            }
+            JobSpec::Light { location, color, on } => {
+                if let Some(row) = self.locations.get_mut(&location) {
+                    match color {
+                        LightColor::Red => row.red = on,
+                        LightColor::Green => row.green = on,
+                    }
+                    row.updated_at = self.now;
+                    self.touched.insert(location);
+                }
+                vec![location]
+            }
+            JobSpec::Travel { .. } => Vec::new(),
+        }
+    }
+
+    fn set_box(&mut self, l: Location, occupied: bool, barcode: Option<String>) {
+        if let Some(row) = self.locations.get_mut(&l) {
+            (row.occupied, row.barcode, row.updated_at) = (occupied, barcode, self.now);
+            self.touched.insert(l);
+        }
+    }
+
+    /// Notes an audit entry and its `audit.recorded` event.
+    fn audit(&mut self, by: &str, action: &str, target: &str, reason: Option<&str>) {
+        let entry = AuditEntry {
+            id: self.next.audit,
+            at: from_ms(self.now),
+            by: by.to_owned(),
+            action: action.to_owned(),
+            target: target.to_owned(),
+            reason: reason.map(str::to_owned),
+        };
+        self.next.audit += 1;
+        self.event("audit.recorded", &entry);
+        self.audit.push(entry);
+    }
+
+    /// A `location.updated` event for each of `locations` the layout has (as they now are).
+    fn location_events(&mut self, locations: &[Location]) {
+        for l in locations {
+            if let Some(row) = self.locations.get(l) {
+                let state = LocationState::from(row.clone());
+                self.event("location.updated", &state);
+            }
+        }
+    }
+
+    /// Appends an event with `data` serialized.
+    fn event(&mut self, kind: &str, data: &impl serde::Serialize) {
+        // Serializing our own types to JSON cannot fail (no maps with non-string keys).
+        let data = serde_json::to_string(data).unwrap_or_else(|_| "null".into());
+        self.append(kind, data);
+    }
+
+    fn append(&mut self, kind: &str, data: String) {
+        let seq = self.next.seq;
+        self.next.seq += 1;
+        self.out.events.push(StoredEvent { seq, at: self.now, kind: kind.to_owned(), data });
+    }
+}
+
+/// A location as audited: `location:A/R/B/L/P`.
+fn location_key(l: Location) -> String {
+    format!("location:{}/{}/{}/{}/{}", l.aisle, l.row, l.bay, l.level, l.position)
+}

@@ -1,0 +1,172 @@
+//! What a group reads before it is applied, set-based: at most one statement per kind of
+//! row (jobs by reference, jobs by id, locations, history starts, active alarms), each
+//! taking all its keys in one JSON parameter, however many requests the group holds.
+
+use std::collections::{BTreeSet, HashMap};
+use std::sync::LazyLock;
+
+use super::apply::{Loaded, Next};
+use super::{Command, Conn, Record};
+use crate::domain::{Job, Location};
+use crate::store::engine::Engine;
+use crate::store::jobs::{COLUMNS, JobRow, decode};
+use crate::store::{alarms, locations, on};
+
+/// The statements, per engine, built once.
+struct Statements {
+    by_reference: String,
+    by_id: String,
+    locations: String,
+    starts: String,
+    alarms: String,
+}
+
+impl Statements {
+    fn new(e: Engine) -> Statements {
+        let keys = ["aisle", "row", "bay", "level", "position"].join(", ");
+        Statements {
+            by_reference: format!(
+                "SELECT request, {COLUMNS} FROM jobs WHERE reference IN (SELECT reference FROM ({}) AS k)",
+                e.json_rows("jobs", &["reference"])
+            ),
+            by_id: format!(
+                "SELECT {COLUMNS} FROM jobs WHERE id IN (SELECT id FROM ({}) AS k)",
+                e.json_rows("jobs", &["id"])
+            ),
+            locations: format!(
+                "SELECT {} FROM locations WHERE ({keys}) IN (SELECT {keys} FROM ({}) AS k)",
+                locations::COLUMNS,
+                e.json_rows("locations", &["aisle", "row", "bay", "level", "position"])
+            ),
+            starts: format!(
+                "SELECT job_id, MAX(at) FROM job_history WHERE state IN ('queued', 'dispatched') \
+                 AND job_id IN (SELECT job_id FROM ({}) AS k) GROUP BY job_id",
+                e.json_rows("job_history", &["job_id"])
+            ),
+            alarms: format!("SELECT {} FROM alarms WHERE cleared_at IS NULL ORDER BY id", alarms::COLUMNS),
+        }
+    }
+}
+
+static SQLITE: LazyLock<Statements> = LazyLock::new(|| Statements::new(Engine::Sqlite));
+static POSTGRES: LazyLock<Statements> = LazyLock::new(|| Statements::new(Engine::Postgres));
+
+fn statements(e: Engine) -> &'static Statements {
+    match e {
+        Engine::Sqlite => &SQLITE,
+        Engine::Postgres => &POSTGRES,
+    }
+}
+
+/// The next free number of each numbered table, from what is committed.
+pub(super) async fn next(db: &mut Conn) -> Result<Next, sqlx::Error> {
+    let sql = "SELECT (SELECT COALESCE(MAX(id), 0) + 1 FROM jobs), (SELECT COALESCE(MAX(seq), 0) + 1 FROM events), \
+               (SELECT COALESCE(MAX(id), 0) + 1 FROM audit), (SELECT COALESCE(MAX(id), 0) + 1 FROM alarms)";
+    let (job, seq, audit, alarm): (i64, i64, i64, i64) =
+        on!(Conn, db, c => sqlx::query_as(sql).fetch_one(&mut *c).await)?;
+    Ok(Next { job, seq, audit, alarm })
+}
+
+/// Reads what `group` needs: the jobs its submissions' references and its changes name, the
+/// locations those jobs and its locks touch, when each of those jobs last started, and the
+/// active alarms if it raises or clears one.
+pub(super) async fn load(db: &mut Conn, group: &[&Command]) -> Result<Loaded, sqlx::Error> {
+    let sql = statements(db.engine());
+    let mut loaded = Loaded::default();
+    let mut references = BTreeSet::new();
+    let mut ids = BTreeSet::new();
+    let mut places = BTreeSet::new();
+    let mut alarms = false;
+    for cmd in group {
+        match cmd {
+            Command::Submit { jobs, .. } => {
+                references.extend(jobs.iter().filter_map(|j| j.reference.as_deref()))
+            }
+            Command::Change { id, .. } => drop(ids.insert(*id)),
+            Command::Reports { reports, .. } => ids.extend(reports.iter().map(|r| r.job)),
+            Command::Record { record, .. } => match record {
+                Record::Lock { location, .. } | Record::Unlock { location, .. } => {
+                    drop(places.insert(*location))
+                }
+                Record::AlarmRaised(_) | Record::AlarmCleared { .. } => alarms = true,
+                Record::Device { .. } | Record::Pause { .. } | Record::Prune { .. } => {}
+            },
+        }
+    }
+    if !references.is_empty() {
+        let keys: Vec<_> = references.iter().map(|r| serde_json::json!({ "reference": r })).collect();
+        let json = serde_json::to_string(&keys).unwrap_or_default();
+        let rows: Vec<(String, JobRow)> = on!(Conn, db, c => {
+            sqlx::query_as::<_, Stored>(sql.by_reference.as_str()).bind(json).fetch_all(&mut *c).await
+        })?
+        .into_iter()
+        .map(|s| (s.request, s.row))
+        .collect();
+        for (request, row) in rows {
+            let job = Job::try_from(row).map_err(decode)?;
+            if let Some(r) = job.reference.clone() {
+                loaded.by_reference.insert(r, (request, job));
+            }
+        }
+    }
+    if !ids.is_empty() {
+        let keys: Vec<_> = ids.iter().map(|id| serde_json::json!({ "id": id })).collect();
+        let json = serde_json::to_string(&keys).unwrap_or_default();
+        let rows: Vec<JobRow> =
+            on!(Conn, db, c => sqlx::query_as(sql.by_id.as_str()).bind(json).fetch_all(&mut *c).await)?;
+        for row in rows {
+            let job = Job::try_from(row).map_err(decode)?;
+            places.extend(job.spec().map(|s| s.locations()).unwrap_or_default());
+            loaded.jobs.insert(job.id, job);
+        }
+        // A change may name a job this same group creates: its locations are needed too.
+        if ids.iter().any(|id| !loaded.jobs.contains_key(id)) {
+            for cmd in group {
+                if let Command::Submit { jobs, .. } = cmd {
+                    places.extend(jobs.iter().flat_map(|j| j.spec.locations()));
+                }
+            }
+        }
+        let keys: Vec<_> = loaded.jobs.keys().map(|id| serde_json::json!({ "job_id": id })).collect();
+        let json = serde_json::to_string(&keys).unwrap_or_default();
+        let starts: Vec<(i64, i64)> =
+            on!(Conn, db, c => sqlx::query_as(sql.starts.as_str()).bind(json).fetch_all(&mut *c).await)?;
+        loaded.starts = starts.into_iter().collect::<HashMap<_, _>>();
+    }
+    if !places.is_empty() {
+        let keys: Vec<_> = places.iter().map(location_json).collect();
+        let json = serde_json::to_string(&keys).unwrap_or_default();
+        let rows: Vec<locations::Row> =
+            on!(Conn, db, c => sqlx::query_as(sql.locations.as_str()).bind(json).fetch_all(&mut *c).await)?;
+        for row in rows {
+            loaded.locations.insert(locations::LocationState::from(row.clone()).location(), row);
+        }
+    }
+    if alarms {
+        loaded.alarms = on!(Conn, db, c => sqlx::query_as(sql.alarms.as_str()).fetch_all(&mut *c).await)?;
+    }
+    Ok(loaded)
+}
+
+/// A location's key as a JSON object of its columns.
+fn location_json(l: &Location) -> serde_json::Value {
+    serde_json::json!({"aisle": l.aisle, "row": l.row, "bay": l.bay, "level": l.level, "position": l.position})
+}
+
+/// A stored job with its canonical request.
+#[derive(sqlx::FromRow)]
+struct Stored {
+    request: String,
+    #[sqlx(flatten)]
+    row: JobRow,
+}
+
+impl Conn {
+    /// Which engine the connection speaks to.
+    pub(super) fn engine(&self) -> Engine {
+        match self {
+            Conn::Sqlite(_) => Engine::Sqlite,
+            Conn::Postgres(_) => Engine::Postgres,
+        }
+    }
+}

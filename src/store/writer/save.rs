@@ -1,0 +1,239 @@
+//! What a group produced, written set-based: one statement per table and kind of change,
+//! each carrying all its rows in one JSON parameter (see [`crate::store::engine`]), so a
+//! group of one job and a group of ten thousand cost the same number of statements.
+
+use std::sync::LazyLock;
+
+use serde::Serialize;
+
+use super::Conn;
+use super::apply::Group;
+use crate::store::engine::Engine;
+use crate::store::on;
+
+const JOB_INSERT: [&str; 16] = [
+    "id",
+    "reference",
+    "kind",
+    "priority",
+    "barcode",
+    "spec",
+    "request",
+    "device",
+    "state",
+    "forced",
+    "failure_kind",
+    "failure_code",
+    "failure_text",
+    "created_at",
+    "updated_at",
+    "attempt",
+];
+const JOB_UPDATE: [&str; 8] =
+    ["state", "priority", "forced", "failure_kind", "failure_code", "failure_text", "updated_at", "attempt"];
+const LOCATION_KEY: [&str; 5] = ["aisle", "row", "bay", "level", "position"];
+const LOCATION_SET: [&str; 10] = [
+    "occupied",
+    "barcode",
+    "red",
+    "green",
+    "reserved_by",
+    "updated_at",
+    "locked_at",
+    "locked_by",
+    "lock_reason",
+    "lock_job",
+];
+const ALARM_INSERT: [&str; 9] =
+    ["id", "device", "kind", "code", "class", "text", "detail", "raised_at", "cleared_at"];
+
+/// The statements, per engine, built once.
+struct Statements {
+    insert_jobs: String,
+    update_jobs: String,
+    history: String,
+    events: String,
+    locations: String,
+    audit: String,
+    raise: String,
+    clear: String,
+    pause: String,
+    resume: String,
+}
+
+impl Statements {
+    fn new(e: Engine) -> Statements {
+        let pause = ["target", "paused", "by", "reason", "at"];
+        Statements {
+            insert_jobs: e.insert_json("jobs", &JOB_INSERT),
+            update_jobs: e.update_json("jobs", &["id"], &JOB_UPDATE),
+            history: e.insert_json("job_history", &["job_id", "state", "cause", "at"]),
+            events: e.insert_json("events", &["seq", "at", "type", "data"]),
+            locations: e.update_json("locations", &LOCATION_KEY, &LOCATION_SET),
+            audit: e.insert_json("audit", &["id", "at", "by", "action", "target", "reason"]),
+            raise: e.insert_json("alarms", &ALARM_INSERT),
+            clear: e.update_json("alarms", &["id"], &["cleared_at"]),
+            // `WHERE TRUE` lets SQLite tell the upsert's ON CONFLICT from a join's ON.
+            pause: format!(
+                "{} WHERE TRUE ON CONFLICT (target) DO UPDATE SET paused = excluded.paused, by = excluded.by, \
+                 reason = excluded.reason, at = excluded.at",
+                e.insert_json("controls", &pause)
+            ),
+            resume: format!(
+                "DELETE FROM controls WHERE target IN (SELECT target FROM ({}) AS k)",
+                e.json_rows("controls", &["target"])
+            ),
+        }
+    }
+}
+
+static SQLITE: LazyLock<Statements> = LazyLock::new(|| Statements::new(Engine::Sqlite));
+static POSTGRES: LazyLock<Statements> = LazyLock::new(|| Statements::new(Engine::Postgres));
+
+/// A job's row, as [`JOB_INSERT`] names its columns.
+#[derive(Serialize)]
+struct JobOut<'a> {
+    id: i64,
+    reference: Option<&'a str>,
+    kind: &'static str,
+    priority: u8,
+    barcode: Option<&'a str>,
+    spec: String,
+    request: Option<&'a str>,
+    device: Option<&'a str>,
+    state: &'static str,
+    forced: bool,
+    failure_kind: Option<&'static str>,
+    failure_code: Option<i64>,
+    failure_text: Option<&'a str>,
+    created_at: i64,
+    updated_at: i64,
+    attempt: u32,
+}
+
+impl<'a> JobOut<'a> {
+    fn new(job: &'a crate::domain::Job, request: Option<&'a str>) -> JobOut<'a> {
+        use crate::domain::time::to_ms;
+        let f = job.failure.as_ref();
+        JobOut {
+            id: job.id,
+            reference: job.reference.as_deref(),
+            kind: job.kind.as_str(),
+            priority: job.priority,
+            barcode: job.barcode.as_deref(),
+            spec: serde_json::to_string(&job.spec()).unwrap_or_default(),
+            request,
+            device: job.device.as_deref(),
+            state: job.state.as_str(),
+            forced: job.forced,
+            failure_kind: f.map(|f| f.kind.as_str()),
+            failure_code: f.and_then(|f| f.code),
+            failure_text: f.map(|f| f.text.as_str()),
+            created_at: to_ms(job.created_at),
+            updated_at: to_ms(job.updated_at),
+            attempt: job.attempt,
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct EventOut<'a> {
+    seq: i64,
+    at: i64,
+    #[serde(rename = "type")]
+    kind: &'a str,
+    data: &'a str,
+}
+
+#[derive(Serialize)]
+struct AuditOut<'a> {
+    id: i64,
+    at: i64,
+    by: &'a str,
+    action: &'a str,
+    target: &'a str,
+    reason: Option<&'a str>,
+}
+
+#[derive(Serialize)]
+struct PauseOut<'a> {
+    target: &'a str,
+    paused: bool,
+    by: &'a str,
+    reason: Option<&'a str>,
+    at: i64,
+}
+
+/// Runs `sql` with `rows` as its JSON parameter, unless there are none.
+async fn write<T: Serialize>(db: &mut Conn, sql: &'static str, rows: &[T]) -> Result<(), sqlx::Error> {
+    if rows.is_empty() {
+        return Ok(());
+    }
+    let json = serde_json::to_string(rows).map_err(|e| sqlx::Error::Encode(e.into()))?;
+    on!(Conn, db, c => sqlx::query(sql).bind(json).execute(&mut *c).await.map(drop))?;
+    Ok(())
+}
+
+/// Writes everything `group` produced, inside the caller's transaction.
+pub(super) async fn save(db: &mut Conn, group: &Group) -> Result<(), sqlx::Error> {
+    let sql: &'static Statements = match db.engine() {
+        Engine::Sqlite => &SQLITE,
+        Engine::Postgres => &POSTGRES,
+    };
+    let created: Vec<JobOut> = group
+        .created
+        .iter()
+        .filter_map(|(id, request)| Some(JobOut::new(group.jobs.get(id)?, Some(request))))
+        .collect();
+    write(db, &sql.insert_jobs, &created).await?;
+    let changed: Vec<JobOut> =
+        group.changed.iter().filter_map(|id| Some(JobOut::new(group.jobs.get(id)?, None))).collect();
+    write(db, &sql.update_jobs, &changed).await?;
+    write(db, &sql.history, &group.history).await?;
+    let locations: Vec<_> = group.touched.iter().filter_map(|l| group.locations.get(l)).collect();
+    write(db, &sql.locations, &locations).await?;
+    let audit: Vec<AuditOut> = group
+        .audit
+        .iter()
+        .map(|a| AuditOut {
+            id: a.id,
+            at: crate::domain::time::to_ms(a.at),
+            by: &a.by,
+            action: &a.action,
+            target: &a.target,
+            reason: a.reason.as_deref(),
+        })
+        .collect();
+    write(db, &sql.audit, &audit).await?;
+    write(db, &sql.raise, &group.raised).await?;
+    let cleared: Vec<_> =
+        group.cleared.iter().map(|(id, at)| serde_json::json!({"id": id, "cleared_at": at})).collect();
+    write(db, &sql.clear, &cleared).await?;
+    let (mut paused, mut resumed) = (Vec::new(), Vec::new());
+    for (target, pause) in &group.controls {
+        match pause {
+            Some(p) => paused.push(PauseOut {
+                target,
+                paused: true,
+                by: &p.by,
+                reason: p.reason.as_deref(),
+                at: crate::domain::time::to_ms(p.at),
+            }),
+            None => resumed.push(serde_json::json!({ "target": target })),
+        }
+    }
+    write(db, &sql.pause, &paused).await?;
+    write(db, &sql.resume, &resumed).await?;
+    let events: Vec<EventOut> = group
+        .out
+        .events
+        .iter()
+        .map(|e| EventOut { seq: e.seq, at: e.at, kind: &e.kind, data: &e.data })
+        .collect();
+    write(db, &sql.events, &events).await?;
+    if let Some(before) = group.prune {
+        let sql = "DELETE FROM events WHERE at < $1 AND seq < (SELECT MAX(seq) FROM events)";
+        on!(Conn, db, c => sqlx::query(sql).bind(before).execute(&mut *c).await.map(drop))?;
+    }
+    Ok(())
+}
