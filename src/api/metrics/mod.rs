@@ -263,6 +263,7 @@ mod tests {
             },
         ];
         (metrics.writer_hook())(&GroupStats {
+            statements: 5,
             commands: 3,
             took: std::time::Duration::from_millis(2),
             jobs: &jobs,

@@ -52,6 +52,8 @@ pub(super) struct Out {
     pub(super) locks: Vec<(Location, Option<LocationLock>)>,
     /// Timed transitions, for `/metrics`.
     pub(super) timings: Vec<JobTiming>,
+    /// Statements the group's transaction ran, `BEGIN` and `COMMIT` included.
+    pub(super) statements: usize,
 }
 
 /// The next id of each numbered table, allocated here (one writer: no gaps, no races).

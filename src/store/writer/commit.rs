@@ -22,6 +22,7 @@ pub(super) async fn commit(
 ) -> Result<(Vec<Answer>, Out), sqlx::Error> {
     begin(db).await?;
     let all: Vec<&Command> = group.iter().collect();
+    let start_read = next.is_none();
     let attempt = async {
         let start = match *next {
             Some(n) => n,
@@ -38,7 +39,9 @@ pub(super) async fn commit(
                 return Err(e);
             }
             *next = Some(applied.next);
-            return Ok((answers, applied.out));
+            let mut out = applied.out;
+            out.statements += 2 + usize::from(start_read);
+            return Ok((answers, out));
         }
         Err(e) if group.len() == 1 => {
             rollback(db).await;
@@ -78,12 +81,14 @@ async fn one_by_one(
                 out.events.extend(applied.out.events);
                 out.locks.extend(applied.out.locks);
                 out.timings.extend(applied.out.timings);
+                out.statements += applied.out.statements + 2;
                 answers.push(answer.remove(0));
             }
             Err(e) => {
                 tracing::error!(error = %e, "request refused by the database");
                 run(db, "ROLLBACK TO SAVEPOINT request").await?;
                 run(db, "RELEASE SAVEPOINT request").await?;
+                out.statements += 3;
                 answers.push(Answer::Failed(WriteError::Database(std::sync::Arc::new(e))));
             }
         }
@@ -95,10 +100,12 @@ async fn one_by_one(
 
 /// Reads, applies and writes `cmds` inside the open transaction.
 async fn apply(db: &mut Conn, cmds: &[&Command], next: Next) -> Result<(Vec<Answer>, Group), sqlx::Error> {
-    let loaded = load::load(db, cmds).await?;
+    let mut count = 0;
+    let loaded = load::load(db, cmds, &mut count).await?;
     let mut group = Group::new(loaded, next, now_ms());
     let answers = cmds.iter().map(|cmd| group.command(cmd)).collect();
-    save::save(db, &group).await?;
+    save::save(db, &group, &mut count).await?;
+    group.out.statements = count;
     Ok((answers, group))
 }
 

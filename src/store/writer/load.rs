@@ -70,7 +70,11 @@ pub(super) async fn next(db: &mut Conn) -> Result<Next, sqlx::Error> {
 /// Reads what `group` needs: the jobs its submissions' references and its changes name, the
 /// locations those jobs and its locks touch, when each of those jobs last started, and the
 /// active alarms if it raises or clears one.
-pub(super) async fn load(db: &mut Conn, group: &[&Command]) -> Result<Loaded, sqlx::Error> {
+pub(super) async fn load(
+    db: &mut Conn,
+    group: &[&Command],
+    count: &mut usize,
+) -> Result<Loaded, sqlx::Error> {
     let sql = statements(db.engine());
     let mut loaded = Loaded::default();
     let mut references = BTreeSet::new();
@@ -86,7 +90,7 @@ pub(super) async fn load(db: &mut Conn, group: &[&Command]) -> Result<Loaded, sq
             Command::Reports { reports, .. } => ids.extend(reports.iter().map(|r| r.job)),
             Command::Record { record, .. } => match record {
                 Record::Lock { location, .. } | Record::Unlock { location, .. } => {
-                    drop(places.insert(*location))
+                    places.insert(*location);
                 }
                 Record::AlarmRaised(_) | Record::AlarmCleared { .. } => alarms = true,
                 Record::Device { .. } | Record::Pause { .. } | Record::Prune { .. } => {}
@@ -96,6 +100,7 @@ pub(super) async fn load(db: &mut Conn, group: &[&Command]) -> Result<Loaded, sq
     if !references.is_empty() {
         let keys: Vec<_> = references.iter().map(|r| serde_json::json!({ "reference": r })).collect();
         let json = serde_json::to_string(&keys).unwrap_or_default();
+        *count += 1;
         let rows: Vec<(String, JobRow)> = on!(Conn, db, c => {
             sqlx::query_as::<_, Stored>(sql.by_reference.as_str()).bind(json).fetch_all(&mut *c).await
         })?
@@ -112,6 +117,7 @@ pub(super) async fn load(db: &mut Conn, group: &[&Command]) -> Result<Loaded, sq
     if !ids.is_empty() {
         let keys: Vec<_> = ids.iter().map(|id| serde_json::json!({ "id": id })).collect();
         let json = serde_json::to_string(&keys).unwrap_or_default();
+        *count += 1;
         let rows: Vec<JobRow> =
             on!(Conn, db, c => sqlx::query_as(sql.by_id.as_str()).bind(json).fetch_all(&mut *c).await)?;
         for row in rows {
@@ -129,6 +135,7 @@ pub(super) async fn load(db: &mut Conn, group: &[&Command]) -> Result<Loaded, sq
         }
         let keys: Vec<_> = loaded.jobs.keys().map(|id| serde_json::json!({ "job_id": id })).collect();
         let json = serde_json::to_string(&keys).unwrap_or_default();
+        *count += 1;
         let starts: Vec<(i64, i64)> =
             on!(Conn, db, c => sqlx::query_as(sql.starts.as_str()).bind(json).fetch_all(&mut *c).await)?;
         loaded.starts = starts.into_iter().collect::<HashMap<_, _>>();
@@ -136,6 +143,7 @@ pub(super) async fn load(db: &mut Conn, group: &[&Command]) -> Result<Loaded, sq
     if !places.is_empty() {
         let keys: Vec<_> = places.iter().map(location_json).collect();
         let json = serde_json::to_string(&keys).unwrap_or_default();
+        *count += 1;
         let rows: Vec<locations::Row> =
             on!(Conn, db, c => sqlx::query_as(sql.locations.as_str()).bind(json).fetch_all(&mut *c).await)?;
         for row in rows {
@@ -143,6 +151,7 @@ pub(super) async fn load(db: &mut Conn, group: &[&Command]) -> Result<Loaded, sq
         }
     }
     if alarms {
+        *count += 1;
         loaded.alarms = on!(Conn, db, c => sqlx::query_as(sql.alarms.as_str()).fetch_all(&mut *c).await)?;
     }
     Ok(loaded)

@@ -284,8 +284,9 @@ async fn run(mut db: Conn, mut rx: mpsc::Receiver<Command>, max_group: usize, ho
         let took = started.elapsed();
         tracing::trace!(requests = group.len(), micros = took.as_micros() as u64, "group committed");
         let timings = result.as_ref().map(|(_, out)| out.timings.as_slice()).unwrap_or_default();
+        let statements = result.as_ref().map_or(0, |(_, out)| out.statements);
         if let Some(observe) = &hooks.observe {
-            observe(&GroupStats { commands: group.len(), took, jobs: timings });
+            observe(&GroupStats { commands: group.len(), statements, took, jobs: timings });
         }
         let answers = match result {
             Ok((answers, out)) => {

@@ -165,17 +165,23 @@ struct PauseOut<'a> {
 }
 
 /// Runs `sql` with `rows` as its JSON parameter, unless there are none.
-async fn write<T: Serialize>(db: &mut Conn, sql: &'static str, rows: &[T]) -> Result<(), sqlx::Error> {
+async fn write<T: Serialize>(
+    db: &mut Conn,
+    count: &mut usize,
+    sql: &'static str,
+    rows: &[T],
+) -> Result<(), sqlx::Error> {
     if rows.is_empty() {
         return Ok(());
     }
+    *count += 1;
     let json = serde_json::to_string(rows).map_err(|e| sqlx::Error::Encode(e.into()))?;
     on!(Conn, db, c => sqlx::query(sql).bind(json).execute(&mut *c).await.map(drop))?;
     Ok(())
 }
 
 /// Writes everything `group` produced, inside the caller's transaction.
-pub(super) async fn save(db: &mut Conn, group: &Group) -> Result<(), sqlx::Error> {
+pub(super) async fn save(db: &mut Conn, group: &Group, count: &mut usize) -> Result<(), sqlx::Error> {
     let sql: &'static Statements = match db.engine() {
         Engine::Sqlite => &SQLITE,
         Engine::Postgres => &POSTGRES,
@@ -185,13 +191,13 @@ pub(super) async fn save(db: &mut Conn, group: &Group) -> Result<(), sqlx::Error
         .iter()
         .filter_map(|(id, request)| Some(JobOut::new(group.jobs.get(id)?, Some(request))))
         .collect();
-    write(db, &sql.insert_jobs, &created).await?;
+    write(db, count, &sql.insert_jobs, &created).await?;
     let changed: Vec<JobOut> =
         group.changed.iter().filter_map(|id| Some(JobOut::new(group.jobs.get(id)?, None))).collect();
-    write(db, &sql.update_jobs, &changed).await?;
-    write(db, &sql.history, &group.history).await?;
+    write(db, count, &sql.update_jobs, &changed).await?;
+    write(db, count, &sql.history, &group.history).await?;
     let locations: Vec<_> = group.touched.iter().filter_map(|l| group.locations.get(l)).collect();
-    write(db, &sql.locations, &locations).await?;
+    write(db, count, &sql.locations, &locations).await?;
     let audit: Vec<AuditOut> = group
         .audit
         .iter()
@@ -204,11 +210,11 @@ pub(super) async fn save(db: &mut Conn, group: &Group) -> Result<(), sqlx::Error
             reason: a.reason.as_deref(),
         })
         .collect();
-    write(db, &sql.audit, &audit).await?;
-    write(db, &sql.raise, &group.raised).await?;
+    write(db, count, &sql.audit, &audit).await?;
+    write(db, count, &sql.raise, &group.raised).await?;
     let cleared: Vec<_> =
         group.cleared.iter().map(|(id, at)| serde_json::json!({"id": id, "cleared_at": at})).collect();
-    write(db, &sql.clear, &cleared).await?;
+    write(db, count, &sql.clear, &cleared).await?;
     let (mut paused, mut resumed) = (Vec::new(), Vec::new());
     for (target, pause) in &group.controls {
         match pause {
@@ -222,17 +228,18 @@ pub(super) async fn save(db: &mut Conn, group: &Group) -> Result<(), sqlx::Error
             None => resumed.push(serde_json::json!({ "target": target })),
         }
     }
-    write(db, &sql.pause, &paused).await?;
-    write(db, &sql.resume, &resumed).await?;
+    write(db, count, &sql.pause, &paused).await?;
+    write(db, count, &sql.resume, &resumed).await?;
     let events: Vec<EventOut> = group
         .out
         .events
         .iter()
         .map(|e| EventOut { seq: e.seq, at: e.at, kind: &e.kind, data: &e.data })
         .collect();
-    write(db, &sql.events, &events).await?;
+    write(db, count, &sql.events, &events).await?;
     if let Some(before) = group.prune {
         let sql = "DELETE FROM events WHERE at < $1 AND seq < (SELECT MAX(seq) FROM events)";
+        *count += 1;
         on!(Conn, db, c => sqlx::query(sql).bind(before).execute(&mut *c).await.map(drop))?;
     }
     Ok(())

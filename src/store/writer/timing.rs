@@ -45,6 +45,9 @@ pub enum JobTiming {
 pub struct GroupStats<'a> {
     /// Commands applied together in one transaction.
     pub commands: usize,
+    /// Statements its transaction ran, `BEGIN` and `COMMIT` included (the same for a group
+    /// of one job and one of thousands: the writer is set-based).
+    pub statements: usize,
     /// Time to apply and commit them (the fsync included).
     pub took: Duration,
     /// The timed transitions the commit made durable (none when it failed).

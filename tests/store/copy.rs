@@ -1,0 +1,1 @@
+//! `rackd db copy` (see src/store/copy.rs).

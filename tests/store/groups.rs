@@ -1,0 +1,94 @@
+//! Group commit, set-based: the number of statements does not grow with the group, and one
+//! request the database refuses fails alone while the rest of its group commits.
+
+use std::sync::{Arc, Mutex};
+
+use futures::future::join_all;
+use rackd::store::writer::{Hooks, Outcome, WriteError, Writer};
+use rackd::store::{Engine, Pool, events, jobs};
+
+use crate::{light, on_both, open};
+
+/// A writer that notes (commands, statements) of every group.
+async fn writer(pool: &Pool) -> (Writer, Arc<Mutex<Vec<(usize, usize)>>>) {
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let hooks = Hooks {
+        observe: Some({
+            let seen = seen.clone();
+            Arc::new(move |g| seen.lock().unwrap().push((g.commands, g.statements)))
+        }),
+        ..Hooks::default()
+    };
+    let (writer, _task) = Writer::start(pool, 4096, 4096, hooks).await.unwrap();
+    (writer, seen)
+}
+
+async fn constant_statements(engine: Engine) {
+    let (pool, _db, _dir) = open(engine).await;
+    let (writer, seen) = writer(&pool).await;
+    writer.submit(vec![light("warm-up", 1)]).await.unwrap();
+    writer.submit(vec![light("one", 1)]).await.unwrap();
+    let batch: Vec<_> = (0..3000).map(|i| light(&format!("batch-{i}"), (i % 20) as u16 + 1)).collect();
+    assert_eq!(writer.submit(batch).await.unwrap().len(), 3000);
+    // 50 requests sent before the writer runs again: one group.
+    let many = join_all((0..50).map(|i| writer.submit(vec![light(&format!("many-{i}"), 2)]))).await;
+    assert!(many.iter().all(Result::is_ok));
+    let seen = seen.lock().unwrap().clone();
+    assert_eq!(seen.len(), 4, "{seen:?}");
+    let (one, batch, group) = (seen[1], seen[2], seen[3]);
+    assert_eq!(group.0, 50, "the 50 requests made one group: {seen:?}");
+    assert_eq!(one.1, batch.1, "one job and 3000 jobs: the same statements ({seen:?})");
+    assert_eq!(one.1, group.1, "one request and 50: the same statements ({seen:?})");
+    let stored = jobs::list(&pool, &jobs::JobFilter { limit: 10_000, ..Default::default() }).await.unwrap();
+    assert_eq!(stored.len(), 3052);
+    let ids: Vec<i64> = stored.iter().map(|j| j.id).collect();
+    assert_eq!(ids, (1..=3052).collect::<Vec<_>>());
+}
+on_both!(a_group_runs_the_same_statements_for_one_job_or_thousands, constant_statements);
+
+/// A trigger that refuses any job with the reference `POISON`.
+async fn poison(pool: &Pool) {
+    match pool {
+        Pool::Sqlite(p) => {
+            let sql = "CREATE TRIGGER poison BEFORE INSERT ON jobs WHEN NEW.reference = 'POISON' \
+                       BEGIN SELECT RAISE(ABORT, 'poisoned'); END";
+            sqlx::raw_sql(sql).execute(p).await.unwrap();
+        }
+        Pool::Postgres(p) => {
+            let sql = "CREATE FUNCTION poison() RETURNS trigger AS $$ BEGIN \
+                       IF NEW.reference = 'POISON' THEN RAISE EXCEPTION 'poisoned'; END IF; RETURN NEW; END $$ \
+                       LANGUAGE plpgsql; \
+                       CREATE TRIGGER poison BEFORE INSERT ON jobs FOR EACH ROW EXECUTE FUNCTION poison()";
+            sqlx::raw_sql(sql).execute(p).await.unwrap();
+        }
+    }
+}
+
+async fn fails_alone(engine: Engine) {
+    let (pool, _db, _dir) = open(engine).await;
+    poison(&pool).await;
+    let (writer, seen) = writer(&pool).await;
+    writer.submit(vec![light("first", 1)]).await.unwrap();
+    let answers = join_all(["A", "POISON", "B"].map(|r| writer.submit(vec![light(r, 3)]))).await;
+    assert_eq!(seen.lock().unwrap()[1].0, 3, "the three requests made one group");
+    let created = |a: &Result<Vec<Outcome>, WriteError>| match a {
+        Ok(o) => match &o[0] {
+            Outcome::Created(job) => job.id,
+            Outcome::Existing(_) => panic!("not created: {a:?}"),
+        },
+        Err(e) => panic!("refused: {e}"),
+    };
+    assert_eq!(created(&answers[0]), 2);
+    assert!(matches!(answers[1], Err(WriteError::Database(_))), "{:?}", answers[1]);
+    assert_eq!(created(&answers[2]), 3, "the refused request's id is given back: no gap");
+    let next = writer.submit(vec![light("after", 4)]).await.unwrap();
+    assert!(matches!(&next[0], Outcome::Created(job) if job.id == 4));
+    let stored = jobs::list(&pool, &jobs::JobFilter { limit: 100, ..Default::default() }).await.unwrap();
+    let references: Vec<_> = stored.iter().map(|j| j.reference.clone().unwrap()).collect();
+    assert_eq!(references, ["first", "A", "B", "after"]);
+    let log = events::after(&pool, 0, 100).await.unwrap();
+    let seqs: Vec<i64> = log.iter().map(|e| e.seq).collect();
+    assert_eq!(seqs, (1..=4).collect::<Vec<_>>(), "one event per stored job, numbered without a gap");
+    assert!(log.iter().all(|e| !e.data.contains("POISON")), "no event of the refused request");
+}
+on_both!(a_request_the_database_refuses_fails_alone, fails_alone);
