@@ -76,6 +76,24 @@ pub enum Command {
     /// Run a device simulator alone.
     #[command(subcommand)]
     Sim(sim::SimCommand),
+    /// The store's database.
+    #[command(subcommand)]
+    Db(DbCommand),
+}
+
+/// `rackd db ...`
+#[derive(clap::Subcommand, Debug)]
+pub enum DbCommand {
+    /// Copy a site's store to an empty database, with every id and event number (stop
+    /// rackd first). Example: rackd db copy --from sqlite:data/rackd.db --to postgres://rackd@db/rackd
+    Copy {
+        /// The store to copy: sqlite:PATH or postgres://...
+        #[arg(long, value_parser = crate::store::Database::parse)]
+        from: crate::store::Database,
+        /// The empty database to copy it to: sqlite:PATH or postgres://...
+        #[arg(long, value_parser = crate::store::Database::parse)]
+        to: crate::store::Database,
+    },
 }
 
 /// `rackd serve` options. Settings come from the defaults, the file, the environment
@@ -125,6 +143,15 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 app.keep(sim);
             }
             app.run_until(shutdown_signal()).await?;
+        }
+        Command::Db(DbCommand::Copy { from, to }) => {
+            let copied = crate::store::copy::copy(&from, &to)
+                .await
+                .with_context(|| format!("copying {} to {}", from.display(), to.display()))?;
+            for (table, rows) in copied {
+                println!("{table}: {rows} rows");
+            }
+            println!("copied {} to {}", from.display(), to.display());
         }
         Command::Openapi => {
             say(crate::api::openapi().to_pretty_json().context("encoding OpenAPI")?);
