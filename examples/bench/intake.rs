@@ -31,11 +31,20 @@ impl Phase {
 }
 
 /// Runs the intake benchmark and prints its figures.
-pub async fn run(clients: usize, seconds: u64, batch: usize) -> anyhow::Result<()> {
+pub async fn run(clients: usize, seconds: u64, batch: usize, database: &str) -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
     let mut config = Config::demo();
     config.server.listen = "127.0.0.1:0".parse()?;
     config.database.path = dir.path().join("bench.db");
+    match database {
+        "sqlite" => {}
+        "postgres" => {
+            crate::postgres::DURABLE.store(true, std::sync::atomic::Ordering::Relaxed);
+            config.database.url = Some(crate::postgres::database().await);
+        }
+        url => config.database.url = Some(url.to_owned()),
+    }
+    let engine = if config.database.url.is_some() { "postgres" } else { "sqlite" };
     let app = Application::build(&config, false).await?;
     let base = format!("http://{}", app.local_addr());
     let (stop, stopped) = oneshot::channel::<()>();
@@ -45,7 +54,7 @@ pub async fn run(clients: usize, seconds: u64, batch: usize) -> anyhow::Result<(
     let duration = Duration::from_secs(seconds);
     let client = reqwest::Client::builder().pool_max_idle_per_host(clients).build()?;
     println!(
-        "bench intake: {clients} clients, {seconds} s per phase, batches of {batch}, {} cores",
+        "bench intake: {clients} clients, {seconds} s per phase, batches of {batch}, {} cores, {engine}",
         num_cpus()
     );
     let trivial = phase("GET /healthz (ceiling)", &client, clients, duration, 1, {

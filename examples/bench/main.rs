@@ -1,7 +1,7 @@
 //! rackd's benchmarks, kept out of the service binary and its dependencies.
 //!
 //! ```text
-//! cargo run --release --example bench -- intake [--clients 64] [--seconds 5] [--batch 1000]
+//! cargo run --release --example bench -- intake [--clients 64] [--seconds 5] [--batch 1000] [--database sqlite|postgres|URL]
 //! cargo run --release --example bench -- shelf  [--latency-jobs 1000] [--batch-jobs 20000] [--poll-ms 10]
 //!                                               [--drop 0.2 [--lossy-jobs 1000] [--fixed-timeout]
 //!                                                [--min-timeout-ms 20]]
@@ -21,6 +21,8 @@
 //! a stale one beside it would silently measure old code.
 
 mod child;
+#[path = "../../tests/common/postgres.rs"]
+mod postgres;
 mod fleet;
 mod intake;
 mod shelf;
@@ -45,6 +47,10 @@ enum Bench {
         /// Jobs per batch request.
         #[arg(long, default_value_t = 1000)]
         batch: usize,
+        /// The store: `sqlite` (a temporary file), `postgres` (a throwaway local cluster
+        /// with PostgreSQL's durable defaults, from /usr/lib/postgresql) or a `postgres://` URL.
+        #[arg(long, default_value = "sqlite")]
+        database: String,
     },
     /// Shelf PLC: POST-to-slot latency and completed jobs/s against the simulator.
     Shelf {
@@ -98,7 +104,7 @@ fn main() -> ExitCode {
     let runtime = tokio::runtime::Runtime::new().expect("a tokio runtime");
     let result = runtime.block_on(async {
         match bench {
-            Bench::Intake { clients, seconds, batch } => intake::run(clients, seconds, batch).await,
+            Bench::Intake { clients, seconds, batch, database } => intake::run(clients, seconds, batch, &database).await,
             Bench::Shelf {
                 latency_jobs,
                 batch_jobs,

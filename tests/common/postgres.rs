@@ -7,8 +7,8 @@
 //! the server runs as the package's `postgres` user (through `setpriv`). It is started by a
 //! thread that lives as long as the test process with a parent-death signal, so it dies with
 //! the tests however they end; its data folder (in the temp folder, `rackd-pg-PID`) is
-//! removed by the next run. Durability settings are off (`fsync=off`): these tests check
-//! behaviour, the benchmarks measure speed.
+//! removed by the next run. Durability settings are off (`fsync=off`) for the tests, which
+//! check behaviour; the benchmarks set [`DURABLE`] and measure with PostgreSQL's defaults.
 //!
 //! A missing PostgreSQL fails the test with the command that installs it; nothing is
 //! skipped.
@@ -31,6 +31,9 @@ struct Cluster {
 }
 
 static CLUSTER: OnceLock<Result<Cluster, String>> = OnceLock::new();
+
+/// Set before first use to keep PostgreSQL's durable defaults (the benchmarks do).
+pub static DURABLE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 static NEXT: AtomicU32 = AtomicU32::new(1);
 
 /// The URL of a fresh, empty database on the test cluster (started on first use).
@@ -122,8 +125,11 @@ fn start() -> Result<Cluster, String> {
         .arg(&data)
         .args(["-p", &port.to_string(), "-k"])
         .arg(&dir)
-        .args(["-c", "listen_addresses=127.0.0.1", "-c", "fsync=off", "-c", "synchronous_commit=off"])
-        .args(["-c", "full_page_writes=off", "-c", "max_connections=400"])
+        .args(["-c", "listen_addresses=127.0.0.1", "-c", "max_connections=400"]);
+    if !DURABLE.load(Ordering::Relaxed) {
+        server.args(["-c", "fsync=off", "-c", "synchronous_commit=off", "-c", "full_page_writes=off"]);
+    }
+    server
         .stdout(Stdio::null())
         .stderr(log);
     // The thread that starts the server never ends, so the parent-death signal fires only
