@@ -21,10 +21,10 @@
 //! a stale one beside it would silently measure old code.
 
 mod child;
-#[path = "../../tests/common/postgres.rs"]
-mod postgres;
 mod fleet;
 mod intake;
+#[path = "../../tests/common/postgres.rs"]
+mod postgres;
 mod shelf;
 mod ws;
 
@@ -104,7 +104,9 @@ fn main() -> ExitCode {
     let runtime = tokio::runtime::Runtime::new().expect("a tokio runtime");
     let result = runtime.block_on(async {
         match bench {
-            Bench::Intake { clients, seconds, batch, database } => intake::run(clients, seconds, batch, &database).await,
+            Bench::Intake { clients, seconds, batch, database } => {
+                intake::run(clients, seconds, batch, &database).await
+            }
             Bench::Shelf {
                 latency_jobs,
                 batch_jobs,

@@ -43,6 +43,9 @@ pub enum Invalid {
         /// The device that serves it already.
         other: String,
     },
+    /// A `database.url` that is not a PostgreSQL URL.
+    #[error("{0}")]
+    DatabaseUrl(String),
     /// An intake bound of 0.
     #[error("intake.max_group and intake.queue must be at least 1")]
     Intake,
@@ -99,6 +102,16 @@ impl Config {
                     let (device, other) = (device.to_owned(), other.to_owned());
                     return Err((at("aisles"), Invalid::AisleServedTwice { device, aisle, other }));
                 }
+            }
+        }
+        if let Some(url) = &self.database.url {
+            match crate::store::Database::parse(url) {
+                Ok(crate::store::Database::Postgres(_)) => {}
+                Ok(crate::store::Database::Sqlite(_)) => {
+                    let why = "database.url is for PostgreSQL (postgres://...); a SQLite file goes in database.path";
+                    return Err(("database.url".into(), Invalid::DatabaseUrl(why.into())));
+                }
+                Err(e) => return Err(("database.url".into(), Invalid::DatabaseUrl(e))),
             }
         }
         if self.intake.max_group == 0 || self.intake.queue == 0 {

@@ -184,3 +184,17 @@ fn explain_names_every_origin_and_reads_back_as_the_same_configuration() {
     assert!(text.contains("slots = 60") && text.contains("# default"), "{text}");
     assert!(text.lines().any(|l| l.starts_with("id = \"s\"") && l.ends_with("# x.toml:2:1")), "{text}");
 }
+
+#[test]
+fn a_database_url_must_be_postgres_and_may_come_from_the_environment() {
+    let url = "postgres://rackd:pw@db.plant/rackd";
+    let env = load(FILE, &[("RACKD_DATABASE__URL", url)]).unwrap();
+    assert_eq!(env.config.database.url.as_deref(), Some(url));
+    let err = error("[database]\nurl = \"sqlite:x.db\"\n");
+    assert!(err.contains("x.toml:2:1: database.url: database.url is for PostgreSQL"), "{err}");
+    let err = error("[database]\nurl = \"mysql://h/db\"\n");
+    assert!(
+        err.contains("database.url") && err.contains("neither sqlite:PATH nor a postgres:// URL"),
+        "{err}"
+    );
+}

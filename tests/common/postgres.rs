@@ -89,7 +89,7 @@ fn start() -> Result<Cluster, String> {
     let bin = binaries()?;
     let as_root = rustix::process::geteuid().is_root();
     if as_root
-        && Command::new("id").arg("postgres").stdout(Stdio::null()).status().map_or(true, |s| !s.success())
+        && !Command::new("id").arg("postgres").stdout(Stdio::null()).status().is_ok_and(|s| s.success())
     {
         return Err(format!(
             "running as root needs the `postgres` user, which the package creates: {INSTALL}"
@@ -101,7 +101,7 @@ fn start() -> Result<Cluster, String> {
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     if as_root {
         let status = Command::new("chown").args(["postgres:postgres"]).arg(&dir).status();
-        if status.map_or(true, |s| !s.success()) {
+        if !status.is_ok_and(|s| s.success()) {
             return Err(format!("cannot give {} to the postgres user", dir.display()));
         }
     }
@@ -120,18 +120,16 @@ fn start() -> Result<Cluster, String> {
         .port();
     let log = std::fs::File::create(dir.join("server.log")).map_err(|e| e.to_string())?;
     let mut server = command(&bin.join("postgres"), as_root);
-    server
-        .arg("-D")
-        .arg(&data)
-        .args(["-p", &port.to_string(), "-k"])
-        .arg(&dir)
-        .args(["-c", "listen_addresses=127.0.0.1", "-c", "max_connections=400"]);
+    server.arg("-D").arg(&data).args(["-p", &port.to_string(), "-k"]).arg(&dir).args([
+        "-c",
+        "listen_addresses=127.0.0.1",
+        "-c",
+        "max_connections=400",
+    ]);
     if !DURABLE.load(Ordering::Relaxed) {
         server.args(["-c", "fsync=off", "-c", "synchronous_commit=off", "-c", "full_page_writes=off"]);
     }
-    server
-        .stdout(Stdio::null())
-        .stderr(log);
+    server.stdout(Stdio::null()).stderr(log);
     // The thread that starts the server never ends, so the parent-death signal fires only
     // when the whole test process does.
     let (tx, rx) = std::sync::mpsc::channel();
@@ -150,7 +148,7 @@ fn start() -> Result<Cluster, String> {
             && Command::new(bin.join("pg_isready"))
                 .args(["-h", "127.0.0.1", "-p", &port.to_string()])
                 .output()
-                .map_or(false, |o| o.status.success());
+                .is_ok_and(|o| o.status.success());
         if ok {
             return Ok(Cluster { base });
         }
