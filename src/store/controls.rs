@@ -33,15 +33,47 @@ pub struct AuditEntry {
     pub reason: Option<String>,
 }
 
+/// A `controls` row (the same on both engines).
+#[derive(sqlx::FromRow)]
+struct ControlRow {
+    target: String,
+    by: String,
+    reason: Option<String>,
+    at: i64,
+}
+
+/// An `audit` row (the same on both engines).
+#[derive(sqlx::FromRow)]
+struct AuditRow {
+    id: i64,
+    at: i64,
+    by: String,
+    action: String,
+    target: String,
+    reason: Option<String>,
+}
+
+impl From<AuditRow> for AuditEntry {
+    fn from(r: AuditRow) -> AuditEntry {
+        AuditEntry {
+            id: r.id,
+            at: from_ms(r.at),
+            by: r.by,
+            action: r.action,
+            target: r.target,
+            reason: r.reason,
+        }
+    }
+}
+
 /// Every paused device and aisle, with who paused it (at start, to restore).
 pub async fn paused(db: impl Into<Reader<'_>>) -> Result<Vec<(Target, Pause)>, sqlx::Error> {
     let sql = "SELECT target, by, reason, at FROM controls WHERE paused = TRUE ORDER BY target";
-    let rows: Vec<(String, String, Option<String>, i64)> =
-        read!(db.into(), p => sqlx::query_as(sql).fetch_all(p).await)?;
+    let rows: Vec<ControlRow> = read!(db.into(), p => sqlx::query_as(sql).fetch_all(p).await)?;
     Ok(rows
         .into_iter()
-        .filter_map(|(target, by, reason, at)| {
-            Some((Target::parse(&target)?, Pause { by, reason, at: from_ms(at) }))
+        .filter_map(|r| {
+            Some((Target::parse(&r.target)?, Pause { by: r.by, reason: r.reason, at: from_ms(r.at) }))
         })
         .collect())
 }
@@ -54,17 +86,7 @@ pub async fn audit(
 ) -> Result<Vec<AuditEntry>, sqlx::Error> {
     let sql = "SELECT id, at, by, action, target, reason FROM audit WHERE ($1 IS NULL OR id < $1) \
                ORDER BY id DESC LIMIT $2";
-    let rows: Vec<(i64, i64, String, String, String, Option<String>)> =
+    let rows: Vec<AuditRow> =
         read!(db.into(), p => sqlx::query_as(sql).bind(before_id).bind(limit as i64).fetch_all(p).await)?;
-    Ok(rows
-        .into_iter()
-        .map(|(id, at, by, action, target, reason)| AuditEntry {
-            id,
-            at: from_ms(at),
-            by,
-            action,
-            target,
-            reason,
-        })
-        .collect())
+    Ok(rows.into_iter().map(AuditEntry::from).collect())
 }

@@ -175,7 +175,7 @@ pub async fn connect(database: &Database, busy_timeout: Duration, max: u32) -> R
                 .connect_with(options)
                 .await?;
             let version: String = sqlx::query_scalar("SHOW server_version_num").fetch_one(&pool).await?;
-            if version.trim().parse::<i64>().map_or(true, |v| v < MIN_POSTGRES) {
+            if !supported(&version) {
                 let found =
                     sqlx::query_scalar("SHOW server_version").fetch_one(&pool).await.unwrap_or(version);
                 return Err(OpenError::Version { found });
@@ -183,6 +183,11 @@ pub async fn connect(database: &Database, busy_timeout: Duration, max: u32) -> R
             Ok(Pool::Postgres(pool))
         }
     }
+}
+
+/// Whether a server saying this `server_version_num` is new enough.
+fn supported(version_num: &str) -> bool {
+    version_num.trim().parse::<i64>().is_ok_and(|v| v >= MIN_POSTGRES)
 }
 
 /// SQLite's settings: WAL, `synchronous=FULL` (a commit is on disk), foreign keys, and how
@@ -261,6 +266,17 @@ mod tests {
         assert!(matches!(Database::parse("postgres://u:p@h/db"), Ok(Database::Postgres(_))));
         assert!(Database::parse("mysql://h/db").is_err());
         assert!(Database::parse("sqlite:").is_err());
+    }
+
+    #[test]
+    fn servers_older_than_14_are_refused() {
+        assert!(supported("140000") && supported("150018") && supported("170002\n"));
+        assert!(!supported("130016") && !supported("90624") && !supported("") && !supported("x"));
+        let e = OpenError::Version { found: "13.16".into() };
+        assert_eq!(
+            e.to_string(),
+            "PostgreSQL 13.16 is not supported: rackd needs PostgreSQL 14 or newer (server_version_num 140000 and up)"
+        );
     }
 
     #[test]

@@ -92,3 +92,41 @@ async fn fails_alone(engine: Engine) {
     assert!(log.iter().all(|e| !e.data.contains("POISON")), "no event of the refused request");
 }
 on_both!(a_request_the_database_refuses_fails_alone, fails_alone);
+
+/// PostgreSQL only: a server that drops rackd's connections (a restart, a failover, an
+/// administrator's `pg_terminate_backend`) costs the group in flight, not the ones after it.
+#[tokio::test]
+async fn a_broken_connection_costs_one_group_not_the_writer() {
+    let (pool, db, _dir) = open(Engine::Postgres).await;
+    let (writer, _seen) = writer(&pool).await;
+    writer.submit(vec![light("before", 1)]).await.unwrap();
+    let rackd::store::Database::Postgres(url) = db else { unreachable!() };
+    let mut admin = <sqlx::PgConnection as sqlx::Connection>::connect(&url).await.unwrap();
+    let killed: Vec<bool> = sqlx::query_scalar(
+        "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE application_name = 'rackd'",
+    )
+    .fetch_all(&mut admin)
+    .await
+    .unwrap();
+    assert!(!killed.is_empty(), "rackd's connections were found");
+    // Termination is a signal: wait until the server has let them go.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    loop {
+        let left: i64 =
+            sqlx::query_scalar("SELECT COUNT(*) FROM pg_stat_activity WHERE application_name = 'rackd'")
+                .fetch_one(&mut admin)
+                .await
+                .unwrap();
+        if left == 0 {
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "{left} connections still there");
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    let during = writer.submit(vec![light("during", 1)]).await;
+    assert!(matches!(during, Err(WriteError::Database(_))), "the group in flight fails: {during:?}");
+    let after = writer.submit(vec![light("after", 1)]).await.unwrap();
+    assert!(matches!(&after[0], Outcome::Created(job) if job.id == 2), "{after:?}");
+    let stored = jobs::list(&pool, &jobs::JobFilter { limit: 10, ..Default::default() }).await.unwrap();
+    assert_eq!(stored.iter().map(|j| j.reference.clone().unwrap()).collect::<Vec<_>>(), ["before", "after"]);
+}

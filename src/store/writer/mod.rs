@@ -219,12 +219,9 @@ impl Writer {
         queue: usize,
         hooks: Hooks,
     ) -> Result<(Writer, JoinHandle<()>), sqlx::Error> {
-        let conn = match pool {
-            Pool::Sqlite(p) => Conn::Sqlite(p.acquire().await?.detach()),
-            Pool::Postgres(p) => Conn::Postgres(p.acquire().await?.detach()),
-        };
+        let conn = Conn::acquire(pool).await?;
         let (tx, rx) = mpsc::channel(queue);
-        let task = tokio::spawn(run(conn, rx, max_group.max(1), hooks));
+        let task = tokio::spawn(run(pool.clone(), conn, rx, max_group.max(1), hooks));
         Ok((Writer { tx }, task))
     }
 
@@ -274,13 +271,40 @@ pub(crate) enum Conn {
     Postgres(sqlx::PgConnection),
 }
 
+impl Conn {
+    /// A connection of the pool's, taken out of it for good.
+    async fn acquire(pool: &Pool) -> Result<Conn, sqlx::Error> {
+        Ok(match pool {
+            Pool::Sqlite(p) => Conn::Sqlite(p.acquire().await?.detach()),
+            Pool::Postgres(p) => Conn::Postgres(p.acquire().await?.detach()),
+        })
+    }
+}
+
 /// The writer: take what waits, commit it, answer, repeat until every handle is gone.
-async fn run(mut db: Conn, mut rx: mpsc::Receiver<Command>, max_group: usize, hooks: Hooks) {
+///
+/// After a failed group the connection is replaced by a fresh one from the pool, so a
+/// database server that restarted (or a connection that broke) costs the groups in flight,
+/// not every group after them.
+async fn run(pool: Pool, db: Conn, mut rx: mpsc::Receiver<Command>, max_group: usize, hooks: Hooks) {
     let mut next = None;
+    let mut db = Some(db);
     let mut group = Vec::with_capacity(max_group);
     while rx.recv_many(&mut group, max_group).await > 0 {
         let started = std::time::Instant::now();
-        let result = commit::commit(&mut db, &group, &mut next).await;
+        if db.is_none() {
+            db = Conn::acquire(&pool)
+                .await
+                .inspect_err(|e| tracing::error!(error = %e, "the job writer cannot reconnect"))
+                .ok();
+        }
+        let result = match db.as_mut() {
+            Some(conn) => commit::commit(conn, &group, &mut next).await,
+            None => Err(sqlx::Error::PoolTimedOut),
+        };
+        if result.is_err() {
+            db = None;
+        }
         let took = started.elapsed();
         tracing::trace!(requests = group.len(), micros = took.as_micros() as u64, "group committed");
         let timings = result.as_ref().map(|(_, out)| out.timings.as_slice()).unwrap_or_default();
