@@ -1,14 +1,20 @@
 // The store drawn as the operator sees it: per aisle, each row as a grid of bays (across)
 // and levels (up), each cell showing its box positions; between the rows the aisle itself,
-// with the bay numbers and, where a stacker crane runs, the crane.
+// with the bay numbers and, under them on a track of its own, the crane where one runs.
+// Each aisle folds away (a <details>) behind a summary line: the devices serving it, its
+// occupancy, its locks, the crane's state, its pause, and for operators Pause/Resume.
+// Clicking a box position opens the location's dialog (lock and unlock; see locations.js).
 //
 // A crane reports its axes in its own units (D220/D221), which say nothing about bays, so
 // the crane is drawn where its work puts it: by its action state, at the pick or put
 // location of the task it holds once there (with an arrow to it while travelling); idle,
-// where it last stopped, or at the station end when both axes read zero (home). The raw
-// axis values are written under the aisle.
+// where it last stopped, or at the station end when both axes read zero (home). Its label
+// starts at its bay's left edge in the left half of the aisle and ends at its bay's right
+// edge in the right half, so it never runs past the aisle's end; being on its own track,
+// it never covers the bay numbers.
 
-import { el, locKey, locName, ms, rowName, setText } from './dom.js';
+import { api } from './api.js';
+import { confirmButton, el, locKey, locName, ms, rowName, setText } from './dom.js';
 import { TERMINAL } from './model.js';
 
 /** The shape of each aisle, from the locations the server knows. */
@@ -41,9 +47,16 @@ function ends(job) {
 }
 
 export class Racks {
-  constructor(root, model) {
+  /** `open(location)` shows a location's dialog; `notify` tells of a refused pause. */
+  constructor(root, model, open, notify) {
     this.root = root;
     this.model = model;
+    this.notify = notify;
+    root.addEventListener('click', (e) => {
+      const pos = e.target.closest('.pos[data-loc]');
+      const l = pos && this.model.locations.get(pos.dataset.loc);
+      if (l) open(l);
+    });
     this.shape = '';
     this.cells = new Map();
     this.lanes = new Map();
@@ -76,19 +89,33 @@ export class Racks {
     }
     const mast = el('div', { class: 'mast', hidden: true });
     block.append(mast);
-    const served = el('span', { class: 'served' });
-    const fill = el('span', { class: 'fill' });
-    const section = el(
-      'section',
-      { class: 'aisle', dataset: { aisle: a.aisle } },
-      el('h3', {}, el('span', { text: `Aisle ${a.aisle}` }), served, fill),
-      block,
+    const s = {
+      served: el('span', { class: 'served' }),
+      fill: el('span', { class: 'fill' }),
+      locks: el('span', { class: 'locks' }),
+      crane: el('span', { class: 'crane-state' }),
+      paused: el('span', { class: 'badge paused aisle-paused', text: 'paused' }),
+    };
+    const pause = confirmButton('Pause aisle', 'Confirm pause', 'pause op', (b) => this.pause(a.aisle, true, b));
+    const resume = confirmButton('Resume aisle', 'Confirm resume', 'resume op', (b) => this.pause(a.aisle, false, b));
+    const summary = el(
+      'summary',
+      { class: 'aisle-summary' },
+      el('span', { class: 'aisle-name', text: `Aisle ${a.aisle}` }),
+      s.served,
+      s.paused,
+      s.crane,
+      s.locks,
+      s.fill,
+      el('span', { class: 'aisle-actions' }, pause, resume),
     );
+    // A click on a button in the summary is the button's, not a fold.
+    summary.addEventListener('click', (e) => {
+      if (e.target.closest('button')) e.preventDefault();
+    });
+    const section = el('details', { class: 'aisle', dataset: { aisle: a.aisle }, open: true }, summary, block);
     const lane = this.lanes.get(a.aisle);
-    lane.mast = mast;
-    lane.served = served;
-    lane.fill = fill;
-    lane.size = a.rows * a.bays * a.levels * a.positions;
+    Object.assign(lane, s, { mast, pause, resume, size: a.rows * a.bays * a.levels * a.positions });
     return section;
   }
 
@@ -115,9 +142,9 @@ export class Racks {
     const info = el('div', { class: 'lane-info' });
     const lane = el('div', { class: 'lane' }, el('div', { class: 'lbl station', text: 'P&D', title: 'station (bay 0)' }));
     for (let bay = 1; bay <= a.bays; bay += 1) lane.append(el('div', { class: 'lbl bay', text: bay }));
-    lane.append(marker);
-    this.lanes.set(a.aisle, { marker, info, bays: a.bays });
-    return el('div', { class: 'lane-wrap' }, lane, info);
+    const track = el('div', { class: 'track' }, marker);
+    this.lanes.set(a.aisle, { marker, track, info, bays: a.bays });
+    return el('div', { class: 'lane-wrap' }, lane, track, info);
   }
 
   /** Draws one location's state onto its position box. */
@@ -138,7 +165,7 @@ export class Racks {
     if (pos.title !== title) pos.title = title;
   }
 
-  /** Device names over each aisle, fill counts, and the cranes in their lanes. */
+  /** The aisles' summaries (devices, fill, locks, pause, crane) and the cranes in their lanes. */
   devices() {
     const byAisle = new Map();
     for (const d of this.model.devices.values()) {
@@ -148,19 +175,45 @@ export class Racks {
       }
     }
     const filled = new Map();
-    for (const l of this.model.locations.values()) if (l.occupied) filled.set(l.aisle, (filled.get(l.aisle) || 0) + 1);
+    const locked = new Map();
+    for (const l of this.model.locations.values()) {
+      if (l.occupied) filled.set(l.aisle, (filled.get(l.aisle) || 0) + 1);
+      if (l.lock) locked.set(l.aisle, (locked.get(l.aisle) || 0) + 1);
+    }
     for (const [aisle, lane] of this.lanes) {
       const devices = byAisle.get(aisle) || [];
       setText(lane.served, devices.length ? devices.map((d) => `${d.id} (${d.kind})`).join(', ') : 'no device');
-      setText(lane.fill, `${filled.get(aisle) || 0} / ${lane.size} occupied`);
+      const n = filled.get(aisle) || 0;
+      setText(lane.fill, `${n} / ${lane.size} occupied (${Math.round((100 * n) / (lane.size || 1))} %)`);
+      const locks = locked.get(aisle) || 0;
+      setText(lane.locks, locks ? `${locks} locked` : 'no locks');
+      lane.locks.classList.toggle('bad', locks > 0);
+      const paused = devices.some((d) => (d.paused_aisles || []).includes(aisle));
+      lane.paused.hidden = !paused;
+      lane.pause.hidden = paused || devices.length === 0;
+      lane.resume.hidden = !paused;
       const crane = devices.find((d) => d.crane);
+      setText(lane.crane, crane ? craneState(crane) : '');
+      lane.crane.classList.toggle('bad', Boolean(crane && (!crane.online || crane.crane.alarm_code)));
       this.crane(lane, crane);
+    }
+  }
+
+  async pause(aisle, paused, button) {
+    button.disabled = true;
+    try {
+      await api('POST', `/api/v1/aisles/${aisle}/${paused ? 'pause' : 'resume'}`);
+    } catch (e) {
+      this.notify(`${paused ? 'Pause' : 'Resume'} aisle ${aisle}: ${e.message}`);
+    } finally {
+      button.disabled = false;
     }
   }
 
   crane(lane, device) {
     if (!device) {
       lane.marker.hidden = true;
+      lane.track.hidden = true;
       lane.mast.hidden = true;
       setText(lane.info, '');
       return;
@@ -172,15 +225,20 @@ export class Racks {
     else if (!work) at = this.idlePlace(device, at);
     if (at) this.cranePlaces.set(device.id, at);
     const travelling = Boolean(work && !work.arrived);
+    lane.track.hidden = false;
     lane.marker.hidden = !at;
     lane.mast.hidden = !at;
     lane.marker.classList.toggle('moving', travelling);
     lane.marker.classList.toggle('alarm', Boolean(c.alarm_code));
     lane.marker.classList.toggle('offline', !device.online);
     if (at) {
-      // At the station the marker starts at the aisle's end instead of centring on it.
+      // In the right half the label ends at the bay's right edge, so it stays in the aisle.
+      const right = at.bay > lane.bays / 2;
       lane.marker.classList.toggle('at-station', at.bay === 0);
-      lane.marker.style.left = at.bay === 0 ? '0px' : `calc(${bayLeft(at.bay, lane.bays)} + ${bayWidth(lane.bays)} / 2)`;
+      lane.marker.classList.toggle('from-right', right);
+      if (at.bay === 0) lane.marker.style.left = '0px';
+      else lane.marker.style.left = right ? 'auto' : `calc${bayLeft(at.bay, lane.bays)}`;
+      lane.marker.style.right = right ? `calc(100% - ${bayLeft(at.bay, lane.bays)} - ${bayWidth(lane.bays)})` : 'auto';
       lane.mast.style.left = at.bay === 0 ? '0px' : `calc${bayLeft(at.bay, lane.bays)}`;
       lane.mast.style.width = at.bay === 0 ? 'var(--lbl)' : `calc${bayWidth(lane.bays)}`;
       const label = travelling && work.target !== at ? `${placeName(at)} → ${placeName(work.target)}` : placeName(at);
@@ -224,6 +282,14 @@ export class Racks {
     }
     return last && last.state === 'completed' ? ends(last).put : null;
   }
+}
+
+/** A crane's state in a few words for its aisle's summary. */
+function craneState(d) {
+  const c = d.crane;
+  if (!d.online) return `${d.id} offline`;
+  if (c.alarm_code) return `${d.id} alarm ${c.alarm_code}${c.alarm_text ? ` ${c.alarm_text}` : ''}`;
+  return `${d.id}: ${c.action}`;
 }
 
 /** The crane's home: the travel origin, at the station end of the aisle. */
