@@ -195,6 +195,7 @@ onUnauthorized(() => {
 });
 
 let ticks = 0;
+$('clock').textContent = clock(new Date().toISOString());
 setInterval(() => {
   $('clock').textContent = clock(new Date().toISOString());
   devices.tick();
