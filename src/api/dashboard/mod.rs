@@ -8,8 +8,8 @@
 //! `/dashboard/`, `api.js` (key and HTTP calls), `live.js` (the WebSocket, reconnection),
 //! `model.js` (the state the events build), `dom.js` (element and time helpers), and one
 //! module per part of the page: `counters.js` (the header), `attention.js` (the jobs that
-//! need a person), `alarms.js`, `devices.js`, `racks.js` (with `locations.js`, a location's
-//! dialog), `kpi.js` (the KPIs, as SVG charts drawn by the page), `jobs.js` (with
+//! need a person), `alarms.js`, `devices.js`, `racks.js` (with `crane.js`, where a crane is
+//! drawn, and `locations.js`, a location's dialog), `kpi.js` (the KPIs, as SVG charts drawn by the page), `jobs.js` (with
 //! `actions.js`, the job buttons); `reasons.js` says why a job waits and `roles.js` which
 //! buttons the key may use. The style is `dashboard.css` (the page, its header and panels)
 //! with `racks.css` and `jobs.css` (the job table, its cards on a tablet, the KPIs).
@@ -41,6 +41,7 @@ const FILES: &[(&str, &str, &str)] = &[
     ("/dashboard/model.js", JS, include_str!("model.js")),
     ("/dashboard/dom.js", JS, include_str!("dom.js")),
     ("/dashboard/racks.js", JS, include_str!("racks.js")),
+    ("/dashboard/crane.js", JS, include_str!("crane.js")),
     ("/dashboard/devices.js", JS, include_str!("devices.js")),
     ("/dashboard/jobs.js", JS, include_str!("jobs.js")),
     ("/dashboard/alarms.js", JS, include_str!("alarms.js")),
