@@ -14,6 +14,7 @@
 #[path = "../common/helpers.rs"]
 mod helpers;
 
+mod actions;
 mod control;
 mod keys;
 mod layout;
