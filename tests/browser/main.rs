@@ -244,11 +244,15 @@ impl Browser {
             .unwrap()
     }
 
-    /// Clicks the element matching a CSS selector, as a user would.
+    /// Clicks the element matching a CSS selector, as a user would: scrolled to the middle
+    /// of the window first, where the sticky header cannot cover it.
     pub async fn click(&self, css: &str) {
         let element =
             self.client.wait().at_most(Duration::from_secs(10)).for_element(Locator::Css(css)).await;
-        element.unwrap_or_else(|e| panic!("no {css} to click: {e}")).click().await.unwrap();
+        let element = element.unwrap_or_else(|e| panic!("no {css} to click: {e}"));
+        let arg = serde_json::to_value(&element).unwrap();
+        self.client.execute("arguments[0].scrollIntoView({block: 'center'})", vec![arg]).await.unwrap();
+        element.click().await.unwrap();
     }
 
     /// Saves a screenshot of the whole page (the window grown to fit it, up to 3000 pixels
