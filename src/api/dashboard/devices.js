@@ -159,7 +159,14 @@ export class Devices {
     t.root.classList.toggle('in-alarm', alarms.length > 0);
     t.alarms.replaceChildren(
       ...alarms.map((a) =>
-        el('li', {}, el('span', { class: 'code', text: a.code ? String(a.code) : 'link' }), ` ${a.text}`, a.class ? el('span', { class: 'class', text: ` (${a.class})` }) : null),
+        el(
+          'li',
+          {},
+          // The code in front, unless the alarm's sentence says it already.
+          a.code && String(a.text).includes(String(a.code)) ? null : el('span', { class: 'code', text: a.code ? `${a.code} ` : `${(a.kind || 'link').replace('_', ' ')} ` }),
+          a.text,
+          a.class ? el('span', { class: 'class', text: ` (${a.class})` }) : null,
+        ),
       ),
     );
     const error = d.online ? '' : d.last_error || '';

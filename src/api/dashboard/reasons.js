@@ -77,7 +77,11 @@ export function attention(job, model, now = Date.now()) {
     return { kind: 'failed', reason: 'failed', text };
   }
   const alarm = deviceAlarm(job, model);
-  if (alarm) return { kind: 'alarm', reason: 'device_alarm', text: `${alarm.device} in alarm: ${alarm.text}` };
+  if (alarm) {
+    // An alarm's sentence usually names its device already.
+    const text = alarm.text.includes(alarm.device) ? alarm.text : `${alarm.device} in alarm: ${alarm.text}`;
+    return { kind: 'alarm', reason: 'device_alarm', text };
+  }
   const w = waiting(job);
   return w ? { kind: 'waiting', ...w } : null;
 }
