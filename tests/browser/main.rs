@@ -4,7 +4,12 @@
 //!
 //! Needs `chromium` and `chromedriver` (Debian: `apt-get install chromium chromium-driver`),
 //! found on the PATH or at `$CHROMIUM` and `$CHROMEDRIVER`; without them the tests fail,
-//! unless `RACKD_SKIP_BROWSER=1` is set, which skips them loudly. The screenshot of the main test is kept at `target/artefacts/dashboard.png`.
+//! unless `RACKD_SKIP_BROWSER=1` is set, which skips them loudly. Screenshots are kept in
+//! `target/artefacts/` (`dashboard.png` from the main test, `first-screen-*.png`,
+//! `dashboard-tablet.png`, `dashboard-stale.png`, ...).
+//!
+//! `control.rs` covers what the page shows of issue 14's API (waiting reasons, KPIs,
+//! acknowledging alarms, `whoami`): it passes once that API is served.
 
 /// The engine these tests run the store on.
 pub const ENGINE: rackd::store::Engine = rackd::store::Engine::Sqlite;
@@ -14,7 +19,10 @@ mod helpers;
 #[path = "../common/postgres.rs"]
 mod postgres;
 
+mod actions;
+mod control;
 mod keys;
+mod layout;
 mod store;
 
 use std::path::{Path, PathBuf};
@@ -37,12 +45,14 @@ const FAST: Pace = Pace { task_time: Duration::from_millis(200), crane_step: Dur
 /// One browser test at a time: two Chromiums on two shared cores make both slow and flaky.
 static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
-/// The demo site's simulators.
+/// The demo site's simulators, and the config that points at them (for a restart).
 pub struct Sims {
     /// The stacker crane (tests raise alarms on it).
     pub crane: CraneSim,
-    _shelf: ShelfSim,
+    /// The shelf PLC (tests cut its link with faults).
+    pub shelf: ShelfSim,
     _tower: TowerSim,
+    config: Config,
 }
 
 /// The demo site (shelf `shelf1` on aisle 1, crane `crane1` on aisle 2, light tower
@@ -56,9 +66,37 @@ pub async fn demo_app(edit: impl FnOnce(&mut Config)) -> (TestApp, Sims) {
         c.site = demo_config.site.clone();
         c.devices = demo_config.devices.clone();
         edit(c);
+        demo_config.auth = c.auth.clone();
     })
     .await;
-    (app, Sims { crane, _shelf: shelf, _tower: tower })
+    (app, Sims { crane, shelf, _tower: tower, config: demo_config })
+}
+
+/// A server stopped with its database kept, to start again where it was.
+pub struct Stopped {
+    db: PathBuf,
+    dir: Option<tempfile::TempDir>,
+    listen: std::net::SocketAddr,
+}
+
+/// Stops `app` gracefully, keeping its database and its address.
+pub async fn stop_keeping(app: TestApp) -> Stopped {
+    let listen = app.base.trim_start_matches("http://").parse().expect("the server's address");
+    let (db, dir) = app.stop().await;
+    Stopped { db, dir, listen }
+}
+
+/// Starts a stopped server again on its database and address (so a page that was open
+/// reconnects to it), with the same simulators. Keep the directory as long as it runs.
+pub async fn start_again(stopped: Stopped, sims: &Sims) -> (TestApp, Option<tempfile::TempDir>) {
+    let app = helpers::spawn_on(stopped.db, |c| {
+        c.site = sims.config.site.clone();
+        c.devices = sims.config.devices.clone();
+        c.auth = sims.config.auth.clone();
+        c.server.listen = stopped.listen;
+    })
+    .await;
+    (app, stopped.dir)
 }
 
 /// Where test artefacts (screenshots) go: `target/artefacts`.
@@ -129,6 +167,50 @@ impl Browser {
         self.wait("the dashboard script to start", "return window.rackd !== undefined", 10).await;
     }
 
+    /// Makes the page's viewport `width` x `height` CSS pixels (the window is grown by what
+    /// the browser itself takes).
+    pub async fn viewport(&self, width: u32, height: u32) {
+        self.client.set_window_size(width, height).await.unwrap();
+        let inner = self.js("return [window.innerWidth, window.innerHeight]").await;
+        let (w, h) = (inner[0].as_u64().unwrap() as u32, inner[1].as_u64().unwrap() as u32);
+        if (w, h) != (width, height) {
+            self.client.set_window_size(2 * width - w, 2 * height - h).await.unwrap();
+        }
+        let script = format!("return window.innerWidth === {width} && window.innerHeight === {height}");
+        self.wait(&format!("a {width}x{height} viewport"), &script, 5).await;
+    }
+
+    /// Asserts that the element matching `css` lies wholly inside the first screen: the
+    /// viewport of the page scrolled to its top, from the element's bounding rectangle.
+    pub async fn assert_in_first_screen(&self, css: &str, what: &str) {
+        let script = "window.scrollTo(0, 0);
+            const n = document.querySelector(arguments[0]);
+            if (!n) return null;
+            const r = n.getBoundingClientRect();
+            return {top: r.top, left: r.left, bottom: r.bottom, right: r.right,
+                    width: window.innerWidth, height: window.innerHeight};";
+        let r = self.client.execute(script, vec![json!(css)]).await.unwrap();
+        assert!(!r.is_null(), "{what}: nothing matches {css}");
+        let f = |k: &str| r[k].as_f64().unwrap();
+        let inside = f("top") >= 0.0
+            && f("left") >= 0.0
+            && f("bottom") <= f("height")
+            && f("right") <= f("width")
+            && f("bottom") > f("top");
+        if !inside {
+            self.screenshot_viewport("failure.png").await;
+        }
+        assert!(inside, "{what} ({css}) is not inside the first screen: {r}");
+    }
+
+    /// Saves what the viewport shows now (no resizing) as `target/artefacts/<name>`.
+    pub async fn screenshot_viewport(&self, name: &str) -> PathBuf {
+        let png = self.client.screenshot().await.unwrap();
+        let path = artefacts().join(name);
+        std::fs::write(&path, png).unwrap();
+        path
+    }
+
     /// Runs `script` (a function body) in the page and returns its value.
     pub async fn js(&self, script: &str) -> Value {
         self.client.execute(script, vec![]).await.unwrap_or_else(|e| panic!("script {script:?}: {e}"))
@@ -167,11 +249,15 @@ impl Browser {
             .unwrap()
     }
 
-    /// Clicks the element matching a CSS selector, as a user would.
+    /// Clicks the element matching a CSS selector, as a user would: scrolled to the middle
+    /// of the window first, where the sticky header cannot cover it.
     pub async fn click(&self, css: &str) {
         let element =
             self.client.wait().at_most(Duration::from_secs(10)).for_element(Locator::Css(css)).await;
-        element.unwrap_or_else(|e| panic!("no {css} to click: {e}")).click().await.unwrap();
+        let element = element.unwrap_or_else(|e| panic!("no {css} to click: {e}"));
+        let arg = serde_json::to_value(&element).unwrap();
+        self.client.execute("arguments[0].scrollIntoView({block: 'center'})", vec![arg]).await.unwrap();
+        element.click().await.unwrap();
     }
 
     /// Saves a screenshot of the whole page (the window grown to fit it, up to 3000 pixels

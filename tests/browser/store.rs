@@ -139,9 +139,14 @@ async fn the_dashboard_follows_the_demo_store_live() {
     crane.clear_alarm();
     browser.wait("the alarm cleared", "const a = document.querySelector('#alarms .alarm-item.cleared'); return a && a.textContent.includes('cleared');", 10).await;
 
-    // An operator pauses the crane from its tile: a job for it waits, queued, and is
-    // cancelled with its button (two clicks); then the crane is resumed.
-    browser.click("[data-device=\"crane1\"] button.pause").await;
+    // An operator (no keys: everyone is) pauses the crane from its tile (two clicks): a job
+    // for it waits, queued, and is cancelled with its button (two clicks); then the crane
+    // is resumed.
+    browser.wait("the role", "return window.rackd.who.can('operator')", 10).await;
+    let pause = "[data-device=\"crane1\"] button.pause";
+    browser.click(pause).await;
+    assert_eq!(browser.text(pause).await, json!("Confirm pause"), "the first click only arms the button");
+    browser.click(pause).await;
     browser
         .wait(
             "crane1 paused",
@@ -162,6 +167,7 @@ async fn the_dashboard_follows_the_demo_store_live() {
         .js(&format!("return document.querySelector('{}') === null", cancel.replace('\'', "\\'")))
         .await;
     assert_eq!(gone, json!(true), "an ended job has no cancel button");
+    browser.click("[data-device=\"crane1\"] button.resume").await;
     browser.click("[data-device=\"crane1\"] button.resume").await;
     browser
         .wait(

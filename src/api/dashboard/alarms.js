@@ -1,13 +1,46 @@
-// The alarm list: active alarms first (newest first), then the recent past, each with its
-// device, code, class, text, and raised and cleared times.
+// The alarm list: active alarms first (newest first), then the recent past. Each says in
+// plain words what happened and where, what to do (`action`, when rackd gives one: the
+// crane catalogue's hardware alarms need a person at the crane), who acknowledged it and
+// when; the protocol's own words sit behind a disclosure. Operators get Acknowledge on an
+// alarm nobody acknowledged yet (active or cleared: a hardware alarm that cleared by
+// itself may still want a look); a rackd without acknowledgements (no `acknowledged_by`
+// in its alarms) shows none.
+//
+// Items are kept per alarm and rebuilt only when the alarm changed, keeping an open
+// disclosure open.
 
+import { api, download, probe } from './api.js';
 import { clock, duration, el, ms } from './dom.js';
 
+/** How far back the CSV export reaches. */
+const EXPORT_HOURS = 24;
+
 export class Alarms {
-  constructor(root, model) {
+  constructor(root, model, notify) {
     this.root = root;
     this.model = model;
+    this.notify = notify;
+    this.items = new Map();
     this.summary = document.getElementById('alarm-summary');
+    this.export = document.getElementById('alarm-export');
+    this.export.addEventListener('click', () => this.download());
+  }
+
+  /** Shows the export button when rackd has the export (asked with HEAD). */
+  async findExport() {
+    const status = await probe(`/api/v1/alarms/export.csv?since=${encodeURIComponent(new Date().toISOString())}`);
+    this.export.hidden = status !== 200;
+  }
+
+  async download() {
+    const until = new Date();
+    const since = new Date(until.getTime() - EXPORT_HOURS * 3600 * 1000);
+    const q = `since=${encodeURIComponent(since.toISOString())}&until=${encodeURIComponent(until.toISOString())}`;
+    try {
+      await download(`/api/v1/alarms/export.csv?${q}`, `rackd-alarms-${until.toISOString().slice(0, 10)}.csv`);
+    } catch (e) {
+      this.notify(`Alarm export: ${e.message}`);
+    }
   }
 
   render() {
@@ -18,16 +51,48 @@ export class Alarms {
       this.summary.textContent = active.length ? `${active.length} active` : 'none active';
       this.summary.className = active.length ? 'pill bad' : 'pill';
     }
-    if (all.length === 0) {
+    for (const [id, item] of this.items) {
+      if (!this.model.alarms.has(id)) {
+        item.li.remove();
+        this.items.delete(id);
+      }
+    }
+    const order = [...active, ...past].map((a) => {
+      let item = this.items.get(a.id);
+      if (!item || item.alarm !== a) {
+        const fresh = { alarm: a, li: this.item(a) };
+        if (item) {
+          const open = item.li.querySelector('details');
+          const details = fresh.li.querySelector('details');
+          if (open && details) details.open = open.open;
+          item.li.replaceWith(fresh.li);
+        }
+        item = fresh;
+        this.items.set(a.id, item);
+      }
+      return item.li;
+    });
+    if (order.length === 0) {
       this.root.replaceChildren(el('li', { class: 'empty', text: 'No alarms.' }));
       return;
     }
-    this.root.replaceChildren(...active.map((a) => this.item(a)), ...past.map((a) => this.item(a)));
+    this.root.querySelectorAll(':scope > .empty').forEach((n) => n.remove());
+    order.forEach((li, i) => {
+      if (this.root.children[i] !== li) this.root.insertBefore(li, this.root.children[i] || null);
+    });
   }
 
   item(a) {
     const cleared = Boolean(a.cleared_at);
     const lasted = cleared ? `cleared ${clock(a.cleared_at)} (after ${duration(ms(a.cleared_at) - ms(a.raised_at))})` : 'active';
+    const knowsAck = Object.prototype.hasOwnProperty.call(a, 'acknowledged_by');
+    const acked = a.acknowledged_by
+      ? el('div', { class: 'alarm-ack', text: `acknowledged by ${a.acknowledged_by} at ${clock(a.acknowledged_at)}` })
+      : null;
+    const ack =
+      knowsAck && !a.acknowledged_by
+        ? el('button', { type: 'button', class: 'ack op', text: 'Acknowledge', onclick: (e) => this.acknowledge(a.id, e.target) })
+        : null;
     return el(
       'li',
       { class: `alarm-item ${cleared ? 'cleared' : 'active'} class-${a.class}`, dataset: { alarmId: a.id } },
@@ -39,8 +104,26 @@ export class Alarms {
         el('span', { class: 'class', text: a.class }),
       ),
       el('div', { class: 'alarm-text', text: a.text }),
-      a.detail ? el('div', { class: 'alarm-detail', text: a.detail }) : '',
-      el('div', { class: 'alarm-times' }, `raised ${clock(a.raised_at)} · `, el('span', { class: 'lasted', text: lasted })),
+      a.action ? el('div', { class: 'alarm-action' }, el('b', { text: 'To do: ' }), a.action) : null,
+      a.detail ? el('details', { class: 'alarm-detail' }, el('summary', { text: 'Protocol detail' }), el('code', { text: a.detail })) : null,
+      el(
+        'div',
+        { class: 'alarm-foot' },
+        el('span', { class: 'alarm-times' }, `raised ${clock(a.raised_at)} · `, el('span', { class: 'lasted', text: lasted })),
+        ack,
+      ),
+      acked,
     );
+  }
+
+  async acknowledge(id, button) {
+    button.disabled = true;
+    try {
+      const alarm = await api('POST', `/api/v1/alarms/${id}/acknowledge`);
+      if (alarm && alarm.id) this.model.addAlarms([alarm]);
+    } catch (e) {
+      this.notify(`Acknowledge alarm ${id}: ${e.message}`);
+      button.disabled = false;
+    }
   }
 }

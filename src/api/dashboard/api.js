@@ -64,15 +64,13 @@ export function onUnauthorized(listener) {
 
 /** Calls the API; resolves to the JSON answer, rejects with an ApiError. */
 export async function api(method, path, body) {
-  const headers = { Accept: 'application/json' };
-  const k = key();
-  if (k) headers.Authorization = `Bearer ${k}`;
-  if (body !== undefined) headers['Content-Type'] = 'application/json';
+  const h = headers('application/json');
+  if (body !== undefined) h['Content-Type'] = 'application/json';
   let response;
   try {
     response = await fetch(path, {
       method,
-      headers,
+      headers: h,
       body: body === undefined ? undefined : JSON.stringify(body),
       cache: 'no-store',
     });
@@ -92,6 +90,50 @@ export async function api(method, path, body) {
     throw error;
   }
   return data;
+}
+
+/** The headers of a call to rackd: the key, when there is one. */
+function headers(accept) {
+  const h = { Accept: accept };
+  const k = key();
+  if (k) h.Authorization = `Bearer ${k}`;
+  return h;
+}
+
+/**
+ * Reads a file the API makes (the alarm export) with the key, and hands it to the browser
+ * as a download named `name`; a link cannot carry the key in a header.
+ */
+export async function download(path, name) {
+  const response = await fetch(path, { headers: headers('*/*'), cache: 'no-store' });
+  if (!response.ok) {
+    let message = response.statusText;
+    try {
+      const data = await response.json();
+      if (data && data.error) message = data.error.message;
+    } catch {
+      // Not JSON: the status says enough.
+    }
+    throw new ApiError(response.status, 'http', message);
+  }
+  const url = URL.createObjectURL(await response.blob());
+  const link = document.createElement('a');
+  link.href = url;
+  link.download = name;
+  document.body.append(link);
+  link.click();
+  link.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 10000);
+}
+
+/** The status a `HEAD` of `path` answers (0 when rackd cannot be reached). */
+export async function probe(path) {
+  try {
+    const response = await fetch(path, { method: 'HEAD', headers: headers('*/*'), cache: 'no-store' });
+    return response.status;
+  } catch {
+    return 0;
+  }
 }
 
 /** The WebSocket address of the live events, with the key and `since` when given. */

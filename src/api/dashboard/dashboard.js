@@ -1,16 +1,21 @@
 // rackd's operator dashboard: wires the live connection, the model and the parts of the
 // page. Everything on the page comes from the server: the WebSocket snapshot and events,
 // plus recent finished jobs and past alarms read over HTTP (the snapshot holds only what is
-// active).
+// active), the KPIs, and who the key belongs to (which buttons to show).
 
 import { adoptTokenFromUrl, api, getKey, onUnauthorized, setKey } from './dashboard/api.js';
 import { Alarms } from './dashboard/alarms.js';
+import { Attention } from './dashboard/attention.js';
+import { Counters } from './dashboard/counters.js';
 import { Devices } from './dashboard/devices.js';
 import { clock, el, throttle } from './dashboard/dom.js';
 import { Jobs } from './dashboard/jobs.js';
+import { Kpi } from './dashboard/kpi.js';
 import { Live } from './dashboard/live.js';
+import { LocationDialog } from './dashboard/locations.js';
 import { Model } from './dashboard/model.js';
 import { Racks } from './dashboard/racks.js';
+import { Who } from './dashboard/roles.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -27,18 +32,30 @@ window.addEventListener('unhandledrejection', (e) => notify(`Dashboard error: ${
 
 adoptTokenFromUrl();
 const model = new Model();
-const racks = new Racks($('racks'), model);
+const locationDialog = new LocationDialog($('location-dialog'), model, notify);
+const racks = new Racks($('racks'), model, (l) => locationDialog.open(l), notify);
 const devices = new Devices($('devices'), model, notify);
 const jobs = new Jobs($('jobs'), model, notify);
-const alarms = new Alarms($('alarms'), model);
+const alarms = new Alarms($('alarms'), model, notify);
+const attention = new Attention($('attention'), model, notify);
+const counters = new Counters($('counters'), model);
+const kpi = new Kpi($('kpi-panel'), $('kpi'), (hour) => counters.setStats(hour));
+const who = new Who((w) => {
+  $('who').textContent = w.role ? `${w.name ? `${w.name} · ` : ''}${w.role}` : '';
+});
 
-// What changed since the last frame; drawn once per animation frame.
+// What changed since the last frame; drawn once per animation frame. The header counters
+// and the attention list follow jobs, devices and alarms alike.
 const dirty = { jobs: false, devices: false, alarms: false, cranes: false };
 const render = throttle(() => {
   if (dirty.jobs) jobs.render();
   if (dirty.devices) devices.render();
   if (dirty.alarms) alarms.render();
   if (dirty.cranes) racks.devices();
+  if (dirty.jobs || dirty.devices || dirty.alarms) {
+    attention.render();
+    counters.render();
+  }
   Object.keys(dirty).forEach((k) => {
     dirty[k] = false;
   });
@@ -48,12 +65,25 @@ const mark = (...parts) => {
   render();
 };
 
+/**
+ * Asks rackd, once per key, who the key is, the KPIs (read every minute from then on) and
+ * whether it exports alarms: at the first snapshot, and again when the key changes.
+ */
+let asked = false;
+function askServer() {
+  asked = true;
+  who.load();
+  kpi.load();
+  alarms.findExport();
+}
+
 model.subscribe((kind, item) => {
   switch (kind) {
     case 'snapshot':
       racks.rebuild();
       mark('jobs', 'devices', 'alarms', 'cranes');
       loadHistory();
+      if (!asked) askServer();
       break;
     case 'job':
     case 'jobs':
@@ -112,11 +142,18 @@ const CONN_TEXT = {
   key: () => 'API key needed',
 };
 let connState = 'connecting';
+/** Until when the page was last live (its data is as of then), or null: never yet. */
+let liveUntil = null;
 function showConn(state, detail) {
+  if (connState === 'live' && state !== 'live') liveUntil = new Date().toISOString();
   connState = state;
   $('conn').dataset.state = state;
   $('conn-text').textContent = CONN_TEXT[state](detail);
-  document.body.classList.toggle('stale', state !== 'live');
+  const stale = state !== 'live';
+  document.body.classList.toggle('stale', stale);
+  const asOf = !stale ? '' : liveUntil ? `as of ${clock(liveUntil)}` : 'no data yet';
+  $('as-of').textContent = asOf;
+  devices.stale(asOf);
   if (state === 'key') askKey(getKey() ? 'The key was not accepted. Enter another one.' : undefined);
 }
 model.subscribe(() => {
@@ -145,9 +182,11 @@ dialog.addEventListener('close', () => {
   if (dialog.returnValue === 'save' && $('key-input').value.trim()) {
     setKey($('key-input').value);
     live.restart();
+    askServer();
   } else if (dialog.returnValue === 'forget') {
     setKey('');
     live.restart();
+    askServer();
   }
   showKeyState();
 });
@@ -155,13 +194,18 @@ onUnauthorized(() => {
   if (!dialog.open) askKey(getKey() ? 'The key was not accepted. Enter another one.' : undefined);
 });
 
+let ticks = 0;
+$('clock').textContent = clock(new Date().toISOString());
 setInterval(() => {
   $('clock').textContent = clock(new Date().toISOString());
   devices.tick();
+  // Failed jobs leave the attention list and the counter an hour after they failed.
+  ticks += 1;
+  if (ticks % 10 === 0) mark('jobs');
 }, 1000);
 
 showKeyState();
 live.restart();
 
-// For the browser console (and the browser test): the state and the connection.
-window.rackd = { model, live };
+// For the browser console (and the browser tests): the state, the connection, the role.
+window.rackd = { model, live, who };

@@ -1,9 +1,11 @@
-// One tile per device: link state, pause, last contact, task slots, what a crane reports,
-// a tags device's values, its alarms; pause and resume for operators (devices that take
-// jobs: pausing a tags device would change nothing).
+// One tile per device: link state (and a degraded link), pause, last contact, task slots,
+// what a crane reports, a tags device's values, its alarms; pause and resume for operators
+// (devices that take jobs: pausing a tags device would change nothing), each asking for a
+// second click. While the live connection is down every tile says "as of" when it was
+// last current (the stylesheet greys it out).
 
 import { api } from './api.js';
-import { ago, el, setText } from './dom.js';
+import { ago, confirmButton, el, setText } from './dom.js';
 
 const KINDS = { shelf: 'shelf PLC', crane: 'stacker crane', tags: 'tag I/O' };
 
@@ -22,6 +24,14 @@ export class Devices {
     this.model = model;
     this.notify = notify;
     this.tiles = new Map();
+    /** "as of HH:MM:SS" while the live connection is down, else ''. */
+    this.asOf = '';
+  }
+
+  /** Says on every tile since when its data may be stale ('' once live again). */
+  stale(asOf) {
+    this.asOf = asOf;
+    for (const tile of this.tiles.values()) setText(tile.asOf, asOf);
   }
 
   /** Redraws every tile (cheap: a handful of devices), adding and removing as needed. */
@@ -62,6 +72,7 @@ export class Devices {
     t.name = el('span', { class: 'name', text: id });
     t.kind = el('span', { class: 'kind' });
     t.link = el('span', { class: 'badge' });
+    t.degraded = el('span', { class: 'badge degraded', text: 'degraded' });
     t.paused = el('span', { class: 'badge paused', text: 'paused' });
     t.alarmBadge = el('span', { class: 'badge alarm', text: 'alarm' });
     t.contact = el('span', { class: 'v contact' });
@@ -74,12 +85,14 @@ export class Devices {
     t.crane = el('div', { class: 'crane-info' });
     t.alarms = el('ul', { class: 'device-alarms' });
     t.error = el('p', { class: 'error-text' });
-    t.pause = el('button', { type: 'button', class: 'pause', text: 'Pause', onclick: () => this.toggle(id, true) });
-    t.resume = el('button', { type: 'button', class: 'resume', text: 'Resume', onclick: () => this.toggle(id, false) });
+    t.asOf = el('span', { class: 'as-of', text: this.asOf });
+    t.pause = confirmButton('Pause', 'Confirm pause', 'pause op', (b) => this.toggle(id, true, b));
+    t.resume = confirmButton('Resume', 'Confirm resume', 'resume op', (b) => this.toggle(id, false, b));
     t.root = el(
       'article',
       { class: 'device', dataset: { device: id } },
-      el('header', {}, t.name, t.kind, el('span', { class: 'badges' }, t.link, t.paused, t.alarmBadge)),
+      el('header', {}, t.name, t.kind, el('span', { class: 'badges' }, t.link, t.degraded, t.paused, t.alarmBadge)),
+      t.asOf,
       el(
         'div',
         { class: 'facts' },
@@ -103,6 +116,9 @@ export class Devices {
     setText(t.kind, KINDS[d.kind] || d.kind);
     setText(t.link, d.online ? 'online' : 'offline');
     t.link.className = `badge ${d.online ? 'online' : 'offline'}`;
+    const degraded = Boolean(d.online && d.link && d.link.degraded);
+    t.degraded.hidden = !degraded;
+    t.root.classList.toggle('is-degraded', degraded);
     t.paused.hidden = !d.paused && !(d.paused_aisles && d.paused_aisles.length);
     setText(t.paused, d.pause ? `paused by ${d.pause.by}${d.pause.reason ? `: ${d.pause.reason}` : ''}`
       : d.paused_aisles && d.paused_aisles.length ? `aisle ${d.paused_aisles.join(', ')} paused` : 'paused');
@@ -143,7 +159,14 @@ export class Devices {
     t.root.classList.toggle('in-alarm', alarms.length > 0);
     t.alarms.replaceChildren(
       ...alarms.map((a) =>
-        el('li', {}, el('span', { class: 'code', text: a.code ? String(a.code) : 'link' }), ` ${a.text}`, a.class ? el('span', { class: 'class', text: ` (${a.class})` }) : null),
+        el(
+          'li',
+          {},
+          // The code in front, unless the alarm's sentence says it already.
+          a.code && String(a.text).includes(String(a.code)) ? null : el('span', { class: 'code', text: a.code ? `${a.code} ` : `${(a.kind || 'link').replace('_', ' ')} ` }),
+          a.text,
+          a.class ? el('span', { class: 'class', text: ` (${a.class})` }) : null,
+        ),
       ),
     );
     const error = d.online ? '' : d.last_error || '';
@@ -169,9 +192,7 @@ export class Devices {
     );
   }
 
-  async toggle(id, pause) {
-    const tile = this.tiles.get(id);
-    const button = pause ? tile.pause : tile.resume;
+  async toggle(id, pause, button) {
     button.disabled = true;
     try {
       const status = await api('POST', `/api/v1/devices/${encodeURIComponent(id)}/${pause ? 'pause' : 'resume'}`);

@@ -76,6 +76,23 @@ export function locName(l) {
   return `${l.aisle}-${rowName(l.row)}-${pad(l.bay)}-${pad(l.level)}-${l.position}`;
 }
 
+/** What a job does, where, in one line: `→ 1-A-03-02-1`, `1-A-03-02-1 red on`. */
+export function jobWhere(job) {
+  switch (job.kind) {
+    case 'store':
+    case 'travel':
+      return `→ ${locName(job.to)}`;
+    case 'retrieve':
+      return `${locName(job.from)} →`;
+    case 'move':
+      return `${locName(job.from)} → ${locName(job.to)}`;
+    case 'light':
+      return `${locName(job.location)} ${job.color || ''} ${job.on ? 'on' : 'off'}`;
+    default:
+      return locName(job.location);
+  }
+}
+
 /** The key of a location in maps and `data-loc` attributes: `aisle-row-bay-level-position`. */
 export function locKey(l) {
   return `${l.aisle}-${l.row}-${l.bay}-${l.level}-${l.position}`;

@@ -1,10 +1,13 @@
-// The live job table: newest first, filtered by state, kind and device, with a cancel
-// button (click twice) on jobs that have not ended. Rows are kept per job and only
-// refilled when the job changed, so a busy store does not rebuild the table every event.
+// The live job table: newest first, filtered by state, kind, device and why a job waits,
+// with Cancel (jobs not ended) and Retry (failed jobs) for operators. Rows are kept per job
+// and only refilled when the job changed, so a busy store does not rebuild the table every
+// event. On a tablet the stylesheet turns each row into a card; every cell carries its
+// heading (`data-label`) for that.
 
-import { api } from './api.js';
-import { clock, confirmButton, el, locName, setText } from './dom.js';
+import { JobActions } from './actions.js';
+import { clock, el, jobWhere, setText } from './dom.js';
 import { MAX_JOBS, TERMINAL } from './model.js';
+import { REASONS, waiting } from './reasons.js';
 
 const STATES = ['queued', 'dispatched', 'running', 'cancelling', 'completed', 'failed', 'cancelled'];
 const KINDS = ['store', 'retrieve', 'move', 'clear', 'light', 'travel'];
@@ -19,45 +22,29 @@ const COLUMNS = [
   ['device', 'Device'],
   ['priority', 'Prio'],
   ['state', 'State'],
-  ['detail', 'Detail'],
+  ['detail', 'Why / detail'],
   ['created', 'Created'],
   ['updated', 'Updated'],
   ['action', ''],
 ];
 
-/** What a job does, where, in one line. */
-function where(job) {
-  switch (job.kind) {
-    case 'store':
-      return `→ ${locName(job.to)}`;
-    case 'retrieve':
-      return `${locName(job.from)} →`;
-    case 'move':
-      return `${locName(job.from)} → ${locName(job.to)}`;
-    case 'travel':
-      return `→ ${locName(job.to)}`;
-    case 'light':
-      return `${locName(job.location)} ${job.color || ''} ${job.on ? 'on' : 'off'}`;
-    default:
-      return locName(job.location);
-  }
-}
-
 export class Jobs {
   constructor(root, model, notify) {
     this.model = model;
-    this.notify = notify;
+    this.actions = new JobActions(model, notify);
     this.rows = new Map();
     this.state = this.select('state', [['', 'all states'], ['active', 'active'], ...STATES.map((s) => [s, s])]);
     this.kind = this.select('kind', [['', 'all kinds'], ...KINDS.map((k) => [k, k])]);
     this.device = this.select('device', [['', 'all devices']]);
+    this.why = this.select('waiting', [['', 'waiting or not'], ['any', 'waiting: any reason'],
+      ...Object.entries(REASONS).map(([r, label]) => [r, `waiting: ${label}`])]);
     this.counts = el('div', { class: 'counts' });
     this.note = el('p', { class: 'note' });
     this.body = el('tbody');
     this.empty = el('p', { class: 'empty', text: 'No jobs to show.' });
     const head = COLUMNS.map(([name, title]) => el('th', { class: `c-${name}`, text: title }));
     root.replaceChildren(
-      el('div', { class: 'filters' }, this.state, this.kind, this.device, this.counts),
+      el('div', { class: 'filters' }, this.state, this.kind, this.device, this.why, this.counts),
       el(
         'div',
         { class: 'table-wrap' },
@@ -81,6 +68,10 @@ export class Jobs {
     if (state && state !== 'active' && job.state !== state) return false;
     if (this.kind.value && job.kind !== this.kind.value) return false;
     if (this.device.value && job.device !== this.device.value) return false;
+    if (this.why.value) {
+      const w = waiting(job);
+      if (!w || (this.why.value !== 'any' && w.reason !== this.why.value)) return false;
+    }
     return true;
   }
 
@@ -135,12 +126,12 @@ export class Jobs {
   row(id) {
     const cells = {};
     const tr = el('tr', { dataset: { jobId: id } });
-    for (const [name] of COLUMNS) {
-      cells[name] = el('td', { class: `c-${name}` });
+    for (const [name, title] of COLUMNS) {
+      cells[name] = el('td', { class: `c-${name}`, dataset: { label: title } });
       tr.append(cells[name]);
     }
     cells.state.append(el('span', { class: 'state' }));
-    return { tr, cells, job: null, cancel: null };
+    return { tr, cells, job: null, buttons: { root: cells.action, cancel: null, retry: null } };
   }
 
   fill(row, job) {
@@ -150,7 +141,7 @@ export class Jobs {
     setText(c.reference, job.reference || '');
     setText(c.kind, job.kind);
     setText(c.barcode, job.barcode || '');
-    setText(c.where, where(job));
+    setText(c.where, jobWhere(job));
     setText(c.device, job.device || '');
     setText(c.priority, job.priority);
     const badge = c.state.firstChild;
@@ -158,29 +149,13 @@ export class Jobs {
     badge.className = `state state-${job.state}`;
     row.tr.className = `job-${job.state}`;
     const f = job.failure;
-    setText(c.detail, f ? `${f.kind}${f.code !== null && f.code !== undefined ? ` ${f.code}` : ''}: ${f.text}` : '');
-    if (f) c.detail.title = f.text;
+    const w = waiting(job);
+    const detail = w ? w.text : f ? `${f.kind}${f.code !== null && f.code !== undefined ? ` ${f.code}` : ''}: ${f.text}` : '';
+    setText(c.detail, detail);
+    c.detail.className = `c-detail${w ? ` waiting reason-${w.reason}` : ''}`;
+    c.detail.title = detail;
     setText(c.created, clock(job.created_at));
     setText(c.updated, clock(job.updated_at));
-    const cancellable = !TERMINAL.has(job.state) && job.state !== 'cancelling';
-    if (cancellable && !row.cancel) {
-      row.cancel = confirmButton('Cancel', 'Confirm cancel', 'cancel', (button) => this.cancel(job.id, button));
-      c.action.append(row.cancel);
-    } else if (!cancellable && row.cancel) {
-      row.cancel.remove();
-      row.cancel = null;
-    }
-  }
-
-  async cancel(id, button) {
-    button.disabled = true;
-    try {
-      const job = await api('POST', `/api/v1/jobs/${id}/cancel`);
-      if (job && job.id) this.model.addJobs([job]);
-    } catch (e) {
-      this.notify(`Cancel job ${id}: ${e.message}`);
-    } finally {
-      button.disabled = false;
-    }
+    this.actions.update(row.buttons, job);
   }
 }

@@ -7,7 +7,17 @@
 //! The script is a handful of ES modules: `dashboard.js` starts everything; under
 //! `/dashboard/`, `api.js` (key and HTTP calls), `live.js` (the WebSocket, reconnection),
 //! `model.js` (the state the events build), `dom.js` (element and time helpers), and one
-//! module per part of the page: `racks.js`, `devices.js`, `jobs.js`, `alarms.js`.
+//! module per part of the page: `counters.js` (the header), `attention.js` (the jobs that
+//! need a person), `alarms.js`, `devices.js`, `racks.js` (with `crane.js`, where a crane is
+//! drawn, and `locations.js`, a location's dialog), `kpi.js` (the KPIs, as SVG charts drawn by the page), `jobs.js` (with
+//! `actions.js`, the job buttons); `reasons.js` says why a job waits and `roles.js` which
+//! buttons the key may use. The style is `dashboard.css` (the page, its header and panels)
+//! with `racks.css` and `jobs.css` (the job table, its cards on a tablet, the KPIs).
+//!
+//! The page is written against the API of issue 14 (a job's `waiting` object,
+//! `GET /api/v1/stats`, alarm acknowledgement and export, `GET /api/v1/whoami`) and degrades
+//! on a rackd without it: no reason shown, no KPI panel, no Acknowledge or export button,
+//! and the role found by a harmless probe (see `roles.js`).
 
 use axum::Router;
 use axum::http::header;
@@ -23,15 +33,25 @@ const SVG: &str = "image/svg+xml";
 const FILES: &[(&str, &str, &str)] = &[
     ("/", HTML, include_str!("index.html")),
     ("/dashboard.css", CSS, include_str!("dashboard.css")),
+    ("/dashboard/racks.css", CSS, include_str!("racks.css")),
+    ("/dashboard/jobs.css", CSS, include_str!("jobs.css")),
     ("/dashboard.js", JS, include_str!("dashboard.js")),
     ("/dashboard/api.js", JS, include_str!("api.js")),
     ("/dashboard/live.js", JS, include_str!("live.js")),
     ("/dashboard/model.js", JS, include_str!("model.js")),
     ("/dashboard/dom.js", JS, include_str!("dom.js")),
     ("/dashboard/racks.js", JS, include_str!("racks.js")),
+    ("/dashboard/crane.js", JS, include_str!("crane.js")),
     ("/dashboard/devices.js", JS, include_str!("devices.js")),
     ("/dashboard/jobs.js", JS, include_str!("jobs.js")),
     ("/dashboard/alarms.js", JS, include_str!("alarms.js")),
+    ("/dashboard/actions.js", JS, include_str!("actions.js")),
+    ("/dashboard/attention.js", JS, include_str!("attention.js")),
+    ("/dashboard/counters.js", JS, include_str!("counters.js")),
+    ("/dashboard/kpi.js", JS, include_str!("kpi.js")),
+    ("/dashboard/locations.js", JS, include_str!("locations.js")),
+    ("/dashboard/reasons.js", JS, include_str!("reasons.js")),
+    ("/dashboard/roles.js", JS, include_str!("roles.js")),
     // Browsers ask for /favicon.ico whatever the page says; an SVG answers both.
     ("/favicon.svg", SVG, include_str!("favicon.svg")),
     ("/favicon.ico", SVG, include_str!("favicon.svg")),

@@ -83,17 +83,23 @@ export class Model {
         break;
       case 'alarm.raised':
       case 'alarm.cleared':
+      case 'alarm.updated':
         this.alarms.set(data.id, data);
         this.trimAlarms();
         this.emit('alarm', data);
         break;
       case 'location.updated':
-        this.locations.set(locKey(data), data);
-        this.emit('location', data);
+        this.applyLocation(data);
         break;
       default:
         break;
     }
+  }
+
+  /** A location's state from an event or from a lock/unlock answer. */
+  applyLocation(location) {
+    this.locations.set(locKey(location), location);
+    this.emit('location', location);
   }
 
   /** A device status from an event or from a pause/resume answer. */
@@ -109,11 +115,18 @@ export class Model {
     if (changed) this.emit('jobs');
   }
 
-  /** Alarms read over HTTP (the recent past): merged, a cleared one wins. */
+  /** Alarms read over HTTP (the recent past, an acknowledgement's answer): merged, a
+   * cleared or acknowledged one wins. */
   addAlarms(alarms) {
     for (const alarm of alarms) {
       const known = this.alarms.get(alarm.id);
-      if (!known || (alarm.cleared_at && !known.cleared_at)) this.alarms.set(alarm.id, alarm);
+      const news = !known || (alarm.cleared_at && !known.cleared_at) || (alarm.acknowledged_at && !known.acknowledged_at);
+      if (!news) continue;
+      const merged = { ...alarm };
+      for (const field of ['cleared_at', 'acknowledged_at', 'acknowledged_by']) {
+        if (known && known[field] && !merged[field]) merged[field] = known[field];
+      }
+      this.alarms.set(alarm.id, merged);
     }
     this.trimAlarms();
     this.emit('alarms');
@@ -121,14 +134,20 @@ export class Model {
 
   /**
    * Keeps the newer of two versions of a job: an event replaces a version as old as it,
-   * an HTTP read only an older one; an ended job is never taken back to an active state.
+   * an HTTP read only an older one; an ended job is never taken back to an active state,
+   * except by a later attempt (a retry).
    */
   mergeJob(job, fromEvent) {
     const known = this.jobs.get(job.id);
     if (known) {
-      if (TERMINAL.has(known.state) && !TERMINAL.has(job.state)) return false;
-      const age = ms(job.updated_at) - ms(known.updated_at);
-      if (age < 0 || (age === 0 && !fromEvent)) return false;
+      // A retry queues a failed job again as its next attempt: the only way back.
+      const attempt = (job.attempt || 1) - (known.attempt || 1);
+      if (attempt < 0) return false;
+      if (attempt === 0) {
+        if (TERMINAL.has(known.state) && !TERMINAL.has(job.state)) return false;
+        const age = ms(job.updated_at) - ms(known.updated_at);
+        if (age < 0 || (age === 0 && !fromEvent)) return false;
+      }
     }
     this.jobs.set(job.id, job);
     if (!known && this.jobs.size > MAX_JOBS) this.trimJobs();
