@@ -13,7 +13,9 @@ use crate::domain::{AlarmClass, AlarmKind};
 /// One alarm, active (no `cleared_at`) or past.
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
 #[schema(example = json!({"id": 3, "device": "crane1", "kind": "device", "code": 41, "class": "hardware",
-    "text": "travel motor overload", "detail": null, "raised_at": "2026-11-21T08:00:00.000Z", "cleared_at": null}))]
+    "text": "crane1 stopped: travel inverter fault (alarm 7011)", "detail": "D205 = 7011 (hardware alarm)",
+    "action": "A person must go to the crane: check the travel drive and its inverter, then reset the fault on the crane's panel.",
+    "acknowledged_by": null, "acknowledged_at": null, "raised_at": "2026-11-21T08:00:00.000Z", "cleared_at": null}))]
 pub struct Alarm {
     /// The alarm's number.
     pub id: i64,
@@ -29,6 +31,14 @@ pub struct Alarm {
     pub text: String,
     /// The protocol's or device's own words, when the text leaves them out.
     pub detail: Option<String>,
+    /// What to do, in plain words; null when nothing is to be done by hand.
+    pub action: Option<String>,
+    /// Who acknowledged it; null until someone does.
+    pub acknowledged_by: Option<String>,
+    /// When it was acknowledged.
+    #[serde(with = "time::serde::rfc3339::option")]
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub acknowledged_at: Option<OffsetDateTime>,
     /// When it was raised.
     #[serde(with = "time::serde::rfc3339")]
     #[schema(value_type = String, format = DateTime)]
@@ -54,6 +64,8 @@ pub struct NewAlarm {
     pub text: String,
     /// The protocol's words, if any.
     pub detail: Option<String>,
+    /// What to do, if anything.
+    pub action: Option<String>,
 }
 
 impl NewAlarm {
@@ -72,6 +84,9 @@ struct Row {
     class: String,
     text: String,
     detail: Option<String>,
+    action: Option<String>,
+    acknowledged_by: Option<String>,
+    acknowledged_at: Option<i64>,
     raised_at: i64,
     cleared_at: Option<i64>,
 }
@@ -88,13 +103,16 @@ impl From<Row> for Alarm {
             class: AlarmClass::parse(&r.class).unwrap_or(AlarmClass::Hardware),
             text: r.text,
             detail: r.detail,
+            action: r.action,
+            acknowledged_by: r.acknowledged_by,
+            acknowledged_at: r.acknowledged_at.map(from_ms),
             raised_at: from_ms(r.raised_at),
             cleared_at: r.cleared_at.map(from_ms),
         }
     }
 }
 
-const COLUMNS: &str = "id, device, kind, code, class, text, detail, raised_at, cleared_at";
+const COLUMNS: &str = "id, device, kind, code, class, text, detail, action, acknowledged_by, acknowledged_at, raised_at, cleared_at";
 
 /// Which alarms to list. Alarms come newest first.
 #[derive(Clone, Debug, Default)]
@@ -155,8 +173,8 @@ pub(crate) fn raise(tx: &Transaction<'_>, new: &NewAlarm, now: i64) -> rusqlite:
         return Ok(None);
     }
     tx.prepare_cached(
-        "INSERT INTO alarms (device, kind, code, class, text, detail, raised_at) \
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+        "INSERT INTO alarms (device, kind, code, class, text, detail, action, raised_at) \
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)",
     )?
     .execute(params![
         new.device,
@@ -165,6 +183,7 @@ pub(crate) fn raise(tx: &Transaction<'_>, new: &NewAlarm, now: i64) -> rusqlite:
         new.class.as_str(),
         new.text,
         new.detail,
+        new.action,
         now
     ])?;
     Ok(Some(Alarm {
@@ -175,6 +194,9 @@ pub(crate) fn raise(tx: &Transaction<'_>, new: &NewAlarm, now: i64) -> rusqlite:
         class: new.class,
         text: new.text.clone(),
         detail: new.detail.clone(),
+        action: new.action.clone(),
+        acknowledged_by: None,
+        acknowledged_at: None,
         raised_at: from_ms(now),
         cleared_at: None,
     }))
@@ -192,22 +214,89 @@ pub(crate) fn clear(
         .prepare_cached(&format!(
             "SELECT {COLUMNS} FROM alarms WHERE device = ?1 AND kind = ?2 AND code = ?3 AND cleared_at IS NULL"
         ))?
-        .query_row(params![device, kind.as_str(), code], |r| {
-            Ok(Row {
-                id: r.get(0)?,
-                device: r.get(1)?,
-                kind: r.get(2)?,
-                code: r.get(3)?,
-                class: r.get(4)?,
-                text: r.get(5)?,
-                detail: r.get(6)?,
-                raised_at: r.get(7)?,
-                cleared_at: None,
-            })
-        })
+        .query_row(params![device, kind.as_str(), code], read_row)
         .optional()?;
     let Some(mut row) = row else { return Ok(None) };
     tx.prepare_cached("UPDATE alarms SET cleared_at = ?1 WHERE id = ?2")?.execute(params![now, row.id])?;
     row.cleared_at = Some(now);
     Ok(Some(row.into()))
+}
+
+/// A row as the writer thread reads it (columns in [`COLUMNS`] order).
+fn read_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<Row> {
+    Ok(Row {
+        id: r.get(0)?,
+        device: r.get(1)?,
+        kind: r.get(2)?,
+        code: r.get(3)?,
+        class: r.get(4)?,
+        text: r.get(5)?,
+        detail: r.get(6)?,
+        action: r.get(7)?,
+        acknowledged_by: r.get(8)?,
+        acknowledged_at: r.get(9)?,
+        raised_at: r.get(10)?,
+        cleared_at: r.get(11)?,
+    })
+}
+
+/// What became of an acknowledgement.
+pub(crate) enum Acknowledged {
+    /// Recorded: the alarm as it now is.
+    Done(Alarm),
+    /// No alarm has the id.
+    NotFound,
+    /// Someone (named) acknowledged it before; the first acknowledgement stands.
+    Before(String),
+}
+
+/// Records that `by` acknowledged alarm `id` (writer thread), unless there is no such
+/// alarm or it was acknowledged before.
+pub(crate) fn acknowledge(
+    tx: &Transaction<'_>,
+    id: i64,
+    by: &str,
+    now: i64,
+) -> rusqlite::Result<Acknowledged> {
+    let row = tx
+        .prepare_cached(&format!("SELECT {COLUMNS} FROM alarms WHERE id = ?1"))?
+        .query_row([id], read_row)
+        .optional()?;
+    let Some(mut row) = row else { return Ok(Acknowledged::NotFound) };
+    if let Some(by) = row.acknowledged_by {
+        return Ok(Acknowledged::Before(by));
+    }
+    tx.prepare_cached("UPDATE alarms SET acknowledged_by = ?1, acknowledged_at = ?2 WHERE id = ?3")?
+        .execute(params![by, now, id])?;
+    row.acknowledged_by = Some(by.to_owned());
+    row.acknowledged_at = Some(now);
+    Ok(Acknowledged::Done(row.into()))
+}
+
+/// Alarms raised in `[from, to)` (Unix ms), oldest first, at most `limit`.
+pub async fn raised_between(
+    db: impl SqliteExecutor<'_>,
+    from: i64,
+    to: i64,
+    limit: u32,
+) -> Result<Vec<Alarm>, sqlx::Error> {
+    let rows: Vec<Row> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
+        "SELECT {COLUMNS} FROM alarms WHERE raised_at >= $1 AND raised_at < $2 ORDER BY id LIMIT $3"
+    )))
+    .bind(from)
+    .bind(to)
+    .bind(limit)
+    .fetch_all(db)
+    .await?;
+    Ok(rows.into_iter().map(Alarm::from).collect())
+}
+
+/// One alarm.
+pub async fn get(db: impl SqliteExecutor<'_>, id: i64) -> Result<Option<Alarm>, sqlx::Error> {
+    let row: Option<Row> =
+        sqlx::query_as(sqlx::AssertSqlSafe(format!("SELECT {COLUMNS} FROM alarms WHERE id = $1")))
+            .bind(id)
+            .fetch_optional(db)
+            .await?;
+    Ok(row.map(Alarm::from))
 }

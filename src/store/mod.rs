@@ -9,6 +9,7 @@ pub mod controls;
 pub mod events;
 pub mod jobs;
 pub mod locations;
+pub mod stats;
 pub mod writer;
 
 use std::path::Path;

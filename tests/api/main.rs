@@ -1,10 +1,12 @@
 //! Integration tests of the HTTP API: the real server on 127.0.0.1:0 with a temporary
 //! SQLite file, spoken to over real HTTP.
 
+mod alarms;
 mod auth;
 mod cli;
 mod container;
 mod contract;
+mod demo;
 mod errors;
 #[path = "../common/helpers.rs"]
 mod helpers;
@@ -14,3 +16,7 @@ mod logs;
 mod metrics;
 mod openapi;
 mod paging;
+mod stats;
+mod waiting;
+#[path = "../common/ws.rs"]
+mod ws;

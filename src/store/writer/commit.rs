@@ -20,6 +20,7 @@ pub(super) enum Answer {
     Changed(Result<Job, WriteError>),
     Reported(Vec<Result<Job, WriteError>>),
     Recorded,
+    Refused(WriteError),
     Failed(WriteError),
 }
 
@@ -50,6 +51,16 @@ pub(super) struct Out {
     pub(super) locks: Vec<(Location, Option<LocationLock>)>,
     /// Timed transitions, for `/metrics`.
     pub(super) timings: Vec<JobTiming>,
+    /// Fills in why a job waits, before its event is written.
+    tell: Option<super::Tell>,
+}
+
+impl Out {
+    fn tell(&self, job: &mut Job) {
+        if let Some(tell) = &self.tell {
+            tell(job);
+        }
+    }
 }
 
 type Events = Out;
@@ -61,6 +72,7 @@ pub(super) fn commit(
     db: &mut rusqlite::Connection,
     group: &[Command],
     next_id: &mut Option<i64>,
+    tell: Option<super::Tell>,
 ) -> rusqlite::Result<(Vec<Answer>, Out)> {
     let tx = db.transaction_with_behavior(rusqlite::TransactionBehavior::Immediate)?;
     let now = now_ms();
@@ -70,7 +82,7 @@ pub(super) fn commit(
     };
     let mut known: HashMap<String, (String, Job)> = HashMap::new();
     let mut answers = Vec::with_capacity(group.len());
-    let mut events = Out::default();
+    let mut events = Out { tell, ..Out::default() };
     let ev = &mut events;
     for cmd in group {
         answers.push(match cmd {
@@ -86,10 +98,10 @@ pub(super) fn commit(
                 }
                 Answer::Reported(jobs)
             }
-            Command::Record { record, .. } => {
-                self::record(&tx, record, now, ev)?;
-                Answer::Recorded
-            }
+            Command::Record { record, .. } => match self::record(&tx, record, now, ev)? {
+                Ok(()) => Answer::Recorded,
+                Err(e) => Answer::Refused(e),
+            },
         });
     }
     tx.commit()?;
@@ -97,8 +109,13 @@ pub(super) fn commit(
     Ok((answers, events))
 }
 
-/// Records a change that is not a job's.
-fn record(tx: &Transaction<'_>, record: &Record, now: i64, events: &mut Events) -> rusqlite::Result<()> {
+/// Records a change that is not a job's; the inner error refuses it.
+fn record(
+    tx: &Transaction<'_>,
+    record: &Record,
+    now: i64,
+    events: &mut Events,
+) -> rusqlite::Result<Result<(), WriteError>> {
     match record {
         Record::Device { status } => events.events.push(append(tx, "device.updated", status.clone(), now)?),
         Record::Pause { target, paused, by } => {
@@ -138,8 +155,42 @@ fn record(tx: &Transaction<'_>, record: &Record, now: i64, events: &mut Events) 
             tx.prepare_cached("DELETE FROM events WHERE at < ?1 AND seq < (SELECT MAX(seq) FROM events)")?
                 .execute([before_ms])?;
         }
+        Record::Retell { jobs } => {
+            let sql = format!("SELECT {COLUMNS} FROM jobs WHERE id = ?1");
+            for &id in jobs {
+                let row =
+                    tx.prepare_cached(&sql)?.query_row([id], |r| JobRow::from_rusqlite(r, 0)).optional()?;
+                let Some(row) = row else { continue };
+                let mut job =
+                    Job::try_from(row).map_err(|e| rusqlite::Error::ToSqlConversionFailure(e.into()))?;
+                // A job that moved on meanwhile was told by its own commit.
+                if job.state == JobState::Queued {
+                    events.tell(&mut job);
+                    event(tx, "job.updated", &job, now, events)?;
+                }
+            }
+        }
+        Record::Acknowledge { alarm, by, note } => {
+            let alarm = match alarms::acknowledge(tx, *alarm, by, now)? {
+                alarms::Acknowledged::Done(alarm) => alarm,
+                alarms::Acknowledged::NotFound => return Ok(Err(WriteError::AlarmNotFound(*alarm))),
+                alarms::Acknowledged::Before(by) => {
+                    return Ok(Err(WriteError::AlreadyAcknowledged { id: *alarm, by }));
+                }
+            };
+            let entry = controls::append(
+                tx,
+                by,
+                "acknowledge",
+                &format!("alarm:{}", alarm.id),
+                note.as_deref(),
+                now,
+            )?;
+            event(tx, "audit.recorded", &entry, now, events)?;
+            event(tx, "alarm.updated", &alarm, now, events)?;
+        }
     }
-    Ok(())
+    Ok(Ok(()))
 }
 
 /// The stored request and job with this reference, looked up once per group.
@@ -195,7 +246,8 @@ fn submit(
             }
             local.insert(reference, created.len());
         }
-        let job = new.accepted(*next_id + created.len() as i64, now);
+        let mut job = new.accepted(*next_id + created.len() as i64, now);
+        events.tell(&mut job);
         outcomes.push(Outcome::Created(job.clone()));
         created.push((request, job));
     }
@@ -428,6 +480,7 @@ fn save(
         job.attempt
     ])?;
     history(tx, job.id, job.state, cause, now)?;
+    events.tell(job);
     event(tx, "job.updated", job, now, events)?;
     Ok(())
 }
