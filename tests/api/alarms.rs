@@ -72,7 +72,7 @@ fn parse_csv(text: &str) -> Vec<Vec<String>> {
             (false, c) => field.push(c),
         }
     }
-    assert!(field.is_empty() && record.is_empty(), "the export ends with a line break");
+    assert!(field.is_empty() && record.is_empty(), "the export ends with a line break: {text}");
     records
 }
 
