@@ -24,8 +24,7 @@ pub const SLOW_CRANE: Pace =
 pub struct Sims {
     /// The crane (tests raise alarms on it).
     pub crane: CraneSim,
-    /// The shelf PLC.
-    pub shelf: ShelfSim,
+    _shelf: ShelfSim,
     _tower: TowerSim,
 }
 
@@ -39,7 +38,7 @@ pub async fn demo_app(pace: Pace, edit: impl FnOnce(&mut Config)) -> (TestApp, S
         edit(c);
     })
     .await;
-    (app, Sims { crane, shelf, _tower: tower })
+    (app, Sims { crane, _shelf: shelf, _tower: tower })
 }
 
 /// A location of aisle 2 (the crane's).

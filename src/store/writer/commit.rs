@@ -15,6 +15,9 @@ use crate::store::locations;
 use crate::store::{alarms, controls};
 
 /// What the writer answers for one command.
+// One answer per command of a group, alive until it is sent: their size does not matter,
+// and boxing the job would cost an allocation per change.
+#[allow(clippy::large_enum_variant)]
 pub(super) enum Answer {
     Submitted(Result<Vec<Outcome>, WriteError>),
     Changed(Result<Job, WriteError>),
