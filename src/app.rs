@@ -83,6 +83,7 @@ impl Application {
             committed: Some(queues.hook()),
             publish: Some(hub.hook()),
             observe: Some(metrics.writer_hook()),
+            tell: Some(queues.tell_hook()),
         };
         let (writer, writer_task) = Writer::start(&pool, config.intake.max_group, config.intake.queue, hooks)
             .await
@@ -94,6 +95,9 @@ impl Application {
         let port = |id: &str| queues.port(id, writer.clone());
         let (devices, mut device_tasks) = devices::start(&config.devices, port, contact_refresh).await?;
         device_tasks.extend(monitor::start(&devices, &queues, writer.clone(), &pool).await);
+        queues.watch_devices(devices.iter().map(|(id, h)| (id.clone(), h.status.clone())).collect());
+        device_tasks
+            .push(tokio::spawn(crate::service::dispatch::waiting::watch(queues.clone(), writer.clone())));
         device_tasks.push(tokio::spawn(retention(writer.clone(), config.events.retention_hours)));
         let rules = Rules {
             layout,

@@ -95,7 +95,8 @@ impl IntoResponse for ApiError {
 impl From<WriteError> for ApiError {
     fn from(e: WriteError) -> Self {
         match e {
-            WriteError::NotFound(_) => Self::not_found(e.to_string()),
+            WriteError::NotFound(_) | WriteError::AlarmNotFound(_) => Self::not_found(e.to_string()),
+            WriteError::AlreadyAcknowledged { .. } => Self::conflict("already_acknowledged", e.to_string()),
             WriteError::Conflict(_) => Self::conflict("reference_conflict", e.to_string()),
             WriteError::Unexpected { .. } | WriteError::Illegal(_) => {
                 Self::conflict("invalid_state", e.to_string())

@@ -12,7 +12,7 @@ use super::error::{ApiError, ErrorBody};
 use super::extract::{Caller, Json, Path, Query, page};
 use super::state::AppState;
 use crate::domain::time::to_ms;
-use crate::domain::{JobKind, JobState, Priority};
+use crate::domain::{JobKind, JobState, Priority, Waiting, WaitingReason};
 use crate::service::dispatch::Actor;
 use crate::service::intake::{JobRequest, MAX_BATCH};
 use crate::store::jobs::{self, Job, JobEvent, JobFilter};
@@ -54,7 +54,10 @@ async fn create_job(State(app): State<AppState>, Json(req): Json<JobRequest>) ->
             headers.extend(location.map(|l| (header::LOCATION, l)));
             (StatusCode::CREATED, headers, Json(job)).into_response()
         }
-        Some(Outcome::Existing(job)) => (StatusCode::OK, Json(job)).into_response(),
+        Some(Outcome::Existing(mut job)) => {
+            job.waiting = app.dispatcher.queues().waiting(&job);
+            (StatusCode::OK, Json(job)).into_response()
+        }
         None => return Err(ApiError::unavailable("writer returned no outcome")),
     })
 }
@@ -116,7 +119,11 @@ async fn create_batch(
     let jobs = outcomes
         .into_iter()
         .map(|o| match o {
-            Outcome::Created(j) | Outcome::Existing(j) => j,
+            Outcome::Created(j) => j,
+            Outcome::Existing(mut j) => {
+                j.waiting = app.dispatcher.queues().waiting(&j);
+                j
+            }
         })
         .collect();
     let status = if created { StatusCode::CREATED } else { StatusCode::OK };
@@ -144,12 +151,64 @@ pub struct ListParams {
     #[serde(default, with = "time::serde::rfc3339::option")]
     #[param(value_type = Option<String>, format = DateTime)]
     created_to: Option<OffsetDateTime>,
+    /// Only queued jobs waiting for this reason (`any`: every waiting job). Reasons are
+    /// computed now, so a job may have moved on by the time the page is read.
+    waiting: Option<WaitingFilter>,
     /// Continue after this cursor (the `next_cursor` of the previous page).
     cursor: Option<String>,
     /// Jobs per page, 1..=1000 (default 100).
     #[param(minimum = 1, maximum = 1000)]
     limit: Option<u32>,
 }
+
+/// A waiting reason to filter on, or `any`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum WaitingFilter {
+    /// Every waiting job.
+    Any,
+    /// See [`WaitingReason::DeviceOffline`].
+    DeviceOffline,
+    /// See [`WaitingReason::DevicePaused`].
+    DevicePaused,
+    /// See [`WaitingReason::AislePaused`].
+    AislePaused,
+    /// See [`WaitingReason::DeviceAlarm`].
+    DeviceAlarm,
+    /// See [`WaitingReason::LocationLocked`].
+    LocationLocked,
+    /// See [`WaitingReason::BehindJob`].
+    BehindJob,
+    /// See [`WaitingReason::SlotsBusy`].
+    SlotsBusy,
+    /// See [`WaitingReason::NoDevice`].
+    NoDevice,
+}
+
+impl WaitingFilter {
+    /// Whether a job waiting for `waiting` passes.
+    fn passes(self, waiting: Option<&Waiting>) -> bool {
+        let Some(w) = waiting else { return false };
+        self == WaitingFilter::Any || Some(w.reason) == WaitingReason::parse(self.as_str())
+    }
+
+    fn as_str(self) -> &'static str {
+        match self {
+            WaitingFilter::Any => "any",
+            WaitingFilter::DeviceOffline => WaitingReason::DeviceOffline.as_str(),
+            WaitingFilter::DevicePaused => WaitingReason::DevicePaused.as_str(),
+            WaitingFilter::AislePaused => WaitingReason::AislePaused.as_str(),
+            WaitingFilter::DeviceAlarm => WaitingReason::DeviceAlarm.as_str(),
+            WaitingFilter::LocationLocked => WaitingReason::LocationLocked.as_str(),
+            WaitingFilter::BehindJob => WaitingReason::BehindJob.as_str(),
+            WaitingFilter::SlotsBusy => WaitingReason::SlotsBusy.as_str(),
+            WaitingFilter::NoDevice => WaitingReason::NoDevice.as_str(),
+        }
+    }
+}
+
+/// How many queued jobs a `waiting` filter reads at a time.
+const WAITING_SCAN: u32 = 1000;
 
 /// A page of jobs.
 #[derive(Serialize, ToSchema)]
@@ -182,12 +241,50 @@ async fn list_jobs(
         after_id,
         limit,
     };
+    if let Some(waiting) = p.waiting {
+        return Ok(Json(waiting_page(&app, filter, waiting).await?));
+    }
     let mut jobs = jobs::list(&app.pool, &filter).await?;
     for job in &mut jobs {
         job.waiting = app.dispatcher.queues().waiting(job);
     }
     let next_cursor = (jobs.len() == limit as usize).then(|| jobs.last().map(|j| j.id.to_string())).flatten();
     Ok(Json(JobPage { jobs, next_cursor }))
+}
+
+/// A page of waiting jobs: only queued jobs wait, so queued ones are read a batch at a time
+/// and kept while their reason passes, until the page is full (its cursor is then the last
+/// job kept) or none are left.
+async fn waiting_page(
+    app: &AppState,
+    mut filter: JobFilter,
+    waiting: WaitingFilter,
+) -> Result<JobPage, ApiError> {
+    let limit = filter.limit as usize;
+    if filter.state.is_some_and(|s| s != JobState::Queued) {
+        return Ok(JobPage { jobs: Vec::new(), next_cursor: None });
+    }
+    filter.state = Some(JobState::Queued);
+    filter.limit = WAITING_SCAN;
+    let mut kept = Vec::new();
+    loop {
+        let batch = jobs::list(&app.pool, &filter).await?;
+        let read = batch.len();
+        for mut job in batch {
+            filter.after_id = Some(job.id);
+            job.waiting = app.dispatcher.queues().waiting(&job);
+            if waiting.passes(job.waiting.as_ref()) {
+                kept.push(job);
+                if kept.len() == limit {
+                    let next_cursor = kept.last().map(|j| j.id.to_string());
+                    return Ok(JobPage { jobs: kept, next_cursor });
+                }
+            }
+        }
+        if read < WAITING_SCAN as usize {
+            return Ok(JobPage { jobs: kept, next_cursor: None });
+        }
+    }
 }
 
 /// Read one job.

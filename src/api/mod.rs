@@ -20,6 +20,8 @@ pub mod locations;
 pub mod metrics;
 pub mod ops;
 pub mod state;
+pub mod stats;
+pub mod whoami;
 pub mod ws;
 
 use std::time::Duration;
@@ -58,12 +60,15 @@ also submits and changes jobs, `admin` may do everything. A `201` means the job 
         (name = "devices", description = "The machines: status, pause and resume (of a device or a whole aisle, kept \
 across restarts and audited); tags of tag I/O devices"),
         (name = "locations", description = "What rackd knows of each location; location locks"),
-        (name = "alarms", description = "Device alarms, active and past"),
+        (name = "alarms", description = "Device alarms, active and past: plain text, what to do, the protocol \
+detail; acknowledge; export as CSV"),
         (name = "events", description = "Live events over WebSocket (`GET /api/v1/ws`). A subscriber first gets a \
 `Snapshot` (or, with `?since=SEQ`, the replay of every later event), then every `Event` as it is committed, in \
 `seq` order with no gap and no duplicate. Event types and their `data`: `job.updated` (a `Job`), \
-`device.updated` (a `DeviceStatus`), `alarm.raised` and `alarm.cleared` (an `Alarm`), `location.updated` \
-(a `LocationState`, with its lock), `audit.recorded` (an `AuditEntry`: a pause, resume, lock, unlock or retry). A subscriber that falls behind gets a `Resync` and the connection closes with code \
+`device.updated` (a `DeviceStatus`), `alarm.raised`, `alarm.cleared` and `alarm.updated` (an `Alarm`; \
+updated when acknowledged), `location.updated` (a `LocationState`, with its lock), `audit.recorded` (an \
+`AuditEntry`: a pause, resume, lock, unlock, retry or acknowledge). A `job.updated` also comes when only a \
+queued job's `waiting` reason changed. A subscriber that falls behind gets a `Resync` and the connection closes with code \
 4000: reconnect with `?since=` its `seq`. `?topics=jobs,devices,alarms,locations,audit` filters both the \
 snapshot and the events. Browsers pass the key as `?token=`."),
         (name = "operations", description = "Health, readiness, metrics and the audit log of operator actions"),
@@ -117,6 +122,8 @@ fn protected_routes() -> OpenApiRouter<AppState> {
         .merge(aisles::router())
         .merge(control::router())
         .merge(health::router())
+        .merge(stats::router())
+        .merge(whoami::router())
         .merge(ws::router());
     OpenApiRouter::with_openapi(ApiDoc::openapi()).nest("/api/v1", v1).routes(routes!(metrics_route))
 }

@@ -164,8 +164,10 @@ mod tests {
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
 #[schema(example = json!({
     "id": 1, "reference": "WMS-1001", "kind": "store", "priority": 10, "barcode": "BOX-0001",
-    "to": {"aisle": 1, "row": 1, "bay": 2, "level": 3, "position": 1}, "device": null,
-    "state": "queued", "forced": false, "failure": null,
+    "to": {"aisle": 1, "row": 1, "bay": 2, "level": 3, "position": 1}, "device": "shelf1",
+    "state": "queued", "forced": false, "failure": null, "attempt": 1,
+    "waiting": {"reason": "slots_busy", "text": "every slot of shelf1 is busy with other jobs", "device": "shelf1",
+        "code": null, "job": null, "by": null},
     "created_at": "2026-11-21T08:00:00.000Z", "updated_at": "2026-11-21T08:00:00.000Z"}))]
 pub struct Job {
     /// rackd's id for the job.
@@ -203,10 +205,10 @@ pub struct Job {
     pub failure: Option<Failure>,
     /// Which attempt this is: 1, and one more each time an operator retries the failed job.
     pub attempt: u32,
-    /// Why a queued job is not handed out now: a paused device or aisle, a locked location.
-    /// Shown by `GET /jobs` and `GET /jobs/{id}`; absent when nothing holds it back.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub waiting: Option<String>,
+    /// Why a queued job is not handed out now (its device offline, paused or in alarm, an
+    /// aisle paused, a location locked, an older job on the same location, every slot busy,
+    /// no device); null while the job moves (running, ended, or about to be handed out).
+    pub waiting: Option<super::Waiting>,
     /// When rackd accepted the job.
     #[serde(with = "time::serde::rfc3339")]
     #[schema(value_type = String, format = DateTime)]

@@ -11,6 +11,7 @@ pub mod report;
 pub mod state;
 pub mod time;
 pub mod values;
+pub mod waiting;
 
 pub use alarm::{AlarmClass, AlarmKind};
 pub use control::{LocationLock, Pause, Target};
@@ -19,6 +20,7 @@ pub use location::{AisleLayout, Layout, Location};
 pub use report::{Report, Reported};
 pub use state::{Failure, FailureKind, JobState, Transition};
 pub use values::{Barcode, Priority};
+pub use waiting::{Waiting, WaitingReason};
 
 /// A value that failed its constructor's checks, with a message that says why.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -136,6 +136,33 @@ async fn record(
     writer.record(Record::Device { status: json }).await
 }
 
+/// What an operator should do about an alarm, in plain words (a crane's own codes: the
+/// catalogue's word).
+fn action(device: &str, kind: AlarmKind, code: u16) -> String {
+    match kind {
+        AlarmKind::Device => crate::wire::alarms::action(code).to_owned(),
+        AlarmKind::Link => format!(
+            "Check that {device} is powered and its network or serial cable is connected; rackd reconnects \
+             by itself and gives it no work meanwhile."
+        ),
+        AlarmKind::Heartbeat => {
+            "Check that the crane's PLC is running; rackd gives the crane no new work until its heartbeat \
+             moves again."
+                .to_owned()
+        }
+        AlarmKind::Degraded => {
+            "Nothing now: the device keeps working. If it lasts, check the network (cable, switch, \
+             interference)."
+                .to_owned()
+        }
+        AlarmKind::MemoryLost => {
+            "Check the locked locations of the lost tasks, correct the inventory, unlock them and retry \
+             the failed jobs."
+                .to_owned()
+        }
+    }
+}
+
 /// An active alarm's identity on its device.
 type Key = (AlarmKind, u16);
 
@@ -150,7 +177,8 @@ fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<Key>) -> (Vec<NewAlarm
     let mut wanted: BTreeMap<Key, NewAlarm> = BTreeMap::new();
     let mut known: BTreeSet<Key> = BTreeSet::new();
     let mut want = |kind: AlarmKind, code: u16, class: AlarmClass, text: String, detail: Option<String>| {
-        let alarm = NewAlarm { device: status.id.clone(), kind, code, class, text, detail };
+        let action = Some(action(&status.id, kind, code).to_owned());
+        let alarm = NewAlarm { device: status.id.clone(), kind, code, class, text, detail, action };
         wanted.insert(alarm.key(), alarm);
     };
     let answers = status.consecutive_failures == 0 && status.last_contact.is_some();
@@ -163,8 +191,10 @@ fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<Key>) -> (Vec<NewAlarm
             && let Some(code) = crane.alarm_code
         {
             let class = crane.alarm_class.unwrap_or(AlarmClass::Hardware);
-            let text = crane.alarm_text.clone().unwrap_or_else(|| format!("alarm {code}"));
-            want(AlarmKind::Device, code, class, text, None);
+            let what = crane.alarm_text.clone().unwrap_or_else(|| format!("alarm {code}"));
+            let text = format!("{} reports alarm {code}: {what}", status.id);
+            let detail = format!("D205 = {code} ({} alarm in the crane's catalogue)", class.as_str());
+            want(AlarmKind::Device, code, class, text, Some(detail));
         }
     } else if status.consecutive_failures > 0 && !status.online {
         known.insert((AlarmKind::Link, LINK_ALARM));
@@ -246,7 +276,9 @@ mod tests {
     fn a_crane_alarm_is_raised_then_cleared() {
         let (raise, clear) = alarm_changes(&crane(true, 0, Some(41)), &BTreeSet::new());
         assert_eq!((keys(&raise), clear), (vec![own(41)], vec![]));
-        assert_eq!(raise[0].text, "text 41");
+        assert_eq!(raise[0].text, "crane1 reports alarm 41: text 41");
+        assert_eq!(raise[0].detail.as_deref(), Some("D205 = 41 (hardware alarm in the crane's catalogue)"));
+        assert!(raise[0].action.as_deref().is_some_and(|a| a.starts_with("A person must")), "{raise:?}");
         let (raise, clear) = alarm_changes(&crane(true, 0, Some(41)), &BTreeSet::from([own(41)]));
         assert_eq!((keys(&raise), clear), (vec![], vec![]));
         let (raise, clear) = alarm_changes(&crane(true, 0, None), &BTreeSet::from([own(41)]));

@@ -12,7 +12,9 @@ use crate::domain::{AlarmClass, AlarmKind};
 /// One alarm, active (no `cleared_at`) or past.
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
 #[schema(example = json!({"id": 3, "device": "crane1", "kind": "device", "code": 41, "class": "hardware",
-    "text": "travel motor overload", "detail": null, "raised_at": "2026-11-21T08:00:00.000Z", "cleared_at": null}))]
+    "text": "crane1 stopped: travel inverter fault (alarm 7011)", "detail": "D205 = 7011 (hardware alarm)",
+    "action": "A person must go to the crane: check the travel drive and its inverter, then reset the fault on the crane's panel.",
+    "acknowledged_by": null, "acknowledged_at": null, "raised_at": "2026-11-21T08:00:00.000Z", "cleared_at": null}))]
 pub struct Alarm {
     /// The alarm's number.
     pub id: i64,
@@ -28,6 +30,14 @@ pub struct Alarm {
     pub text: String,
     /// The protocol's or device's own words, when the text leaves them out.
     pub detail: Option<String>,
+    /// What to do, in plain words; null when nothing is to be done by hand.
+    pub action: Option<String>,
+    /// Who acknowledged it; null until someone does.
+    pub acknowledged_by: Option<String>,
+    /// When it was acknowledged.
+    #[serde(with = "time::serde::rfc3339::option")]
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub acknowledged_at: Option<OffsetDateTime>,
     /// When it was raised.
     #[serde(with = "time::serde::rfc3339")]
     #[schema(value_type = String, format = DateTime)]
@@ -53,6 +63,8 @@ pub struct NewAlarm {
     pub text: String,
     /// The protocol's words, if any.
     pub detail: Option<String>,
+    /// What to do, if anything.
+    pub action: Option<String>,
 }
 
 impl NewAlarm {
@@ -72,6 +84,9 @@ pub(crate) struct Row {
     pub(crate) class: String,
     pub(crate) text: String,
     pub(crate) detail: Option<String>,
+    pub(crate) action: Option<String>,
+    pub(crate) acknowledged_by: Option<String>,
+    pub(crate) acknowledged_at: Option<i64>,
     pub(crate) raised_at: i64,
     pub(crate) cleared_at: Option<i64>,
 }
@@ -88,6 +103,9 @@ impl From<Row> for Alarm {
             class: AlarmClass::parse(&r.class).unwrap_or(AlarmClass::Hardware),
             text: r.text,
             detail: r.detail,
+            action: r.action,
+            acknowledged_by: r.acknowledged_by,
+            acknowledged_at: r.acknowledged_at.map(from_ms),
             raised_at: from_ms(r.raised_at),
             cleared_at: r.cleared_at.map(from_ms),
         }
@@ -95,7 +113,7 @@ impl From<Row> for Alarm {
 }
 
 /// The columns [`Row`] reads.
-pub(crate) const COLUMNS: &str = "id, device, kind, code, class, text, detail, raised_at, cleared_at";
+pub(crate) const COLUMNS: &str = "id, device, kind, code, class, text, detail, action, acknowledged_by, acknowledged_at, raised_at, cleared_at";
 
 /// Which alarms to list. Alarms come newest first.
 #[derive(Clone, Debug, Default)]
@@ -140,4 +158,26 @@ pub async fn active(db: impl Into<Reader<'_>>) -> Result<Vec<Alarm>, sqlx::Error
 pub async fn count_active(db: impl Into<Reader<'_>>) -> Result<Vec<(String, String, i64)>, sqlx::Error> {
     let sql = "SELECT device, class, COUNT(*) FROM alarms WHERE cleared_at IS NULL GROUP BY device, class";
     read!(db.into(), p => sqlx::query_as(sql).fetch_all(p).await)
+}
+
+/// Alarms raised in `[from, to)` (Unix ms), oldest first, at most `limit`.
+pub async fn raised_between(
+    db: impl Into<Reader<'_>>,
+    from: i64,
+    to: i64,
+    limit: u32,
+) -> Result<Vec<Alarm>, sqlx::Error> {
+    let sql = sqlx::AssertSqlSafe(format!(
+        "SELECT {COLUMNS} FROM alarms WHERE raised_at >= $1 AND raised_at < $2 ORDER BY id LIMIT $3"
+    ));
+    let rows: Vec<Row> =
+        read!(db.into(), p => sqlx::query_as(sql).bind(from).bind(to).bind(limit as i64).fetch_all(p).await)?;
+    Ok(rows.into_iter().map(Alarm::from).collect())
+}
+
+/// One alarm.
+pub async fn get(db: impl Into<Reader<'_>>, id: i64) -> Result<Option<Alarm>, sqlx::Error> {
+    let sql = sqlx::AssertSqlSafe(format!("SELECT {COLUMNS} FROM alarms WHERE id = $1"));
+    let row: Option<Row> = read!(db.into(), p => sqlx::query_as(sql).bind(id).fetch_optional(p).await)?;
+    Ok(row.map(Alarm::from))
 }

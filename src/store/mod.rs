@@ -28,6 +28,7 @@ pub mod engine;
 pub mod events;
 pub mod jobs;
 pub mod locations;
+pub mod stats;
 pub mod writer;
 
 use std::path::PathBuf;

@@ -67,6 +67,45 @@ pub fn lookup(code: u16) -> Alarm {
     }
 }
 
+/// What an operator should do about a crane alarm, in plain words. Business alarms need no
+/// one at the crane (rackd cancels the task; the job fails and its locations lock until a
+/// person checks them); every hardware alarm, and an unknown code, needs a person at the
+/// crane, as the spec's catalogue says.
+pub fn action(code: u16) -> &'static str {
+    match code {
+        _ if lookup(code).class == Business => {
+            "No one needs to go to the crane: rackd cancels the task and fails the job. Check the job's \
+             locations, unlock them, then retry the job."
+        }
+        7001 | 7002 | 7101 => {
+            "A person must go to the crane: find out why the emergency stop was pressed, make the area \
+             safe, release the stop and reset the crane."
+        }
+        7102 | 7104 => "A person must close the ground cabinet's safety door and reset the crane.",
+        7003 | 7004 => {
+            "A person must go to the crane: it reached a limit switch; move it back in manual mode and \
+             reset it."
+        }
+        7006 => "Do not run the crane: a person must inspect the lift's wire rope before resetting it.",
+        7007 => "A person must check the crane's distance laser (dirt, alignment), then reset the crane.",
+        7011..=7013 => "A person must check the drive and its inverter on the crane, then reset the fault.",
+        7014 => "A person must check the crane's travel position markers, then reset the crane.",
+        7020 => {
+            "Check that rackd reaches the crane's PLC (the heartbeat stopped); reset the crane once the \
+             link works again."
+        }
+        7054 | 7055 => {
+            "A person must check the forks (obstruction, sensors), bring them home in manual mode, then \
+             reset the crane."
+        }
+        7081..=7087 => {
+            "A person must take the load off the crane at the station, fix its size or pallet, then reset \
+             the crane."
+        }
+        _ => "A person must check the crane's panel: this code is not in rackd's catalogue.",
+    }
+}
+
 /// The business alarm codes, in catalogue order.
 pub fn business_codes() -> impl Iterator<Item = u16> {
     CATALOGUE.iter().filter(|(_, class, _)| *class == Business).map(|(c, _, _)| *c)
@@ -93,6 +132,15 @@ mod tests {
         let a = lookup(1234);
         assert_eq!(a.class, Hardware);
         assert!(a.text.contains("1234"));
+    }
+
+    #[test]
+    fn every_code_says_what_to_do_and_whether_a_person_must_go() {
+        for &(code, class, _) in CATALOGUE {
+            let action = action(code);
+            assert_eq!(action.contains("No one needs to go"), class == Business, "{code}: {action}");
+        }
+        assert!(action(1234).contains("not in rackd's catalogue"));
     }
 
     #[test]

@@ -74,7 +74,7 @@ pub async fn demo_app(edit: impl FnOnce(&mut Config)) -> (TestApp, Sims) {
 
 /// A server stopped with its database kept, to start again where it was.
 pub struct Stopped {
-    db: PathBuf,
+    db: rackd::store::Database,
     dir: Option<tempfile::TempDir>,
     listen: std::net::SocketAddr,
 }

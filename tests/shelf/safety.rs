@@ -87,7 +87,8 @@ async fn a_plc_that_forgets_its_tasks_is_one_decision_and_its_locations_lock() {
     wait_job(&app, &elsewhere["id"], 10, |j| j["state"] != "queued").await;
     let j = job(&app, &waiting["id"]).await;
     assert_eq!(j["state"], "queued", "{j}");
-    assert!(j["waiting"].as_str().unwrap().contains("is locked"), "{j}");
+    assert!(j["waiting"]["text"].as_str().unwrap().contains("is locked"), "{j}");
+    assert_eq!(j["waiting"]["reason"], "location_locked", "{j}");
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
     while active_alarms(&app).await.iter().any(|a| a["kind"] == "memory_lost") {
         assert!(std::time::Instant::now() < deadline, "the memory alarm stays after the PLC took work");
@@ -106,7 +107,7 @@ async fn a_plc_that_forgets_its_tasks_is_one_decision_and_its_locations_lock() {
         "{retried}"
     );
     assert!(retried["failure"].is_null());
-    assert!(retried["waiting"].as_str().unwrap().contains("is locked"), "still locked: {retried}");
+    assert!(retried["waiting"]["text"].as_str().unwrap().contains("is locked"), "still locked: {retried}");
     let (status, unlocked) =
         app.post(&format!("{}/unlock", path(&places[1])), &json!({"reason": "checked: empty"})).await;
     assert_eq!((status, unlocked["lock"].clone()), (200, Value::Null), "{unlocked}");
@@ -172,14 +173,18 @@ async fn locks_by_hand_hold_jobs_back_until_unlocked() {
     wait_for_more("polls with the job held back", 5, 10, || faults.requests_seen()).await;
     let j = job(&app, &held["id"]).await;
     assert_eq!(j["state"], "queued");
-    assert_eq!(j["waiting"], "location 1/1/3/2/1 is locked: box damaged", "{j}");
+    assert_eq!(j["waiting"]["text"], "location 1/1/3/2/1 is locked: box damaged", "{j}");
+    assert_eq!(
+        (j["waiting"]["reason"].clone(), j["waiting"]["by"].clone()),
+        (json!("location_locked"), json!("anonymous"))
+    );
     let (_, listed) = app.get("/api/v1/jobs?state=queued").await;
     assert_eq!(listed["jobs"][0]["waiting"], j["waiting"]);
 
     let (status, _) = app.post(&format!("{}/unlock", path(&place)), &Value::Null).await;
     assert_eq!(status, 200);
     let done = wait_job(&app, &held["id"], 10, |j| j["state"] == "completed").await;
-    assert!(done.get("waiting").is_none(), "{done}");
+    assert!(done["waiting"].is_null(), "{done}");
     assert_eq!(sim.violations(), 0);
 }
 
@@ -209,7 +214,7 @@ async fn a_pause_outlasts_a_restart_and_an_aisle_pause_holds_its_jobs() {
     wait_for_more("polls of the paused shelf", 70, 10, || faults.requests_seen()).await;
     let j = job(&app, &queued["id"]).await;
     assert_eq!(j["state"], "queued", "a paused device runs nothing after a restart");
-    assert_eq!(j["waiting"], "device shelf1 is paused: fork inspection (by anonymous)");
+    assert_eq!(j["waiting"]["text"], "device shelf1 is paused: fork inspection (by anonymous)");
 
     // The aisle pause takes over: the device resumes but its only aisle is paused.
     let (status, aisle) = app.post("/api/v1/aisles/1/pause", &json!({"reason": "maintenance"})).await;
@@ -227,7 +232,7 @@ async fn a_pause_outlasts_a_restart_and_an_aisle_pause_holds_its_jobs() {
     wait_for_more("polls with the aisle paused", 5, 10, || faults.requests_seen()).await;
     let j = job(&app, &queued["id"]).await;
     assert_eq!(
-        (j["state"].clone(), j["waiting"].clone()),
+        (j["state"].clone(), j["waiting"]["text"].clone()),
         (json!("queued"), json!("aisle 1 is paused: maintenance (by anonymous)"))
     );
     app.stop().await;

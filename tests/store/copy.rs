@@ -49,11 +49,14 @@ async fn site(pool: &Pool) {
             class: AlarmClass::Hardware,
             text: format!("alarm {code}"),
             detail: Some("D205".into()),
+            action: Some("go to the crane".into()),
         };
         writer.record(Record::AlarmRaised(alarm)).await.unwrap();
     }
     let cleared = Record::AlarmCleared { device: "crane1".into(), key: (AlarmKind::Device, 41) };
     writer.record(cleared).await.unwrap();
+    let ack = Record::Acknowledge { alarm: 2, by: "ops".into(), note: Some("seen".into()) };
+    writer.record(ack).await.unwrap();
     drop(writer);
     task.await.unwrap();
 }

@@ -65,6 +65,9 @@ pub async fn read(
         let mut active = jobs::active(tx.reader(), job_limit.saturating_add(1)).await?;
         data.jobs_truncated = Some(active.len() > job_limit as usize);
         active.truncate(job_limit as usize);
+        for job in &mut active {
+            job.waiting = devices.1.waiting(job);
+        }
         data.jobs = Some(active);
     }
     if topics.contains(&Topic::Alarms) {

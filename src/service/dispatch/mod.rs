@@ -5,12 +5,14 @@
 //! jobs it can start ([`order::next_jobs`]: priority, then age, never overtaking an older
 //! job on the same location) and reports what became of them through the same port, one
 //! commit per report round. Pausing is control state kept here, apart from what devices
-//! report: a paused device is simply offered no work.
+//! report: a paused device is simply offered no work. Why each queued job waits is
+//! worked out beside those decisions, never instead of them ([`waiting`]).
 
 pub mod cancel;
 pub mod control;
 pub mod order;
 pub mod queues;
+pub mod waiting;
 
 use crate::store::Pool;
 

@@ -12,17 +12,19 @@
 //! What operators set is kept here too, as the store has it (restored at start): a paused
 //! device is offered nothing; a job touching a paused aisle or a locked location waits
 //! (it is not handed out, keeps later jobs off its locations, and [`Queues::waiting`] says
-//! why). The writer hands over every lock change of a commit ([`Queues::locked_hook`]).
+//! why, see [`super::waiting`]). The writer hands over every lock change of a commit
+//! ([`Queues::locked_hook`]).
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use async_trait::async_trait;
 use tokio::sync::{Notify, watch};
 
 use super::order::next_jobs;
+use crate::devices::DeviceStatus;
 use crate::devices::port::{Port, ReportError};
-use crate::domain::{Job, JobState, Location, LocationLock, Pause, Report};
+use crate::domain::{Job, JobState, Location, LocationLock, Pause, Report, Waiting, WaitingReason};
 use crate::store::writer::{Committed, Locked, WriteError, Writer};
 
 /// What operators set for a device, apart from what the device reports.
@@ -36,13 +38,15 @@ pub struct Control {
 
 /// One device's unfinished jobs.
 #[derive(Default)]
-struct Queue {
+pub(super) struct Queue {
     /// Jobs handed to the device and not yet ended, by id.
-    active: BTreeMap<i64, Job>,
+    pub(super) active: BTreeMap<i64, Job>,
     /// Jobs waiting for the device, by id (= acceptance order).
-    queued: BTreeMap<i64, Job>,
+    pub(super) queued: BTreeMap<i64, Job>,
     /// Queued jobs a cancel is deciding on: not handed out meanwhile.
     withheld: HashSet<i64>,
+    /// The unfinished jobs touching each location, by id: which job is ahead of which.
+    pub(super) on: HashMap<Location, BTreeSet<i64>>,
 }
 
 /// A device's way to be told of work, and its control state.
@@ -55,32 +59,42 @@ struct Lane {
 
 /// What holds jobs back whichever device serves them.
 #[derive(Default)]
-struct Holds {
+pub(super) struct Holds {
     aisles: BTreeMap<u16, Pause>,
     locks: HashMap<Location, LocationLock>,
 }
 
 impl Holds {
-    /// Why `job` may not start now, if something here holds it.
-    fn why(&self, job: &Job) -> Option<String> {
+    /// Why `job` may not start now, if something here holds it: a locked location first,
+    /// then a paused aisle.
+    pub(super) fn why(&self, job: &Job) -> Option<Waiting> {
         let locations = job.spec().map(|s| s.locations()).unwrap_or_default();
         for l in &locations {
             if let Some(lock) = self.locks.get(l) {
-                return Some(format!(
-                    "location {}/{}/{}/{}/{} is locked: {}",
-                    l.aisle, l.row, l.bay, l.level, l.position, lock.reason
-                ));
+                let text = format!("location {} is locked: {}", slashed(l), lock.reason);
+                let mut w = Waiting::new(WaitingReason::LocationLocked, text);
+                w.job = lock.job;
+                w.by = lock.job.is_none().then(|| lock.by.clone());
+                return Some(w);
             }
         }
         locations.iter().find_map(|l| {
             let pause = self.aisles.get(&l.aisle)?;
-            Some(format!("aisle {} is paused{}", l.aisle, because(pause)))
+            let text = format!("aisle {} is paused{}", l.aisle, because(pause));
+            let mut w = Waiting::new(WaitingReason::AislePaused, text);
+            w.by = Some(pause.by.clone());
+            Some(w)
         })
     }
 }
 
+/// A location as people write it: `A/R/B/L/P`.
+pub(super) fn slashed(l: &Location) -> String {
+    format!("{}/{}/{}/{}/{}", l.aisle, l.row, l.bay, l.level, l.position)
+}
+
 /// ": REASON (by WHO)", or " (by WHO)" without a reason.
-fn because(pause: &Pause) -> String {
+pub(super) fn because(pause: &Pause) -> String {
     match &pause.reason {
         Some(r) => format!(": {r} (by {})", pause.by),
         None => format!(" (by {})", pause.by),
@@ -89,12 +103,18 @@ fn because(pause: &Pause) -> String {
 
 /// The unfinished jobs of every configured device.
 #[derive(Clone)]
-pub struct Queues(Arc<Inner>);
+pub struct Queues(pub(super) Arc<Inner>);
 
-struct Inner {
+pub(super) struct Inner {
     queues: Mutex<HashMap<String, Queue>>,
     lanes: HashMap<String, Lane>,
     holds: Mutex<Holds>,
+    /// What each device reports, once the devices run ([`Queues::watch_devices`]).
+    pub(super) statuses: std::sync::OnceLock<HashMap<String, watch::Receiver<DeviceStatus>>>,
+    /// What the waiting reasons of queued jobs were last told as (see [`super::waiting`]).
+    pub(super) told: Mutex<HashMap<i64, Option<Waiting>>>,
+    /// Wakes the waiting watcher: something a waiting reason depends on changed.
+    pub(super) changed: Notify,
 }
 
 /// A device as the dispatcher sees it: its id, its dispatch window and the aisles it serves.
@@ -118,14 +138,21 @@ impl Queues {
                 Lane { wake: Arc::new(Notify::new()), control: watch::Sender::default(), window, aisles };
             lanes.insert(id, lane);
         }
-        Queues(Arc::new(Inner { queues: Mutex::new(queues), lanes, holds: Mutex::default() }))
+        Queues(Arc::new(Inner {
+            queues: Mutex::new(queues),
+            lanes,
+            holds: Mutex::default(),
+            statuses: std::sync::OnceLock::new(),
+            told: Mutex::default(),
+            changed: Notify::new(),
+        }))
     }
 
-    fn holds(&self) -> MutexGuard<'_, Holds> {
+    pub(super) fn holds(&self) -> MutexGuard<'_, Holds> {
         self.0.holds.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    fn lock(&self) -> MutexGuard<'_, HashMap<String, Queue>> {
+    pub(super) fn lock(&self) -> MutexGuard<'_, HashMap<String, Queue>> {
         self.0.queues.lock().unwrap_or_else(|p| p.into_inner())
     }
 
@@ -172,6 +199,17 @@ impl Queues {
         if let Some(lane) = self.0.lanes.get(device) {
             lane.wake.notify_one();
         }
+        self.0.changed.notify_one();
+    }
+
+    /// Each device's dispatch window.
+    pub(super) fn windows(&self) -> HashMap<&str, usize> {
+        self.0.lanes.iter().map(|(id, lane)| (id.as_str(), lane.window)).collect()
+    }
+
+    /// The device's pause, if it is paused.
+    pub(super) fn pause_of(&self, device: &str) -> Option<Pause> {
+        self.0.lanes.get(device).and_then(|l| l.control.borrow().pause.clone())
     }
 
     /// The job, if it is unfinished and its device is configured.
@@ -215,6 +253,7 @@ impl Queues {
             changed
         });
         lane.wake.notify_one();
+        self.0.changed.notify_one();
         true
     }
 
@@ -234,6 +273,7 @@ impl Queues {
             lane.control.send_if_modified(|c| std::mem::replace(&mut c.paused_aisles, mine.clone()) != mine);
             lane.wake.notify_one();
         }
+        self.0.changed.notify_one();
     }
 
     /// The paused aisles, with who paused them.
@@ -266,24 +306,7 @@ impl Queues {
                 lane.wake.notify_one();
             }
         }
-    }
-
-    /// Why a queued job is not handed out now, if an operator's control holds it: its
-    /// device or aisle paused, one of its locations locked.
-    pub fn waiting(&self, job: &Job) -> Option<String> {
-        if job.state != JobState::Queued {
-            return None;
-        }
-        if let Some(pause) = job
-            .device
-            .as_deref()
-            .and_then(|d| self.0.lanes.get(d))
-            .and_then(|l| l.control.borrow().pause.clone())
-        {
-            let device = job.device.as_deref().unwrap_or_default();
-            return Some(format!("device {device} is paused{}", because(&pause)));
-        }
-        self.holds().why(job)
+        self.0.changed.notify_one();
     }
 
     /// The port through which `device` gets its work and reports it.
@@ -294,11 +317,25 @@ impl Queues {
 
 impl Queue {
     fn put(&mut self, job: &Job) {
+        let locations = job.spec().map(|s| s.locations()).unwrap_or_default();
         if job.state.is_terminal() {
             self.active.remove(&job.id);
             self.queued.remove(&job.id);
             self.withheld.remove(&job.id);
-        } else if job.state == JobState::Queued {
+            for l in locations {
+                if let Some(ids) = self.on.get_mut(&l) {
+                    ids.remove(&job.id);
+                    if ids.is_empty() {
+                        self.on.remove(&l);
+                    }
+                }
+            }
+            return;
+        }
+        for l in locations {
+            self.on.entry(l).or_default().insert(job.id);
+        }
+        if job.state == JobState::Queued {
             self.active.remove(&job.id);
             self.queued.insert(job.id, job.clone());
         } else {

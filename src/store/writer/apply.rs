@@ -17,11 +17,15 @@ use crate::store::jobs::{Job, NewJob};
 use crate::store::locations::{self, LocationState};
 
 /// What the writer answers for one command.
+// One answer per command of a group, alive until it is sent: their size does not matter,
+// and boxing the job would cost an allocation per change.
+#[allow(clippy::large_enum_variant)]
 pub(super) enum Answer {
     Submitted(Result<Vec<Outcome>, WriteError>),
     Changed(Result<Job, WriteError>),
     Reported(Vec<Result<Job, WriteError>>),
     Recorded,
+    Refused(WriteError),
     Failed(WriteError),
 }
 
@@ -76,8 +80,9 @@ pub(super) struct Loaded {
     pub(super) locations: HashMap<Location, locations::Row>,
     /// When each loaded job entered its latest `queued` or `dispatched` state (Unix ms).
     pub(super) starts: HashMap<i64, i64>,
-    /// Every active alarm (only when the group raises or clears one).
-    pub(super) alarms: Vec<alarms::Row>,
+    /// Every active alarm (only when the group raises or clears one), and the alarms its
+    /// acknowledgements name, by id.
+    pub(super) alarms: BTreeMap<i64, alarms::Row>,
 }
 
 /// One history entry to write.
@@ -104,12 +109,14 @@ pub(super) struct Group {
     /// Locations this group changed.
     pub(super) touched: BTreeSet<Location>,
     starts: HashMap<i64, i64>,
-    /// Active alarms (stored ones, and those raised by this group).
-    active: Vec<alarms::Row>,
-    /// Alarms raised by this group (as they end up: possibly cleared again).
-    pub(super) raised: Vec<alarms::Row>,
-    /// Stored alarms this group cleared: (id, when).
-    pub(super) cleared: Vec<(i64, i64)>,
+    /// The alarms loaded, and those raised by this group, as they now are.
+    pub(super) alarms: BTreeMap<i64, alarms::Row>,
+    /// Alarms raised by this group.
+    pub(super) raised: BTreeSet<i64>,
+    /// Stored alarms this group changed (cleared, acknowledged).
+    pub(super) alarms_changed: BTreeSet<i64>,
+    /// Fills in why a job waits, before its event is made.
+    tell: Option<super::Tell>,
     /// Pauses set (`Some`) or lifted (`None`) by this group, by target key, as they end up.
     pub(super) controls: BTreeMap<String, Option<Pause>>,
     pub(super) audit: Vec<AuditEntry>,
@@ -121,7 +128,7 @@ pub(super) struct Group {
 
 impl Group {
     /// A group starting from what it read.
-    pub(super) fn new(loaded: Loaded, next: Next, now: i64) -> Group {
+    pub(super) fn new(loaded: Loaded, next: Next, now: i64, tell: Option<super::Tell>) -> Group {
         Group {
             now,
             next,
@@ -132,9 +139,10 @@ impl Group {
             locations: loaded.locations,
             touched: BTreeSet::new(),
             starts: loaded.starts,
-            active: loaded.alarms,
-            raised: Vec::new(),
-            cleared: Vec::new(),
+            alarms: loaded.alarms,
+            raised: BTreeSet::new(),
+            alarms_changed: BTreeSet::new(),
+            tell,
             controls: BTreeMap::new(),
             audit: Vec::new(),
             history: Vec::new(),
@@ -154,15 +162,15 @@ impl Group {
                     .map(|r| self.apply(r.job, &Change::Report { to: r.to.clone(), cause: r.cause.clone() }))
                     .collect(),
             ),
-            Command::Record { record, .. } => {
-                self.record(record);
-                Answer::Recorded
-            }
+            Command::Record { record, .. } => match self.record(record) {
+                Ok(()) => Answer::Recorded,
+                Err(e) => Answer::Refused(e),
+            },
         }
     }
 
-    /// Records a change that is not a job's.
-    fn record(&mut self, record: &Record) {
+    /// Records a change that is not a job's; an error refuses it.
+    fn record(&mut self, record: &Record) -> Result<(), WriteError> {
         let now = self.now;
         match record {
             Record::Device { status } => self.append("device.updated", status.clone()),
@@ -197,9 +205,12 @@ impl Group {
             }
             Record::AlarmRaised(new) => {
                 let active = |a: &&alarms::Row| {
-                    a.device == new.device && a.kind == new.kind.as_str() && a.code == new.code as i64
+                    a.cleared_at.is_none()
+                        && a.device == new.device
+                        && a.kind == new.kind.as_str()
+                        && a.code == new.code as i64
                 };
-                if self.active.iter().find(active).is_none() {
+                if self.alarms.values().find(active).is_none() {
                     let row = alarms::Row {
                         id: self.next.alarm,
                         device: new.device.clone(),
@@ -208,31 +219,71 @@ impl Group {
                         class: new.class.as_str().to_owned(),
                         text: new.text.clone(),
                         detail: new.detail.clone(),
+                        action: new.action.clone(),
+                        acknowledged_by: None,
+                        acknowledged_at: None,
                         raised_at: now,
                         cleared_at: None,
                     };
                     self.next.alarm += 1;
-                    self.active.push(row.clone());
-                    self.raised.push(row.clone());
+                    self.raised.insert(row.id);
+                    self.alarms.insert(row.id, row.clone());
                     self.event("alarm.raised", &Alarm::from(row));
                 }
             }
             Record::AlarmCleared { device, key: (kind, code) } => {
-                let found = self
-                    .active
-                    .iter()
-                    .position(|a| a.device == *device && a.kind == kind.as_str() && a.code == *code as i64);
-                if let Some(i) = found {
-                    let mut row = self.active.remove(i);
+                let found = self.alarms.values_mut().find(|a| {
+                    a.cleared_at.is_none()
+                        && a.device == *device
+                        && a.kind == kind.as_str()
+                        && a.code == *code as i64
+                });
+                if let Some(row) = found {
                     row.cleared_at = Some(now);
-                    match self.raised.iter_mut().find(|r| r.id == row.id) {
-                        Some(raised) => raised.cleared_at = Some(now),
-                        None => self.cleared.push((row.id, now)),
-                    }
+                    let row = row.clone();
+                    self.alarm_changed(row.id);
                     self.event("alarm.cleared", &Alarm::from(row));
                 }
             }
+            Record::Acknowledge { alarm, by, note } => {
+                let Some(row) = self.alarms.get_mut(alarm) else {
+                    return Err(WriteError::AlarmNotFound(*alarm));
+                };
+                if let Some(first) = &row.acknowledged_by {
+                    return Err(WriteError::AlreadyAcknowledged { id: *alarm, by: first.clone() });
+                }
+                (row.acknowledged_by, row.acknowledged_at) = (Some(by.clone()), Some(now));
+                let row = row.clone();
+                self.alarm_changed(row.id);
+                self.audit(by, "acknowledge", &format!("alarm:{alarm}"), note.as_deref());
+                self.event("alarm.updated", &Alarm::from(row));
+            }
+            Record::Retell { jobs } => {
+                for id in jobs {
+                    // A job that moved on meanwhile was told by its own commit.
+                    if let Some(mut job) = self.jobs.get(id).filter(|j| j.state == JobState::Queued).cloned()
+                    {
+                        self.tell(&mut job);
+                        self.event("job.updated", &job);
+                    }
+                }
+            }
             Record::Prune { before_ms } => self.prune = Some(*before_ms),
+        }
+        Ok(())
+    }
+
+    /// Notes that a stored alarm changed (one this group raised is written as it ends up).
+    fn alarm_changed(&mut self, id: i64) {
+        if !self.raised.contains(&id) {
+            self.alarms_changed.insert(id);
+        }
+    }
+
+    /// Fills in why `job` waits, if the dispatcher says.
+    fn tell(&self, job: &mut Job) {
+        if let Some(tell) = &self.tell {
+            tell(job);
         }
     }
 
@@ -258,7 +309,8 @@ impl Group {
                 }
                 local.insert(reference, created.len());
             }
-            let job = new.accepted(self.next.job + created.len() as i64, self.now);
+            let mut job = new.accepted(self.next.job + created.len() as i64, self.now);
+            self.tell(&mut job);
             outcomes.push(Outcome::Created(job.clone()));
             created.push((request, job));
         }
@@ -410,6 +462,7 @@ impl Group {
             self.changed.insert(job.id);
         }
         self.history(job.id, job.state, cause);
+        self.tell(job);
         self.event("job.updated", job);
     }
 

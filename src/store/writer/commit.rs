@@ -8,7 +8,7 @@
 //! out in memory and given back with whatever rolls back, so they stay gapless.
 
 use super::apply::{Answer, Group, Next, Out};
-use super::{Command, Conn, WriteError, load, save};
+use super::{Command, Conn, Tell, WriteError, load, save};
 use crate::domain::time::now_ms;
 use crate::store::engine::Engine;
 use crate::store::on;
@@ -19,6 +19,7 @@ pub(super) async fn commit(
     db: &mut Conn,
     group: &[Command],
     next: &mut Option<Next>,
+    tell: Option<&Tell>,
 ) -> Result<(Vec<Answer>, Out), sqlx::Error> {
     begin(db).await?;
     let all: Vec<&Command> = group.iter().collect();
@@ -28,7 +29,7 @@ pub(super) async fn commit(
             Some(n) => n,
             None => load::next(db).await?,
         };
-        let applied = apply(db, &all, start).await?;
+        let applied = apply(db, &all, start, tell).await?;
         Ok::<_, sqlx::Error>(applied)
     }
     .await;
@@ -52,7 +53,7 @@ pub(super) async fn commit(
             rollback(db).await;
         }
     }
-    let result = one_by_one(db, group, next).await;
+    let result = one_by_one(db, group, next, tell).await;
     if result.is_err() {
         rollback(db).await;
     }
@@ -64,6 +65,7 @@ async fn one_by_one(
     db: &mut Conn,
     group: &[Command],
     next: &mut Option<Next>,
+    tell: Option<&Tell>,
 ) -> Result<(Vec<Answer>, Out), sqlx::Error> {
     begin(db).await?;
     let mut numbers = match *next {
@@ -74,7 +76,7 @@ async fn one_by_one(
     let mut out = Out::default();
     for cmd in group {
         run(db, "SAVEPOINT request").await?;
-        match apply(db, &[cmd], numbers).await {
+        match apply(db, &[cmd], numbers, tell).await {
             Ok((mut answer, applied)) => {
                 run(db, "RELEASE SAVEPOINT request").await?;
                 numbers = applied.next;
@@ -99,10 +101,15 @@ async fn one_by_one(
 }
 
 /// Reads, applies and writes `cmds` inside the open transaction.
-async fn apply(db: &mut Conn, cmds: &[&Command], next: Next) -> Result<(Vec<Answer>, Group), sqlx::Error> {
+async fn apply(
+    db: &mut Conn,
+    cmds: &[&Command],
+    next: Next,
+    tell: Option<&Tell>,
+) -> Result<(Vec<Answer>, Group), sqlx::Error> {
     let mut count = 0;
     let loaded = load::load(db, cmds, &mut count).await?;
-    let mut group = Group::new(loaded, next, now_ms());
+    let mut group = Group::new(loaded, next, now_ms(), tell.cloned());
     let answers = cmds.iter().map(|cmd| group.command(cmd)).collect();
     save::save(db, &group, &mut count).await?;
     group.out.statements = count;

@@ -19,6 +19,7 @@ struct Statements {
     locations: String,
     starts: String,
     alarms: String,
+    alarms_by_id: String,
 }
 
 impl Statements {
@@ -44,6 +45,11 @@ impl Statements {
                 e.json_rows("job_history", &["job_id"])
             ),
             alarms: format!("SELECT {} FROM alarms WHERE cleared_at IS NULL ORDER BY id", alarms::COLUMNS),
+            alarms_by_id: format!(
+                "SELECT {} FROM alarms WHERE id IN (SELECT id FROM ({}) AS k)",
+                alarms::COLUMNS,
+                e.json_rows("alarms", &["id"])
+            ),
         }
     }
 }
@@ -81,6 +87,7 @@ pub(super) async fn load(
     let mut ids = BTreeSet::new();
     let mut places = BTreeSet::new();
     let mut alarms = false;
+    let mut acknowledged = BTreeSet::new();
     for cmd in group {
         match cmd {
             Command::Submit { jobs, .. } => {
@@ -93,6 +100,10 @@ pub(super) async fn load(
                     places.insert(*location);
                 }
                 Record::AlarmRaised(_) | Record::AlarmCleared { .. } => alarms = true,
+                Record::Acknowledge { alarm, .. } => {
+                    acknowledged.insert(*alarm);
+                }
+                Record::Retell { jobs } => ids.extend(jobs.iter().copied()),
                 Record::Device { .. } | Record::Pause { .. } | Record::Prune { .. } => {}
             },
         }
@@ -152,7 +163,16 @@ pub(super) async fn load(
     }
     if alarms {
         *count += 1;
-        loaded.alarms = on!(Conn, db, c => sqlx::query_as(sql.alarms.as_str()).fetch_all(&mut *c).await)?;
+        let rows: Vec<alarms::Row> =
+            on!(Conn, db, c => sqlx::query_as(sql.alarms.as_str()).fetch_all(&mut *c).await)?;
+        loaded.alarms.extend(rows.into_iter().map(|r| (r.id, r)));
+    }
+    if !acknowledged.is_empty() {
+        *count += 1;
+        let keys: Vec<_> = acknowledged.iter().map(|id| serde_json::json!({ "id": id })).collect();
+        let json = serde_json::to_string(&keys).unwrap_or_default();
+        let rows: Vec<alarms::Row> = on!(Conn, db, c => sqlx::query_as(sql.alarms_by_id.as_str()).bind(json).fetch_all(&mut *c).await)?;
+        loaded.alarms.extend(rows.into_iter().map(|r| (r.id, r)));
     }
     Ok(loaded)
 }

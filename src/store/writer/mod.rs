@@ -122,6 +122,22 @@ pub enum Record {
         /// Why, if given.
         reason: Option<String>,
     },
+    /// Tell these jobs again: a `job.updated` event for each one still queued, with why it
+    /// waits now (the dispatcher's waiting reason changed while the job did not).
+    Retell {
+        /// The jobs.
+        jobs: Vec<i64>,
+    },
+    /// An operator acknowledges an alarm (audited); refused with [`WriteError::AlarmNotFound`]
+    /// or [`WriteError::AlreadyAcknowledged`].
+    Acknowledge {
+        /// The alarm.
+        alarm: i64,
+        /// The API key's name.
+        by: String,
+        /// A note, if given.
+        note: Option<String>,
+    },
     /// Retention: delete events committed before this time (Unix ms), always keeping the
     /// newest so that sequence numbers are never reused.
     Prune {
@@ -166,6 +182,17 @@ pub enum WriteError {
     /// waiting (`intake.queue`).
     #[error("the job writer is overloaded")]
     Overloaded,
+    /// No alarm has this id.
+    #[error("alarm {0} does not exist")]
+    AlarmNotFound(i64),
+    /// The alarm was acknowledged before.
+    #[error("alarm {id} was already acknowledged by {by}")]
+    AlreadyAcknowledged {
+        /// The alarm.
+        id: i64,
+        /// Who acknowledged it.
+        by: String,
+    },
     /// The database failed; nothing of the request was written.
     #[error("database error: {0}")]
     Database(Arc<sqlx::Error>),
@@ -183,6 +210,10 @@ pub type Publish = Arc<dyn Fn(Vec<StoredEvent>) + Send + Sync>;
 /// (`Some`) or unlocked (`None`), so the dispatcher holds back jobs on locked locations.
 pub type Locked = Arc<dyn Fn(&[(Location, Option<LocationLock>)]) + Send + Sync>;
 
+/// Called for each job as a commit writes its `job.updated` event, to fill in why it waits
+/// (`Job::waiting`): the dispatcher says, and remembers what it told.
+pub type Tell = Arc<dyn Fn(&mut Job) + Send + Sync>;
+
 /// What the writer calls after each commit.
 #[derive(Clone, Default)]
 pub struct Hooks {
@@ -194,6 +225,8 @@ pub struct Hooks {
     pub publish: Option<Publish>,
     /// Tells `/metrics` about each group (size, commit time, timed transitions).
     pub observe: Option<Observe>,
+    /// Fills in each job's waiting reason before its event is written.
+    pub tell: Option<Tell>,
 }
 
 enum Command {
@@ -299,7 +332,7 @@ async fn run(pool: Pool, db: Conn, mut rx: mpsc::Receiver<Command>, max_group: u
                 .ok();
         }
         let result = match db.as_mut() {
-            Some(conn) => commit::commit(conn, &group, &mut next).await,
+            Some(conn) => commit::commit(conn, &group, &mut next, hooks.tell.as_ref()).await,
             None => Err(sqlx::Error::PoolTimedOut),
         };
         if result.is_err() {
@@ -340,6 +373,7 @@ async fn run(pool: Pool, db: Conn, mut rx: mpsc::Receiver<Command>, max_group: u
                 (Command::Submit { reply, .. }, apply::Answer::Submitted(r)) => drop(reply.send(r)),
                 (Command::Change { reply, .. }, apply::Answer::Changed(r)) => drop(reply.send(r)),
                 (Command::Record { reply, .. }, apply::Answer::Recorded) => drop(reply.send(Ok(()))),
+                (Command::Record { reply, .. }, apply::Answer::Refused(e)) => drop(reply.send(Err(e))),
                 (Command::Reports { reply, .. }, apply::Answer::Reported(r)) => drop(reply.send(r)),
                 (Command::Reports { reply, reports }, apply::Answer::Failed(e)) => {
                     drop(reply.send(reports.iter().map(|_| Err(e.clone())).collect()))

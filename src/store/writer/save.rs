@@ -44,8 +44,20 @@ const LOCATION_SET: [&str; 10] = [
     "lock_reason",
     "lock_job",
 ];
-const ALARM_INSERT: [&str; 9] =
-    ["id", "device", "kind", "code", "class", "text", "detail", "raised_at", "cleared_at"];
+const ALARM_INSERT: [&str; 12] = [
+    "id",
+    "device",
+    "kind",
+    "code",
+    "class",
+    "text",
+    "detail",
+    "action",
+    "acknowledged_by",
+    "acknowledged_at",
+    "raised_at",
+    "cleared_at",
+];
 
 /// The statements, per engine, built once.
 struct Statements {
@@ -56,7 +68,7 @@ struct Statements {
     locations: String,
     audit: String,
     raise: String,
-    clear: String,
+    update_alarms: String,
     pause: String,
     resume: String,
 }
@@ -72,7 +84,11 @@ impl Statements {
             locations: e.update_json("locations", &LOCATION_KEY, &LOCATION_SET),
             audit: e.insert_json("audit", &["id", "at", "by", "action", "target", "reason"]),
             raise: e.insert_json("alarms", &ALARM_INSERT),
-            clear: e.update_json("alarms", &["id"], &["cleared_at"]),
+            update_alarms: e.update_json(
+                "alarms",
+                &["id"],
+                &["cleared_at", "acknowledged_by", "acknowledged_at"],
+            ),
             // `WHERE TRUE` lets SQLite tell the upsert's ON CONFLICT from a join's ON.
             pause: format!(
                 "{} WHERE TRUE ON CONFLICT (target) DO UPDATE SET paused = excluded.paused, by = excluded.by, \
@@ -211,10 +227,10 @@ pub(super) async fn save(db: &mut Conn, group: &Group, count: &mut usize) -> Res
         })
         .collect();
     write(db, count, &sql.audit, &audit).await?;
-    write(db, count, &sql.raise, &group.raised).await?;
-    let cleared: Vec<_> =
-        group.cleared.iter().map(|(id, at)| serde_json::json!({"id": id, "cleared_at": at})).collect();
-    write(db, count, &sql.clear, &cleared).await?;
+    let raised: Vec<_> = group.raised.iter().filter_map(|id| group.alarms.get(id)).collect();
+    write(db, count, &sql.raise, &raised).await?;
+    let changed: Vec<_> = group.alarms_changed.iter().filter_map(|id| group.alarms.get(id)).collect();
+    write(db, count, &sql.update_alarms, &changed).await?;
     let (mut paused, mut resumed) = (Vec::new(), Vec::new());
     for (target, pause) in &group.controls {
         match pause {

@@ -1,0 +1,224 @@
+//! Why a queued job is not moving: the `waiting` reason every job carries.
+//!
+//! The reason is computed beside the dispatcher's decisions, never instead of them: the
+//! devices still ask [`Port::next`](crate::devices::port::Port::next) and take what it
+//! offers; nothing here holds a job back or lets one go. A queued job's reason is the first
+//! of, in this order (an operator's decision first, then what the machine says, then what
+//! other work says):
+//!
+//! 1. `no_device`: the job has no device (no configured device runs jobs when it was
+//!    accepted) or its device is no longer configured;
+//! 2. `device_paused`: an operator paused its device;
+//! 3. `device_offline`: its device does not answer (or has not answered yet);
+//! 4. `device_alarm`: its device (a crane) reports an alarm code;
+//! 5. `location_locked`, then `aisle_paused`: as the dispatcher holds such jobs back;
+//! 6. `behind_job`: an older unfinished job on the same device touches one of its
+//!    locations (the job named is the nearest one ahead, the one it waits for directly);
+//! 7. `slots_busy`: every slot of its device (the crane) is taken by rackd's other jobs or
+//!    shows busy.
+//!
+//! Otherwise the job is about to be handed out and `waiting` is null, as it is for every job
+//! that is not queued. "About to" includes a job a device with free slots has not taken yet
+//! because better jobs came first: the next round takes it.
+//!
+//! Telling clients: each `job.updated` event the writer commits carries the reason as of
+//! that commit ([`Queues::tell_hook`]), and the reasons told are remembered. A change of
+//! reason alone (a device goes offline, a crane raises an alarm, a slot frees up) wakes
+//! [`watch`], which recomputes the reasons of each device's oldest `dispatch_window` queued
+//! jobs (the ones the dispatcher weighs) at most every [`SETTLE`], and asks the writer to
+//! tell again those whose reason changed ([`Record::Retell`]); the writer re-reads each job
+//! and writes a `job.updated` only while it is still queued, with its reason as of then,
+//! so a late retell never shows a job older than it is. Jobs further back in a long
+//! backlog show their reason when read and in their own events, and are told of changes
+//! once they reach the window: a hundred thousand queued jobs cost a change no more than a
+//! thousand events.
+
+use std::collections::HashMap;
+use std::time::Duration;
+
+use tokio::sync::watch;
+
+use super::queues::{Holds, Queue, Queues, because, slashed};
+use crate::devices::DeviceStatus;
+use crate::domain::{Job, JobState, Waiting, WaitingReason};
+use crate::store::writer::{Record, Tell, WriteError, Writer};
+
+/// How long the watcher lets a burst of changes settle before it recomputes.
+pub const SETTLE: Duration = Duration::from_millis(50);
+
+impl Queues {
+    /// Gives the dispatcher what each device reports (once, when the devices run), so
+    /// reasons can say a device is offline, in alarm or busy.
+    pub fn watch_devices(&self, statuses: HashMap<String, watch::Receiver<DeviceStatus>>) {
+        let _ = self.0.statuses.set(statuses);
+    }
+
+    /// Why `job` is not moving now; None while it moves or is about to be handed out.
+    pub fn waiting(&self, job: &Job) -> Option<Waiting> {
+        if job.state != JobState::Queued {
+            return None;
+        }
+        let status = job.device.as_deref().and_then(|d| self.status(d));
+        let queues = self.lock();
+        let queue = job.device.as_deref().and_then(|d| queues.get(d));
+        let holds = self.holds();
+        self.reason(job, queue, &holds, status.as_ref())
+    }
+
+    fn status(&self, device: &str) -> Option<DeviceStatus> {
+        self.0.statuses.get().and_then(|s| s.get(device)).map(|r| r.borrow().clone())
+    }
+
+    /// The reason, given the job's queue, the holds and its device's status (the module doc
+    /// says in which order reasons are weighed).
+    fn reason(
+        &self,
+        job: &Job,
+        queue: Option<&Queue>,
+        holds: &Holds,
+        status: Option<&DeviceStatus>,
+    ) -> Option<Waiting> {
+        let Some(device) = job.device.as_deref() else {
+            let mut aisles: Vec<u16> =
+                job.spec().map(|s| s.locations()).unwrap_or_default().iter().map(|l| l.aisle).collect();
+            aisles.dedup();
+            let aisles: Vec<String> = aisles.iter().map(u16::to_string).collect();
+            let text = format!("no configured device runs jobs on aisle {}", aisles.join(", "));
+            return Some(Waiting::new(WaitingReason::NoDevice, text));
+        };
+        let Some(queue) = queue.filter(|_| self.has(device)) else {
+            let text = format!("device {device} is not configured");
+            return Some(Waiting::new(WaitingReason::NoDevice, text).on(device));
+        };
+        if let Some(pause) = self.pause_of(device) {
+            let text = format!("device {device} is paused{}", because(&pause));
+            let mut w = Waiting::new(WaitingReason::DevicePaused, text).on(device);
+            w.by = Some(pause.by);
+            return Some(w);
+        }
+        if let Some(s) = status {
+            if !s.online {
+                let text = match s.last_contact {
+                    None => format!("{device} has not answered yet"),
+                    Some(_) => format!("{device} does not answer"),
+                };
+                return Some(Waiting::new(WaitingReason::DeviceOffline, text).on(device));
+            }
+            if let Some(crane) = &s.crane
+                && let Some(code) = crane.alarm_code
+            {
+                let what = crane.alarm_text.as_deref().unwrap_or("see its alarm");
+                let mut w = Waiting::new(
+                    WaitingReason::DeviceAlarm,
+                    format!("{device} reports alarm {code}: {what}"),
+                )
+                .on(device);
+                w.code = Some(code);
+                return Some(w);
+            }
+        }
+        if let Some(w) = holds.why(job) {
+            return Some(w);
+        }
+        let locations = job.spec().map(|s| s.locations()).unwrap_or_default();
+        let ahead = locations
+            .iter()
+            .filter_map(|l| Some((*queue.on.get(l)?.range(..job.id).next_back()?, l)))
+            .max_by_key(|(id, _)| *id);
+        if let Some((id, l)) = ahead {
+            let text = format!("behind job {id} on location {}", slashed(l));
+            let mut w = Waiting::new(WaitingReason::BehindJob, text).on(device);
+            w.job = Some(id);
+            return Some(w);
+        }
+        let total = status.map_or(0, |s| usize::from(s.slots_total));
+        let in_use = status.map_or(0, |s| usize::from(s.slots_in_use)).max(queue.active.len());
+        if total > 0 && in_use >= total {
+            let text = match total {
+                1 => format!("{device} is busy with another job"),
+                _ => format!("every slot of {device} is busy with other jobs"),
+            };
+            return Some(Waiting::new(WaitingReason::SlotsBusy, text).on(device));
+        }
+        None
+    }
+
+    /// The writer hook: fills in each job's reason before its event is written, and
+    /// remembers it as told.
+    pub fn tell_hook(&self) -> Tell {
+        let queues = self.clone();
+        std::sync::Arc::new(move |job: &mut Job| {
+            job.waiting = queues.waiting(job);
+            let mut told = queues.0.told.lock().unwrap_or_else(|p| p.into_inner());
+            match job.state == JobState::Queued && job.device.as_deref().is_some_and(|d| queues.has(d)) {
+                true => drop(told.insert(job.id, job.waiting.clone())),
+                false => drop(told.remove(&job.id)),
+            }
+        })
+    }
+
+    /// The queued jobs (of each device's dispatch window) whose reason is not the one last
+    /// told; a job never told counts as told "not waiting".
+    fn untold(&self) -> Vec<i64> {
+        let statuses: HashMap<String, DeviceStatus> = match self.0.statuses.get() {
+            Some(s) => s.iter().map(|(id, r)| (id.clone(), r.borrow().clone())).collect(),
+            None => HashMap::new(),
+        };
+        let windows = self.windows();
+        let queues = self.lock();
+        let holds = self.holds();
+        let told = self.0.told.lock().unwrap_or_else(|p| p.into_inner());
+        let mut changed = Vec::new();
+        for (device, queue) in queues.iter() {
+            let window = windows.get(device.as_str()).copied().unwrap_or(usize::MAX);
+            for job in queue.queued.values().take(window) {
+                let now = self.reason(job, Some(queue), &holds, statuses.get(device));
+                if told.get(&job.id).unwrap_or(&None) != &now {
+                    changed.push(job.id);
+                }
+            }
+        }
+        changed
+    }
+}
+
+/// Tells clients of every change of reason alone (see the module doc) until the writer
+/// stops. Device status changes wake it as well as the dispatcher's own.
+pub async fn watch(queues: Queues, writer: Writer) {
+    let mut forwarders = Vec::new();
+    for status in queues.0.statuses.get().map(|s| s.values().cloned().collect::<Vec<_>>()).unwrap_or_default()
+    {
+        let queues = queues.clone();
+        forwarders.push(tokio::spawn(async move {
+            let mut status = status;
+            while status.changed().await.is_ok() {
+                queues.0.changed.notify_one();
+            }
+        }));
+    }
+    let _stop = AbortOnDrop(forwarders);
+    loop {
+        queues.0.changed.notified().await;
+        tokio::time::sleep(SETTLE).await;
+        let jobs = queues.untold();
+        if jobs.is_empty() {
+            continue;
+        }
+        match writer.record(Record::Retell { jobs }).await {
+            Ok(()) => {}
+            Err(WriteError::Closed) => return,
+            Err(e) => tracing::warn!(error = %e, "telling why jobs wait"),
+        }
+    }
+}
+
+/// Stops the forwarding tasks with the watcher.
+struct AbortOnDrop(Vec<tokio::task::JoinHandle<()>>);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        for task in &self.0 {
+            task.abort();
+        }
+    }
+}
