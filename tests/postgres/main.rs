@@ -16,8 +16,12 @@ mod postgres;
 #[path = "../common/ws.rs"]
 mod ws;
 
+#[path = "../api/alarms.rs"]
+mod api_alarms;
 #[path = "../api/auth.rs"]
 mod auth;
+#[path = "../api/demo.rs"]
+mod demo;
 #[path = "../api/errors.rs"]
 mod errors;
 #[path = "../api/jobs.rs"]
@@ -26,6 +30,10 @@ mod jobs;
 mod lifecycle;
 #[path = "../api/paging.rs"]
 mod paging;
+#[path = "../api/stats.rs"]
+mod stats;
+#[path = "../api/waiting.rs"]
+mod waiting;
 
 #[path = "../common/events.rs"]
 mod events;
