@@ -65,7 +65,10 @@ impl Application {
             tracing::warn!(%listen, "no API keys configured: every request is allowed");
         }
         let db = &config.database;
-        let database = store::database(db);
+        let database = match &db.url {
+            Some(url) => store::Database::Postgres(url.clone()),
+            None => store::Database::Sqlite(db.path.clone()),
+        };
         let pool = store::open(&database, Duration::from_millis(db.busy_timeout_ms))
             .await
             .with_context(|| format!("opening database {}", database.display()))?;

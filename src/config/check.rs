@@ -105,13 +105,20 @@ impl Config {
             }
         }
         if let Some(url) = &self.database.url {
-            match crate::store::Database::parse(url) {
-                Ok(crate::store::Database::Postgres(_)) => {}
-                Ok(crate::store::Database::Sqlite(_)) => {
-                    let why = "database.url is for PostgreSQL (postgres://...); a SQLite file goes in database.path";
-                    return Err(("database.url".into(), Invalid::DatabaseUrl(why.into())));
-                }
-                Err(e) => return Err(("database.url".into(), Invalid::DatabaseUrl(e))),
+            let why = if url.starts_with("sqlite:") {
+                Some(
+                    "database.url is for PostgreSQL (postgres://...); a SQLite file goes in database.path"
+                        .into(),
+                )
+            } else if !(url.starts_with("postgres://") || url.starts_with("postgresql://")) {
+                Some(format!("{url:?} is not a postgres:// URL"))
+            } else {
+                <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url)
+                    .err()
+                    .map(|e| format!("not a PostgreSQL URL: {e}"))
+            };
+            if let Some(why) = why {
+                return Err(("database.url".into(), Invalid::DatabaseUrl(why)));
             }
         }
         if self.intake.max_group == 0 || self.intake.queue == 0 {

@@ -194,7 +194,7 @@ fn a_database_url_must_be_postgres_and_may_come_from_the_environment() {
     assert!(err.contains("x.toml:2:1: database.url: database.url is for PostgreSQL"), "{err}");
     let err = error("[database]\nurl = \"mysql://h/db\"\n");
     assert!(
-        err.contains("database.url") && err.contains("neither sqlite:PATH nor a postgres:// URL"),
+        err.contains("database.url") && err.contains("is not a postgres:// URL"),
         "{err}"
     );
 }

@@ -31,7 +31,6 @@ pub mod locations;
 pub mod stats;
 pub mod writer;
 
-use std::path::PathBuf;
 use std::time::Duration;
 
 use sqlx::{PgPool, SqlitePool};
@@ -163,14 +162,6 @@ pub async fn open(database: &Database, busy_timeout: Duration) -> Result<Pool, O
     let pool = engine::connect(database, busy_timeout, 8).await?;
     on!(Pool, &pool, p => pool.migrator().run(p).await)?;
     Ok(pool)
-}
-
-/// Where the store of `config` is.
-pub fn database(config: &crate::config::DatabaseConfig) -> Database {
-    match &config.url {
-        Some(url) => Database::Postgres(url.clone()),
-        None => Database::Sqlite(PathBuf::from(&config.path)),
-    }
 }
 
 /// Why the store is not ready.
