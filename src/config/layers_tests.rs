@@ -193,8 +193,5 @@ fn a_database_url_must_be_postgres_and_may_come_from_the_environment() {
     let err = error("[database]\nurl = \"sqlite:x.db\"\n");
     assert!(err.contains("x.toml:2:1: database.url: database.url is for PostgreSQL"), "{err}");
     let err = error("[database]\nurl = \"mysql://h/db\"\n");
-    assert!(
-        err.contains("database.url") && err.contains("is not a postgres:// URL"),
-        "{err}"
-    );
+    assert!(err.contains("database.url") && err.contains("is not a postgres:// URL"), "{err}");
 }

@@ -15,77 +15,19 @@
 
 use std::time::Duration;
 
+use super::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOB_HISTORY, JOBS, LOCATIONS};
 use super::engine::{Database, Engine, OpenError};
 use super::{Pool, on};
 
 /// Each table, in an order that satisfies its foreign keys, with its key and columns.
 const TABLES: &[(&str, &str, &[&str])] = &[
-    (
-        "jobs",
-        "id",
-        &[
-            "id",
-            "reference",
-            "kind",
-            "priority",
-            "barcode",
-            "spec",
-            "request",
-            "device",
-            "state",
-            "forced",
-            "failure_kind",
-            "failure_code",
-            "failure_text",
-            "device_ref",
-            "created_at",
-            "updated_at",
-            "attempt",
-        ],
-    ),
-    ("job_history", "id", &["id", "job_id", "state", "cause", "detail", "at"]),
-    (
-        "locations",
-        "aisle, row, bay, level, position",
-        &[
-            "aisle",
-            "row",
-            "bay",
-            "level",
-            "position",
-            "occupied",
-            "barcode",
-            "red",
-            "green",
-            "reserved_by",
-            "updated_at",
-            "locked_at",
-            "locked_by",
-            "lock_reason",
-            "lock_job",
-        ],
-    ),
-    ("events", "seq", &["seq", "at", "type", "data"]),
-    (
-        "alarms",
-        "id",
-        &[
-            "id",
-            "device",
-            "kind",
-            "code",
-            "class",
-            "text",
-            "detail",
-            "action",
-            "acknowledged_by",
-            "acknowledged_at",
-            "raised_at",
-            "cleared_at",
-        ],
-    ),
-    ("controls", "target", &["target", "paused", "by", "reason", "at"]),
-    ("audit", "id", &["id", "at", "by", "action", "target", "reason"]),
+    ("jobs", "id", &JOBS),
+    ("job_history", "id", &JOB_HISTORY),
+    ("locations", "aisle, row, bay, level, position", &LOCATIONS),
+    ("events", "seq", &EVENTS),
+    ("alarms", "id", &ALARMS),
+    ("controls", "target", &CONTROLS),
+    ("audit", "id", &AUDIT),
 ];
 
 /// Rows per page.

@@ -14,56 +14,12 @@ use serde::Serialize;
 
 use super::Conn;
 use super::apply::Group;
+use crate::store::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOBS, LOCATIONS};
 use crate::store::engine::Engine;
 use crate::store::on;
 
-const JOB_INSERT: [&str; 16] = [
-    "id",
-    "reference",
-    "kind",
-    "priority",
-    "barcode",
-    "spec",
-    "request",
-    "device",
-    "state",
-    "forced",
-    "failure_kind",
-    "failure_code",
-    "failure_text",
-    "created_at",
-    "updated_at",
-    "attempt",
-];
 const JOB_UPDATE: [&str; 8] =
     ["state", "priority", "forced", "failure_kind", "failure_code", "failure_text", "updated_at", "attempt"];
-const LOCATION_KEY: [&str; 5] = ["aisle", "row", "bay", "level", "position"];
-const LOCATION_SET: [&str; 10] = [
-    "occupied",
-    "barcode",
-    "red",
-    "green",
-    "reserved_by",
-    "updated_at",
-    "locked_at",
-    "locked_by",
-    "lock_reason",
-    "lock_job",
-];
-const ALARM_INSERT: [&str; 12] = [
-    "id",
-    "device",
-    "kind",
-    "code",
-    "class",
-    "text",
-    "detail",
-    "action",
-    "acknowledged_by",
-    "acknowledged_at",
-    "raised_at",
-    "cleared_at",
-];
 
 /// The statements, per engine, built once.
 struct Statements {
@@ -81,15 +37,14 @@ struct Statements {
 
 impl Statements {
     fn new(e: Engine) -> Statements {
-        let pause = ["target", "paused", "by", "reason", "at"];
         Statements {
-            insert_jobs: e.insert_json("jobs", &JOB_INSERT),
+            insert_jobs: e.insert_json("jobs", &JOBS),
             update_jobs: e.update_json("jobs", &["id"], &JOB_UPDATE),
             history: e.insert_json("job_history", &["job_id", "state", "cause", "at"]),
-            events: e.insert_json("events", &["seq", "at", "type", "data"]),
-            locations: e.update_json("locations", &LOCATION_KEY, &LOCATION_SET),
-            audit: e.insert_json("audit", &["id", "at", "by", "action", "target", "reason"]),
-            raise: e.insert_json("alarms", &ALARM_INSERT),
+            events: e.insert_json("events", &EVENTS),
+            locations: e.update_json("locations", &LOCATIONS[..5], &LOCATIONS[5..]),
+            audit: e.insert_json("audit", &AUDIT),
+            raise: e.insert_json("alarms", &ALARMS),
             update_alarms: e.update_json(
                 "alarms",
                 &["id"],
@@ -99,7 +54,7 @@ impl Statements {
             pause: format!(
                 "{} WHERE TRUE ON CONFLICT (target) DO UPDATE SET paused = excluded.paused, by = excluded.by, \
                  reason = excluded.reason, at = excluded.at",
-                e.insert_json("controls", &pause)
+                e.insert_json("controls", &CONTROLS)
             ),
             resume: format!(
                 "DELETE FROM controls WHERE target IN (SELECT target FROM ({}) AS k)",
@@ -112,7 +67,7 @@ impl Statements {
 static SQLITE: LazyLock<Statements> = LazyLock::new(|| Statements::new(Engine::Sqlite));
 static POSTGRES: LazyLock<Statements> = LazyLock::new(|| Statements::new(Engine::Postgres));
 
-/// A job's row, as [`JOB_INSERT`] names its columns.
+/// A job's row, as [`JOBS`] names its columns (`device_ref` is null: a new job has none).
 #[derive(Serialize)]
 struct JobOut<'a> {
     id: i64,
