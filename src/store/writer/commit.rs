@@ -1,10 +1,11 @@
 //! One group, one transaction: read what it needs, apply it in memory, write it set-based.
 //!
 //! A group's statements are a constant number whatever its size (see [`super::load`] and
-//! [`super::save`]). If the database refuses the group (a constraint, a full disk, a lost
-//! connection), it is rolled back and applied again request by request, each in a
-//! savepoint of its own, so that one bad request fails alone and the rest of its group
-//! commits; only a failing commit fails them all. Ids and event sequence numbers are handed
+//! [`super::save`]). If the database refuses a statement of the group (a constraint, a
+//! trigger, a full disk), the group is rolled back and applied again request by request,
+//! each in a savepoint of its own, so that one bad request fails alone and the rest of its
+//! group commits; only a failing commit fails them all. A broken connection fails the group
+//! at once (the writer then takes a fresh one). Ids and event sequence numbers are handed
 //! out in memory and given back with whatever rolls back, so they stay gapless.
 
 use super::apply::{Answer, Group, Next, Out};
@@ -44,7 +45,9 @@ pub(super) async fn commit(
             out.statements += 2 + usize::from(start_read);
             return Ok((answers, out));
         }
-        Err(e) if group.len() == 1 => {
+        // One request, or a failure that is not about what the group asked (the connection,
+        // the pool): replaying request by request would only fail again.
+        Err(e) if group.len() == 1 || !matches!(e, sqlx::Error::Database(_)) => {
             rollback(db).await;
             return Err(e);
         }
