@@ -170,7 +170,10 @@ export class Devices {
       ),
     );
     const error = d.online ? '' : d.last_error || '';
-    setText(t.error, error ? `${d.consecutive_failures} failed requests: ${error}` : '');
+    // Plain words on the tile; the protocol's own words (the link alarm's detail) on hover,
+    // so the tile does not repeat what the alarm list says.
+    setText(t.error, error ? `no answer: ${d.consecutive_failures} requests failed` : '');
+    t.error.title = error;
     t.error.hidden = !error;
   }
 
