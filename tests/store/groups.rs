@@ -104,17 +104,19 @@ async fn a_broken_connection_costs_one_group_not_the_writer() {
     let rackd::store::Database::Postgres(url) = db else { unreachable!() };
     let mut admin = <sqlx::PgConnection as sqlx::Connection>::connect(&url).await.unwrap();
     let killed: Vec<bool> = sqlx::query_scalar(
-        "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE application_name = 'rackd'",
+        "SELECT pg_terminate_backend(pid) FROM pg_stat_activity \
+         WHERE application_name = 'rackd' AND datname = current_database()",
     )
     .fetch_all(&mut admin)
     .await
     .unwrap();
     assert!(!killed.is_empty(), "rackd's connections were found");
-    // Termination is a signal: wait until the server has let them go.
+    // Only this test's database: the other tests share the cluster. Termination is a
+    // signal: wait until the server has let them go.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
     loop {
         let left: i64 =
-            sqlx::query_scalar("SELECT COUNT(*) FROM pg_stat_activity WHERE application_name = 'rackd'")
+            sqlx::query_scalar("SELECT COUNT(*) FROM pg_stat_activity WHERE application_name = 'rackd' AND datname = current_database()")
                 .fetch_one(&mut admin)
                 .await
                 .unwrap();
