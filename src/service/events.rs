@@ -1,6 +1,6 @@
 //! Live events: the hub that hands each committed event to every subscriber.
 //!
-//! The writer thread calls [`Hub::publish`] after each commit with the events it appended,
+//! The writer calls [`Hub::publish`] after each commit with the events it appended,
 //! in sequence order. Each event is serialized once, to the text subscribers receive, and
 //! shared by all of them. The hub is a bounded broadcast ring of commits (one entry holds
 //! all of a commit's events, so a batch of thousands of jobs is one entry, not a burst that
