@@ -98,7 +98,11 @@ pub(super) struct History {
 pub(super) struct Group {
     pub(super) now: i64,
     pub(super) next: Next,
+    /// Stored jobs by reference, with their requests (as loaded).
     known: HashMap<String, (String, Job)>,
+    /// Jobs this group created, by reference (their requests are in `created`, the jobs in
+    /// `jobs`): kept apart so that creating a job copies it once, not three times.
+    created_refs: HashMap<String, i64>,
     /// Every job loaded or created, as it now is.
     pub(super) jobs: HashMap<i64, Job>,
     /// Jobs created by this group, with their canonical requests, in id order.
@@ -133,6 +137,7 @@ impl Group {
             now,
             next,
             known: loaded.by_reference,
+            created_refs: HashMap::new(),
             jobs: loaded.jobs,
             created: BTreeMap::new(),
             changed: BTreeSet::new(),
@@ -291,14 +296,14 @@ impl Group {
     /// refuses the whole submission before anything of it is written.
     fn submit(&mut self, jobs: &[NewJob]) -> Result<Vec<Outcome>, WriteError> {
         let mut outcomes = Vec::with_capacity(jobs.len());
-        let mut created: Vec<(String, Job)> = Vec::new();
+        let mut created: Vec<(String, Job)> = Vec::with_capacity(jobs.len());
         let mut local: HashMap<&str, usize> = HashMap::new();
         for new in jobs {
             let request = new.canonical();
             if let Some(reference) = new.reference.as_deref() {
                 let seen = match local.get(reference) {
-                    Some(&i) => Some(&created[i]),
-                    None => self.known.get(reference),
+                    Some(&i) => Some((&created[i].0, &created[i].1)),
+                    None => self.seen(reference),
                 };
                 if let Some((stored, job)) = seen {
                     if *stored != request {
@@ -315,16 +320,27 @@ impl Group {
             created.push((request, job));
         }
         self.next.job += created.len() as i64;
+        self.jobs.reserve(created.len());
+        self.history.reserve(created.len());
+        self.out.events.reserve(created.len());
         for (request, job) in created {
             self.history(job.id, JobState::Queued, "accepted");
             self.event("job.updated", &job);
-            if let Some(r) = job.reference.clone() {
-                self.known.insert(r, (request.clone(), job.clone()));
+            if let Some(r) = &job.reference {
+                self.created_refs.insert(r.clone(), job.id);
             }
             self.created.insert(job.id, request);
             self.jobs.insert(job.id, job);
         }
         Ok(outcomes)
+    }
+
+    /// The request and the job (as it now is) that already use `reference`.
+    fn seen(&self, reference: &str) -> Option<(&String, &Job)> {
+        if let Some(id) = self.created_refs.get(reference) {
+            return self.created.get(id).zip(self.jobs.get(id));
+        }
+        self.known.get(reference).map(|(request, job)| (request, job))
     }
 
     /// Applies one change to a job, with its effects on the location model.
