@@ -38,6 +38,8 @@
 
 pub mod bank;
 pub mod client;
+pub mod client_reads;
+pub mod command;
 pub mod device;
 pub mod end_code;
 pub mod frame;
@@ -45,7 +47,9 @@ pub mod handler;
 pub mod link;
 pub mod request;
 pub mod response;
+pub mod scattered;
 pub mod server;
+pub mod type_name;
 
 #[cfg(test)]
 mod proptests;
@@ -54,7 +58,9 @@ pub use bank::{Bank, SharedBank};
 pub use client::{Mc3eClient, Mc3eConfig};
 pub use device::Device;
 pub use end_code::EndCode;
-pub use frame::Route;
+pub use frame::{FrameKind, Route};
 pub use handler::{WriteEvent, WriteHook};
 pub use link::{LinkConfig, TransportKind};
+pub use scattered::Block;
 pub use server::{Mc3eServer, ServerState};
+pub use type_name::TypeName;
