@@ -203,11 +203,12 @@ async fn k4_word_views_and_timer_counter_devices() {
         plc.write_words(&plc.parse_address("CN2").unwrap(), &[7]).await.unwrap();
         plc.write_bits(&plc.parse_address("STC1").unwrap(), &[true]).await.unwrap();
         plc.write_words(&plc.parse_address("SN3").unwrap(), &[9]).await.unwrap();
-        let bank = srv.bank();
-        let b = bank.lock().unwrap();
-        assert_eq!((b.word(Device::CN, 2), b.word(Device::STN, 3)), (7, 9));
-        assert!(b.bit(Device::STC, 1) && !b.bit(Device::CC, 1));
-        drop(b);
+        {
+            let bank = srv.bank();
+            let b = bank.lock().unwrap();
+            assert_eq!((b.word(Device::CN, 2), b.word(Device::STN, 3)), (7, 9));
+            assert!(b.bit(Device::STC, 1) && !b.bit(Device::CC, 1));
+        }
         assert!(matches!(
             plc.read_bits(&plc.parse_address("TN5").unwrap(), 1).await,
             Err(PlcError::OutOfRange(_))

@@ -13,6 +13,9 @@ use super::scattered::{self, Block};
 use super::type_name::TypeName;
 use crate::protocols::{Address, PlcError};
 
+/// Blocks with their place in the caller's list.
+type Numbered = Vec<(usize, Block)>;
+
 fn device_of(address: &Address) -> Result<Device, PlcError> {
     let device = word_device(address)?;
     if device.is_bit() && super::device::word_view(&address.area).is_none() {
@@ -65,7 +68,7 @@ impl Mc3eClient {
             specs.push(Block { device, start, points: *count });
         }
         scattered::check_blocks(&specs)?;
-        let (bits, words): (Vec<(usize, Block)>, Vec<(usize, Block)>) =
+        let (bits, words): (Numbered, Numbered) =
             specs.into_iter().enumerate().partition(|(_, b)| b.device.is_bit());
         let order: Vec<(usize, Block)> = words.iter().chain(&bits).copied().collect();
         let command = Command::ReadBlocks {
