@@ -141,6 +141,22 @@ async fn a_4e_reply_with_another_serial_is_dropped_and_counted() {
     assert_eq!(plc.link_stats().stale, 1);
     drop(plc);
     fake.await.unwrap();
+
+    // The simulator's --wrong-id fault: every reply's serial is off by one, so a 4E client
+    // drops them all and times out, counting each; a 3E client is not affected.
+    for kind in BOTH {
+        let srv = server(kind, ServerState::new(Bank::default().shared())).await;
+        srv.faults().update(|f| f.wrong_id_rate = 1.0);
+        let mut config = Mc3eConfig::new(srv.local_addr().to_string(), kind);
+        (config.link.timeout, config.link.retries, config.frame) =
+            (Duration::from_millis(300), 0, FrameKind::E4);
+        let four = Mc3eClient::new(config);
+        let err = four.read_words(&four.parse_address("D0").unwrap(), 1).await.unwrap_err();
+        assert!(matches!(err, PlcError::Timeout { .. }), "{kind:?}: {err:?}");
+        assert_eq!(four.link_stats().stale, 1, "{kind:?}");
+        let three = client(&srv, kind, 1000, 0);
+        assert_eq!(three.read_words(&three.parse_address("D0").unwrap(), 1).await.unwrap(), [0]);
+    }
 }
 
 #[tokio::test]

@@ -67,8 +67,8 @@ impl ServerState {
         self
     }
 
-    /// The faults to apply to one frame, and its answer, if any. Wrong ids and units do
-    /// not apply: 3E frames have neither.
+    /// The faults to apply to one frame, and its answer, if any. A wrong id changes a 4E
+    /// reply's serial number (3E frames have none); wrong units do not apply (no unit).
     fn process(&self, bytes: &[u8]) -> (Plan, Option<Vec<u8>>) {
         let plan = self.faults.plan();
         if plan.unanswered() {
@@ -78,7 +78,14 @@ impl ServerState {
         if let (Some(hook), Some(write)) = (&self.on_write, answer.as_ref().and_then(|a| a.write)) {
             hook(write);
         }
-        (plan, answer.map(|a| a.bytes))
+        let mut bytes = answer.map(|a| a.bytes);
+        if let Some(reply) =
+            bytes.as_mut().filter(|r| plan.wrong_id && r.starts_with(&frame::RESPONSE_SUBHEADER_4E))
+        {
+            let serial = u16::from_le_bytes([reply[2], reply[3]]).wrapping_add(1);
+            reply[2..4].copy_from_slice(&serial.to_le_bytes());
+        }
+        (plan, bytes)
     }
 }
 
