@@ -193,6 +193,36 @@ mod tests {
     }
 
     #[test]
+    fn manual_word_unit_examples_answer_byte_for_byte() {
+        // MC protocol reference manual (iQ-R SH-081338 8.2 and 8.3, Q/L subcommands; the same
+        // examples as SH-080008): M100..M131 read as 2 words answers `34 12 02 00`.
+        let bank = Mutex::new(Bank::default());
+        bank.lock().unwrap().write_words(Device::M, 100, &[0x1234, 0x0002]).unwrap();
+        let r = run(&bank, Command::ReadWords { device: Device::M, start: 100, count: 2 });
+        assert_eq!(r.outcome, Outcome::Ok(vec![0x34, 0x12, 0x02, 0x00]));
+        // Random read: words D0, T0 (TN), M100..M115, X20..X2F; double words D1500, Y160,
+        // M1111, with the manual's stored values.
+        {
+            let mut b = bank.lock().unwrap();
+            b.set_word(Device::D, 0, 0x1995);
+            b.set_word(Device::TN, 0, 0x1202);
+            b.write_words(Device::M, 100, &[0x2030]).unwrap();
+            b.write_words(Device::X, 0x20, &[0x4849]).unwrap();
+            b.write_words(Device::D, 1500, &[0x4F4E, 0x4C54]).unwrap();
+            b.write_words(Device::Y, 0x160, &[0xB9AF, 0xC3DE]).unwrap();
+            b.write_words(Device::M, 1111, &[0xBCB7, 0xBADD]).unwrap();
+        }
+        let words = vec![(Device::D, 0), (Device::TN, 0), (Device::M, 100), (Device::X, 0x20)];
+        let dwords = vec![(Device::D, 1500), (Device::Y, 0x160), (Device::M, 1111)];
+        let r = run(&bank, Command::RandomRead { words, dwords });
+        let manual = [
+            0x95, 0x19, 0x02, 0x12, 0x30, 0x20, 0x49, 0x48, 0x4E, 0x4F, 0x54, 0x4C, 0xAF, 0xB9, 0xDE, 0xC3,
+            0xB7, 0xBC, 0xDD, 0xBA,
+        ];
+        assert_eq!(r.outcome, Outcome::Ok(manual.to_vec()));
+    }
+
+    #[test]
     fn scattered_reads_type_name_and_4e() {
         let bank = Mutex::new(Bank::default());
         {

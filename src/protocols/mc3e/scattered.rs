@@ -148,9 +148,10 @@ mod tests {
 
     #[test]
     fn random_read_manual_example() {
-        // The random read (0403) example of the MELSEC-Q/L MC Protocol Reference Manual
-        // (SH-080008), binary code: words D0, T0 (current value), M100, X20; double words
-        // D1500, Y160, M1111.
+        // The random read (0403) example of the MC protocol reference manual (iQ-R SH-081338
+        // 8.3 with the Q/L subcommand; the same in SH-080008): words D0, T0 (current value),
+        // M100, X20; double words D1500, Y160, M1111. The manual prints it in ASCII; these are
+        // its binary bytes (counts, then device number LE and code per device).
         let words = vec![(Device::D, 0), (Device::TN, 0), (Device::M, 100), (Device::X, 0x20)];
         let dwords = vec![(Device::D, 1500), (Device::Y, 0x160), (Device::M, 1111)];
         let command = Command::RandomRead { words, dwords };
@@ -171,8 +172,9 @@ mod tests {
 
     #[test]
     fn block_read_manual_example() {
-        // The multiple-block batch read (0406) example of the same manual: word blocks
-        // D0..D3 and W100..W107; bit blocks M0..M31, M128..M159 and B100..B12F (in words).
+        // Multiple-block batch read (0406), message format of the same manual (8.4): block
+        // counts, word blocks, then bit blocks (points in words). Blocks: D0..D3, W100..W107;
+        // M0..M31, M128..M159, B100..B12F.
         let words = vec![Block::new(Device::D, 0, 4), Block::new(Device::W, 0x100, 8)];
         let bits =
             vec![Block::new(Device::M, 0, 2), Block::new(Device::M, 128, 2), Block::new(Device::B, 0x100, 3)];

@@ -1,8 +1,9 @@
 //! The answer to "read CPU model name" (command 0101): 16 ASCII characters of model name,
 //! padded with spaces, then the 2-byte model code (little-endian).
 //!
-//! The simulator's default is a Q03UDVCPU with model code 0x0366, the code the MELSEC-Q/L MC
-//! protocol manual's model code table gives it (plc-comm-slmp-rust resolves the same pair).
+//! The simulator's default is a Q03UDVCPU with model code 0x0366, as plc-comm-slmp-rust's
+//! model-family tests pair them (the manual's model code table lists the Q/L codes). Layout
+//! as pymcprotocol's `read_cputype` reads it.
 //! On decode, trailing spaces and NULs are trimmed; a name that is not ASCII is malformed.
 
 use crate::protocols::PlcError;
