@@ -1,5 +1,5 @@
-//! What requests and responses share: the route fields, the 9-byte header, framing errors,
-//! and the packing of bit values (two per byte, first point in the high nibble).
+//! What requests and responses share: the route fields, the 9-byte (3E) or 13-byte (4E)
+//! header and framing errors; the packing of bit values is in [`super::bits`].
 //!
 //! ```text
 //! subheader(2) network(1) pc(1) module_io(2, LE) station(1) data_length(2, LE) | data...
@@ -27,6 +27,8 @@ pub const REQUEST_SUBHEADER_4E: [u8; 2] = [0x54, 0x00];
 pub const RESPONSE_SUBHEADER_4E: [u8; 2] = [0xD4, 0x00];
 /// Bytes before the data of a 4E frame: subheader, serial, `00 00`, route and data length.
 pub const HEADER_LEN_4E: usize = 13;
+
+pub use super::bits::{bit_bytes, pack_bits, unpack_bits};
 
 /// Which frame a client sends: 3E (no serial number) or 4E (a serial number the reply
 /// echoes). Servers answer both.
@@ -245,40 +247,6 @@ pub(crate) fn finish_frame(out: &mut [u8]) {
     out[size - 2..size].copy_from_slice(&len.to_le_bytes());
 }
 
-/// Bytes needed for `count` bits in bit units.
-pub fn bit_bytes(count: usize) -> usize {
-    count.div_ceil(2)
-}
-
-/// Packs bits two per byte, first point in the high nibble, `1` for ON (binary bit units).
-pub fn pack_bits(bits: &[bool], out: &mut Vec<u8>) {
-    for pair in bits.chunks(2) {
-        let hi = u8::from(pair[0]) << 4;
-        let lo = pair.get(1).map_or(0, |b| u8::from(*b));
-        out.push(hi | lo);
-    }
-}
-
-/// Unpacks `count` bits; `None` if `bytes` is not exactly [`bit_bytes`]`(count)` long or a
-/// nibble is neither 0 nor 1.
-pub fn unpack_bits(bytes: &[u8], count: usize) -> Option<Vec<bool>> {
-    if bytes.len() != bit_bytes(count) {
-        return None;
-    }
-    let mut bits = Vec::with_capacity(count);
-    for (i, byte) in bytes.iter().enumerate() {
-        let (hi, lo) = (byte >> 4, byte & 0x0F);
-        if hi > 1 || lo > 1 {
-            return None;
-        }
-        bits.push(hi == 1);
-        if 2 * i + 1 < count {
-            bits.push(lo == 1);
-        }
-    }
-    Some(bits)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -288,28 +256,6 @@ mod tests {
         let mut out = Vec::new();
         Route::default().encode(&mut out);
         assert_eq!(out, [0x00, 0xFF, 0xFF, 0x03, 0x00]);
-    }
-
-    #[test]
-    fn bits_pack_high_nibble_first() {
-        // The MC Protocol Reference Manual's (SH-080008) bit-unit read example: M100..M107 =
-        // 0,0,0,1,0,0,1,1 is `00 01 00 11`.
-        let bits = [false, false, false, true, false, false, true, true];
-        let mut out = Vec::new();
-        pack_bits(&bits, &mut out);
-        assert_eq!(out, [0x00, 0x01, 0x00, 0x11]);
-        assert_eq!(unpack_bits(&out, 8).unwrap(), bits);
-        let mut odd = Vec::new();
-        pack_bits(&[true, false, true], &mut odd);
-        assert_eq!(odd, [0x10, 0x10]);
-        assert_eq!(unpack_bits(&odd, 3).unwrap(), [true, false, true]);
-    }
-
-    #[test]
-    fn unpack_rejects_bad_nibbles_and_lengths() {
-        assert_eq!(unpack_bits(&[0x20], 2), None);
-        assert_eq!(unpack_bits(&[0x01], 3), None);
-        assert_eq!(unpack_bits(&[], 0), Some(vec![]));
     }
 
     #[test]

@@ -13,9 +13,10 @@
 //! multiple-block batch read (0406). See `/work/shared/spec/crane-mc3e.md`.
 //!
 //! # Layers
-//! [`frame`], [`command`], [`scattered`], [`type_name`], [`request`], [`response`] are the
-//! pure codec (no I/O); [`device`] parses addresses in each device's native radix (`X1A`
-//! hexadecimal, `D200` decimal, `K4M100` a bit device in words); [`end_code`] names end
+//! [`frame`], [`bits`], [`command`], [`scattered`], [`type_name`], [`request`], [`response`]
+//! are the pure codec (no I/O); [`device`] names the devices and their codes, [`address`]
+//! parses addresses in each device's native radix (`X1A` hexadecimal, `D200` decimal,
+//! `K4M100` a bit device in words); [`end_code`] names end
 //! codes; [`link`] sends frames over the shared [`transport`](crate::protocols::transport)
 //! layer (timeouts, retries, reconnection) with the stale-reply defences; [`client`]
 //! implements [`PlcMemory`](super::PlcMemory) and [`client_reads`] adds the type name,
@@ -49,7 +50,9 @@
 //!   supported; not ASCII, random or block writes, monitor registration, or the iQ-R
 //!   4-byte device numbers (subcommands 0002/0003).
 
+pub mod address;
 pub mod bank;
+pub mod bits;
 pub mod client;
 pub mod client_reads;
 pub mod command;
