@@ -7,7 +7,7 @@
 //! random read  (0403): words(1) dwords(1) | device no(3) code(1) per word, then per dword
 //! blocks       (0406): word blocks(1) bit blocks(1) | device no(3) code(1) points(2) per block
 //! ```
-//! Random and block reads are in [`scattered`](super::scattered).
+//! Random and block reads are in [`super::scattered`].
 
 use super::device::Device;
 use super::end_code;

@@ -9,7 +9,7 @@
 //! and peer servers have been seen sending other data after the end code. Whatever follows a
 //! nonzero end code, the end code is what the PLC meant: it is surfaced as long as the length
 //! field matches the frame; 9 trailing bytes are read as error information, any other number
-//! is kept as-is in [`Outcome::Failed::trailing`] (logged, never trusted).
+//! is kept as-is in `Outcome::Failed`'s `trailing` (logged, never trusted).
 //!
 //! A 4E response (`D4 00`) is the same with the request's serial number after the subheader.
 
