@@ -1,11 +1,13 @@
-//! `rackd sim mc3e`: a standalone simulated MC 3E PLC serving every device (D, W, R, ZR, M,
-//! X, Y, B, L at a Q-series CPU's default sizes), with optional faults.
+//! `rackd sim mc3e`: a standalone simulated MC PLC answering 3E and 4E frames on one port,
+//! serving every device (D, W, R, ZR, M, X, Y, B, L, SM, SD, F, V, SB, SW and the timers and
+//! counters at a Q-series CPU's default sizes), with optional faults and a configurable
+//! answer to "read CPU model name".
 
 use std::net::SocketAddr;
 
 use super::sim_faults::FaultArgs;
 use crate::protocols::faults::SharedFaults;
-use crate::protocols::mc3e::{Bank, EndCode, Mc3eServer, ServerState};
+use crate::protocols::mc3e::{Bank, EndCode, Mc3eServer, ServerState, TypeName};
 
 /// Transport of the simulated PLC.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -28,12 +30,43 @@ pub struct SimMc3eArgs {
     /// Link faults.
     #[command(flatten)]
     pub faults: FaultArgs,
+    /// The answer to "read CPU model name" (command 0101).
+    #[command(flatten)]
+    pub cpu: CpuArgs,
+}
+
+/// What the simulated CPU says it is.
+#[derive(clap::Args, Clone, Debug, PartialEq)]
+pub struct CpuArgs {
+    /// Model name answered to "read CPU model name" (up to 16 ASCII characters).
+    #[arg(long = "cpu-model", default_value = "Q03UDVCPU")]
+    pub model: String,
+    /// Model code answered with it, in hexadecimal as the manual writes it (0366 = Q03UDVCPU).
+    #[arg(long = "cpu-code", default_value = "0366", value_parser = parse_code)]
+    pub code: u16,
+}
+
+impl Default for CpuArgs {
+    /// A Q03UDVCPU, model code 0366.
+    fn default() -> Self {
+        let TypeName { model, code } = TypeName::default();
+        CpuArgs { model, code }
+    }
+}
+
+fn parse_code(text: &str) -> Result<u16, String> {
+    let hex = text.trim().trim_start_matches("0x").trim_start_matches("0X");
+    u16::from_str_radix(hex, 16)
+        .map_err(|_| format!("bad model code {text:?}: expected 4 hex digits such as 0366"))
 }
 
 /// Starts the simulated PLC described by `args` and returns it running.
 pub async fn start(args: &SimMc3eArgs) -> anyhow::Result<Mc3eServer> {
     let faults = SharedFaults::new(args.faults.faults::<EndCode>()?);
-    let state = ServerState::new(Bank::default().shared()).with_faults(faults);
+    let Some(type_name) = TypeName::new(&args.cpu.model, args.cpu.code) else {
+        anyhow::bail!("bad --cpu-model {:?}: up to 16 printable ASCII characters", args.cpu.model);
+    };
+    let state = ServerState::new(Bank::default().shared()).with_faults(faults).with_type_name(type_name);
     let server = match args.transport {
         SimTransport::Tcp => Mc3eServer::bind_tcp(args.listen, state).await?,
         SimTransport::Udp => Mc3eServer::bind_udp(args.listen, state).await?,

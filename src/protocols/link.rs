@@ -26,7 +26,7 @@ use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::time::Duration;
 
-use super::mc3e::{Mc3eClient, Mc3eConfig, TransportKind};
+use super::mc3e::{FrameKind, Mc3eClient, Mc3eConfig, TransportKind};
 use super::mewtocol::{MewtocolClient, MewtocolConfig, MewtocolTransport};
 use super::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use super::ppi::{PpiClient, PpiConfig, PpiTransport};
@@ -152,9 +152,15 @@ impl LinkConfig {
     }
 
     fn mc3e(&self) -> Mc3eConfig {
-        let transport =
-            if self.protocol == Protocol::Mc3eUdp { TransportKind::Udp } else { TransportKind::Tcp };
+        let transport = match self.protocol {
+            Protocol::Mc3eUdp | Protocol::Mc4eUdp => TransportKind::Udp,
+            _ => TransportKind::Tcp,
+        };
         let mut config = Mc3eConfig::new(self.address.clone(), transport);
+        config.frame = match self.protocol {
+            Protocol::Mc4e | Protocol::Mc4eUdp => FrameKind::E4,
+            _ => FrameKind::E3,
+        };
         config.link.timeout = self.timeout;
         config.link.retries = self.retries;
         config.link.tuning = self.tuning;
@@ -291,6 +297,11 @@ mod tests {
             assert_eq!(plc.parse_address("D200").unwrap().index, 200);
         }
         assert_eq!(link(Protocol::Mc3eUdp, 1, &[]).mc3e().link.transport, TransportKind::Udp);
+        let four = link(Protocol::Mc4eUdp, 1, &[]).mc3e();
+        assert_eq!((four.link.transport, four.frame), (TransportKind::Udp, FrameKind::E4));
+        let four = link(Protocol::Mc4e, 1, &[]).mc3e();
+        assert_eq!((four.link.transport, four.frame), (TransportKind::Tcp, FrameKind::E4));
+        assert_eq!(link(Protocol::Mc3e, 1, &[]).mc3e().frame, FrameKind::E3);
         assert!(link(Protocol::Mc3e, 1, &[Quirk::Length0]).check().is_err());
         assert!(connect(&link(Protocol::Mc3e, 1, &[Quirk::NoBcc])).await.is_err());
         let mut one_second = link(Protocol::Mc3eUdp, 1, &[]);

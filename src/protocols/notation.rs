@@ -41,7 +41,7 @@ pub struct Shape {
     /// `index + step * n <= limit`.
     pub limit: u64,
     /// A master may write it: false for inputs (Modbus 1x and 3x, S7 I and AI, MEWTOCOL X,
-    /// WX and timer/counter contacts, MC X), which the PLC refreshes from the field.
+    /// WX and timer/counter contacts, MC X and TS/STS/CS), which the PLC refreshes from the field.
     pub writable: bool,
 }
 
@@ -69,12 +69,17 @@ fn modbus_shape(text: &str) -> Result<Shape, PlcError> {
     Ok(Shape { address, items, step: 1, limit: 0x1_0000, writable: table.writable() })
 }
 
+/// MC: bit devices (relays, timer/counter contacts and coils) hold bits, word devices and
+/// timer/counter current values words; `K4M100` holds words of 16 points (step 16).
 fn mc3e_shape(text: &str) -> Result<Shape, PlcError> {
     let address = mc3e::device::parse_address(text)?;
+    let limit = mc3e::device::MAX_DEVICE_NUMBER as u64 + 1;
+    if let Some(device) = mc3e::device::word_view(&address.area) {
+        return Ok(Shape { address, items: Items::Words, step: 16, limit, writable: device.is_writable() });
+    }
     let device = mc3e::Device::of_area(&address.area)?;
     let items = if device.is_bit() { Items::Bits } else { Items::Words };
-    let limit = mc3e::device::MAX_DEVICE_NUMBER as u64 + 1;
-    Ok(Shape { address, items, step: 1, limit, writable: device != mc3e::Device::X })
+    Ok(Shape { address, items, step: 1, limit, writable: device.is_writable() })
 }
 
 fn mewtocol_shape(text: &str) -> Result<Shape, PlcError> {
@@ -132,6 +137,12 @@ mod tests {
         assert_eq!(of("mc3e", "D200"), (Items::Words, 1, true));
         assert_eq!(of("mc3e-udp", "X1A"), (Items::Bits, 1, false));
         assert_eq!(of("mc3e", "M10"), (Items::Bits, 1, true));
+        assert_eq!(of("mc3e", "K4M100"), (Items::Words, 16, true));
+        assert_eq!(of("mc3e", "K4X0"), (Items::Words, 16, false));
+        assert_eq!(of("mc3e", "TN5"), (Items::Words, 1, true));
+        assert_eq!(of("mc3e", "TS5"), (Items::Bits, 1, false));
+        assert_eq!(of("mc3e", "CC2"), (Items::Bits, 1, true));
+        assert_eq!(of("mc3e-udp", "STN1"), (Items::Words, 1, true));
         assert_eq!(of("mewtocol", "DT100"), (Items::Words, 1, true));
         assert_eq!(of("mewtocol-tcp", "WX0"), (Items::Words, 1, false));
         assert_eq!(of("mewtocol-tcp", "X0001"), (Items::Bits, 1, false));
@@ -156,5 +167,7 @@ mod tests {
         assert!(!at("mewtocol", "DT99999").unwrap().fits(2));
         assert!(at("mewtocol", "DT99998").unwrap().fits(2));
         assert!(!at("mc3e", "D16777215").unwrap().fits(2));
+        assert!(at("mc3e", "K4M16777184").unwrap().fits(2));
+        assert!(!at("mc3e", "K4M16777185").unwrap().fits(2));
     }
 }

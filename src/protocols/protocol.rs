@@ -6,7 +6,10 @@
 //! enum, so adding one is a compile error everywhere a decision depends on it.
 //!
 //! The names are the configuration's since the first release (`modbus-udp`, ...); `mc3e`
-//! is MC 3E over TCP and also answers to `mc3e-tcp`.
+//! is MC 3E over TCP and also answers to `mc3e-tcp`. MC 4E frames are chosen by protocol
+//! (`mc4e`, alias `mc4e-tcp`, and `mc4e-udp`) rather than by a separate setting: the frame
+//! decides how replies are matched, as the transport does, and a protocol name is what
+//! `rackd plc` and the configuration already take.
 
 use std::fmt;
 use std::str::FromStr;
@@ -42,6 +45,14 @@ pub enum Protocol {
     #[serde(rename = "mc3e-udp")]
     #[value(name = "mc3e-udp")]
     Mc3eUdp,
+    /// Mitsubishi MC protocol 4E binary (3E with serial numbers) over TCP.
+    #[serde(rename = "mc4e", alias = "mc4e-tcp")]
+    #[value(name = "mc4e", alias = "mc4e-tcp")]
+    Mc4e,
+    /// Mitsubishi MC protocol 4E binary over UDP: replies are matched by serial number.
+    #[serde(rename = "mc4e-udp")]
+    #[value(name = "mc4e-udp")]
+    Mc4eUdp,
     /// Panasonic MEWTOCOL-COM on a serial port (addresses DT100, WR1, R1F, Y1A).
     #[serde(rename = "mewtocol")]
     #[value(name = "mewtocol")]
@@ -65,7 +76,7 @@ pub enum Protocol {
 pub enum Family {
     /// Modbus (UDP, TCP, RTU, RTU over TCP).
     Modbus,
-    /// MC protocol 3E (TCP, UDP).
+    /// MC protocol 3E and 4E (TCP, UDP).
     Mc3e,
     /// MEWTOCOL-COM (serial, TCP).
     Mewtocol,
@@ -87,13 +98,15 @@ impl Protocol {
     }
 
     /// Every protocol, in the order the documentation lists them.
-    pub const ALL: [Protocol; 10] = [
+    pub const ALL: [Protocol; 12] = [
         Protocol::ModbusUdp,
         Protocol::ModbusTcp,
         Protocol::ModbusRtu,
         Protocol::ModbusRtuTcp,
         Protocol::Mc3e,
         Protocol::Mc3eUdp,
+        Protocol::Mc4e,
+        Protocol::Mc4eUdp,
         Protocol::Mewtocol,
         Protocol::MewtocolTcp,
         Protocol::Ppi,
@@ -109,6 +122,8 @@ impl Protocol {
             Protocol::ModbusRtuTcp => "modbus-rtu-tcp",
             Protocol::Mc3e => "mc3e",
             Protocol::Mc3eUdp => "mc3e-udp",
+            Protocol::Mc4e => "mc4e",
+            Protocol::Mc4eUdp => "mc4e-udp",
             Protocol::Mewtocol => "mewtocol",
             Protocol::MewtocolTcp => "mewtocol-tcp",
             Protocol::Ppi => "ppi",
@@ -117,10 +132,10 @@ impl Protocol {
     }
 
     /// Whether a reply names the request it answers (Modbus TCP and UDP: the transaction
-    /// id), so that a late reply can never pass for another request's answer and a resend
-    /// costs only the request itself.
+    /// id; MC 4E: the serial number), so that a late reply can never pass for another
+    /// request's answer and a resend costs only the request itself.
     pub fn matches_replies(self) -> bool {
-        matches!(self, Protocol::ModbusUdp | Protocol::ModbusTcp)
+        matches!(self, Protocol::ModbusUdp | Protocol::ModbusTcp | Protocol::Mc4e | Protocol::Mc4eUdp)
     }
 
     /// The family: which frames, notation and client.
@@ -129,7 +144,7 @@ impl Protocol {
             Protocol::ModbusUdp | Protocol::ModbusTcp | Protocol::ModbusRtu | Protocol::ModbusRtuTcp => {
                 Family::Modbus
             }
-            Protocol::Mc3e | Protocol::Mc3eUdp => Family::Mc3e,
+            Protocol::Mc3e | Protocol::Mc3eUdp | Protocol::Mc4e | Protocol::Mc4eUdp => Family::Mc3e,
             Protocol::Mewtocol | Protocol::MewtocolTcp => Family::Mewtocol,
             Protocol::Ppi | Protocol::PpiTcp => Family::Ppi,
         }
@@ -168,6 +183,7 @@ impl FromStr for Protocol {
         let wanted = text.trim().to_ascii_lowercase();
         match wanted.as_str() {
             "mc3e-tcp" => Ok(Protocol::Mc3e),
+            "mc4e-tcp" => Ok(Protocol::Mc4e),
             name => Protocol::ALL
                 .into_iter()
                 .find(|p| p.name() == name)
@@ -257,6 +273,10 @@ mod tests {
             Protocol::Mc3e
         );
         assert_eq!(<Protocol as clap::ValueEnum>::from_str("mc3e-tcp", false), Ok(Protocol::Mc3e));
+        assert_eq!("mc4e-tcp".parse::<Protocol>(), Ok(Protocol::Mc4e));
+        assert_eq!(<Protocol as clap::ValueEnum>::from_str("mc4e-tcp", false), Ok(Protocol::Mc4e));
+        assert_eq!(Protocol::Mc4eUdp.family(), Family::Mc3e);
+        assert!(Protocol::Mc4eUdp.matches_replies() && !Protocol::Mc3eUdp.matches_replies());
         let err = "mc9".parse::<Protocol>().unwrap_err().to_string();
         assert!(err.contains("mc9") && err.contains("modbus-rtu-tcp"), "{err}");
     }

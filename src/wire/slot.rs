@@ -231,7 +231,7 @@ pub fn default_layout(protocol: Protocol) -> (&'static str, u16) {
         Protocol::ModbusRtu | Protocol::ModbusRtuTcp => ("4x0", 100),
         Protocol::Ppi | Protocol::PpiTcp => ("VW1000", 50),
         Protocol::Mewtocol | Protocol::MewtocolTcp => ("DT4000", 100),
-        Protocol::Mc3e | Protocol::Mc3eUdp => ("D4000", 100),
+        Protocol::Mc3e | Protocol::Mc3eUdp | Protocol::Mc4e | Protocol::Mc4eUdp => ("D4000", 100),
     }
 }
 

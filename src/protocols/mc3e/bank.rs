@@ -1,5 +1,7 @@
-//! The device memory a simulated PLC serves: word areas D, W, R, ZR and bit areas M, X, Y,
-//! B, L, each with its own size.
+//! The device memory a simulated PLC serves: word areas (D, W, R, ZR, SD, SW and the timer
+//! and counter current values) and bit areas (M, X, Y, B, L, SM, F, V, SB and the timer and
+//! counter contacts and coils), each with its own size. Timers and counters do not run: their
+//! contacts, coils and current values are plain memory a simulator or a test sets.
 //!
 //! The server shares one bank as a [`SharedBank`] (`Arc<Mutex<Bank>>`): a simulator keeps a
 //! clone, reads and changes registers between requests, and never holds the lock across an
@@ -23,7 +25,9 @@ pub struct Bank {
 
 impl Default for Bank {
     /// Sizes of a Q-series CPU's default device assignment (X/Y/M/L/B 8192 points, D 12288,
-    /// W 8192), R one block of 32768 and ZR 1,048,576 words.
+    /// W 8192, SM/SD/F/V/SB/SW 2048, timers 2048, counters 1024), R one block of 32768, ZR
+    /// 1,048,576 words, and 64 retentive timers (0 by default on a Q CPU; some, so that STN
+    /// can be tried).
     fn default() -> Self {
         let sizes = [
             (Device::D, 12_288),
@@ -35,6 +39,21 @@ impl Default for Bank {
             (Device::Y, 0x2000),
             (Device::B, 0x2000),
             (Device::L, 8_192),
+            (Device::SM, 2_048),
+            (Device::SD, 2_048),
+            (Device::F, 2_048),
+            (Device::V, 2_048),
+            (Device::SB, 0x800),
+            (Device::SW, 0x800),
+            (Device::TS, 2_048),
+            (Device::TC, 2_048),
+            (Device::TN, 2_048),
+            (Device::STS, 64),
+            (Device::STC, 64),
+            (Device::STN, 64),
+            (Device::CS, 1_024),
+            (Device::CC, 1_024),
+            (Device::CN, 1_024),
         ];
         Bank::with_sizes(&sizes)
     }

@@ -1,8 +1,14 @@
-//! The MC 3E binary client: [`PlcMemory`] over a TCP or UDP [`Link`].
+//! The MC 3E/4E binary client: [`PlcMemory`] over a TCP or UDP [`Link`].
 //!
 //! Requests larger than one frame allows are split: 960 points per word-unit batch, 7168
-//! per bit-unit batch. Word devices (D, W, R, ZR) are read and written in words only; bit
-//! devices (M, X, Y, B, L) in bits, or in words of 16 points (bit 0 = the start device).
+//! per bit-unit batch. Word devices (D, W, R, ZR, SD, SW, TN, STN, CN) are read and written
+//! in words only; bit devices (M, X, Y, B, L, SM, F, V, SB, timer/counter contacts and coils)
+//! in bits, or in words of 16 points (bit 0 = the start device): `K4M100` through
+//! [`PlcMemory`], or [`Mc3eClient::read_device_words`] on a bit device.
+//!
+//! With [`FrameKind::E4`] every request carries the next serial number (wrapping, starting
+//! at 1) and only the reply echoing it is taken. The reads beyond the batch commands (type
+//! name, random, blocks) are in [`super::client_reads`].
 
 use std::time::Duration;
 
@@ -10,7 +16,7 @@ use async_trait::async_trait;
 use tokio::sync::Mutex;
 
 use super::device::{self, Device, MAX_DEVICE_NUMBER};
-use super::frame::{self, MAX_BIT_POINTS, MAX_WORD_POINTS, Route};
+use super::frame::{self, FrameKind, MAX_BIT_POINTS, MAX_WORD_POINTS, Route};
 use super::link::{Expect, Link, LinkConfig, TransportKind};
 use super::request::{Command, Request};
 use crate::protocols::transport::Backoff;
@@ -26,6 +32,8 @@ pub struct Mc3eConfig {
     /// CPU monitoring timer in units of 250 ms, sent in every request (0 = wait forever).
     /// Keep it below the timeout so the module gives up (and answers) before rackd does.
     pub monitor_timer: u16,
+    /// 3E or 4E frames.
+    pub frame: FrameKind,
 }
 
 impl Mc3eConfig {
@@ -45,6 +53,7 @@ impl Mc3eConfig {
             },
             route: Route::default(),
             monitor_timer: 4,
+            frame: FrameKind::E3,
         }
     }
 }
@@ -53,6 +62,8 @@ impl Mc3eConfig {
 pub struct Mc3eClient {
     route: Route,
     monitor_timer: u16,
+    frame: FrameKind,
+    serial: std::sync::atomic::AtomicU16,
     link: Mutex<Link>,
     health: std::sync::Arc<crate::protocols::transport::LinkHealth>,
 }
@@ -64,16 +75,32 @@ impl Mc3eClient {
         Mc3eClient {
             route: config.route,
             monitor_timer: config.monitor_timer,
+            frame: config.frame,
+            serial: std::sync::atomic::AtomicU16::new(0),
             health: link.health(),
             link: Mutex::new(link),
         }
     }
 
-    async fn send(&self, command: Command) -> Result<Vec<u8>, PlcError> {
-        let expect =
-            Expect { route: self.route, command: command.numbers(), data_len: command.reply_data_len() };
-        let frame = Request { route: self.route, monitor_timer: self.monitor_timer, command }.encode();
-        self.link.lock().await.exchange(&frame, &expect).await
+    /// Sends one command and returns the reply's data (end code 0), checked for length.
+    pub(super) async fn send(&self, command: Command) -> Result<Vec<u8>, PlcError> {
+        let mut link = self.link.lock().await;
+        let serial = match self.frame {
+            FrameKind::E3 => None,
+            FrameKind::E4 => {
+                let previous = self.serial.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                Some(previous.wrapping_add(1))
+            }
+        };
+        let expect = Expect {
+            serial,
+            route: self.route,
+            command: command.numbers(),
+            data_len: command.reply_data_len(),
+        };
+        let frame =
+            Request { serial, route: self.route, monitor_timer: self.monitor_timer, command }.encode();
+        link.exchange(&frame, &expect).await
     }
 
     /// Reads `count` words of `device` from `start`, split into batches of 960.
@@ -169,8 +196,26 @@ fn bit_device(device: Device) -> Result<(), PlcError> {
     if device.is_bit() {
         Ok(())
     } else {
-        Err(PlcError::OutOfRange("word devices (D, W, R, ZR) cannot be accessed in bit units"))
+        Err(PlcError::OutOfRange(
+            "word devices (D, W, R, ZR, SD, SW, TN, STN, CN) cannot be accessed in bit units",
+        ))
     }
+}
+
+/// The device an address reads in words: a word device, or the bit device of a `K4` view.
+pub(super) fn word_device(address: &Address) -> Result<Device, PlcError> {
+    match device::word_view(&address.area) {
+        Some(device) => Ok(device),
+        None => Device::of_area(&address.area),
+    }
+}
+
+/// The device an address reads in bits; a `K4` view is words only.
+fn bit_address_device(address: &Address) -> Result<Device, PlcError> {
+    if device::word_view(&address.area).is_some() {
+        return Err(PlcError::OutOfRange("K4M100 names words of 16 bits; write M100 to read or write bits"));
+    }
+    Device::of_area(&address.area)
 }
 
 #[async_trait]
@@ -180,19 +225,19 @@ impl PlcMemory for Mc3eClient {
     }
 
     async fn read_words(&self, start: &Address, count: u16) -> Result<Vec<u16>, PlcError> {
-        self.read_device_words(Device::of_area(&start.area)?, start.index, usize::from(count)).await
+        self.read_device_words(word_device(start)?, start.index, usize::from(count)).await
     }
 
     async fn write_words(&self, start: &Address, values: &[u16]) -> Result<(), PlcError> {
-        self.write_device_words(Device::of_area(&start.area)?, start.index, values).await
+        self.write_device_words(word_device(start)?, start.index, values).await
     }
 
     async fn read_bits(&self, start: &Address, count: u16) -> Result<Vec<bool>, PlcError> {
-        self.read_device_bits(Device::of_area(&start.area)?, start.index, usize::from(count)).await
+        self.read_device_bits(bit_address_device(start)?, start.index, usize::from(count)).await
     }
 
     async fn write_bits(&self, start: &Address, values: &[bool]) -> Result<(), PlcError> {
-        self.write_device_bits(Device::of_area(&start.area)?, start.index, values).await
+        self.write_device_bits(bit_address_device(start)?, start.index, values).await
     }
 
     fn link_stats(&self) -> crate::protocols::transport::LinkStats {

@@ -1,10 +1,19 @@
-//! What requests and responses share: the route fields, the 9-byte header, framing errors,
-//! and the packing of bit values (two per byte, first point in the high nibble).
+//! What requests and responses share: the route fields, the 9-byte (3E) or 13-byte (4E)
+//! header and framing errors; the packing of bit values is in [`super::bits`].
 //!
 //! ```text
 //! subheader(2) network(1) pc(1) module_io(2, LE) station(1) data_length(2, LE) | data...
 //! ```
 //! `data_length` counts every byte after itself. Requests start `50 00`, responses `D0 00`.
+//!
+//! A 4E frame is a 3E frame with a serial number after the subheader:
+//! ```text
+//! subheader(2) serial(2, LE) 00 00 | network(1) pc(1) module_io(2, LE) station(1) data_length(2, LE) | data...
+//! ```
+//! Requests start `54 00`, responses `D4 00`; the response echoes the request's serial so a
+//! client can tell replies apart (layout as in pymcprotocol's `type4e.py` and the MC protocol
+//! manual's 4E frame chapter). The two fixed bytes after the serial are sent as `00 00` and
+//! not checked on decode (the manual gives them no meaning).
 
 /// The subheader of a 3E binary request.
 pub const REQUEST_SUBHEADER: [u8; 2] = [0x50, 0x00];
@@ -12,6 +21,124 @@ pub const REQUEST_SUBHEADER: [u8; 2] = [0x50, 0x00];
 pub const RESPONSE_SUBHEADER: [u8; 2] = [0xD0, 0x00];
 /// Bytes before the data: subheader, route and data length.
 pub const HEADER_LEN: usize = 9;
+/// The subheader of a 4E binary request.
+pub const REQUEST_SUBHEADER_4E: [u8; 2] = [0x54, 0x00];
+/// The subheader of a 4E binary response.
+pub const RESPONSE_SUBHEADER_4E: [u8; 2] = [0xD4, 0x00];
+/// Bytes before the data of a 4E frame: subheader, serial, `00 00`, route and data length.
+pub const HEADER_LEN_4E: usize = 13;
+
+pub use super::bits::{bit_bytes, pack_bits, unpack_bits};
+
+/// Which frame a client sends: 3E (no serial number) or 4E (a serial number the reply
+/// echoes). Servers answer both.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FrameKind {
+    /// Subheader `50 00`.
+    #[default]
+    E3,
+    /// Subheader `54 00` with a serial number.
+    E4,
+}
+
+/// Which way a frame goes: it decides the subheaders (`50`/`54` or `D0`/`D4`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Direction {
+    /// Client to PLC.
+    Request,
+    /// PLC to client.
+    Response,
+}
+
+impl Direction {
+    fn subheaders(self) -> ([u8; 2], [u8; 2]) {
+        match self {
+            Direction::Request => (REQUEST_SUBHEADER, REQUEST_SUBHEADER_4E),
+            Direction::Response => (RESPONSE_SUBHEADER, RESPONSE_SUBHEADER_4E),
+        }
+    }
+}
+
+/// The header of a 3E frame (`serial` None) or a 4E frame (`serial` Some).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Header {
+    /// The 4E serial number; None for a 3E frame.
+    pub serial: Option<u16>,
+    /// The route.
+    pub route: Route,
+    /// The declared data length (bytes after the header).
+    pub length: usize,
+}
+
+impl Header {
+    /// Bytes of this header: 9 (3E) or 13 (4E).
+    pub fn size(&self) -> usize {
+        header_size(self.serial)
+    }
+}
+
+/// Bytes of a header with this serial (None: 3E).
+pub fn header_size(serial: Option<u16>) -> usize {
+    if serial.is_some() { HEADER_LEN_4E } else { HEADER_LEN }
+}
+
+/// The header size announced by a frame's first two bytes (9 for 3E, 13 for 4E), or why not.
+pub fn header_size_of(bytes: &[u8], direction: Direction) -> Result<usize, FrameError> {
+    let (e3, e4) = direction.subheaders();
+    match bytes.get(..2) {
+        None => Err(FrameError::Truncated { need: 2, have: bytes.len() }),
+        Some(s) if s == e3 => Ok(HEADER_LEN),
+        Some(s) if s == e4 => Ok(HEADER_LEN_4E),
+        Some(s) => Err(FrameError::Subheader([s[0], s[1]])),
+    }
+}
+
+/// The header of a 3E or 4E frame going `direction`, or why not. Used by stream readers:
+/// once this succeeds, the frame is `header.size() + header.length` bytes.
+pub fn parse_any_header(bytes: &[u8], direction: Direction) -> Result<Header, FrameError> {
+    let size = header_size_of(bytes, direction)?;
+    if bytes.len() < size {
+        return Err(FrameError::Truncated { need: size, have: bytes.len() });
+    }
+    let (serial, rest) = match size {
+        HEADER_LEN_4E => (Some(u16::from_le_bytes([bytes[2], bytes[3]])), &bytes[6..size]),
+        _ => (None, &bytes[2..size]),
+    };
+    let route = Route::decode(rest).ok_or(FrameError::Truncated { need: size, have: bytes.len() })?;
+    Ok(Header { serial, route, length: usize::from(u16::from_le_bytes([rest[5], rest[6]])) })
+}
+
+/// Checks a whole 3E or 4E frame's header and returns it with the bytes after the length.
+pub fn split_any(bytes: &[u8], direction: Direction) -> Result<(Header, &[u8]), FrameError> {
+    let header = parse_any_header(bytes, direction)?;
+    let data = &bytes[header.size()..];
+    if data.len() != header.length {
+        return Err(FrameError::Length { declared: header.length, actual: data.len() });
+    }
+    Ok((header, data))
+}
+
+/// Writes a 3E or 4E header with a placeholder length; [`finish_frame`] fills it in.
+pub(crate) fn start_any(
+    direction: Direction,
+    serial: Option<u16>,
+    route: &Route,
+    capacity: usize,
+) -> Vec<u8> {
+    let (e3, e4) = direction.subheaders();
+    let mut out = Vec::with_capacity(HEADER_LEN_4E + capacity);
+    match serial {
+        None => out.extend_from_slice(&e3),
+        Some(serial) => {
+            out.extend_from_slice(&e4);
+            out.extend_from_slice(&serial.to_le_bytes());
+            out.extend_from_slice(&[0, 0]);
+        }
+    }
+    route.encode(&mut out);
+    out.extend_from_slice(&[0, 0]);
+    out
+}
 
 /// Largest point count of one batch read or write in word units (words, or 16-bit
 /// groups of a bit device), per the Q-series MC protocol manual for 3E frames.
@@ -85,9 +212,6 @@ pub enum FrameError {
         /// What is there.
         actual: usize,
     },
-    /// An error response carries error information that is neither absent nor 9 bytes.
-    #[error("error response with {0} bytes of error information (expected 0 or 9)")]
-    ErrorInfo(usize),
 }
 
 /// The route and the declared data length of a frame starting with `subheader`, or why not.
@@ -114,54 +238,13 @@ pub fn split_frame(bytes: &[u8], subheader: [u8; 2]) -> Result<(Route, &[u8]), F
     Ok((route, data))
 }
 
-/// Writes the header with a placeholder length; [`finish_frame`] fills it in.
-pub(crate) fn start_frame(subheader: [u8; 2], route: &Route, capacity: usize) -> Vec<u8> {
-    let mut out = Vec::with_capacity(HEADER_LEN + capacity);
-    out.extend_from_slice(&subheader);
-    route.encode(&mut out);
-    out.extend_from_slice(&[0, 0]);
-    out
-}
-
-/// Sets the data length field. Data longer than 65535 bytes cannot be framed: callers keep
-/// requests within the point limits, so this saturates rather than panics.
+/// Sets the data length field of a frame begun by [`start_any`]. Data
+/// longer than 65535 bytes cannot be framed: callers keep requests within the point limits,
+/// so this saturates rather than panics.
 pub(crate) fn finish_frame(out: &mut [u8]) {
-    let len = u16::try_from(out.len().saturating_sub(HEADER_LEN)).unwrap_or(u16::MAX);
-    out[7..9].copy_from_slice(&len.to_le_bytes());
-}
-
-/// Bytes needed for `count` bits in bit units.
-pub fn bit_bytes(count: usize) -> usize {
-    count.div_ceil(2)
-}
-
-/// Packs bits two per byte, first point in the high nibble, `1` for ON (binary bit units).
-pub fn pack_bits(bits: &[bool], out: &mut Vec<u8>) {
-    for pair in bits.chunks(2) {
-        let hi = u8::from(pair[0]) << 4;
-        let lo = pair.get(1).map_or(0, |b| u8::from(*b));
-        out.push(hi | lo);
-    }
-}
-
-/// Unpacks `count` bits; `None` if `bytes` is not exactly [`bit_bytes`]`(count)` long or a
-/// nibble is neither 0 nor 1.
-pub fn unpack_bits(bytes: &[u8], count: usize) -> Option<Vec<bool>> {
-    if bytes.len() != bit_bytes(count) {
-        return None;
-    }
-    let mut bits = Vec::with_capacity(count);
-    for (i, byte) in bytes.iter().enumerate() {
-        let (hi, lo) = (byte >> 4, byte & 0x0F);
-        if hi > 1 || lo > 1 {
-            return None;
-        }
-        bits.push(hi == 1);
-        if 2 * i + 1 < count {
-            bits.push(lo == 1);
-        }
-    }
-    Some(bits)
+    let size = if matches!(out[0], 0x54 | 0xD4) { HEADER_LEN_4E } else { HEADER_LEN };
+    let len = u16::try_from(out.len().saturating_sub(size)).unwrap_or(u16::MAX);
+    out[size - 2..size].copy_from_slice(&len.to_le_bytes());
 }
 
 #[cfg(test)]
@@ -176,25 +259,27 @@ mod tests {
     }
 
     #[test]
-    fn bits_pack_high_nibble_first() {
-        // The MC Protocol Reference Manual's (SH-080008) bit-unit read example: M100..M107 =
-        // 0,0,0,1,0,0,1,1 is `00 01 00 11`.
-        let bits = [false, false, false, true, false, false, true, true];
-        let mut out = Vec::new();
-        pack_bits(&bits, &mut out);
-        assert_eq!(out, [0x00, 0x01, 0x00, 0x11]);
-        assert_eq!(unpack_bits(&out, 8).unwrap(), bits);
-        let mut odd = Vec::new();
-        pack_bits(&[true, false, true], &mut odd);
-        assert_eq!(odd, [0x10, 0x10]);
-        assert_eq!(unpack_bits(&odd, 3).unwrap(), [true, false, true]);
-    }
-
-    #[test]
-    fn unpack_rejects_bad_nibbles_and_lengths() {
-        assert_eq!(unpack_bits(&[0x20], 2), None);
-        assert_eq!(unpack_bits(&[0x01], 3), None);
-        assert_eq!(unpack_bits(&[], 0), Some(vec![]));
+    fn four_e_header_carries_the_serial() {
+        // 4E layout as pymcprotocol's type4e.py builds it: 54 00, serial LE, 00 00, route.
+        let mut out = start_any(Direction::Request, Some(0x1234), &Route::default(), 0);
+        out.extend_from_slice(&[0x10, 0x00]);
+        finish_frame(&mut out);
+        assert_eq!(
+            out,
+            [0x54, 0x00, 0x34, 0x12, 0x00, 0x00, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x02, 0x00, 0x10, 0x00]
+        );
+        let (header, data) = split_any(&out, Direction::Request).unwrap();
+        assert_eq!(header, Header { serial: Some(0x1234), route: Route::default(), length: 2 });
+        assert_eq!(data, [0x10, 0x00]);
+        assert_eq!(split_any(&out, Direction::Response), Err(FrameError::Subheader([0x54, 0x00])));
+        assert!(matches!(
+            parse_any_header(&out[..12], Direction::Request),
+            Err(FrameError::Truncated { .. })
+        ));
+        let three = [0xD0, 0x00, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x00, 0x00];
+        assert_eq!(parse_any_header(&three, Direction::Response).unwrap().serial, None);
+        assert_eq!(header_size_of(&[0xD4, 0x00], Direction::Response), Ok(HEADER_LEN_4E));
+        assert!(header_size_of(&[0xD4], Direction::Response).is_err());
     }
 
     #[test]

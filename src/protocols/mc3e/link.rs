@@ -1,8 +1,10 @@
-//! An MC 3E link: one request frame out, its reply in, over TCP or UDP, under the shared
+//! An MC 3E/4E link: one request frame out, its reply in, over TCP or UDP, under the shared
 //! transport's retry policy and reconnect.
 //!
-//! Plain 3E frames carry no serial number, so a reply cannot be matched to its request by
-//! content alone. The defences:
+//! 4E frames carry a serial number the reply echoes: a reply with another serial (a late
+//! answer to an earlier request) is dropped and counted as a stale reply, over UDP and TCP
+//! alike, and the wait goes on for the right one. Plain 3E frames carry no serial number, so
+//! a reply cannot be matched to its request by content alone. The defences (both frames):
 //! - one request in flight per link (the client holds the link's lock for the exchange);
 //! - every exchange is exclusive: after one that did not finish (a timeout, a malformed
 //!   reply, a caller that gave up), the TCP connection is closed, or the UDP socket
@@ -17,7 +19,11 @@
 //! Limitation (UDP with a fixed local port, `udp_local`, as some Ethernet-module open
 //! settings require): a late reply that arrives after the drain and has the same shape as
 //! the new request's reply (same command and point count) cannot be told apart and will be
-//! taken. Use ephemeral ports, or TCP, where this matters.
+//! taken. Use ephemeral ports, TCP, or 4E frames where this matters.
+//!
+//! An error reply (nonzero end code) may carry any number of bytes after the end code (see
+//! [`super::response`]): on TCP its length field is allowed up to the longest reply any
+//! command has, so the end code surfaces and the stream stays in step.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -27,7 +33,7 @@ use tokio_util::bytes::BytesMut;
 use tokio_util::codec::Decoder;
 
 use super::end_code::EndCode;
-use super::frame::{self, RESPONSE_SUBHEADER, Route};
+use super::frame::{self, Direction, MAX_WORD_POINTS, Route};
 use super::response::{ErrorInfo, Outcome, Response};
 use crate::protocols::transport::{
     Attempt, AttemptError, Backoff, DatagramLink, Endpoint, LinkHealth, LinkTuning, RetryPolicy, StreamLink,
@@ -66,13 +72,20 @@ pub struct LinkConfig {
 /// What a valid reply looks like.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Expect {
+    /// The 4E serial number the reply must echo (None: 3E).
+    pub serial: Option<u16>,
     pub route: Route,
     pub command: (u16, u16),
     pub data_len: usize,
 }
 
-/// Finds one 3E response in a TCP stream. The length field is checked against the longest
-/// reply the request allows before anything is waited for.
+/// The longest data an error reply may declare: end code plus the longest reply data of any
+/// command (960 words).
+const MAX_ERROR_DATA: usize = 2 + 2 * MAX_WORD_POINTS as usize;
+
+/// Finds one 3E or 4E response in a TCP stream. The length field is checked against the
+/// longest reply the request allows (an error reply: [`MAX_ERROR_DATA`]) before anything
+/// more is waited for.
 struct Responses {
     max_len: usize,
 }
@@ -82,14 +95,30 @@ impl Decoder for Responses {
     type Error = AttemptError;
 
     fn decode(&mut self, src: &mut BytesMut) -> Result<Option<BytesMut>, AttemptError> {
-        let Some(header) = src.get(..frame::HEADER_LEN) else { return Ok(None) };
-        let (_, len) = frame::parse_header(header, RESPONSE_SUBHEADER)
-            .map_err(|_| AttemptError::Malformed("reply does not start with a 3E response header"))?;
+        let not_a_reply = |_| AttemptError::Malformed("reply does not start with a 3E/4E response header");
+        let Some(size) = src.get(..2).map(|s| frame::header_size_of(s, Direction::Response)) else {
+            return Ok(None);
+        };
+        let size = size.map_err(not_a_reply)?;
+        let Some(header) = src.get(..size) else { return Ok(None) };
+        let len = frame::parse_any_header(header, Direction::Response).map_err(not_a_reply)?.length;
         if len > self.max_len {
-            return Err(AttemptError::Malformed("reply length field exceeds what the request allows"));
+            // Only an error reply may be longer than the request's answer.
+            let Some(end_code) = src.get(size..size + 2) else { return Ok(None) };
+            if end_code == [0, 0] || len > MAX_ERROR_DATA {
+                return Err(AttemptError::Malformed("reply length field exceeds what the request allows"));
+            }
         }
-        Ok((src.len() >= frame::HEADER_LEN + len).then(|| src.split_to(frame::HEADER_LEN + len)))
+        Ok((src.len() >= size + len).then(|| src.split_to(size + len)))
     }
+}
+
+/// Why a reply is not this request's answer.
+enum Mismatch {
+    /// A 4E reply with another serial number: a late answer, dropped.
+    Serial,
+    /// Anything else.
+    Other(&'static str),
 }
 
 /// The carrier of a link.
@@ -129,7 +158,7 @@ impl Link {
         let mut retry = health.start("mc3e");
         while let Some(attempt) = retry.next_attempt() {
             let outcome = match &mut self.carrier {
-                Carrier::Tcp(link) => tcp_attempt(link, frame, expect, &attempt).await,
+                Carrier::Tcp(link) => tcp_attempt(link, frame, expect, &health, &attempt).await,
                 Carrier::Udp(link) => udp_attempt(link, frame, expect, &health, &attempt).await,
             };
             match outcome {
@@ -151,6 +180,7 @@ async fn tcp_attempt(
     link: &mut StreamLink,
     frame: &[u8],
     expect: &Expect,
+    health: &LinkHealth,
     attempt: &Attempt,
 ) -> Result<Outcome, AttemptError> {
     link.begin_exclusive();
@@ -160,12 +190,22 @@ async fn tcp_attempt(
     }
     link.send(frame, attempt.timeout).await?;
     let mut responses = Responses { max_len: 2 + expect.data_len.max(ErrorInfo::LEN) };
-    let Some(bytes) = link.read_frame(&mut responses, attempt.deadline).await? else {
-        return Err(AttemptError::Timeout);
-    };
-    let outcome = check(&bytes, expect).map_err(AttemptError::Malformed)?;
-    link.finished();
-    Ok(outcome)
+    loop {
+        let Some(bytes) = link.read_frame(&mut responses, attempt.deadline).await? else {
+            return Err(AttemptError::Timeout);
+        };
+        match check(&bytes, expect) {
+            Ok(outcome) => {
+                link.finished();
+                return Ok(outcome);
+            }
+            Err(Mismatch::Serial) => {
+                tracing::debug!("mc4e tcp: dropped a reply with another serial number");
+                health.dropped(DropReason::Stale);
+            }
+            Err(Mismatch::Other(why)) => return Err(AttemptError::Malformed(why)),
+        }
+    }
 }
 
 async fn udp_attempt(
@@ -189,7 +229,11 @@ async fn udp_attempt(
                 link.finished();
                 return Ok(outcome);
             }
-            Err(why) => {
+            Err(Mismatch::Serial) => {
+                tracing::debug!("mc4e udp: dropped a reply with another serial number");
+                health.dropped(DropReason::Stale);
+            }
+            Err(Mismatch::Other(why)) => {
                 tracing::debug!(why, "mc3e udp: discarded a datagram that is not this reply");
                 health.dropped(DropReason::Stale);
             }
@@ -198,18 +242,34 @@ async fn udp_attempt(
 }
 
 /// Decodes a reply and checks it answers the expected request.
-fn check(bytes: &[u8], expect: &Expect) -> Result<Outcome, &'static str> {
-    let response = Response::decode(bytes).map_err(|_| "reply is not a well-formed 3E binary response")?;
+fn check(bytes: &[u8], expect: &Expect) -> Result<Outcome, Mismatch> {
+    let other = Mismatch::Other;
+    let response =
+        Response::decode(bytes).map_err(|_| other("reply is not a well-formed 3E/4E binary response"))?;
+    match (response.serial, expect.serial) {
+        (Some(got), Some(sent)) if got != sent => return Err(Mismatch::Serial),
+        (Some(_), Some(_)) | (None, None) => {}
+        _ => return Err(other("reply's frame (3E or 4E) is not the request's")),
+    }
     if response.route != expect.route {
-        return Err("reply's route fields do not echo the request's");
+        return Err(other("reply's route fields do not echo the request's"));
     }
     match &response.outcome {
         Outcome::Ok(data) if data.len() != expect.data_len => {
-            Err("reply's data length does not match the points requested")
+            Err(other("reply's data length does not match the points requested"))
         }
         Outcome::Failed { info: Some(info), .. } if (info.command, info.subcommand) != expect.command => {
-            Err("error information names another command")
+            Err(other("error information names another command"))
         }
-        _ => Ok(response.outcome),
+        Outcome::Failed { trailing, .. } => {
+            if !trailing.is_empty() {
+                tracing::debug!(
+                    bytes = trailing.len(),
+                    "mc3e: error reply with trailing data other than error information"
+                );
+            }
+            Ok(response.outcome)
+        }
+        Outcome::Ok(_) => Ok(response.outcome),
     }
 }

@@ -11,6 +11,8 @@ use super::frame::Route;
 use super::handler;
 use super::request::{Command, Request};
 use super::response::{ErrorInfo, Outcome, Response};
+use super::scattered::Block;
+use super::type_name::TypeName;
 
 fn route() -> impl Strategy<Value = Route> {
     (any::<u8>(), any::<u8>(), any::<u16>(), any::<u8>())
@@ -23,6 +25,10 @@ fn device() -> impl Strategy<Value = Device> {
 
 fn bit_device() -> impl Strategy<Value = Device> {
     prop::sample::select(Device::ALL.into_iter().filter(|d| d.is_bit()).collect::<Vec<_>>())
+}
+
+fn word_device() -> impl Strategy<Value = Device> {
+    prop::sample::select(Device::ALL.into_iter().filter(|d| !d.is_bit()).collect::<Vec<_>>())
 }
 
 fn command() -> impl Strategy<Value = Command> {
@@ -40,8 +46,28 @@ fn command() -> impl Strategy<Value = Command> {
         }),
         (device(), start.clone(), prop::collection::vec(any::<u16>(), 0..1000))
             .prop_map(|(device, start, values)| Command::WriteWords { device, start, values }),
-        (bit_device(), start, prop::collection::vec(any::<bool>(), 0..2000))
+        (bit_device(), start.clone(), prop::collection::vec(any::<bool>(), 0..2000))
             .prop_map(|(device, start, values)| Command::WriteBits { device, start, values }),
+        Just(Command::ReadTypeName),
+        (
+            prop::collection::vec((device(), start.clone()), 0..100),
+            prop::collection::vec((device(), start.clone()), 0..100)
+        )
+            .prop_map(|(words, dwords)| Command::RandomRead { words, dwords }),
+        (
+            prop::collection::vec((word_device(), start.clone(), any::<u16>()), 0..60),
+            prop::collection::vec((bit_device(), start, any::<u16>()), 0..60)
+        )
+            .prop_map(|(words, bits)| Command::ReadBlocks {
+                words: words
+                    .into_iter()
+                    .map(|(device, start, points)| Block { device, start, points })
+                    .collect(),
+                bits: bits
+                    .into_iter()
+                    .map(|(device, start, points)| Block { device, start, points })
+                    .collect(),
+            }),
     ]
 }
 
@@ -53,21 +79,27 @@ fn outcome() -> impl Strategy<Value = Outcome> {
     });
     prop_oneof![
         prop::collection::vec(any::<u8>(), 0..2000).prop_map(Outcome::Ok),
-        (1..=u16::MAX, prop::option::of(info))
-            .prop_map(|(end_code, info)| Outcome::Failed { end_code, info }),
+        (1..=u16::MAX, info).prop_map(|(end_code, info)| Outcome::Failed {
+            end_code,
+            info: Some(info),
+            trailing: vec![]
+        }),
+        // Anything but 9 bytes after the end code stays trailing data.
+        (1..=u16::MAX, prop::collection::vec(any::<u8>(), 0..40).prop_filter("not 9", |t| t.len() != 9))
+            .prop_map(|(end_code, trailing)| Outcome::Failed { end_code, info: None, trailing }),
     ]
 }
 
 proptest! {
     #[test]
-    fn every_request_decodes_back_in_the_server(route in route(), monitor_timer in any::<u16>(), command in command()) {
-        let request = Request { route, monitor_timer, command };
+    fn every_request_decodes_back_in_the_server(serial in prop::option::of(any::<u16>()), route in route(), monitor_timer in any::<u16>(), command in command()) {
+        let request = Request { serial, route, monitor_timer, command };
         prop_assert_eq!(Request::decode(&request.encode()).ok(), Some(request));
     }
 
     #[test]
-    fn every_response_decodes_back_in_the_client(route in route(), outcome in outcome()) {
-        let response = Response { route, outcome };
+    fn every_response_decodes_back_in_the_client(serial in prop::option::of(any::<u16>()), route in route(), outcome in outcome()) {
+        let response = Response { serial, route, outcome };
         prop_assert_eq!(Response::decode(&response.encode()), Ok(response));
     }
 
@@ -76,7 +108,7 @@ proptest! {
         let _ = Request::decode(&bytes);
         let _ = Response::decode(&bytes);
         let bank = Mutex::new(Bank::with_sizes(&[(Device::D, 100), (Device::M, 100)]));
-        if let Some(answer) = handler::answer(&bank, &bytes, None) {
+        if let Some(answer) = handler::answer(&bank, &TypeName::default(), &bytes, None) {
             prop_assert!(Response::decode(&answer.bytes).is_ok());
         }
     }
@@ -88,8 +120,13 @@ proptest! {
         bytes.extend_from_slice(&tail);
         let _ = Request::decode(&bytes);
         let bank = Mutex::new(Bank::with_sizes(&[(Device::D, 100), (Device::M, 100)]));
-        let _ = handler::answer(&bank, &bytes, None);
+        let _ = handler::answer(&bank, &TypeName::default(), &bytes, None);
         bytes[0] = 0xD0;
         let _ = Response::decode(&bytes);
+        let mut four = vec![0x54, 0x00, 0x01, 0x00, 0x00, 0x00];
+        four.extend_from_slice(&bytes[2..]);
+        let _ = handler::answer(&bank, &TypeName::default(), &four, None);
+        four[0] = 0xD4;
+        let _ = Response::decode(&four);
     }
 }

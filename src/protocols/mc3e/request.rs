@@ -1,151 +1,24 @@
-//! 3E binary requests: the four batch commands, encoded by the client, decoded by the server.
+//! 3E and 4E binary requests, encoded by the client, decoded by the server.
 //!
 //! ```text
-//! header(9) | monitoring timer(2) command(2) subcommand(2) | device no(3) code(1) points(2) [data]
+//! header(9, 4E: 13) | monitoring timer(2) command(2) subcommand(2) | command data (see command.rs)
 //! ```
 //! Decoding is split so the server can always answer: [`RequestHeader::decode`] fails only
 //! when the bytes are not a 3E request at all; [`Command::decode`] fails with the end code
 //! the server should answer.
 
-use super::device::{Device, MAX_DEVICE_NUMBER};
-use super::end_code;
-use super::frame::{self, FrameError, REQUEST_SUBHEADER, Route};
-
-/// Batch read command.
-pub const CMD_BATCH_READ: u16 = 0x0401;
-/// Batch write command.
-pub const CMD_BATCH_WRITE: u16 = 0x1401;
-/// Subcommand: word units (Q/L device specification).
-pub const SUB_WORDS: u16 = 0x0000;
-/// Subcommand: bit units (Q/L device specification).
-pub const SUB_BITS: u16 = 0x0001;
-
-/// What a request asks for.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum Command {
-    /// Batch read in word units (0401/0000); on a bit device each word is 16 points.
-    ReadWords {
-        /// The device.
-        device: Device,
-        /// The first device number.
-        start: u32,
-        /// Number of words.
-        count: u16,
-    },
-    /// Batch write in word units (1401/0000).
-    WriteWords {
-        /// The device.
-        device: Device,
-        /// The first device number.
-        start: u32,
-        /// The words.
-        values: Vec<u16>,
-    },
-    /// Batch read in bit units (0401/0001).
-    ReadBits {
-        /// The device.
-        device: Device,
-        /// The first device number.
-        start: u32,
-        /// Number of bits.
-        count: u16,
-    },
-    /// Batch write in bit units (1401/0001).
-    WriteBits {
-        /// The device.
-        device: Device,
-        /// The first device number.
-        start: u32,
-        /// The bits.
-        values: Vec<bool>,
-    },
-}
-
-impl Command {
-    /// The command and subcommand numbers.
-    pub fn numbers(&self) -> (u16, u16) {
-        match self {
-            Command::ReadWords { .. } => (CMD_BATCH_READ, SUB_WORDS),
-            Command::WriteWords { .. } => (CMD_BATCH_WRITE, SUB_WORDS),
-            Command::ReadBits { .. } => (CMD_BATCH_READ, SUB_BITS),
-            Command::WriteBits { .. } => (CMD_BATCH_WRITE, SUB_BITS),
-        }
-    }
-
-    /// Bytes of data a normal response to this command carries after the end code.
-    pub fn reply_data_len(&self) -> usize {
-        match self {
-            Command::ReadWords { count, .. } => 2 * usize::from(*count),
-            Command::ReadBits { count, .. } => frame::bit_bytes(usize::from(*count)),
-            Command::WriteWords { .. } | Command::WriteBits { .. } => 0,
-        }
-    }
-
-    fn encode(&self, out: &mut Vec<u8>) {
-        let head = |out: &mut Vec<u8>, device: &Device, start: u32, count: usize| {
-            out.extend_from_slice(&start.to_le_bytes()[..3]);
-            out.push(device.code());
-            out.extend_from_slice(&u16::try_from(count).unwrap_or(u16::MAX).to_le_bytes());
-        };
-        match self {
-            Command::ReadWords { device, start, count } | Command::ReadBits { device, start, count } => {
-                head(out, device, *start, usize::from(*count))
-            }
-            Command::WriteWords { device, start, values } => {
-                head(out, device, *start, values.len());
-                values.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
-            }
-            Command::WriteBits { device, start, values } => {
-                head(out, device, *start, values.len());
-                frame::pack_bits(values, out);
-            }
-        }
-    }
-
-    /// Decodes a command from its numbers and the bytes after the subcommand, or returns the
-    /// end code a PLC would answer. Point-count limits are not checked here (the server
-    /// does, so the codec can carry any count).
-    pub fn decode(command: u16, subcommand: u16, data: &[u8]) -> Result<Command, u16> {
-        let bits = match (command, subcommand) {
-            (CMD_BATCH_READ | CMD_BATCH_WRITE, SUB_WORDS) => false,
-            (CMD_BATCH_READ | CMD_BATCH_WRITE, SUB_BITS) => true,
-            _ => return Err(end_code::UNKNOWN_COMMAND),
-        };
-        let [n0, n1, n2, code, c0, c1, rest @ ..] = data else { return Err(end_code::LENGTH_MISMATCH) };
-        let start = u32::from_le_bytes([*n0, *n1, *n2, 0]);
-        let count = u16::from_le_bytes([*c0, *c1]);
-        let device = Device::from_code(*code).ok_or(end_code::DEVICE_NOT_ACCESSIBLE)?;
-        if bits && !device.is_bit() {
-            return Err(end_code::BAD_REQUEST_CONTENTS);
-        }
-        let expect_rest = match (command, bits) {
-            (CMD_BATCH_READ, _) => 0,
-            (_, false) => 2 * usize::from(count),
-            (_, true) => frame::bit_bytes(usize::from(count)),
-        };
-        if rest.len() != expect_rest {
-            return Err(end_code::LENGTH_MISMATCH);
-        }
-        Ok(match (command, bits) {
-            (CMD_BATCH_READ, false) => Command::ReadWords { device, start, count },
-            (CMD_BATCH_READ, true) => Command::ReadBits { device, start, count },
-            (_, false) => Command::WriteWords {
-                device,
-                start,
-                values: rest.chunks_exact(2).map(|w| u16::from_le_bytes([w[0], w[1]])).collect(),
-            },
-            (_, true) => Command::WriteBits {
-                device,
-                start,
-                values: frame::unpack_bits(rest, usize::from(count)).ok_or(end_code::BAD_REQUEST_DATA)?,
-            },
-        })
-    }
-}
+pub use super::command::{
+    CMD_BATCH_READ, CMD_BATCH_WRITE, CMD_RANDOM_READ, CMD_READ_BLOCKS, CMD_READ_TYPE_NAME, Command, SUB_BITS,
+    SUB_WORDS,
+};
+use super::device::MAX_DEVICE_NUMBER;
+use super::frame::{self, Direction, FrameError, Route};
 
 /// A whole request.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Request {
+    /// The 4E serial number; None sends a 3E frame.
+    pub serial: Option<u16>,
     /// Where the request goes.
     pub route: Route,
     /// CPU monitoring timer in units of 250 ms (0 = wait forever).
@@ -158,8 +31,13 @@ impl Request {
     /// The request's bytes. Device numbers above [`MAX_DEVICE_NUMBER`] are truncated to 3
     /// bytes; the client checks ranges before it gets here.
     pub fn encode(&self) -> Vec<u8> {
-        debug_assert!(self.start() <= MAX_DEVICE_NUMBER);
-        let mut out = frame::start_frame(REQUEST_SUBHEADER, &self.route, 12 + self.command.reply_data_len());
+        debug_assert!(self.command.first_device_number() <= MAX_DEVICE_NUMBER);
+        let mut out = frame::start_any(
+            Direction::Request,
+            self.serial,
+            &self.route,
+            12 + self.command.reply_data_len(),
+        );
         out.extend_from_slice(&self.monitor_timer.to_le_bytes());
         let (command, subcommand) = self.command.numbers();
         out.extend_from_slice(&command.to_le_bytes());
@@ -169,20 +47,16 @@ impl Request {
         out
     }
 
-    fn start(&self) -> u32 {
-        match &self.command {
-            Command::ReadWords { start, .. }
-            | Command::WriteWords { start, .. }
-            | Command::ReadBits { start, .. }
-            | Command::WriteBits { start, .. } => *start,
-        }
-    }
-
     /// Decodes a whole request as the server does.
     pub fn decode(bytes: &[u8]) -> Result<Request, Refusal<'_>> {
         let header = RequestHeader::decode(bytes).map_err(Refusal::Frame)?;
         match Command::decode(header.command, header.subcommand, header.data) {
-            Ok(command) => Ok(Request { route: header.route, monitor_timer: header.monitor_timer, command }),
+            Ok(command) => Ok(Request {
+                serial: header.serial,
+                route: header.route,
+                monitor_timer: header.monitor_timer,
+                command,
+            }),
             Err(end_code) => Err(Refusal::Command { header, end_code }),
         }
     }
@@ -205,6 +79,8 @@ pub enum Refusal<'a> {
 /// The fixed part of a request, decoded before its command.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RequestHeader<'a> {
+    /// The 4E serial number (None: 3E).
+    pub serial: Option<u16>,
     /// The route.
     pub route: Route,
     /// The monitoring timer.
@@ -220,12 +96,13 @@ pub struct RequestHeader<'a> {
 impl<'a> RequestHeader<'a> {
     /// Decodes the header of a whole request frame (length field checked against the bytes).
     pub fn decode(bytes: &'a [u8]) -> Result<RequestHeader<'a>, FrameError> {
-        let (route, data) = frame::split_frame(bytes, REQUEST_SUBHEADER)?;
+        let (header, data) = frame::split_any(bytes, Direction::Request)?;
         let [t0, t1, m0, m1, s0, s1, data @ ..] = data else {
-            return Err(FrameError::Truncated { need: frame::HEADER_LEN + 6, have: bytes.len() });
+            return Err(FrameError::Truncated { need: header.size() + 6, have: bytes.len() });
         };
         Ok(RequestHeader {
-            route,
+            serial: header.serial,
+            route: header.route,
             monitor_timer: u16::from_le_bytes([*t0, *t1]),
             command: u16::from_le_bytes([*m0, *m1]),
             subcommand: u16::from_le_bytes([*s0, *s1]),
@@ -238,8 +115,32 @@ impl<'a> RequestHeader<'a> {
 mod tests {
     use super::*;
 
+    use crate::protocols::mc3e::device::Device;
+
     fn req(command: Command) -> Request {
-        Request { route: Route::default(), monitor_timer: 0x10, command }
+        Request { serial: None, route: Route::default(), monitor_timer: 0x10, command }
+    }
+
+    #[test]
+    fn four_e_read_d1000_and_type_name() {
+        // The seed's read of D1000 x2 in a 4E frame with serial 0x1234 (layout of
+        // pymcprotocol's type4e.py: 54 00, serial LE, 00 00, then the 3E header's route).
+        let mut request = req(Command::ReadWords { device: Device::D, start: 1000, count: 2 });
+        request.serial = Some(0x1234);
+        let bytes = request.encode();
+        let expect = [
+            0x54, 0x00, 0x34, 0x12, 0x00, 0x00, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x0C, 0x00, 0x10, 0x00, 0x01,
+            0x04, 0x00, 0x00, 0xE8, 0x03, 0x00, 0xA8, 0x02, 0x00,
+        ];
+        assert_eq!(bytes, expect);
+        assert_eq!(Request::decode(&expect).unwrap(), request);
+        // Read CPU model name: command 0101, subcommand 0000, no data (request length 6).
+        let bytes = req(Command::ReadTypeName).encode();
+        assert_eq!(
+            bytes,
+            [0x50, 0x00, 0x00, 0xFF, 0xFF, 0x03, 0x00, 0x06, 0x00, 0x10, 0x00, 0x01, 0x01, 0x00, 0x00]
+        );
+        assert_eq!(Request::decode(&bytes).unwrap().command, Command::ReadTypeName);
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! An MC 3E binary server over TCP or UDP, for simulators and tests.
 //!
-//! The server answers batch reads and writes against a [`SharedBank`] and injects the
+//! The server answers 3E and 4E frames on the same port (batch reads and writes, random and
+//! block reads, the CPU model name) against a [`SharedBank`] and injects the
 //! faults of a [`SharedFaults`]; both handles stay with the caller, who may read and change
 //! them while the server runs. A write hook ([`WriteHook`]) is called after each write.
 //!
@@ -24,8 +25,9 @@ use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::task::{JoinHandle, JoinSet};
 
 use super::bank::SharedBank;
-use super::frame::{self, REQUEST_SUBHEADER};
+use super::frame::{self, Direction};
 use super::handler::{self, WriteHook};
+use super::type_name::TypeName;
 use crate::protocols::faults::{Plan, SharedFaults};
 
 /// What a server serves: memory, faults and an optional write hook.
@@ -37,12 +39,20 @@ pub struct ServerState {
     pub faults: SharedFaults,
     /// Called after every successful write.
     pub on_write: Option<WriteHook>,
+    /// What "read CPU model name" answers (default: Q03UDVCPU, 0x0366).
+    pub type_name: TypeName,
 }
 
 impl ServerState {
     /// A state serving `bank`, without faults or hook.
     pub fn new(bank: SharedBank) -> Self {
-        ServerState { bank, faults: SharedFaults::default(), on_write: None }
+        ServerState { bank, faults: SharedFaults::default(), on_write: None, type_name: TypeName::default() }
+    }
+
+    /// The same state answering "read CPU model name" with `type_name`.
+    pub fn with_type_name(mut self, type_name: TypeName) -> Self {
+        self.type_name = type_name;
+        self
     }
 
     /// The same state with these faults.
@@ -57,18 +67,25 @@ impl ServerState {
         self
     }
 
-    /// The faults to apply to one frame, and its answer, if any. Wrong ids and units do
-    /// not apply: 3E frames have neither.
+    /// The faults to apply to one frame, and its answer, if any. A wrong id changes a 4E
+    /// reply's serial number (3E frames have none); wrong units do not apply (no unit).
     fn process(&self, bytes: &[u8]) -> (Plan, Option<Vec<u8>>) {
         let plan = self.faults.plan();
         if plan.unanswered() {
             return (plan, None);
         }
-        let answer = handler::answer(&self.bank, bytes, plan.device_error);
+        let answer = handler::answer(&self.bank, &self.type_name, bytes, plan.device_error);
         if let (Some(hook), Some(write)) = (&self.on_write, answer.as_ref().and_then(|a| a.write)) {
             hook(write);
         }
-        (plan, answer.map(|a| a.bytes))
+        let mut bytes = answer.map(|a| a.bytes);
+        if let Some(reply) =
+            bytes.as_mut().filter(|r| plan.wrong_id && r.starts_with(&frame::RESPONSE_SUBHEADER_4E))
+        {
+            let serial = u16::from_le_bytes([reply[2], reply[3]]).wrapping_add(1);
+            reply[2..4].copy_from_slice(&serial.to_le_bytes());
+        }
+        (plan, bytes)
     }
 }
 
@@ -147,23 +164,28 @@ async fn serve_tcp(listener: TcpListener, state: ServerState) {
     }
 }
 
-/// Serves one connection, one request at a time, like a PLC's Ethernet port. Bytes that are
-/// not a 3E request leave the stream impossible to resynchronise, so the connection closes.
+/// Serves one connection, one request at a time, like a PLC's Ethernet port; 3E and 4E
+/// frames may alternate. Bytes that are not a 3E or 4E request leave the stream impossible
+/// to resynchronise, so the connection closes.
 async fn serve_connection(mut stream: TcpStream, peer: SocketAddr, state: ServerState) {
     let mut frame_bytes = Vec::new();
     loop {
-        let mut header = [0u8; frame::HEADER_LEN];
-        if stream.read_exact(&mut header).await.is_err() {
+        let mut header = [0u8; frame::HEADER_LEN_4E];
+        if stream.read_exact(&mut header[..2]).await.is_err() {
             return;
         }
-        let Ok((_, len)) = frame::parse_header(&header, REQUEST_SUBHEADER) else {
-            tracing::debug!(%peer, "mc3e server: not a 3E binary request, closing");
+        let Ok(size) = frame::header_size_of(&header, Direction::Request) else {
+            tracing::debug!(%peer, "mc3e server: not a 3E/4E binary request, closing");
             return;
         };
+        if stream.read_exact(&mut header[2..size]).await.is_err() {
+            return;
+        }
+        let Ok(parsed) = frame::parse_any_header(&header[..size], Direction::Request) else { return };
         frame_bytes.clear();
-        frame_bytes.extend_from_slice(&header);
-        frame_bytes.resize(frame::HEADER_LEN + len, 0);
-        if stream.read_exact(&mut frame_bytes[frame::HEADER_LEN..]).await.is_err() {
+        frame_bytes.extend_from_slice(&header[..size]);
+        frame_bytes.resize(size + parsed.length, 0);
+        if stream.read_exact(&mut frame_bytes[size..]).await.is_err() {
             return;
         }
         let (plan, out) = state.process(&frame_bytes);

@@ -14,6 +14,8 @@ use rackd::protocols::transport::Backoff;
 use rackd::protocols::{DeviceCode, PlcError, PlcMemory, Protocol};
 use tokio::net::UdpSocket;
 
+mod more;
+
 const BOTH: [TransportKind; 2] = [TransportKind::Tcp, TransportKind::Udp];
 
 async fn server(kind: TransportKind, state: ServerState) -> Mc3eServer {
@@ -228,8 +230,12 @@ async fn write_hook_sees_every_write() {
 async fn cli_pieces_build_a_client_and_a_simulator() {
     for (transport, protocol) in [(SimTransport::Udp, Protocol::Mc3eUdp), (SimTransport::Tcp, Protocol::Mc3e)]
     {
-        let args =
-            SimMc3eArgs { listen: "127.0.0.1:0".parse().unwrap(), transport, faults: FaultArgs::default() };
+        let args = SimMc3eArgs {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            transport,
+            faults: FaultArgs::default(),
+            cpu: Default::default(),
+        };
         let sim = sim_mc3e::start(&args).await.unwrap();
         let address = sim.local_addr().to_string();
         let mut link = LinkConfig::new(protocol, address);
