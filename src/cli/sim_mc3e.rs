@@ -1,11 +1,17 @@
 //! `rackd sim mc3e`: a standalone simulated MC 3E PLC serving every device (D, W, R, ZR, M,
-//! X, Y, B, L at a Q-series CPU's default sizes), with optional faults.
+//! X, Y, B, L at a Q-series CPU's default sizes), with optional faults, a preset and a
+//! control surface ([`PresetArgs`]).
 
 use std::net::SocketAddr;
+use std::sync::Arc;
 
+use super::sim_control::ControlServer;
 use super::sim_faults::FaultArgs;
+use super::sim_preset::PresetArgs;
+use crate::protocols::Protocol;
 use crate::protocols::faults::SharedFaults;
 use crate::protocols::mc3e::{Bank, EndCode, Mc3eServer, ServerState};
+use crate::sim::memory::Mc3eMemory;
 
 /// Transport of the simulated PLC.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -28,24 +34,41 @@ pub struct SimMc3eArgs {
     /// Link faults.
     #[command(flatten)]
     pub faults: FaultArgs,
+    /// Preset and control surface.
+    #[command(flatten)]
+    pub bench: PresetArgs,
 }
 
-/// Starts the simulated PLC described by `args` and returns it running.
-pub async fn start(args: &SimMc3eArgs) -> anyhow::Result<Mc3eServer> {
+/// A running simulated PLC and its control surface, if asked for.
+pub struct Running {
+    /// The MC server.
+    pub server: Mc3eServer,
+    /// The control surface.
+    pub control: Option<ControlServer>,
+}
+
+/// Loads the preset, starts the simulated PLC described by `args` and returns it running.
+pub async fn start(args: &SimMc3eArgs) -> anyhow::Result<Running> {
+    let bank = Bank::default().shared();
+    let memory = Mc3eMemory::new(bank.clone());
+    let read_only = args.bench.load(Protocol::Mc3e, &memory)?;
     let faults = SharedFaults::new(args.faults.faults::<EndCode>()?);
-    let state = ServerState::new(Bank::default().shared()).with_faults(faults);
+    let state = ServerState::new(bank).with_faults(faults.clone());
     let server = match args.transport {
         SimTransport::Tcp => Mc3eServer::bind_tcp(args.listen, state).await?,
         SimTransport::Udp => Mc3eServer::bind_udp(args.listen, state).await?,
     };
-    Ok(server)
+    let control = args.bench.start_control(Protocol::Mc3e, Arc::new(memory), faults, read_only).await?;
+    Ok(Running { server, control })
 }
 
 /// Runs the simulated PLC until Ctrl-C.
 pub async fn run(args: SimMc3eArgs) -> anyhow::Result<()> {
-    let server = start(&args).await?;
+    let Running { server, control } = start(&args).await?;
     tracing::info!(address = %server.local_addr(), transport = ?args.transport, "MC 3E simulator listening");
+    eprintln!("MC 3E simulator ({:?}) on {}; Ctrl-C to stop", args.transport, server.local_addr());
     tokio::signal::ctrl_c().await?;
+    drop(control);
     server.shutdown().await;
     Ok(())
 }
