@@ -76,13 +76,21 @@ struct Read {
     length: Option<u16>,
 }
 
-async fn get_values(State(c): Shared, query: Result<Query<Read>, QueryRejection>) -> Result<Json<Entry>, Refusal> {
+async fn get_values(
+    State(c): Shared,
+    query: Result<Query<Read>, QueryRejection>,
+) -> Result<Json<Entry>, Refusal> {
     let Query(q) = query.map_err(|e| e.body_text())?;
     let n = q.count.unwrap_or(1);
     let target = Target::new(c.protocol, c.memory.as_ref(), &q.address, q.ty, q.word_order, n, q.length)?;
     let mut values = target.read(c.memory.as_ref())?;
-    let mut entry =
-        Entry { address: q.address, ty: q.ty, word_order: q.word_order, length: q.length, ..Entry::default() };
+    let mut entry = Entry {
+        address: q.address,
+        ty: q.ty,
+        word_order: q.word_order,
+        length: q.length,
+        ..Entry::default()
+    };
     match q.count {
         Some(_) => entry.values = Some(values),
         None => entry.value = values.pop(),
@@ -90,7 +98,10 @@ async fn get_values(State(c): Shared, query: Result<Query<Read>, QueryRejection>
     Ok(Json(entry))
 }
 
-async fn put_values(State(c): Shared, body: Result<Json<Entry>, JsonRejection>) -> Result<Json<Entry>, Refusal> {
+async fn put_values(
+    State(c): Shared,
+    body: Result<Json<Entry>, JsonRejection>,
+) -> Result<Json<Entry>, Refusal> {
     let Json(entry) = body.map_err(|e| e.body_text())?;
     let resolved = Resolved::new(c.protocol, c.memory.as_ref(), &entry)?;
     let mut listed = c.read_only.lock().unwrap_or_else(|p| p.into_inner());
@@ -100,7 +111,10 @@ async fn put_values(State(c): Shared, body: Result<Json<Entry>, JsonRejection>) 
         let span = range_span(c.protocol, c.memory.as_ref(), &range)?;
         for other in listed.iter() {
             if range_span(c.protocol, c.memory.as_ref(), other)?.overlaps(&span) {
-                return Err(Refusal(format!("overlaps the read-only range {} count {}", other.address, other.count)));
+                return Err(Refusal(format!(
+                    "overlaps the read-only range {} count {}",
+                    other.address, other.count
+                )));
             }
         }
     }

@@ -93,7 +93,8 @@ pub async fn start(args: &SimModbusArgs) -> anyhow::Result<Running> {
         }
     }
     .with_context(|| format!("cannot listen on {listen}"))?;
-    let control = args.bench.start_control(Protocol::ModbusTcp, Arc::new(memory), handle.faults(), read_only).await?;
+    let control =
+        args.bench.start_control(Protocol::ModbusTcp, Arc::new(memory), handle.faults(), read_only).await?;
     Ok(Running { server: handle, control })
 }
 

@@ -73,7 +73,8 @@ pub struct Preset {
 impl Preset {
     /// Reads a preset file: TOML if the name ends in `.toml`, JSON otherwise.
     pub fn read(path: &Path) -> anyhow::Result<Preset> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading the preset {}", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading the preset {}", path.display()))?;
         let toml = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
         let parsed = if toml {
             toml::from_str(&text).map_err(anyhow::Error::from)
@@ -182,3 +183,7 @@ impl PresetArgs {
         Ok(Some(server))
     }
 }
+
+#[cfg(test)]
+#[path = "sim_preset_tests.rs"]
+mod tests;

@@ -94,7 +94,11 @@ enum Codec {
     Tag(Box<TagSpec>),
     /// ASCII: `per_item` characters an item (1 on S7 bytes, else 2), first in the high byte
     /// or not.
-    Text { length: u16, per_item: u16, high_first: bool },
+    Text {
+        length: u16,
+        per_item: u16,
+        high_first: bool,
+    },
 }
 
 /// Where `n` values of a type live in a simulator's memory, checked against it.
@@ -305,8 +309,15 @@ impl Resolved {
             (Some(ValueType::String), None, Some(Json::String(s))) => Some(s.len().max(1) as u16),
             (_, length, _) => length,
         };
-        let target =
-            Target::new(protocol, memory, &entry.address, entry.ty, entry.word_order, values.len() as u32, length)?;
+        let target = Target::new(
+            protocol,
+            memory,
+            &entry.address,
+            entry.ty,
+            entry.word_order,
+            values.len() as u32,
+            length,
+        )?;
         anyhow::ensure!(
             !(entry.read_only && target.word_bit().is_some()),
             "read_only on a bit of a word would protect the whole word: list the word in read_only"

@@ -51,7 +51,9 @@ fn written(request: &Request) -> Vec<(Region, Range<u64>)> {
         Request::WriteContactWords { area, start, values } => {
             vec![(Region::Contacts(*area), items(u64::from(*start) * 16, values.len() as u64 * 16))]
         }
-        Request::WriteData { start, values } => vec![(Region::Dt, items((*start).into(), values.len() as u64))],
+        Request::WriteData { start, values } => {
+            vec![(Region::Dt, items((*start).into(), values.len() as u64))]
+        }
         _ => Vec::new(),
     }
 }

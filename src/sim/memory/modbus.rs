@@ -24,7 +24,9 @@ fn written(request: &Request) -> Option<(Table, std::ops::Range<u64>)> {
         Request::WriteSingleCoil { address, .. } => (Table::Coils, address, 1),
         Request::WriteSingleRegister { address, .. } => (Table::HoldingRegisters, address, 1),
         Request::WriteMultipleCoils { address, values } => (Table::Coils, address, values.len()),
-        Request::WriteMultipleRegisters { address, values } => (Table::HoldingRegisters, address, values.len()),
+        Request::WriteMultipleRegisters { address, values } => {
+            (Table::HoldingRegisters, address, values.len())
+        }
         _ => return None,
     };
     Some((table, items(u64::from(*address), count as u64)))
