@@ -6,8 +6,8 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
+use rackd::cli::sim_bench::PresetArgs;
 use rackd::cli::sim_faults::FaultArgs;
-use rackd::cli::sim_preset::PresetArgs;
 use rackd::cli::{sim_line, sim_mc3e, sim_modbus};
 use rackd::protocols::link::{LinkConfig, connect};
 use rackd::protocols::{DeviceCode, PlcError, PlcMemory, Protocol, mc3e, mewtocol, modbus, ppi};

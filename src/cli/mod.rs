@@ -4,6 +4,7 @@
 pub mod demo;
 pub mod plc;
 pub mod sim;
+pub mod sim_bench;
 pub mod sim_control;
 pub mod sim_crane;
 pub mod sim_faults;

@@ -4,9 +4,9 @@
 
 use std::sync::Arc;
 
+use super::sim_bench::PresetArgs;
 use super::sim_control::ControlServer;
 use super::sim_faults::FaultArgs;
-use super::sim_preset::PresetArgs;
 use crate::protocols::faults::SharedFaults;
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::StreamServer;

@@ -5,9 +5,9 @@
 use std::net::SocketAddr;
 use std::sync::Arc;
 
+use super::sim_bench::PresetArgs;
 use super::sim_control::ControlServer;
 use super::sim_faults::FaultArgs;
-use super::sim_preset::PresetArgs;
 use crate::protocols::Protocol;
 use crate::protocols::faults::SharedFaults;
 use crate::protocols::mc3e::{Bank, EndCode, Mc3eServer, ServerState};

@@ -6,9 +6,9 @@ use std::sync::Arc;
 
 use anyhow::Context;
 
+use super::sim_bench::PresetArgs;
 use super::sim_control::ControlServer;
 use super::sim_faults::FaultArgs;
-use super::sim_preset::PresetArgs;
 use crate::protocols::Protocol;
 use crate::protocols::modbus::Exception;
 use crate::protocols::modbus::server::{ModbusServer, ServerHandle, ServerOptions};

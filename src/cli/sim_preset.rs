@@ -136,54 +136,6 @@ pub fn range_span(protocol: Protocol, memory: &dyn SimMemory, range: &ReadOnlyRa
     Ok(memory.span(&shape.address, range.count)?)
 }
 
-/// `--preset` and `--control`, taken by every memory simulator.
-#[derive(clap::Args, Clone, Debug, Default, PartialEq)]
-pub struct PresetArgs {
-    /// Load initial values and read-only ranges from FILE before serving (JSON, or TOML when
-    /// it ends in .toml): {"values": [{"address": "4x100", "type": "f32", "word_order":
-    /// "cdab", "value": 3.5}, ...], "read_only": [{"address": "3x0", "count": 10}]}. See the
-    /// README, "Simulators", and examples/sim/.
-    #[arg(long, value_name = "FILE")]
-    pub preset: Option<std::path::PathBuf>,
-    /// Serve a control surface on HOST:PORT (HTTP/JSON): GET /values?address=4x100&type=f32,
-    /// PUT /values with a preset entry (writes pass by read-only ranges), GET /read-only,
-    /// GET /counters.
-    #[arg(long, value_name = "HOST:PORT")]
-    pub control: Option<std::net::SocketAddr>,
-}
-
-impl PresetArgs {
-    /// Loads the preset, if any, into `memory`; returns the read-only ranges it set.
-    pub fn load(&self, protocol: Protocol, memory: &dyn SimMemory) -> anyhow::Result<Vec<ReadOnlyRange>> {
-        match &self.preset {
-            Some(path) => Preset::read(path)?.apply(path, protocol, memory),
-            None => Ok(Vec::new()),
-        }
-    }
-
-    /// Starts the control surface, if asked for.
-    pub async fn start_control(
-        &self,
-        protocol: Protocol,
-        memory: std::sync::Arc<dyn SimMemory>,
-        faults: crate::protocols::faults::SharedFaults,
-        read_only: Vec<ReadOnlyRange>,
-    ) -> anyhow::Result<Option<super::sim_control::ControlServer>> {
-        let Some(listen) = self.control else { return Ok(None) };
-        let control = super::sim_control::Control {
-            protocol,
-            memory,
-            faults,
-            read_only: std::sync::Mutex::new(read_only),
-        };
-        let server = super::sim_control::ControlServer::start(listen, control)
-            .await
-            .with_context(|| format!("cannot serve the control surface on {listen}"))?;
-        eprintln!("control surface on http://{}", server.local_addr());
-        Ok(Some(server))
-    }
-}
-
 #[cfg(test)]
 #[path = "sim_preset_tests.rs"]
 mod tests;
