@@ -224,8 +224,10 @@ async fn the_control_surface_plays_the_field_while_a_master_reads() {
     let (status, body) = put(&bench, json!({"address": "D1", "value": 1})).await;
     assert_eq!(status, 400);
     assert!(body["error"]["message"].as_str().unwrap().contains("D1"), "{body}");
-    let reply = reqwest::get(format!("{}/values?address=4x1&type=f64", bench.control)).await.unwrap();
-    assert_eq!(reply.status().as_u16(), 400);
+    for query in ["address=4x1&type=f64", "address=4x0&type=u32&count=40000", "address=4x1&type=string"] {
+        let reply = reqwest::get(format!("{}/values?{query}", bench.control)).await.unwrap();
+        assert_eq!(reply.status().as_u16(), 400, "{query}");
+    }
 
     // The master's requests: two reads, two writes (one refused).
     assert_eq!(get(&bench, "/counters").await, json!({"requests": 4, "refused": 1}));

@@ -18,7 +18,7 @@ use crate::sim::memory::SimMemory;
 #[derive(clap::Args, Clone, Debug, Default, PartialEq)]
 pub struct PresetArgs {
     /// Load initial values and read-only ranges from FILE before serving (JSON, or TOML when
-    /// it ends in .toml): {"values": [{"address": "4x100", "type": "f32", "word_order":
+    /// it ends in .toml), addresses in the simulator's notation; for Modbus: {"values": [{"address": "4x100", "type": "f32", "word_order":
     /// "cdab", "value": 3.5}, ...], "read_only": [{"address": "1x0", "count": 16}]}. See the
     /// README, "Simulators", and config/sim/.
     #[arg(long, value_name = "FILE")]

@@ -14,9 +14,10 @@
 //! }
 //! ```
 //!
-//! Entries use the tags' vocabulary ([`TagDef`]: addresses in the protocol's notation,
-//! `ADDRESS.N` for a bit of a word, types bool, u16, i16, u32, i32, f32, `word_order`) and
-//! their codec, plus what a bench needs and a tag does not:
+//! Entries use the tags' vocabulary ([`TagDef`](crate::devices::tagdef::TagDef):
+//! addresses in the protocol's notation, `ADDRESS.N` for a bit of a word, types bool, u16,
+//! i16, u32, i32, f32, `word_order`) and their codec, plus what a bench needs and a tag
+//! does not:
 //! - `values`: a list of values of the type at consecutive addresses, where `value` is one;
 //! - `type: "string"`: ASCII, two characters a word (one per item on S7 `VB`), padded with
 //!   NUL to `length` characters; the first character sits in the high byte for Modbus and S7

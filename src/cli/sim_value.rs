@@ -173,10 +173,12 @@ impl Target {
                     n == 1 || !matches!(spec.place, Place::WordBit(_)),
                     "a bit of a word takes one `value`, not `values`"
                 );
-                let items = n * u32::from(spec.count());
+                let items = n.saturating_mul(u32::from(spec.count()));
                 (spec.at.clone(), Codec::Tag(Box::new(spec)), items)
             }
         };
+        // Reads and writes go to the memory in one piece, counted in 16 bits.
+        anyhow::ensure!(items <= u32::from(u16::MAX), "{items} items at once; at most 65535");
         let span = memory.span(&at, items)?;
         Ok(Target { address: address.to_owned(), at, codec, n, span })
     }
