@@ -12,6 +12,7 @@ pub mod sim_line;
 pub mod sim_mc3e;
 pub mod sim_modbus;
 pub mod sim_preset;
+pub mod sim_text;
 pub mod sim_value;
 
 use std::net::SocketAddr;

@@ -2,13 +2,13 @@
 //! against a simulator's memory and carried out there.
 //!
 //! Numbers and bits go through the tags' own resolution and codec ([`TagSpec`],
-//! [`codec`]), so an entry means what the same tag would mean to rackd. Strings are this
-//! module's: ASCII, two characters a word, in the byte order of the protocol's family
-//! (see [`super::sim_preset`]).
+//! [`codec`]), so an entry means what the same tag would mean to rackd. Strings are
+//! [`super::sim_text`]'s.
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value as Json;
 
+use super::sim_text::{text_of, text_words};
 use crate::devices::tagdef::spec::TagError;
 use crate::devices::tagdef::{Place, TagDef, TagSpec, TagType, TagValue, WordOrder, codec};
 use crate::protocols::notation::{self, Items};
@@ -261,31 +261,6 @@ impl Target {
             .map(|w| Ok(serde_json::to_value(spec.from_words(w)?)?))
             .collect::<anyhow::Result<Vec<Json>>>()
     }
-}
-
-/// The words of an ASCII string padded with NUL to `length` characters.
-fn text_words(json: &Json, length: u16, per_item: u16, high_first: bool) -> anyhow::Result<Vec<u16>> {
-    let text = json.as_str().ok_or_else(|| anyhow::anyhow!("a string takes a JSON string, not {json}"))?;
-    anyhow::ensure!(text.is_ascii(), "{text:?} is not ASCII");
-    anyhow::ensure!(text.len() <= length as usize, "{text:?} is longer than length {length}");
-    let mut bytes = text.as_bytes().to_vec();
-    bytes.resize(length.div_ceil(per_item) as usize * per_item as usize, 0);
-    Ok(match (per_item, high_first) {
-        (1, _) => bytes.iter().map(|&b| b.into()).collect(),
-        (_, true) => bytes.chunks(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect(),
-        (_, false) => bytes.chunks(2).map(|c| u16::from_le_bytes([c[0], c[1]])).collect(),
-    })
-}
-
-/// The string in words, up to the first NUL; bytes beyond ASCII show as U+FFFD.
-fn text_of(words: &[u16], per_item: u16, high_first: bool) -> String {
-    let bytes: Vec<u8> = match (per_item, high_first) {
-        (1, _) => words.iter().map(|&w| w as u8).collect(),
-        (_, true) => words.iter().flat_map(|w| w.to_be_bytes()).collect(),
-        (_, false) => words.iter().flat_map(|w| w.to_le_bytes()).collect(),
-    };
-    let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
-    bytes[..end].iter().map(|&b| if b.is_ascii() { b as char } else { '\u{FFFD}' }).collect()
 }
 
 /// A preset entry checked against the memory, ready to write.
