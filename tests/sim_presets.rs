@@ -268,3 +268,30 @@ fn a_bad_preset_stops_the_simulator_before_it_serves() {
     assert!(!out.status.success());
     assert!(err.contains("bench.json: values[1] (VW4): ") && !err.contains("serving"), "{err}");
 }
+
+#[tokio::test]
+async fn the_binary_takes_preset_and_control_flags() {
+    use tokio::io::{AsyncBufReadExt, BufReader};
+    let preset = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim/ppi.json");
+    let mut child = tokio::process::Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .args(["sim", "ppi", "--listen", "127.0.0.1:0", "--preset", preset, "--control", "127.0.0.1:0"])
+        .stderr(std::process::Stdio::piped())
+        .kill_on_drop(true)
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let (mut control, mut server) = (None, None);
+    while control.is_none() || server.is_none() {
+        let line = lines.next_line().await.unwrap().expect("the simulator printed its addresses");
+        if let Some(at) = line.strip_prefix("control surface on ") {
+            control = Some(at.to_owned());
+        } else if let Some(rest) = line.strip_prefix("PPI simulator on ") {
+            server = rest.split(';').next().map(str::to_owned);
+        }
+    }
+    let bench = Bench { server: server.unwrap(), control: control.unwrap(), _running: Box::new(()) };
+    assert_eq!(get(&bench, "/values?address=VB200&type=string&length=6").await["value"], json!("S7-200"));
+    let plc = client(Protocol::PpiTcp, &bench).await;
+    assert_eq!(words(plc.as_ref(), "VD8", 2).await, I32);
+    child.kill().await.unwrap();
+}
