@@ -1,13 +1,18 @@
 //! `rackd sim mc3e`: a standalone simulated MC PLC answering 3E and 4E frames on one port,
 //! serving every device (D, W, R, ZR, M, X, Y, B, L, SM, SD, F, V, SB, SW and the timers and
-//! counters at a Q-series CPU's default sizes), with optional faults and a configurable
-//! answer to "read CPU model name".
+//! counters at a Q-series CPU's default sizes), with optional faults, a configurable answer
+//! to "read CPU model name", a preset and a control surface ([`PresetArgs`]).
 
 use std::net::SocketAddr;
+use std::sync::Arc;
 
+use super::sim_bench::PresetArgs;
+use super::sim_control::ControlServer;
 use super::sim_faults::FaultArgs;
+use crate::protocols::Protocol;
 use crate::protocols::faults::SharedFaults;
 use crate::protocols::mc3e::{Bank, EndCode, Mc3eServer, ServerState, TypeName};
+use crate::sim::memory::Mc3eMemory;
 
 /// Transport of the simulated PLC.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -33,6 +38,9 @@ pub struct SimMc3eArgs {
     /// The answer to "read CPU model name" (command 0101).
     #[command(flatten)]
     pub cpu: CpuArgs,
+    /// Preset and control surface.
+    #[command(flatten)]
+    pub bench: PresetArgs,
 }
 
 /// What the simulated CPU says it is.
@@ -60,25 +68,39 @@ fn parse_code(text: &str) -> Result<u16, String> {
         .map_err(|_| format!("bad model code {text:?}: expected 4 hex digits such as 0366"))
 }
 
-/// Starts the simulated PLC described by `args` and returns it running.
-pub async fn start(args: &SimMc3eArgs) -> anyhow::Result<Mc3eServer> {
+/// A running simulated PLC and its control surface, if asked for.
+pub struct Running {
+    /// The MC server.
+    pub server: Mc3eServer,
+    /// The control surface.
+    pub control: Option<ControlServer>,
+}
+
+/// Loads the preset, starts the simulated PLC described by `args` and returns it running.
+pub async fn start(args: &SimMc3eArgs) -> anyhow::Result<Running> {
+    let bank = Bank::default().shared();
+    let memory = Mc3eMemory::new(bank.clone());
+    let read_only = args.bench.load(Protocol::Mc3e, &memory)?;
     let faults = SharedFaults::new(args.faults.faults::<EndCode>()?);
     let Some(type_name) = TypeName::new(&args.cpu.model, args.cpu.code) else {
         anyhow::bail!("bad --cpu-model {:?}: up to 16 printable ASCII characters", args.cpu.model);
     };
-    let state = ServerState::new(Bank::default().shared()).with_faults(faults).with_type_name(type_name);
+    let state = ServerState::new(bank).with_faults(faults.clone()).with_type_name(type_name);
     let server = match args.transport {
         SimTransport::Tcp => Mc3eServer::bind_tcp(args.listen, state).await?,
         SimTransport::Udp => Mc3eServer::bind_udp(args.listen, state).await?,
     };
-    Ok(server)
+    let control = args.bench.start_control(Protocol::Mc3e, Arc::new(memory), faults, read_only).await?;
+    Ok(Running { server, control })
 }
 
 /// Runs the simulated PLC until Ctrl-C.
 pub async fn run(args: SimMc3eArgs) -> anyhow::Result<()> {
-    let server = start(&args).await?;
+    let Running { server, control } = start(&args).await?;
     tracing::info!(address = %server.local_addr(), transport = ?args.transport, "MC 3E simulator listening");
+    eprintln!("MC 3E simulator ({:?}) on {}; Ctrl-C to stop", args.transport, server.local_addr());
     tokio::signal::ctrl_c().await?;
+    drop(control);
     server.shutdown().await;
     Ok(())
 }

@@ -1,14 +1,19 @@
 //! `rackd sim modbus`: a standalone Modbus server whose bank covers all four tables
-//! (addresses 0..65535), for commissioning tools and manual tests.
+//! (addresses 0..65535), for commissioning tools and manual tests, optionally prepared
+//! with a preset and driven through a control surface ([`PresetArgs`]).
 
 use std::sync::Arc;
 
 use anyhow::Context;
 
+use super::sim_bench::PresetArgs;
+use super::sim_control::ControlServer;
 use super::sim_faults::FaultArgs;
+use crate::protocols::Protocol;
 use crate::protocols::modbus::Exception;
-use crate::protocols::modbus::server::{Bank, ModbusServer, ServerOptions};
+use crate::protocols::modbus::server::{ModbusServer, ServerHandle, ServerOptions};
 use crate::protocols::serial::SerialSettings;
+use crate::sim::memory::ModbusMemory;
 
 /// The transports the simulator can listen on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -53,10 +58,23 @@ pub struct SimModbusArgs {
     /// Link faults.
     #[command(flatten)]
     pub faults: FaultArgs,
+    /// Preset and control surface.
+    #[command(flatten)]
+    pub bench: PresetArgs,
 }
 
-/// Runs the simulator until Ctrl-C.
-pub async fn run(args: SimModbusArgs) -> anyhow::Result<()> {
+/// A running simulator and its control surface, if asked for.
+pub struct Running {
+    /// The Modbus server.
+    pub server: ServerHandle,
+    /// The control surface.
+    pub control: Option<ControlServer>,
+}
+
+/// Loads the preset and starts serving.
+pub async fn start(args: &SimModbusArgs) -> anyhow::Result<Running> {
+    let memory = ModbusMemory::default();
+    let read_only = args.bench.load(Protocol::ModbusTcp, &memory)?;
     let faults = args.faults.faults::<Exception>()?;
     let options = ServerOptions {
         unit: args.unit,
@@ -64,7 +82,7 @@ pub async fn run(args: SimModbusArgs) -> anyhow::Result<()> {
         zero_transaction_id: args.quirk.contains(&SimQuirk::ZeroTid),
         faults,
     };
-    let server = ModbusServer::new(Arc::new(Bank::new()), options);
+    let server = ModbusServer::new(Arc::new(memory.clone()), options);
     let listen = args.listen.as_str();
     let handle = match args.transport {
         SimTransport::Udp => server.serve_udp(listen).await,
@@ -75,9 +93,18 @@ pub async fn run(args: SimModbusArgs) -> anyhow::Result<()> {
         }
     }
     .with_context(|| format!("cannot listen on {listen}"))?;
-    let at = handle.local_addr().map_or(listen.to_string(), |a| a.to_string());
+    let control =
+        args.bench.start_control(Protocol::ModbusTcp, Arc::new(memory), handle.faults(), read_only).await?;
+    Ok(Running { server: handle, control })
+}
+
+/// Runs the simulator until Ctrl-C.
+pub async fn run(args: SimModbusArgs) -> anyhow::Result<()> {
+    let Running { server, control } = start(&args).await?;
+    let at = server.local_addr().map_or(args.listen.clone(), |a| a.to_string());
     eprintln!("modbus simulator ({:?}) serving unit {} on {at}; Ctrl-C to stop", args.transport, args.unit);
     tokio::signal::ctrl_c().await.context("waiting for Ctrl-C")?;
-    handle.shutdown().await;
+    drop(control);
+    server.shutdown().await;
     Ok(())
 }

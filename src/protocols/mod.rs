@@ -23,6 +23,7 @@ pub mod modbus;
 pub mod notation;
 pub mod ppi;
 pub mod protocol;
+pub mod read_only;
 pub mod serial;
 pub mod transport;
 

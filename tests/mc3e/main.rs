@@ -230,13 +230,15 @@ async fn write_hook_sees_every_write() {
 async fn cli_pieces_build_a_client_and_a_simulator() {
     for (transport, protocol) in [(SimTransport::Udp, Protocol::Mc3eUdp), (SimTransport::Tcp, Protocol::Mc3e)]
     {
+        let listen = "127.0.0.1:0".parse().unwrap();
         let args = SimMc3eArgs {
-            listen: "127.0.0.1:0".parse().unwrap(),
+            listen,
             transport,
             faults: FaultArgs::default(),
             cpu: Default::default(),
+            bench: Default::default(),
         };
-        let sim = sim_mc3e::start(&args).await.unwrap();
+        let sim = sim_mc3e::start(&args).await.unwrap().server;
         let address = sim.local_addr().to_string();
         let mut link = LinkConfig::new(protocol, address);
         (link.timeout, link.retries) = (Duration::from_secs(1), 1);

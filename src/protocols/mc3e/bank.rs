@@ -6,12 +6,20 @@
 //! The server shares one bank as a [`SharedBank`] (`Arc<Mutex<Bank>>`): a simulator keeps a
 //! clone, reads and changes registers between requests, and never holds the lock across an
 //! `.await`. Errors are the end codes a PLC would answer.
+//!
+//! Read-only ranges ([`Bank::protect`]) refuse a master's writes ([`Bank::write_words`],
+//! [`Bank::write_bits`], what the server calls) with end code C05B, "the target cannot read
+//! or write the specified device" in the Q-series MC protocol manual's end code table: a
+//! write-protected range is a device the target cannot write. The simulator's own writes
+//! ([`Bank::set_words`], [`Bank::set_bits`], [`Bank::set_word`], [`Bank::set_bit`]) are the
+//! field's and pass by them.
 
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 
 use super::device::Device;
 use super::end_code;
+use crate::protocols::read_only::{Overlap, ReadOnly};
 
 /// A bank shared between the server and whoever simulates the machine.
 pub type SharedBank = Arc<Mutex<Bank>>;
@@ -21,6 +29,7 @@ pub type SharedBank = Arc<Mutex<Bank>>;
 pub struct Bank {
     words: BTreeMap<Device, Vec<u16>>,
     bits: BTreeMap<Device, Vec<bool>>,
+    read_only: ReadOnly<Device>,
 }
 
 impl Default for Bank {
@@ -63,7 +72,7 @@ impl Bank {
     /// A zeroed bank with the given number of points per device; devices not listed have
     /// none (every access to them is out of range).
     pub fn with_sizes(sizes: &[(Device, u32)]) -> Bank {
-        let mut bank = Bank { words: BTreeMap::new(), bits: BTreeMap::new() };
+        let mut bank = Bank { words: BTreeMap::new(), bits: BTreeMap::new(), read_only: ReadOnly::default() };
         for &(device, size) in sizes {
             let size = size as usize;
             if device.is_bit() {
@@ -115,8 +124,34 @@ impl Bank {
         Ok(self.words[&device][r].to_vec())
     }
 
-    /// Writes words; on a bit device each word sets 16 points, the first from bit 0.
+    /// Makes `points` of `device` from `start` read-only to masters; refused if it
+    /// overlaps an earlier read-only range of the device.
+    pub fn protect(&mut self, device: Device, start: u32, points: u32) -> Result<(), Overlap> {
+        self.read_only.add(device, u64::from(start)..u64::from(start) + u64::from(points))
+    }
+
+    /// The read-only ranges (device, points) and the master writes they refused so far.
+    pub fn read_only(&self) -> &ReadOnly<Device> {
+        &self.read_only
+    }
+
+    /// Refuses a master's write of `points` from `start` into a read-only range.
+    fn guard(&mut self, device: Device, start: u32, points: usize) -> Result<(), u16> {
+        let items = u64::from(start)..u64::from(start) + points as u64;
+        if self.read_only.refuses(&device, items) { Err(end_code::DEVICE_NOT_ACCESSIBLE) } else { Ok(()) }
+    }
+
+    /// Writes words as a master does (read-only ranges refuse it); on a bit device each word
+    /// sets 16 points, the first from bit 0.
     pub fn write_words(&mut self, device: Device, start: u32, values: &[u16]) -> Result<(), u16> {
+        let unit = if device.is_bit() { 16 } else { 1 };
+        self.range(device, start, unit * values.len())?;
+        self.guard(device, start, unit * values.len())?;
+        self.set_words(device, start, values)
+    }
+
+    /// Writes words as the field does, read-only ranges or not.
+    pub fn set_words(&mut self, device: Device, start: u32, values: &[u16]) -> Result<(), u16> {
         if device.is_bit() {
             let r = self.range(device, start, 16 * values.len())?;
             let bits = self.bits.get_mut(&device).ok_or(end_code::DEVICE_OUT_OF_RANGE)?;
@@ -138,8 +173,17 @@ impl Bank {
         Ok(bits[r].to_vec())
     }
 
-    /// Writes bits of a bit device.
+    /// Writes bits of a bit device as a master does (read-only ranges refuse it).
     pub fn write_bits(&mut self, device: Device, start: u32, values: &[bool]) -> Result<(), u16> {
+        if device.is_bit() {
+            self.range(device, start, values.len())?;
+            self.guard(device, start, values.len())?;
+        }
+        self.set_bits(device, start, values)
+    }
+
+    /// Writes bits of a bit device as the field does, read-only ranges or not.
+    pub fn set_bits(&mut self, device: Device, start: u32, values: &[bool]) -> Result<(), u16> {
         let r = self.range(device, start, values.len())?;
         let bits = self.bits.get_mut(&device).ok_or(Self::no_bits(device))?;
         bits[r].copy_from_slice(values);
@@ -157,7 +201,7 @@ impl Bank {
 
     /// Sets one word; false when out of range.
     pub fn set_word(&mut self, device: Device, number: u32, value: u16) -> bool {
-        self.write_words(device, number, &[value]).is_ok()
+        self.set_words(device, number, &[value]).is_ok()
     }
 
     /// One bit (false when out of range).
@@ -167,7 +211,7 @@ impl Bank {
 
     /// Sets one bit; false when out of range.
     pub fn set_bit(&mut self, device: Device, number: u32, value: bool) -> bool {
-        self.write_bits(device, number, &[value]).is_ok()
+        self.set_bits(device, number, &[value]).is_ok()
     }
 }
 
@@ -196,5 +240,23 @@ mod tests {
         bank.write_words(Device::M, 16, &[0x8001]).unwrap();
         assert!(bank.bit(Device::M, 16) && bank.bit(Device::M, 31) && !bank.bit(Device::M, 17));
         assert_eq!(bank.write_words(Device::M, 17, &[1]), Err(0xC056));
+    }
+
+    #[test]
+    fn read_only_ranges_refuse_masters_not_the_field() {
+        let mut bank = Bank::with_sizes(&[(Device::D, 100), (Device::M, 64)]);
+        bank.protect(Device::D, 10, 2).unwrap();
+        bank.protect(Device::M, 20, 1).unwrap();
+        assert!(bank.protect(Device::D, 11, 1).is_err(), "overlap");
+        assert_eq!(bank.write_words(Device::D, 8, &[1, 2, 3]), Err(0xC05B));
+        assert_eq!(bank.word(Device::D, 8), 0, "nothing written");
+        assert_eq!(bank.write_words(Device::D, 12, &[5]), Ok(()));
+        assert_eq!(bank.write_words(Device::M, 16, &[0xFFFF]), Err(0xC05B), "16 points cover M20");
+        assert_eq!(bank.write_bits(Device::M, 20, &[true]), Err(0xC05B));
+        assert_eq!(bank.write_words(Device::D, 99, &[1, 2]), Err(0xC056), "range first");
+        assert_eq!(bank.read_only().refused(), 3);
+        bank.set_words(Device::D, 10, &[7, 8]).unwrap();
+        assert!(bank.set_bit(Device::M, 20, true));
+        assert_eq!(bank.read_words(Device::D, 10, 2), Ok(vec![7, 8]));
     }
 }

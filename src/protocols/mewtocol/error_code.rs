@@ -29,6 +29,8 @@ pub const DATA_ERROR: u8 = 61;
 pub const REGISTRATION_ERROR: u8 = 62;
 /// PLC mode error (e.g. a write while the PLC forbids it).
 pub const MODE_ERROR: u8 = 63;
+/// Protect error: a write into memory the PLC protects (the simulators' read-only ranges).
+pub const PROTECT_ERROR: u8 = 65;
 
 impl std::str::FromStr for ErrorCode {
     type Err = BadDeviceCode;
@@ -57,6 +59,7 @@ pub fn meaning(code: u8) -> &'static str {
         DATA_ERROR => "data error",
         REGISTRATION_ERROR => "registration error",
         MODE_ERROR => "PLC mode error",
+        PROTECT_ERROR => "protect error (write-protected memory)",
         _ => "unknown MEWTOCOL error code",
     }
 }
