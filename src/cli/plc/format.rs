@@ -1,0 +1,268 @@
+//! How `rackd plc` shows words and reads values to write: `--format` and `--word-order`.
+//!
+//! The numeric formats are the tag types of the configuration (`u16`, `i16`, `u32`, `i32`,
+//! `f32`, the names `[[devices.tags]]` writes) and go through the same codec
+//! ([`crate::devices::tagdef::codec`]), so a value reads the same in `rackd plc` as in a tag.
+//! Decisions of this module:
+//! - **Word order** defaults to the protocol's native one, as tags do
+//!   ([`native_order`]): high word first (ABCD) for Modbus and S7, low word first (CDAB) for
+//!   MC and MEWTOCOL. `badc` and `dcba` also swap the two bytes of every word, for devices
+//!   that store bytes little-endian inside a Modbus register; `--word-order` applies to
+//!   every format, so `-f ascii --word-order badc` reads low byte first.
+//! - **S7 double words** (`VD4`) are 32-bit items whatever the format: the PLC sends them
+//!   high word first, so `--word-order` does not apply; `u16`/`i16`/`hex`/`bin` widen to 32
+//!   bits.
+//! - A float that is NaN or infinite is shown (`NaN`, `inf`; `null` in JSON), not refused
+//!   as a tag's would be: commissioning is when one finds such values.
+//! - `hex` shows `0x` and four digits per word; `bin` shows bytes split by `_`
+//!   (`0b00010010_00110100`); both are strings in JSON. `write` takes them back, with or
+//!   without the prefix.
+//! - `ascii` reads all COUNT words as one string, high byte first (`HE` is 0x4845), trailing
+//!   NUL bytes left out, other bytes escaped as Rust does (`\r`, `\x01`, `\"`), quoted in
+//!   `ADDRESS VALUE` lines; `write -f ascii TEXT` takes one value and pads an odd length with
+//!   one NUL.
+
+use serde_json::Value as Json;
+
+use crate::devices::tagdef::codec::{self, TagType, TagValue, ValueError, WordOrder};
+
+/// How words are shown and values read (`--format` / `-f`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// Unsigned 16-bit (negative values written as -32768..-1 are taken as their two's complement).
+    #[default]
+    U16,
+    /// Signed 16-bit.
+    I16,
+    /// Hexadecimal, 0x1234.
+    Hex,
+    /// The bits of the word, 0b00010010_00110100 (bit 15 first).
+    Bin,
+    /// Unsigned 32-bit, two words.
+    U32,
+    /// Signed 32-bit, two words.
+    I32,
+    /// IEEE 754 32-bit float, two words.
+    F32,
+    /// Text, two characters per word, high byte first.
+    Ascii,
+}
+
+/// Which word of a 32-bit value comes first, and whether bytes are swapped in each word
+/// (`--word-order`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Order {
+    /// High word first, big-endian bytes (Modbus convention, Siemens).
+    #[value(alias = "big", alias = "high-first")]
+    Abcd,
+    /// Low word first (Mitsubishi, Panasonic, many Modbus devices).
+    #[value(alias = "little", alias = "low-first")]
+    Cdab,
+    /// High word first, bytes swapped in each word.
+    Badc,
+    /// Low word first, bytes swapped in each word (fully little-endian).
+    Dcba,
+}
+
+impl Order {
+    /// The same order as the configuration's word order, with no byte swap.
+    pub fn of(order: WordOrder) -> Order {
+        match order {
+            WordOrder::HighFirst => Order::Abcd,
+            WordOrder::LowFirst => Order::Cdab,
+        }
+    }
+
+    fn words(self) -> WordOrder {
+        match self {
+            Order::Abcd | Order::Badc => WordOrder::HighFirst,
+            Order::Cdab | Order::Dcba => WordOrder::LowFirst,
+        }
+    }
+
+    fn swaps_bytes(self) -> bool {
+        matches!(self, Order::Badc | Order::Dcba)
+    }
+}
+
+/// An item as shown: the text of an `ADDRESS VALUE` line and the JSON value.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Shown {
+    /// The text.
+    pub text: String,
+    /// The JSON value.
+    pub json: Json,
+}
+
+impl Shown {
+    fn number(text: String, json: impl Into<Json>) -> Shown {
+        Shown { text, json: json.into() }
+    }
+
+    fn text(text: String) -> Shown {
+        Shown { json: Json::String(text.clone()), text }
+    }
+}
+
+/// A format applied to one kind of word item.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct View {
+    /// The format.
+    pub format: Format,
+    /// Word order and byte swap.
+    pub order: Order,
+    /// Items are S7 double words: two words, high first, always 32-bit.
+    pub double: bool,
+}
+
+impl View {
+    /// Words per item: 2 for 32-bit values and double words, `None` for `ascii`, which takes
+    /// every word read as one string.
+    pub fn width(&self) -> Option<u16> {
+        match self.format {
+            Format::Ascii => None,
+            Format::U32 | Format::I32 | Format::F32 => Some(2),
+            _ if self.double => Some(2),
+            _ => Some(1),
+        }
+    }
+
+    fn order(&self) -> Order {
+        if self.double { Order::Abcd } else { self.order }
+    }
+
+    /// Words in the PLC's byte order, as the codec takes them.
+    fn unswap(&self, words: &[u16]) -> Vec<u16> {
+        let swap = self.order().swaps_bytes();
+        words.iter().map(|w| if swap { w.swap_bytes() } else { *w }).collect()
+    }
+
+    /// The item `words` hold (one item's words; all of them for `ascii`).
+    pub fn show(&self, words: &[u16]) -> Result<Shown, ValueError> {
+        let words = self.unswap(words);
+        let order = self.order().words();
+        let wide = self.width() == Some(2);
+        let int = |ty| match codec::decode(ty, order, &words)? {
+            TagValue::Int(v) => Ok(v),
+            other => unreachable_value(other),
+        };
+        Ok(match (self.format, wide) {
+            (Format::U16, false) => Shown::number(words[0].to_string(), words[0]),
+            (Format::I16, false) => Shown::number((words[0] as i16).to_string(), words[0] as i16),
+            (Format::Hex, false) => Shown::text(format!("0x{:04X}", words[0])),
+            (Format::Bin, false) => Shown::text(binary(&words[0].to_be_bytes())),
+            (Format::U16 | Format::U32, true) => {
+                let v = int(TagType::U32)?;
+                Shown::number(v.to_string(), v)
+            }
+            (Format::I16 | Format::I32, true) => {
+                let v = int(TagType::I32)?;
+                Shown::number(v.to_string(), v)
+            }
+            (Format::Hex, true) => Shown::text(format!("0x{:08X}", int(TagType::U32)?)),
+            (Format::Bin, true) => Shown::text(binary(&(int(TagType::U32)? as u32).to_be_bytes())),
+            (Format::F32, _) => match codec::decode(TagType::F32, order, &words) {
+                Ok(v) => Shown::number(v.to_string(), serde_json::to_value(v).unwrap_or(Json::Null)),
+                Err(ValueError::NotFinite(x)) => Shown { text: x.to_string(), json: Json::Null },
+                Err(e) => return Err(e),
+            },
+            (Format::Ascii, _) => {
+                let text = ascii(&words);
+                Shown { text: format!("\"{text}\""), json: Json::String(text) }
+            }
+            (Format::U32 | Format::I32, false) => unreachable!("32-bit formats are two words wide"),
+        })
+    }
+
+    /// The words of one value to write, in the format.
+    pub fn parse(&self, text: &str) -> Result<Vec<u16>, String> {
+        let order = self.order().words();
+        let wide = self.width() == Some(2);
+        let bad = |expected: &str| format!("bad {} value {text:?}: expected {expected}", self.name());
+        let int = |ty: TagType| -> Result<Vec<u16>, String> {
+            let (min, max) = ty.range().map(|(a, b)| (a as i64, b as i64)).unwrap_or_default();
+            // Unsigned types also take the signed spelling of the same bits (-1 is 0xFFFF).
+            let low = if min == 0 { -(max / 2) - 1 } else { min };
+            let signed = if min == 0 { format!(" or {low}..=-1") } else { String::new() };
+            let expected = format!("{min}..={max}{signed}");
+            let v: i64 = text.trim().parse().map_err(|_| bad(&expected))?;
+            if !(low..=max).contains(&v) {
+                return Err(bad(&expected));
+            }
+            let value = if v < 0 && min == 0 { v + max + 1 } else { v };
+            codec::encode(ty, order, TagValue::Int(value)).map_err(|e| e.to_string())
+        };
+        let words = match (self.format, wide) {
+            (Format::U16, false) => int(TagType::U16)?,
+            (Format::I16, false) => int(TagType::I16)?,
+            (Format::U16 | Format::U32, true) => int(TagType::U32)?,
+            (Format::I16 | Format::I32, true) => int(TagType::I32)?,
+            (Format::Hex, _) => {
+                let digits = text.trim().trim_start_matches("0x").trim_start_matches("0X").replace('_', "");
+                let v = u32::from_str_radix(&digits, 16).map_err(|_| bad("hex digits, 0x1234"))?;
+                radix(v, wide, order).ok_or_else(|| bad(if wide { "up to 0xFFFFFFFF" } else { "up to 0xFFFF" }))?
+            }
+            (Format::Bin, _) => {
+                let digits = text.trim().trim_start_matches("0b").trim_start_matches("0B").replace('_', "");
+                let v = u32::from_str_radix(&digits, 2).map_err(|_| bad("binary digits, 0b0001_0010"))?;
+                radix(v, wide, order).ok_or_else(|| bad(if wide { "up to 32 bits" } else { "up to 16 bits" }))?
+            }
+            (Format::F32, _) => {
+                let x: f32 = text.trim().parse().map_err(|_| bad("a number such as 3.14"))?;
+                if !x.is_finite() {
+                    return Err(bad("a finite number"));
+                }
+                codec::encode(TagType::F32, order, TagValue::Float(x as f64)).map_err(|e| e.to_string())?
+            }
+            (Format::Ascii, _) if !text.is_ascii() => return Err(bad("ASCII text")),
+            (Format::Ascii, _) => {
+                text.as_bytes().chunks(2).map(|c| u16::from_be_bytes([c[0], *c.get(1).unwrap_or(&0)])).collect()
+            }
+            (Format::U32 | Format::I32, false) => unreachable!("32-bit formats are two words wide"),
+        };
+        Ok(self.unswap(&words))
+    }
+
+    /// The format's name, as `--format` writes it (`u32` for a double word read as `u16`).
+    pub fn name(&self) -> &'static str {
+        match (self.format, self.width() == Some(2)) {
+            (Format::U16 | Format::U32, true) => "u32",
+            (Format::I16 | Format::I32, true) => "i32",
+            (Format::U16, false) => "u16",
+            (Format::I16, false) => "i16",
+            (Format::Hex, _) => "hex",
+            (Format::Bin, _) => "bin",
+            (Format::F32, _) => "f32",
+            (Format::Ascii, _) => "ascii",
+            (Format::U32 | Format::I32, false) => unreachable!("32-bit formats are two words wide"),
+        }
+    }
+}
+
+fn unreachable_value(value: TagValue) -> Result<i64, ValueError> {
+    Err(ValueError::Type { ty: "integer", expected: "an integer", got: value.to_string() })
+}
+
+fn radix(v: u32, wide: bool, order: WordOrder) -> Option<Vec<u16>> {
+    match wide {
+        true => codec::encode(TagType::U32, order, TagValue::Int(v as i64)).ok(),
+        false => u16::try_from(v).ok().map(|w| vec![w]),
+    }
+}
+
+fn binary(bytes: &[u8]) -> String {
+    let parts: Vec<String> = bytes.iter().map(|b| format!("{b:08b}")).collect();
+    format!("0b{}", parts.join("_"))
+}
+
+fn ascii(words: &[u16]) -> String {
+    let mut bytes: Vec<u8> = words.iter().flat_map(|w| w.to_be_bytes()).collect();
+    while bytes.last() == Some(&0) {
+        bytes.pop();
+    }
+    bytes.iter().flat_map(|&b| std::ascii::escape_default(b)).map(char::from).collect()
+}
+
+#[cfg(test)]
+#[path = "format_tests.rs"]
+mod tests;
