@@ -12,6 +12,7 @@
 //! - **S7 double words** (`VD4`) are 32-bit items whatever the format: the PLC sends them
 //!   high word first, so `--word-order` does not apply; `u16`/`i16`/`hex`/`bin` widen to 32
 //!   bits.
+//! - A float prints plain from 1e-6 to 1e15 and in exponent form beyond (`-4.9502034e32`).
 //! - A float that is NaN or infinite is shown (`NaN`, `inf`; `null` in JSON), not refused
 //!   as a tag's would be: commissioning is when one finds such values.
 //! - `hex` shows `0x` and four digits per word; `bin` shows bytes split by `_`
@@ -162,7 +163,7 @@ impl View {
             (Format::Hex, true) => Shown::text(format!("0x{:08X}", int(TagType::U32)?)),
             (Format::Bin, true) => Shown::text(binary(&(int(TagType::U32)? as u32).to_be_bytes())),
             (Format::F32, _) => match codec::decode(TagType::F32, order, &words) {
-                Ok(v) => Shown::number(v.to_string(), serde_json::to_value(v).unwrap_or(Json::Null)),
+                Ok(v) => Shown::number(float_text(v), serde_json::to_value(v).unwrap_or(Json::Null)),
                 Err(ValueError::NotFinite(x)) => Shown { text: x.to_string(), json: Json::Null },
                 Err(e) => return Err(e),
             },
@@ -200,12 +201,14 @@ impl View {
             (Format::Hex, _) => {
                 let digits = text.trim().trim_start_matches("0x").trim_start_matches("0X").replace('_', "");
                 let v = u32::from_str_radix(&digits, 16).map_err(|_| bad("hex digits, 0x1234"))?;
-                radix(v, wide, order).ok_or_else(|| bad(if wide { "up to 0xFFFFFFFF" } else { "up to 0xFFFF" }))?
+                radix(v, wide, order)
+                    .ok_or_else(|| bad(if wide { "up to 0xFFFFFFFF" } else { "up to 0xFFFF" }))?
             }
             (Format::Bin, _) => {
                 let digits = text.trim().trim_start_matches("0b").trim_start_matches("0B").replace('_', "");
                 let v = u32::from_str_radix(&digits, 2).map_err(|_| bad("binary digits, 0b0001_0010"))?;
-                radix(v, wide, order).ok_or_else(|| bad(if wide { "up to 32 bits" } else { "up to 16 bits" }))?
+                radix(v, wide, order)
+                    .ok_or_else(|| bad(if wide { "up to 32 bits" } else { "up to 16 bits" }))?
             }
             (Format::F32, _) => {
                 let x: f32 = text.trim().parse().map_err(|_| bad("a number such as 3.14"))?;
@@ -215,9 +218,11 @@ impl View {
                 codec::encode(TagType::F32, order, TagValue::Float(x as f64)).map_err(|e| e.to_string())?
             }
             (Format::Ascii, _) if !text.is_ascii() => return Err(bad("ASCII text")),
-            (Format::Ascii, _) => {
-                text.as_bytes().chunks(2).map(|c| u16::from_be_bytes([c[0], *c.get(1).unwrap_or(&0)])).collect()
-            }
+            (Format::Ascii, _) => text
+                .as_bytes()
+                .chunks(2)
+                .map(|c| u16::from_be_bytes([c[0], *c.get(1).unwrap_or(&0)]))
+                .collect(),
             (Format::U32 | Format::I32, false) => unreachable!("32-bit formats are two words wide"),
         };
         Ok(self.unswap(&words))
@@ -241,6 +246,15 @@ impl View {
 
 fn unreachable_value(value: TagValue) -> Result<i64, ValueError> {
     Err(ValueError::Type { ty: "integer", expected: "an integer", got: value.to_string() })
+}
+
+/// A float as people read it: plain from 1e-6 to 1e15, in exponent form beyond (the f32's
+/// shortest digits: -4.9502034e32, not 33 digits).
+fn float_text(value: TagValue) -> String {
+    match value {
+        TagValue::Float(x) if x != 0.0 && !(1e-6..1e15).contains(&x.abs()) => format!("{:e}", x as f32),
+        other => other.to_string(),
+    }
 }
 
 fn radix(v: u32, wide: bool, order: WordOrder) -> Option<Vec<u16>> {

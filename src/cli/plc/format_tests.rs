@@ -37,6 +37,9 @@ fn floats_in_the_four_orders() {
         assert_eq!(v.show(&words).unwrap().json, serde_json::json!(3.14));
         assert_eq!(v.parse("3.14").unwrap(), words, "{order:?}");
     }
+    assert_eq!(text(view(Format::F32, Order::Abcd), &[0xF5C3, 0x4048]), "-4.9502034e32");
+    assert_eq!(text(view(Format::F32, Order::Abcd), &[0x0000, 0x0001]), "1e-45");
+    assert_eq!(text(view(Format::F32, Order::Abcd), &[0x4996, 0xB438]), "1234567");
     let nan = view(Format::F32, Order::Abcd).show(&[0x7FC0, 0]).unwrap();
     assert_eq!((nan.text.as_str(), nan.json), ("NaN", Json::Null));
     assert!(view(Format::F32, Order::Abcd).parse("inf").is_err());

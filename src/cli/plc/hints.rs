@@ -39,8 +39,10 @@ pub fn explain(error: &PlcError, protocol: Protocol) -> String {
             }
         }
         PlcError::Connection(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {
-            format!("connection refused: nothing listens there ({e}); check the address and port, and that \
-                     the PLC's server or the gateway is on")
+            format!(
+                "connection refused: nothing listens there ({e}); check the address and port, and that \
+                     the PLC's server or the gateway is on"
+            )
         }
         other => other.to_string(),
     }
@@ -87,9 +89,13 @@ pub fn describe(code: &DeviceCode) -> String {
 fn device_hint(code: &DeviceCode) -> &'static str {
     match code {
         DeviceCode::Modbus(e) => match e.0 {
-            1 => "the device does not offer this function for this table (some have no coils or input registers)",
-            2 => "the address is outside the device's map; check the notation too: 4x100 is PDU address 100, \
-                  Modicon 40101",
+            1 => {
+                "the device does not offer this function for this table (some have no coils or input registers)"
+            }
+            2 => {
+                "the address is outside the device's map; check the notation too: 4x100 is PDU address 100, \
+                  Modicon 40101"
+            }
             3 => "check the count (at most 125 registers or 2000 bits per read) and the value",
             0x0A | 0x0B => "the gateway cannot reach the unit: check --unit and the gateway's serial side",
             _ => "",
@@ -103,8 +109,10 @@ fn device_hint(code: &DeviceCode) -> &'static str {
             _ => "",
         },
         DeviceCode::Mewtocol(c) => match c.0 {
-            mewtocol::error_code::BCC_ERROR => "the PLC has a BCC check rackd did not match; try --no-bcc if it \
-                                                is set without one",
+            mewtocol::error_code::BCC_ERROR => {
+                "the PLC has a BCC check rackd did not match; try --no-bcc if it \
+                                                is set without one"
+            }
             mewtocol::error_code::NOT_SUPPORTED => "this PLC does not know the command",
             mewtocol::error_code::PARAMETER_ERROR => "check the address range of this PLC type",
             mewtocol::error_code::MODE_ERROR => "the PLC refuses writes in its current mode (PROG/RUN)",
@@ -114,7 +122,9 @@ fn device_hint(code: &DeviceCode) -> &'static str {
             ppi::ReturnCode::Item(ppi::return_code::OUT_OF_RANGE) => {
                 "the address is beyond this CPU's memory (V memory size differs by CPU)"
             }
-            ppi::ReturnCode::Item(ppi::return_code::ACCESS_DENIED) => "the CPU protects this area (password?)",
+            ppi::ReturnCode::Item(ppi::return_code::ACCESS_DENIED) => {
+                "the CPU protects this area (password?)"
+            }
             _ => "",
         },
     }
@@ -151,7 +161,9 @@ mod tests {
     fn silence_on_a_serial_line_names_unit_baud_parity_and_wiring() {
         for protocol in [Protocol::ModbusRtu, Protocol::Mewtocol, Protocol::Ppi] {
             let text = explain(&timeout(None), protocol);
-            assert!(text.contains("--unit") && text.contains("baud rate and parity") && text.contains("wiring"));
+            assert!(
+                text.contains("--unit") && text.contains("baud rate and parity") && text.contains("wiring")
+            );
         }
         assert!(explain(&timeout(None), Protocol::ModbusTcp).contains("255"));
     }

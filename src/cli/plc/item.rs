@@ -33,16 +33,26 @@ pub struct Target {
 impl Target {
     /// `text` in the protocol's notation, with the display format; refuses a format the
     /// area cannot hold (a word format on bits, a 32-bit one on S7 bytes).
-    pub fn new(protocol: Protocol, text: &str, format: Option<Format>, order: Order) -> anyhow::Result<Target> {
+    pub fn new(
+        protocol: Protocol,
+        text: &str,
+        format: Option<Format>,
+        order: Order,
+    ) -> anyhow::Result<Target> {
         let shape = notation::shape(protocol, text).map_err(|e| anyhow!(hints::explain(&e, protocol)))?;
         let chosen = format.unwrap_or_default();
         let view = match shape.items {
             Items::Bits if format.is_some_and(|f| f != Format::U16) => {
-                bail!("{text} names bits, read as 0 and 1: --format applies to words{}", bits_note(protocol, text))
+                bail!(
+                    "{text} names bits, read as 0 and 1: --format applies to words{}",
+                    bits_note(protocol, text)
+                )
             }
             Items::Bits => None,
             Items::Bytes if !matches!(chosen, Format::U16 | Format::I16 | Format::Hex | Format::Bin) => {
-                bail!("{text} names bytes: read 32-bit values from a double word (VD) and text from words (VW)")
+                bail!(
+                    "{text} names bytes: read 32-bit values from a double word (VD) and text from words (VW)"
+                )
             }
             Items::DoubleWords if chosen == Format::Ascii => {
                 bail!("{text} names double words: read text from words (VW)")
@@ -102,7 +112,10 @@ impl Target {
         let start = &self.shape.address;
         let failed = |e| anyhow!(hints::explain(&e, self.protocol));
         let Some(view) = self.view else {
-            let bits = values.iter().map(|v| parse_bit(v, self.protocol, &self.text)).collect::<Result<Vec<_>, _>>()?;
+            let bits = values
+                .iter()
+                .map(|v| parse_bit(v, self.protocol, &self.text))
+                .collect::<Result<Vec<_>, _>>()?;
             plc.write_bits(start, &bits).await.map_err(failed)?;
             return Ok(bits.into_iter().enumerate().map(|(i, b)| (self.label(i as u32), bit(b))).collect());
         };
@@ -132,7 +145,10 @@ fn parse_bit(text: &str, protocol: Protocol, address: &str) -> anyhow::Result<bo
     match text.to_ascii_lowercase().as_str() {
         "1" | "true" | "on" => Ok(true),
         "0" | "false" | "off" => Ok(false),
-        _ => bail!("bad bit value {text:?}: {address} names bits, written as 0 or 1{}", bits_note(protocol, address)),
+        _ => bail!(
+            "bad bit value {text:?}: {address} names bits, written as 0 or 1{}",
+            bits_note(protocol, address)
+        ),
     }
 }
 
@@ -140,8 +156,10 @@ fn parse_bit(text: &str, protocol: Protocol, address: &str) -> anyhow::Result<bo
 /// like hex sixteen.
 fn bits_note(protocol: Protocol, text: &str) -> String {
     let Ok(address) = modbus::address::parse(text) else { return String::new() };
-    let digits = text.trim().get(2..).filter(|_| text.trim().get(..2).is_some_and(|p| p.eq_ignore_ascii_case("0x")));
-    let (Family::Modbus, Some(Ok(hex))) = (protocol.family(), digits.map(|d| u32::from_str_radix(d, 16))) else {
+    let digits =
+        text.trim().get(2..).filter(|_| text.trim().get(..2).is_some_and(|p| p.eq_ignore_ascii_case("0x")));
+    let (Family::Modbus, Some(Ok(hex))) = (protocol.family(), digits.map(|d| u32::from_str_radix(d, 16)))
+    else {
         return String::new();
     };
     let n = address.index;
@@ -186,10 +204,10 @@ mod tests {
         let dt = target(Protocol::Mewtocol, "DT100", Some(Format::I32)).unwrap();
         assert_eq!(dt.items(&[1, 0]).unwrap()[0].0, "DT100");
         let d = Target::new(Protocol::Mc3e, "D200", Some(Format::Ascii), Order::Cdab).unwrap();
-        assert_eq!(d.items(&[0x4142, 0x4300]).unwrap(), [("D200".into(), super::super::format::Shown {
-            text: "\"ABC\"".into(),
-            json: "ABC".into()
-        })]);
+        assert_eq!(
+            d.items(&[0x4142, 0x4300]).unwrap(),
+            [("D200".into(), super::super::format::Shown { text: "\"ABC\"".into(), json: "ABC".into() })]
+        );
     }
 
     #[test]

@@ -199,7 +199,10 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
             let plc = connect(&args).await?;
             match args.polling() {
                 None => {
-                    let items = target.read(&*plc, *count).await.with_context(|| format!("read {address} x{count} from {peer}"))?;
+                    let items = target
+                        .read(&*plc, *count)
+                        .await
+                        .with_context(|| format!("read {address} x{count} from {peer}"))?;
                     out.once(&items);
                 }
                 Some((every, polls)) => poll::run(&*plc, &target, *count, every, polls, out).await?,
@@ -211,7 +214,8 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
             }
             let target = Target::new(args.protocol, address, args.format, order)?;
             let plc = connect(&args).await?;
-            let items = target.write(&*plc, values).await.with_context(|| format!("write {address} on {peer}"))?;
+            let items =
+                target.write(&*plc, values).await.with_context(|| format!("write {address} on {peer}"))?;
             out.once(&items);
         }
     }
@@ -254,14 +258,33 @@ mod tests {
         let args = parse(&["--protocol", "mc3e", "--address", "127.0.0.1:9", "--length0", "read", "D0"]);
         let err = connect(&args.unwrap()).await.err().unwrap();
         let quirk = err.downcast_ref::<LinkError>();
-        assert!(matches!(quirk, Some(LinkError::Quirk { quirk: Quirk::Length0, protocol: Protocol::Mc3e })), "{err}");
+        assert!(
+            matches!(quirk, Some(LinkError::Quirk { quirk: Quirk::Length0, protocol: Protocol::Mc3e })),
+            "{err}"
+        );
     }
 
     #[test]
     fn options_are_taken_anywhere_on_the_line() {
         let args = parse(&[
-            "--protocol", "modbus-tcp", "--address", "10.0.0.5", "read", "40001", "4", "--json", "-f", "f32",
-            "--word-order", "little", "--interval", "50", "--count", "3", "--unit", "255",
+            "--protocol",
+            "modbus-tcp",
+            "--address",
+            "10.0.0.5",
+            "read",
+            "40001",
+            "4",
+            "--json",
+            "-f",
+            "f32",
+            "--word-order",
+            "little",
+            "--interval",
+            "50",
+            "--count",
+            "3",
+            "--unit",
+            "255",
         ])
         .unwrap();
         assert!(args.json);
@@ -273,7 +296,8 @@ mod tests {
         assert_eq!(ee.unwrap().link().unwrap().unit, 238);
         let once = parse(&["--protocol", "ppi-tcp", "--address", "h:1", "read", "VD4"]).unwrap();
         assert_eq!(once.polling(), None);
-        let counted = parse(&["--protocol", "ppi-tcp", "--address", "h:1", "--count", "2", "read", "VD4"]).unwrap();
+        let counted =
+            parse(&["--protocol", "ppi-tcp", "--address", "h:1", "--count", "2", "read", "VD4"]).unwrap();
         assert_eq!(counted.polling(), Some((Duration::from_millis(1000), Some(2))));
     }
 }

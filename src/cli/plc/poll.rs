@@ -36,7 +36,8 @@ pub struct Output {
 impl Output {
     /// The output for `--json`, with colour only for a person at a terminal.
     pub fn new(json: bool) -> Output {
-        let colour = std::io::stdout().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty());
+        let colour =
+            std::io::stdout().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty());
         Output { json, colour }
     }
 
@@ -53,7 +54,8 @@ impl Output {
     }
 
     fn poll(&self, n: u64, items: &[Item], previous: Option<&[Item]>) {
-        let changed = |i: usize| previous.is_some_and(|p| p.get(i).is_none_or(|(_, v)| v.text != items[i].1.text));
+        let changed =
+            |i: usize| previous.is_some_and(|p| p.get(i).is_none_or(|(_, v)| v.text != items[i].1.text));
         if self.json {
             let items: Vec<_> = (0..items.len())
                 .map(|i| json!({ "address": items[i].0, "value": items[i].1.json, "changed": changed(i) }))

@@ -95,7 +95,8 @@ pub fn parse(text: &str) -> Result<Address, PlcError> {
 }
 
 fn schneider(table: Table, number: &str) -> Option<Address> {
-    let index = number.parse::<u32>().ok().filter(|&i| i <= 0xFFFF && number.bytes().all(|b| b.is_ascii_digit()))?;
+    let index =
+        number.parse::<u32>().ok().filter(|&i| i <= 0xFFFF && number.bytes().all(|b| b.is_ascii_digit()))?;
     Some(Address { area: Area::new(table.area_name()), index })
 }
 
@@ -154,8 +155,24 @@ mod tests {
     #[test]
     fn rejects_bad_text() {
         for text in [
-            "", "4", "4x", "2x10", "4x65536", "4x-1", "4x0x10", "D200", "4x99999999999", "0x1A", "4000", "20001",
-            "40000", "465537", "4000001", "%MW65536", "%MWx", "%IW0",
+            "",
+            "4",
+            "4x",
+            "2x10",
+            "4x65536",
+            "4x-1",
+            "4x0x10",
+            "D200",
+            "4x99999999999",
+            "0x1A",
+            "4000",
+            "20001",
+            "40000",
+            "465537",
+            "4000001",
+            "%MW65536",
+            "%MWx",
+            "%IW0",
         ] {
             assert!(matches!(parse(text), Err(PlcError::BadAddress { .. })), "{text}");
         }
