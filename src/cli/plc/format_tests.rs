@@ -23,6 +23,7 @@ fn words_show_in_every_format() {
 }
 
 #[test]
+#[allow(clippy::approx_constant, reason = "3.14 is the common test vector, not an approximation of pi")]
 fn floats_in_the_four_orders() {
     // 3.14f32 is 0x4048F5C3 (IEEE 754; the byte orders as Modbus Poll names them:
     // ABCD, CDAB, BADC, DCBA).
