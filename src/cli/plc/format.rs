@@ -116,16 +116,70 @@ pub struct View {
     pub double: bool,
 }
 
+/// What a view does with words: the format, widened to 32 bits for S7 double words.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    U16,
+    I16,
+    Hex16,
+    Bin16,
+    U32,
+    I32,
+    Hex32,
+    Bin32,
+    F32,
+    Ascii,
+}
+
+impl Kind {
+    fn width(self) -> Option<u16> {
+        match self {
+            Kind::Ascii => None,
+            Kind::U32 | Kind::I32 | Kind::Hex32 | Kind::Bin32 | Kind::F32 => Some(2),
+            Kind::U16 | Kind::I16 | Kind::Hex16 | Kind::Bin16 => Some(1),
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Kind::U16 => "u16",
+            Kind::I16 => "i16",
+            Kind::Hex16 | Kind::Hex32 => "hex",
+            Kind::Bin16 | Kind::Bin32 => "bin",
+            Kind::U32 => "u32",
+            Kind::I32 => "i32",
+            Kind::F32 => "f32",
+            Kind::Ascii => "ascii",
+        }
+    }
+}
+
 impl View {
+    fn kind(&self) -> Kind {
+        let wide = self.double || matches!(self.format, Format::U32 | Format::I32 | Format::F32);
+        match (self.format, wide) {
+            (Format::U16, false) => Kind::U16,
+            (Format::I16, false) => Kind::I16,
+            (Format::Hex, false) => Kind::Hex16,
+            (Format::Bin, false) => Kind::Bin16,
+            (Format::U16 | Format::U32, _) => Kind::U32,
+            (Format::I16 | Format::I32, _) => Kind::I32,
+            (Format::Hex, true) => Kind::Hex32,
+            (Format::Bin, true) => Kind::Bin32,
+            (Format::F32, _) => Kind::F32,
+            (Format::Ascii, _) => Kind::Ascii,
+        }
+    }
+
     /// Words per item: 2 for 32-bit values and double words, `None` for `ascii`, which takes
     /// every word read as one string.
     pub fn width(&self) -> Option<u16> {
-        match self.format {
-            Format::Ascii => None,
-            Format::U32 | Format::I32 | Format::F32 => Some(2),
-            _ if self.double => Some(2),
-            _ => Some(1),
-        }
+        self.kind().width()
+    }
+
+    /// The format's name, as `--format` writes it (`u32` for a double word read as `u16`).
+    pub fn name(&self) -> &'static str {
+        self.kind().name()
     }
 
     fn order(&self) -> Order {
@@ -140,46 +194,46 @@ impl View {
 
     /// The item `words` hold (one item's words; all of them for `ascii`).
     pub fn show(&self, words: &[u16]) -> Result<Shown, ValueError> {
+        let kind = self.kind();
+        let want = kind.width().unwrap_or(1);
+        let count = || ValueError::WordCount { ty: kind.name(), got: words.len(), want };
+        if words.is_empty() || kind.width().is_some_and(|w| words.len() != w as usize) {
+            return Err(count());
+        }
         let words = self.unswap(words);
         let order = self.order().words();
-        let wide = self.width() == Some(2);
         let int = |ty| match codec::decode(ty, order, &words)? {
             TagValue::Int(v) => Ok(v),
-            other => unreachable_value(other),
+            _ => Err(count()),
         };
-        Ok(match (self.format, wide) {
-            (Format::U16, false) => Shown::number(words[0].to_string(), words[0]),
-            (Format::I16, false) => Shown::number((words[0] as i16).to_string(), words[0] as i16),
-            (Format::Hex, false) => Shown::text(format!("0x{:04X}", words[0])),
-            (Format::Bin, false) => Shown::text(binary(&words[0].to_be_bytes())),
-            (Format::U16 | Format::U32, true) => {
-                let v = int(TagType::U32)?;
+        Ok(match kind {
+            Kind::U16 => Shown::number(words[0].to_string(), words[0]),
+            Kind::I16 => Shown::number((words[0] as i16).to_string(), words[0] as i16),
+            Kind::Hex16 => Shown::text(format!("0x{:04X}", words[0])),
+            Kind::Bin16 => Shown::text(binary(&words[0].to_be_bytes())),
+            Kind::U32 | Kind::I32 => {
+                let v = int(if kind == Kind::U32 { TagType::U32 } else { TagType::I32 })?;
                 Shown::number(v.to_string(), v)
             }
-            (Format::I16 | Format::I32, true) => {
-                let v = int(TagType::I32)?;
-                Shown::number(v.to_string(), v)
-            }
-            (Format::Hex, true) => Shown::text(format!("0x{:08X}", int(TagType::U32)?)),
-            (Format::Bin, true) => Shown::text(binary(&(int(TagType::U32)? as u32).to_be_bytes())),
-            (Format::F32, _) => match codec::decode(TagType::F32, order, &words) {
+            Kind::Hex32 => Shown::text(format!("0x{:08X}", int(TagType::U32)?)),
+            Kind::Bin32 => Shown::text(binary(&(int(TagType::U32)? as u32).to_be_bytes())),
+            Kind::F32 => match codec::decode(TagType::F32, order, &words) {
                 Ok(v) => Shown::number(float_text(v), serde_json::to_value(v).unwrap_or(Json::Null)),
                 Err(ValueError::NotFinite(x)) => Shown { text: x.to_string(), json: Json::Null },
                 Err(e) => return Err(e),
             },
-            (Format::Ascii, _) => {
+            Kind::Ascii => {
                 let text = ascii(&words);
                 Shown { text: format!("\"{text}\""), json: Json::String(text) }
             }
-            (Format::U32 | Format::I32, false) => unreachable!("32-bit formats are two words wide"),
         })
     }
 
     /// The words of one value to write, in the format.
     pub fn parse(&self, text: &str) -> Result<Vec<u16>, String> {
+        let kind = self.kind();
         let order = self.order().words();
-        let wide = self.width() == Some(2);
-        let bad = |expected: &str| format!("bad {} value {text:?}: expected {expected}", self.name());
+        let bad = |expected: &str| format!("bad {} value {text:?}: expected {expected}", kind.name());
         let int = |ty: TagType| -> Result<Vec<u16>, String> {
             let (min, max) = ty.range().map(|(a, b)| (a as i64, b as i64)).unwrap_or_default();
             // Unsigned types also take the signed spelling of the same bits (-1 is 0xFFFF).
@@ -193,59 +247,41 @@ impl View {
             let value = if v < 0 && min == 0 { v + max + 1 } else { v };
             codec::encode(ty, order, TagValue::Int(value)).map_err(|e| e.to_string())
         };
-        let words = match (self.format, wide) {
-            (Format::U16, false) => int(TagType::U16)?,
-            (Format::I16, false) => int(TagType::I16)?,
-            (Format::U16 | Format::U32, true) => int(TagType::U32)?,
-            (Format::I16 | Format::I32, true) => int(TagType::I32)?,
-            (Format::Hex, _) => {
-                let digits = text.trim().trim_start_matches("0x").trim_start_matches("0X").replace('_', "");
-                let v = u32::from_str_radix(&digits, 16).map_err(|_| bad("hex digits, 0x1234"))?;
-                radix(v, wide, order)
-                    .ok_or_else(|| bad(if wide { "up to 0xFFFFFFFF" } else { "up to 0xFFFF" }))?
+        let radix = |prefix: [&str; 2], base: u32, example: &str| -> Result<Vec<u16>, String> {
+            let t = text.trim();
+            let digits = t.strip_prefix(prefix[0]).or_else(|| t.strip_prefix(prefix[1])).unwrap_or(t);
+            let v = u32::from_str_radix(&digits.replace('_', ""), base).map_err(|_| bad(example))?;
+            let too_big = || bad(&format!("{example}, at most {} bits", 16 * kind.width().unwrap_or(1)));
+            match kind.width() {
+                Some(2) => {
+                    codec::encode(TagType::U32, order, TagValue::Int(v as i64)).map_err(|e| e.to_string())
+                }
+                _ => u16::try_from(v).map(|w| vec![w]).map_err(|_| too_big()),
             }
-            (Format::Bin, _) => {
-                let digits = text.trim().trim_start_matches("0b").trim_start_matches("0B").replace('_', "");
-                let v = u32::from_str_radix(&digits, 2).map_err(|_| bad("binary digits, 0b0001_0010"))?;
-                radix(v, wide, order)
-                    .ok_or_else(|| bad(if wide { "up to 32 bits" } else { "up to 16 bits" }))?
-            }
-            (Format::F32, _) => {
+        };
+        let words = match kind {
+            Kind::U16 => int(TagType::U16)?,
+            Kind::I16 => int(TagType::I16)?,
+            Kind::U32 => int(TagType::U32)?,
+            Kind::I32 => int(TagType::I32)?,
+            Kind::Hex16 | Kind::Hex32 => radix(["0x", "0X"], 16, "hex digits, 0x1234")?,
+            Kind::Bin16 | Kind::Bin32 => radix(["0b", "0B"], 2, "binary digits, 0b0001_0010")?,
+            Kind::F32 => {
                 let x: f32 = text.trim().parse().map_err(|_| bad("a number such as 3.14"))?;
                 if !x.is_finite() {
                     return Err(bad("a finite number"));
                 }
                 codec::encode(TagType::F32, order, TagValue::Float(x as f64)).map_err(|e| e.to_string())?
             }
-            (Format::Ascii, _) if !text.is_ascii() => return Err(bad("ASCII text")),
-            (Format::Ascii, _) => text
+            Kind::Ascii if !text.is_ascii() => return Err(bad("ASCII text")),
+            Kind::Ascii => text
                 .as_bytes()
                 .chunks(2)
                 .map(|c| u16::from_be_bytes([c[0], *c.get(1).unwrap_or(&0)]))
                 .collect(),
-            (Format::U32 | Format::I32, false) => unreachable!("32-bit formats are two words wide"),
         };
         Ok(self.unswap(&words))
     }
-
-    /// The format's name, as `--format` writes it (`u32` for a double word read as `u16`).
-    pub fn name(&self) -> &'static str {
-        match (self.format, self.width() == Some(2)) {
-            (Format::U16 | Format::U32, true) => "u32",
-            (Format::I16 | Format::I32, true) => "i32",
-            (Format::U16, false) => "u16",
-            (Format::I16, false) => "i16",
-            (Format::Hex, _) => "hex",
-            (Format::Bin, _) => "bin",
-            (Format::F32, _) => "f32",
-            (Format::Ascii, _) => "ascii",
-            (Format::U32 | Format::I32, false) => unreachable!("32-bit formats are two words wide"),
-        }
-    }
-}
-
-fn unreachable_value(value: TagValue) -> Result<i64, ValueError> {
-    Err(ValueError::Type { ty: "integer", expected: "an integer", got: value.to_string() })
 }
 
 /// A float as people read it: plain from 1e-6 to 1e15, in exponent form beyond (the f32's
@@ -254,13 +290,6 @@ fn float_text(value: TagValue) -> String {
     match value {
         TagValue::Float(x) if x != 0.0 && !(1e-6..1e15).contains(&x.abs()) => format!("{:e}", x as f32),
         other => other.to_string(),
-    }
-}
-
-fn radix(v: u32, wide: bool, order: WordOrder) -> Option<Vec<u16>> {
-    match wide {
-        true => codec::encode(TagType::U32, order, TagValue::Int(v as i64)).ok(),
-        false => u16::try_from(v).ok().map(|w| vec![w]),
     }
 }
 

@@ -71,6 +71,16 @@ fn values_to_write_take_the_format_and_its_range() {
         assert!(err.starts_with(&format!("bad {} value", abcd(f).name())), "{err}");
     }
     assert!(abcd(Format::U16).parse("65536").unwrap_err().contains("0..=65535 or -32768..=-1"));
+    assert!(abcd(Format::Hex).parse("0x10000").unwrap_err().contains("at most 16 bits"));
+    let vd = View { format: Format::Hex, order: Order::Abcd, double: true };
+    assert_eq!(vd.parse("0x12345678").unwrap(), [0x1234, 0x5678]);
+}
+
+#[test]
+fn too_few_words_are_an_error_not_a_panic() {
+    assert!(view(Format::U16, Order::Abcd).show(&[]).is_err());
+    assert!(view(Format::F32, Order::Abcd).show(&[1]).is_err());
+    assert!(view(Format::Ascii, Order::Abcd).show(&[]).is_err());
 }
 
 #[test]

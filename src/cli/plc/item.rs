@@ -206,7 +206,7 @@ mod tests {
         let d = Target::new(Protocol::Mc3e, "D200", Some(Format::Ascii), Order::Cdab).unwrap();
         assert_eq!(
             d.items(&[0x4142, 0x4300]).unwrap(),
-            [("D200".into(), super::super::format::Shown { text: "\"ABC\"".into(), json: "ABC".into() })]
+            [("D200".into(), Shown { text: "\"ABC\"".into(), json: "ABC".into() })]
         );
     }
 
