@@ -94,3 +94,19 @@ fn errors_say_which_flag_to_try() {
     let (ok, _, err) = plc("modbus-tcp", &refusing.address, &["read", "40001"]);
     assert!(!ok && err.contains("exception 02 \"illegal data address\": ") && err.contains("40101"), "{err}");
 }
+
+#[tokio::test]
+async fn silence_on_a_serial_line_names_unit_baud_parity_and_wiring() {
+    use tokio_serial::SerialPort;
+    // A pty pair whose far end never answers: a PLC that is not there, or set differently.
+    let (_far, near) = tokio_serial::SerialStream::pair().expect("pty pair");
+    let path = near.name().expect("the pty's device path");
+    drop(near);
+    let args = ["--timeout-ms", "100", "--retries", "0", "read", "4x0"];
+    let (ok, _, err) = tokio::task::spawn_blocking(move || plc("modbus-rtu", &path, &args)).await.unwrap();
+    assert!(!ok && err.contains("timeout"), "{err}");
+    assert!(
+        err.contains("check the unit (--unit), the baud rate and parity (--serial), and the wiring"),
+        "{err}"
+    );
+}

@@ -192,7 +192,8 @@ pub async fn connect(args: &PlcArgs) -> anyhow::Result<Arc<dyn PlcMemory>> {
 pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
     let order = args.word_order.unwrap_or_else(|| Order::of(native_order(args.protocol)));
     let out = Output::new(args.json);
-    let peer = format!("{} {}", args.protocol, args.address);
+    let at = flags::address(args.protocol, &args.address).unwrap_or_else(|_| args.address.clone());
+    let peer = format!("{} {at}", args.protocol);
     match &args.op {
         PlcOp::Read { address, count } => {
             let target = Target::new(args.protocol, address, args.format, order)?;
