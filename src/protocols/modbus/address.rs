@@ -61,10 +61,6 @@ impl Table {
     }
 }
 
-/// What a parse error adds to its reason: the notations, so the fix is in the message.
-pub const NOTATIONS: &str = "4x100 (area notation, PDU address), 40101 (Modicon reference, 1-based) \
-                             or %MW100";
-
 /// Parses any of the module's notations (case-insensitive): `4x4000`, `40001`, `%MW100`.
 pub fn parse(text: &str) -> Result<Address, PlcError> {
     let bad = |reason| PlcError::BadAddress { text: text.to_string(), reason };
