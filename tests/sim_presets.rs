@@ -48,6 +48,7 @@ async fn start(protocol: Protocol) -> Bench {
                 listen: "127.0.0.1:0".parse().unwrap(),
                 transport: sim_mc3e::SimTransport::Tcp,
                 faults: FaultArgs::default(),
+                cpu: Default::default(),
                 bench: bench_args("mc3e.json"),
             };
             let r = sim_mc3e::start(&args).await.unwrap();

@@ -247,8 +247,9 @@ async fn the_simulator_command_answers_mc4e_and_its_configured_type_name() {
             transport,
             faults: FaultArgs::default(),
             cpu: CpuArgs { model: "R04CPU".into(), code: 0x4800 },
+            bench: Default::default(),
         };
-        let sim = sim_mc3e::start(&args).await.unwrap();
+        let sim = sim_mc3e::start(&args).await.unwrap().server;
         let mut link = LinkConfig::new(protocol, sim.local_addr().to_string());
         (link.timeout, link.retries) = (Duration::from_secs(1), 0);
         let plc = rackd::protocols::link::connect(&link).await.unwrap();
@@ -264,6 +265,7 @@ async fn the_simulator_command_answers_mc4e_and_its_configured_type_name() {
         transport: SimTransport::Tcp,
         faults: FaultArgs::default(),
         cpu: CpuArgs { model: "A-MODEL-NAME-TOO-LONG".into(), code: 1 },
+        bench: Default::default(),
     };
     assert!(sim_mc3e::start(&bad).await.is_err());
 }

@@ -15,6 +15,7 @@
 use anyhow::bail;
 
 use crate::protocols::Protocol;
+use crate::protocols::protocol::Family;
 
 /// MEWTOCOL's global station, as a unit number.
 pub const GLOBAL_STATION: u8 = 0xEE;
@@ -57,7 +58,7 @@ pub fn address(protocol: Protocol, address: &str) -> anyhow::Result<String> {
     };
     match default_port(protocol) {
         Some(port) => Ok(format!("{host}:{port}")),
-        None if matches!(protocol, Protocol::Mc3e | Protocol::Mc3eUdp) => bail!(
+        None if protocol.family() == Family::Mc3e => bail!(
             "--address {address} names no port, and MC protocol has none of its own: give the port set in \
              the module's open settings, e.g. {host}:5000"
         ),

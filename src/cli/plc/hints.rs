@@ -63,7 +63,7 @@ fn silence_hint(protocol: Protocol) -> &'static str {
             "check the address and port, the unit (--unit: many TCP devices answer only 1, 255 or 0) \
              and, over UDP, that the device speaks Modbus UDP at all"
         }
-        Protocol::Mc3e | Protocol::Mc3eUdp => {
+        Protocol::Mc3e | Protocol::Mc3eUdp | Protocol::Mc4e | Protocol::Mc4eUdp => {
             "check the port and the transport against the module's open settings (TCP or UDP, \
              binary code), and that the port is open for MC protocol"
         }

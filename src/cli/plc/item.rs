@@ -12,10 +12,10 @@ use anyhow::{Context, anyhow, bail};
 
 use super::format::{Format, Order, Shown, View};
 use super::hints;
-use crate::protocols::mc3e::Device;
+
 use crate::protocols::notation::{self, Items, Shape};
 use crate::protocols::protocol::Family;
-use crate::protocols::{Address, PlcMemory, Protocol, mewtocol, modbus, ppi};
+use crate::protocols::{Address, PlcMemory, Protocol, mc3e, mewtocol, modbus, ppi};
 
 /// One line of output: the item's address and its value.
 pub type Item = (String, Shown);
@@ -174,8 +174,7 @@ fn bits_note(protocol: Protocol, text: &str) -> String {
 pub fn format_address(protocol: Protocol, address: &Address) -> String {
     match protocol.family() {
         Family::Modbus => modbus::address::format(address),
-        Family::Mc3e => Device::of_area(&address.area)
-            .map_or_else(|_| format!("{}{}", address.area, address.index), |d| d.format(address.index)),
+        Family::Mc3e => mc3e::address::format_address(address),
         Family::Mewtocol => mewtocol::address::format(address),
         Family::Ppi => ppi::address::format(address),
     }
