@@ -12,6 +12,8 @@ use tokio::net::UdpSocket;
 
 #[path = "modbus/paused.rs"]
 mod paused;
+#[path = "modbus/units.rs"]
+mod units;
 
 async fn serve(transport: Transport, options: ServerOptions) -> (ServerHandle, Bank, String) {
     let bank = Bank::new();
@@ -297,9 +299,9 @@ async fn timeouts_count_every_attempt() {
 }
 
 #[tokio::test]
-async fn broadcasts_are_written_without_awaiting_a_reply() {
-    let (server, bank, address) = serve(Transport::Udp, ServerOptions::default()).await;
-    let mut c = config(Transport::Udp, &address, 100, 0);
+async fn rtu_broadcasts_are_written_without_awaiting_a_reply() {
+    let (server, bank, address) = serve(Transport::RtuOverTcp, ServerOptions::default()).await;
+    let mut c = config(Transport::RtuOverTcp, &address, 100, 0);
     c.unit = 0;
     let plc = ModbusClient::connect(c).await.unwrap();
     plc.write_words(&plc.parse_address("4x5").unwrap(), &[5, 6]).await.unwrap();

@@ -41,7 +41,8 @@ pub struct SimModbusArgs {
     /// Transport.
     #[arg(long, value_enum, default_value = "udp")]
     pub transport: SimTransport,
-    /// Unit id answered.
+    /// Unit id answered. Over TCP and UDP any of 0..=255, and units 0 and 255 are answered
+    /// too (they address the device itself); over RTU a station 1..=247.
     #[arg(long, default_value_t = 1)]
     pub unit: u8,
     /// Device quirks to imitate (repeatable).
@@ -57,6 +58,10 @@ pub struct SimModbusArgs {
 
 /// Runs the simulator until Ctrl-C.
 pub async fn run(args: SimModbusArgs) -> anyhow::Result<()> {
+    let rtu = matches!(args.transport, SimTransport::Rtu | SimTransport::RtuOverTcp);
+    if rtu && !(1..=247).contains(&args.unit) {
+        anyhow::bail!("--unit {}: an RTU station is 1..=247 (0 is the broadcast address)", args.unit);
+    }
     let faults = args.faults.faults::<Exception>()?;
     let options = ServerOptions {
         unit: args.unit,

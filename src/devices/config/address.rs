@@ -11,8 +11,9 @@
 //!   the protocol's `-tcp` form, the usual mix-up with a serial-to-Ethernet gateway.
 //! - **Units** follow the protocol documents: Modbus RTU (also over TCP, where a gateway
 //!   puts the frame on an RS-485 bus) 1..=247, as 0 is the broadcast that no station
-//!   answers; Modbus TCP and UDP 0..=247, since there the unit 0 addresses the TCP device
-//!   itself (Modbus Messaging on TCP/IP Implementation Guide) rather than a bus; MEWTOCOL
+//!   answers; Modbus TCP and UDP 0..=255, since there the unit id addresses the TCP device
+//!   itself (Modbus Messaging on TCP/IP Implementation Guide: 0xFF, or 0) or a station
+//!   behind a gateway, rather than a bus, and unit 0 is answered; MEWTOCOL
 //!   stations 1..=99 (two decimal digits); PPI addresses 1..=126 (0 is rackd, the master;
 //!   127 is the broadcast). An MC 3E frame addresses the PLC by network 0, PC FF, station
 //!   0 and carries no unit, so an MC entry's `unit` must stay at its default 1 (a value
@@ -111,7 +112,7 @@ pub fn check_address(protocol: Protocol, address: &str) -> Result<(), AddressErr
 pub fn check_unit(protocol: Protocol, unit: i64) -> Result<u8, AddressError> {
     let range: (i64, i64, &'static str) = match (protocol.family(), protocol) {
         (Family::Modbus, Protocol::ModbusTcp | Protocol::ModbusUdp) => {
-            (0, 247, "0..=247 (0 addresses the TCP device itself)")
+            (0, 255, "0..=255 (255 or 0 address the TCP device itself)")
         }
         (Family::Modbus, _) => (1, 247, "1..=247 (0 is the broadcast, which no station answers)"),
         (Family::Mewtocol, _) => (1, 99, "1..=99"),
@@ -163,8 +164,10 @@ mod tests {
         assert_eq!(check_unit(Protocol::ModbusRtu, 247), Ok(247));
         assert!(check_unit(Protocol::ModbusRtu, 0).unwrap_err().to_string().contains("broadcast"));
         assert_eq!(check_unit(Protocol::ModbusTcp, 0), Ok(0));
+        assert_eq!(check_unit(Protocol::ModbusTcp, 255), Ok(255));
+        assert!(check_unit(Protocol::ModbusRtuTcp, 248).is_err());
         let err = check_unit(Protocol::ModbusUdp, 300).unwrap_err().to_string();
-        assert_eq!(err, "unit 300 is not a modbus-udp station: 0..=247 (0 addresses the TCP device itself)");
+        assert_eq!(err, "unit 300 is not a modbus-udp station: 0..=255 (255 or 0 address the TCP device itself)");
         assert!(check_unit(Protocol::Mewtocol, 100).is_err() && check_unit(Protocol::Mewtocol, 99).is_ok());
         assert!(check_unit(Protocol::Ppi, 0).is_err() && check_unit(Protocol::PpiTcp, 126).is_ok());
         assert!(check_unit(Protocol::Ppi, 127).is_err() && check_unit(Protocol::Ppi, -1).is_err());

@@ -40,7 +40,7 @@ impl ModbusClient {
     /// serial port is opened on the first request (and reopened after it is lost), so a
     /// device that is down when the client is built does not fail construction.
     pub async fn connect(config: ModbusConfig) -> Result<Self, PlcError> {
-        check_unit(config.unit)?;
+        config.transport.check_unit(config.unit).map_err(PlcError::OutOfRange)?;
         let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
         let counters = Arc::new(Counters::new(LinkHealth::new(policy)));
         let link = match config.transport {
@@ -66,12 +66,16 @@ impl ModbusClient {
     }
 
     /// An RTU client over a stream the caller already opened (a pty in tests, a port
-    /// opened with special settings). The stream cannot be reopened if it fails.
+    /// opened with special settings). The stream cannot be reopened if it fails. It carries
+    /// RTU frames whatever `config.transport` says (an MBAP transport is taken as RTU).
     pub fn rtu_over_stream(
-        config: ModbusConfig,
+        mut config: ModbusConfig,
         stream: impl ByteStream + 'static,
     ) -> Result<Self, PlcError> {
-        check_unit(config.unit)?;
+        if config.transport.is_mbap() {
+            config.transport = Transport::RtuSerial;
+        }
+        config.transport.check_unit(config.unit).map_err(PlcError::OutOfRange)?;
         let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
         let counters = Arc::new(Counters::new(LinkHealth::new(policy)));
         let link = StreamLink::new(Endpoint::given(stream), Backoff::default());
@@ -101,7 +105,8 @@ impl ModbusClient {
     /// Sends one request (within the per-function limits) to the configured unit under the
     /// retry policy ([`RetryPolicy`]): exception replies are returned at once as
     /// [`PlcError::Device`]; timeouts, lost connections and malformed replies are retried.
-    /// A write to unit 0 is broadcast: nothing is awaited and the expected echo is returned.
+    /// Over RTU a write to unit 0 is broadcast: nothing is awaited and the expected echo is
+    /// returned. Over TCP and UDP unit 0 addresses the device itself and is answered.
     pub async fn call(&self, request: &Request) -> Result<Response, PlcError> {
         request.check().map_err(PlcError::OutOfRange)?;
         let unit = self.config.unit;
@@ -110,7 +115,7 @@ impl ModbusClient {
         Counters::bump(&self.counters.requests);
         let mut link = self.link.lock().await;
         let ex = Exchange { unit, request, pdu: &pdu_bytes };
-        if unit == 0 {
+        if unit == 0 && !self.config.transport.is_mbap() {
             if !request.is_write() {
                 return Err(PlcError::OutOfRange("unit 0 (broadcast) is for writes only"));
             }
@@ -142,13 +147,6 @@ impl ModbusClient {
         let request = Request::Diagnostics { sub_function: pdu::DIAG_RETURN_QUERY_DATA, data };
         self.call(&request).await.map(|_| ())
     }
-}
-
-fn check_unit(unit: u8) -> Result<(), PlcError> {
-    if unit > 247 {
-        return Err(PlcError::OutOfRange("unit must be 0 (broadcast) or 1..247"));
-    }
-    Ok(())
 }
 
 /// The reply a device would have sent to a write; used for broadcasts, which get none.

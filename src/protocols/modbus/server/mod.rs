@@ -21,6 +21,16 @@
 //!
 //! The bank is shared: whoever holds a [`Bank`] clone sees and changes what clients see. To
 //! observe or veto requests, pass your own [`Handler`] that delegates to the bank.
+//!
+//! # Units
+//!
+//! Over RTU (serial or over TCP) the server is one station on a bus: it answers its own
+//! unit, performs writes broadcast to unit 0 without replying, and ignores other units.
+//! Over TCP and UDP (MBAP) the unit id addresses the device itself, so the server answers
+//! its own unit (any of 0..=255) and also 0 and 255 as "this device": the Modbus Messaging
+//! on TCP/IP Implementation Guide has a TCP device use 0xFF when the unit id is useless and
+//! accept 0 for direct communication. A reply carries the request's unit id. Other units
+//! are ignored, as a gateway with no station behind them would time out.
 
 mod bank;
 mod handler;
@@ -43,8 +53,9 @@ use crate::protocols::transport::ByteStream;
 /// How a server presents itself.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ServerOptions {
-    /// The unit id it answers (requests to other units are ignored; unit 0 broadcasts are
-    /// performed without reply).
+    /// The unit id it answers. Requests to other units are ignored, except: over RTU unit 0
+    /// broadcasts (writes are performed without reply); over TCP and UDP units 0 and 255
+    /// address this device and are answered (see the module documentation).
     pub unit: u8,
     /// Answer with an MBAP length field of 0, like the shelf PLC.
     pub length0: bool,
@@ -93,13 +104,23 @@ pub(crate) struct Outcome {
     pub plan: Plan,
 }
 
+/// How the framing a request came in addresses the server.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Addressing {
+    /// MBAP (TCP, UDP): units 0 and 255 also mean this device; no broadcast.
+    Mbap,
+    /// RTU: a station on a bus; unit 0 broadcasts.
+    Rtu,
+}
+
 impl Shared {
     /// Handles one request PDU sent to `unit`; `None` if no reply is due (another unit, a
     /// broadcast, a dropped request, a frame too short to answer).
-    pub fn process(&self, unit: u8, pdu: &[u8]) -> Option<Outcome> {
+    pub fn process(&self, unit: u8, pdu: &[u8], addressing: Addressing) -> Option<Outcome> {
         self.requests.fetch_add(1, Ordering::Relaxed);
-        let broadcast = unit == 0;
-        if unit != self.options.unit && !broadcast {
+        let broadcast = unit == 0 && addressing == Addressing::Rtu;
+        let this_device = unit == self.options.unit || (addressing == Addressing::Mbap && matches!(unit, 0 | 255));
+        if !this_device && !broadcast {
             return None;
         }
         let plan = self.faults.plan();
