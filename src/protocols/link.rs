@@ -17,7 +17,8 @@
 //!   device with `timeout_ms` below the default floor simply gets a fixed timeout).
 //!   Shares outside 0..=1, a `degraded_below` above `degraded_above` or an empty window
 //!   are refused by [`LinkConfig::check`].
-//! - **Unit** ranges are the protocols' own: MEWTOCOL stations 1..=99, PPI addresses
+//! - **Unit** ranges are the protocols' own: MEWTOCOL stations 1..=99, or 238 (0xEE) for
+//!   the global station `EE` that the one PLC on a line answers whatever its number; PPI addresses
 //!   1..=126 (0 is rackd's own master address). Modbus RTU (serial or over TCP) units
 //!   0..=247: 0 broadcasts a write (no reply; `rackd plc` allows it), 248..=255 are
 //!   reserved. Modbus TCP and UDP units 0..=255: the unit id addresses the device itself
@@ -31,6 +32,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use super::mc3e::{Mc3eClient, Mc3eConfig, TransportKind};
+use super::mewtocol::frame::GLOBAL_STATION;
 use super::mewtocol::{MewtocolClient, MewtocolConfig, MewtocolTransport};
 use super::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use super::ppi::{PpiClient, PpiConfig, PpiTransport};
@@ -141,7 +143,9 @@ impl LinkConfig {
         }
         let unit = |range| Err(LinkError::Unit { unit: self.unit, protocol: self.protocol, range });
         match self.protocol.family() {
-            Family::Mewtocol if !(1..=99).contains(&self.unit) => unit("1..=99"),
+            Family::Mewtocol if !(1..=99).contains(&self.unit) && self.unit != GLOBAL_STATION => {
+                unit("1..=99, or 238 for EE, the global station")
+            }
             Family::Ppi if !(1..=126).contains(&self.unit) => unit("1..=126 (0 is rackd's own address)"),
             Family::Modbus if self.modbus().transport.check_unit(self.unit).is_err() => {
                 unit("1..=247, or 0 to broadcast a write (248..=255 are reserved on RTU)")
@@ -255,6 +259,8 @@ mod tests {
         assert!(matches!(err, LinkError::Quirk { quirk: Quirk::Length0, protocol: Protocol::PpiTcp }));
         assert!(err.to_string().contains("no-pdu-ref"), "{err}");
         assert!(link(Protocol::Mewtocol, 1, &[]).check().is_ok());
+        assert!(link(Protocol::MewtocolTcp, 238, &[]).check().is_ok(), "EE, the global station");
+        assert!(link(Protocol::Mewtocol, 100, &[]).check().is_err());
         let mut serial = link(Protocol::Ppi, 2, &[]);
         serial.serial = Some("187500,8E1".parse().unwrap());
         assert_eq!(serial.ppi().serial.baud, 187_500);
