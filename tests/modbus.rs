@@ -10,6 +10,8 @@ use rackd::protocols::modbus::{Exception, ModbusClient, ModbusConfig, Quirks, Re
 use rackd::protocols::{DeviceCode, DropReason, Dropped, PlcError, PlcMemory};
 use tokio::net::UdpSocket;
 
+#[path = "modbus/device_id.rs"]
+mod device_id;
 #[path = "modbus/paused.rs"]
 mod paused;
 #[path = "modbus/units.rs"]
@@ -168,10 +170,11 @@ async fn the_server_answers_unknown_functions_with_exception_01() {
     let (_server, _bank, address) = serve(Transport::Udp, ServerOptions::default()).await;
     let socket = UdpSocket::bind("127.0.0.1:0").await.unwrap();
     socket.connect(&address).await.unwrap();
-    socket.send(&[0, 9, 0, 0, 0, 2, 1, 0x2B]).await.unwrap();
+    // 0x11, report server id, which the server does not implement.
+    socket.send(&[0, 9, 0, 0, 0, 2, 1, 0x11]).await.unwrap();
     let mut buf = [0u8; 64];
     let n = tokio::time::timeout(Duration::from_secs(2), socket.recv(&mut buf)).await.unwrap().unwrap();
-    assert_eq!(&buf[..n], &[0, 9, 0, 0, 0, 3, 1, 0xAB, 0x01]);
+    assert_eq!(&buf[..n], &[0, 9, 0, 0, 0, 3, 1, 0x91, 0x01]);
 }
 
 #[tokio::test]

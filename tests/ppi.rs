@@ -323,7 +323,8 @@ async fn setup_communication_is_answered_before_reads() {
     let granted = "68 17 17 68 00 02 08 32 03 00 00 00 01 00 08 00 00 00 00 F0 00 00 01 00 01 00 F0 2A 16";
     assert_eq!(exchange(&mut master, setup, 29).await, hex(granted));
     // Read VB0..VB1 (PDU reference 1), as in the OpcBridge fixture of libnodave's read.
-    let read = "68 1B 1B 68 02 00 6C 32 01 00 00 00 01 00 0E 00 00 04 01 12 0A 10 02 00 02 00 01 84 00 00 00 6A 16";
+    let read =
+        "68 1B 1B 68 02 00 6C 32 01 00 00 00 01 00 0E 00 00 04 01 12 0A 10 02 00 02 00 01 84 00 00 00 6A 16";
     let data = "68 17 17 68 00 02 08 32 03 00 00 00 01 00 02 00 06 00 00 04 01 FF 04 00 10 12 34 A6 16";
     assert_eq!(exchange(&mut master, read, 29).await, hex(data));
 }

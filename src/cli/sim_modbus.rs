@@ -68,6 +68,7 @@ pub async fn run(args: SimModbusArgs) -> anyhow::Result<()> {
         length0: args.quirk.contains(&SimQuirk::Length0),
         zero_transaction_id: args.quirk.contains(&SimQuirk::ZeroTid),
         faults,
+        ..ServerOptions::default()
     };
     let server = ModbusServer::new(Arc::new(Bank::new()), options);
     let listen = args.listen.as_str();

@@ -170,7 +170,10 @@ mod tests {
         assert_eq!(check_unit(Protocol::ModbusTcp, 255), Ok(255));
         assert!(check_unit(Protocol::ModbusRtuTcp, 248).is_err());
         let err = check_unit(Protocol::ModbusUdp, 300).unwrap_err().to_string();
-        assert_eq!(err, "unit 300 is not a modbus-udp station: 0..=255 (255 or 0 address the TCP device itself)");
+        assert_eq!(
+            err,
+            "unit 300 is not a modbus-udp station: 0..=255 (255 or 0 address the TCP device itself)"
+        );
         assert!(check_unit(Protocol::Mewtocol, 100).is_err() && check_unit(Protocol::Mewtocol, 99).is_ok());
         assert_eq!(check_unit(Protocol::MewtocolTcp, 238), Ok(238));
         assert!(check_unit(Protocol::Ppi, 238).is_err() && check_unit(Protocol::Mewtocol, 237).is_err());

@@ -6,6 +6,7 @@ use std::sync::atomic::Ordering;
 use tokio::sync::Mutex;
 
 use super::config::{ModbusConfig, Transport};
+use super::device_id::{DeviceIdPage, DeviceObject, ReadDeviceIdCode};
 use super::link::{Counters, Exchange, Link, RtuLink, TcpLink, UdpLink};
 use super::pdu::{self, Request, Response};
 use super::rtu;
@@ -140,6 +141,50 @@ impl ModbusClient {
         Err(retry.spent())
     }
 
+    /// Reads the device identification objects of `category` (basic, regular or extended
+    /// stream access), following "more follows" and the next object id across as many
+    /// requests as the device needs. With [`ReadDeviceIdCode::Individual`] it reads object
+    /// 0 alone; see [`ModbusClient::read_device_object`] for any other. A device that does
+    /// not implement function 43 answers exception 01, surfaced as [`PlcError::Device`].
+    pub async fn read_device_identification(
+        &self,
+        category: ReadDeviceIdCode,
+    ) -> Result<Vec<DeviceObject>, PlcError> {
+        let mut objects = Vec::new();
+        let mut from = 0u8;
+        // Each page must move forward, so 256 requests read every possible object.
+        for _ in 0..256 {
+            let request = Request::ReadDeviceId { code: category, object_id: from };
+            let Response::ReadDeviceId(page) = self.call(&request).await? else {
+                return Err(PlcError::Malformed("not a device identification reply"));
+            };
+            objects.extend(page.objects);
+            match page.next {
+                None => return Ok(objects),
+                Some(next) if next > from => from = next,
+                Some(_) => {
+                    return Err(PlcError::Malformed(
+                        "device identification: next object id does not advance",
+                    ));
+                }
+            }
+        }
+        Err(PlcError::Malformed("device identification: more than 256 pages"))
+    }
+
+    /// Reads one device identification object (individual access, code 04). A device
+    /// without that object answers exception 02, surfaced as [`PlcError::Device`].
+    pub async fn read_device_object(&self, id: u8) -> Result<DeviceObject, PlcError> {
+        let request = Request::ReadDeviceId { code: ReadDeviceIdCode::Individual, object_id: id };
+        let Response::ReadDeviceId(page) = self.call(&request).await? else {
+            return Err(PlcError::Malformed("not a device identification reply"));
+        };
+        match <[DeviceObject; 1]>::try_from(page.objects) {
+            Ok([object]) if object.id == id => Ok(object),
+            _ => Err(PlcError::Malformed("device identification: not the one object asked for")),
+        }
+    }
+
     /// A link check: diagnostics 08 sub-function 0000 (return query data), which the
     /// device must echo.
     pub async fn link_check(&self) -> Result<(), PlcError> {
@@ -168,6 +213,12 @@ fn echo_of(request: &Request) -> Response {
             Response::Diagnostics { sub_function: *sub_function, data: *data }
         }
         // Reads are refused before broadcasting; an empty answer keeps this total.
+        Request::ReadDeviceId { code, .. } => Response::ReadDeviceId(DeviceIdPage {
+            code: *code,
+            conformity: 0,
+            next: None,
+            objects: Vec::new(),
+        }),
         Request::ReadCoils { .. } | Request::ReadDiscreteInputs { .. } => Response::ReadCoils(Vec::new()),
         Request::ReadHoldingRegisters { .. } | Request::ReadInputRegisters { .. } => {
             Response::ReadHoldingRegisters(Vec::new())

@@ -115,7 +115,9 @@ fn malformed_requests() {
         ("01 00 00 07 D1", DecodeError::BadCount),
         ("05 00 AC 12 34", DecodeError::BadCoilValue),
         ("07 00 00 00 00", DecodeError::UnknownFunction(7)),
-        ("2B", DecodeError::UnknownFunction(0x2B)),
+        ("11", DecodeError::UnknownFunction(0x11)),
+        ("2B", DecodeError::Truncated),
+        ("2B 0D 01 00", DecodeError::BadMeiType),
         ("08 00 01 00 00", DecodeError::UnknownSubFunction),
         ("0F 00 13 00 0A 01 CD", DecodeError::ByteCountMismatch),
         ("0F 00 13 00 0A 02 CD", DecodeError::Truncated),
@@ -155,7 +157,8 @@ fn pdu_lengths_from_prefixes() {
     assert_eq!(request_pdu_len(&hex("03")), Ok(Some(5)));
     assert_eq!(request_pdu_len(&hex("10 00 01 00 02")), Ok(None));
     assert_eq!(request_pdu_len(&hex("10 00 01 00 02 04")), Ok(Some(10)));
-    assert_eq!(request_pdu_len(&hex("2B")), Err(DecodeError::UnknownFunction(0x2B)));
+    assert_eq!(request_pdu_len(&hex("11")), Err(DecodeError::UnknownFunction(0x11)));
+    assert_eq!(request_pdu_len(&hex("2B")), Ok(Some(4)));
     assert_eq!(response_pdu_len(&hex("03")), Ok(None));
     assert_eq!(response_pdu_len(&hex("03 06")), Ok(Some(8)));
     assert_eq!(response_pdu_len(&hex("90")), Ok(Some(2)));
@@ -182,6 +185,10 @@ fn request_strategy() -> impl Strategy<Value = Request> {
             .prop_map(|(address, values)| Request::WriteMultipleRegisters { address, values }),
         (prop_oneof![Just(pdu::DIAG_RETURN_QUERY_DATA), Just(pdu::DIAG_CLEAR_COUNTERS)], any::<u16>())
             .prop_map(|(sub_function, data)| Request::Diagnostics { sub_function, data }),
+        (1..=4u8, any::<u8>()).prop_map(|(code, object_id)| Request::ReadDeviceId {
+            code: crate::protocols::modbus::ReadDeviceIdCode::from_byte(code).unwrap(),
+            object_id
+        }),
     ]
 }
 
@@ -220,6 +227,21 @@ fn exchange_strategy() -> impl Strategy<Value = (Request, Response)> {
             }
             Request::Diagnostics { sub_function, data } => {
                 Just(Response::Diagnostics { sub_function: *sub_function, data: *data }).boxed()
+            }
+            Request::ReadDeviceId { code, .. } => {
+                let object = (any::<u8>(), prop::collection::vec(any::<u8>(), 0..40))
+                    .prop_map(|(id, value)| crate::protocols::modbus::DeviceObject { id, value });
+                let code = *code;
+                (any::<u8>(), prop::option::of(any::<u8>()), prop::collection::vec(object, 0..5))
+                    .prop_map(move |(conformity, next, objects)| {
+                        Response::ReadDeviceId(crate::protocols::modbus::DeviceIdPage {
+                            code,
+                            conformity,
+                            next,
+                            objects,
+                        })
+                    })
+                    .boxed()
             }
         };
         (Just(req), resp)

@@ -1,7 +1,10 @@
 //! Modbus PDUs (function code + data) as plain Rust values, and their encoding to bytes.
 //!
 //! The PDU is the same in every framing (TCP, UDP, RTU); [`super::frame`] and
-//! [`super::rtu`] wrap it. Decoding lives in [`super::decode`]. Nothing here does I/O.
+//! [`super::rtu`] wrap it. Decoding lives in [`super::decode`]; Read Device Identification's
+//! objects in [`super::device_id`]. Nothing here does I/O.
+
+use super::device_id::{DeviceIdPage, MEI_DEVICE_ID, ReadDeviceIdCode};
 
 /// Function codes this crate speaks.
 pub mod fc {
@@ -23,6 +26,8 @@ pub mod fc {
     pub const WRITE_MULTIPLE_COILS: u8 = 0x0F;
     /// 16 (0x10) write multiple registers.
     pub const WRITE_MULTIPLE_REGISTERS: u8 = 0x10;
+    /// 43 (0x2B) encapsulated interface transport (MEI 0x0E: read device identification).
+    pub const ENCAPSULATED: u8 = 0x2B;
     /// Set in the function code of an exception reply.
     pub const EXCEPTION_FLAG: u8 = 0x80;
 }
@@ -107,6 +112,13 @@ pub enum Request {
         /// Data word (echoed by sub-function 0000).
         data: u16,
     },
+    /// 43 / MEI 0x0E: read device identification objects from `object_id` on.
+    ReadDeviceId {
+        /// Which objects: a category as a stream, or one object.
+        code: ReadDeviceIdCode,
+        /// The first object (stream access) or the one object (individual access).
+        object_id: u8,
+    },
 }
 
 /// A normal (non-exception) response PDU.
@@ -155,6 +167,8 @@ pub enum Response {
         /// Data word (echoed by sub-function 0000).
         data: u16,
     },
+    /// 43 / MEI 0x0E: one page of device identification objects.
+    ReadDeviceId(DeviceIdPage),
 }
 
 impl Request {
@@ -170,6 +184,7 @@ impl Request {
             Request::WriteMultipleCoils { .. } => fc::WRITE_MULTIPLE_COILS,
             Request::WriteMultipleRegisters { .. } => fc::WRITE_MULTIPLE_REGISTERS,
             Request::Diagnostics { .. } => fc::DIAGNOSTICS,
+            Request::ReadDeviceId { .. } => fc::ENCAPSULATED,
         }
     }
 
@@ -231,6 +246,9 @@ impl Request {
                 put_words(buf, values);
             }
             Request::Diagnostics { sub_function, data } => put_words(buf, &[*sub_function, *data]),
+            Request::ReadDeviceId { code, object_id } => {
+                buf.extend_from_slice(&[MEI_DEVICE_ID, *code as u8, *object_id])
+            }
         }
     }
 }
@@ -248,11 +266,15 @@ impl Response {
             Response::WriteMultipleCoils { .. } => fc::WRITE_MULTIPLE_COILS,
             Response::WriteMultipleRegisters { .. } => fc::WRITE_MULTIPLE_REGISTERS,
             Response::Diagnostics { .. } => fc::DIAGNOSTICS,
+            Response::ReadDeviceId(_) => fc::ENCAPSULATED,
         }
     }
 
     /// Appends the PDU bytes to `buf`.
     pub fn encode(&self, buf: &mut Vec<u8>) {
+        if let Response::ReadDeviceId(page) = self {
+            return page.encode(buf);
+        }
         buf.push(self.function());
         match self {
             Response::ReadCoils(bits) | Response::ReadDiscreteInputs(bits) => {
@@ -268,6 +290,7 @@ impl Response {
             Response::WriteMultipleCoils { address, count }
             | Response::WriteMultipleRegisters { address, count } => put_words(buf, &[*address, *count]),
             Response::Diagnostics { sub_function, data } => put_words(buf, &[*sub_function, *data]),
+            Response::ReadDeviceId(_) => {}
         }
     }
 }

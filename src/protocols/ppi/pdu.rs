@@ -5,8 +5,8 @@
 
 pub use super::area::{MemArea, Size};
 use super::return_code::SUCCESS;
-pub use super::setup::Setup;
 use super::setup::SETUP;
+pub use super::setup::Setup;
 
 /// S7 protocol id, the first PDU byte.
 const PROTOCOL_ID: u8 = 0x32;

@@ -114,6 +114,8 @@ pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io:
         unit,
         length0: protocol == ShelfProtocol::ModbusUdp,
         faults: faults.clone(),
+        // An S7-1200's Modbus_Slave has no device identification (exception 01).
+        identification: if s7.is_some() { None } else { ServerOptions::default().identification },
         ..ServerOptions::default()
     };
     let server = ModbusServer::new(Arc::new(handler), options);

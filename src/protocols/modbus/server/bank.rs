@@ -82,6 +82,8 @@ impl RegisterBank {
             Request::Diagnostics { sub_function, data } => {
                 Response::Diagnostics { sub_function: *sub_function, data: *data }
             }
+            // Answered by the server from its options' identification, never by the tables.
+            Request::ReadDeviceId { .. } => return Err(Exception::ILLEGAL_FUNCTION),
         })
     }
 }

@@ -45,8 +45,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 pub use bank::{Bank, RegisterBank, TABLE_SIZE};
 pub use handler::Handler;
 
+use super::device_id::DeviceIdentification;
 use super::exception::Exception;
-use super::pdu::{Request, encode_exception};
+use super::pdu::{Request, Response, encode_exception};
 use crate::protocols::faults::{Faults, Plan, SharedFaults};
 use crate::protocols::transport::ByteStream;
 
@@ -63,11 +64,21 @@ pub struct ServerOptions {
     pub zero_transaction_id: bool,
     /// Faults to inject from the start.
     pub faults: Faults,
+    /// The objects Read Device Identification (43 / 0x0E) is answered from, before the
+    /// handler sees the request; rackd's own by default. `None` passes the request to the
+    /// handler (a [`Bank`] answers exception 01, as a device without the function).
+    pub identification: Option<DeviceIdentification>,
 }
 
 impl Default for ServerOptions {
     fn default() -> Self {
-        ServerOptions { unit: 1, length0: false, zero_transaction_id: false, faults: Faults::default() }
+        ServerOptions {
+            unit: 1,
+            length0: false,
+            zero_transaction_id: false,
+            faults: Faults::default(),
+            identification: Some(DeviceIdentification::default()),
+        }
     }
 }
 
@@ -119,7 +130,8 @@ impl Shared {
     pub fn process(&self, unit: u8, pdu: &[u8], addressing: Addressing) -> Option<Outcome> {
         self.requests.fetch_add(1, Ordering::Relaxed);
         let broadcast = unit == 0 && addressing == Addressing::Rtu;
-        let this_device = unit == self.options.unit || (addressing == Addressing::Mbap && matches!(unit, 0 | 255));
+        let this_device =
+            unit == self.options.unit || (addressing == Addressing::Mbap && matches!(unit, 0 | 255));
         if !this_device && !broadcast {
             return None;
         }
@@ -132,9 +144,15 @@ impl Shared {
         let result = match Request::decode(pdu) {
             Ok(req) if broadcast && !req.is_write() => return None,
             // A Modbus exception is one byte: the code's low byte.
-            Ok(req) => match plan.device_error {
-                Some(code) => Err(Exception(code as u8)),
-                None => self.handler.handle(unit, &req),
+            Ok(req) => match (plan.device_error, &req) {
+                (Some(code), _) => Err(Exception(code as u8)),
+                (None, Request::ReadDeviceId { code, object_id })
+                    if self.options.identification.is_some() =>
+                {
+                    let objects = self.options.identification.as_ref().expect("checked");
+                    objects.answer(*code, *object_id).map(Response::ReadDeviceId)
+                }
+                (None, _) => self.handler.handle(unit, &req),
             },
             Err(e) => Err(e.exception()),
         };

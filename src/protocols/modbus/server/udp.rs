@@ -21,7 +21,9 @@ pub(crate) async fn serve(socket: UdpSocket, shared: Arc<Shared>) {
             Err(_) => continue,
         };
         let Ok(header) = frame::decode_header(&rx[..n]) else { continue };
-        let Some(Outcome { unit, pdu, plan }) = shared.process(header.unit, &rx[MBAP_LEN..n], Addressing::Mbap) else {
+        let Some(Outcome { unit, pdu, plan }) =
+            shared.process(header.unit, &rx[MBAP_LEN..n], Addressing::Mbap)
+        else {
             continue;
         };
         if plan.close {
