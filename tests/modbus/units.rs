@@ -69,3 +69,27 @@ async fn rtu_refuses_units_248_to_255_and_keeps_0_for_broadcasts() {
     assert!(matches!(err, PlcError::OutOfRange(_)), "{err:?}");
     assert_eq!(server.stats().requests, 0);
 }
+
+/// Reads of 0 and of 126 registers (past the limit of 125) reach the device with
+/// `call_unchecked`, whose exception 03 surfaces; `call` refuses them before sending.
+#[tokio::test]
+async fn reads_past_the_limits_reach_the_device_and_surface_its_exception() {
+    use rackd::protocols::DeviceCode;
+    use rackd::protocols::modbus::Exception;
+    let (server, _bank, address) = serve(Transport::Tcp, ServerOptions::default()).await;
+    let mut c = config(Transport::Tcp, &address, 300, 0);
+    c.unit = 255;
+    let plc = ModbusClient::connect(c).await.unwrap();
+    for count in [0, 126] {
+        let request = Request::ReadHoldingRegisters { address: 0, count };
+        assert!(matches!(plc.call(&request).await, Err(PlcError::OutOfRange(_))), "{count}");
+        let err = plc.call_unchecked(&request).await.unwrap_err();
+        let illegal_value = PlcError::Device(DeviceCode::Modbus(Exception::ILLEGAL_DATA_VALUE));
+        assert_eq!(err.to_string(), illegal_value.to_string(), "{count}");
+    }
+    let bits = Request::ReadCoils { address: 0, count: 2001 };
+    assert!(matches!(plc.call_unchecked(&bits).await, Err(PlcError::Device(_))));
+    assert_eq!(server.stats().requests, 3, "the refused calls sent nothing");
+    let fine = plc.call_unchecked(&Request::ReadHoldingRegisters { address: 0, count: 125 }).await;
+    assert!(matches!(fine, Ok(Response::ReadHoldingRegisters(v)) if v.len() == 125));
+}

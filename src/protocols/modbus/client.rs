@@ -110,6 +110,29 @@ impl ModbusClient {
     /// returned. Over TCP and UDP unit 0 addresses the device itself and is answered.
     pub async fn call(&self, request: &Request) -> Result<Response, PlcError> {
         request.check().map_err(PlcError::OutOfRange)?;
+        self.send(request).await
+    }
+
+    /// Like [`ModbusClient::call`], but a read (01..04) is sent with whatever count and
+    /// address it has, 0 and past the per-function limits included, to test a device's
+    /// limits: the device's exception (usually 03, illegal data value) comes back as
+    /// [`PlcError::Device`], and a reply that does not fit the count is malformed. Other
+    /// requests are checked as by `call`, since their counts set their own byte counts.
+    pub async fn call_unchecked(&self, request: &Request) -> Result<Response, PlcError> {
+        let read = matches!(
+            request,
+            Request::ReadCoils { .. }
+                | Request::ReadDiscreteInputs { .. }
+                | Request::ReadHoldingRegisters { .. }
+                | Request::ReadInputRegisters { .. }
+        );
+        if !read {
+            request.check().map_err(PlcError::OutOfRange)?;
+        }
+        self.send(request).await
+    }
+
+    async fn send(&self, request: &Request) -> Result<Response, PlcError> {
         let unit = self.config.unit;
         let mut pdu_bytes = Vec::with_capacity(260);
         request.encode(&mut pdu_bytes);
