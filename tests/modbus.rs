@@ -12,6 +12,8 @@ use tokio::net::UdpSocket;
 
 #[path = "modbus/device_id.rs"]
 mod device_id;
+#[path = "modbus/diagnostics.rs"]
+mod diagnostics;
 #[path = "modbus/paused.rs"]
 mod paused;
 #[path = "modbus/units.rs"]

@@ -208,6 +208,22 @@ impl ModbusClient {
         }
     }
 
+    /// Diagnostics (08) `sub_function` with data 0000: the device's answer, a register or
+    /// counter (0002 diagnostic register, 000B bus messages, 000C bus communication
+    /// errors, 000D bus exceptions, 000E server messages, 000F server no responses), or
+    /// the echoed 0000 for 000A (clear counters). A sub-function the device lacks comes
+    /// back as exception 01 ([`PlcError::Device`]); one rackd does not know is refused
+    /// before sending.
+    pub async fn diagnostic(&self, sub_function: u16) -> Result<u16, PlcError> {
+        if !pdu::diag_known(sub_function) {
+            return Err(PlcError::OutOfRange("diagnostics sub-function not one of 0000, 0002, 000A..000F"));
+        }
+        match self.call(&Request::Diagnostics { sub_function, data: 0 }).await? {
+            Response::Diagnostics { data, .. } => Ok(data),
+            _ => Err(PlcError::Malformed("not a diagnostics reply")),
+        }
+    }
+
     /// A link check: diagnostics 08 sub-function 0000 (return query data), which the
     /// device must echo.
     pub async fn link_check(&self) -> Result<(), PlcError> {

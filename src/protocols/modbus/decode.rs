@@ -149,12 +149,8 @@ impl Request {
             }
             fc::WRITE_SINGLE_COIL => Request::WriteSingleCoil { address: a, value: coil(n)? },
             fc::WRITE_SINGLE_REGISTER => Request::WriteSingleRegister { address: a, value: n },
-            fc::DIAGNOSTICS => match a {
-                pdu::DIAG_RETURN_QUERY_DATA | pdu::DIAG_CLEAR_COUNTERS => {
-                    Request::Diagnostics { sub_function: a, data: n }
-                }
-                _ => return Err(DecodeError::UnknownSubFunction),
-            },
+            fc::DIAGNOSTICS if pdu::diag_known(a) => Request::Diagnostics { sub_function: a, data: n },
+            fc::DIAGNOSTICS => return Err(DecodeError::UnknownSubFunction),
             fc::WRITE_MULTIPLE_COILS => {
                 let count = count_in(n, pdu::MAX_WRITE_BITS)? as usize;
                 let data = byte_counted(d, count.div_ceil(8))?;
@@ -247,9 +243,17 @@ pub fn decode_response(pdu: &[u8], req: &Request) -> Result<Result<Response, Exc
             echo([*address, values.len() as u16])?;
             Response::WriteMultipleRegisters { address: *address, count: values.len() as u16 }
         }
-        Request::Diagnostics { sub_function, data } => {
+        Request::Diagnostics { sub_function, data } if pdu::diag_echoes(*sub_function) => {
             echo([*sub_function, *data])?;
             Response::Diagnostics { sub_function: *sub_function, data: *data }
+        }
+        // A register or counter: any value, under the request's sub-function.
+        Request::Diagnostics { sub_function, .. } => {
+            exact(d, 4)?;
+            if word(d, 0)? != *sub_function {
+                return Err(DecodeError::EchoMismatch);
+            }
+            Response::Diagnostics { sub_function: *sub_function, data: word(d, 2)? }
         }
         Request::ReadDeviceId { code, .. } => Response::ReadDeviceId(DeviceIdPage::decode(d, *code)?),
     };

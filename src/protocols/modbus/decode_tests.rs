@@ -185,6 +185,8 @@ fn request_strategy() -> impl Strategy<Value = Request> {
             .prop_map(|(address, values)| Request::WriteMultipleRegisters { address, values }),
         (prop_oneof![Just(pdu::DIAG_RETURN_QUERY_DATA), Just(pdu::DIAG_CLEAR_COUNTERS)], any::<u16>())
             .prop_map(|(sub_function, data)| Request::Diagnostics { sub_function, data }),
+        (pdu::DIAG_BUS_MESSAGES..=pdu::DIAG_SERVER_NO_RESPONSES, Just(0u16))
+            .prop_map(|(sub_function, data)| Request::Diagnostics { sub_function, data }),
         (1..=4u8, any::<u8>()).prop_map(|(code, object_id)| Request::ReadDeviceId {
             code: crate::protocols::modbus::ReadDeviceIdCode::from_byte(code).unwrap(),
             object_id
@@ -225,8 +227,12 @@ fn exchange_strategy() -> impl Strategy<Value = (Request, Response)> {
                 Just(Response::WriteMultipleRegisters { address: *address, count: values.len() as u16 })
                     .boxed()
             }
-            Request::Diagnostics { sub_function, data } => {
+            Request::Diagnostics { sub_function, data } if pdu::diag_echoes(*sub_function) => {
                 Just(Response::Diagnostics { sub_function: *sub_function, data: *data }).boxed()
+            }
+            Request::Diagnostics { sub_function, .. } => {
+                let sub_function = *sub_function;
+                any::<u16>().prop_map(move |data| Response::Diagnostics { sub_function, data }).boxed()
             }
             Request::ReadDeviceId { code, .. } => {
                 let object = (any::<u8>(), prop::collection::vec(any::<u8>(), 0..40))
@@ -270,4 +276,20 @@ proptest! {
         let _ = request_pdu_len(&bytes);
         let _ = response_pdu_len(&bytes);
     }
+}
+
+/// Diagnostics counters (spec V1.1b3 section 6.8: sub-function, then the counter in the
+/// data field of the reply; the request's data field is 0000).
+#[test]
+fn diagnostics_counters_carry_a_value_not_an_echo() {
+    let request = Request::decode(&hex("08 00 0B 00 00")).unwrap();
+    assert_eq!(request, Request::Diagnostics { sub_function: pdu::DIAG_BUS_MESSAGES, data: 0 });
+    assert_eq!(
+        decode_response(&hex("08 00 0B 01 2C"), &request),
+        Ok(Ok(Response::Diagnostics { sub_function: pdu::DIAG_BUS_MESSAGES, data: 300 }))
+    );
+    assert_eq!(decode_response(&hex("08 00 0C 01 2C"), &request), Err(DecodeError::EchoMismatch));
+    assert_eq!(decode_response(&hex("08 00 0B 01"), &request), Err(DecodeError::Truncated));
+    assert_eq!(Request::decode(&hex("08 00 01 00 00")), Err(DecodeError::UnknownSubFunction));
+    assert_eq!(Request::decode(&hex("08 00 10 00 00")), Err(DecodeError::UnknownSubFunction));
 }

@@ -45,6 +45,30 @@ pub const MAX_WRITE_REGISTERS: u16 = 123;
 pub const DIAG_RETURN_QUERY_DATA: u16 = 0x0000;
 /// Diagnostics sub-function 000A: clear counters and diagnostic register.
 pub const DIAG_CLEAR_COUNTERS: u16 = 0x000A;
+/// Diagnostics sub-function 0002: return the diagnostic register.
+pub const DIAG_DIAGNOSTIC_REGISTER: u16 = 0x0002;
+/// Diagnostics sub-function 000B: return the bus message count.
+pub const DIAG_BUS_MESSAGES: u16 = 0x000B;
+/// Diagnostics sub-function 000C: return the bus communication error count.
+pub const DIAG_BUS_COMM_ERRORS: u16 = 0x000C;
+/// Diagnostics sub-function 000D: return the bus exception error count.
+pub const DIAG_BUS_EXCEPTIONS: u16 = 0x000D;
+/// Diagnostics sub-function 000E: return the server message count.
+pub const DIAG_SERVER_MESSAGES: u16 = 0x000E;
+/// Diagnostics sub-function 000F: return the server no response count.
+pub const DIAG_SERVER_NO_RESPONSES: u16 = 0x000F;
+
+/// Whether a diagnostics sub-function is one this crate speaks.
+pub fn diag_known(sub_function: u16) -> bool {
+    matches!(sub_function, DIAG_RETURN_QUERY_DATA | DIAG_DIAGNOSTIC_REGISTER | DIAG_CLEAR_COUNTERS)
+        || (DIAG_BUS_MESSAGES..=DIAG_SERVER_NO_RESPONSES).contains(&sub_function)
+}
+
+/// Whether the reply to a diagnostics sub-function echoes the request's data word (0000,
+/// 000A); the others answer a register or counter in it.
+pub fn diag_echoes(sub_function: u16) -> bool {
+    matches!(sub_function, DIAG_RETURN_QUERY_DATA | DIAG_CLEAR_COUNTERS)
+}
 
 /// A request PDU. Addresses are PDU addresses (0-based, as on the wire).
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -33,6 +33,7 @@
 //! are ignored, as a gateway with no station behind them would time out.
 
 mod bank;
+mod diagnostics;
 mod handler;
 mod rtu;
 mod tcp;
@@ -68,6 +69,10 @@ pub struct ServerOptions {
     /// handler sees the request; rackd's own by default. `None` passes the request to the
     /// handler (a [`Bank`] answers exception 01, as a device without the function).
     pub identification: Option<DeviceIdentification>,
+    /// Answer diagnostics (08) sub-functions 0002 and 000A..=000F from the server's own
+    /// counters (see `diagnostics.rs`), before the handler sees them; `false` passes every
+    /// sub-function to the handler (a device that has no counters).
+    pub diagnostic_counters: bool,
 }
 
 impl Default for ServerOptions {
@@ -78,6 +83,7 @@ impl Default for ServerOptions {
             zero_transaction_id: false,
             faults: Faults::default(),
             identification: Some(DeviceIdentification::default()),
+            diagnostic_counters: true,
         }
     }
 }
@@ -106,6 +112,7 @@ pub(crate) struct Shared {
     requests: AtomicU64,
     replies: AtomicU64,
     dropped: AtomicU64,
+    diagnostics: diagnostics::Counters,
 }
 
 /// A reply to send, and the faults to apply while sending it.
@@ -129,20 +136,26 @@ impl Shared {
     /// broadcast, a dropped request, a frame too short to answer).
     pub fn process(&self, unit: u8, pdu: &[u8], addressing: Addressing) -> Option<Outcome> {
         self.requests.fetch_add(1, Ordering::Relaxed);
+        self.diagnostics.bus_message();
         let broadcast = unit == 0 && addressing == Addressing::Rtu;
         let this_device =
             unit == self.options.unit || (addressing == Addressing::Mbap && matches!(unit, 0 | 255));
         if !this_device && !broadcast {
             return None;
         }
+        self.diagnostics.server_message();
         let plan = self.faults.plan();
         if plan.drop || plan.drop_ack {
             self.dropped.fetch_add(1, Ordering::Relaxed);
+            self.diagnostics.no_response();
             return None;
         }
         let function = *pdu.first()?;
         let result = match Request::decode(pdu) {
-            Ok(req) if broadcast && !req.is_write() => return None,
+            Ok(req) if broadcast && !req.is_write() => {
+                self.diagnostics.no_response();
+                return None;
+            }
             // A Modbus exception is one byte: the code's low byte.
             Ok(req) => match (plan.device_error, &req) {
                 (Some(code), _) => Err(Exception(code as u8)),
@@ -152,12 +165,25 @@ impl Shared {
                     let objects = self.options.identification.as_ref().expect("checked");
                     objects.answer(*code, *object_id).map(Response::ReadDeviceId)
                 }
+                (None, Request::Diagnostics { sub_function, data }) if self.options.diagnostic_counters => {
+                    match self.diagnostics.answer(*sub_function, *data) {
+                        Some(response) => Ok(response),
+                        None => self.handler.handle(unit, &req),
+                    }
+                }
                 (None, _) => self.handler.handle(unit, &req),
             },
-            Err(e) => Err(e.exception()),
+            Err(e) => {
+                self.diagnostics.undecoded(e);
+                Err(e.exception())
+            }
         };
         if broadcast {
+            self.diagnostics.no_response();
             return None;
+        }
+        if result.is_err() {
+            self.diagnostics.exception();
         }
         let mut out = Vec::with_capacity(260);
         match result {
@@ -183,6 +209,7 @@ impl ModbusServer {
             requests: AtomicU64::new(0),
             replies: AtomicU64::new(0),
             dropped: AtomicU64::new(0),
+            diagnostics: diagnostics::Counters::default(),
         };
         ModbusServer { shared: Arc::new(shared) }
     }
