@@ -1,5 +1,5 @@
 //! Diagnostics (08) beyond the echo: the server's counters read by the client over UDP
-//! and RTU over TCP, cleared by 000A.
+//! and RTU over TCP, cleared by 000A; and Read FIFO queue (24).
 
 use rackd::protocols::PlcError;
 use rackd::protocols::modbus::pdu::{
@@ -64,4 +64,26 @@ async fn rtu_broadcasts_are_counted_as_unanswered() {
         tokio::time::sleep(std::time::Duration::from_millis(10)).await;
     }
     assert_eq!(unanswered, 1);
+}
+
+/// Read FIFO queue (24) against the bank: the count register at the pointer, then the
+/// queue, over TCP and RTU over TCP; more than 31 is exception 03.
+#[tokio::test]
+async fn fifo_queues_are_read_from_the_bank() {
+    use rackd::protocols::DeviceCode;
+    use rackd::protocols::modbus::Exception;
+    for transport in [Transport::Tcp, Transport::RtuOverTcp] {
+        let (_server, bank, address) = serve(transport, ServerOptions::default()).await;
+        bank.set_holding(0x04DE, &[2, 0x01B8, 0x1284, 0x9999]);
+        let plc = client(transport, &address, 300, 0).await;
+        assert_eq!(plc.read_fifo_queue(0x04DE).await.unwrap(), vec![0x01B8, 0x1284], "{transport:?}");
+        bank.set_holding(0x04DE, &[0]);
+        assert_eq!(plc.read_fifo_queue(0x04DE).await.unwrap(), Vec::<u16>::new());
+        bank.set_holding(0x04DE, &[32]);
+        let err = plc.read_fifo_queue(0x04DE).await.unwrap_err();
+        assert!(
+            matches!(err, PlcError::Device(DeviceCode::Modbus(Exception::ILLEGAL_DATA_VALUE))),
+            "{err:?}"
+        );
+    }
 }

@@ -208,6 +208,16 @@ impl ModbusClient {
         }
     }
 
+    /// Reads the FIFO queue whose count register is at `address` (function 24): the queued
+    /// registers, oldest first, at most 31. A queue of more than 31 is exception 03 from
+    /// the device ([`PlcError::Device`]).
+    pub async fn read_fifo_queue(&self, address: u16) -> Result<Vec<u16>, PlcError> {
+        match self.call(&Request::ReadFifoQueue { address }).await? {
+            Response::ReadFifoQueue(words) => Ok(words),
+            _ => Err(PlcError::Malformed("not a FIFO queue reply")),
+        }
+    }
+
     /// Diagnostics (08) `sub_function` with data 0000: the device's answer, a register or
     /// counter (0002 diagnostic register, 000B bus messages, 000C bus communication
     /// errors, 000D bus exceptions, 000E server messages, 000F server no responses), or
@@ -252,6 +262,7 @@ fn echo_of(request: &Request) -> Response {
             Response::Diagnostics { sub_function: *sub_function, data: *data }
         }
         // Reads are refused before broadcasting; an empty answer keeps this total.
+        Request::ReadFifoQueue { .. } => Response::ReadFifoQueue(Vec::new()),
         Request::ReadDeviceId { code, .. } => Response::ReadDeviceId(DeviceIdPage {
             code: *code,
             conformity: 0,

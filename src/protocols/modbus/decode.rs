@@ -124,6 +124,10 @@ impl Request {
         if request_pdu_len(pdu).is_err() {
             return Err(DecodeError::UnknownFunction(f));
         }
+        if f == fc::READ_FIFO_QUEUE {
+            exact(d, 2)?;
+            return Ok(Request::ReadFifoQueue { address: word(d, 0)? });
+        }
         if f == fc::ENCAPSULATED {
             return match d {
                 [MEI_DEVICE_ID, code, object_id] => Ok(Request::ReadDeviceId {
@@ -255,6 +259,17 @@ pub fn decode_response(pdu: &[u8], req: &Request) -> Result<Result<Response, Exc
             }
             Response::Diagnostics { sub_function: *sub_function, data: word(d, 2)? }
         }
+        Request::ReadFifoQueue { .. } => {
+            let (byte_count, count) = (word(d, 0)? as usize, word(d, 2)?);
+            if count > pdu::MAX_FIFO_COUNT {
+                return Err(DecodeError::BadCount);
+            }
+            if byte_count != 2 + count as usize * 2 {
+                return Err(DecodeError::ByteCountMismatch);
+            }
+            exact(d, 2 + byte_count)?;
+            Response::ReadFifoQueue(words(&d[4..]))
+        }
         Request::ReadDeviceId { code, .. } => Response::ReadDeviceId(DeviceIdPage::decode(d, *code)?),
     };
     Ok(Ok(resp))
@@ -269,6 +284,7 @@ pub fn request_pdu_len(prefix: &[u8]) -> Result<Option<usize>, DecodeError> {
         fc::WRITE_MULTIPLE_COILS | fc::WRITE_MULTIPLE_REGISTERS => {
             Ok(prefix.get(5).map(|&bc| 6 + bc as usize))
         }
+        fc::READ_FIFO_QUEUE => Ok(Some(3)),
         fc::ENCAPSULATED => Ok(Some(4)),
         other => Err(DecodeError::UnknownFunction(other)),
     }
@@ -283,6 +299,7 @@ pub fn response_pdu_len(prefix: &[u8]) -> Result<Option<usize>, DecodeError> {
         fc::READ_COILS..=fc::READ_INPUT_REGISTERS => Ok(prefix.get(1).map(|&bc| 2 + bc as usize)),
         fc::WRITE_SINGLE_COIL | fc::WRITE_SINGLE_REGISTER | fc::DIAGNOSTICS => Ok(Some(5)),
         fc::WRITE_MULTIPLE_COILS | fc::WRITE_MULTIPLE_REGISTERS => Ok(Some(5)),
+        fc::READ_FIFO_QUEUE => Ok(prefix.get(1..3).map(|b| 3 + u16::from_be_bytes([b[0], b[1]]) as usize)),
         fc::ENCAPSULATED => device_id::reply_len(prefix),
         other => Err(DecodeError::UnknownFunction(other)),
     }

@@ -187,6 +187,7 @@ fn request_strategy() -> impl Strategy<Value = Request> {
             .prop_map(|(sub_function, data)| Request::Diagnostics { sub_function, data }),
         (pdu::DIAG_BUS_MESSAGES..=pdu::DIAG_SERVER_NO_RESPONSES, Just(0u16))
             .prop_map(|(sub_function, data)| Request::Diagnostics { sub_function, data }),
+        any::<u16>().prop_map(|address| Request::ReadFifoQueue { address }),
         (1..=4u8, any::<u8>()).prop_map(|(code, object_id)| Request::ReadDeviceId {
             code: crate::protocols::modbus::ReadDeviceIdCode::from_byte(code).unwrap(),
             object_id
@@ -233,6 +234,9 @@ fn exchange_strategy() -> impl Strategy<Value = (Request, Response)> {
             Request::Diagnostics { sub_function, .. } => {
                 let sub_function = *sub_function;
                 any::<u16>().prop_map(move |data| Response::Diagnostics { sub_function, data }).boxed()
+            }
+            Request::ReadFifoQueue { .. } => {
+                prop::collection::vec(any::<u16>(), 0..=31).prop_map(Response::ReadFifoQueue).boxed()
             }
             Request::ReadDeviceId { code, .. } => {
                 let object = (any::<u8>(), prop::collection::vec(any::<u8>(), 0..40))
@@ -292,4 +296,27 @@ fn diagnostics_counters_carry_a_value_not_an_echo() {
     assert_eq!(decode_response(&hex("08 00 0B 01"), &request), Err(DecodeError::Truncated));
     assert_eq!(Request::decode(&hex("08 00 01 00 00")), Err(DecodeError::UnknownSubFunction));
     assert_eq!(Request::decode(&hex("08 00 10 00 00")), Err(DecodeError::UnknownSubFunction));
+}
+
+/// Read FIFO queue, the example of spec V1.1b3 section 6.18: pointer 0x04DE, two queued
+/// registers 0x01B8 and 0x1284.
+#[test]
+fn read_fifo_queue_as_in_the_specification() {
+    let request = Request::ReadFifoQueue { address: 0x04DE };
+    assert_eq!(enc_req(&request), hex("18 04 DE"));
+    assert_eq!(Request::decode(&hex("18 04 DE")), Ok(request.clone()));
+    assert_eq!(request_pdu_len(&hex("18")), Ok(Some(3)));
+    let reply = hex("18 00 06 00 02 01 B8 12 84");
+    let values = Response::ReadFifoQueue(vec![0x01B8, 0x1284]);
+    assert_eq!(decode_response(&reply, &request), Ok(Ok(values.clone())));
+    assert_eq!(enc_resp(&values), reply);
+    assert_eq!(response_pdu_len(&reply[..2]), Ok(None));
+    assert_eq!(response_pdu_len(&reply[..3]), Ok(Some(9)));
+    assert_eq!(
+        decode_response(&hex("18 00 06 00 03 01 B8 12 84"), &request),
+        Err(DecodeError::ByteCountMismatch)
+    );
+    assert_eq!(decode_response(&hex("18 00 42 00 20"), &request), Err(DecodeError::BadCount));
+    assert_eq!(decode_response(&hex("18 00 06 00 02 01 B8"), &request), Err(DecodeError::Truncated));
+    assert_eq!(Request::decode(&hex("18 04 DE 00")), Err(DecodeError::TrailingBytes));
 }

@@ -21,7 +21,7 @@
 //! (the client must drop stale datagrams but report a wrong function), reads a function
 //! mismatch as an exception code, does not check write echoes, and works on whole frames,
 //! with no way to find frame boundaries in an RTU byte stream after line noise. The Modbus
-//! PDU is small (ten functions here), so the codec is written out in full, with typed
+//! PDU is small (eleven functions here), so the codec is written out in full, with typed
 //! errors and property tests that no input panics it.
 //!
 //! # Quirks ([`Quirks`])

@@ -26,6 +26,8 @@ pub mod fc {
     pub const WRITE_MULTIPLE_COILS: u8 = 0x0F;
     /// 16 (0x10) write multiple registers.
     pub const WRITE_MULTIPLE_REGISTERS: u8 = 0x10;
+    /// 24 (0x18) read FIFO queue.
+    pub const READ_FIFO_QUEUE: u8 = 0x18;
     /// 43 (0x2B) encapsulated interface transport (MEI 0x0E: read device identification).
     pub const ENCAPSULATED: u8 = 0x2B;
     /// Set in the function code of an exception reply.
@@ -40,6 +42,8 @@ pub const MAX_READ_REGISTERS: u16 = 125;
 pub const MAX_WRITE_BITS: u16 = 1968;
 /// Most registers one write multiple (16) may carry.
 pub const MAX_WRITE_REGISTERS: u16 = 123;
+/// Most registers a FIFO queue (24) may hold.
+pub const MAX_FIFO_COUNT: u16 = 31;
 
 /// Diagnostics sub-function 0000: return query data (echo).
 pub const DIAG_RETURN_QUERY_DATA: u16 = 0x0000;
@@ -136,6 +140,11 @@ pub enum Request {
         /// Data word (echoed by sub-function 0000).
         data: u16,
     },
+    /// 24: read the FIFO queue whose count register is at `address`.
+    ReadFifoQueue {
+        /// The FIFO pointer address: the queue's count register.
+        address: u16,
+    },
     /// 43 / MEI 0x0E: read device identification objects from `object_id` on.
     ReadDeviceId {
         /// Which objects: a category as a stream, or one object.
@@ -191,6 +200,8 @@ pub enum Response {
         /// Data word (echoed by sub-function 0000).
         data: u16,
     },
+    /// 24: the queued registers (at most 31), oldest first.
+    ReadFifoQueue(Vec<u16>),
     /// 43 / MEI 0x0E: one page of device identification objects.
     ReadDeviceId(DeviceIdPage),
 }
@@ -208,6 +219,7 @@ impl Request {
             Request::WriteMultipleCoils { .. } => fc::WRITE_MULTIPLE_COILS,
             Request::WriteMultipleRegisters { .. } => fc::WRITE_MULTIPLE_REGISTERS,
             Request::Diagnostics { .. } => fc::DIAGNOSTICS,
+            Request::ReadFifoQueue { .. } => fc::READ_FIFO_QUEUE,
             Request::ReadDeviceId { .. } => fc::ENCAPSULATED,
         }
     }
@@ -270,6 +282,7 @@ impl Request {
                 put_words(buf, values);
             }
             Request::Diagnostics { sub_function, data } => put_words(buf, &[*sub_function, *data]),
+            Request::ReadFifoQueue { address } => put_words(buf, &[*address]),
             Request::ReadDeviceId { code, object_id } => {
                 buf.extend_from_slice(&[MEI_DEVICE_ID, *code as u8, *object_id])
             }
@@ -290,6 +303,7 @@ impl Response {
             Response::WriteMultipleCoils { .. } => fc::WRITE_MULTIPLE_COILS,
             Response::WriteMultipleRegisters { .. } => fc::WRITE_MULTIPLE_REGISTERS,
             Response::Diagnostics { .. } => fc::DIAGNOSTICS,
+            Response::ReadFifoQueue(_) => fc::READ_FIFO_QUEUE,
             Response::ReadDeviceId(_) => fc::ENCAPSULATED,
         }
     }
@@ -314,6 +328,10 @@ impl Response {
             Response::WriteMultipleCoils { address, count }
             | Response::WriteMultipleRegisters { address, count } => put_words(buf, &[*address, *count]),
             Response::Diagnostics { sub_function, data } => put_words(buf, &[*sub_function, *data]),
+            Response::ReadFifoQueue(words) => {
+                put_words(buf, &[(2 + words.len() * 2) as u16, words.len() as u16]);
+                put_words(buf, words);
+            }
             Response::ReadDeviceId(_) => {}
         }
     }
