@@ -18,9 +18,9 @@
 //! - **Conformity level**: 0x80 (individual access) plus the highest category the device
 //!   has objects in (0x81, 0x82 or 0x83).
 //! - **Client**: a reply whose object lengths run past the PDU, whose MEI type or read
-//!   device id code is not the request's, whose "more follows" is neither 00 nor FF, or
-//!   whose next object id does not move forward is malformed (a typed
-//!   [`super::decode::DecodeError`]); the paging loop ends after 256 requests at most.
+//!   device id code is not the request's, or whose "more follows" is neither 00 nor FF is
+//!   malformed (a typed [`super::decode::DecodeError`]); when paging, a next object id that
+//!   does not move forward is malformed too, so the loop ends after 256 requests at most.
 
 use std::collections::BTreeMap;
 
@@ -225,8 +225,8 @@ pub struct DeviceIdentification {
 }
 
 impl Default for DeviceIdentification {
-    /// rackd's simulator: vendor "rackd", product code "rackd-sim-modbus", the crate's
-    /// version, its repository-less product and model names.
+    /// rackd's simulator: vendor "rackd", product code "rackd-sim-modbus", revision the
+    /// crate's version, product name "rackd Modbus simulator", model name "sim modbus".
     fn default() -> Self {
         let mut objects = BTreeMap::new();
         objects.insert(0x00, b"rackd".to_vec());

@@ -157,21 +157,9 @@ impl Shared {
                 return None;
             }
             // A Modbus exception is one byte: the code's low byte.
-            Ok(req) => match (plan.device_error, &req) {
-                (Some(code), _) => Err(Exception(code as u8)),
-                (None, Request::ReadDeviceId { code, object_id })
-                    if self.options.identification.is_some() =>
-                {
-                    let objects = self.options.identification.as_ref().expect("checked");
-                    objects.answer(*code, *object_id).map(Response::ReadDeviceId)
-                }
-                (None, Request::Diagnostics { sub_function, data }) if self.options.diagnostic_counters => {
-                    match self.diagnostics.answer(*sub_function, *data) {
-                        Some(response) => Ok(response),
-                        None => self.handler.handle(unit, &req),
-                    }
-                }
-                (None, _) => self.handler.handle(unit, &req),
+            Ok(req) => match plan.device_error {
+                Some(code) => Err(Exception(code as u8)),
+                None => self.own_answer(&req).unwrap_or_else(|| self.handler.handle(unit, &req)),
             },
             Err(e) => {
                 self.diagnostics.undecoded(e);
@@ -191,6 +179,21 @@ impl Shared {
             Err(e) => encode_exception(function, e.0, &mut out),
         }
         Some(Outcome { unit: plan.wrong_unit.unwrap_or(unit), pdu: out, plan })
+    }
+
+    /// The answer the server gives itself, before the handler: device identification from
+    /// its options, diagnostics from its counters; `None` for the handler to answer.
+    fn own_answer(&self, request: &Request) -> Option<Result<Response, Exception>> {
+        match request {
+            Request::ReadDeviceId { code, object_id } => {
+                let objects = self.options.identification.as_ref()?;
+                Some(objects.answer(*code, *object_id).map(Response::ReadDeviceId))
+            }
+            Request::Diagnostics { sub_function, data } if self.options.diagnostic_counters => {
+                self.diagnostics.answer(*sub_function, *data).map(Ok)
+            }
+            _ => None,
+        }
     }
 
     pub fn replied(&self) {
