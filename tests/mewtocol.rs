@@ -265,3 +265,28 @@ async fn a_late_reply_is_never_the_next_commands_answer_on_a_serial_line() {
     let (_server, plc) = pty(&s, fixed_400_ms);
     late_replies_are_never_another_commands_answer(&plc, &s).await;
 }
+
+/// The global station `EE` (238): a client addressing it is answered by a PLC of any
+/// number, over TCP and a pty, and the reply on the wire is signed `EE` as an FP-X's.
+#[tokio::test]
+async fn the_global_station_ee_is_answered_whatever_the_station() {
+    use rackd::protocols::mewtocol::frame::GLOBAL_STATION;
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut s = state();
+    s.station = 42;
+    let (server, plc) = tcp(&s, |c| c.station = GLOBAL_STATION).await;
+    exercise(&plc, &s).await;
+    let (_pty_server, over_pty) = pty(&s, |c| c.station = GLOBAL_STATION);
+    exercise(&over_pty, &s).await;
+    // On the wire: RD of DT1 sent to EE comes back as `%EE$RD` + the word + BCC.
+    plc.write_words(&plc.parse_address("DT1").unwrap(), &[0x0063]).await.unwrap();
+    let mut raw = tokio::net::TcpStream::connect(server.local_addr().unwrap()).await.unwrap();
+    raw.write_all(b"%EE#RDD0000100001**\r").await.unwrap();
+    let mut reply = [0u8; 13];
+    raw.read_exact(&mut reply).await.unwrap();
+    assert_eq!(&reply, b"%EE$RD630012\r");
+    // Station 41 is still someone else's.
+    let (_other_server, other) = tcp(&s, |c| (c.station, c.retries) = (41, 0)).await;
+    let err = other.read_words(&other.parse_address("DT0").unwrap(), 1).await.unwrap_err();
+    assert!(matches!(err, PlcError::Timeout { attempts: 1, .. }), "{err:?}");
+}

@@ -10,8 +10,14 @@ use rackd::protocols::modbus::{Exception, ModbusClient, ModbusConfig, Quirks, Re
 use rackd::protocols::{DeviceCode, DropReason, Dropped, PlcError, PlcMemory};
 use tokio::net::UdpSocket;
 
+#[path = "modbus/device_id.rs"]
+mod device_id;
+#[path = "modbus/diagnostics.rs"]
+mod diagnostics;
 #[path = "modbus/paused.rs"]
 mod paused;
+#[path = "modbus/units.rs"]
+mod units;
 
 async fn serve(transport: Transport, options: ServerOptions) -> (ServerHandle, Bank, String) {
     let bank = Bank::new();
@@ -166,10 +172,11 @@ async fn the_server_answers_unknown_functions_with_exception_01() {
     let (_server, _bank, address) = serve(Transport::Udp, ServerOptions::default()).await;
     let socket = UdpSocket::bind("127.0.0.1:0").await.unwrap();
     socket.connect(&address).await.unwrap();
-    socket.send(&[0, 9, 0, 0, 0, 2, 1, 0x2B]).await.unwrap();
+    // 0x11, report server id, which the server does not implement.
+    socket.send(&[0, 9, 0, 0, 0, 2, 1, 0x11]).await.unwrap();
     let mut buf = [0u8; 64];
     let n = tokio::time::timeout(Duration::from_secs(2), socket.recv(&mut buf)).await.unwrap().unwrap();
-    assert_eq!(&buf[..n], &[0, 9, 0, 0, 0, 3, 1, 0xAB, 0x01]);
+    assert_eq!(&buf[..n], &[0, 9, 0, 0, 0, 3, 1, 0x91, 0x01]);
 }
 
 #[tokio::test]
@@ -297,9 +304,9 @@ async fn timeouts_count_every_attempt() {
 }
 
 #[tokio::test]
-async fn broadcasts_are_written_without_awaiting_a_reply() {
-    let (server, bank, address) = serve(Transport::Udp, ServerOptions::default()).await;
-    let mut c = config(Transport::Udp, &address, 100, 0);
+async fn rtu_broadcasts_are_written_without_awaiting_a_reply() {
+    let (server, bank, address) = serve(Transport::RtuOverTcp, ServerOptions::default()).await;
+    let mut c = config(Transport::RtuOverTcp, &address, 100, 0);
     c.unit = 0;
     let plc = ModbusClient::connect(c).await.unwrap();
     plc.write_words(&plc.parse_address("4x5").unwrap(), &[5, 6]).await.unwrap();

@@ -297,3 +297,34 @@ async fn wrong_ids_and_sources_are_not_taken_and_duplicates_do_not_desync() {
     s.bank.lock().unwrap().bytes_mut(MemArea::V)[0..2].copy_from_slice(&[0, 7]);
     assert_eq!(plc.read_words(&vw0, 1).await.unwrap(), vec![7]);
 }
+
+/// A master that sends "setup communication" first (libnodave, python-snap7's
+/// `PPIClient.connect`): the simulator acknowledges it with E5 and, on the poll, grants
+/// AmQ 1/1 and a PDU of 240 (the request is libnodave's, asking for 960), then serves a
+/// read on the same connection.
+#[tokio::test]
+async fn setup_communication_is_answered_before_reads() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let s = state();
+    s.bank.lock().unwrap().bytes_mut(MemArea::V)[0..2].copy_from_slice(&[0x12, 0x34]);
+    let server = server::serve_tcp("127.0.0.1:0", s.clone()).await.unwrap();
+    let mut master = tokio::net::TcpStream::connect(server.local_addr().unwrap()).await.unwrap();
+    async fn exchange(master: &mut tokio::net::TcpStream, request: &str, reply_len: usize) -> Vec<u8> {
+        master.write_all(&hex(request)).await.unwrap();
+        let mut ack = [0u8; 1];
+        master.read_exact(&mut ack).await.unwrap();
+        assert_eq!(ack, [0xE5]);
+        master.write_all(&hex("10 02 00 5C 5E 16")).await.unwrap();
+        let mut reply = vec![0u8; reply_len];
+        master.read_exact(&mut reply).await.unwrap();
+        reply
+    }
+    let setup = "68 15 15 68 02 00 6C 32 01 00 00 00 01 00 08 00 00 F0 00 00 01 00 01 03 C0 5F 16";
+    let granted = "68 17 17 68 00 02 08 32 03 00 00 00 01 00 08 00 00 00 00 F0 00 00 01 00 01 00 F0 2A 16";
+    assert_eq!(exchange(&mut master, setup, 29).await, hex(granted));
+    // Read VB0..VB1 (PDU reference 1), as in the OpcBridge fixture of libnodave's read.
+    let read =
+        "68 1B 1B 68 02 00 6C 32 01 00 00 00 01 00 0E 00 00 04 01 12 0A 10 02 00 02 00 01 84 00 00 00 6A 16";
+    let data = "68 17 17 68 00 02 08 32 03 00 00 00 01 00 02 00 06 00 00 04 01 FF 04 00 10 12 34 A6 16";
+    assert_eq!(exchange(&mut master, read, 29).await, hex(data));
+}

@@ -23,7 +23,8 @@ pub struct SimLineArgs {
     /// 9600,8E1 for PPI].
     #[arg(long)]
     pub serial: Option<SerialSettings>,
-    /// Station number (MEWTOCOL, default 1) or PPI address (default 2).
+    /// Station number (MEWTOCOL 1..=99, default 1; the global station EE is answered too)
+    /// or PPI address (1..=126, default 2).
     #[arg(long)]
     pub station: Option<u8>,
     /// Link faults.

@@ -46,7 +46,8 @@ pub struct SimModbusArgs {
     /// Transport.
     #[arg(long, value_enum, default_value = "udp")]
     pub transport: SimTransport,
-    /// Unit id answered.
+    /// Unit id answered. Over TCP and UDP any of 0..=255, and units 0 and 255 are answered
+    /// too (they address the device itself); over RTU a station 1..=247.
     #[arg(long, default_value_t = 1)]
     pub unit: u8,
     /// Device quirks to imitate (repeatable).
@@ -73,6 +74,10 @@ pub struct Running {
 
 /// Loads the preset and starts serving.
 pub async fn start(args: &SimModbusArgs) -> anyhow::Result<Running> {
+    let rtu = matches!(args.transport, SimTransport::Rtu | SimTransport::RtuOverTcp);
+    if rtu && !(1..=247).contains(&args.unit) {
+        anyhow::bail!("--unit {}: an RTU station is 1..=247 (0 is the broadcast address)", args.unit);
+    }
     let memory = ModbusMemory::default();
     let read_only = args.bench.load(Protocol::ModbusTcp, &memory)?;
     let faults = args.faults.faults::<Exception>()?;
@@ -81,6 +86,7 @@ pub async fn start(args: &SimModbusArgs) -> anyhow::Result<Running> {
         length0: args.quirk.contains(&SimQuirk::Length0),
         zero_transaction_id: args.quirk.contains(&SimQuirk::ZeroTid),
         faults,
+        ..ServerOptions::default()
     };
     let server = ModbusServer::new(Arc::new(memory.clone()), options);
     let listen = args.listen.as_str();

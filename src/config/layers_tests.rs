@@ -97,7 +97,8 @@ fn serial_settings_only_on_serial_protocols() {
 #[test]
 fn units_are_checked_per_protocol_with_their_line() {
     let cases = [
-        ("modbus-udp", "10.0.0.1:502", 300, "0..=247"),
+        ("modbus-udp", "10.0.0.1:502", 300, "0..=255"),
+        ("modbus-rtu-tcp", "10.0.0.1:4001", 248, "1..=247"),
         ("modbus-rtu", "/dev/ttyS0", 0, "broadcast"),
         ("mewtocol", "/dev/ttyS0", 100, "1..=99"),
         ("ppi", "/dev/ttyS0", 127, "1..=126"),

@@ -17,16 +17,22 @@
 //!   device with `timeout_ms` below the default floor simply gets a fixed timeout).
 //!   Shares outside 0..=1, a `degraded_below` above `degraded_above` or an empty window
 //!   are refused by [`LinkConfig::check`].
-//! - **Unit** ranges are the protocols' own: MEWTOCOL stations 1..=99, PPI addresses
-//!   1..=126 (0 is rackd's own master address), Modbus units 0..=247 (0 broadcasts a
-//!   write, which `rackd plc` allows; 248..=255 are reserved). Checked before connecting,
-//!   so `rackd check-config` reports them.
+//! - **Unit** ranges are the protocols' own: MEWTOCOL stations 1..=99, or 238 (0xEE) for
+//!   the global station `EE` that the one PLC on a line answers whatever its number; PPI addresses
+//!   1..=126 (0 is rackd's own master address). Modbus RTU (serial or over TCP) units
+//!   0..=247: 0 broadcasts a write (no reply; `rackd plc` allows it), 248..=255 are
+//!   reserved. Modbus TCP and UDP units 0..=255: the unit id addresses the device itself
+//!   (or a station behind a gateway), many TCP devices expect 255 (0xFF, the Modbus
+//!   Messaging on TCP/IP Implementation Guide's value) or 0, and unit 0 is answered like
+//!   any other, never a broadcast. Checked before connecting, so `rackd check-config`
+//!   reports them.
 
 use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::time::Duration;
 
 use super::mc3e::{FrameKind, Mc3eClient, Mc3eConfig, TransportKind};
+use super::mewtocol::frame::GLOBAL_STATION;
 use super::mewtocol::{MewtocolClient, MewtocolConfig, MewtocolTransport};
 use super::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use super::ppi::{PpiClient, PpiConfig, PpiTransport};
@@ -137,9 +143,13 @@ impl LinkConfig {
         }
         let unit = |range| Err(LinkError::Unit { unit: self.unit, protocol: self.protocol, range });
         match self.protocol.family() {
-            Family::Mewtocol if !(1..=99).contains(&self.unit) => unit("1..=99"),
+            Family::Mewtocol if !(1..=99).contains(&self.unit) && self.unit != GLOBAL_STATION => {
+                unit("1..=99, or 238 for EE, the global station")
+            }
             Family::Ppi if !(1..=126).contains(&self.unit) => unit("1..=126 (0 is rackd's own address)"),
-            Family::Modbus if self.unit > 247 => unit("0..=247 (0 broadcasts)"),
+            Family::Modbus if self.modbus().transport.check_unit(self.unit).is_err() => {
+                unit("1..=247, or 0 to broadcast a write (248..=255 are reserved on RTU)")
+            }
             _ => Ok(()),
         }
     }
@@ -255,6 +265,8 @@ mod tests {
         assert!(matches!(err, LinkError::Quirk { quirk: Quirk::Length0, protocol: Protocol::PpiTcp }));
         assert!(err.to_string().contains("no-pdu-ref"), "{err}");
         assert!(link(Protocol::Mewtocol, 1, &[]).check().is_ok());
+        assert!(link(Protocol::MewtocolTcp, 238, &[]).check().is_ok(), "EE, the global station");
+        assert!(link(Protocol::Mewtocol, 100, &[]).check().is_err());
         let mut serial = link(Protocol::Ppi, 2, &[]);
         serial.serial = Some("187500,8E1".parse().unwrap());
         assert_eq!(serial.ppi().serial.baud, 187_500);
@@ -282,11 +294,17 @@ mod tests {
         assert_eq!(m.quirks, Quirks { length0: true, ignore_transaction_id: true });
         assert!(link(Protocol::ModbusRtu, 1, &[Quirk::Length0]).check().is_err(), "RTU has no MBAP");
         assert_eq!(link(Protocol::ModbusRtuTcp, 0, &[]).modbus().transport, Transport::RtuOverTcp);
-        assert!(link(Protocol::ModbusTcp, 0, &[]).check().is_ok(), "unit 0 broadcasts");
-        assert!(matches!(
-            link(Protocol::ModbusRtu, 248, &[]).check(),
-            Err(LinkError::Unit { unit: 248, .. })
-        ));
+        for unit in [0, 248, 255] {
+            for p in [Protocol::ModbusTcp, Protocol::ModbusUdp] {
+                assert!(link(p, unit, &[]).check().is_ok(), "{p} unit {unit} addresses the device");
+            }
+        }
+        assert!(link(Protocol::ModbusRtu, 0, &[]).check().is_ok(), "unit 0 broadcasts on RTU");
+        for p in [Protocol::ModbusRtu, Protocol::ModbusRtuTcp] {
+            let err = link(p, 248, &[]).check().unwrap_err();
+            assert!(matches!(err, LinkError::Unit { unit: 248, .. }), "{err:?}");
+            assert!(err.to_string().contains("248..=255 are reserved"), "{err}");
+        }
     }
 
     #[tokio::test]

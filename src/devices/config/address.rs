@@ -11,9 +11,11 @@
 //!   the protocol's `-tcp` form, the usual mix-up with a serial-to-Ethernet gateway.
 //! - **Units** follow the protocol documents: Modbus RTU (also over TCP, where a gateway
 //!   puts the frame on an RS-485 bus) 1..=247, as 0 is the broadcast that no station
-//!   answers; Modbus TCP and UDP 0..=247, since there the unit 0 addresses the TCP device
-//!   itself (Modbus Messaging on TCP/IP Implementation Guide) rather than a bus; MEWTOCOL
-//!   stations 1..=99 (two decimal digits); PPI addresses 1..=126 (0 is rackd, the master;
+//!   answers; Modbus TCP and UDP 0..=255, since there the unit id addresses the TCP device
+//!   itself (Modbus Messaging on TCP/IP Implementation Guide: 0xFF, or 0) or a station
+//!   behind a gateway, rather than a bus, and unit 0 is answered; MEWTOCOL
+//!   stations 1..=99 (two decimal digits), or 238 (0xEE) for the global station `EE`,
+//!   which the one PLC on a point-to-point line answers whatever its number; PPI addresses 1..=126 (0 is rackd, the master;
 //!   127 is the broadcast). An MC 3E frame addresses the PLC by network 0, PC FF, station
 //!   0 and carries no unit, so an MC entry's `unit` must stay at its default 1 (a value
 //!   that would be silently ignored is refused).
@@ -23,6 +25,7 @@
 use std::net::{Ipv4Addr, SocketAddr};
 
 use crate::protocols::Protocol;
+use crate::protocols::mewtocol::frame::GLOBAL_STATION;
 use crate::protocols::protocol::Family;
 
 /// An address, unit or serial setting the protocol cannot use.
@@ -111,15 +114,16 @@ pub fn check_address(protocol: Protocol, address: &str) -> Result<(), AddressErr
 pub fn check_unit(protocol: Protocol, unit: i64) -> Result<u8, AddressError> {
     let range: (i64, i64, &'static str) = match (protocol.family(), protocol) {
         (Family::Modbus, Protocol::ModbusTcp | Protocol::ModbusUdp) => {
-            (0, 247, "0..=247 (0 addresses the TCP device itself)")
+            (0, 255, "0..=255 (255 or 0 address the TCP device itself)")
         }
         (Family::Modbus, _) => (1, 247, "1..=247 (0 is the broadcast, which no station answers)"),
-        (Family::Mewtocol, _) => (1, 99, "1..=99"),
+        (Family::Mewtocol, _) => (1, 99, "1..=99, or 238 for EE, the global station"),
         (Family::Ppi, _) => (1, 126, "1..=126 (0 is rackd's own address, 127 the broadcast)"),
         (Family::Mc3e, _) => (1, 1, "the 3E frame carries no unit; leave `unit` out"),
     };
+    let global = protocol.family() == Family::Mewtocol && unit == i64::from(GLOBAL_STATION);
     match u8::try_from(unit) {
-        Ok(u) if (range.0..=range.1).contains(&unit) => Ok(u),
+        Ok(u) if (range.0..=range.1).contains(&unit) || global => Ok(u),
         _ => Err(AddressError::Unit { unit, protocol, range: range.2 }),
     }
 }
@@ -163,9 +167,16 @@ mod tests {
         assert_eq!(check_unit(Protocol::ModbusRtu, 247), Ok(247));
         assert!(check_unit(Protocol::ModbusRtu, 0).unwrap_err().to_string().contains("broadcast"));
         assert_eq!(check_unit(Protocol::ModbusTcp, 0), Ok(0));
+        assert_eq!(check_unit(Protocol::ModbusTcp, 255), Ok(255));
+        assert!(check_unit(Protocol::ModbusRtuTcp, 248).is_err());
         let err = check_unit(Protocol::ModbusUdp, 300).unwrap_err().to_string();
-        assert_eq!(err, "unit 300 is not a modbus-udp station: 0..=247 (0 addresses the TCP device itself)");
+        assert_eq!(
+            err,
+            "unit 300 is not a modbus-udp station: 0..=255 (255 or 0 address the TCP device itself)"
+        );
         assert!(check_unit(Protocol::Mewtocol, 100).is_err() && check_unit(Protocol::Mewtocol, 99).is_ok());
+        assert_eq!(check_unit(Protocol::MewtocolTcp, 238), Ok(238));
+        assert!(check_unit(Protocol::Ppi, 238).is_err() && check_unit(Protocol::Mewtocol, 237).is_err());
         assert!(check_unit(Protocol::Ppi, 0).is_err() && check_unit(Protocol::PpiTcp, 126).is_ok());
         assert!(check_unit(Protocol::Ppi, 127).is_err() && check_unit(Protocol::Ppi, -1).is_err());
         assert_eq!(check_unit(Protocol::Mc3e, 1), Ok(1));

@@ -9,7 +9,7 @@ use tokio_util::codec::Decoder;
 
 use super::command::{Request, Response};
 use super::error_code::{self, ErrorCode};
-use super::frame::{self, Bcc, Frame, FrameError, Kind, MAX_LONG, MAX_SHORT, Scan};
+use super::frame::{self, Bcc, Frame, FrameError, GLOBAL_STATION, Kind, MAX_LONG, MAX_SHORT, Scan};
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
     Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, RetryPolicy,
@@ -36,6 +36,8 @@ pub struct MewtocolConfig {
     /// Serial line settings (default 9600,8O1, the FP series' factory setting).
     pub serial: SerialSettings,
     /// Station number of the PLC, 1..=99 (the seed's `01` is only the default).
+    /// (1..=99, or [`GLOBAL_STATION`] = 238 for `EE`, which the one PLC on the line answers
+    /// whatever its number; its reply is taken whatever station signs it).
     pub station: u8,
     /// Reply timeout of each attempt.
     pub timeout: Duration,
@@ -117,7 +119,10 @@ pub struct MewtocolClient {
 }
 
 fn check_station(station: u8) -> Result<(), PlcError> {
-    if (1..=99).contains(&station) { Ok(()) } else { Err(PlcError::OutOfRange("station must be 1..=99")) }
+    match (1..=99).contains(&station) || station == GLOBAL_STATION {
+        true => Ok(()),
+        false => Err(PlcError::OutOfRange("station must be 1..=99, or 238 (EE, the global station)")),
+    }
 }
 
 impl MewtocolClient {
@@ -210,7 +215,9 @@ impl MewtocolClient {
             if frame.kind == Kind::Command {
                 continue;
             }
-            if frame.station != self.config.station {
+            // Addressed to EE, the one PLC on the line answers; FP-X signs the reply EE,
+            // another model may sign it with its own number, so any station is taken.
+            if frame.station != self.config.station && self.config.station != GLOBAL_STATION {
                 self.health.dropped(DropReason::Unit);
                 continue;
             }

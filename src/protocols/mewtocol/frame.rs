@@ -3,7 +3,14 @@
 //! Pure bytes, no I/O. [`scan`] finds frames in a byte stream: noise before a start
 //! character is skipped, and a candidate that does not decode is reported with how many
 //! bytes to drop, so a real frame after it is still found.
+//!
+//! The station is two decimal digits (`01`..`99`), or `EE`, Panasonic's global station
+//! ("answer whatever your station number", for a computer linked to one PLC). A station is
+//! a `u8` everywhere in rackd; the global one is [`GLOBAL_STATION`], 238 = 0xEE, a value no
+//! two-digit station can take, written `EE` on the wire.
 
+/// The global station `EE` (238 = 0xEE): every PLC answers it, whatever its own number.
+pub const GLOBAL_STATION: u8 = 0xEE;
 /// The carriage return ending every frame.
 pub const CR: u8 = 0x0D;
 /// Longest `%` frame in characters, CR included.
@@ -55,7 +62,7 @@ pub enum Bcc {
 pub struct Frame {
     /// `<` (long frame) rather than `%`.
     pub long: bool,
-    /// Station number (0..=99).
+    /// Station number (0..=99), or [`GLOBAL_STATION`] for `EE`.
     pub station: u8,
     /// Command, response or error.
     pub kind: Kind,
@@ -71,8 +78,8 @@ pub enum FrameError {
     /// Fewer characters than the smallest frame.
     #[error("frame too short")]
     TooShort,
-    /// The station is not two decimal digits.
-    #[error("station number is not two decimal digits")]
+    /// The station is not two decimal digits nor `EE`.
+    #[error("station number is not two decimal digits nor EE")]
     BadStation,
     /// The character after the station is not `#`, `$` or `!`.
     #[error("unknown frame type character")]
@@ -91,7 +98,10 @@ pub fn bcc(bytes: &[u8]) -> u8 {
 pub fn encode(out: &mut Vec<u8>, long: bool, station: u8, kind: Kind, body: &[u8], with_bcc: bool) {
     let start = out.len();
     out.push(if long { b'<' } else { b'%' });
-    out.extend_from_slice(format!("{:02}", station % 100).as_bytes());
+    match station {
+        GLOBAL_STATION => out.extend_from_slice(b"EE"),
+        n => out.extend_from_slice(format!("{:02}", n % 100).as_bytes()),
+    }
     out.push(kind.mark());
     out.extend_from_slice(body);
     if with_bcc {
@@ -111,6 +121,7 @@ pub fn decode(bytes: &[u8]) -> Result<Frame, FrameError> {
     let long = bytes[0] == b'<';
     let station = match (bytes[1], bytes[2]) {
         (a @ b'0'..=b'9', b @ b'0'..=b'9') => (a - b'0') * 10 + (b - b'0'),
+        (b'E', b'E') => GLOBAL_STATION,
         _ => return Err(FrameError::BadStation),
     };
     let kind = match bytes[3] {
@@ -227,6 +238,27 @@ mod tests {
             decode(&frame("%01!40")).unwrap().bcc,
             Bcc::Wrong { computed: bcc(b"%01!"), received: 0x40 }
         );
+    }
+
+    /// The global station: Panasonic's MEWTOCOL-COM command reference (FP series
+    /// programming manuals, "station number EE: global") has `%EE#RT**` read the PLC's
+    /// status from whichever PLC is on the line, which answers `%EE$RT...`.
+    #[test]
+    fn the_global_station_ee() {
+        let mut out = Vec::new();
+        encode(&mut out, false, GLOBAL_STATION, Kind::Command, b"RT", false);
+        assert_eq!(out, frame("%EE#RT**"));
+        out.clear();
+        encode(&mut out, false, GLOBAL_STATION, Kind::Command, b"RDD0010000101", true);
+        // XOR by hand: '%'^'#' = 06, 'E'^'E' = 00, 'R'^'D' = 16, 'D' = 44, seven '0' and
+        // three '1' = 01: 06 ^ 16 ^ 44 ^ 01 = 55.
+        assert_eq!(out, frame("%EE#RDD001000010155"));
+        // The PLC's reply is signed EE too: '%'^'$'^'R'^'D' = 17, "6300" = 05 -> 12.
+        let f = decode(&frame("%EE$RD630012")).unwrap();
+        assert_eq!((f.station, f.kind, f.body.as_slice()), (GLOBAL_STATION, Kind::Ok, &b"RD6300"[..]));
+        assert_eq!(f.bcc, Bcc::Good);
+        assert_eq!(decode(&frame("%EF$WC14")), Err(FrameError::BadStation));
+        assert_eq!(decode(&frame("%E1$WC14")), Err(FrameError::BadStation));
     }
 
     #[test]

@@ -3,7 +3,8 @@
 //!
 //! Commands with a wrong BCC get `!40`; a command that does not parse gets `!41` or `!42`;
 //! an address past the bank gets `!61`. Commands for other stations are ignored, as on a
-//! shared RS-485 line. Faults ([`SharedFaults`]) drop, delay, prefix noise, duplicate,
+//! shared RS-485 line. Commands to the global station `EE` are answered whatever the
+//! simulated PLC's number, with the reply signed `EE`, as an FP-X does (`%EE$RT...`). Faults ([`SharedFaults`]) drop, delay, prefix noise, duplicate,
 //! answer from another station or with a chosen error code, or close the connection;
 //! MEWTOCOL frames carry no id, so a wrong-id fault has no effect. A [`Handler`] lets a machine simulator see each command against the
 //! memory as it was, and carry it out itself.
@@ -15,7 +16,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use super::bank::{Bank, SharedBank};
 use super::command::{Request, Response};
 use super::error_code::BCC_ERROR;
-use super::frame::{self, Bcc, Frame, Kind, Scan};
+use super::frame::{self, Bcc, Frame, GLOBAL_STATION, Kind, Scan};
 use crate::protocols::faults::SharedFaults;
 use crate::protocols::transport::{self, ByteStream, StreamServer};
 
@@ -50,10 +51,15 @@ impl ServerState {
         self
     }
 
+    /// Whether `frame` is a command for this PLC: its own station or the global `EE`.
+    fn answers(&self, frame: &Frame) -> bool {
+        frame.kind == Kind::Command && (frame.station == self.station || frame.station == GLOBAL_STATION)
+    }
+
     /// The reply to one command frame, or None when it is not for this station; `error`
     /// is answered instead of carrying the command out, and `station` signs the reply.
     fn reply(&self, frame: &Frame, error: Option<u16>, station: u8) -> Option<Vec<u8>> {
-        if frame.kind != Kind::Command || frame.station != self.station {
+        if !self.answers(frame) {
             return None;
         }
         let mut body = Vec::new();
@@ -100,7 +106,7 @@ async fn serve(mut stream: Box<dyn ByteStream>, state: ServerState) {
             match frame::scan(&rx) {
                 Scan::Found { end, frame } => {
                     rx.drain(..end);
-                    if frame.kind != Kind::Command || frame.station != state.station {
+                    if !state.answers(&frame) {
                         continue;
                     }
                     let plan = state.faults.plan();
@@ -110,7 +116,8 @@ async fn serve(mut stream: Box<dyn ByteStream>, state: ServerState) {
                     if plan.unanswered() {
                         continue;
                     }
-                    let station = plan.wrong_unit.unwrap_or(state.station);
+                    // A reply is signed with the station addressed: its own, or EE.
+                    let station = plan.wrong_unit.unwrap_or(frame.station);
                     let Some(reply) = state.reply(&frame, plan.device_error, station) else { continue };
                     if !plan.delay.is_zero() {
                         tokio::time::sleep(plan.delay).await;

@@ -6,6 +6,7 @@ use std::sync::atomic::Ordering;
 use tokio::sync::Mutex;
 
 use super::config::{ModbusConfig, Transport};
+use super::device_id::{DeviceIdPage, DeviceObject, ReadDeviceIdCode};
 use super::link::{Counters, Exchange, Link, RtuLink, TcpLink, UdpLink};
 use super::pdu::{self, Request, Response};
 use super::rtu;
@@ -40,7 +41,7 @@ impl ModbusClient {
     /// serial port is opened on the first request (and reopened after it is lost), so a
     /// device that is down when the client is built does not fail construction.
     pub async fn connect(config: ModbusConfig) -> Result<Self, PlcError> {
-        check_unit(config.unit)?;
+        config.transport.check_unit(config.unit).map_err(PlcError::OutOfRange)?;
         let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
         let counters = Arc::new(Counters::new(LinkHealth::new(policy)));
         let link = match config.transport {
@@ -66,12 +67,16 @@ impl ModbusClient {
     }
 
     /// An RTU client over a stream the caller already opened (a pty in tests, a port
-    /// opened with special settings). The stream cannot be reopened if it fails.
+    /// opened with special settings). The stream cannot be reopened if it fails. It carries
+    /// RTU frames whatever `config.transport` says (an MBAP transport is taken as RTU).
     pub fn rtu_over_stream(
-        config: ModbusConfig,
+        mut config: ModbusConfig,
         stream: impl ByteStream + 'static,
     ) -> Result<Self, PlcError> {
-        check_unit(config.unit)?;
+        if config.transport.is_mbap() {
+            config.transport = Transport::RtuSerial;
+        }
+        config.transport.check_unit(config.unit).map_err(PlcError::OutOfRange)?;
         let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
         let counters = Arc::new(Counters::new(LinkHealth::new(policy)));
         let link = StreamLink::new(Endpoint::given(stream), Backoff::default());
@@ -101,16 +106,40 @@ impl ModbusClient {
     /// Sends one request (within the per-function limits) to the configured unit under the
     /// retry policy ([`RetryPolicy`]): exception replies are returned at once as
     /// [`PlcError::Device`]; timeouts, lost connections and malformed replies are retried.
-    /// A write to unit 0 is broadcast: nothing is awaited and the expected echo is returned.
+    /// Over RTU a write to unit 0 is broadcast: nothing is awaited and the expected echo is
+    /// returned. Over TCP and UDP unit 0 addresses the device itself and is answered.
     pub async fn call(&self, request: &Request) -> Result<Response, PlcError> {
         request.check().map_err(PlcError::OutOfRange)?;
+        self.send(request).await
+    }
+
+    /// Like [`ModbusClient::call`], but a read (01..04) is sent with whatever count and
+    /// address it has, 0 and past the per-function limits included, to test a device's
+    /// limits: the device's exception (usually 03, illegal data value) comes back as
+    /// [`PlcError::Device`], and a reply that does not fit the count is malformed. Other
+    /// requests are checked as by `call`, since their counts set their own byte counts.
+    pub async fn call_unchecked(&self, request: &Request) -> Result<Response, PlcError> {
+        let read = matches!(
+            request,
+            Request::ReadCoils { .. }
+                | Request::ReadDiscreteInputs { .. }
+                | Request::ReadHoldingRegisters { .. }
+                | Request::ReadInputRegisters { .. }
+        );
+        if !read {
+            request.check().map_err(PlcError::OutOfRange)?;
+        }
+        self.send(request).await
+    }
+
+    async fn send(&self, request: &Request) -> Result<Response, PlcError> {
         let unit = self.config.unit;
         let mut pdu_bytes = Vec::with_capacity(260);
         request.encode(&mut pdu_bytes);
         Counters::bump(&self.counters.requests);
         let mut link = self.link.lock().await;
         let ex = Exchange { unit, request, pdu: &pdu_bytes };
-        if unit == 0 {
+        if unit == 0 && !self.config.transport.is_mbap() {
             if !request.is_write() {
                 return Err(PlcError::OutOfRange("unit 0 (broadcast) is for writes only"));
             }
@@ -135,6 +164,76 @@ impl ModbusClient {
         Err(retry.spent())
     }
 
+    /// Reads the device identification objects of `category` (basic, regular or extended
+    /// stream access), following "more follows" and the next object id across as many
+    /// requests as the device needs. With [`ReadDeviceIdCode::Individual`] it reads object
+    /// 0 alone; see [`ModbusClient::read_device_object`] for any other. A device that does
+    /// not implement function 43 answers exception 01, surfaced as [`PlcError::Device`].
+    pub async fn read_device_identification(
+        &self,
+        category: ReadDeviceIdCode,
+    ) -> Result<Vec<DeviceObject>, PlcError> {
+        let mut objects = Vec::new();
+        let mut from = 0u8;
+        // Each page must move forward, so 256 requests read every possible object.
+        for _ in 0..256 {
+            let request = Request::ReadDeviceId { code: category, object_id: from };
+            let Response::ReadDeviceId(page) = self.call(&request).await? else {
+                return Err(PlcError::Malformed("not a device identification reply"));
+            };
+            objects.extend(page.objects);
+            match page.next {
+                None => return Ok(objects),
+                Some(next) if next > from => from = next,
+                Some(_) => {
+                    return Err(PlcError::Malformed(
+                        "device identification: next object id does not advance",
+                    ));
+                }
+            }
+        }
+        Err(PlcError::Malformed("device identification: more than 256 pages"))
+    }
+
+    /// Reads one device identification object (individual access, code 04). A device
+    /// without that object answers exception 02, surfaced as [`PlcError::Device`].
+    pub async fn read_device_object(&self, id: u8) -> Result<DeviceObject, PlcError> {
+        let request = Request::ReadDeviceId { code: ReadDeviceIdCode::Individual, object_id: id };
+        let Response::ReadDeviceId(page) = self.call(&request).await? else {
+            return Err(PlcError::Malformed("not a device identification reply"));
+        };
+        match <[DeviceObject; 1]>::try_from(page.objects) {
+            Ok([object]) if object.id == id => Ok(object),
+            _ => Err(PlcError::Malformed("device identification: not the one object asked for")),
+        }
+    }
+
+    /// Reads the FIFO queue whose count register is at `address` (function 24): the queued
+    /// registers, oldest first, at most 31. A queue of more than 31 is exception 03 from
+    /// the device ([`PlcError::Device`]).
+    pub async fn read_fifo_queue(&self, address: u16) -> Result<Vec<u16>, PlcError> {
+        match self.call(&Request::ReadFifoQueue { address }).await? {
+            Response::ReadFifoQueue(words) => Ok(words),
+            _ => Err(PlcError::Malformed("not a FIFO queue reply")),
+        }
+    }
+
+    /// Diagnostics (08) `sub_function` with data 0000: the device's answer, a register or
+    /// counter (0002 diagnostic register, 000B bus messages, 000C bus communication
+    /// errors, 000D bus exceptions, 000E server messages, 000F server no responses), or
+    /// the echoed 0000 for 000A (clear counters). A sub-function the device lacks comes
+    /// back as exception 01 ([`PlcError::Device`]); one rackd does not know is refused
+    /// before sending.
+    pub async fn diagnostic(&self, sub_function: u16) -> Result<u16, PlcError> {
+        if !pdu::diag_known(sub_function) {
+            return Err(PlcError::OutOfRange("diagnostics sub-function not one of 0000, 0002, 000A..000F"));
+        }
+        match self.call(&Request::Diagnostics { sub_function, data: 0 }).await? {
+            Response::Diagnostics { data, .. } => Ok(data),
+            _ => Err(PlcError::Malformed("not a diagnostics reply")),
+        }
+    }
+
     /// A link check: diagnostics 08 sub-function 0000 (return query data), which the
     /// device must echo.
     pub async fn link_check(&self) -> Result<(), PlcError> {
@@ -142,13 +241,6 @@ impl ModbusClient {
         let request = Request::Diagnostics { sub_function: pdu::DIAG_RETURN_QUERY_DATA, data };
         self.call(&request).await.map(|_| ())
     }
-}
-
-fn check_unit(unit: u8) -> Result<(), PlcError> {
-    if unit > 247 {
-        return Err(PlcError::OutOfRange("unit must be 0 (broadcast) or 1..247"));
-    }
-    Ok(())
 }
 
 /// The reply a device would have sent to a write; used for broadcasts, which get none.
@@ -170,6 +262,13 @@ fn echo_of(request: &Request) -> Response {
             Response::Diagnostics { sub_function: *sub_function, data: *data }
         }
         // Reads are refused before broadcasting; an empty answer keeps this total.
+        Request::ReadFifoQueue { .. } => Response::ReadFifoQueue(Vec::new()),
+        Request::ReadDeviceId { code, .. } => Response::ReadDeviceId(DeviceIdPage {
+            code: *code,
+            conformity: 0,
+            next: None,
+            objects: Vec::new(),
+        }),
         Request::ReadCoils { .. } | Request::ReadDiscreteInputs { .. } => Response::ReadCoils(Vec::new()),
         Request::ReadHoldingRegisters { .. } | Request::ReadInputRegisters { .. } => {
             Response::ReadHoldingRegisters(Vec::new())

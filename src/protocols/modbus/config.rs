@@ -18,6 +18,23 @@ pub enum Transport {
     RtuOverTcp,
 }
 
+impl Transport {
+    /// True for the MBAP framings (TCP, UDP), where the unit id addresses the device itself
+    /// and unit 0 is not a broadcast.
+    pub fn is_mbap(self) -> bool {
+        matches!(self, Transport::Tcp | Transport::Udp)
+    }
+
+    /// Checks a unit id for this transport: RTU stations are 0 (broadcast) and 1..=247
+    /// (248..=255 are reserved); TCP and UDP take any unit id.
+    pub fn check_unit(self, unit: u8) -> Result<(), &'static str> {
+        match self.is_mbap() || unit <= 247 {
+            true => Ok(()),
+            false => Err("an RTU unit is 1..=247, or 0 to broadcast a write (248..=255 are reserved)"),
+        }
+    }
+}
+
 /// Deviations from the standard that a particular device needs tolerated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Quirks {
@@ -40,7 +57,9 @@ pub struct ModbusConfig {
     pub address: String,
     /// Serial line settings, for [`Transport::RtuSerial`] (also sets the RTU frame gap).
     pub serial: SerialSettings,
-    /// Unit (station) id 1..247; 0 broadcasts writes and awaits no reply.
+    /// Unit id. RTU (serial or over TCP): station 1..=247, 0 broadcasts writes and awaits
+    /// no reply. TCP and UDP: any 0..=255, addressing the device itself (or a station
+    /// behind a gateway); every request, unit 0 included, awaits a reply.
     pub unit: u8,
     /// How long to wait for each reply.
     pub timeout: Duration,

@@ -4,6 +4,7 @@
 //! field without checking it against the bytes actually present, and each failure says
 //! what was wrong ([`DecodeError`]).
 
+use super::device_id::{self, DeviceIdPage, MEI_DEVICE_ID, ReadDeviceIdCode};
 use super::exception::Exception;
 use super::pdu::{self, Request, Response, fc};
 
@@ -37,9 +38,22 @@ pub enum DecodeError {
     /// The reply's function code is not the request's.
     #[error("function code in the reply differs from the request")]
     FunctionMismatch,
-    /// A write reply does not echo the request's address, value or count.
+    /// A write reply does not echo the request's address, value or count (or a device
+    /// identification reply another read device id code).
     #[error("write echo does not match the request")]
     EchoMismatch,
+    /// An encapsulated interface (43) MEI type other than 0x0E, read device identification.
+    #[error("MEI type is not 0x0E (read device identification)")]
+    BadMeiType,
+    /// A read device id code outside 01..=04.
+    #[error("read device id code is not 01..04")]
+    BadReadDeviceIdCode,
+    /// A device identification reply's "more follows" is neither 00 nor FF.
+    #[error("more follows is neither 00 nor FF")]
+    BadMoreFollows,
+    /// A device identification object's length runs past the end of the reply.
+    #[error("a device identification object runs past the end of the reply")]
+    ObjectOverrun,
 }
 
 impl DecodeError {
@@ -56,13 +70,19 @@ impl DecodeError {
             DecodeError::BadCoilValue => "coil value is neither FF00 nor 0000",
             DecodeError::FunctionMismatch => "function code in the reply differs from the request",
             DecodeError::EchoMismatch => "write echo does not match the request",
+            DecodeError::BadMeiType => "MEI type is not 0x0E (read device identification)",
+            DecodeError::BadReadDeviceIdCode => "read device id code is not 01..04",
+            DecodeError::BadMoreFollows => "more follows is neither 00 nor FF",
+            DecodeError::ObjectOverrun => "a device identification object runs past the end of the reply",
         }
     }
 
     /// The exception a server answers for a request that failed to decode this way.
     pub fn exception(self) -> Exception {
         match self {
-            DecodeError::UnknownFunction(_) | DecodeError::UnknownSubFunction => Exception::ILLEGAL_FUNCTION,
+            DecodeError::UnknownFunction(_) | DecodeError::UnknownSubFunction | DecodeError::BadMeiType => {
+                Exception::ILLEGAL_FUNCTION
+            }
             _ => Exception::ILLEGAL_DATA_VALUE,
         }
     }
@@ -104,6 +124,21 @@ impl Request {
         if request_pdu_len(pdu).is_err() {
             return Err(DecodeError::UnknownFunction(f));
         }
+        if f == fc::READ_FIFO_QUEUE {
+            exact(d, 2)?;
+            return Ok(Request::ReadFifoQueue { address: word(d, 0)? });
+        }
+        if f == fc::ENCAPSULATED {
+            return match d {
+                [MEI_DEVICE_ID, code, object_id] => Ok(Request::ReadDeviceId {
+                    code: ReadDeviceIdCode::from_byte(*code).ok_or(DecodeError::BadReadDeviceIdCode)?,
+                    object_id: *object_id,
+                }),
+                [] | [MEI_DEVICE_ID] | [MEI_DEVICE_ID, _] => Err(DecodeError::Truncated),
+                [MEI_DEVICE_ID, ..] => Err(DecodeError::TrailingBytes),
+                _ => Err(DecodeError::BadMeiType),
+            };
+        }
         let (a, n) = (word(d, 0)?, word(d, 2)?);
         let req = match f {
             fc::READ_COILS => Request::ReadCoils { address: a, count: count_in(n, pdu::MAX_READ_BITS)? },
@@ -118,12 +153,8 @@ impl Request {
             }
             fc::WRITE_SINGLE_COIL => Request::WriteSingleCoil { address: a, value: coil(n)? },
             fc::WRITE_SINGLE_REGISTER => Request::WriteSingleRegister { address: a, value: n },
-            fc::DIAGNOSTICS => match a {
-                pdu::DIAG_RETURN_QUERY_DATA | pdu::DIAG_CLEAR_COUNTERS => {
-                    Request::Diagnostics { sub_function: a, data: n }
-                }
-                _ => return Err(DecodeError::UnknownSubFunction),
-            },
+            fc::DIAGNOSTICS if pdu::diag_known(a) => Request::Diagnostics { sub_function: a, data: n },
+            fc::DIAGNOSTICS => return Err(DecodeError::UnknownSubFunction),
             fc::WRITE_MULTIPLE_COILS => {
                 let count = count_in(n, pdu::MAX_WRITE_BITS)? as usize;
                 let data = byte_counted(d, count.div_ceil(8))?;
@@ -216,10 +247,30 @@ pub fn decode_response(pdu: &[u8], req: &Request) -> Result<Result<Response, Exc
             echo([*address, values.len() as u16])?;
             Response::WriteMultipleRegisters { address: *address, count: values.len() as u16 }
         }
-        Request::Diagnostics { sub_function, data } => {
+        Request::Diagnostics { sub_function, data } if pdu::diag_echoes(*sub_function) => {
             echo([*sub_function, *data])?;
             Response::Diagnostics { sub_function: *sub_function, data: *data }
         }
+        // A register or counter: any value, under the request's sub-function.
+        Request::Diagnostics { sub_function, .. } => {
+            exact(d, 4)?;
+            if word(d, 0)? != *sub_function {
+                return Err(DecodeError::EchoMismatch);
+            }
+            Response::Diagnostics { sub_function: *sub_function, data: word(d, 2)? }
+        }
+        Request::ReadFifoQueue { .. } => {
+            let (byte_count, count) = (word(d, 0)? as usize, word(d, 2)?);
+            if count > pdu::MAX_FIFO_COUNT {
+                return Err(DecodeError::BadCount);
+            }
+            if byte_count != 2 + count as usize * 2 {
+                return Err(DecodeError::ByteCountMismatch);
+            }
+            exact(d, 2 + byte_count)?;
+            Response::ReadFifoQueue(words(&d[4..]))
+        }
+        Request::ReadDeviceId { code, .. } => Response::ReadDeviceId(DeviceIdPage::decode(d, *code)?),
     };
     Ok(Ok(resp))
 }
@@ -233,6 +284,8 @@ pub fn request_pdu_len(prefix: &[u8]) -> Result<Option<usize>, DecodeError> {
         fc::WRITE_MULTIPLE_COILS | fc::WRITE_MULTIPLE_REGISTERS => {
             Ok(prefix.get(5).map(|&bc| 6 + bc as usize))
         }
+        fc::READ_FIFO_QUEUE => Ok(Some(3)),
+        fc::ENCAPSULATED => Ok(Some(4)),
         other => Err(DecodeError::UnknownFunction(other)),
     }
 }
@@ -246,6 +299,8 @@ pub fn response_pdu_len(prefix: &[u8]) -> Result<Option<usize>, DecodeError> {
         fc::READ_COILS..=fc::READ_INPUT_REGISTERS => Ok(prefix.get(1).map(|&bc| 2 + bc as usize)),
         fc::WRITE_SINGLE_COIL | fc::WRITE_SINGLE_REGISTER | fc::DIAGNOSTICS => Ok(Some(5)),
         fc::WRITE_MULTIPLE_COILS | fc::WRITE_MULTIPLE_REGISTERS => Ok(Some(5)),
+        fc::READ_FIFO_QUEUE => Ok(prefix.get(1..3).map(|b| 3 + u16::from_be_bytes([b[0], b[1]]) as usize)),
+        fc::ENCAPSULATED => device_id::reply_len(prefix),
         other => Err(DecodeError::UnknownFunction(other)),
     }
 }

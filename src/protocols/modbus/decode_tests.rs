@@ -115,7 +115,9 @@ fn malformed_requests() {
         ("01 00 00 07 D1", DecodeError::BadCount),
         ("05 00 AC 12 34", DecodeError::BadCoilValue),
         ("07 00 00 00 00", DecodeError::UnknownFunction(7)),
-        ("2B", DecodeError::UnknownFunction(0x2B)),
+        ("11", DecodeError::UnknownFunction(0x11)),
+        ("2B", DecodeError::Truncated),
+        ("2B 0D 01 00", DecodeError::BadMeiType),
         ("08 00 01 00 00", DecodeError::UnknownSubFunction),
         ("0F 00 13 00 0A 01 CD", DecodeError::ByteCountMismatch),
         ("0F 00 13 00 0A 02 CD", DecodeError::Truncated),
@@ -155,7 +157,8 @@ fn pdu_lengths_from_prefixes() {
     assert_eq!(request_pdu_len(&hex("03")), Ok(Some(5)));
     assert_eq!(request_pdu_len(&hex("10 00 01 00 02")), Ok(None));
     assert_eq!(request_pdu_len(&hex("10 00 01 00 02 04")), Ok(Some(10)));
-    assert_eq!(request_pdu_len(&hex("2B")), Err(DecodeError::UnknownFunction(0x2B)));
+    assert_eq!(request_pdu_len(&hex("11")), Err(DecodeError::UnknownFunction(0x11)));
+    assert_eq!(request_pdu_len(&hex("2B")), Ok(Some(4)));
     assert_eq!(response_pdu_len(&hex("03")), Ok(None));
     assert_eq!(response_pdu_len(&hex("03 06")), Ok(Some(8)));
     assert_eq!(response_pdu_len(&hex("90")), Ok(Some(2)));
@@ -182,6 +185,13 @@ fn request_strategy() -> impl Strategy<Value = Request> {
             .prop_map(|(address, values)| Request::WriteMultipleRegisters { address, values }),
         (prop_oneof![Just(pdu::DIAG_RETURN_QUERY_DATA), Just(pdu::DIAG_CLEAR_COUNTERS)], any::<u16>())
             .prop_map(|(sub_function, data)| Request::Diagnostics { sub_function, data }),
+        (pdu::DIAG_BUS_MESSAGES..=pdu::DIAG_SERVER_NO_RESPONSES, Just(0u16))
+            .prop_map(|(sub_function, data)| Request::Diagnostics { sub_function, data }),
+        any::<u16>().prop_map(|address| Request::ReadFifoQueue { address }),
+        (1..=4u8, any::<u8>()).prop_map(|(code, object_id)| Request::ReadDeviceId {
+            code: crate::protocols::modbus::ReadDeviceIdCode::from_byte(code).unwrap(),
+            object_id
+        }),
     ]
 }
 
@@ -218,8 +228,30 @@ fn exchange_strategy() -> impl Strategy<Value = (Request, Response)> {
                 Just(Response::WriteMultipleRegisters { address: *address, count: values.len() as u16 })
                     .boxed()
             }
-            Request::Diagnostics { sub_function, data } => {
+            Request::Diagnostics { sub_function, data } if pdu::diag_echoes(*sub_function) => {
                 Just(Response::Diagnostics { sub_function: *sub_function, data: *data }).boxed()
+            }
+            Request::Diagnostics { sub_function, .. } => {
+                let sub_function = *sub_function;
+                any::<u16>().prop_map(move |data| Response::Diagnostics { sub_function, data }).boxed()
+            }
+            Request::ReadFifoQueue { .. } => {
+                prop::collection::vec(any::<u16>(), 0..=31).prop_map(Response::ReadFifoQueue).boxed()
+            }
+            Request::ReadDeviceId { code, .. } => {
+                let object = (any::<u8>(), prop::collection::vec(any::<u8>(), 0..40))
+                    .prop_map(|(id, value)| crate::protocols::modbus::DeviceObject { id, value });
+                let code = *code;
+                (any::<u8>(), prop::option::of(any::<u8>()), prop::collection::vec(object, 0..5))
+                    .prop_map(move |(conformity, next, objects)| {
+                        Response::ReadDeviceId(crate::protocols::modbus::DeviceIdPage {
+                            code,
+                            conformity,
+                            next,
+                            objects,
+                        })
+                    })
+                    .boxed()
             }
         };
         (Just(req), resp)
@@ -248,4 +280,43 @@ proptest! {
         let _ = request_pdu_len(&bytes);
         let _ = response_pdu_len(&bytes);
     }
+}
+
+/// Diagnostics counters (spec V1.1b3 section 6.8: sub-function, then the counter in the
+/// data field of the reply; the request's data field is 0000).
+#[test]
+fn diagnostics_counters_carry_a_value_not_an_echo() {
+    let request = Request::decode(&hex("08 00 0B 00 00")).unwrap();
+    assert_eq!(request, Request::Diagnostics { sub_function: pdu::DIAG_BUS_MESSAGES, data: 0 });
+    assert_eq!(
+        decode_response(&hex("08 00 0B 01 2C"), &request),
+        Ok(Ok(Response::Diagnostics { sub_function: pdu::DIAG_BUS_MESSAGES, data: 300 }))
+    );
+    assert_eq!(decode_response(&hex("08 00 0C 01 2C"), &request), Err(DecodeError::EchoMismatch));
+    assert_eq!(decode_response(&hex("08 00 0B 01"), &request), Err(DecodeError::Truncated));
+    assert_eq!(Request::decode(&hex("08 00 01 00 00")), Err(DecodeError::UnknownSubFunction));
+    assert_eq!(Request::decode(&hex("08 00 10 00 00")), Err(DecodeError::UnknownSubFunction));
+}
+
+/// Read FIFO queue, the example of spec V1.1b3 section 6.18: pointer 0x04DE, two queued
+/// registers 0x01B8 and 0x1284.
+#[test]
+fn read_fifo_queue_as_in_the_specification() {
+    let request = Request::ReadFifoQueue { address: 0x04DE };
+    assert_eq!(enc_req(&request), hex("18 04 DE"));
+    assert_eq!(Request::decode(&hex("18 04 DE")), Ok(request.clone()));
+    assert_eq!(request_pdu_len(&hex("18")), Ok(Some(3)));
+    let reply = hex("18 00 06 00 02 01 B8 12 84");
+    let values = Response::ReadFifoQueue(vec![0x01B8, 0x1284]);
+    assert_eq!(decode_response(&reply, &request), Ok(Ok(values.clone())));
+    assert_eq!(enc_resp(&values), reply);
+    assert_eq!(response_pdu_len(&reply[..2]), Ok(None));
+    assert_eq!(response_pdu_len(&reply[..3]), Ok(Some(9)));
+    assert_eq!(
+        decode_response(&hex("18 00 06 00 03 01 B8 12 84"), &request),
+        Err(DecodeError::ByteCountMismatch)
+    );
+    assert_eq!(decode_response(&hex("18 00 42 00 20"), &request), Err(DecodeError::BadCount));
+    assert_eq!(decode_response(&hex("18 00 06 00 02 01 B8"), &request), Err(DecodeError::Truncated));
+    assert_eq!(Request::decode(&hex("18 04 DE 00")), Err(DecodeError::TrailingBytes));
 }

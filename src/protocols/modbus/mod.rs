@@ -2,7 +2,8 @@
 //!
 //! # Layers
 //!
-//! - [`pdu`], [`decode`], [`exception`]: PDUs as Rust values, encoded and decoded without I/O.
+//! - [`pdu`], [`decode`], [`exception`], [`device_id`]: PDUs as Rust values, encoded and
+//!   decoded without I/O.
 //! - [`frame`] (MBAP, for TCP and UDP) and [`rtu`] (CRC-16, frame scanning): framings.
 //! - `link`: one request/reply attempt per framing (MBAP over TCP or UDP, RTU over a byte
 //!   stream), over the shared [`transport`](crate::protocols::transport) layer;
@@ -20,7 +21,7 @@
 //! (the client must drop stale datagrams but report a wrong function), reads a function
 //! mismatch as an exception code, does not check write echoes, and works on whole frames,
 //! with no way to find frame boundaries in an RTU byte stream after line noise. The Modbus
-//! PDU is small (nine functions here), so the codec is written out in full, with typed
+//! PDU is small (eleven functions here), so the codec is written out in full, with typed
 //! errors and property tests that no input panics it.
 //!
 //! # Quirks ([`Quirks`])
@@ -46,6 +47,7 @@ pub mod address;
 mod client;
 pub mod config;
 pub mod decode;
+pub mod device_id;
 pub mod exception;
 pub mod frame;
 mod link;
@@ -57,5 +59,6 @@ pub mod server;
 pub use crate::protocols::transport::ByteStream;
 pub use client::{ClientStats, ModbusClient};
 pub use config::{ModbusConfig, Quirks, Transport};
+pub use device_id::{DeviceIdPage, DeviceIdentification, DeviceObject, ObjectId, ReadDeviceIdCode};
 pub use exception::Exception;
 pub use pdu::{Request, Response};

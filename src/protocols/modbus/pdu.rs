@@ -1,7 +1,10 @@
 //! Modbus PDUs (function code + data) as plain Rust values, and their encoding to bytes.
 //!
 //! The PDU is the same in every framing (TCP, UDP, RTU); [`super::frame`] and
-//! [`super::rtu`] wrap it. Decoding lives in [`super::decode`]. Nothing here does I/O.
+//! [`super::rtu`] wrap it. Decoding lives in [`super::decode`]; Read Device Identification's
+//! objects in [`super::device_id`]. Nothing here does I/O.
+
+use super::device_id::{DeviceIdPage, MEI_DEVICE_ID, ReadDeviceIdCode};
 
 /// Function codes this crate speaks.
 pub mod fc {
@@ -23,6 +26,10 @@ pub mod fc {
     pub const WRITE_MULTIPLE_COILS: u8 = 0x0F;
     /// 16 (0x10) write multiple registers.
     pub const WRITE_MULTIPLE_REGISTERS: u8 = 0x10;
+    /// 24 (0x18) read FIFO queue.
+    pub const READ_FIFO_QUEUE: u8 = 0x18;
+    /// 43 (0x2B) encapsulated interface transport (MEI 0x0E: read device identification).
+    pub const ENCAPSULATED: u8 = 0x2B;
     /// Set in the function code of an exception reply.
     pub const EXCEPTION_FLAG: u8 = 0x80;
 }
@@ -35,11 +42,37 @@ pub const MAX_READ_REGISTERS: u16 = 125;
 pub const MAX_WRITE_BITS: u16 = 1968;
 /// Most registers one write multiple (16) may carry.
 pub const MAX_WRITE_REGISTERS: u16 = 123;
+/// Most registers a FIFO queue (24) may hold.
+pub const MAX_FIFO_COUNT: u16 = 31;
 
 /// Diagnostics sub-function 0000: return query data (echo).
 pub const DIAG_RETURN_QUERY_DATA: u16 = 0x0000;
 /// Diagnostics sub-function 000A: clear counters and diagnostic register.
 pub const DIAG_CLEAR_COUNTERS: u16 = 0x000A;
+/// Diagnostics sub-function 0002: return the diagnostic register.
+pub const DIAG_DIAGNOSTIC_REGISTER: u16 = 0x0002;
+/// Diagnostics sub-function 000B: return the bus message count.
+pub const DIAG_BUS_MESSAGES: u16 = 0x000B;
+/// Diagnostics sub-function 000C: return the bus communication error count.
+pub const DIAG_BUS_COMM_ERRORS: u16 = 0x000C;
+/// Diagnostics sub-function 000D: return the bus exception error count.
+pub const DIAG_BUS_EXCEPTIONS: u16 = 0x000D;
+/// Diagnostics sub-function 000E: return the server message count.
+pub const DIAG_SERVER_MESSAGES: u16 = 0x000E;
+/// Diagnostics sub-function 000F: return the server no response count.
+pub const DIAG_SERVER_NO_RESPONSES: u16 = 0x000F;
+
+/// Whether a diagnostics sub-function is one this crate speaks.
+pub fn diag_known(sub_function: u16) -> bool {
+    matches!(sub_function, DIAG_RETURN_QUERY_DATA | DIAG_DIAGNOSTIC_REGISTER | DIAG_CLEAR_COUNTERS)
+        || (DIAG_BUS_MESSAGES..=DIAG_SERVER_NO_RESPONSES).contains(&sub_function)
+}
+
+/// Whether the reply to a diagnostics sub-function echoes the request's data word (0000,
+/// 000A); the others answer a register or counter in it.
+pub fn diag_echoes(sub_function: u16) -> bool {
+    matches!(sub_function, DIAG_RETURN_QUERY_DATA | DIAG_CLEAR_COUNTERS)
+}
 
 /// A request PDU. Addresses are PDU addresses (0-based, as on the wire).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -107,6 +140,18 @@ pub enum Request {
         /// Data word (echoed by sub-function 0000).
         data: u16,
     },
+    /// 24: read the FIFO queue whose count register is at `address`.
+    ReadFifoQueue {
+        /// The FIFO pointer address: the queue's count register.
+        address: u16,
+    },
+    /// 43 / MEI 0x0E: read device identification objects from `object_id` on.
+    ReadDeviceId {
+        /// Which objects: a category as a stream, or one object.
+        code: ReadDeviceIdCode,
+        /// The first object (stream access) or the one object (individual access).
+        object_id: u8,
+    },
 }
 
 /// A normal (non-exception) response PDU.
@@ -155,6 +200,10 @@ pub enum Response {
         /// Data word (echoed by sub-function 0000).
         data: u16,
     },
+    /// 24: the queued registers (at most 31), oldest first.
+    ReadFifoQueue(Vec<u16>),
+    /// 43 / MEI 0x0E: one page of device identification objects.
+    ReadDeviceId(DeviceIdPage),
 }
 
 impl Request {
@@ -170,6 +219,8 @@ impl Request {
             Request::WriteMultipleCoils { .. } => fc::WRITE_MULTIPLE_COILS,
             Request::WriteMultipleRegisters { .. } => fc::WRITE_MULTIPLE_REGISTERS,
             Request::Diagnostics { .. } => fc::DIAGNOSTICS,
+            Request::ReadFifoQueue { .. } => fc::READ_FIFO_QUEUE,
+            Request::ReadDeviceId { .. } => fc::ENCAPSULATED,
         }
     }
 
@@ -231,6 +282,10 @@ impl Request {
                 put_words(buf, values);
             }
             Request::Diagnostics { sub_function, data } => put_words(buf, &[*sub_function, *data]),
+            Request::ReadFifoQueue { address } => put_words(buf, &[*address]),
+            Request::ReadDeviceId { code, object_id } => {
+                buf.extend_from_slice(&[MEI_DEVICE_ID, *code as u8, *object_id])
+            }
         }
     }
 }
@@ -248,11 +303,16 @@ impl Response {
             Response::WriteMultipleCoils { .. } => fc::WRITE_MULTIPLE_COILS,
             Response::WriteMultipleRegisters { .. } => fc::WRITE_MULTIPLE_REGISTERS,
             Response::Diagnostics { .. } => fc::DIAGNOSTICS,
+            Response::ReadFifoQueue(_) => fc::READ_FIFO_QUEUE,
+            Response::ReadDeviceId(_) => fc::ENCAPSULATED,
         }
     }
 
     /// Appends the PDU bytes to `buf`.
     pub fn encode(&self, buf: &mut Vec<u8>) {
+        if let Response::ReadDeviceId(page) = self {
+            return page.encode(buf);
+        }
         buf.push(self.function());
         match self {
             Response::ReadCoils(bits) | Response::ReadDiscreteInputs(bits) => {
@@ -268,6 +328,11 @@ impl Response {
             Response::WriteMultipleCoils { address, count }
             | Response::WriteMultipleRegisters { address, count } => put_words(buf, &[*address, *count]),
             Response::Diagnostics { sub_function, data } => put_words(buf, &[*sub_function, *data]),
+            Response::ReadFifoQueue(words) => {
+                put_words(buf, &[(2 + words.len() * 2) as u16, words.len() as u16]);
+                put_words(buf, words);
+            }
+            Response::ReadDeviceId(_) => {}
         }
     }
 }

@@ -95,6 +95,7 @@ impl Bank {
                 self.running = false;
                 Ok(Reply::Done(pdu::STOP))
             }
+            Request::Setup(setup) => Ok(Reply::Setup(setup.negotiated())),
         };
         result.unwrap_or_else(Reply::ItemError)
     }

@@ -48,6 +48,7 @@ mod memory;
 pub mod pdu;
 pub mod return_code;
 pub mod server;
+pub mod setup;
 
 pub use bank::{Bank, SharedBank};
 pub use client::{PpiClient, PpiConfig, PpiTransport};

@@ -1,9 +1,12 @@
 //! The S7 PDU inside a PPI long frame: header `32 ROSCTR 00 00 REF REF PL PL DL DL` (plus
 //! the error class and code in acknowledgements), parameters, data. Requests: read and
-//! write of one item, RUN and STOP. Pure bytes, no I/O.
+//! write of one item, RUN and STOP, setup communication ([`super::setup`]). Pure bytes, no
+//! I/O.
 
 pub use super::area::{MemArea, Size};
 use super::return_code::SUCCESS;
+use super::setup::SETUP;
+pub use super::setup::Setup;
 
 /// S7 protocol id, the first PDU byte.
 const PROTOCOL_ID: u8 = 0x32;
@@ -89,6 +92,8 @@ pub enum Request {
     Run,
     /// Put the PLC in STOP.
     Stop,
+    /// Setup communication: the master's proposal.
+    Setup(Setup),
 }
 
 /// A reply PDU.
@@ -102,6 +107,8 @@ pub enum Reply {
     ItemError(u8),
     /// RUN or STOP done (the function code answered).
     Done(u8),
+    /// Setup communication: what the PLC grants.
+    Setup(Setup),
     /// The whole request was refused with this error class and code.
     Refused {
         /// Error class (0x85, ...).
@@ -196,6 +203,10 @@ impl Request {
                 out.extend_from_slice(&[RUN, 0, 0, 0, 0, 0, 0, 0xFD, 0, 0, P_PROGRAM.len() as u8]);
                 out.extend_from_slice(P_PROGRAM);
             }
+            Request::Setup(setup) => {
+                header(out, JOB, pdu_ref, 8, 0);
+                setup.encode(out);
+            }
         }
     }
 
@@ -223,6 +234,7 @@ impl Request {
             }
             STOP => Request::Stop,
             RUN => Request::Run,
+            SETUP if dlen == 0 => Request::Setup(Setup::decode(param).ok_or(PduError::BadLength)?),
             _ => return Err(PduError::Unsupported),
         };
         Ok((pdu_ref, request))
@@ -244,6 +256,10 @@ impl Reply {
             (Reply::Done(function), _) => {
                 ack_data(out, 1, 0);
                 out.push(*function);
+            }
+            (Reply::Setup(setup), _) => {
+                ack_data(out, 8, 0);
+                setup.encode(out);
             }
             (Reply::Data(bytes), Request::Read(item)) => {
                 ack_data(out, 2, 4 + bytes.len());
@@ -306,6 +322,9 @@ impl Reply {
                 _ => return Err(PduError::BadItem),
             },
             (Request::Run | Request::Stop, [f @ (RUN | STOP)]) => Reply::Done(*f),
+            (Request::Setup(_), [SETUP, ..]) if data.is_empty() => {
+                Reply::Setup(Setup::decode(param).ok_or(PduError::BadLength)?)
+            }
             _ => return Err(PduError::Mismatch),
         };
         Ok((pdu_ref, reply))

@@ -101,6 +101,40 @@ fn seed_run_and_stop() {
     assert_eq!(reply_frame(&Reply::Done(STOP), &Request::Stop), hex(RUN_STOP_OK));
 }
 
+/// The setup communication request libnodave's `_daveNegPDUlengthRequest` sends over PPI
+/// (AmQ 1/1, PDU 960; PDU reference 1, PLC 2, master 0), as written out byte by byte in
+/// the OpcBridge project's `S7PpiCodecTests.BuildNegotiateRequest_Fixture`.
+const SETUP_REQUEST: &str =
+    "68 15 15 68 02 00 6C 32 01 00 00 00 01 00 08 00 00 F0 00 00 01 00 01 03 C0 5F 16";
+/// What the simulated S7-200 answers: ack-data, AmQ 1/1, PDU 960 clamped to 240.
+const SETUP_REPLY: &str =
+    "68 17 17 68 00 02 08 32 03 00 00 00 01 00 08 00 00 00 00 F0 00 00 01 00 01 00 F0 2A 16";
+
+#[test]
+fn setup_communication_is_answered_like_an_s7_200() {
+    let asked = Setup { amq_calling: 1, amq_called: 1, pdu_len: 960 };
+    let request = Request::Setup(asked);
+    let mut pdu = Vec::new();
+    request.encode(1, &mut pdu);
+    let mut frame_bytes = Vec::new();
+    frame::encode_long(&mut frame_bytes, 2, 0, request.fc(), &pdu);
+    assert_eq!(frame_bytes, hex(SETUP_REQUEST));
+    assert_eq!(Request::decode(&payload(&hex(SETUP_REQUEST))), Ok((1, request.clone())));
+    let granted = asked.negotiated();
+    assert_eq!(granted, Setup { amq_calling: 1, amq_called: 1, pdu_len: 240 });
+    let mut pdu = Vec::new();
+    Reply::Setup(granted).encode(&request, 1, &mut pdu);
+    let mut reply = Vec::new();
+    frame::encode_long(&mut reply, 0, 2, frame::FC_RESPONSE, &pdu);
+    assert_eq!(reply, hex(SETUP_REPLY));
+    assert_eq!(Reply::decode(&payload(&reply), &request), Ok((1, Reply::Setup(granted))));
+    // Smaller proposals are granted as asked; a short parameter block is malformed.
+    let small = Setup { amq_calling: 0, amq_called: 1, pdu_len: 120 };
+    assert_eq!(small.negotiated(), small);
+    let short = hex("32 01 00 00 00 01 00 06 00 00 F0 00 00 01 00 01");
+    assert_eq!(Request::decode(&short), Err(PduError::BadLength));
+}
+
 #[test]
 fn item_errors_and_mismatches() {
     let read = Request::Read(item(Size::Word, 2, MemArea::V, 0));
@@ -146,6 +180,8 @@ proptest! {
             (Request::Write(it, data.clone()), Reply::ItemError(3)),
             (Request::Run, Reply::Done(RUN)),
             (Request::Stop, Reply::Refused { class: 0x85, code: 1 }),
+            (Request::Setup(Setup { amq_calling: r, amq_called: 1, pdu_len: 240 }),
+             Reply::Setup(Setup { amq_calling: 1, amq_called: 1, pdu_len: r })),
         ] {
             let mut pdu = Vec::new();
             request.encode(r, &mut pdu);

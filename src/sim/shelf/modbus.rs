@@ -114,6 +114,10 @@ pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io:
         unit,
         length0: protocol == ShelfProtocol::ModbusUdp,
         faults: faults.clone(),
+        // An S7-1200's Modbus_Slave has no device identification (exception 01).
+        identification: if s7.is_some() { None } else { ServerOptions::default().identification },
+        // Its diagnostics are Modbus_Slave's own (0000 and 000A only, see s7_1200.rs).
+        diagnostic_counters: s7.is_none(),
         ..ServerOptions::default()
     };
     let server = ModbusServer::new(Arc::new(handler), options);

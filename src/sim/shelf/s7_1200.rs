@@ -60,6 +60,8 @@ impl S7Mapping {
                 DIAG_RETURN_QUERY_DATA | DIAG_CLEAR_COUNTERS => Ok(()),
                 _ => Err(Exception::ILLEGAL_FUNCTION),
             },
+            // Modbus_Slave has no device identification and no FIFO queue.
+            Request::ReadDeviceId { .. } | Request::ReadFifoQueue { .. } => Err(Exception::ILLEGAL_FUNCTION),
         }
     }
 }

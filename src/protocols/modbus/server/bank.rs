@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use super::handler::Handler;
 use crate::protocols::modbus::exception::Exception;
-use crate::protocols::modbus::pdu::{Request, Response};
+use crate::protocols::modbus::pdu::{self, Request, Response};
 
 /// Items in each table: the whole 16-bit address range.
 pub const TABLE_SIZE: usize = 0x1_0000;
@@ -82,6 +82,18 @@ impl RegisterBank {
             Request::Diagnostics { sub_function, data } => {
                 Response::Diagnostics { sub_function: *sub_function, data: *data }
             }
+            // The count register at the pointer, then the queued registers; reading does
+            // not empty the queue (spec V1.1b3 section 6.18).
+            Request::ReadFifoQueue { address } => {
+                let count = range(&self.holding_registers, *address, 1)?[0];
+                if count > pdu::MAX_FIFO_COUNT {
+                    return Err(Exception::ILLEGAL_DATA_VALUE);
+                }
+                let first = address.checked_add(1).ok_or(Exception::ILLEGAL_DATA_ADDRESS)?;
+                Response::ReadFifoQueue(range(&self.holding_registers, first, count as usize)?.to_vec())
+            }
+            // Answered by the server from its options' identification, never by the tables.
+            Request::ReadDeviceId { .. } => return Err(Exception::ILLEGAL_FUNCTION),
         })
     }
 }

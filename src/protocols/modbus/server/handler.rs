@@ -8,8 +8,9 @@ use crate::protocols::modbus::pdu::{Request, Response};
 /// refuse requests (count writes into a busy task slot, answer exception 06 while busy,
 /// start work when a task id is written) and then delegates to the bank.
 ///
-/// Called for every request addressed to the server's unit, and for broadcasts (unit 0)
-/// whose reply is then discarded. Runs under no lock of the server's own; keep it short,
+/// Called for every request addressed to the server's unit (over TCP and UDP also units 0
+/// and 255, which address the device itself), and for RTU broadcasts (unit 0) whose reply
+/// is then discarded. Runs under no lock of the server's own; keep it short,
 /// it is on the reply path.
 pub trait Handler: Send + Sync + 'static {
     /// Performs `request` sent to `unit`, or refuses it with an exception.

@@ -21,8 +21,19 @@
 //!
 //! The bank is shared: whoever holds a [`Bank`] clone sees and changes what clients see. To
 //! observe or veto requests, pass your own [`Handler`] that delegates to the bank.
+//!
+//! # Units
+//!
+//! Over RTU (serial or over TCP) the server is one station on a bus: it answers its own
+//! unit, performs writes broadcast to unit 0 without replying, and ignores other units.
+//! Over TCP and UDP (MBAP) the unit id addresses the device itself, so the server answers
+//! its own unit (any of 0..=255) and also 0 and 255 as "this device": the Modbus Messaging
+//! on TCP/IP Implementation Guide has a TCP device use 0xFF when the unit id is useless and
+//! accept 0 for direct communication. A reply carries the request's unit id. Other units
+//! are ignored, as a gateway with no station behind them would time out.
 
 mod bank;
+mod diagnostics;
 mod handler;
 mod rtu;
 mod tcp;
@@ -35,16 +46,18 @@ use std::sync::atomic::{AtomicU64, Ordering};
 pub use bank::{Bank, RegisterBank, TABLE_SIZE};
 pub use handler::Handler;
 
+use super::device_id::DeviceIdentification;
 use super::exception::Exception;
-use super::pdu::{Request, encode_exception};
+use super::pdu::{Request, Response, encode_exception};
 use crate::protocols::faults::{Faults, Plan, SharedFaults};
 use crate::protocols::transport::ByteStream;
 
 /// How a server presents itself.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ServerOptions {
-    /// The unit id it answers (requests to other units are ignored; unit 0 broadcasts are
-    /// performed without reply).
+    /// The unit id it answers. Requests to other units are ignored, except: over RTU unit 0
+    /// broadcasts (writes are performed without reply); over TCP and UDP units 0 and 255
+    /// address this device and are answered (see the module documentation).
     pub unit: u8,
     /// Answer with an MBAP length field of 0, like the shelf PLC.
     pub length0: bool,
@@ -52,11 +65,26 @@ pub struct ServerOptions {
     pub zero_transaction_id: bool,
     /// Faults to inject from the start.
     pub faults: Faults,
+    /// The objects Read Device Identification (43 / 0x0E) is answered from, before the
+    /// handler sees the request; rackd's own by default. `None` passes the request to the
+    /// handler (a [`Bank`] answers exception 01, as a device without the function).
+    pub identification: Option<DeviceIdentification>,
+    /// Answer diagnostics (08) sub-functions 0002 and 000A..=000F from the server's own
+    /// counters (see `diagnostics.rs`), before the handler sees them; `false` passes every
+    /// sub-function to the handler (a device that has no counters).
+    pub diagnostic_counters: bool,
 }
 
 impl Default for ServerOptions {
     fn default() -> Self {
-        ServerOptions { unit: 1, length0: false, zero_transaction_id: false, faults: Faults::default() }
+        ServerOptions {
+            unit: 1,
+            length0: false,
+            zero_transaction_id: false,
+            faults: Faults::default(),
+            identification: Some(DeviceIdentification::default()),
+            diagnostic_counters: true,
+        }
     }
 }
 
@@ -84,6 +112,7 @@ pub(crate) struct Shared {
     requests: AtomicU64,
     replies: AtomicU64,
     dropped: AtomicU64,
+    diagnostics: diagnostics::Counters,
 }
 
 /// A reply to send, and the faults to apply while sending it.
@@ -93,32 +122,56 @@ pub(crate) struct Outcome {
     pub plan: Plan,
 }
 
+/// How the framing a request came in addresses the server.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Addressing {
+    /// MBAP (TCP, UDP): units 0 and 255 also mean this device; no broadcast.
+    Mbap,
+    /// RTU: a station on a bus; unit 0 broadcasts.
+    Rtu,
+}
+
 impl Shared {
     /// Handles one request PDU sent to `unit`; `None` if no reply is due (another unit, a
     /// broadcast, a dropped request, a frame too short to answer).
-    pub fn process(&self, unit: u8, pdu: &[u8]) -> Option<Outcome> {
+    pub fn process(&self, unit: u8, pdu: &[u8], addressing: Addressing) -> Option<Outcome> {
         self.requests.fetch_add(1, Ordering::Relaxed);
-        let broadcast = unit == 0;
-        if unit != self.options.unit && !broadcast {
+        self.diagnostics.bus_message();
+        let broadcast = unit == 0 && addressing == Addressing::Rtu;
+        let this_device =
+            unit == self.options.unit || (addressing == Addressing::Mbap && matches!(unit, 0 | 255));
+        if !this_device && !broadcast {
             return None;
         }
+        self.diagnostics.server_message();
         let plan = self.faults.plan();
         if plan.drop || plan.drop_ack {
             self.dropped.fetch_add(1, Ordering::Relaxed);
+            self.diagnostics.no_response();
             return None;
         }
         let function = *pdu.first()?;
         let result = match Request::decode(pdu) {
-            Ok(req) if broadcast && !req.is_write() => return None,
+            Ok(req) if broadcast && !req.is_write() => {
+                self.diagnostics.no_response();
+                return None;
+            }
             // A Modbus exception is one byte: the code's low byte.
             Ok(req) => match plan.device_error {
                 Some(code) => Err(Exception(code as u8)),
-                None => self.handler.handle(unit, &req),
+                None => self.own_answer(&req).unwrap_or_else(|| self.handler.handle(unit, &req)),
             },
-            Err(e) => Err(e.exception()),
+            Err(e) => {
+                self.diagnostics.undecoded(e);
+                Err(e.exception())
+            }
         };
         if broadcast {
+            self.diagnostics.no_response();
             return None;
+        }
+        if result.is_err() {
+            self.diagnostics.exception();
         }
         let mut out = Vec::with_capacity(260);
         match result {
@@ -126,6 +179,21 @@ impl Shared {
             Err(e) => encode_exception(function, e.0, &mut out),
         }
         Some(Outcome { unit: plan.wrong_unit.unwrap_or(unit), pdu: out, plan })
+    }
+
+    /// The answer the server gives itself, before the handler: device identification from
+    /// its options, diagnostics from its counters; `None` for the handler to answer.
+    fn own_answer(&self, request: &Request) -> Option<Result<Response, Exception>> {
+        match request {
+            Request::ReadDeviceId { code, object_id } => {
+                let objects = self.options.identification.as_ref()?;
+                Some(objects.answer(*code, *object_id).map(Response::ReadDeviceId))
+            }
+            Request::Diagnostics { sub_function, data } if self.options.diagnostic_counters => {
+                self.diagnostics.answer(*sub_function, *data).map(Ok)
+            }
+            _ => None,
+        }
     }
 
     pub fn replied(&self) {
@@ -144,6 +212,7 @@ impl ModbusServer {
             requests: AtomicU64::new(0),
             replies: AtomicU64::new(0),
             dropped: AtomicU64::new(0),
+            diagnostics: diagnostics::Counters::default(),
         };
         ModbusServer { shared: Arc::new(shared) }
     }

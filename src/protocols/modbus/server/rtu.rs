@@ -10,7 +10,7 @@ use std::sync::Arc;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::time::Instant;
 
-use super::{Outcome, Shared};
+use super::{Addressing, Outcome, Shared};
 use crate::protocols::modbus::rtu::{self, Direction};
 use crate::protocols::transport::ByteStream;
 
@@ -21,7 +21,7 @@ pub(crate) async fn serve(mut stream: Box<dyn ByteStream>, shared: Arc<Shared>, 
     let mut last_io = Instant::now();
     loop {
         while let Some(found) = rtu::scan(&rx, Direction::Request) {
-            let outcome = shared.process(found.unit(&rx), found.pdu(&rx));
+            let outcome = shared.process(found.unit(&rx), found.pdu(&rx), Addressing::Rtu);
             rx.drain(..found.start + found.len);
             let Some(Outcome { unit, pdu, plan }) = outcome else { continue };
             if plan.close {

@@ -10,7 +10,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::task::JoinSet;
 
-use super::{Outcome, Shared};
+use super::{Addressing, Outcome, Shared};
 use crate::protocols::modbus::decode::request_pdu_len;
 use crate::protocols::modbus::frame::{self, LengthField, MAX_PDU_LEN, MBAP_LEN};
 
@@ -69,7 +69,7 @@ async fn serve_mbap(mut stream: TcpStream, shared: Arc<Shared>) {
             },
         };
         let Ok(header) = frame::decode_header(&rx) else { return };
-        let outcome = shared.process(header.unit, &rx[MBAP_LEN..MBAP_LEN + len]);
+        let outcome = shared.process(header.unit, &rx[MBAP_LEN..MBAP_LEN + len], Addressing::Mbap);
         rx.drain(..MBAP_LEN + len);
         let Some(Outcome { unit, pdu, plan }) = outcome else { continue };
         if plan.close {

@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use tokio::net::UdpSocket;
 
-use super::{Outcome, Shared};
+use super::{Addressing, Outcome, Shared};
 use crate::protocols::modbus::frame::{self, LengthField, MBAP_LEN};
 
 pub(crate) async fn serve(socket: UdpSocket, shared: Arc<Shared>) {
@@ -21,7 +21,9 @@ pub(crate) async fn serve(socket: UdpSocket, shared: Arc<Shared>) {
             Err(_) => continue,
         };
         let Ok(header) = frame::decode_header(&rx[..n]) else { continue };
-        let Some(Outcome { unit, pdu, plan }) = shared.process(header.unit, &rx[MBAP_LEN..n]) else {
+        let Some(Outcome { unit, pdu, plan }) =
+            shared.process(header.unit, &rx[MBAP_LEN..n], Addressing::Mbap)
+        else {
             continue;
         };
         if plan.close {
