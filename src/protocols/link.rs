@@ -93,6 +93,14 @@ pub enum LinkError {
     /// Adaptive timeout or degraded settings that make no sense.
     #[error("{0}")]
     Tuning(&'static str),
+    /// A protocol of another family than the request needs.
+    #[error("{protocol} is not {wanted}")]
+    Family {
+        /// The link's protocol.
+        protocol: Protocol,
+        /// The family the request needs.
+        wanted: &'static str,
+    },
     /// The client could not be set up.
     #[error(transparent)]
     Plc(#[from] PlcError),
@@ -236,6 +244,26 @@ pub async fn connect(config: &LinkConfig) -> Result<Arc<dyn PlcMemory>, LinkErro
         Family::Ppi => Arc::new(PpiClient::new(config.ppi())?),
         Family::Modbus => Arc::new(ModbusClient::connect(config.modbus()).await?),
     })
+}
+
+/// A Modbus client for the link, for the requests beyond memory reads and writes (device
+/// identification, diagnostics), after [`LinkConfig::check`].
+pub async fn connect_modbus(config: &LinkConfig) -> Result<ModbusClient, LinkError> {
+    config.check()?;
+    match config.protocol.family() {
+        Family::Modbus => Ok(ModbusClient::connect(config.modbus()).await?),
+        _ => Err(LinkError::Family { protocol: config.protocol, wanted: "Modbus" }),
+    }
+}
+
+/// An MC client for the link, for the requests beyond memory reads and writes (CPU model
+/// name, random and block reads), after [`LinkConfig::check`].
+pub fn connect_mc3e(config: &LinkConfig) -> Result<Mc3eClient, LinkError> {
+    config.check()?;
+    match config.protocol.family() {
+        Family::Mc3e => Ok(Mc3eClient::new(config.mc3e())),
+        _ => Err(LinkError::Family { protocol: config.protocol, wanted: "MC protocol" }),
+    }
 }
 
 #[cfg(test)]

@@ -77,3 +77,11 @@ fn s7_double_words_read_as_one_32_bit_value() {
     );
     assert_eq!(w(&["read", "DT100", "-f", "i32"]), "DT100 -70000\n");
 }
+
+#[test]
+fn mc_bit_devices_read_as_words_are_labelled_by_their_first_bit() {
+    let mc = sim(&["mc3e"]);
+    ok("mc3e", &mc.address, &["write", "M116", "1"]);
+    let lines = ok("mc3e", &mc.address, &["read", "K4M100", "2"]);
+    assert_eq!(lines.lines().collect::<Vec<_>>(), ["K4M100 0", "K4M116 1"]);
+}

@@ -3,6 +3,7 @@
 //! loop and the hints in its errors.
 
 mod formats;
+mod identify;
 mod polls;
 
 use std::io::{BufRead, BufReader, Read};

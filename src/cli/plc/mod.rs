@@ -23,6 +23,7 @@
 pub mod flags;
 pub mod format;
 pub mod hints;
+pub mod identify;
 pub mod item;
 pub mod poll;
 
@@ -47,12 +48,14 @@ Examples:
   rackd plc --protocol mc3e --address 10.0.0.6:5000 read D200 4 -f i32
   rackd plc --protocol mewtocol --address /dev/ttyUSB0 --unit EE read DT100 2
   rackd plc --protocol ppi-tcp --address 10.0.0.7:4001 read VD4
+  rackd plc --protocol modbus-tcp --address 10.0.0.5 --unit 255 identify
 
 Notations:
   Modbus    4x100 = holding register at PDU address 100 = 40101 (Modicon, 1-based) = %MW100 = MW100;
             3x input registers, 1x discrete inputs, 0x coils: 0x10 is coil ten in the Modicon area
             notation, not hex sixteen (the number is always decimal); 30001, 10001, 00001; %M10 coil 10
-  MC 3E     D200, W1F (hex), R, ZR words; M100, X1A, Y1A, B, L bits (X, Y, B, W numbered in hex)
+  MC 3E/4E  D200, W1F (hex), R, ZR, SD, SW words; M100, X1A, Y1A, B, L, SM, F, V bits (X, Y, B, W
+            numbered in hex); K4M100 = M100..M115 as one word; TN/CN current values, TS/TC, CS/CC bits
   MEWTOCOL  DT100 words; WX, WY, WR, WL contact words; X, Y, R, L, T, C bits (last digit hex: R1F)
   S7 PPI    VW100 (words step 2 bytes), VB0 bytes, VD4 32-bit double words, V10.3, Q0.1, I0.0 bits,
             MW4, SMB0, AIW0, T37, C5
@@ -142,6 +145,15 @@ pub enum PlcOp {
         #[arg(required = true, allow_negative_numbers = true)]
         values: Vec<String>,
     },
+    /// Ask the PLC what it is: Modbus device identification (43/14), MC CPU model name (0101).
+    Identify {
+        /// Modbus: which objects.
+        #[arg(long, value_enum, default_value_t = identify::Category::Regular)]
+        category: identify::Category,
+        /// Modbus: one object by its id (0..255) instead of a category.
+        #[arg(long)]
+        object: Option<u8>,
+    },
 }
 
 impl PlcArgs {
@@ -218,6 +230,24 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
             let items =
                 target.write(&*plc, values).await.with_context(|| format!("write {address} on {peer}"))?;
             out.once(&items);
+        }
+        PlcOp::Identify { category, object } => {
+            if args.polling().is_some() {
+                bail!("--interval and --count repeat reads; identify is asked once");
+            }
+            let link = args.link()?;
+            let pairs = identify::identify(&link, *category, *object)
+                .await
+                .with_context(|| format!("identify {peer}"))?;
+            if args.json {
+                let map: serde_json::Map<_, _> =
+                    pairs.into_iter().map(|(k, v)| (k, serde_json::Value::String(v))).collect();
+                super::say(serde_json::Value::Object(map));
+            } else {
+                for (name, value) in pairs {
+                    super::say(format!("{name} {value}"));
+                }
+            }
         }
     }
     Ok(())
