@@ -23,3 +23,25 @@ fn a_modbus_device_and_an_mc_cpu_say_what_they_are() {
     let (good, _, err) = plc("mewtocol-tcp", "127.0.0.1:9", &["identify"]);
     assert!(!good && err.contains("no identification request"), "{err}");
 }
+
+#[test]
+fn scattered_and_block_reads_fifo_and_diagnostics() {
+    let mc = sim(&["mc3e"]);
+    ok("mc3e", &mc.address, &["write", "D10", "7", "8"]);
+    ok("mc3e", &mc.address, &["write", "M116", "1"]);
+    let lines = ok("mc3e", &mc.address, &["random", "D11", "D10", "--dword", "D10"]);
+    assert_eq!(lines.lines().collect::<Vec<_>>(), ["D11 8", "D10 7", "D10 524295"]);
+    let lines = ok("mc4e", &mc.address, &["blocks", "D10:2", "K4M100:2"]);
+    assert_eq!(lines.lines().collect::<Vec<_>>(), ["D10 7", "D11 8", "K4M100 0", "K4M116 1"]);
+    let (good, _, err) = plc("mc3e", &mc.address, &["blocks", "D10"]);
+    assert!(!good && err.contains("ADDRESS:COUNT"), "{err}");
+
+    let modbus = sim(&["modbus", "--transport", "tcp"]);
+    ok("modbus-tcp", &modbus.address, &["write", "4x100", "2", "11", "12"]);
+    let lines = ok("modbus-tcp", &modbus.address, &["fifo", "4x100"]);
+    assert_eq!(lines.lines().collect::<Vec<_>>(), ["count 2", "fifo[0] 11", "fifo[1] 12"]);
+    let lines = ok("modbus-tcp", &modbus.address, &["diag", "000B"]);
+    assert!(lines.starts_with("000B "), "{lines}");
+    let (good, _, err) = plc("modbus-tcp", &modbus.address, &["random", "D0"]);
+    assert!(!good && err.contains("is not MC protocol"), "{err}");
+}

@@ -20,6 +20,7 @@
 //! `--address`, which clap cannot make both required and global. A new operation (say
 //! `identify`) is one more [`PlcOp`] variant and one more arm in [`run`].
 
+pub mod extra;
 pub mod flags;
 pub mod format;
 pub mod hints;
@@ -154,6 +155,32 @@ pub enum PlcOp {
         #[arg(long)]
         object: Option<u8>,
     },
+    /// MC: read words at scattered addresses in one request (random read, 0403).
+    Random {
+        /// Word addresses (D100 W1F K4M100 TN5).
+        addresses: Vec<String>,
+        /// Double-word addresses, read as 32-bit values.
+        #[arg(long = "dword")]
+        dwords: Vec<String>,
+    },
+    /// MC: read several blocks in one request (multi-block read, 0406), each ADDRESS:COUNT
+    /// (D100:10; bit devices as 16-point words: K4M100:2).
+    Blocks {
+        /// The blocks.
+        #[arg(required = true)]
+        blocks: Vec<String>,
+    },
+    /// Modbus: Read FIFO Queue (function 24) at its pointer register (4x100).
+    Fifo {
+        /// The FIFO pointer register.
+        address: String,
+    },
+    /// Modbus: a Diagnostics (function 8) counter or register by sub-function, in hex (000B
+    /// bus messages, 000C CRC errors, 000D exceptions, 000E server messages, 0002 register).
+    Diag {
+        /// The sub-function.
+        sub_function: String,
+    },
 }
 
 impl PlcArgs {
@@ -232,25 +259,44 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
             out.once(&items);
         }
         PlcOp::Identify { category, object } => {
-            if args.polling().is_some() {
-                bail!("--interval and --count repeat reads; identify is asked once");
-            }
-            let link = args.link()?;
-            let pairs = identify::identify(&link, *category, *object)
+            extra::once(args.polling().is_some(), "identify")?;
+            let pairs = identify::identify(&args.link()?, *category, *object)
                 .await
                 .with_context(|| format!("identify {peer}"))?;
-            if args.json {
-                let map: serde_json::Map<_, _> =
-                    pairs.into_iter().map(|(k, v)| (k, serde_json::Value::String(v))).collect();
-                super::say(serde_json::Value::Object(map));
-            } else {
-                for (name, value) in pairs {
-                    super::say(format!("{name} {value}"));
-                }
-            }
+            say_pairs(args.json, pairs, true);
+        }
+        op => {
+            let request = match op {
+                PlcOp::Random { addresses, dwords } => extra::Extra::Random { words: addresses, dwords },
+                PlcOp::Blocks { blocks } => extra::Extra::Blocks(blocks),
+                PlcOp::Fifo { address } => extra::Extra::Fifo(address),
+                PlcOp::Diag { sub_function } => extra::Extra::Diagnostics(sub_function),
+                _ => unreachable!("read, write and identify are handled above"),
+            };
+            extra::once(args.polling().is_some(), "this request")?;
+            let pairs = extra::run(&args.link()?, request).await.with_context(|| format!("on {peer}"))?;
+            say_pairs(args.json, pairs, false);
         }
     }
     Ok(())
+}
+
+/// `NAME VALUE` lines; with `json`, one object of them (`keyed`) or an array of
+/// `{"address", "value"}` as `read` prints.
+fn say_pairs(json: bool, pairs: Vec<(String, String)>, keyed: bool) {
+    if json && keyed {
+        let map: serde_json::Map<_, _> =
+            pairs.into_iter().map(|(k, v)| (k, serde_json::Value::String(v))).collect();
+        super::say(serde_json::Value::Object(map));
+    } else if json {
+        let list: Vec<_> =
+            pairs.into_iter().map(|(a, v)| serde_json::json!({ "address": a, "value": v })).collect();
+        super::say(serde_json::Value::Array(list));
+    } else {
+        for (name, value) in pairs {
+            super::say(format!("{name} {value}"));
+        }
+    }
 }
 
 #[cfg(test)]
