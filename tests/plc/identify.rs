@@ -45,3 +45,16 @@ fn scattered_and_block_reads_fifo_and_diagnostics() {
     let (good, _, err) = plc("modbus-tcp", &modbus.address, &["random", "D0"]);
     assert!(!good && err.contains("is not MC protocol"), "{err}");
 }
+
+#[test]
+fn an_unchecked_read_sends_the_count_as_asked_and_shows_the_devices_answer() {
+    let modbus = sim(&["modbus", "--transport", "tcp"]);
+    let (good, _, err) = plc("modbus-tcp", &modbus.address, &["read", "4x0", "0"]);
+    assert!(!good, "a checked read of 0 is refused before sending: {err}");
+    for count in ["0", "126"] {
+        let (good, _, err) = plc("modbus-tcp", &modbus.address, &["read", "4x0", count, "--unchecked"]);
+        assert!(!good && err.contains("exception 03"), "count {count}: {err}");
+    }
+    let lines = ok("modbus-tcp", &modbus.address, &["read", "0x5", "3", "--unchecked"]);
+    assert_eq!(lines.lines().collect::<Vec<_>>(), ["0x5 0", "0x6 0", "0x7 0"]);
+}

@@ -1,12 +1,14 @@
 //! `rackd plc` requests beyond reading and writing consecutive memory, for commissioning:
 //! MC random reads (0403) and multi-block reads (0406), Modbus Read FIFO Queue (24) and
-//! Diagnostics (8). Each answers `NAME VALUE` lines like `read`, or with `--json` the same JSON array
+//! Diagnostics (8), and Modbus reads of any count (`read --unchecked`). Each answers `NAME VALUE` lines like `read`, or with `--json` the same JSON array
 //! of `{"address", "value"}` (values as text).
 
 use anyhow::{Context, anyhow, bail};
 
 use super::hints;
 use crate::protocols::link::{self, LinkConfig, LinkError};
+use crate::protocols::modbus::address::Table;
+use crate::protocols::modbus::{Request, Response};
 use crate::protocols::protocol::Family;
 use crate::protocols::{PlcError, mc3e, modbus};
 
@@ -26,6 +28,13 @@ pub enum Extra<'a> {
     Fifo(&'a str),
     /// Modbus Diagnostics sub-function, in hexadecimal as the specification writes it.
     Diagnostics(&'a str),
+    /// A Modbus read of any count (0, past 125 words or 2000 bits), to test a device's limits.
+    Unchecked {
+        /// The first address.
+        address: &'a str,
+        /// How many items, sent as asked.
+        count: u16,
+    },
 }
 
 /// Runs the request and returns `(name, value)` pairs in order.
@@ -82,6 +91,30 @@ pub async fn run(link: &LinkConfig, extra: Extra<'_>) -> anyhow::Result<Vec<(Str
                 .with_context(|| format!("sub-function {sub:?}: four hex digits, e.g. 000B"))?;
             let value = client.diagnostic(code).await.map_err(device).context("diagnostics (8)")?;
             Ok(vec![(format!("{code:04X}"), value.to_string())])
+        }
+        Extra::Unchecked { address, count } => {
+            let client = modbus_only(link).await.map_err(setup)?;
+            let start = modbus::address::parse(address).map_err(device)?;
+            let at = u16::try_from(start.index).context("address past 65535")?;
+            let request = match Table::from_area(&start.area) {
+                Some(Table::Coils) => Request::ReadCoils { address: at, count },
+                Some(Table::DiscreteInputs) => Request::ReadDiscreteInputs { address: at, count },
+                Some(Table::InputRegisters) => Request::ReadInputRegisters { address: at, count },
+                _ => Request::ReadHoldingRegisters { address: at, count },
+            };
+            let reply = client.call_unchecked(&request).await.map_err(device).context("unchecked read")?;
+            let values: Vec<u16> = match reply {
+                Response::ReadCoils(b) | Response::ReadDiscreteInputs(b) => {
+                    b.into_iter().map(u16::from).collect()
+                }
+                Response::ReadHoldingRegisters(w) | Response::ReadInputRegisters(w) => w,
+                _ => bail!("the device answered another function"),
+            };
+            Ok(values
+                .into_iter()
+                .enumerate()
+                .map(|(i, v)| (modbus::address::format(&start.offset(i as u32)), v.to_string()))
+                .collect())
         }
     }
 }

@@ -137,6 +137,10 @@ pub enum PlcOp {
         /// How many items (an item is one value of the format; with -f ascii, one word).
         #[arg(default_value_t = 1)]
         count: u16,
+        /// Modbus: send the count as asked, 0 or past the limits (125 words, 2000 bits)
+        /// included, to see how the device answers; items are shown as plain numbers.
+        #[arg(long)]
+        unchecked: bool,
     },
     /// Write values from ADDRESS on, each in the format (-f); bits: 0/1.
     Write {
@@ -234,7 +238,13 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
     let at = flags::address(args.protocol, &args.address).unwrap_or_else(|_| args.address.clone());
     let peer = format!("{} {at}", args.protocol);
     match &args.op {
-        PlcOp::Read { address, count } => {
+        PlcOp::Read { address, count, unchecked: true } => {
+            extra::once(args.polling().is_some(), "an unchecked read")?;
+            let request = extra::Extra::Unchecked { address, count: *count };
+            let pairs = extra::run(&args.link()?, request).await.with_context(|| format!("on {peer}"))?;
+            say_pairs(args.json, pairs, false);
+        }
+        PlcOp::Read { address, count, .. } => {
             let target = Target::new(args.protocol, address, args.format, order)?;
             let plc = connect(&args).await?;
             match args.polling() {
