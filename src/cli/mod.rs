@@ -8,6 +8,7 @@ pub mod sim_bench;
 pub mod sim_control;
 pub mod sim_crane;
 pub mod sim_faults;
+pub mod sim_identity;
 pub mod sim_line;
 pub mod sim_mc3e;
 pub mod sim_modbus;

@@ -9,6 +9,7 @@ use std::sync::{Arc, Mutex};
 use anyhow::Context;
 
 use super::sim_control::{Control, ControlServer};
+use super::sim_identity::Identity;
 use super::sim_preset::{Preset, ReadOnlyRange};
 use crate::protocols::Protocol;
 use crate::protocols::faults::SharedFaults;
@@ -37,6 +38,24 @@ impl PresetArgs {
             Some(path) => Preset::read(path)?.apply(path, protocol, memory),
             None => Ok(Vec::new()),
         }
+    }
+
+    /// The preset's `identity` section, if it has one (see [`super::sim_identity`]).
+    pub fn identity(&self) -> anyhow::Result<Option<Identity>> {
+        match &self.preset {
+            Some(path) => Ok(Preset::read(path)?.identity),
+            None => Ok(None),
+        }
+    }
+
+    /// Refuses an `identity` section where the protocol has no request that asks for it.
+    pub fn no_identity(&self, protocol: Protocol) -> anyhow::Result<()> {
+        if self.identity()?.is_some() {
+            anyhow::bail!(
+                "the preset's `identity` section is for Modbus and MC; {protocol} has no such request"
+            );
+        }
+        Ok(())
     }
 
     /// Starts the control surface, if asked for.

@@ -53,6 +53,7 @@ impl SimLineArgs {
 pub async fn start_mewtocol(args: &SimLineArgs) -> anyhow::Result<Running> {
     let bank = mewtocol::Bank::default().shared();
     let memory = MewtocolMemory::new(bank.clone());
+    args.bench.no_identity(Protocol::Mewtocol)?;
     let read_only = args.bench.load(Protocol::Mewtocol, &memory)?;
     let mut state = mewtocol::ServerState::new(bank).with_handler(memory.handler());
     state.faults = SharedFaults::new(args.faults.faults::<mewtocol::ErrorCode>()?);
@@ -74,6 +75,7 @@ pub async fn start_mewtocol(args: &SimLineArgs) -> anyhow::Result<Running> {
 pub async fn start_ppi(args: &SimLineArgs) -> anyhow::Result<Running> {
     let bank = ppi::Bank::default().shared();
     let memory = PpiMemory::new(bank.clone());
+    args.bench.no_identity(Protocol::Ppi)?;
     let read_only = args.bench.load(Protocol::Ppi, &memory)?;
     let mut state = ppi::ServerState::new(bank).with_handler(memory.handler());
     state.faults = SharedFaults::new(args.faults.faults::<ppi::ReturnCode>()?);

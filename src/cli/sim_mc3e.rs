@@ -85,6 +85,10 @@ pub async fn start(args: &SimMc3eArgs) -> anyhow::Result<Running> {
     let Some(type_name) = TypeName::new(&args.cpu.model, args.cpu.code) else {
         anyhow::bail!("bad --cpu-model {:?}: up to 16 printable ASCII characters", args.cpu.model);
     };
+    let type_name = match args.bench.identity()? {
+        Some(identity) => identity.mc3e(type_name)?,
+        None => type_name,
+    };
     let state = ServerState::new(bank).with_faults(faults.clone()).with_type_name(type_name);
     let server = match args.transport {
         SimTransport::Tcp => Mc3eServer::bind_tcp(args.listen, state).await?,

@@ -88,6 +88,10 @@ pub async fn start(args: &SimModbusArgs) -> anyhow::Result<Running> {
         faults,
         ..ServerOptions::default()
     };
+    let options = match args.bench.identity()?.map(|i| i.modbus()).transpose()?.flatten() {
+        Some(objects) => ServerOptions { identification: Some(objects), ..options },
+        None => options,
+    };
     let server = ModbusServer::new(Arc::new(memory.clone()), options);
     let listen = args.listen.as_str();
     let handle = match args.transport {

@@ -69,6 +69,9 @@ pub struct Preset {
     /// Ranges a master may read but not write.
     #[serde(default)]
     pub read_only: Vec<ReadOnlyRange>,
+    /// What the PLC says it is (Modbus device identification, MC CPU model name).
+    #[serde(default)]
+    pub identity: Option<super::sim_identity::Identity>,
 }
 
 impl Preset {

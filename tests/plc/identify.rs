@@ -58,3 +58,26 @@ fn an_unchecked_read_sends_the_count_as_asked_and_shows_the_devices_answer() {
     let lines = ok("modbus-tcp", &modbus.address, &["read", "0x5", "3", "--unchecked"]);
     assert_eq!(lines.lines().collect::<Vec<_>>(), ["0x5 0", "0x6 0", "0x7 0"]);
 }
+
+#[test]
+fn a_presets_identity_is_what_the_simulator_says_it_is() {
+    let dir = tempfile::tempdir().unwrap();
+    let modbus = dir.path().join("modbus.json");
+    std::fs::write(
+        &modbus,
+        r#"{"identity": {"objects": {"VendorName": "ACME", "ProductCode": "X-100",
+            "MajorMinorRevision": "2.1", "0x80": "line 4"}}}"#,
+    )
+    .unwrap();
+    let sim_modbus = sim(&["modbus", "--transport", "tcp", "--preset", modbus.to_str().unwrap()]);
+    let lines = ok("modbus-tcp", &sim_modbus.address, &["identify", "--category", "extended"]);
+    assert_eq!(
+        lines.lines().collect::<Vec<_>>(),
+        ["VendorName ACME", "ProductCode X-100", "MajorMinorRevision 2.1", "object 0x80 line 4"]
+    );
+    let mc = dir.path().join("mc.toml");
+    std::fs::write(&mc, "[identity]\nmodel = \"FX5U-32MT\"\ncode = \"4A21\"\n").unwrap();
+    let sim_mc = sim(&["mc3e", "--preset", mc.to_str().unwrap()]);
+    let lines = ok("mc3e", &sim_mc.address, &["identify"]);
+    assert_eq!(lines.lines().collect::<Vec<_>>(), ["model FX5U-32MT", "code 4A21"]);
+}
