@@ -27,6 +27,9 @@ pub fn admin_paths() -> &'static [&'static str] {
 pub fn required_role(method: &Method, path: &str) -> Role {
     if method == Method::GET || method == Method::HEAD {
         Role::Viewer
+    } else if method == Method::PUT && path.trim_end_matches('/') == "/api/v1/locations" {
+        // The inventory: what the store holds, for commissioning.
+        Role::Admin
     } else if admin_paths().iter().any(|p| path.starts_with(p))
         && !path.ends_with("/pause")
         && !path.ends_with("/resume")
@@ -124,6 +127,8 @@ mod tests {
         assert_eq!(required_role(&Method::POST, "/api/v1/jobs"), Role::Operator);
         assert_eq!(required_role(&Method::PATCH, "/api/v1/jobs/1"), Role::Operator);
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/registers"), Role::Admin);
+        assert_eq!(required_role(&Method::PUT, "/api/v1/locations"), Role::Admin);
+        assert_eq!(required_role(&Method::POST, "/api/v1/locations/1/1/1/1/1/lock"), Role::Operator);
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/pause"), Role::Operator);
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/tower1/tags/beacon.red"), Role::Operator);
         assert_eq!(required_role(&Method::GET, "/api/v1/devices/tower1/tags"), Role::Viewer);

@@ -15,6 +15,7 @@ pub mod devices;
 pub mod error;
 pub mod extract;
 pub mod health;
+pub mod inventory;
 pub mod jobs;
 pub mod locations;
 pub mod metrics;
@@ -118,6 +119,7 @@ fn protected_routes() -> OpenApiRouter<AppState> {
     let v1 = jobs::router()
         .merge(devices::router())
         .merge(locations::router())
+        .merge(inventory::router())
         .merge(alarms::router())
         .merge(aisles::router())
         .merge(control::router())

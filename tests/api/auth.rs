@@ -33,6 +33,14 @@ async fn each_role_reaches_exactly_its_routes() {
         ("POST", "/api/v1/aisles/1/pause", None, Some(Role::Operator)),
         ("POST", "/api/v1/locations/1/1/1/1/1/lock", Some(json!({"reason": "auth"})), Some(Role::Operator)),
         ("POST", "/api/v1/locations/1/1/1/1/1/unlock", None, Some(Role::Operator)),
+        (
+            "PUT",
+            "/api/v1/locations",
+            Some(
+                json!({"locations": [{"aisle": 1, "row": 1, "bay": 1, "level": 1, "position": 1, "occupied": false}]}),
+            ),
+            Some(Role::Admin),
+        ),
         ("GET", "/api/v1/audit", None, Some(Role::Viewer)),
         ("GET", "/api/v1/aisles", None, Some(Role::Viewer)),
         ("GET", "/api/v1/alarms", None, Some(Role::Viewer)),

@@ -13,6 +13,7 @@ pub const ENGINE: rackd::store::Engine = rackd::store::Engine::Sqlite;
 
 #[path = "../common/helpers.rs"]
 mod helpers;
+mod inventory;
 mod jobs;
 mod lifecycle;
 mod logs;

@@ -24,6 +24,8 @@ mod auth;
 mod demo;
 #[path = "../api/errors.rs"]
 mod errors;
+#[path = "../api/inventory.rs"]
+mod inventory;
 #[path = "../api/jobs.rs"]
 mod jobs;
 #[path = "../api/lifecycle.rs"]

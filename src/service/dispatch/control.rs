@@ -5,7 +5,7 @@
 
 use crate::domain::time::{from_ms, now_ms};
 use crate::domain::{Job, JobState, Location, LocationLock, Pause, Target};
-use crate::store::writer::{Change, Record, WriteError};
+use crate::store::writer::{Change, Record, Stock, WriteError};
 
 use super::Dispatcher;
 
@@ -82,6 +82,12 @@ impl Dispatcher {
             at: from_ms(now_ms()),
         };
         Ok(self.writer.record(Record::Lock { location, lock }).await?)
+    }
+
+    /// Sets what locations hold, as counted or loaded at commissioning (all or nothing).
+    pub async fn inventory(&self, entries: Vec<Stock>, actor: &Actor) -> Result<(), ControlError> {
+        let record = Record::Inventory { entries, by: actor.by.clone(), reason: actor.reason.clone() };
+        Ok(self.writer.record(record).await?)
     }
 
     /// Unlocks a location: jobs waiting on it may go.

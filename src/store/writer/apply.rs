@@ -250,6 +250,32 @@ impl Group {
                     self.event("alarm.cleared", &Alarm::from(row));
                 }
             }
+            Record::Inventory { entries, by, reason } => {
+                let held = entries.iter().find_map(|e| {
+                    let row = self.locations.get(&e.location)?;
+                    row.reserved_by.map(|job| (e.location, job))
+                });
+                if let Some((location, job)) = held {
+                    return Err(WriteError::Reserved { location, job });
+                }
+                let mut changed = Vec::new();
+                for e in entries {
+                    let same = self.locations.get(&e.location).map(|r| (r.occupied, r.barcode.as_deref()))
+                        == Some((e.occupied, e.barcode.as_deref()));
+                    if !same && self.locations.contains_key(&e.location) {
+                        self.set_box(e.location, e.occupied, e.barcode.clone());
+                        let what = match (&e.occupied, &e.barcode) {
+                            (true, Some(b)) => format!("inventory: a box, {b}"),
+                            (true, None) => "inventory: a box".to_owned(),
+                            (false, _) => "inventory: empty".to_owned(),
+                        };
+                        let why = reason.as_deref().map_or(what.clone(), |r| format!("{what} ({r})"));
+                        self.audit(by, "inventory", &location_key(e.location), Some(&why));
+                        changed.push(e.location);
+                    }
+                }
+                self.location_events(&changed);
+            }
             Record::Acknowledge { alarm, by, note } => {
                 let Some(row) = self.alarms.get_mut(alarm) else {
                     return Err(WriteError::AlarmNotFound(*alarm));

@@ -99,6 +99,7 @@ pub(super) async fn load(
                 Record::Lock { location, .. } | Record::Unlock { location, .. } => {
                     places.insert(*location);
                 }
+                Record::Inventory { entries, .. } => places.extend(entries.iter().map(|e| e.location)),
                 Record::AlarmRaised(_) | Record::AlarmCleared { .. } => alarms = true,
                 Record::Acknowledge { alarm, .. } => {
                     acknowledged.insert(*alarm);

@@ -79,6 +79,17 @@ impl Change {
     }
 }
 
+/// What one location holds, as an inventory says.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Stock {
+    /// Where.
+    pub location: Location,
+    /// A box is there.
+    pub occupied: bool,
+    /// The box's barcode, if known (only with `occupied`).
+    pub barcode: Option<String>,
+}
+
 /// A change that is not a job's: device status, alarms, the log's retention.
 #[derive(Clone, Debug)]
 pub enum Record {
@@ -117,6 +128,16 @@ pub enum Record {
     Unlock {
         /// Where.
         location: Location,
+        /// The API key's name.
+        by: String,
+        /// Why, if given.
+        reason: Option<String>,
+    },
+    /// The store's contents as counted or loaded at commissioning: each location's box,
+    /// all or nothing (refused if a job in flight holds one of them), audited.
+    Inventory {
+        /// What each location holds.
+        entries: Vec<Stock>,
         /// The API key's name.
         by: String,
         /// Why, if given.
@@ -192,6 +213,14 @@ pub enum WriteError {
         id: i64,
         /// Who acknowledged it.
         by: String,
+    },
+    /// A location is held by a job in flight, so its contents are that job's to change.
+    #[error("location {location} is reserved by job {job}, which is not finished")]
+    Reserved {
+        /// The location.
+        location: Location,
+        /// The job.
+        job: i64,
     },
     /// The database failed; nothing of the request was written.
     #[error("database error: {0}")]
