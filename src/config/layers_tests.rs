@@ -114,6 +114,26 @@ fn units_are_checked_per_protocol_with_their_line() {
 }
 
 #[test]
+fn mewtocols_global_station_is_written_ee() {
+    let mewtocol = |protocol: &str, address: &str, unit: &str| {
+        format!(
+            "[[devices]]\nid = \"d\"\nkind = \"tags\"\nprotocol = \"{protocol}\"\naddress = \"{address}\"\n\
+             unit = {unit}\n[devices.tags]\nx = \"DT1\"\n"
+        )
+    };
+    let loaded = load(&mewtocol("mewtocol-tcp", "10.0.0.1:4001", "\"EE\""), &[]).unwrap();
+    assert_eq!(loaded.config.devices[0].link().unit, 238);
+    let shown = toml::to_string(&loaded.config).unwrap();
+    assert!(shown.contains("unit = \"EE\""), "written back as EE: {shown}");
+    let lower = load(&mewtocol("mewtocol", "/dev/ttyS0", "\"ee\""), &[]).unwrap();
+    assert_eq!(lower.config.devices[0].link().unit, 238);
+    let err = error(&device("modbus-tcp", "10.0.0.1:502", "unit = \"EE\"\n"));
+    assert!(err.contains("devices[0].unit") && err.contains("global station"), "{err}");
+    let err = error(&mewtocol("mewtocol", "/dev/ttyS0", "\"FF\""));
+    assert!(err.contains("a station number, or \"EE\""), "{err}");
+}
+
+#[test]
 fn a_key_of_another_kind_is_named_at_its_line() {
     let crane = "[[devices]]\nid = \"c\"\nkind = \"crane\"\naddress = \"10.0.0.1:8000\"\n\nstride = 1\n";
     let err = error(crane);

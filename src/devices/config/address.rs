@@ -14,7 +14,8 @@
 //!   answers; Modbus TCP and UDP 0..=255, since there the unit id addresses the TCP device
 //!   itself (Modbus Messaging on TCP/IP Implementation Guide: 0xFF, or 0) or a station
 //!   behind a gateway, rather than a bus, and unit 0 is answered; MEWTOCOL
-//!   stations 1..=99 (two decimal digits), or 238 (0xEE) for the global station `EE`,
+//!   stations 1..=99 (two decimal digits), or the global station `EE` (written `unit = "EE"`,
+//!   or 238 = 0xEE, as rackd keeps it),
 //!   which the one PLC on a point-to-point line answers whatever its number; PPI addresses 1..=126 (0 is rackd, the master;
 //!   127 is the broadcast). An MC 3E frame addresses the PLC by network 0, PC FF, station
 //!   0 and carries no unit, so an MC entry's `unit` must stay at its default 1 (a value
@@ -60,6 +61,9 @@ pub enum AddressError {
         /// The valid range, in words.
         range: &'static str,
     },
+    /// `unit = "EE"` on a protocol other than MEWTOCOL.
+    #[error("unit \"EE\" is MEWTOCOL's global station; {0} takes a number")]
+    GlobalStation(Protocol),
     /// `serial` on a protocol without a serial line.
     #[error("serial settings apply to serial protocols and modbus-rtu-tcp, not to {0}")]
     SerialUnused(Protocol),

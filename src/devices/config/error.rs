@@ -77,9 +77,8 @@ impl Problem {
             Problem::Id => "id".into(),
             Problem::ForeignKey { key, .. } | Problem::Zero(key) => (*key).into(),
             Problem::Serial(_) | Problem::Address(AddressError::SerialUnused(_)) => "serial".into(),
-            Problem::Address(AddressError::Unit { .. }) | Problem::Link(LinkError::Unit { .. }) => {
-                "unit".into()
-            }
+            Problem::Address(AddressError::Unit { .. } | AddressError::GlobalStation(_))
+            | Problem::Link(LinkError::Unit { .. }) => "unit".into(),
             Problem::Address(_) | Problem::Link(LinkError::Plc(_)) => "address".into(),
             Problem::Link(LinkError::Quirk { .. }) => "quirks".into(),
             Problem::Link(LinkError::Family { .. }) => "protocol".into(),

@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-use super::address::check_unit;
+use super::address::{AddressError, check_unit};
 use super::crane::{self, Ack, CraneConfig, Station};
 use super::error::{DeviceConfigError, Problem};
 use super::shelf::{ShelfConfig, default_shelf_quirks};
@@ -15,6 +15,8 @@ use super::tags::TagsConfig;
 use super::{DeviceConfig, DeviceKind};
 use crate::devices::tagdef::TagTable;
 use crate::protocols::link::{DEFAULT_RETRIES, DEFAULT_TIMEOUT, LinkConfig};
+use crate::protocols::mewtocol::frame::GLOBAL_STATION;
+use crate::protocols::protocol::Family;
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::LinkTuning;
 use crate::protocols::{Protocol, Quirk};
@@ -31,9 +33,9 @@ pub struct RawDevice {
     #[serde(skip_serializing_if = "Option::is_none")]
     protocol: Option<Protocol>,
     /// Wider than any protocol's unit, so that `unit = 300` is refused with the protocol's
-    /// range rather than serde's "expected u8".
+    /// range rather than serde's "expected u8"; or `"EE"`, MEWTOCOL's global station.
     #[serde(skip_serializing_if = "Option::is_none")]
-    unit: Option<i64>,
+    unit: Option<Unit>,
     #[serde(skip_serializing_if = "Option::is_none")]
     serial: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -149,7 +151,9 @@ impl RawDevice {
     ) -> Result<LinkConfig, Problem> {
         let serial = self.serial.as_deref().map(str::parse::<SerialSettings>).transpose()?;
         let unit = match self.unit {
-            Some(unit) => check_unit(protocol, unit)?,
+            Some(Unit::Number(unit)) => check_unit(protocol, unit)?,
+            Some(Unit::Global) if protocol.family() == Family::Mewtocol => GLOBAL_STATION,
+            Some(Unit::Global) => return Err(AddressError::GlobalStation(protocol).into()),
             None => protocol.default_unit(),
         };
         let d = LinkTuning::for_protocol(protocol);
@@ -232,7 +236,7 @@ impl RawDevice {
             kind,
             address: link.address.clone(),
             protocol: Some(link.protocol),
-            unit: Some(link.unit.into()),
+            unit: Some(Unit::of(link.protocol, link.unit)),
             serial: link.serial.map(|s| s.to_string()),
             timeout_ms: Some(link.timeout.as_millis() as u64),
             retries: Some(link.retries),
@@ -292,5 +296,61 @@ impl From<&DeviceConfig> for RawDevice {
             }
         }
         raw
+    }
+}
+
+/// A `unit` as written: a number, or `"EE"` (any case), MEWTOCOL's global station.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Unit {
+    Number(i64),
+    Global,
+}
+
+impl Unit {
+    /// How a link's unit is written back: `"EE"` for MEWTOCOL's global station.
+    fn of(protocol: Protocol, unit: u8) -> Unit {
+        if protocol.family() == Family::Mewtocol && unit == GLOBAL_STATION {
+            Unit::Global
+        } else {
+            Unit::Number(unit.into())
+        }
+    }
+}
+
+impl Serialize for Unit {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Unit::Number(n) => s.serialize_i64(*n),
+            Unit::Global => s.serialize_str("EE"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Unit {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Unit, D::Error> {
+        struct Visitor;
+        impl serde::de::Visitor<'_> for Visitor {
+            type Value = Unit;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a station number, or \"EE\" (MEWTOCOL's global station)")
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Unit, E> {
+                Ok(Unit::Number(v))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Unit, E> {
+                Ok(Unit::Number(i64::try_from(v).unwrap_or(i64::MAX)))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Unit, E> {
+                if v.eq_ignore_ascii_case("EE") {
+                    return Ok(Unit::Global);
+                }
+                // A number from an environment variable arrives as text.
+                v.trim()
+                    .parse()
+                    .map(Unit::Number)
+                    .map_err(|_| E::invalid_value(serde::de::Unexpected::Str(v), &self))
+            }
+        }
+        d.deserialize_any(Visitor)
     }
 }
