@@ -142,6 +142,24 @@ async fn modbus_only(link: &LinkConfig) -> Result<modbus::ModbusClient, LinkErro
     link::connect_modbus(link).await
 }
 
+/// `NAME VALUE` lines; with `json`, one object of them (`keyed`) or an array of
+/// `{"address", "value"}` as `read` prints.
+pub fn say(json: bool, pairs: Vec<(String, String)>, keyed: bool) {
+    if json && keyed {
+        let map: serde_json::Map<_, _> =
+            pairs.into_iter().map(|(k, v)| (k, serde_json::Value::String(v))).collect();
+        crate::cli::say(serde_json::Value::Object(map));
+    } else if json {
+        let list: Vec<_> =
+            pairs.into_iter().map(|(a, v)| serde_json::json!({ "address": a, "value": v })).collect();
+        crate::cli::say(serde_json::Value::Array(list));
+    } else {
+        for (name, value) in pairs {
+            crate::cli::say(format!("{name} {value}"));
+        }
+    }
+}
+
 /// Refuses a poll of a request that is asked once.
 pub fn once(polling: bool, what: &str) -> anyhow::Result<()> {
     if polling {

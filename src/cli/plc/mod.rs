@@ -242,7 +242,7 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
             extra::once(args.polling().is_some(), "an unchecked read")?;
             let request = extra::Extra::Unchecked { address, count: *count };
             let pairs = extra::run(&args.link()?, request).await.with_context(|| format!("on {peer}"))?;
-            say_pairs(args.json, pairs, false);
+            extra::say(args.json, pairs, false);
         }
         PlcOp::Read { address, count, .. } => {
             let target = Target::new(args.protocol, address, args.format, order)?;
@@ -273,7 +273,7 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
             let pairs = identify::identify(&args.link()?, *category, *object)
                 .await
                 .with_context(|| format!("identify {peer}"))?;
-            say_pairs(args.json, pairs, true);
+            extra::say(args.json, pairs, true);
         }
         op => {
             let request = match op {
@@ -285,28 +285,10 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
             };
             extra::once(args.polling().is_some(), "this request")?;
             let pairs = extra::run(&args.link()?, request).await.with_context(|| format!("on {peer}"))?;
-            say_pairs(args.json, pairs, false);
+            extra::say(args.json, pairs, false);
         }
     }
     Ok(())
-}
-
-/// `NAME VALUE` lines; with `json`, one object of them (`keyed`) or an array of
-/// `{"address", "value"}` as `read` prints.
-fn say_pairs(json: bool, pairs: Vec<(String, String)>, keyed: bool) {
-    if json && keyed {
-        let map: serde_json::Map<_, _> =
-            pairs.into_iter().map(|(k, v)| (k, serde_json::Value::String(v))).collect();
-        super::say(serde_json::Value::Object(map));
-    } else if json {
-        let list: Vec<_> =
-            pairs.into_iter().map(|(a, v)| serde_json::json!({ "address": a, "value": v })).collect();
-        super::say(serde_json::Value::Array(list));
-    } else {
-        for (name, value) in pairs {
-            super::say(format!("{name} {value}"));
-        }
-    }
 }
 
 #[cfg(test)]

@@ -38,6 +38,7 @@ mod error;
 mod raw;
 mod shelf;
 mod tags;
+mod unit;
 
 use std::time::Duration;
 
