@@ -3,6 +3,11 @@
 //! A poll cycle reads every slot that matters, decides what each shows, and then records
 //! all the reports at once: they reach the job writer together and share one commit, so a
 //! cycle that sees sixty tasks finish costs one fsync, not sixty.
+//!
+//! The slots are read one request each, so a PLC that power-cycles during a cycle can show
+//! its first slots as they were and the rest empty. A cycle that sees one of rackd's tasks
+//! gone therefore reads every slot once more before it decides (this costs a second round
+//! only when a task vanished, which is rare), and a lost memory stays one decision.
 
 use std::collections::HashMap;
 
@@ -68,6 +73,24 @@ impl Shelf {
                 }
             }
         }
+        // A power cycle between two of this round's reads shows some of rackd's tasks gone
+        // and the others not yet: read them all once more before deciding, so that a lost
+        // memory is one decision (and one alarm), not a task lost here and there.
+        if link.is_ok() && self.vanished(&reads) {
+            let mut again = Vec::with_capacity(reads.len());
+            for (k, _) in &reads {
+                match self.read(&self.slot_address(*k), SLOT_WORDS as u16).await {
+                    Ok(words) => again.push((*k, words)),
+                    Err(e) => {
+                        link = Err(e);
+                        break;
+                    }
+                }
+            }
+            if link.is_ok() {
+                reads = again;
+            }
+        }
         match (self.settle(reads).await, link) {
             (Err(e), _) => self.repeats.failed("following the slots failed", &e),
             (Ok(()), Err(e)) => self.repeats.failed("polling failed", &e),
@@ -100,6 +123,16 @@ impl Shelf {
             }
         }
         Ok(())
+    }
+
+    /// Whether these reads show a task rackd saw in its slot gone from it.
+    fn vanished(&self, reads: &[(usize, Vec<u16>)]) -> bool {
+        reads.iter().any(|(k, words)| match self.slots[*k] {
+            Slot::Held { task, confirmed: true, .. } => {
+                SlotView::parse(words).is_some_and(|v| v.task_id != task)
+            }
+            _ => false,
+        })
     }
 
     /// Whether these reads show every slot rackd had a task in empty, and at least
