@@ -1,12 +1,13 @@
 //! What the machines' interfaces look like on the wire, word by word: the shelf PLC's task
-//! slot ([`slot`]), the stacker crane's register map ([`registers`]) and its alarm
-//! catalogue ([`alarms`]).
+//! slot ([`slot`]), the stacker crane's register map ([`registers`]), its alarm catalogue
+//! ([`alarms`]) and how it moves ([`motion`]).
 //!
 //! A leaf: no I/O and nothing of rackd's but the [`crate::domain`] words. The device
 //! adapters (which drive real machines) and the simulators (which play them) both read the
 //! interface from here, so neither depends on the other.
 
 pub mod alarms;
+pub mod motion;
 pub mod registers;
 pub mod slot;
 
