@@ -1,6 +1,7 @@
 //! Building and running the service: open the store, start the devices, bind, serve, and
 //! shut down gracefully.
 
+use std::collections::BTreeSet;
 use std::future::Future;
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -15,12 +16,14 @@ use crate::api::state::Shared;
 use crate::api::{self, AppState};
 use crate::auth::KeyRing;
 use crate::config::Config;
+use crate::devices::config::DeviceConfig;
 use crate::devices::{self, Devices};
 use crate::domain::time::now_ms;
 use crate::service::dispatch::{Dispatcher, Queues, Setup};
 use crate::service::events::Hub;
 use crate::service::intake::Rules;
 use crate::service::monitor;
+use crate::service::planner::CranePlanner;
 use crate::store::writer::{Hooks, Record, Writer};
 use crate::store::{self, locations};
 
@@ -74,10 +77,15 @@ impl Application {
             .with_context(|| format!("opening database {}", database.display()))?;
         let layout = config.layout();
         locations::seed(&pool, &layout, now_ms()).await.context("seeding locations")?;
+        let deep: BTreeSet<u16> = config.site.aisles.iter().filter(|a| a.depth == 2).map(|a| a.aisle).collect();
         let queues = Queues::new(config.devices.iter().map(|d| Setup {
             id: d.id().to_owned(),
             window: d.dispatch_window(),
             aisles: d.aisles().to_vec(),
+            planner: match d {
+                DeviceConfig::Crane(c) => Some(Arc::new(CranePlanner::new(c, &deep, pool.clone()))),
+                _ => None,
+            },
         }));
         let hub = Hub::new(config.events.buffer);
         let metrics = Arc::new(Metrics::default());
@@ -104,6 +112,7 @@ impl Application {
         device_tasks.push(tokio::spawn(retention(writer.clone(), config.events.retention_hours)));
         let rules = Rules {
             layout,
+            deep,
             devices: config.devices.iter().map(|d| (d.id().to_owned(), d.kind().job_kinds())).collect(),
             routes: config
                 .devices

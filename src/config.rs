@@ -118,6 +118,15 @@ pub struct AisleConfig {
     pub levels: u16,
     /// Box positions (shelf) or depths (crane) per level.
     pub positions: u16,
+    /// 2: a double-deep crane aisle (position 1 near, 2 far behind it), where rackd keeps
+    /// the crane from ever being asked to reach past a box (see `service::planner`); 1
+    /// (the default): no such rules.
+    #[serde(default = "single_deep")]
+    pub depth: u16,
+}
+
+fn single_deep() -> u16 {
+    1
 }
 
 impl AisleConfig {
@@ -132,7 +141,7 @@ impl Config {
     /// crane aisle 2 of 2 rows x 20 bays x 8 levels x 2 depths (sides).
     pub fn demo() -> Self {
         let mut config = Config::default();
-        config.site.aisles.push(AisleConfig { aisle: 2, rows: 2, bays: 20, levels: 8, positions: 2 });
+        config.site.aisles.push(AisleConfig { aisle: 2, rows: 2, bays: 20, levels: 8, positions: 2, depth: 2 });
         config
     }
 
@@ -176,7 +185,7 @@ impl Default for IntakeConfig {
 
 impl Default for SiteConfig {
     fn default() -> Self {
-        SiteConfig { aisles: vec![AisleConfig { aisle: 1, rows: 2, bays: 10, levels: 6, positions: 4 }] }
+        SiteConfig { aisles: vec![AisleConfig { aisle: 1, rows: 2, bays: 10, levels: 6, positions: 4, depth: 1 }] }
     }
 }
 

@@ -15,7 +15,8 @@ use crate::domain::time::to_ms;
 use crate::domain::{JobKind, JobState, Priority, Waiting, WaitingReason};
 use crate::service::dispatch::Actor;
 use crate::service::intake::{JobRequest, MAX_BATCH};
-use crate::store::jobs::{self, Job, JobEvent, JobFilter};
+use crate::service::planner::refusal::{NearOccupied, near_occupied};
+use crate::store::jobs::{self, Job, JobEvent, JobFilter, NewJob};
 use crate::store::writer::{Change, Outcome};
 
 /// The routes of this resource.
@@ -35,7 +36,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         (status = 201, description = "Stored, queued", body = Job, headers(("Location" = String, description = "The job's URL"))),
         (status = 200, description = "A job with this reference and the same request already exists", body = Job),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
-        (status = 409, description = "The reference is used by a different request", body = ErrorBody),
+        (status = 409, description = "`reference_conflict`: the reference is used by a different request; `near_occupied`: a store into a far location of a double-deep aisle whose near location holds a box no job takes away", body = ErrorBody),
         (status = 413, description = "Body too large", body = ErrorBody),
         (status = 415, description = "Not `application/json`", body = ErrorBody),
         (status = 422, description = "Unknown or missing field, wrong type, location outside the layout", body = ErrorBody),
@@ -44,8 +45,12 @@ pub fn router() -> OpenApiRouter<AppState> {
     ))]
 async fn create_job(State(app): State<AppState>, Json(req): Json<JobRequest>) -> Result<Response, ApiError> {
     let job = app.rules.check(req).map_err(|e| ApiError::invalid("invalid_job", e.0))?;
+    let jobs = vec![job];
+    if let Some(refused) = refused(&app, &jobs).await? {
+        return Err(ApiError::conflict("near_occupied", refused.to_string()));
+    }
     let started = std::time::Instant::now();
-    let outcome = app.writer.submit(vec![job]).await?;
+    let outcome = app.writer.submit(jobs).await?;
     app.metrics.intake_seconds.observe(started.elapsed().as_secs_f64());
     Ok(match outcome.into_iter().next() {
         Some(Outcome::Created(job)) => {
@@ -87,7 +92,7 @@ pub struct BatchResponse {
         (status = 201, description = "All stored (or already there)", body = BatchResponse),
         (status = 200, description = "Every job already existed with the same request", body = BatchResponse),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
-        (status = 409, description = "A reference is used by a different request; nothing stored", body = ErrorBody),
+        (status = 409, description = "`reference_conflict`: a reference is used by a different request; `near_occupied`: a store into a far location behind a box (the index is named); nothing stored", body = ErrorBody),
         (status = 413, description = "Body too large", body = ErrorBody),
         (status = 415, description = "Not `application/json`", body = ErrorBody),
         (status = 422, description = "A job is invalid (its index is named); nothing stored", body = ErrorBody),
@@ -112,6 +117,9 @@ async fn create_batch(
             app.rules.check(r).map_err(|e| ApiError::invalid("invalid_job", format!("jobs[{i}]: {}", e.0)))
         })
         .collect::<Result<Vec<_>, _>>()?;
+    if let Some(refused) = refused(&app, &jobs).await? {
+        return Err(ApiError::conflict("near_occupied", format!("jobs[{}]: {refused}", refused.index)));
+    }
     let started = std::time::Instant::now();
     let outcomes = app.writer.submit(jobs).await?;
     app.metrics.intake_seconds.observe(started.elapsed().as_secs_f64());
@@ -376,4 +384,22 @@ async fn retry_job(
     let mut job = app.dispatcher.retry(id, &Actor { by, reason: None }).await?;
     job.waiting = app.dispatcher.queues().waiting(&job);
     Ok(Json(job))
+}
+
+/// The first new store of `jobs` the rack refuses (see `service::planner::refusal`); a
+/// repeated request whose reference is stored already is answered as before.
+async fn refused(app: &AppState, jobs: &[NewJob]) -> Result<Option<NearOccupied>, ApiError> {
+    if app.rules.deep.is_empty() {
+        return Ok(None);
+    }
+    let Some(refused) = near_occupied(&app.pool, |l| app.dispatcher.queues().taking_from(l).is_some(), &app.rules.deep, jobs).await? else {
+        return Ok(None);
+    };
+    if let Some(reference) = &jobs[refused.index].reference {
+        let filter = JobFilter { reference: Some(reference.clone()), limit: 1, ..JobFilter::default() };
+        if !jobs::list(&app.pool, &filter).await?.is_empty() {
+            return Ok(None);
+        }
+    }
+    Ok(Some(refused))
 }

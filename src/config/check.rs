@@ -19,6 +19,9 @@ pub enum Invalid {
     /// No aisles at all.
     #[error("site.aisles: at least one aisle is needed")]
     NoAisles,
+    /// A depth other than 1 or 2, or double-deep where it cannot be.
+    #[error("site.aisles: aisle {0}: depth is 1 or 2, and 2 needs positions = 2 and no device but a crane serving the aisle")]
+    Depth(u16),
     /// A device entry.
     #[error(transparent)]
     Device(#[from] DeviceConfigError),
@@ -81,6 +84,9 @@ impl Config {
             if let Some((key, _)) = sizes.iter().find(|&&(key, n)| n == 0 || (key == "rows" && n > 2)) {
                 return Err((format!("site.aisles[{i}].{key}"), Invalid::AisleSize(a.aisle)));
             }
+            if !(a.depth == 1 || (a.depth == 2 && a.positions == 2)) {
+                return Err((format!("site.aisles[{i}].depth"), Invalid::Depth(a.aisle)));
+            }
         }
         if self.site.aisles.is_empty() {
             return Err(("site.aisles".into(), Invalid::NoAisles));
@@ -103,6 +109,16 @@ impl Config {
                     return Err((at("aisles"), Invalid::AisleServedTwice { device, aisle, other }));
                 }
             }
+        }
+        let others: BTreeSet<u16> = self
+            .devices
+            .iter()
+            .filter(|d| d.kind() != crate::devices::config::DeviceKind::Crane)
+            .flat_map(|d| d.aisles().iter().copied())
+            .collect();
+        let shelf_deep = self.site.aisles.iter().enumerate().find(|(_, a)| a.depth == 2 && others.contains(&a.aisle));
+        if let Some((i, a)) = shelf_deep {
+            return Err((format!("site.aisles[{i}].depth"), Invalid::Depth(a.aisle)));
         }
         if let Some(url) = &self.database.url {
             let why = if url.starts_with("sqlite:") {

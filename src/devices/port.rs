@@ -26,6 +26,13 @@ pub trait Port: Send + Sync {
     /// while the device is paused.
     fn next(&self, free: usize, holding: &HashSet<i64>) -> Vec<Job>;
 
+    /// The one job an idle single-task device (a crane) should start now, after whatever
+    /// its planner had to do first: a job it made to clear the way (a relocation), or none.
+    /// Without a planner, the best of [`Port::next`].
+    async fn next_task(&self) -> Result<Option<Job>, ReportError> {
+        Ok(self.next(1, &HashSet::new()).into_iter().next())
+    }
+
     /// Completes when new work may be waiting (a job queued for this device, a resume, a
     /// job ended that others waited behind).
     async fn work_waiting(&self);

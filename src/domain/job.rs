@@ -164,7 +164,7 @@ mod tests {
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
 #[schema(example = json!({
     "id": 1, "reference": "WMS-1001", "kind": "store", "priority": 10, "barcode": "BOX-0001",
-    "to": {"aisle": 1, "row": 1, "bay": 2, "level": 3, "position": 1}, "device": "shelf1",
+    "to": {"aisle": 1, "row": 1, "bay": 2, "level": 3, "position": 1}, "device": "shelf1", "serves": null,
     "state": "queued", "forced": false, "failure": null, "attempt": 1,
     "waiting": {"reason": "slots_busy", "text": "every slot of shelf1 is busy with other jobs", "device": "shelf1",
         "code": null, "job": null, "by": null},
@@ -197,6 +197,9 @@ pub struct Job {
     pub on: Option<bool>,
     /// The device that runs the job, once known.
     pub device: Option<String>,
+    /// The job this one clears the way for: a relocation rackd made (a `move` of the box in
+    /// front of a far location) names the job it serves; null for every job a WMS posts.
+    pub serves: Option<i64>,
     /// Where the job is in its life.
     pub state: JobState,
     /// Completed by force on the device (crane forced completion).
@@ -246,6 +249,8 @@ pub struct NewJob {
     pub barcode: Option<Barcode>,
     /// The device named in the request, if any.
     pub device: Option<String>,
+    /// The job this one clears the way for (a relocation rackd made), if any.
+    pub serves: Option<i64>,
 }
 
 impl NewJob {
@@ -284,6 +289,7 @@ impl NewJob {
             color: None,
             on: None,
             device: self.device.clone(),
+            serves: self.serves,
             state: JobState::Queued,
             forced: false,
             failure: None,

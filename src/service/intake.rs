@@ -4,7 +4,7 @@
 //! exactly its own fields, so a `store` with a `from` is an error, not a silently ignored
 //! field. Locations are checked against the site layout, and a named device must exist.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use serde::Deserialize;
 use utoipa::ToSchema;
@@ -59,6 +59,8 @@ pub struct Rules {
     pub devices: BTreeMap<String, &'static [JobKind]>,
     /// Which device serves each aisle.
     pub routes: BTreeMap<u16, String>,
+    /// The double-deep aisles (`depth = 2`).
+    pub deep: BTreeSet<u16>,
 }
 
 impl Rules {
@@ -108,7 +110,7 @@ impl Rules {
             check_reference(r)?;
         }
         let device = self.route(&spec, req.device)?;
-        Ok(NewJob { spec, reference: req.reference, priority, barcode, device })
+        Ok(NewJob { spec, reference: req.reference, priority, barcode, device, serves: None })
     }
 
     /// The device a job runs on: the one named, or the one serving its locations' aisle.

@@ -1,7 +1,9 @@
 //! The service layer: job intake, the dispatcher (which job next, on which device; cancels;
-//! control state), the device monitor (device events and alarms) and the event hub.
+//! control state), the crane planner, the device monitor (device events and alarms) and the
+//! event hub.
 
 pub mod dispatch;
 pub mod events;
 pub mod intake;
 pub mod monitor;
+pub mod planner;

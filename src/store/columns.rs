@@ -2,7 +2,7 @@
 //! name them from here.
 
 /// `jobs`.
-pub(crate) const JOBS: [&str; 17] = [
+pub(crate) const JOBS: [&str; 18] = [
     "id",
     "reference",
     "kind",
@@ -20,6 +20,7 @@ pub(crate) const JOBS: [&str; 17] = [
     "created_at",
     "updated_at",
     "attempt",
+    "serves",
 ];
 
 /// `job_history`.

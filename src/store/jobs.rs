@@ -61,11 +61,12 @@ pub(crate) struct JobRow {
     created_at: i64,
     updated_at: i64,
     attempt: i64,
+    serves: Option<i64>,
 }
 
 /// The columns [`JobRow`] reads, in a SELECT list.
 pub(crate) const COLUMNS: &str = "id, reference, priority, barcode, spec, device, state, forced, \
-    failure_kind, failure_code, failure_text, created_at, updated_at, attempt";
+    failure_kind, failure_code, failure_text, created_at, updated_at, attempt, serves";
 
 /// A stored row that does not make a valid job (a damaged or hand-edited database).
 #[derive(Debug, thiserror::Error)]
@@ -85,7 +86,8 @@ impl TryFrom<JobRow> for Job {
         let spec: JobSpec = serde_json::from_str(&row.spec).map_err(|_| corrupt("spec"))?;
         let priority = Priority::try_from(row.priority).map_err(|_| corrupt("priority"))?;
         let state = JobState::parse(&row.state).ok_or_else(|| corrupt("state"))?;
-        let new = NewJob { spec, reference: row.reference, priority, barcode: None, device: row.device };
+        let new =
+            NewJob { spec, reference: row.reference, priority, barcode: None, device: row.device, serves: row.serves };
         let mut job = new.accepted(row.id, row.created_at);
         job.barcode = row.barcode;
         job.state = state;

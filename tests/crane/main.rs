@@ -63,7 +63,7 @@ pub fn device_for(
 /// by `device` alone.
 pub fn with_crane(config: &mut Config, device: CraneConfig) {
     if !config.site.aisles.iter().any(|a| a.aisle == 2) {
-        config.site.aisles.push(AisleConfig { aisle: 2, rows: 2, bays: 20, levels: 8, positions: 2 });
+        config.site.aisles.push(AisleConfig { aisle: 2, rows: 2, bays: 20, levels: 8, positions: 2, depth: 1 });
     }
     config.devices = vec![device.into()];
 }

@@ -38,6 +38,7 @@ pub fn light(reference: &str, bay: u16) -> NewJob {
         priority: Priority::default(),
         barcode: None,
         device: None,
+        serves: None,
     }
 }
 

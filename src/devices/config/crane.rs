@@ -8,6 +8,7 @@ use super::defaults::{OFFLINE_AFTER, POLL_MS};
 use super::error::{WordsError, check_words};
 use crate::protocols::Protocol;
 use crate::protocols::link::LinkConfig;
+use crate::wire::motion::Motion;
 use crate::wire::registers::BLOCK_WORDS;
 
 /// A crane's reply timeout when `timeout_ms` is not set (see [`super`] for why it is
@@ -23,6 +24,17 @@ pub enum Ack {
     Handshake,
     /// D22 := the value of D223.
     Echo,
+}
+
+/// How the crane's next job is chosen (see `service::planner`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Planner {
+    /// Priority, then age.
+    Fifo,
+    /// Priority, then the least empty travel from where the crane stands, with aging.
+    #[default]
+    Travel,
 }
 
 /// A station (pick-and-drop point) of the crane, written `[row, bay, level, side]`.
@@ -89,14 +101,25 @@ pub struct CraneConfig {
     pub auto_cancel: bool,
     /// How completion is acknowledged.
     pub ack: Ack,
+    /// How the next job is chosen.
+    pub planner: Planner,
+    /// Times a queued job may be passed over by younger ones of its priority (travel
+    /// planner) before it goes next.
+    pub max_overtaken: u32,
+    /// How the crane moves: what the travel planner weighs and putaway ranks by.
+    pub motion: Motion,
 }
 
 /// A crane setting that cannot work.
 #[derive(Debug, thiserror::Error)]
 pub enum CraneConfigError {
-    /// A timeout of 0 would declare the crane lost, or a hand-over failed, at once.
+    /// A timeout of 0 would declare the crane lost, or a hand-over failed, at once; a
+    /// `max_overtaken` of 0 would be no travel planning at all.
     #[error("{0} must be above 0")]
-    ZeroTimeout(&'static str),
+    Zero(&'static str),
+    /// A figure of the motion model is zero, negative or not a number.
+    #[error("every figure of motion must be above 0")]
+    Motion,
     /// A register block does not suit the protocol.
     #[error(transparent)]
     Block(#[from] WordsError),
@@ -121,6 +144,9 @@ impl CraneConfig {
             handshake_timeout_ms: 3_000,
             auto_cancel: true,
             ack: Ack::Handshake,
+            planner: Planner::Travel,
+            max_overtaken: 10,
+            motion: Motion::default(),
         }
     }
 
@@ -133,10 +159,16 @@ impl CraneConfig {
     /// writes its own block and only reads the crane's).
     pub fn check(&self) -> Result<(), CraneConfigError> {
         if self.heartbeat_timeout_ms == 0 {
-            return Err(CraneConfigError::ZeroTimeout("heartbeat_timeout_ms"));
+            return Err(CraneConfigError::Zero("heartbeat_timeout_ms"));
         }
         if self.handshake_timeout_ms == 0 {
-            return Err(CraneConfigError::ZeroTimeout("handshake_timeout_ms"));
+            return Err(CraneConfigError::Zero("handshake_timeout_ms"));
+        }
+        if self.max_overtaken == 0 {
+            return Err(CraneConfigError::Zero("max_overtaken"));
+        }
+        if !self.motion.is_valid() {
+            return Err(CraneConfigError::Motion);
         }
         let (protocol, words) = (self.link.protocol, BLOCK_WORDS as u32);
         check_words(protocol, "wcs_base", &self.wcs_base, words, true)?;
@@ -169,7 +201,7 @@ mod tests {
         c.check().unwrap();
         let mut bad = c;
         bad.handshake_timeout_ms = 0;
-        assert!(matches!(bad.check(), Err(CraneConfigError::ZeroTimeout("handshake_timeout_ms"))));
+        assert!(matches!(bad.check(), Err(CraneConfigError::Zero("handshake_timeout_ms"))));
     }
 
     #[test]

@@ -91,7 +91,8 @@ impl Problem {
             Problem::Shelf(ShelfConfigError::Area(e)) | Problem::Crane(CraneConfigError::Block(e)) => {
                 words(e).into()
             }
-            Problem::Crane(CraneConfigError::ZeroTimeout(key)) => (*key).into(),
+            Problem::Crane(CraneConfigError::Zero(key)) => (*key).into(),
+            Problem::Crane(CraneConfigError::Motion) => "motion".into(),
             Problem::Tags(TagsConfigError::NoTags) => "tags".into(),
             Problem::Tags(TagsConfigError::Tag(TagError::Name(name))) => format!("tags.{}", name.0),
             Problem::Tags(TagsConfigError::Tag(TagError::Def { name, .. })) => format!("tags.{name}"),

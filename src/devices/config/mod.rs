@@ -46,7 +46,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 pub use address::{AddressError, check_address, check_serial, check_unit};
-pub use crane::{Ack, CraneConfig, CraneConfigError, Station};
+pub use crane::{Ack, CraneConfig, CraneConfigError, Planner, Station};
 pub use error::{DeviceConfigError, Problem, WordsError, check_words};
 pub use raw::RawDevice;
 pub use shelf::{ShelfConfig, ShelfConfigError, default_shelf_quirks};

@@ -8,7 +8,8 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use super::address::{AddressError, check_unit};
-use super::crane::{self, Ack, CraneConfig, Station};
+use super::crane::{self, Ack, CraneConfig, Planner, Station};
+use crate::wire::motion::Motion;
 use super::error::{DeviceConfigError, Problem};
 use super::shelf::{ShelfConfig, default_shelf_quirks};
 use super::tags::TagsConfig;
@@ -91,6 +92,12 @@ pub struct RawDevice {
     auto_cancel: Option<bool>,
     #[serde(skip_serializing_if = "Option::is_none")]
     ack: Option<Ack>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    planner: Option<Planner>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    max_overtaken: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    motion: Option<Motion>,
     // Tags.
     #[serde(serialize_with = "tag_map")]
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -122,6 +129,9 @@ impl RawDevice {
             ("handshake_timeout_ms", self.handshake_timeout_ms.is_some()),
             ("auto_cancel", self.auto_cancel.is_some()),
             ("ack", self.ack.is_some()),
+            ("planner", self.planner.is_some()),
+            ("max_overtaken", self.max_overtaken.is_some()),
+            ("motion", self.motion.is_some()),
         ];
         let mut set = Vec::new();
         let mut add = |keys: &[(&'static str, bool)], owners| {
@@ -216,6 +226,9 @@ impl TryFrom<RawDevice> for DeviceConfig {
                 c.handshake_timeout_ms = raw.handshake_timeout_ms.unwrap_or(c.handshake_timeout_ms);
                 c.auto_cancel = raw.auto_cancel.unwrap_or(c.auto_cancel);
                 c.ack = raw.ack.unwrap_or(c.ack);
+                c.planner = raw.planner.unwrap_or(c.planner);
+                c.max_overtaken = raw.max_overtaken.unwrap_or(c.max_overtaken);
+                c.motion = raw.motion.unwrap_or(c.motion);
                 DeviceConfig::Crane(c)
             }
             DeviceKind::Tags => {
@@ -264,6 +277,9 @@ impl RawDevice {
             handshake_timeout_ms: None,
             auto_cancel: None,
             ack: None,
+            planner: None,
+            max_overtaken: None,
+            motion: None,
             tags: None,
         }
     }
@@ -290,6 +306,7 @@ impl From<&DeviceConfig> for RawDevice {
                 raw.heartbeat_timeout_ms = Some(c.heartbeat_timeout_ms);
                 raw.handshake_timeout_ms = Some(c.handshake_timeout_ms);
                 (raw.auto_cancel, raw.ack) = (Some(c.auto_cancel), Some(c.ack));
+                (raw.planner, raw.max_overtaken, raw.motion) = (Some(c.planner), Some(c.max_overtaken), Some(c.motion));
             }
             DeviceConfig::Tags(c) => {
                 (raw.poll_ms, raw.offline_after) = (Some(c.poll_ms), Some(c.offline_after));

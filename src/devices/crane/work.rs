@@ -1,8 +1,6 @@
 //! Giving the crane work and taking it back: the hand-over of the next job, cancels through
 //! the API, and the automatic cancel of a business alarm.
 
-use std::collections::HashSet;
-
 use tracing::Instrument;
 
 use super::{Crane, CraneError, Current};
@@ -15,7 +13,7 @@ use crate::wire::task_id_for;
 impl Crane {
     /// Hands the best eligible queued job to the idle crane.
     pub(super) async fn dispatch(&mut self) -> Result<(), CraneError> {
-        let Some(job) = self.port.next(1, &HashSet::new()).into_iter().next() else { return Ok(()) };
+        let Some(job) = self.port.next_task().await? else { return Ok(()) };
         let span = tracing::info_span!("job", job = job.id);
         self.dispatch_job(job).instrument(span).await
     }

@@ -11,6 +11,7 @@
 pub mod cancel;
 pub mod control;
 pub mod order;
+mod plan;
 pub mod queues;
 pub mod waiting;
 

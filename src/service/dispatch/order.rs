@@ -50,6 +50,7 @@ mod tests {
             priority: Priority::try_from(priority as i64).unwrap(),
             barcode: None,
             device: None,
+            serves: None,
         };
         let mut j = new.accepted(id, 0);
         j.state = state;

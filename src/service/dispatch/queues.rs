@@ -25,6 +25,7 @@ use super::order::next_jobs;
 use crate::devices::DeviceStatus;
 use crate::devices::port::{Port, ReportError};
 use crate::domain::{Job, JobState, Location, LocationLock, Pause, Report, Waiting, WaitingReason};
+use crate::service::planner::CranePlanner;
 use crate::store::writer::{Committed, Locked, WriteError, Writer};
 
 /// What operators set for a device, apart from what the device reports.
@@ -55,6 +56,7 @@ struct Lane {
     control: watch::Sender<Control>,
     window: usize,
     aisles: Vec<u16>,
+    planner: Option<Arc<CranePlanner>>,
 }
 
 /// What holds jobs back whichever device serves them.
@@ -117,7 +119,8 @@ pub(super) struct Inner {
     pub(super) changed: Notify,
 }
 
-/// A device as the dispatcher sees it: its id, its dispatch window and the aisles it serves.
+/// A device as the dispatcher sees it: its id, its dispatch window, the aisles it serves
+/// and, for a crane, its planner.
 pub struct Setup {
     /// The device's id.
     pub id: String,
@@ -125,6 +128,8 @@ pub struct Setup {
     pub window: usize,
     /// The aisles whose locations it serves.
     pub aisles: Vec<u16>,
+    /// A crane's planner: it chooses the crane's next task ([`Port::next_task`]).
+    pub planner: Option<Arc<CranePlanner>>,
 }
 
 impl Queues {
@@ -132,10 +137,10 @@ impl Queues {
     pub fn new(devices: impl IntoIterator<Item = Setup>) -> Queues {
         let mut queues = HashMap::new();
         let mut lanes = HashMap::new();
-        for Setup { id, window, aisles } in devices {
+        for Setup { id, window, aisles, planner } in devices {
             queues.insert(id.clone(), Queue::default());
-            let lane =
-                Lane { wake: Arc::new(Notify::new()), control: watch::Sender::default(), window, aisles };
+            let control = watch::Sender::default();
+            let lane = Lane { wake: Arc::new(Notify::new()), control, window, aisles, planner };
             lanes.insert(id, lane);
         }
         Queues(Arc::new(Inner {
@@ -358,10 +363,10 @@ impl Queue {
 }
 
 /// One device's [`Port`].
-struct DevicePort {
-    queues: Queues,
-    device: String,
-    writer: Writer,
+pub(super) struct DevicePort {
+    pub(super) queues: Queues,
+    pub(super) device: String,
+    pub(super) writer: Writer,
 }
 
 #[async_trait]
@@ -377,22 +382,15 @@ impl Port for DevicePort {
     }
 
     fn next(&self, free: usize, holding: &HashSet<i64>) -> Vec<Job> {
-        let Some(lane) = self.queues.0.lanes.get(&self.device) else { return Vec::new() };
-        if free == 0 || lane.control.borrow().pause.is_some() {
-            return Vec::new();
+        self.eligible(free, holding)
+    }
+
+    async fn next_task(&self) -> Result<Option<Job>, ReportError> {
+        let planner = self.queues.0.lanes.get(&self.device).and_then(|l| l.planner.clone());
+        match planner {
+            Some(planner) => super::plan::next_task(self, &planner).await,
+            None => Ok(self.eligible(1, &HashSet::new()).into_iter().next()),
         }
-        let queues = self.queues.lock();
-        let Some(queue) = queues.get(&self.device) else { return Vec::new() };
-        let window = queue.window(lane.window);
-        let mut held: HashSet<i64> = queue.withheld.union(holding).copied().collect();
-        {
-            let holds = self.queues.holds();
-            if !holds.locks.is_empty() || !holds.aisles.is_empty() {
-                let waiting = window.iter().filter(|j| j.state == JobState::Queued && holds.why(j).is_some());
-                held.extend(waiting.map(|j| j.id));
-            }
-        }
-        next_jobs(window, &held, free).into_iter().cloned().collect()
     }
 
     async fn work_waiting(&self) {
@@ -411,7 +409,30 @@ impl Port for DevicePort {
     }
 }
 
-fn report_error(e: WriteError) -> ReportError {
+impl DevicePort {
+    /// The queued jobs the order rules let start now, best first, at most `free`; none
+    /// while the device is paused.
+    pub(super) fn eligible(&self, free: usize, holding: &HashSet<i64>) -> Vec<Job> {
+        let Some(lane) = self.queues.0.lanes.get(&self.device) else { return Vec::new() };
+        if free == 0 || lane.control.borrow().pause.is_some() {
+            return Vec::new();
+        }
+        let queues = self.queues.lock();
+        let Some(queue) = queues.get(&self.device) else { return Vec::new() };
+        let window = queue.window(lane.window);
+        let mut held: HashSet<i64> = queue.withheld.union(holding).copied().collect();
+        {
+            let holds = self.queues.holds();
+            if !holds.locks.is_empty() || !holds.aisles.is_empty() {
+                let waiting = window.iter().filter(|j| j.state == JobState::Queued && holds.why(j).is_some());
+                held.extend(waiting.map(|j| j.id));
+            }
+        }
+        next_jobs(window, &held, free).into_iter().cloned().collect()
+    }
+}
+
+pub(super) fn report_error(e: WriteError) -> ReportError {
     match e {
         WriteError::Closed => ReportError::Stopped,
         WriteError::NotFound(id) => ReportError::NotFound(id),

@@ -86,6 +86,7 @@ struct JobOut<'a> {
     created_at: i64,
     updated_at: i64,
     attempt: u32,
+    serves: Option<i64>,
 }
 
 impl<'a> JobOut<'a> {
@@ -109,6 +110,7 @@ impl<'a> JobOut<'a> {
             created_at: to_ms(job.created_at),
             updated_at: to_ms(job.updated_at),
             attempt: job.attempt,
+            serves: job.serves,
         }
     }
 }
@@ -199,7 +201,7 @@ pub(super) async fn save(db: &mut Conn, group: &Group, count: &mut usize) -> Res
     match db {
         Conn::Sqlite(c) => {
             let target = "jobs (id, reference, kind, priority, barcode, spec, request, device, state, forced, \
-                          failure_kind, failure_code, failure_text, created_at, updated_at, attempt)";
+                          failure_kind, failure_code, failure_text, created_at, updated_at, attempt, serves)";
             insert_values!(c, count, target, created, |r| [
                 r.id,
                 r.reference,
@@ -217,6 +219,7 @@ pub(super) async fn save(db: &mut Conn, group: &Group, count: &mut usize) -> Res
                 r.created_at,
                 r.updated_at,
                 r.attempt,
+                r.serves,
             ]);
             insert_values!(c, count, "job_history (job_id, state, cause, at)", group.history, |r| [
                 r.job_id,

@@ -1,0 +1,70 @@
+//! The dispatcher's side of the crane planner: it asks [`CranePlanner`] what the idle crane
+//! does next and carries that out before anything reaches the crane: a relocation is
+//! committed as a job of its own (a `move` naming the job it serves) and handed out first; a
+//! job the rack makes impossible fails with the reason, nothing sent.
+
+use std::collections::HashSet;
+
+use super::queues::{DevicePort, report_error};
+use crate::devices::port::{Port, ReportError};
+use crate::domain::{Failure, FailureKind, Job, JobSpec, Priority, Report, Reported};
+use crate::service::planner::{CranePlanner, Decision};
+use crate::store::jobs::NewJob;
+use crate::store::writer::Outcome;
+
+/// The crane's next task as its planner decides, after what must come first.
+pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Result<Option<Job>, ReportError> {
+    // A refusal ends a job and the choice is made again among the others.
+    loop {
+        let candidates = port.eligible(usize::MAX, &HashSet::new());
+        if candidates.is_empty() {
+            return Ok(None);
+        }
+        let unfinished = port.unfinished();
+        let rack = planner.rack().await.map_err(|e| ReportError::Store(Box::new(e)))?;
+        let (c, u): (Vec<&Job>, Vec<&Job>) = (candidates.iter().collect(), unfinished.iter().collect());
+        match planner.decide(&c, &u, &rack) {
+            Decision::Run(id) => return Ok(candidates.into_iter().find(|j| j.id == id)),
+            Decision::Wait => return Ok(None),
+            Decision::Refuse { job, text } => {
+                let failure = Failure { kind: FailureKind::Unsupported, code: None, text };
+                let cause = "the rack makes the task impossible: nothing sent to the crane";
+                port.report(vec![Report::new(job, Reported::Failed(failure), cause)]).await?;
+            }
+            Decision::Relocate { serves, from, to } => {
+                let priority = candidates.iter().find(|j| j.id == serves).map_or(Priority::DEFAULT, |j| {
+                    Priority::try_from(i64::from(j.priority)).unwrap_or(Priority::DEFAULT)
+                });
+                tracing::info!(serves, %from, %to, "relocating the box in front of a far location");
+                let relocation = NewJob {
+                    spec: JobSpec::Move { from, to },
+                    reference: None,
+                    priority,
+                    barcode: None,
+                    device: Some(port.device.clone()),
+                    serves: Some(serves),
+                };
+                let outcome = port.writer.submit(vec![relocation]).await.map_err(report_error)?;
+                return Ok(outcome.into_iter().find_map(|o| match o {
+                    Outcome::Created(job) => Some(job),
+                    Outcome::Existing(_) => None,
+                }));
+            }
+        }
+    }
+}
+
+impl super::Queues {
+    /// The unfinished job that takes the box at `l` away (a retrieve or move from it), if
+    /// any.
+    pub fn taking_from(&self, l: crate::domain::Location) -> Option<i64> {
+        let queues = self.lock();
+        queues.values().find_map(|q| {
+            let ids = q.on.get(&l)?;
+            ids.iter().copied().find(|id| {
+                let job = q.active.get(id).or_else(|| q.queued.get(id));
+                job.and_then(|j| j.spec()).is_some_and(|s| crate::service::planner::refusal::picks_from(&s, l))
+            })
+        })
+    }
+}

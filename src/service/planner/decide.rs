@@ -1,0 +1,219 @@
+//! The crane planner's decision, pure: of the jobs the dispatcher's order rules allow now,
+//! which one the idle crane runs next, or what must happen first.
+//!
+//! Each candidate is checked against the rack first ([`check`]):
+//! - a task whose far location has a box in front of it (pick far, or put far, with near
+//!   occupied) waits while another unfinished job will take that box away, and otherwise
+//!   needs a relocation: a `move` of the near box to a place [`putaway::choose`] picks;
+//! - a put into a location that holds a box (double-deep aisles, where rackd keeps the
+//!   rack's contents) is never sent: the job fails with the reason, nothing sent;
+//! - everything else can go.
+//!
+//! Then one is chosen. `fifo` takes the first in the order rules' order (priority, then
+//! age). `travel` keeps priorities (only jobs of the best priority present compete, so a
+//! priority 0 job still goes first) and among them takes the one whose pick the crane
+//! reaches soonest from where it stands: after a store (the crane at the put) the nearest
+//! retrieve, after a retrieve (the crane at the station) a store, whose pick is the station:
+//! dual command cycles. Ties go to the older job. A job passed over `max_overtaken` times by
+//! younger ones of its priority goes next, so nothing starves.
+
+use std::collections::{HashMap, HashSet};
+
+use super::putaway::{self, Want, spot};
+use super::rack::Rack;
+use super::refusal::picks_from;
+use crate::devices::config::{Planner, Station};
+use crate::domain::{Job, JobSpec, Location};
+use crate::wire::motion::{Motion, Spot};
+
+/// A crane's planning settings.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// How the next job is picked.
+    pub strategy: Planner,
+    /// The crane's motion, to weigh travel.
+    pub motion: Motion,
+    /// Where a store picks.
+    pub inbound: Station,
+    /// Where a retrieve puts.
+    pub outbound: Station,
+    /// Times a job may be passed over by younger ones before it goes next.
+    pub max_overtaken: u32,
+}
+
+/// What the planner remembers between decisions.
+#[derive(Clone, Debug, Default)]
+pub struct Memory {
+    /// Where the crane stands once its last task ends.
+    pub at: Option<Spot>,
+    /// Times each queued job was passed over by a younger one of its priority.
+    pub overtaken: HashMap<i64, u32>,
+}
+
+/// What the crane should do next.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Decision {
+    /// Hand this job over.
+    Run(i64),
+    /// First move the box at `from` (near) to `to`, for job `serves`.
+    Relocate {
+        /// The job the relocation clears the way for.
+        serves: i64,
+        /// The blocking near location.
+        from: Location,
+        /// Where its box goes.
+        to: Location,
+    },
+    /// Fail this job without sending it: the rack makes it impossible.
+    Refuse {
+        /// The job.
+        job: i64,
+        /// Why, for the job's failure.
+        text: String,
+    },
+    /// Nothing can start now.
+    Wait,
+}
+
+/// What the rack allows a job.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    /// It can be sent.
+    Go,
+    /// The box at this near location must go first, and no job will take it: relocate it.
+    Relocate(Location),
+    /// The box at the near location goes with this unfinished job first.
+    Behind(i64),
+    /// It can never run as asked.
+    Impossible(String),
+}
+
+/// What the rack allows `job` now, given every unfinished job of the crane.
+pub fn check(job: &Job, rack: &Rack, unfinished: &[&Job]) -> Verdict {
+    let Some(spec) = job.spec() else { return Verdict::Go };
+    let (pick, put) = ends(&spec);
+    if let Some(near) = pick.and_then(|p| rack.blocker(p)) {
+        return behind_or_relocate(job.id, near, unfinished);
+    }
+    // The put sees the rack after the pick: a box picked is no longer in the way.
+    let holds = |l: Location| Some(l) != pick && rack.occupied(l);
+    if let Some(q) = put.filter(|q| rack.is_deep(q.aisle) && q.bay != 0) {
+        if holds(q) {
+            let text = format!("location {q} holds a box: rackd does not send a put into it");
+            return Verdict::Impossible(text);
+        }
+        let near = Rack::near_of(q);
+        if rack.is_far(q) && holds(near) {
+            return behind_or_relocate(job.id, near, unfinished);
+        }
+    }
+    Verdict::Go
+}
+
+fn behind_or_relocate(id: i64, near: Location, unfinished: &[&Job]) -> Verdict {
+    let taker = unfinished.iter().find(|j| j.id != id && j.spec().is_some_and(|s| picks_from(&s, near)));
+    match taker {
+        Some(j) => Verdict::Behind(j.id),
+        None => Verdict::Relocate(near),
+    }
+}
+
+/// Where a job picks and where it puts, when it does (a station is neither stock nor
+/// blocked).
+fn ends(spec: &JobSpec) -> (Option<Location>, Option<Location>) {
+    match *spec {
+        JobSpec::Store { to } => (None, Some(to)),
+        JobSpec::Retrieve { from } => (Some(from), None),
+        JobSpec::Move { from, to } => (Some(from), Some(to)),
+        _ => (None, None),
+    }
+}
+
+/// Chooses among `candidates` (the order rules' eligible jobs, best first) for the idle
+/// crane; `unfinished` is every job of the crane not ended; `memory` is updated.
+pub fn decide(plan: &Plan, memory: &mut Memory, candidates: &[&Job], unfinished: &[&Job], rack: &Rack) -> Decision {
+    let mut open: Vec<(&Job, Option<Location>)> = Vec::new();
+    for job in candidates {
+        match check(job, rack, unfinished) {
+            Verdict::Go => open.push((job, None)),
+            Verdict::Relocate(near) => open.push((job, Some(near))),
+            Verdict::Behind(_) => {}
+            Verdict::Impossible(text) => return Decision::Refuse { job: job.id, text },
+        }
+    }
+    let busy: HashSet<Location> = unfinished.iter().filter_map(|j| j.spec()).flat_map(|s| s.locations()).collect();
+    // A job whose relocation has nowhere to go waits.
+    open.retain(|(job, near)| near.is_none() || target(plan, rack, &busy, job, near.unwrap()).is_some());
+    let Some(&(job, near)) = pick(plan, memory, &open) else { return Decision::Wait };
+    let live: HashSet<i64> = unfinished.iter().map(|j| j.id).collect();
+    memory.overtaken.retain(|id, _| live.contains(id));
+    for (other, _) in &open {
+        if other.id < job.id && other.priority == job.priority {
+            *memory.overtaken.entry(other.id).or_default() += 1;
+        }
+    }
+    memory.overtaken.remove(&job.id);
+    match near {
+        None => {
+            memory.at = job.spec().map(|s| end_spot(plan, &s));
+            Decision::Run(job.id)
+        }
+        Some(from) => {
+            let to = target(plan, rack, &busy, job, from).unwrap_or(from);
+            memory.at = Some(spot(to));
+            Decision::Relocate { serves: job.id, from, to }
+        }
+    }
+}
+
+fn pick<'a>(plan: &Plan, memory: &Memory, open: &'a [(&'a Job, Option<Location>)]) -> Option<&'a (&'a Job, Option<Location>)> {
+    let best = open.iter().map(|(j, _)| j.priority).min()?;
+    let group = open.iter().filter(|(j, _)| j.priority == best);
+    if plan.strategy == Planner::Fifo || best == 0 {
+        return group.min_by_key(|(j, _)| j.id);
+    }
+    let starved = group.clone().filter(|(j, _)| memory.overtaken.get(&j.id).copied().unwrap_or(0) >= plan.max_overtaken);
+    if let Some(oldest) = starved.min_by_key(|(j, _)| j.id) {
+        return Some(oldest);
+    }
+    let from = memory.at.unwrap_or(station_spot(plan.outbound));
+    group.min_by(|a, b| {
+        let cost = |(j, near): &(&Job, Option<Location>)| plan.motion.move_time(from, pick_spot(plan, j, *near));
+        cost(a).total_cmp(&cost(b)).then(a.0.id.cmp(&b.0.id))
+    })
+}
+
+/// Where the crane first goes for a job: its pick (the inbound station for a store), the
+/// near box to relocate, or a travel's target.
+fn pick_spot(plan: &Plan, job: &Job, near: Option<Location>) -> Spot {
+    if let Some(n) = near {
+        return spot(n);
+    }
+    match job.spec() {
+        Some(JobSpec::Store { .. }) | None => station_spot(plan.inbound),
+        Some(JobSpec::Retrieve { from } | JobSpec::Move { from, .. }) => spot(from),
+        Some(JobSpec::Travel { to } | JobSpec::Clear { location: to } | JobSpec::Light { location: to, .. }) => spot(to),
+    }
+}
+
+/// Where the crane stands once the job ends.
+fn end_spot(plan: &Plan, spec: &JobSpec) -> Spot {
+    match *spec {
+        JobSpec::Retrieve { .. } => station_spot(plan.outbound),
+        JobSpec::Store { to } | JobSpec::Move { to, .. } | JobSpec::Travel { to } => spot(to),
+        JobSpec::Clear { location } | JobSpec::Light { location, .. } => spot(location),
+    }
+}
+
+fn station_spot(s: Station) -> Spot {
+    Spot { bay: s.bay, level: s.level }
+}
+
+/// Where the box at `near` goes so that `job` can run.
+fn target(plan: &Plan, rack: &Rack, busy: &HashSet<Location>, job: &Job, near: Location) -> Option<Location> {
+    let mut busy = busy.clone();
+    busy.extend(job.spec().map(|s| s.locations()).unwrap_or_default());
+    busy.insert(Rack::far_of(near));
+    let want = Want { aisle: near.aisle, from: spot(near), station: station_spot(plan.inbound), class: None, busy: &busy };
+    putaway::choose(rack, &plan.motion, &want)
+}

@@ -1,0 +1,149 @@
+//! The planner's decisions on made-up racks and queues.
+
+use std::collections::BTreeSet;
+
+use super::decide::{Decision, Memory, Plan, Verdict, check, decide};
+use super::rack::{Cell, Rack};
+use crate::devices::config::{Planner, Station};
+use crate::domain::{Job, JobSpec, Location, NewJob, Priority};
+use crate::wire::motion::{Motion, Spot};
+
+fn at(bay: u16, level: u16, position: u16) -> Location {
+    Location { aisle: 2, row: 1, bay, level, position }
+}
+
+fn job(id: i64, priority: u8, spec: JobSpec) -> Job {
+    let new = NewJob {
+        spec,
+        reference: None,
+        priority: Priority::try_from(priority as i64).unwrap(),
+        barcode: None,
+        device: Some("crane1".into()),
+        serves: None,
+    };
+    new.accepted(id, 0)
+}
+
+/// Bays 1..=20, levels 1..=4, both depths, `full` holding boxes; aisle 2 double-deep.
+fn rack(full: &[Location]) -> Rack {
+    let mut cells = Vec::new();
+    for bay in 1..=20 {
+        for level in 1..=4 {
+            for position in 1..=2 {
+                let l = at(bay, level, position);
+                cells.push((l, Cell { occupied: full.contains(&l), ..Cell::default() }));
+            }
+        }
+    }
+    Rack::from_cells(cells, &BTreeSet::from([2]))
+}
+
+fn plan(strategy: Planner) -> Plan {
+    Plan {
+        strategy,
+        motion: Motion::default(),
+        inbound: Station { row: 2, bay: 0, level: 1, side: 1 },
+        outbound: Station { row: 1, bay: 0, level: 1, side: 1 },
+        max_overtaken: 3,
+    }
+}
+
+fn run(plan: &Plan, memory: &mut Memory, jobs: &[Job], rack: &Rack) -> Decision {
+    let all: Vec<&Job> = jobs.iter().collect();
+    decide(plan, memory, &all, &all, rack)
+}
+
+#[test]
+fn a_retrieve_behind_a_box_gets_a_relocation_first() {
+    let r = rack(&[at(5, 2, 1), at(5, 2, 2)]);
+    let jobs = [job(1, 10, JobSpec::Retrieve { from: at(5, 2, 2) })];
+    let decision = run(&plan(Planner::Fifo), &mut Memory::default(), &jobs, &r);
+    let Decision::Relocate { serves, from, to } = decision else { panic!("{decision:?}") };
+    assert_eq!((serves, from), (1, at(5, 2, 1)));
+    assert!(!r.occupied(to) && to != at(5, 2, 2), "to a free place: {to:?}");
+    assert_eq!(to.position, 2, "far first: {to:?}");
+    assert!(to.bay.abs_diff(5) <= 1, "near the box it moves: {to:?}");
+}
+
+#[test]
+fn a_retrieve_behind_a_box_that_leaves_anyway_waits() {
+    let r = rack(&[at(5, 2, 1), at(5, 2, 2)]);
+    let far = job(2, 0, JobSpec::Retrieve { from: at(5, 2, 2) });
+    let near = job(3, 10, JobSpec::Retrieve { from: at(5, 2, 1) });
+    assert_eq!(check(&far, &r, &[&far, &near]), Verdict::Behind(3));
+    let decision = run(&plan(Planner::Travel), &mut Memory::default(), &[far, near], &r);
+    assert_eq!(decision, Decision::Run(3), "the near box goes first, though the far job has priority 0");
+}
+
+#[test]
+fn stores_far_behind_a_box_relocate_and_puts_into_a_box_are_refused() {
+    let r = rack(&[at(6, 1, 1), at(7, 1, 1)]);
+    let far = job(1, 10, JobSpec::Store { to: at(6, 1, 2) });
+    assert_eq!(check(&far, &r, &[&far]), Verdict::Relocate(at(6, 1, 1)));
+    let into_box = job(2, 10, JobSpec::Store { to: at(7, 1, 1) });
+    let decision = run(&plan(Planner::Travel), &mut Memory::default(), &[into_box], &r);
+    assert!(matches!(decision, Decision::Refuse { job: 2, .. }), "{decision:?}");
+    let shallow = Rack::from_cells(r.locations(), &BTreeSet::new());
+    assert_eq!(check(&far, &shallow, &[&far]), Verdict::Go, "single-deep aisles have no rules");
+    let swap = job(3, 10, JobSpec::Move { from: at(6, 1, 1), to: at(6, 1, 2) });
+    assert_eq!(check(&swap, &r, &[&swap]), Verdict::Go, "a move out of the near box clears its own way");
+}
+
+#[test]
+fn travel_takes_the_nearest_pick_and_fifo_the_oldest() {
+    let r = rack(&[at(18, 1, 1), at(3, 1, 1)]);
+    let jobs = [
+        job(1, 10, JobSpec::Retrieve { from: at(18, 1, 1) }),
+        job(2, 10, JobSpec::Retrieve { from: at(3, 1, 1) }),
+    ];
+    let mut memory = Memory { at: Some(Spot { bay: 4, level: 1 }), ..Memory::default() };
+    assert_eq!(run(&plan(Planner::Travel), &mut memory, &jobs, &r), Decision::Run(2));
+    assert_eq!(memory.at, Some(Spot { bay: 0, level: 1 }), "a retrieve ends at the station");
+    assert_eq!(memory.overtaken.get(&1), Some(&1));
+    let mut memory = Memory { at: Some(Spot { bay: 4, level: 1 }), ..Memory::default() };
+    assert_eq!(run(&plan(Planner::Fifo), &mut memory, &jobs, &r), Decision::Run(1));
+}
+
+#[test]
+fn after_a_retrieve_a_store_after_a_store_the_nearest_retrieve() {
+    let r = rack(&[at(15, 1, 1)]);
+    let jobs = [
+        job(1, 10, JobSpec::Retrieve { from: at(15, 1, 1) }),
+        job(2, 10, JobSpec::Store { to: at(14, 1, 2) }),
+    ];
+    let mut memory = Memory { at: Some(Spot { bay: 0, level: 1 }), ..Memory::default() };
+    let p = plan(Planner::Travel);
+    assert_eq!(run(&p, &mut memory, &jobs, &r), Decision::Run(2), "at the station: the store");
+    assert_eq!(run(&p, &mut memory, &jobs[..1], &r), Decision::Run(1));
+}
+
+#[test]
+fn priority_zero_still_goes_first() {
+    let r = rack(&[at(20, 4, 1), at(1, 1, 1)]);
+    let jobs = [
+        job(1, 10, JobSpec::Retrieve { from: at(1, 1, 1) }),
+        job(2, 0, JobSpec::Retrieve { from: at(20, 4, 1) }),
+    ];
+    let mut memory = Memory { at: Some(Spot { bay: 1, level: 1 }), ..Memory::default() };
+    assert_eq!(run(&plan(Planner::Travel), &mut memory, &jobs, &r), Decision::Run(2));
+}
+
+#[test]
+fn nothing_starves_under_the_travel_planner() {
+    // A far retrieve among a stream of near ones, each new one nearer than it: it still
+    // goes within max_overtaken (3) decisions.
+    let full: Vec<Location> = (1..=10).map(|b| at(b, 1, 1)).chain([at(20, 4, 1)]).collect();
+    let r = rack(&full);
+    let p = plan(Planner::Travel);
+    let mut memory = Memory { at: Some(Spot { bay: 0, level: 1 }), ..Memory::default() };
+    let mut queue = vec![job(1, 10, JobSpec::Retrieve { from: at(20, 4, 1) })];
+    let mut ran = Vec::new();
+    for id in 2..=10 {
+        queue.push(job(id, 10, JobSpec::Retrieve { from: at(id as u16, 1, 1) }));
+        let Decision::Run(chosen) = run(&p, &mut memory, &queue, &r) else { panic!() };
+        queue.retain(|j| j.id != chosen);
+        ran.push(chosen);
+    }
+    let turn = ran.iter().position(|&id| id == 1).expect("the far job ran");
+    assert!(turn <= 3, "it ran as decision {turn}: {ran:?}");
+}

@@ -1,0 +1,86 @@
+//! The crane planner: what an idle crane does next, in the service layer beside the
+//! dispatcher, which asks it on the crane's behalf ([`CranePlanner::next`]).
+//!
+//! - **Double-deep without business alarms** ([`decide::check`]): in an aisle with
+//!   `depth = 2` rackd never sends a task the rack makes impossible. A pick or a put far
+//!   behind a box gets a relocation first: a `move` of the near box to a place chosen by the
+//!   putaway rules ([`putaway`]), made by rackd, naming the job it `serves`, committed before
+//!   it is handed over; the job it serves waits behind it. A put into a box fails at once,
+//!   nothing sent. A store into a far location whose near location holds a box is refused
+//!   at intake (409 `near_occupied`) when the WMS names it ([`refusal`]).
+//! - **Sequencing** ([`decide::decide`]): `planner = "travel"` (the default) takes, among
+//!   the jobs of the best priority, the one the crane reaches with the least empty travel
+//!   (dual command cycles), with aging; `"fifo"` keeps priority then age.
+//!
+//! The rack it reads is rackd's location model (occupancy and reservations), read afresh
+//! for each decision: a crane decides once a cycle, so a read of its aisles is cheap next
+//! to the minute a cycle takes, and nothing can go stale. Where the crane stands is where
+//! its last task was to end (rackd's own record, not D220/D221, whose units a site's
+//! program decides).
+
+pub mod decide;
+pub mod putaway;
+pub mod rack;
+pub mod refusal;
+
+#[cfg(test)]
+mod decide_tests;
+
+use std::collections::BTreeSet;
+use std::sync::Mutex;
+
+use crate::devices::config::CraneConfig;
+use crate::domain::Job;
+use crate::store::{Pool, locations};
+pub use decide::{Decision, Plan};
+use decide::Memory;
+use rack::Rack;
+
+/// One crane's planner.
+pub struct CranePlanner {
+    plan: Plan,
+    aisles: Vec<u16>,
+    deep: BTreeSet<u16>,
+    memory: Mutex<Memory>,
+    pool: Pool,
+}
+
+impl CranePlanner {
+    /// The planner of `crane`; `deep` are the site's double-deep aisles.
+    pub fn new(crane: &CraneConfig, deep: &BTreeSet<u16>, pool: Pool) -> CranePlanner {
+        let plan = Plan {
+            strategy: crane.planner,
+            motion: crane.motion,
+            inbound: crane.inbound_station,
+            outbound: crane.outbound_station,
+            max_overtaken: crane.max_overtaken,
+        };
+        let deep = deep.iter().copied().filter(|a| crane.aisles.contains(a)).collect();
+        CranePlanner { plan, aisles: crane.aisles.clone(), deep, memory: Mutex::default(), pool }
+    }
+
+    /// The crane's aisles as the location model has them now.
+    pub async fn rack(&self) -> Result<Rack, sqlx::Error> {
+        let mut states = Vec::new();
+        for &aisle in &self.aisles {
+            states.extend(locations::list(&self.pool, Some(aisle)).await?);
+        }
+        Ok(Rack::new(&states, &self.deep))
+    }
+
+    /// What the idle crane does next, of `candidates` (the order rules' eligible jobs,
+    /// best first) given every unfinished job of the crane and the rack.
+    pub fn decide(&self, candidates: &[&Job], unfinished: &[&Job], rack: &Rack) -> Decision {
+        let mut memory = self.memory.lock().unwrap_or_else(|p| p.into_inner());
+        decide::decide(&self.plan, &mut memory, candidates, unfinished, rack)
+    }
+
+    /// Why a queued job waits on the rack, if it does: the job that takes the box in front
+    /// of its far location first.
+    pub fn behind(&self, job: &Job, unfinished: &[&Job], rack: &Rack) -> Option<i64> {
+        match decide::check(job, rack, unfinished) {
+            decide::Verdict::Behind(id) => Some(id),
+            _ => None,
+        }
+    }
+}
