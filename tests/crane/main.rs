@@ -14,6 +14,7 @@ mod handover;
 mod heartbeat;
 mod jobs;
 mod pause_restart;
+mod planner;
 mod paused;
 mod restart;
 

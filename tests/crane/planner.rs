@@ -1,0 +1,119 @@
+//! The crane planner against the real crane simulator, in a double-deep aisle: a far box
+//! behind a near one is fetched after a relocation rackd makes; a store far behind a box is
+//! refused at intake; a put into a box fails without being sent.
+
+use std::time::Duration;
+
+use rackd::config::Config;
+use rackd::devices::config::CraneConfig;
+use rackd::protocols::mc3e::TransportKind;
+use rackd::sim::crane::CraneSim;
+use rackd::wire::task_id_for;
+use serde_json::{Value, json};
+
+use super::{cloc, crane, device_for, submit, wait_job, with_crane};
+use crate::helpers::{TestApp, spawn_with, split};
+
+/// A crane app whose aisle 2 is double-deep.
+async fn deep_app(edit: impl FnOnce(&mut CraneConfig)) -> (TestApp, CraneSim) {
+    let sim = crane(TransportKind::Tcp, 5).await;
+    let device = device_for(&sim, TransportKind::Tcp, edit);
+    let app = spawn_with(|c: &mut Config| {
+        with_crane(c, device);
+        c.site.aisles.iter_mut().filter(|a| a.aisle == 2).for_each(|a| a.depth = 2);
+    })
+    .await;
+    (app, sim)
+}
+
+/// Loads boxes at these crane locations.
+async fn stock(app: &TestApp, at: &[Value]) {
+    let entries: Vec<Value> = at
+        .iter()
+        .map(|l| {
+            let mut e = l.clone();
+            e["occupied"] = json!(true);
+            e
+        })
+        .collect();
+    let body = json!({"locations": entries, "reason": "test stock"});
+    let (status, answer) = split(app.client.put(app.url("/api/v1/locations")).json(&body).send().await.unwrap()).await;
+    assert_eq!(status, 200, "{answer}");
+}
+
+async fn occupied(app: &TestApp, l: &Value) -> bool {
+    let (_, all) = app.get("/api/v1/locations?aisle=2&occupied=true").await;
+    all.as_array().unwrap().iter().any(|s| ["row", "bay", "level", "position"].iter().all(|k| s[*k] == l[*k]))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_far_box_behind_a_near_one_comes_out_after_a_relocation() {
+    let (app, sim) = deep_app(|_| {}).await;
+    let (near, far) = (cloc(1, 5, 2, 1), cloc(1, 5, 2, 2));
+    stock(&app, &[near.clone(), far.clone()]).await;
+    let id = submit(&app, json!({"kind": "retrieve", "from": far}), "R-FAR").await;
+    let done = wait_job(&app, id, &["completed", "failed"], 20).await;
+    assert_eq!(done["state"], "completed", "{done}");
+    let (_, moves) = app.get("/api/v1/jobs?kind=move").await;
+    let moves = moves["jobs"].as_array().unwrap().clone();
+    assert_eq!(moves.len(), 1, "one relocation: {moves:?}");
+    let relocation = &moves[0];
+    assert_eq!((relocation["serves"].as_i64(), &relocation["from"]), (Some(id), &near), "{relocation}");
+    assert_eq!(relocation["state"], "completed", "{relocation}");
+    assert!(relocation["id"].as_i64().unwrap() > id);
+    let to = relocation["to"].clone();
+    assert_eq!(to["position"], 2, "far first: {to}");
+    assert!(!occupied(&app, &near).await && !occupied(&app, &far).await);
+    assert!(occupied(&app, &to).await, "the near box is where it was moved: {to}");
+    for job in [id, relocation["id"].as_i64().unwrap()] {
+        assert_eq!(sim.received(task_id_for(job)), 1, "job {job} handed over once");
+    }
+    assert_eq!(sim.violations(), 0, "{:?}", sim.violation_log());
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_store_far_behind_a_box_is_refused_unless_the_box_leaves_first() {
+    let (app, sim) = deep_app(|_| {}).await;
+    stock(&app, &[cloc(1, 7, 1, 1)]).await;
+    let (status, err) = app.post("/api/v1/jobs", &json!({"kind": "store", "to": cloc(1, 7, 1, 2)})).await;
+    assert_eq!(status, 409, "{err}");
+    assert_eq!(err["error"]["code"], "near_occupied", "{err}");
+    let batch = json!({"jobs": [
+        {"kind": "store", "to": cloc(1, 8, 1, 2)},
+        {"kind": "store", "to": cloc(1, 7, 1, 2)},
+    ]});
+    let (status, err) = app.post("/api/v1/jobs/batch", &batch).await;
+    assert_eq!(status, 409, "{err}");
+    assert!(err["error"]["message"].as_str().unwrap().starts_with("jobs[1]:"), "{err}");
+    // A retrieve of the near box first makes the same store fine: it runs after it.
+    let batch = json!({"jobs": [
+        {"kind": "retrieve", "from": cloc(1, 7, 1, 1)},
+        {"kind": "store", "to": cloc(1, 7, 1, 2)},
+    ]});
+    let (status, both) = app.post("/api/v1/jobs/batch", &batch).await;
+    assert_eq!(status, 201, "{both}");
+    for job in both["jobs"].as_array().unwrap() {
+        let id = job["id"].as_i64().unwrap();
+        assert_eq!(wait_job(&app, id, &["completed", "failed"], 20).await["state"], "completed");
+    }
+    let (_, moves) = app.get("/api/v1/jobs?kind=move").await;
+    assert!(moves["jobs"].as_array().unwrap().is_empty(), "no relocation was needed: {moves}");
+    assert_eq!(sim.violations(), 0);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_put_into_a_box_fails_without_being_sent() {
+    let (app, sim) = deep_app(|_| {}).await;
+    stock(&app, &[cloc(2, 3, 4, 1)]).await;
+    let id = submit(&app, json!({"kind": "store", "to": cloc(2, 3, 4, 1)}), "S-INTO-BOX").await;
+    let failed = wait_job(&app, id, &["failed", "completed"], 10).await;
+    assert_eq!(failed["state"], "failed", "{failed}");
+    assert_eq!(failed["failure"]["kind"], "unsupported", "{failed}");
+    assert!(failed["failure"]["text"].as_str().unwrap().contains("holds a box"), "{failed}");
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    assert_eq!(sim.received(task_id_for(id)), 0, "nothing was sent");
+    assert_eq!(sim.violations(), 0);
+    app.stop().await;
+}
