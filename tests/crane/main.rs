@@ -61,11 +61,11 @@ pub fn device_for(
 }
 
 /// The demo site plus the crane aisle 2 (2 rows x 20 bays x 8 levels x 2 sides), served
-/// by `device` alone.
+/// by `device` alone; single-deep, so that rackd sends what the tests ask whatever its
+/// location model holds (the planner's double-deep rules are tested in [`planner`]).
 pub fn with_crane(config: &mut Config, device: CraneConfig) {
-    if !config.site.aisles.iter().any(|a| a.aisle == 2) {
-        config.site.aisles.push(AisleConfig { aisle: 2, rows: 2, bays: 20, levels: 8, positions: 2, depth: 1 });
-    }
+    config.site.aisles.retain(|a| a.aisle != 2);
+    config.site.aisles.push(AisleConfig { aisle: 2, rows: 2, bays: 20, levels: 8, positions: 2, depth: 1 });
     config.devices = vec![device.into()];
 }
 
