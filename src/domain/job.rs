@@ -6,7 +6,7 @@ use time::OffsetDateTime;
 use utoipa::ToSchema;
 
 use super::time::from_ms;
-use super::{Barcode, Failure, JobState, Location, Priority};
+use super::{Barcode, Class, Failure, JobState, Location, Priority, Zone};
 
 /// The kinds of job rackd runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
@@ -70,9 +70,11 @@ pub enum LightColor {
     Green,
 }
 
-/// A job's kind with exactly the fields it needs.
+/// A job's kind with exactly the fields it needs. Stored as JSON (with keys of the store's
+/// own beside it, see `store::jobs`), never read from a request: [`crate::service::intake`]
+/// checks requests field by field.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+#[serde(tag = "kind", rename_all = "lowercase")]
 pub enum JobSpec {
     /// Put a box into `to`.
     Store {
@@ -110,13 +112,22 @@ pub enum JobSpec {
         /// Where the crane goes.
         to: Location,
     },
+    /// A store whose location rackd chooses when it dispatches it (putaway); once chosen,
+    /// the job is a plain [`JobSpec::Store`]. Its kind is `store`.
+    Putaway {
+        /// Where the box may go: any location in one of these.
+        zones: Vec<Zone>,
+        /// The box's velocity class, if the WMS gave one.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        class: Option<Class>,
+    },
 }
 
 impl JobSpec {
     /// The job's kind.
     pub fn kind(&self) -> JobKind {
         match self {
-            Self::Store { .. } => JobKind::Store,
+            Self::Store { .. } | Self::Putaway { .. } => JobKind::Store,
             Self::Retrieve { .. } => JobKind::Retrieve,
             Self::Move { .. } => JobKind::Move,
             Self::Clear { .. } => JobKind::Clear,
@@ -132,6 +143,7 @@ impl JobSpec {
             Self::Retrieve { from } => vec![from],
             Self::Move { from, to } => vec![from, to],
             Self::Clear { location } | Self::Light { location, .. } => vec![location],
+            Self::Putaway { .. } => Vec::new(),
         }
     }
 }
@@ -183,9 +195,16 @@ pub struct Job {
     /// Source location (`retrieve`, `move`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub from: Option<Location>,
-    /// Target location (`store`, `move`, `travel`).
+    /// Target location (`store`, `move`, `travel`); for a store left to rackd, absent
+    /// until rackd chooses it as it dispatches the job.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub to: Option<Location>,
+    /// Where a store left to rackd may go (putaway).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zones: Option<Vec<Zone>>,
+    /// The velocity class of a store left to rackd, if given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub class: Option<Class>,
     /// The location (`clear`, `light`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub location: Option<Location>,
@@ -226,7 +245,10 @@ impl Job {
     /// The job's kind-specific fields.
     pub fn spec(&self) -> Option<JobSpec> {
         Some(match self.kind {
-            JobKind::Store => JobSpec::Store { to: self.to? },
+            JobKind::Store => match (self.to, &self.zones) {
+                (Some(to), _) => JobSpec::Store { to },
+                (None, zones) => JobSpec::Putaway { zones: zones.clone()?, class: self.class },
+            },
             JobKind::Retrieve => JobSpec::Retrieve { from: self.from? },
             JobKind::Move => JobSpec::Move { from: self.from?, to: self.to? },
             JobKind::Clear => JobSpec::Clear { location: self.location? },
@@ -285,6 +307,8 @@ impl NewJob {
             barcode: self.barcode.as_ref().map(|b| b.as_str().to_owned()),
             from: None,
             to: None,
+            zones: None,
+            class: None,
             location: None,
             color: None,
             on: None,
@@ -298,8 +322,9 @@ impl NewJob {
             created_at: at,
             updated_at: at,
         };
-        match self.spec {
+        match self.spec.clone() {
             JobSpec::Store { to } | JobSpec::Travel { to } => job.to = Some(to),
+            JobSpec::Putaway { zones, class } => (job.zones, job.class) = (Some(zones), class),
             JobSpec::Retrieve { from } => job.from = Some(from),
             JobSpec::Move { from, to } => (job.from, job.to) = (Some(from), Some(to)),
             JobSpec::Clear { location } => job.location = Some(location),

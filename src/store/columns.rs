@@ -2,7 +2,7 @@
 //! name them from here.
 
 /// `jobs`.
-pub(crate) const JOBS: [&str; 18] = [
+pub(crate) const JOBS: [&str; 17] = [
     "id",
     "reference",
     "kind",
@@ -20,7 +20,6 @@ pub(crate) const JOBS: [&str; 18] = [
     "created_at",
     "updated_at",
     "attempt",
-    "serves",
 ];
 
 /// `job_history`.

@@ -7,7 +7,7 @@ use utoipa::ToSchema;
 
 use super::{Pool, Reader, read};
 use crate::domain::time::from_ms;
-use crate::domain::{Failure, FailureKind, JobKind, JobSpec, JobState, Priority};
+use crate::domain::{Class, Failure, FailureKind, JobKind, JobSpec, JobState, Priority, Zone};
 pub use crate::domain::{Job, NewJob};
 
 /// One entry of a job's history.
@@ -61,12 +61,49 @@ pub(crate) struct JobRow {
     created_at: i64,
     updated_at: i64,
     attempt: i64,
-    serves: Option<i64>,
 }
 
 /// The columns [`JobRow`] reads, in a SELECT list.
 pub(crate) const COLUMNS: &str = "id, reference, priority, barcode, spec, device, state, forced, \
-    failure_kind, failure_code, failure_text, created_at, updated_at, attempt, serves";
+    failure_kind, failure_code, failure_text, created_at, updated_at, attempt";
+
+/// The `spec` column: what the job does, and what rackd's planner adds to it (the job a
+/// relocation serves; where a store left to rackd may go, kept once its location is
+/// chosen), as one JSON object, so that jobs keep the columns (and the bound values per
+/// row of a SQLite insert) they had.
+#[derive(Serialize, serde::Deserialize)]
+pub(crate) struct StoredSpec {
+    #[serde(flatten)]
+    pub(crate) spec: JobSpec,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) serves: Option<i64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) putaway: Option<Putaway>,
+}
+
+/// Where a store left to rackd may go, once its location is chosen.
+#[derive(Serialize, serde::Deserialize)]
+pub(crate) struct Putaway {
+    zones: Vec<Zone>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    class: Option<Class>,
+}
+
+impl StoredSpec {
+    /// The column's text for `job` (`null` for a job whose fields make no spec, which
+    /// [`Job`]'s constructors never build).
+    pub(crate) fn json(job: &Job) -> String {
+        let stored = job.spec().map(|spec| {
+            let putaway = match (&spec, &job.zones) {
+                (JobSpec::Store { .. }, Some(zones)) => Some(Putaway { zones: zones.clone(), class: job.class }),
+                _ => None,
+            };
+            StoredSpec { spec, serves: job.serves, putaway }
+        });
+        // Our own types, no maps with non-string keys: serializing cannot fail.
+        serde_json::to_string(&stored).unwrap_or_default()
+    }
+}
 
 /// A stored row that does not make a valid job (a damaged or hand-edited database).
 #[derive(Debug, thiserror::Error)]
@@ -83,13 +120,17 @@ impl TryFrom<JobRow> for Job {
     fn try_from(row: JobRow) -> Result<Job, CorruptRow> {
         let id = row.id;
         let corrupt = |what: &'static str| CorruptRow { id, what };
-        let spec: JobSpec = serde_json::from_str(&row.spec).map_err(|_| corrupt("spec"))?;
+        let stored: StoredSpec = serde_json::from_str(&row.spec).map_err(|_| corrupt("spec"))?;
+        let spec = stored.spec;
         let priority = Priority::try_from(row.priority).map_err(|_| corrupt("priority"))?;
         let state = JobState::parse(&row.state).ok_or_else(|| corrupt("state"))?;
         let new =
-            NewJob { spec, reference: row.reference, priority, barcode: None, device: row.device, serves: row.serves };
+            NewJob { spec, reference: row.reference, priority, barcode: None, device: row.device, serves: stored.serves };
         let mut job = new.accepted(row.id, row.created_at);
         job.barcode = row.barcode;
+        if let Some(p) = stored.putaway {
+            (job.zones, job.class) = (Some(p.zones), p.class);
+        }
         job.state = state;
         job.forced = row.forced;
         job.updated_at = from_ms(row.updated_at);

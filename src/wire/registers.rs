@@ -168,6 +168,7 @@ pub fn task_for(spec: &JobSpec, number: u16, stations: &Stations) -> Result<Task
         JobSpec::Travel { to } => (Mode::Travel, [0; 4], coord(to)),
         JobSpec::Clear { .. } => return Err("a stacker crane has no clear task"),
         JobSpec::Light { .. } => return Err("a stacker crane has no lights"),
+        JobSpec::Putaway { .. } => return Err("no location was chosen for this store"),
     };
     Ok(Task { number, mode, from, to })
 }

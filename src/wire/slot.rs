@@ -138,6 +138,7 @@ pub fn command_for(spec: &JobSpec) -> Result<Positions, &'static str> {
             (c, Some(location), None)
         }
         JobSpec::Travel { .. } => return Err("a shelf PLC has no travel command"),
+        JobSpec::Putaway { .. } => return Err("a shelf PLC needs the store's location"),
     })
 }
 

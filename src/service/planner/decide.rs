@@ -190,7 +190,7 @@ fn pick_spot(plan: &Plan, job: &Job, near: Option<Location>) -> Spot {
         return spot(n);
     }
     match job.spec() {
-        Some(JobSpec::Store { .. }) | None => station_spot(plan.inbound),
+        Some(JobSpec::Store { .. } | JobSpec::Putaway { .. }) | None => station_spot(plan.inbound),
         Some(JobSpec::Retrieve { from } | JobSpec::Move { from, .. }) => spot(from),
         Some(JobSpec::Travel { to } | JobSpec::Clear { location: to } | JobSpec::Light { location: to, .. }) => spot(to),
     }
@@ -202,6 +202,7 @@ fn end_spot(plan: &Plan, spec: &JobSpec) -> Spot {
         JobSpec::Retrieve { .. } => station_spot(plan.outbound),
         JobSpec::Store { to } | JobSpec::Move { to, .. } | JobSpec::Travel { to } => spot(to),
         JobSpec::Clear { location } | JobSpec::Light { location, .. } => spot(location),
+        JobSpec::Putaway { .. } => station_spot(plan.inbound),
     }
 }
 

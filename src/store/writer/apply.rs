@@ -401,6 +401,20 @@ impl Group {
                 self.audit(by, "retry", &format!("job:{id}"), None);
                 Ok(())
             }
+            Change::Place(to) => {
+                if job.state != JobState::Queued || job.to.is_some() || job.zones.is_none() {
+                    return Err(WriteError::Unexpected { id, state: job.state });
+                }
+                let free = self.locations.get(to).is_some_and(|r| {
+                    !r.occupied && r.reserved_by.is_none() && r.locked_at.is_none()
+                });
+                if !free {
+                    return Err(WriteError::Taken(*to));
+                }
+                job.to = Some(*to);
+                self.save(job, &format!("putaway: rackd chose {to}"));
+                Ok(())
+            }
             Change::Priority(p) => {
                 if job.state != JobState::Queued {
                     return Err(WriteError::Unexpected { id, state: job.state });
@@ -572,7 +586,7 @@ impl Group {
                 }
                 vec![location]
             }
-            JobSpec::Travel { .. } => Vec::new(),
+            JobSpec::Travel { .. } | JobSpec::Putaway { .. } => Vec::new(),
         }
     }
 

@@ -6,7 +6,7 @@ use std::collections::{BTreeSet, HashMap};
 use std::sync::LazyLock;
 
 use super::apply::{Loaded, Next};
-use super::{Command, Conn, Record};
+use super::{Change, Command, Conn, Record};
 use crate::domain::{Job, Location};
 use crate::store::engine::Engine;
 use crate::store::jobs::{COLUMNS, JobRow, decode};
@@ -93,7 +93,12 @@ pub(super) async fn load(
             Command::Submit { jobs, .. } => {
                 references.extend(jobs.iter().filter_map(|j| j.reference.as_deref()))
             }
-            Command::Change { id, .. } => drop(ids.insert(*id)),
+            Command::Change { id, change, .. } => {
+                ids.insert(*id);
+                if let Change::Place(to) = change {
+                    places.insert(*to);
+                }
+            }
             Command::Reports { reports, .. } => ids.extend(reports.iter().map(|r| r.job)),
             Command::Record { record, .. } => match record {
                 Record::Lock { location, .. } | Record::Unlock { location, .. } => {

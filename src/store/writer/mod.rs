@@ -64,6 +64,9 @@ pub enum Change {
         /// The API key's name.
         by: String,
     },
+    /// Give a queued store left to rackd (putaway) the location rackd chose; refused with
+    /// [`WriteError::Taken`] unless the location is free (no box, no lock, no job holding it).
+    Place(Location),
 }
 
 impl Change {
@@ -222,6 +225,9 @@ pub enum WriteError {
         /// The job.
         job: i64,
     },
+    /// A location chosen for a box is no longer free.
+    #[error("location {0} is not free: a box, a lock or a job holds it")]
+    Taken(Location),
     /// The database failed; nothing of the request was written.
     #[error("database error: {0}")]
     Database(Arc<sqlx::Error>),

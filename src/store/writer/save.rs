@@ -18,8 +18,8 @@ use crate::store::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOBS, LOCATIONS};
 use crate::store::engine::Engine;
 use crate::store::on;
 
-const JOB_UPDATE: [&str; 8] =
-    ["state", "priority", "forced", "failure_kind", "failure_code", "failure_text", "updated_at", "attempt"];
+const JOB_UPDATE: [&str; 9] =
+    ["state", "priority", "forced", "failure_kind", "failure_code", "failure_text", "updated_at", "attempt", "spec"];
 
 /// The statements, per engine, built once.
 struct Statements {
@@ -86,7 +86,6 @@ struct JobOut<'a> {
     created_at: i64,
     updated_at: i64,
     attempt: u32,
-    serves: Option<i64>,
 }
 
 impl<'a> JobOut<'a> {
@@ -99,7 +98,7 @@ impl<'a> JobOut<'a> {
             kind: job.kind.as_str(),
             priority: job.priority,
             barcode: job.barcode.as_deref(),
-            spec: serde_json::to_string(&job.spec()).unwrap_or_default(),
+            spec: crate::store::jobs::StoredSpec::json(job),
             request,
             device: job.device.as_deref(),
             state: job.state.as_str(),
@@ -110,7 +109,6 @@ impl<'a> JobOut<'a> {
             created_at: to_ms(job.created_at),
             updated_at: to_ms(job.updated_at),
             attempt: job.attempt,
-            serves: job.serves,
         }
     }
 }
@@ -201,7 +199,7 @@ pub(super) async fn save(db: &mut Conn, group: &Group, count: &mut usize) -> Res
     match db {
         Conn::Sqlite(c) => {
             let target = "jobs (id, reference, kind, priority, barcode, spec, request, device, state, forced, \
-                          failure_kind, failure_code, failure_text, created_at, updated_at, attempt, serves)";
+                          failure_kind, failure_code, failure_text, created_at, updated_at, attempt)";
             insert_values!(c, count, target, created, |r| [
                 r.id,
                 r.reference,
@@ -219,7 +217,6 @@ pub(super) async fn save(db: &mut Conn, group: &Group, count: &mut usize) -> Res
                 r.created_at,
                 r.updated_at,
                 r.attempt,
-                r.serves,
             ]);
             insert_values!(c, count, "job_history (job_id, state, cause, at)", group.history, |r| [
                 r.job_id,
