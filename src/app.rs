@@ -110,9 +110,16 @@ impl Application {
         device_tasks
             .push(tokio::spawn(crate::service::dispatch::waiting::watch(queues.clone(), writer.clone())));
         device_tasks.push(tokio::spawn(retention(writer.clone(), config.events.retention_hours)));
+        let crane_aisles = config
+            .devices
+            .iter()
+            .filter(|d| matches!(d, DeviceConfig::Crane(_)))
+            .flat_map(|d| d.aisles().iter().copied())
+            .collect();
         let rules = Rules {
             layout,
             deep,
+            crane_aisles,
             devices: config.devices.iter().map(|d| (d.id().to_owned(), d.kind().job_kinds())).collect(),
             routes: config
                 .devices

@@ -9,7 +9,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use crate::domain::{Barcode, Invalid, JobKind, JobSpec, Layout, LightColor, Location, Priority};
+use crate::domain::{Barcode, Class, Invalid, JobKind, JobSpec, Layout, LightColor, Location, Priority, Zone};
 use crate::store::jobs::NewJob;
 
 /// Longest accepted WMS reference.
@@ -25,8 +25,8 @@ pub const MAX_BATCH: usize = 1000;
     "to": {"aisle": 1, "row": 1, "bay": 2, "level": 3, "position": 1}}))]
 pub struct JobRequest {
     /// What the job does; decides which of `from`, `to`, `location`, `color`, `on` are required
-    /// (store: to; retrieve: from; move: from, to; clear: location; light: location, color, on;
-    /// travel: to) and that the others are absent.
+    /// (store: to, or `aisle` or `zones` to let rackd choose; retrieve: from; move: from, to;
+    /// clear: location; light: location, color, on; travel: to) and that the others are absent.
     pub kind: JobKind,
     /// The WMS's own id for the job (1..=100 printable characters), unique: a repeated POST
     /// with the same reference and body returns the existing job; a different body is a 409.
@@ -48,6 +48,15 @@ pub struct JobRequest {
     pub on: Option<bool>,
     /// Run on this device instead of the one that serves the locations.
     pub device: Option<String>,
+    /// A store without `to`: rackd chooses a location of this crane aisle as it dispatches
+    /// the job (putaway).
+    pub aisle: Option<u16>,
+    /// A store without `to`: rackd chooses a location in one of these parts of one crane
+    /// aisle (each the aisle and any of row, bay, level, position).
+    pub zones: Option<Vec<Zone>>,
+    /// A store left to rackd: the box's velocity class (A: the nearest third of the aisle by
+    /// the crane's travel time, B the middle, C the farthest).
+    pub class: Option<Class>,
 }
 
 /// What intake checks requests against.
@@ -61,6 +70,8 @@ pub struct Rules {
     pub routes: BTreeMap<u16, String>,
     /// The double-deep aisles (`depth = 2`).
     pub deep: BTreeSet<u16>,
+    /// The aisles a crane serves: where a store may leave its location to rackd.
+    pub crane_aisles: BTreeSet<u16>,
 }
 
 impl Rules {
@@ -74,7 +85,8 @@ impl Rules {
             ("color", req.color.is_some()),
             ("on", req.on.is_some()),
         ];
-        let wanted = |field: &str| kind.fields().contains(&field);
+        let putaway = self.putaway(&req)?;
+        let wanted = |field: &str| kind.fields().contains(&field) && (putaway.is_none() || field != "to");
         if let Some((field, _)) = present.iter().find(|(f, p)| *p && !wanted(f)) {
             return Err(Invalid(format!("a {} job takes no `{field}`", kind.as_str())));
         }
@@ -83,7 +95,10 @@ impl Rules {
         }
         let missing = || Invalid("internal: field checked above".into());
         let spec = match kind {
-            JobKind::Store => JobSpec::Store { to: req.to.ok_or_else(missing)? },
+            JobKind::Store => match putaway {
+                Some(spec) => spec,
+                None => JobSpec::Store { to: req.to.ok_or_else(missing)? },
+            },
             JobKind::Retrieve => JobSpec::Retrieve { from: req.from.ok_or_else(missing)? },
             JobKind::Move => {
                 JobSpec::Move { from: req.from.ok_or_else(missing)?, to: req.to.ok_or_else(missing)? }
@@ -113,6 +128,37 @@ impl Rules {
         Ok(NewJob { spec, reference: req.reference, priority, barcode, device, serves: None })
     }
 
+    /// A store left to rackd, from `aisle`, `zones` and `class` (none of which any other
+    /// request takes); None when the request names none of them.
+    fn putaway(&self, req: &JobRequest) -> Result<Option<JobSpec>, Invalid> {
+        let named = [("aisle", req.aisle.is_some()), ("zones", req.zones.is_some()), ("class", req.class.is_some())];
+        let Some((first, _)) = named.iter().find(|(_, p)| *p) else { return Ok(None) };
+        if req.kind != JobKind::Store {
+            return Err(Invalid(format!("a {} job takes no `{first}`", req.kind.as_str())));
+        }
+        if req.to.is_some() {
+            return Err(Invalid(format!("a store takes `to`, or `aisle`/`zones` for rackd to choose, not `to` and `{first}`")));
+        }
+        let mut zones = req.zones.clone().unwrap_or_default();
+        match (req.aisle, zones.is_empty()) {
+            (Some(aisle), true) => zones.push(Zone::aisle(aisle)),
+            (None, true) if req.zones.is_some() => return Err(Invalid("`zones` needs at least one zone".into())),
+            (None, true) => return Err(Invalid("`class` needs `aisle` or `zones`: where rackd may choose".into())),
+            _ => {}
+        }
+        let aisle = zones[0].aisle;
+        if zones.iter().any(|z| z.aisle != aisle) || req.aisle.is_some_and(|a| a != aisle) {
+            return Err(Invalid("every zone must be in the same aisle (one crane chooses)".into()));
+        }
+        if !self.crane_aisles.contains(&aisle) {
+            return Err(Invalid(format!("aisle {aisle} is served by no crane: name the store's location in `to`")));
+        }
+        for z in &zones {
+            self.layout.check_zone(z)?;
+        }
+        Ok(Some(JobSpec::Putaway { zones, class: req.class }))
+    }
+
     /// The device a job runs on: the one named, or the one serving its locations' aisle.
     /// With no device that runs jobs (none, or only tags devices) jobs have none and stay
     /// queued. A device that runs no jobs (tags) serves no aisle and refuses any job named
@@ -131,7 +177,10 @@ impl Rules {
                 )));
             }
             None => {
-                let mut aisles = spec.locations().into_iter().map(|l| l.aisle).collect::<Vec<_>>();
+                let mut aisles = match spec {
+                    JobSpec::Putaway { zones, .. } => zones.iter().map(|z| z.aisle).collect(),
+                    _ => spec.locations().into_iter().map(|l| l.aisle).collect::<Vec<_>>(),
+                };
                 aisles.dedup();
                 let routed: Vec<_> = aisles.iter().map(|a| self.routes.get(a)).collect();
                 match routed.as_slice() {

@@ -117,3 +117,54 @@ async fn a_put_into_a_box_fails_without_being_sent() {
     assert_eq!(sim.violations(), 0);
     app.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_store_left_to_rackd_goes_far_first_and_tells_where() {
+    let (app, sim) = deep_app(|_| {}).await;
+    let first = submit(&app, json!({"kind": "store", "aisle": 2}), "PUT-1").await;
+    let (_, queued) = app.get(&format!("/api/v1/jobs/{first}")).await;
+    assert_eq!(queued["zones"], json!([{"aisle": 2}]), "{queued}");
+    let done = wait_job(&app, first, &["completed", "failed"], 20).await;
+    assert_eq!(done["state"], "completed", "{done}");
+    // Nearest the inbound station (row 2, bay 0, level 1), far before near.
+    assert_eq!(done["to"], cloc(1, 1, 1, 2), "{done}");
+    assert!(occupied(&app, &cloc(1, 1, 1, 2)).await);
+    let told = super::history(&app, first).await;
+    assert!(told.iter().any(|(_, cause)| cause.contains("putaway: rackd chose 2-1-1-1-2")), "{told:?}");
+    // Zones and a class narrow the choice; the rest of the aisle is left alone.
+    let zoned = json!({"kind": "store", "zones": [{"aisle": 2, "row": 2, "level": 3}], "class": "C"});
+    let second = submit(&app, zoned, "PUT-2").await;
+    let done = wait_job(&app, second, &["completed", "failed"], 20).await;
+    assert_eq!(done["state"], "completed", "{done}");
+    let to = &done["to"];
+    assert_eq!((to["row"].as_u64(), to["level"].as_u64(), to["position"].as_u64()), (Some(2), Some(3), Some(2)), "{done}");
+    assert!(to["bay"].as_u64().unwrap() >= 13, "class C: the far third of the aisle: {done}");
+    assert_eq!(done["class"], "C");
+    assert_eq!(sim.received(task_id_for(first)), 1);
+    assert_eq!(sim.violations(), 0);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_store_left_to_rackd_is_checked_at_intake() {
+    let (app, _sim) = deep_app(|_| {}).await;
+    let cases = [
+        (json!({"kind": "store", "aisle": 1}), "served by no crane"),
+        (json!({"kind": "store", "aisle": 9}), "served by no crane"),
+        (json!({"kind": "store", "aisle": 2, "to": cloc(1, 1, 1, 1)}), "not `to` and `aisle`"),
+        (json!({"kind": "store", "class": "A"}), "`class` needs `aisle` or `zones`"),
+        (json!({"kind": "store", "zones": []}), "at least one zone"),
+        (json!({"kind": "store", "zones": [{"aisle": 2}, {"aisle": 1}]}), "same aisle"),
+        (json!({"kind": "store", "zones": [{"aisle": 2, "level": 9}]}), "level 9 is outside 1..=8"),
+        (json!({"kind": "retrieve", "from": cloc(1, 1, 1, 1), "aisle": 2}), "takes no `aisle`"),
+        (json!({"kind": "store", "aisle": 2, "class": "D"}), ""),
+        (json!({"kind": "store"}), "needs `to`"),
+    ];
+    for (body, says) in cases {
+        let (status, err) = app.post("/api/v1/jobs", &body).await;
+        assert_eq!(status, 422, "{body}: {err}");
+        assert_eq!(err["error"]["code"], if says.is_empty() { "invalid_body" } else { "invalid_job" }, "{err}");
+        assert!(err["error"]["message"].as_str().unwrap().contains(says), "{body}: {err}");
+    }
+    app.stop().await;
+}

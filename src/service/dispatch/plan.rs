@@ -10,12 +10,13 @@ use crate::devices::port::{Port, ReportError};
 use crate::domain::{Failure, FailureKind, Job, JobSpec, Priority, Report, Reported};
 use crate::service::planner::{CranePlanner, Decision};
 use crate::store::jobs::NewJob;
-use crate::store::writer::Outcome;
+use crate::store::writer::{Change, Outcome, WriteError};
 
 /// The crane's next task as its planner decides, after what must come first.
 pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Result<Option<Job>, ReportError> {
-    // A refusal ends a job and the choice is made again among the others.
-    loop {
+    // A refusal ends a job and the choice is made again among the others; a place taken
+    // meanwhile is chosen again. Bounded: a crane polls again soon anyway.
+    for _ in 0..ROUNDS {
         let candidates = port.eligible(usize::MAX, &HashSet::new());
         if candidates.is_empty() {
             return Ok(None);
@@ -26,6 +27,12 @@ pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Resu
         match planner.decide(&c, &u, &rack) {
             Decision::Run(id) => return Ok(candidates.into_iter().find(|j| j.id == id)),
             Decision::Wait => return Ok(None),
+            Decision::Place { job, to } => match port.writer.change(job, Change::Place(to)).await {
+                Ok(placed) => return Ok(Some(placed)),
+                // Taken since the rack was read (an inventory load): choose again.
+                Err(WriteError::Taken(_)) => continue,
+                Err(e) => return Err(report_error(e)),
+            },
             Decision::Refuse { job, text } => {
                 let failure = Failure { kind: FailureKind::Unsupported, code: None, text };
                 let cause = "the rack makes the task impossible: nothing sent to the crane";
@@ -52,7 +59,11 @@ pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Resu
             }
         }
     }
+    Ok(None)
 }
+
+/// Decisions made in one call at most.
+const ROUNDS: usize = 16;
 
 impl super::Queues {
     /// The unfinished job that takes the box at `l` away (a retrieve or move from it), if

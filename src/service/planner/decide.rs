@@ -23,7 +23,7 @@ use super::putaway::{self, Want, spot};
 use super::rack::Rack;
 use super::refusal::picks_from;
 use crate::devices::config::{Planner, Station};
-use crate::domain::{Job, JobSpec, Location};
+use crate::domain::{Class, Job, JobSpec, Location, Zone};
 use crate::wire::motion::{Motion, Spot};
 
 /// A crane's planning settings.
@@ -61,6 +61,13 @@ pub enum Decision {
         serves: i64,
         /// The blocking near location.
         from: Location,
+        /// Where its box goes.
+        to: Location,
+    },
+    /// Give this store left to rackd the location chosen for it, then hand it over.
+    Place {
+        /// The job.
+        job: i64,
         /// Where its box goes.
         to: Location,
     },
@@ -142,8 +149,19 @@ pub fn decide(plan: &Plan, memory: &mut Memory, candidates: &[&Job], unfinished:
         }
     }
     let busy: HashSet<Location> = unfinished.iter().filter_map(|j| j.spec()).flat_map(|s| s.locations()).collect();
-    // A job whose relocation has nowhere to go waits.
-    open.retain(|(job, near)| near.is_none() || target(plan, rack, &busy, job, near.unwrap()).is_some());
+    // A job whose relocation has nowhere to go waits; so does a store left to rackd while
+    // its zones have no place.
+    let places: HashMap<i64, Location> = open
+        .iter()
+        .filter_map(|(job, _)| match job.spec() {
+            Some(JobSpec::Putaway { zones, class }) => Some((job.id, place(plan, rack, &busy, &zones, class)?)),
+            _ => None,
+        })
+        .collect();
+    open.retain(|(job, near)| match near {
+        Some(near) => target(plan, rack, &busy, job, *near).is_some(),
+        None => !matches!(job.spec(), Some(JobSpec::Putaway { .. })) || places.contains_key(&job.id),
+    });
     let Some(&(job, near)) = pick(plan, memory, &open) else { return Decision::Wait };
     let live: HashSet<i64> = unfinished.iter().map(|j| j.id).collect();
     memory.overtaken.retain(|id, _| live.contains(id));
@@ -154,6 +172,11 @@ pub fn decide(plan: &Plan, memory: &mut Memory, candidates: &[&Job], unfinished:
     }
     memory.overtaken.remove(&job.id);
     match near {
+        None if places.contains_key(&job.id) => {
+            let to = places[&job.id];
+            memory.at = Some(spot(to));
+            Decision::Place { job: job.id, to }
+        }
         None => {
             memory.at = job.spec().map(|s| end_spot(plan, &s));
             Decision::Run(job.id)
@@ -210,11 +233,21 @@ fn station_spot(s: Station) -> Spot {
     Spot { bay: s.bay, level: s.level }
 }
 
+/// Where the box of a store left to rackd goes: from the inbound station, in its zones.
+fn place(plan: &Plan, rack: &Rack, busy: &HashSet<Location>, zones: &[Zone], class: Option<Class>) -> Option<Location> {
+    let station = station_spot(plan.inbound);
+    let aisle = zones.first()?.aisle;
+    let want = Want { aisle, from: station, station, class, zones, busy };
+    putaway::choose(rack, &plan.motion, &want)
+}
+
 /// Where the box at `near` goes so that `job` can run.
 fn target(plan: &Plan, rack: &Rack, busy: &HashSet<Location>, job: &Job, near: Location) -> Option<Location> {
     let mut busy = busy.clone();
     busy.extend(job.spec().map(|s| s.locations()).unwrap_or_default());
     busy.insert(Rack::far_of(near));
-    let want = Want { aisle: near.aisle, from: spot(near), station: station_spot(plan.inbound), class: None, busy: &busy };
+    let zones = [Zone::aisle(near.aisle)];
+    let station = station_spot(plan.inbound);
+    let want = Want { aisle: near.aisle, from: spot(near), station, class: None, zones: &zones, busy: &busy };
     putaway::choose(rack, &plan.motion, &want)
 }

@@ -147,3 +147,28 @@ fn nothing_starves_under_the_travel_planner() {
     let turn = ran.iter().position(|&id| id == 1).expect("the far job ran");
     assert!(turn <= 3, "it ran as decision {turn}: {ran:?}");
 }
+
+#[test]
+fn a_store_left_to_rackd_gets_the_nearest_far_place_in_its_zones() {
+    use crate::domain::{Class, Zone};
+    let r = rack(&[at(1, 1, 2)]);
+    let p = plan(Planner::Travel);
+    let anywhere = job(1, 10, JobSpec::Putaway { zones: vec![Zone::aisle(2)], class: None });
+    let mut memory = Memory::default();
+    let decision = run(&p, &mut memory, std::slice::from_ref(&anywhere), &r);
+    // Bay 1 level 1 far holds a box: its near is the nearest place (far ones go first only
+    // within one bay and level).
+    assert_eq!(decision, Decision::Place { job: 1, to: at(1, 1, 1) });
+    assert_eq!(memory.at, Some(Spot { bay: 1, level: 1 }));
+    let empty = rack(&[]);
+    let decision = run(&p, &mut Memory::default(), std::slice::from_ref(&anywhere), &empty);
+    assert_eq!(decision, Decision::Place { job: 1, to: at(1, 1, 2) }, "far before near");
+    let high = job(2, 10, JobSpec::Putaway { zones: vec![Zone { level: Some(4), ..Zone::aisle(2) }], class: None });
+    assert_eq!(run(&p, &mut Memory::default(), &[high], &r), Decision::Place { job: 2, to: at(1, 4, 2) });
+    let slow = job(3, 10, JobSpec::Putaway { zones: vec![Zone::aisle(2)], class: Some(Class::C) });
+    let Decision::Place { to, .. } = run(&p, &mut Memory::default(), &[slow], &r) else { panic!() };
+    assert!(to.bay >= 10, "class C goes to the far third: {to:?}");
+    let full: Vec<Location> = (1..=4).flat_map(|level| [at(3, level, 1), at(3, level, 2)]).collect();
+    let nowhere = job(4, 10, JobSpec::Putaway { zones: vec![Zone { bay: Some(3), ..Zone::aisle(2) }], class: None });
+    assert_eq!(run(&p, &mut Memory::default(), &[nowhere], &rack(&full)), Decision::Wait, "a full zone waits");
+}

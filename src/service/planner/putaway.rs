@@ -15,19 +15,8 @@
 use std::collections::HashSet;
 
 use super::rack::Rack;
-use crate::domain::Location;
+use crate::domain::{Class, Location, Zone};
 use crate::wire::motion::{Motion, Spot};
-
-/// A velocity class: how often a box is expected to move (A most often).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Class {
-    /// Fast movers: nearest the station.
-    A,
-    /// Middle band.
-    B,
-    /// Slow movers: farthest.
-    C,
-}
 
 /// What a choice must respect.
 #[derive(Clone, Debug)]
@@ -40,6 +29,8 @@ pub struct Want<'a> {
     pub station: Spot,
     /// The job's velocity class, if any.
     pub class: Option<Class>,
+    /// Where the box may go: a location in one of these (one aisle).
+    pub zones: &'a [Zone],
     /// Locations unfinished jobs touch: never chosen.
     pub busy: &'a HashSet<Location>,
 }
@@ -59,6 +50,7 @@ pub fn choose(rack: &Rack, motion: &Motion, want: &Want) -> Option<Location> {
         .locations()
         .map(|(l, _)| l)
         .filter(|l| l.aisle == want.aisle && l.bay != 0 && free(*l))
+        .filter(|l| want.zones.iter().any(|z| z.contains(*l)))
         .filter(|l| !rack.is_far(*l) || !rack.occupied(Rack::near_of(*l)))
         .collect();
     let band = want.class.map(|class| (class, bands(rack, motion, want)));
@@ -120,9 +112,11 @@ mod tests {
         Rack::from_cells(cells, &BTreeSet::from([2]))
     }
 
+    const AISLE: [Zone; 1] = [Zone { aisle: 2, row: None, bay: None, level: None, position: None }];
+
     fn want(busy: &HashSet<Location>, class: Option<Class>) -> Want<'_> {
         let station = Spot { bay: 0, level: 1 };
-        Want { aisle: 2, from: station, station, class, busy }
+        Want { aisle: 2, from: station, station, class, zones: &AISLE, busy }
     }
 
     #[test]
@@ -160,5 +154,8 @@ mod tests {
         let c = choose(&r, &m, &want(&none, Some(Class::C))).unwrap();
         assert!(a.bay < 5, "A is nearest: {a:?}");
         assert!(c.bay >= 20, "C is in the far third: {c:?}");
+        let upper = [Zone { level: Some(2), ..AISLE[0] }];
+        let chosen = choose(&r, &m, &Want { zones: &upper, ..want(&none, None) }).unwrap();
+        assert_eq!((chosen.level, chosen.bay, chosen.position), (2, 1, 2), "{chosen:?}");
     }
 }
