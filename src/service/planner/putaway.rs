@@ -3,7 +3,9 @@
 //!
 //! A candidate is a location of the aisle, not a station, with no box, not reserved by a
 //! job on the crane, not locked, not touched by any unfinished job (so no later job finds
-//! its place taken), and reachable: a far location only behind an empty near one.
+//! its place taken), and reachable: a far location only behind an empty near one. A near
+//! location in front of a far one that an unfinished job will pick or fill is no
+//! candidate either: a box there would only have to be relocated for that job.
 //!
 //! Candidates rank by the crane's travel time from where the box starts (the station for a
 //! store, the blocking near location for a relocation), and within one bay and level far
@@ -52,6 +54,7 @@ pub fn choose(rack: &Rack, motion: &Motion, want: &Want) -> Option<Location> {
         .filter(|l| l.aisle == want.aisle && l.bay != 0 && free(*l))
         .filter(|l| want.zones.iter().any(|z| z.contains(*l)))
         .filter(|l| !rack.is_far(*l) || !rack.occupied(Rack::near_of(*l)))
+        .filter(|l| !rack.is_deep(l.aisle) || rack.is_far(*l) || !want.busy.contains(&Rack::far_of(*l)))
         .collect();
     let band = want.class.map(|class| (class, bands(rack, motion, want)));
     let key = |l: Location| {
@@ -136,7 +139,8 @@ mod tests {
     fn busy_reserved_and_locked_places_are_skipped() {
         let m = Motion::default();
         let busy = HashSet::from([at(1, 1, 2)]);
-        assert_eq!(choose(&rack(5, &[]), &m, &want(&busy, None)), Some(at(1, 1, 1)));
+        let chosen = choose(&rack(5, &[]), &m, &want(&busy, None)).unwrap();
+        assert_eq!(chosen, at(1, 2, 2), "neither the busy far place nor the near one in front of it");
         let mut cells: Vec<_> = rack(1, &[]).locations().collect();
         for (_, c) in &mut cells {
             c.locked = true;
