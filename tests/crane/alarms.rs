@@ -141,7 +141,11 @@ async fn the_crane_refuses_a_store_behind_a_load_with_7092_and_rackd_fails_the_j
     let app = helpers::spawn_with(|c| with_crane(c, device)).await;
     let id = submit(&app, json!({"kind": "store", "barcode": "FAR", "to": cloc(1, 4, 2, 2)}), "far").await;
     let job = wait_job(&app, id, &["failed", "completed", "cancelled"], 5).await;
-    assert_eq!((job["state"].clone(), job["failure"]["code"].clone()), (json!("failed"), json!(7092)), "{job}");
+    assert_eq!(
+        (job["state"].clone(), job["failure"]["code"].clone()),
+        (json!("failed"), json!(7092)),
+        "{job}"
+    );
     assert_eq!(sim.inventory(), Some(vec![[1, 4, 2, 1]]), "nothing stored; the station's load went back");
     // A possible store completes, ends in the crane's inventory, and the crane stands there.
     let id = submit(&app, json!({"kind": "store", "barcode": "OK", "to": cloc(1, 6, 3, 2)}), "ok").await;

@@ -86,7 +86,11 @@ impl CraneSim {
             )),
             ["put", rest @ ..] => {
                 let c = cell(rest)?;
-                Ok(if self.put_load(c) { format!("load put into {}", show(c)) } else { format!("{} not free", show(c)) })
+                Ok(if self.put_load(c) {
+                    format!("load put into {}", show(c))
+                } else {
+                    format!("{} not free", show(c))
+                })
             }
             ["take", rest @ ..] => {
                 let c = cell(rest)?;

@@ -34,9 +34,9 @@
 //! distances and business alarms ([`stats`]).
 
 mod commands;
-mod link;
 pub mod engine;
 pub mod inventory;
+mod link;
 pub mod stats;
 
 use std::net::SocketAddr;
@@ -122,6 +122,10 @@ impl CraneSim {
         engine.set_motion(options.motion);
         engine.time_scale = options.time_scale;
         engine.inventory = options.inventory.map(Inventory::new);
+        if options.motion.is_some() {
+            // Shows where it stands (D220/D221) before anyone reads it.
+            engine.tick(&mut bank.lock().unwrap_or_else(|p| p.into_inner()), tokio::time::Instant::now());
+        }
         let engine = Arc::new(Mutex::new(engine));
         let kick = Arc::new(Notify::new());
         let faults = SharedFaults::default();

@@ -23,9 +23,9 @@
 
 mod ending;
 mod handover;
-mod run;
 #[cfg(test)]
 mod model_tests;
+mod run;
 #[cfg(test)]
 mod tests;
 

@@ -71,8 +71,17 @@ impl Engine {
         let to = [word(214), word(215), word(216), word(217)];
         let states: &'static [u16] = if word(209) == 1 { &TRAVEL } else { &TRANSFER };
         set(bank, 203, states[0]);
-        let mut run =
-            Run { states, index: 0, from, to, elapsed: Duration::ZERO, clock: now, leg: None, picked: false, put: false };
+        let mut run = Run {
+            states,
+            index: 0,
+            from,
+            to,
+            elapsed: Duration::ZERO,
+            clock: now,
+            leg: None,
+            picked: false,
+            put: false,
+        };
         self.begin_leg(&mut run);
         self.run = Some(run);
     }
