@@ -72,8 +72,9 @@ pub struct CraneSimOptions {
     pub wcs_timeout: Option<Duration>,
     /// The motion model the action states take their times from. None: `step` each.
     pub motion: Option<Motion>,
-    /// Simulated seconds per real second (1: real time; 100: a 60 s cycle in 0.6 s). The
-    /// watchdog and the hand-over stay in real time: rackd runs in real time.
+    /// Simulated seconds per real second (1: real time; 100: a 60 s cycle in 0.6 s). It
+    /// scales the action states and homing, `step` as well as the model's times; the
+    /// watchdog, the hand-over and `late_start` stay in real time: rackd runs in real time.
     pub time_scale: f64,
     /// The occupied cells `[row, bay, level, side]` at start. None: not tracked (every pick
     /// finds a load, every put fits, no double-deep alarm).

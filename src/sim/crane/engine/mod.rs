@@ -1,7 +1,7 @@
 //! The simulated crane's behaviour over its D registers: heartbeat answer, STB/ACK
-//! hand-over ([`handover`]), motion through the action states ([`run`]), completion and its
-//! acknowledgement, cancel, homing, alarms and forced completion. Pure: it works on a
-//! [`Bank`] and an instant, so every step is deterministic.
+//! hand-over (`handover.rs`), motion through the action states (`run.rs`), completion and
+//! its acknowledgement, cancel, homing (`ending.rs`), alarms and forced completion. Pure:
+//! it works on a [`Bank`] and an instant, so every step is deterministic.
 //!
 //! It also watches the WCS keep the interface's rules and counts each breach in
 //! [`Engine::violations`] (tests assert none): a strobe raised while ACK is still 1, a
@@ -12,7 +12,8 @@
 //!
 //! Time: without a motion model every action state (and homing) takes `step`; with one
 //! ([`Engine::set_motion`]) the states take the model's times, divided by the time scale
-//! (simulated seconds per real second). Time halted under an alarm does not count.
+//! (simulated seconds per real second; `step` is divided by it too). Time halted under an
+//! alarm does not count: the state resumes where it stopped once the alarm clears.
 //!
 //! Where the crane stands, with a motion model: it starts at the stations (bay 0, level 1),
 //! stands where its last task ended, stops where a cancel catches it, and homes to bay 0,
