@@ -77,7 +77,7 @@ pub async fn start_with(config: &mut Config, pace: Pace) -> anyhow::Result<(Shel
     let mut device = shelf_device(&sim, "shelf1", &plc.to_string(), vec![1]);
     device.poll_ms = 100;
     let crane_options =
-        CraneSimOptions { transport: TransportKind::Tcp, step: pace.crane_step, wcs_timeout: None };
+        CraneSimOptions { transport: TransportKind::Tcp, step: pace.crane_step, ..Default::default() };
     let crane = CraneSim::start("127.0.0.1:0", crane_options).await?;
     let mut crane_device = CraneConfig::new("crane1", &crane.local_addr().to_string(), vec![2]);
     crane_device.poll_ms = 100;

@@ -10,7 +10,16 @@
 //! > drop              close the connection once (UDP: lose one request)
 //! > link off          ignore every request (on: answer again)
 //! > status            action state, task, alarm, load, positions
+//! > put 1 4 2 1       a load into row 1, bay 4, level 2, near (starts tracking the inventory)
+//! > take 1 4 2 1      the load out of that cell
+//! > inventory         the occupied cells
+//! > stats             cycles, busy time, distances, business alarms
 //! ```
+//!
+//! `--motion` (or any of its figures, e.g. `--travel-speed 4`) times the action states by
+//! the motion model instead of `--step-ms`; `--time-scale 100` runs it 100 times faster
+//! than real time; `--inventory FILE` (a JSON array of `[row, bay, level, side]`) gives the
+//! crane an inventory, so it raises 7069/7070 and 7091..7098 when asked the impossible.
 
 use std::time::Duration;
 
@@ -19,7 +28,9 @@ use tokio::io::{AsyncBufReadExt, BufReader};
 use super::sim_faults::FaultArgs;
 use super::sim_mc3e::SimTransport;
 use crate::protocols::mc3e::{EndCode, TransportKind};
+use crate::sim::crane::inventory::Cell;
 use crate::sim::crane::{CraneSim, CraneSimOptions};
+use crate::wire::motion::Motion;
 
 /// `rackd sim crane` options.
 #[derive(clap::Args, Clone, Debug)]
@@ -39,9 +50,84 @@ pub struct SimCraneArgs {
     /// Raise alarm CODE SECONDS after start (repeatable), e.g. `7069@10`.
     #[arg(long, value_parser = scheduled_alarm)]
     pub alarm: Vec<(u16, u64)>,
+    /// Simulated seconds per real second (100: a 60 s cycle in 0.6 s).
+    #[arg(long, default_value_t = 1.0)]
+    pub time_scale: f64,
+    /// The crane's inventory at start: a JSON array of [row, bay, level, side].
+    #[arg(long, value_name = "FILE")]
+    pub inventory: Option<std::path::PathBuf>,
+    /// The motion model.
+    #[command(flatten)]
+    pub motion: MotionArgs,
     /// Link faults.
     #[command(flatten)]
     pub faults: FaultArgs,
+}
+
+/// The motion model's options: `--motion` takes the defaults, each figure overrides one
+/// (and implies `--motion`).
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct MotionArgs {
+    /// Time the action states by the motion model (travel, lift, forks) instead of --step-ms.
+    #[arg(long)]
+    pub motion: bool,
+    /// Travel top speed, m/s (default 3).
+    #[arg(long)]
+    pub travel_speed: Option<f64>,
+    /// Travel acceleration, m/s² (default 0.5).
+    #[arg(long)]
+    pub travel_accel: Option<f64>,
+    /// Lift top speed, m/s (default 1).
+    #[arg(long)]
+    pub lift_speed: Option<f64>,
+    /// Lift acceleration, m/s² (default 0.5).
+    #[arg(long)]
+    pub lift_accel: Option<f64>,
+    /// Bay width, m (default 1.4).
+    #[arg(long)]
+    pub bay_width: Option<f64>,
+    /// Level height, m (default 1.5).
+    #[arg(long)]
+    pub level_height: Option<f64>,
+    /// Seconds of a fork cycle at a near position or a station (default 6).
+    #[arg(long)]
+    pub fork_near: Option<f64>,
+    /// Seconds of a fork cycle at a far position (default 9).
+    #[arg(long)]
+    pub fork_far: Option<f64>,
+}
+
+impl MotionArgs {
+    /// The model asked for, if any.
+    pub fn model(&self) -> Option<Motion> {
+        let mut m = Motion::default();
+        let figures = [
+            (self.travel_speed, &mut m.travel.speed),
+            (self.travel_accel, &mut m.travel.accel),
+            (self.lift_speed, &mut m.lift.speed),
+            (self.lift_accel, &mut m.lift.accel),
+            (self.bay_width, &mut m.bay_width),
+            (self.level_height, &mut m.level_height),
+            (self.fork_near, &mut m.fork_near),
+            (self.fork_far, &mut m.fork_far),
+        ];
+        let mut any = self.motion;
+        for (given, figure) in figures {
+            if let Some(v) = given {
+                *figure = v;
+                any = true;
+            }
+        }
+        any.then_some(m)
+    }
+}
+
+/// Reads an inventory file: a JSON array of [row, bay, level, side].
+fn read_inventory(path: &std::path::Path) -> anyhow::Result<Vec<Cell>> {
+    use anyhow::Context;
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text)
+        .with_context(|| format!("{}: expected a JSON array of [row, bay, level, side]", path.display()))
 }
 
 /// Why a `--alarm` value was refused.
@@ -64,10 +150,21 @@ pub async fn run(args: SimCraneArgs) -> anyhow::Result<()> {
     };
     let faults = args.faults.faults::<EndCode>()?;
     let wcs_timeout = (args.watchdog_secs > 0).then(|| Duration::from_secs(args.watchdog_secs));
-    let options = CraneSimOptions { transport, step: Duration::from_millis(args.step_ms), wcs_timeout };
+    let inventory = args.inventory.as_deref().map(read_inventory).transpose()?;
+    let options = CraneSimOptions {
+        transport,
+        step: Duration::from_millis(args.step_ms),
+        wcs_timeout,
+        motion: args.motion.model(),
+        time_scale: args.time_scale,
+        inventory,
+    };
     let sim = std::sync::Arc::new(CraneSim::start(&args.listen, options).await?);
     sim.set_faults(faults);
     println!("crane simulator on {:?} {} (commands on stdin)", args.transport, sim.local_addr());
+    if let Some(m) = args.motion.model() {
+        println!("motion model {m:?}, time scale {}", args.time_scale);
+    }
     for (code, secs) in args.alarm.clone() {
         let sim = sim.clone();
         tokio::spawn(async move {

@@ -111,9 +111,20 @@ impl Motion {
 
     /// Seconds to move from one spot to another, both axes at once.
     pub fn move_time(&self, from: Spot, to: Spot) -> f64 {
-        let (x0, y0) = self.metres(from);
-        let (x1, y1) = self.metres(to);
-        self.travel.time(x1 - x0).max(self.lift.time(y1 - y0))
+        self.between(self.metres(from), self.metres(to))
+    }
+
+    /// Seconds to move between two points given in metres (travel, lift), both axes at
+    /// once: a crane halted or cancelled between two spots moves on from where it stands.
+    pub fn between(&self, from: (f64, f64), to: (f64, f64)) -> f64 {
+        self.travel.time(to.0 - from.0).max(self.lift.time(to.1 - from.1))
+    }
+
+    /// Where a move between two points in metres stands `t` seconds after it started; each
+    /// axis on its own profile, so the shorter one arrives first and waits.
+    pub fn along(&self, from: (f64, f64), to: (f64, f64), t: f64) -> (f64, f64) {
+        let step = |axis: &Axis, a: f64, b: f64| a + (b - a).signum() * axis.covered(b - a, t);
+        (step(&self.travel, from.0, to.0), step(&self.lift, from.1, to.1))
     }
 
     /// Seconds of one fork cycle at `position` (1 near; 2 and beyond far; 0 a station).
@@ -181,5 +192,18 @@ mod tests {
         assert!(m.fork_time(2) > m.fork_time(1));
         assert!(m.is_valid());
         assert!(!Motion { bay_width: 0.0, ..m }.is_valid());
+    }
+
+    #[test]
+    fn along_goes_both_ways_and_ends_at_the_target() {
+        let m = Motion::default();
+        let (a, b) = ((14.0, 1.5), (2.8, 6.0));
+        let total = m.between(a, b);
+        assert_eq!(m.along(a, b, 0.0), a);
+        let end = m.along(a, b, total);
+        assert!((end.0 - b.0).abs() < 1e-9 && (end.1 - b.1).abs() < 1e-9, "{end:?}");
+        let mid = m.along(a, b, total / 2.0);
+        assert!(mid.0 < a.0 && mid.0 > b.0 && mid.1 > a.1, "{mid:?}");
+        assert_eq!(m.along(a, a, 3.0), a);
     }
 }

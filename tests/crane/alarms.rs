@@ -124,3 +124,38 @@ async fn without_auto_cancel_a_business_alarm_waits_for_an_operator() {
     assert_eq!(sim.word(205), 0);
     app.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_crane_refuses_a_store_behind_a_load_with_7092_and_rackd_fails_the_job() {
+    // The motion model at 1000 simulated seconds per second, the crane's own inventory
+    // holding a load near in row 1, bay 4, level 2, which rackd does not know about.
+    let options = CraneSimOptions {
+        transport: TransportKind::Tcp,
+        motion: Some(rackd::wire::motion::Motion::default()),
+        time_scale: 1000.0,
+        inventory: Some(vec![[1, 4, 2, 1]]),
+        ..Default::default()
+    };
+    let sim = CraneSim::start("127.0.0.1:0", options).await.unwrap();
+    let device = device_for(&sim, TransportKind::Tcp, |_| {});
+    let app = helpers::spawn_with(|c| with_crane(c, device)).await;
+    let id = submit(&app, json!({"kind": "store", "barcode": "FAR", "to": cloc(1, 4, 2, 2)}), "far").await;
+    let job = wait_job(&app, id, &["failed", "completed", "cancelled"], 5).await;
+    assert_eq!(
+        (job["state"].clone(), job["failure"]["code"].clone()),
+        (json!("failed"), json!(7092)),
+        "{job}"
+    );
+    assert_eq!(sim.inventory(), Some(vec![[1, 4, 2, 1]]), "nothing stored; the station's load went back");
+    // A possible store completes, ends in the crane's inventory, and the crane stands there.
+    let id = submit(&app, json!({"kind": "store", "barcode": "OK", "to": cloc(1, 6, 3, 2)}), "ok").await;
+    let job = wait_job(&app, id, &["failed", "completed", "cancelled"], 5).await;
+    assert_eq!(job["state"], "completed", "{job}");
+    assert_eq!(sim.inventory(), Some(vec![[1, 4, 2, 1], [1, 6, 3, 2]]));
+    assert_eq!((sim.word(220), sim.word(221)), (840, 450), "6 x 1.4 m, 3 x 1.5 m in cm");
+    let stats = sim.stats();
+    assert_eq!((stats.cycles, stats.cancelled, stats.alarms.clone()), (1, 1, [(7092, 1)].into()), "{stats}");
+    assert_eq!(sim.violations(), 0, "{:?}", sim.violation_log());
+    assert_eq!(sim.refused(), 0);
+    app.stop().await;
+}

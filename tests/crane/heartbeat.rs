@@ -91,6 +91,7 @@ async fn the_crane_sees_rackds_heartbeat_and_raises_7020_only_while_rackd_is_awa
         transport: TransportKind::Tcp,
         step: Duration::from_millis(10),
         wcs_timeout: Some(Duration::from_millis(400)),
+        ..Default::default()
     };
     let sim = CraneSim::start("127.0.0.1:0", options).await.unwrap();
     let device = device_for(&sim, TransportKind::Tcp, |_| {});

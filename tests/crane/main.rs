@@ -36,7 +36,7 @@ pub const POLLS: u64 = 10;
 
 /// A simulated crane with `step_ms` per action state.
 pub async fn crane(transport: TransportKind, step_ms: u64) -> CraneSim {
-    let options = CraneSimOptions { transport, step: Duration::from_millis(step_ms), wcs_timeout: None };
+    let options = CraneSimOptions { transport, step: Duration::from_millis(step_ms), ..Default::default() };
     CraneSim::start("127.0.0.1:0", options).await.unwrap()
 }
 

@@ -23,8 +23,21 @@
 //! With `wcs_timeout` set the crane watches rackd's heartbeat too and raises 7020 when D0
 //! stalls; it clears 7020 itself once D0 moves again (a simplification: a real crane may
 //! want a reset).
+//!
+//! With a motion model ([`CraneSimOptions::motion`]) the action states take the model's
+//! times, D220/D221 move with the axes (centimetres; see [`engine`]) and `time_scale` runs
+//! simulated time faster than real time (100: a 60 s cycle in 0.6 s), so a benchmark of
+//! hundreds of cycles fits in a minute. With an inventory ([`CraneSimOptions::inventory`],
+//! [`CraneSim::set_inventory`], the commands `put`/`take`/`inventory`) the crane refuses the
+//! impossible with the business alarms 7069/7070 and 7091..7098 ([`inventory`]); without one
+//! it tracks nothing and never raises them. [`CraneSim::stats`] counts cycles, busy time,
+//! distances and business alarms ([`stats`]).
 
+mod commands;
 pub mod engine;
+pub mod inventory;
+mod link;
+pub mod stats;
 
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
@@ -33,10 +46,14 @@ use std::time::Duration;
 use tokio::sync::Notify;
 use tokio::task::JoinHandle;
 
-use crate::protocols::faults::{Fault, Faults, SharedFaults};
+use crate::protocols::faults::SharedFaults;
 use crate::protocols::mc3e::{Bank, Device, Mc3eServer, ServerState, SharedBank, TransportKind, WriteEvent};
+use crate::wire::motion::Motion;
+pub use commands::CommandError;
 use engine::Engine;
 pub use engine::Hold;
+use inventory::{Cell, Inventory};
+pub use stats::CraneStats;
 
 /// Whether a code is a business alarm of the catalogue.
 pub fn is_business(code: u16) -> bool {
@@ -48,30 +65,33 @@ pub fn is_business(code: u16) -> bool {
 pub struct CraneSimOptions {
     /// TCP or UDP.
     pub transport: TransportKind,
-    /// Time of each action state.
+    /// Time of each action state without a motion model.
     pub step: Duration,
     /// The crane's watchdog on rackd's heartbeat: alarm 7020 when D0 stalls this long
     /// (cleared when it moves again). None: no watchdog.
     pub wcs_timeout: Option<Duration>,
+    /// The motion model the action states take their times from. None: `step` each.
+    pub motion: Option<Motion>,
+    /// Simulated seconds per real second (1: real time; 100: a 60 s cycle in 0.6 s). It
+    /// scales the action states and homing, `step` as well as the model's times; the
+    /// watchdog, the hand-over and `late_start` stay in real time: rackd runs in real time.
+    pub time_scale: f64,
+    /// The occupied cells `[row, bay, level, side]` at start. None: not tracked (every pick
+    /// finds a load, every put fits, no double-deep alarm).
+    pub inventory: Option<Vec<Cell>>,
 }
 
 impl Default for CraneSimOptions {
     fn default() -> Self {
-        CraneSimOptions { transport: TransportKind::Tcp, step: Duration::from_millis(500), wcs_timeout: None }
+        CraneSimOptions {
+            transport: TransportKind::Tcp,
+            step: Duration::from_millis(500),
+            wcs_timeout: None,
+            motion: None,
+            time_scale: 1.0,
+            inventory: None,
+        }
     }
-}
-
-/// Why a text command was refused.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-pub enum CommandError {
-    /// `alarm` with something other than a number.
-    #[error("not an alarm code: {0}")]
-    AlarmCode(String),
-    /// Not one of the commands.
-    #[error(
-        "unknown command {0:?} (alarm CODE, clear, heartbeat on|off, handshake on|off, hold ack|start|off, force, drop, link on|off, status)"
-    )]
-    Unknown(String),
 }
 
 /// A running simulated crane.
@@ -89,11 +109,24 @@ pub struct CraneSim {
 impl CraneSim {
     /// Starts a crane listening on `addr` (port 0 picks a free port).
     pub async fn start(addr: &str, options: CraneSimOptions) -> std::io::Result<CraneSim> {
-        let addr: SocketAddr =
-            addr.parse().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
+        let invalid = |e: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, e);
+        let addr: SocketAddr = addr.parse().map_err(|e| invalid(format!("{e}")))?;
+        if !(options.time_scale.is_finite() && options.time_scale > 0.0) {
+            return Err(invalid(format!("time scale {} is not a positive number", options.time_scale)));
+        }
+        if options.motion.is_some_and(|m| !m.is_valid()) {
+            return Err(invalid("every figure of the motion model must be positive".into()));
+        }
         let bank = Bank::default().shared();
         let mut engine = Engine::new(options.step);
         engine.wcs_timeout = options.wcs_timeout;
+        engine.set_motion(options.motion);
+        engine.time_scale = options.time_scale;
+        engine.inventory = options.inventory.map(Inventory::new);
+        if options.motion.is_some() {
+            // Shows where it stands (D220/D221) before anyone reads it.
+            engine.tick(&mut bank.lock().unwrap_or_else(|p| p.into_inner()), tokio::time::Instant::now());
+        }
         let engine = Arc::new(Mutex::new(engine));
         let kick = Arc::new(Notify::new());
         let faults = SharedFaults::default();
@@ -118,7 +151,12 @@ impl CraneSim {
             TransportKind::Tcp => Mc3eServer::bind_tcp(addr, state).await?,
             TransportKind::Udp => Mc3eServer::bind_udp(addr, state).await?,
         };
-        let tick = (options.step / 5).clamp(Duration::from_millis(1), Duration::from_millis(20));
+        // Fine enough for the axes to move smoothly and for a scaled cycle to end on time.
+        let tick = match options.motion {
+            Some(_) => Duration::from_millis(20).div_f64(options.time_scale.max(1.0)),
+            None => options.step / 5,
+        }
+        .clamp(Duration::from_millis(1), Duration::from_millis(20));
         let ticker = tokio::spawn(run_ticks(bank.clone(), engine.clone(), kick, tick));
         Ok(CraneSim { server: Some(server), bank, engine, ticker, drop_rate: Mutex::new(0.0), cut })
     }
@@ -145,6 +183,38 @@ impl CraneSim {
     /// Raises an alarm (D205 := code); motion halts until it clears or a cancel comes.
     pub fn raise_alarm(&self, code: u16) {
         self.set(205, code);
+        self.engine().count_alarm(code);
+    }
+
+    fn engine(&self) -> std::sync::MutexGuard<'_, Engine> {
+        self.engine.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The occupied cells, in order; None if the inventory is not tracked.
+    pub fn inventory(&self) -> Option<Vec<Cell>> {
+        self.engine().cells()
+    }
+
+    /// Replaces the inventory (None: stop tracking it). Stations (bay 0) are dropped.
+    pub fn set_inventory(&self, cells: Option<Vec<Cell>>) {
+        self.engine().inventory = cells.map(Inventory::new);
+    }
+
+    /// Puts a load into a cell, tracking the inventory from now on if it was not; false if
+    /// the cell was occupied or is a station.
+    pub fn put_load(&self, cell: Cell) -> bool {
+        self.engine().inventory.get_or_insert_with(Inventory::default).put(cell)
+    }
+
+    /// Takes the load out of a cell; None if the inventory is not tracked, else whether
+    /// the cell held one.
+    pub fn take_load(&self, cell: Cell) -> Option<bool> {
+        self.engine().inventory.as_mut().map(|inv| inv.take(cell))
+    }
+
+    /// The counters since start (see [`stats`]).
+    pub fn stats(&self) -> CraneStats {
+        self.engine().stats.clone()
     }
 
     /// Clears the alarm (a person reset the crane).
@@ -154,35 +224,23 @@ impl CraneSim {
 
     /// Stops or restarts answering the heartbeat.
     pub fn set_heartbeat(&self, on: bool) {
-        self.engine.lock().unwrap_or_else(|p| p.into_inner()).heartbeat_on = on;
+        self.engine().heartbeat_on = on;
     }
 
     /// Stops or restarts answering the hand-over strobe.
     pub fn set_handshake(&self, on: bool) {
-        self.engine.lock().unwrap_or_else(|p| p.into_inner()).handshake_on = on;
+        self.engine().handshake_on = on;
     }
 
     /// Freezes the crane's side of the hand-over at a step (`None`: reacts again, at once).
     pub fn hold(&self, hold: Option<Hold>) {
-        self.engine.lock().unwrap_or_else(|p| p.into_inner()).hold = hold;
+        self.engine().hold = hold;
     }
 
     /// A slow crane program: task words shown in D208..D217 only when the task starts,
     /// one step after ACK was cleared (step 4), instead of as soon as they are taken.
     pub fn set_late_start(&self, on: bool) {
-        self.engine.lock().unwrap_or_else(|p| p.into_inner()).late_start = on;
-    }
-
-    /// Takes the link down (as `link off`) right after the next write of the WCS that
-    /// leaves D register `n` at `value`; that write is carried out and answered, nothing
-    /// after it until [`CraneSim::set_link`] brings the link back.
-    pub fn cut_link_after(&self, n: u32, value: u16) {
-        *self.cut.lock().unwrap_or_else(|p| p.into_inner()) = Some((n, value));
-    }
-
-    /// Whether an armed [`CraneSim::cut_link_after`] has fired.
-    pub fn link_cut(&self) -> bool {
-        self.cut.lock().unwrap_or_else(|p| p.into_inner()).is_none()
+        self.engine().late_start = on;
     }
 
     /// Breaches of the interface by the WCS so far (tests assert none).
@@ -192,118 +250,33 @@ impl CraneSim {
 
     /// The breaches, in words, in order.
     pub fn violation_log(&self) -> Vec<String> {
-        self.engine.lock().unwrap_or_else(|p| p.into_inner()).violations.clone()
+        self.engine().violations.clone()
     }
 
     /// Presses "force complete": the task under way ends in state 30. False if none.
     pub fn force_complete(&self) -> bool {
         let mut bank = self.bank.lock().unwrap_or_else(|p| p.into_inner());
-        self.engine.lock().unwrap_or_else(|p| p.into_inner()).force_complete(&mut bank)
-    }
-
-    /// Sets the standing link faults (`rackd sim crane`'s fault flags).
-    pub fn set_faults(&self, faults: Faults) {
-        *self.drop_rate.lock().unwrap_or_else(|p| p.into_inner()) = faults.drop_rate;
-        if let Some(s) = &self.server {
-            s.faults().set(faults);
-        }
-    }
-
-    /// Closes the TCP connection (loses the next request over UDP).
-    pub fn drop_link(&self) {
-        if let Some(s) = &self.server {
-            s.faults().push(Fault::Close);
-        }
-    }
-
-    /// Ignores every request (`false`) or answers again (`true`, at the configured drop
-    /// rate).
-    pub fn set_link(&self, up: bool) {
-        let configured = *self.drop_rate.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some(s) = &self.server {
-            s.faults().update(|f| f.drop_rate = if up { configured } else { 1.0 });
-        }
+        self.engine().force_complete(&mut bank)
     }
 
     /// How many times task `number` was handed over (mode 1 or 2).
     pub fn received(&self, number: u16) -> u32 {
-        self.engine.lock().unwrap_or_else(|p| p.into_inner()).received.get(&number).copied().unwrap_or(0)
+        self.engine().received.get(&number).copied().unwrap_or(0)
     }
 
     /// Cancels (mode 3) received.
     pub fn cancels(&self) -> u32 {
-        self.engine.lock().unwrap_or_else(|p| p.into_inner()).cancels
+        self.engine().cancels
     }
 
     /// Hand-overs refused because the crane was busy (rackd should cause none).
     pub fn refused(&self) -> u32 {
-        self.engine.lock().unwrap_or_else(|p| p.into_inner()).refused
-    }
-
-    /// Requests that reached the crane's server so far, dropped ones included (0 once it is
-    /// shut down). Tests wait on it to know rackd has polled the crane again, instead of
-    /// sleeping a fixed time before asserting that something did not happen.
-    pub fn requests_seen(&self) -> u64 {
-        self.server.as_ref().map_or(0, |s| s.faults().requests_seen())
+        self.engine().refused
     }
 
     /// Action state (D203).
     pub fn action(&self) -> u16 {
         self.word(203)
-    }
-
-    /// Runs one text command (see the module doc); returns what to print.
-    pub fn command(&self, line: &str) -> Result<String, CommandError> {
-        let words: Vec<&str> = line.split_whitespace().collect();
-        match words.as_slice() {
-            ["alarm", code] => {
-                let code: u16 = code.parse().map_err(|_| CommandError::AlarmCode(code.to_string()))?;
-                self.raise_alarm(code);
-                Ok(format!("alarm {code}: {}", crate::wire::alarms::lookup(code).text))
-            }
-            ["clear"] => Ok({
-                self.clear_alarm();
-                "alarm cleared".into()
-            }),
-            ["heartbeat", on @ ("on" | "off")] => Ok({
-                self.set_heartbeat(*on == "on");
-                format!("heartbeat {on}")
-            }),
-            ["handshake", on @ ("on" | "off")] => Ok({
-                self.set_handshake(*on == "on");
-                format!("handshake {on}")
-            }),
-            ["hold", at @ ("ack" | "start" | "off")] => Ok({
-                self.hold(match *at {
-                    "ack" => Some(Hold::BeforeAck),
-                    "start" => Some(Hold::BeforeStart),
-                    _ => None,
-                });
-                format!("hold {at}")
-            }),
-            ["force"] => Ok(if self.force_complete() { "force-completed (30)" } else { "no task" }.into()),
-            ["drop"] => Ok({
-                self.drop_link();
-                "link dropped once".into()
-            }),
-            ["link", on @ ("on" | "off")] => Ok({
-                self.set_link(*on == "on");
-                format!("link {on}")
-            }),
-            ["status"] => Ok(format!(
-                "action {} task {} alarm {} load {} travel {} lift {} stb {} ack {} violations {}",
-                self.word(203),
-                self.word(208),
-                self.word(205),
-                self.word(206),
-                self.word(220),
-                self.word(221),
-                self.word(21),
-                self.word(225),
-                self.violations()
-            )),
-            _ => Err(CommandError::Unknown(line.to_string())),
-        }
     }
 
     /// Stops the crane and its server.
@@ -330,26 +303,5 @@ async fn run_ticks(bank: SharedBank, engine: Arc<Mutex<Engine>>, kick: Arc<Notif
         }
         let mut bank = bank.lock().unwrap_or_else(|p| p.into_inner());
         engine.lock().unwrap_or_else(|p| p.into_inner()).tick(&mut bank, tokio::time::Instant::now());
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[tokio::test]
-    async fn text_commands_hold_the_hand_over_and_status_counts_violations() {
-        let sim = CraneSim::start("127.0.0.1:0", CraneSimOptions::default()).await.unwrap();
-        let hold = || sim.engine.lock().unwrap().hold;
-        assert_eq!(sim.command("hold ack").unwrap(), "hold ack");
-        assert_eq!(hold(), Some(Hold::BeforeAck));
-        assert_eq!(sim.command("hold start").unwrap(), "hold start");
-        assert_eq!(hold(), Some(Hold::BeforeStart));
-        assert_eq!(sim.command("hold off").unwrap(), "hold off");
-        assert_eq!(hold(), None);
-        assert!(matches!(sim.command("hold later"), Err(CommandError::Unknown(_))));
-        let status = sim.command("status").unwrap();
-        assert!(status.ends_with("stb 0 ack 0 violations 0"), "{status}");
-        sim.shutdown().await;
     }
 }

@@ -1,0 +1,73 @@
+//! What the simulated crane did, counted for a benchmark ([`super::CraneSim::stats`], the
+//! `stats` text command). Times are simulated seconds (real seconds x the time scale);
+//! distances come from the motion model, so they stay 0 without one.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use serde::Serialize;
+
+/// The crane's counters since it started.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct CraneStats {
+    /// Tasks that ended in state 20 (complete), transfers and travels alike.
+    pub cycles: u32,
+    /// Tasks that ended in state 40 (cancelled).
+    pub cancelled: u32,
+    /// Tasks that ended in state 30 (force-completed).
+    pub forced: u32,
+    /// Simulated seconds spent running action states 1..18 and homing (state 100); time
+    /// halted under an alarm, idle time and hand-overs do not count.
+    pub busy_secs: f64,
+    /// Metres along the travel axis with a load on the platform (D206 = 1).
+    pub travel_loaded_m: f64,
+    /// Metres along the travel axis with the platform empty (D206 = 0).
+    pub travel_empty_m: f64,
+    /// Metres along the lift axis, loaded and empty together.
+    pub lift_m: f64,
+    /// Business alarms raised, by code: by the inventory rules, and by hand
+    /// ([`super::CraneSim::raise_alarm`], the `alarm` command).
+    pub alarms: BTreeMap<u16, u32>,
+}
+
+impl CraneStats {
+    /// Counts a business alarm (other codes are not counted).
+    pub fn alarm(&mut self, code: u16) {
+        if super::is_business(code) {
+            *self.alarms.entry(code).or_default() += 1;
+        }
+    }
+
+    /// Counts a move of `dx` metres of travel and `dy` of lift.
+    pub fn moved(&mut self, dx: f64, dy: f64, loaded: bool) {
+        if loaded {
+            self.travel_loaded_m += dx.abs();
+        } else {
+            self.travel_empty_m += dx.abs();
+        }
+        self.lift_m += dy.abs();
+    }
+}
+
+impl fmt::Display for CraneStats {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "cycles {} cancelled {} forced {} busy {:.1} s travel loaded {:.1} m empty {:.1} m lift {:.1} m alarms",
+            self.cycles,
+            self.cancelled,
+            self.forced,
+            self.busy_secs,
+            self.travel_loaded_m,
+            self.travel_empty_m,
+            self.lift_m
+        )?;
+        if self.alarms.is_empty() {
+            return write!(f, " none");
+        }
+        for (code, n) in &self.alarms {
+            write!(f, " {code}x{n}")?;
+        }
+        Ok(())
+    }
+}
