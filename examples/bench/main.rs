@@ -7,6 +7,7 @@
 //!                                                [--min-timeout-ms 20]]
 //! cargo run --release --example bench -- ws     [--subscribers 1000] [--events 500] [--rate 50]
 //! cargo run --release --example bench -- fleet  [--devices 500] [--tags 30] [--poll-ms 500] [--seconds 20] [--changing 0.1]
+//! cargo run --release --example bench -- crane  [--jobs 200] [--backlog 30] [--fill 0.5] [--time-scale 200] [--seed 7]
 //! ```
 //!
 //! An example rather than a `rackd bench` subcommand, so that `cargo build --release` of
@@ -21,6 +22,7 @@
 //! a stale one beside it would silently measure old code.
 
 mod child;
+mod crane;
 mod fleet;
 mod intake;
 #[path = "../../tests/common/postgres.rs"]
@@ -93,6 +95,8 @@ enum Bench {
     },
     /// Tag devices: tag reads/s and rackd's CPU per 1000 reads, values static and changing.
     Fleet(fleet::FleetArgs),
+    /// The crane planner: fifo against travel on one workload, against the simulated crane.
+    Crane(crane::CraneArgs),
 }
 
 fn main() -> ExitCode {
@@ -123,6 +127,7 @@ fn main() -> ExitCode {
             }
             Bench::Ws { subscribers, events, rate } => ws::run(subscribers, events, rate).await,
             Bench::Fleet(args) => fleet::run(args).await,
+            Bench::Crane(args) => crane::run(args).await,
         }
     });
     match result {
