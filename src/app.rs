@@ -77,7 +77,8 @@ impl Application {
             .with_context(|| format!("opening database {}", database.display()))?;
         let layout = config.layout();
         locations::seed(&pool, &layout, now_ms()).await.context("seeding locations")?;
-        let deep: BTreeSet<u16> = config.site.aisles.iter().filter(|a| a.depth == 2).map(|a| a.aisle).collect();
+        let deep: BTreeSet<u16> =
+            config.site.aisles.iter().filter(|a| a.depth == 2).map(|a| a.aisle).collect();
         let queues = Queues::new(config.devices.iter().map(|d| Setup {
             id: d.id().to_owned(),
             window: d.dispatch_window(),

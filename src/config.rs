@@ -141,7 +141,14 @@ impl Config {
     /// crane aisle 2 of 2 rows x 20 bays x 8 levels x 2 depths (sides).
     pub fn demo() -> Self {
         let mut config = Config::default();
-        config.site.aisles.push(AisleConfig { aisle: 2, rows: 2, bays: 20, levels: 8, positions: 2, depth: 2 });
+        config.site.aisles.push(AisleConfig {
+            aisle: 2,
+            rows: 2,
+            bays: 20,
+            levels: 8,
+            positions: 2,
+            depth: 2,
+        });
         config
     }
 
@@ -185,7 +192,9 @@ impl Default for IntakeConfig {
 
 impl Default for SiteConfig {
     fn default() -> Self {
-        SiteConfig { aisles: vec![AisleConfig { aisle: 1, rows: 2, bays: 10, levels: 6, positions: 4, depth: 1 }] }
+        SiteConfig {
+            aisles: vec![AisleConfig { aisle: 1, rows: 2, bays: 10, levels: 6, positions: 4, depth: 1 }],
+        }
     }
 }
 

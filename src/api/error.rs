@@ -98,7 +98,9 @@ impl From<WriteError> for ApiError {
             WriteError::NotFound(_) | WriteError::AlarmNotFound(_) => Self::not_found(e.to_string()),
             WriteError::AlreadyAcknowledged { .. } => Self::conflict("already_acknowledged", e.to_string()),
             WriteError::Conflict(_) => Self::conflict("reference_conflict", e.to_string()),
-            WriteError::Reserved { .. } | WriteError::Taken(_) => Self::conflict("location_reserved", e.to_string()),
+            WriteError::Reserved { .. } | WriteError::Taken(_) => {
+                Self::conflict("location_reserved", e.to_string())
+            }
             WriteError::Unexpected { .. } | WriteError::Illegal(_) => {
                 Self::conflict("invalid_state", e.to_string())
             }

@@ -392,7 +392,10 @@ async fn refused(app: &AppState, jobs: &[NewJob]) -> Result<Option<NearOccupied>
     if app.rules.deep.is_empty() {
         return Ok(None);
     }
-    let Some(refused) = near_occupied(&app.pool, |l| app.dispatcher.queues().taking_from(l).is_some(), &app.rules.deep, jobs).await? else {
+    let Some(refused) =
+        near_occupied(&app.pool, |l| app.dispatcher.queues().taking_from(l).is_some(), &app.rules.deep, jobs)
+            .await?
+    else {
         return Ok(None);
     };
     if let Some(reference) = &jobs[refused.index].reference {

@@ -20,7 +20,9 @@ pub enum Invalid {
     #[error("site.aisles: at least one aisle is needed")]
     NoAisles,
     /// A depth other than 1 or 2, or double-deep where it cannot be.
-    #[error("site.aisles: aisle {0}: depth is 1 or 2, and 2 needs positions = 2 and no device but a crane serving the aisle")]
+    #[error(
+        "site.aisles: aisle {0}: depth is 1 or 2, and 2 needs positions = 2 and no device but a crane serving the aisle"
+    )]
     Depth(u16),
     /// A device entry.
     #[error(transparent)]
@@ -116,7 +118,8 @@ impl Config {
             .filter(|d| d.kind() != crate::devices::config::DeviceKind::Crane)
             .flat_map(|d| d.aisles().iter().copied())
             .collect();
-        let shelf_deep = self.site.aisles.iter().enumerate().find(|(_, a)| a.depth == 2 && others.contains(&a.aisle));
+        let shelf_deep =
+            self.site.aisles.iter().enumerate().find(|(_, a)| a.depth == 2 && others.contains(&a.aisle));
         if let Some((i, a)) = shelf_deep {
             return Err((format!("site.aisles[{i}].depth"), Invalid::Depth(a.aisle)));
         }

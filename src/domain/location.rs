@@ -104,7 +104,10 @@ impl Layout {
         ];
         for (name, value, max) in checks {
             if let Some(v) = value.filter(|v| *v < 1 || *v > max) {
-                return Err(Invalid(format!("zone in aisle {}: {name} {v} is outside 1..={max}", zone.aisle)));
+                return Err(Invalid(format!(
+                    "zone in aisle {}: {name} {v} is outside 1..={max}",
+                    zone.aisle
+                )));
             }
         }
         Ok(())

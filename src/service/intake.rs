@@ -9,7 +9,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use crate::domain::{Barcode, Class, Invalid, JobKind, JobSpec, Layout, LightColor, Location, Priority, Zone};
+use crate::domain::{
+    Barcode, Class, Invalid, JobKind, JobSpec, Layout, LightColor, Location, Priority, Zone,
+};
 use crate::store::jobs::NewJob;
 
 /// Longest accepted WMS reference.
@@ -131,19 +133,26 @@ impl Rules {
     /// A store left to rackd, from `aisle`, `zones` and `class` (none of which any other
     /// request takes); None when the request names none of them.
     fn putaway(&self, req: &JobRequest) -> Result<Option<JobSpec>, Invalid> {
-        let named = [("aisle", req.aisle.is_some()), ("zones", req.zones.is_some()), ("class", req.class.is_some())];
+        let named =
+            [("aisle", req.aisle.is_some()), ("zones", req.zones.is_some()), ("class", req.class.is_some())];
         let Some((first, _)) = named.iter().find(|(_, p)| *p) else { return Ok(None) };
         if req.kind != JobKind::Store {
             return Err(Invalid(format!("a {} job takes no `{first}`", req.kind.as_str())));
         }
         if req.to.is_some() {
-            return Err(Invalid(format!("a store takes `to`, or `aisle`/`zones` for rackd to choose, not `to` and `{first}`")));
+            return Err(Invalid(format!(
+                "a store takes `to`, or `aisle`/`zones` for rackd to choose, not `to` and `{first}`"
+            )));
         }
         let mut zones = req.zones.clone().unwrap_or_default();
         match (req.aisle, zones.is_empty()) {
             (Some(aisle), true) => zones.push(Zone::aisle(aisle)),
-            (None, true) if req.zones.is_some() => return Err(Invalid("`zones` needs at least one zone".into())),
-            (None, true) => return Err(Invalid("`class` needs `aisle` or `zones`: where rackd may choose".into())),
+            (None, true) if req.zones.is_some() => {
+                return Err(Invalid("`zones` needs at least one zone".into()));
+            }
+            (None, true) => {
+                return Err(Invalid("`class` needs `aisle` or `zones`: where rackd may choose".into()));
+            }
             _ => {}
         }
         let aisle = zones[0].aisle;
@@ -151,7 +160,9 @@ impl Rules {
             return Err(Invalid("every zone must be in the same aisle (one crane chooses)".into()));
         }
         if !self.crane_aisles.contains(&aisle) {
-            return Err(Invalid(format!("aisle {aisle} is served by no crane: name the store's location in `to`")));
+            return Err(Invalid(format!(
+                "aisle {aisle} is served by no crane: name the store's location in `to`"
+            )));
         }
         for z in &zones {
             self.layout.check_zone(z)?;

@@ -95,7 +95,9 @@ impl StoredSpec {
     pub(crate) fn json(job: &Job) -> String {
         let stored = job.spec().map(|spec| {
             let putaway = match (&spec, &job.zones) {
-                (JobSpec::Store { .. }, Some(zones)) => Some(Putaway { zones: zones.clone(), class: job.class }),
+                (JobSpec::Store { .. }, Some(zones)) => {
+                    Some(Putaway { zones: zones.clone(), class: job.class })
+                }
                 _ => None,
             };
             StoredSpec { spec, serves: job.serves, putaway }
@@ -124,8 +126,14 @@ impl TryFrom<JobRow> for Job {
         let spec = stored.spec;
         let priority = Priority::try_from(row.priority).map_err(|_| corrupt("priority"))?;
         let state = JobState::parse(&row.state).ok_or_else(|| corrupt("state"))?;
-        let new =
-            NewJob { spec, reference: row.reference, priority, barcode: None, device: row.device, serves: stored.serves };
+        let new = NewJob {
+            spec,
+            reference: row.reference,
+            priority,
+            barcode: None,
+            device: row.device,
+            serves: stored.serves,
+        };
         let mut job = new.accepted(row.id, row.created_at);
         job.barcode = row.barcode;
         if let Some(p) = stored.putaway {

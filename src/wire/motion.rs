@@ -32,11 +32,7 @@ impl Axis {
             return 0.0;
         }
         let ramp = self.speed * self.speed / self.accel;
-        if d < ramp {
-            2.0 * (d / self.accel).sqrt()
-        } else {
-            d / self.speed + self.speed / self.accel
-        }
+        if d < ramp { 2.0 * (d / self.accel).sqrt() } else { d / self.speed + self.speed / self.accel }
     }
 
     /// Metres covered `t` seconds into a move of `distance` metres (clamped to the move).

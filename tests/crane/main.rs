@@ -14,8 +14,8 @@ mod handover;
 mod heartbeat;
 mod jobs;
 mod pause_restart;
-mod planner;
 mod paused;
+mod planner;
 mod restart;
 
 use std::time::{Duration, Instant};

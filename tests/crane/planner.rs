@@ -7,7 +7,7 @@ use std::time::Duration;
 use rackd::config::Config;
 use rackd::devices::config::CraneConfig;
 use rackd::protocols::mc3e::TransportKind;
-use rackd::sim::crane::CraneSim;
+use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use rackd::wire::task_id_for;
 use serde_json::{Value, json};
 
@@ -37,7 +37,8 @@ async fn stock(app: &TestApp, at: &[Value]) {
         })
         .collect();
     let body = json!({"locations": entries, "reason": "test stock"});
-    let (status, answer) = split(app.client.put(app.url("/api/v1/locations")).json(&body).send().await.unwrap()).await;
+    let (status, answer) =
+        split(app.client.put(app.url("/api/v1/locations")).json(&body).send().await.unwrap()).await;
     assert_eq!(status, 200, "{answer}");
 }
 
@@ -137,7 +138,11 @@ async fn a_store_left_to_rackd_goes_far_first_and_tells_where() {
     let done = wait_job(&app, second, &["completed", "failed"], 20).await;
     assert_eq!(done["state"], "completed", "{done}");
     let to = &done["to"];
-    assert_eq!((to["row"].as_u64(), to["level"].as_u64(), to["position"].as_u64()), (Some(2), Some(3), Some(2)), "{done}");
+    assert_eq!(
+        (to["row"].as_u64(), to["level"].as_u64(), to["position"].as_u64()),
+        (Some(2), Some(3), Some(2)),
+        "{done}"
+    );
     assert!(to["bay"].as_u64().unwrap() >= 13, "class C: the far third of the aisle: {done}");
     assert_eq!(done["class"], "C");
     assert_eq!(sim.received(task_id_for(first)), 1);
@@ -163,8 +168,73 @@ async fn a_store_left_to_rackd_is_checked_at_intake() {
     for (body, says) in cases {
         let (status, err) = app.post("/api/v1/jobs", &body).await;
         assert_eq!(status, 422, "{body}: {err}");
-        assert_eq!(err["error"]["code"], if says.is_empty() { "invalid_body" } else { "invalid_job" }, "{err}");
+        assert_eq!(
+            err["error"]["code"],
+            if says.is_empty() { "invalid_body" } else { "invalid_job" },
+            "{err}"
+        );
         assert!(err["error"]["message"].as_str().unwrap().contains(says), "{body}: {err}");
     }
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_mixed_workload_raises_no_business_alarm_and_both_inventories_agree() {
+    // The crane knows its own rack (it raises 7069/7070 and 7091..7098 when asked the
+    // impossible); rackd is told the same contents. Every job that would be impossible as
+    // sent goes through the planner instead.
+    let boxes = [[1, 3, 2, 1], [1, 3, 2, 2], [2, 5, 1, 1], [2, 5, 1, 2], [1, 8, 4, 2], [2, 2, 2, 1]];
+    let options = CraneSimOptions {
+        transport: TransportKind::Tcp,
+        motion: Some(rackd::wire::motion::Motion::default()),
+        time_scale: 1000.0,
+        inventory: Some(boxes.to_vec()),
+        ..Default::default()
+    };
+    let sim = CraneSim::start("127.0.0.1:0", options).await.unwrap();
+    let device = device_for(&sim, TransportKind::Tcp, |_| {});
+    let app = spawn_with(|c: &mut Config| {
+        with_crane(c, device);
+        c.site.aisles.iter_mut().filter(|a| a.aisle == 2).for_each(|a| a.depth = 2);
+    })
+    .await;
+    let cells: Vec<Value> = boxes.iter().map(|[r, b, l, s]| cloc(*r, *b, *l, *s)).collect();
+    stock(&app, &cells).await;
+    let jobs = json!({"jobs": [
+        {"kind": "retrieve", "from": cloc(1, 3, 2, 2)},
+        {"kind": "store", "aisle": 2},
+        {"kind": "retrieve", "from": cloc(2, 5, 1, 2)},
+        {"kind": "store", "to": cloc(1, 8, 4, 1)},
+        {"kind": "store", "zones": [{"aisle": 2, "bay": 3}]},
+        {"kind": "move", "from": cloc(2, 2, 2, 1), "to": cloc(2, 9, 1, 2)},
+        {"kind": "retrieve", "from": cloc(2, 5, 1, 1)},
+    ]});
+    let (status, posted) = app.post("/api/v1/jobs/batch", &jobs).await;
+    assert_eq!(status, 201, "{posted}");
+    for job in posted["jobs"].as_array().unwrap() {
+        let id = job["id"].as_i64().unwrap();
+        let done = wait_job(&app, id, &["completed", "failed", "cancelled"], 30).await;
+        assert_eq!(done["state"], "completed", "{done}");
+    }
+    let stats = sim.stats();
+    assert!(stats.alarms.is_empty(), "no business alarm: {stats}");
+    assert_eq!(sim.violations(), 0, "{:?}", sim.violation_log());
+    let (_, moves) = app.get("/api/v1/jobs?kind=move").await;
+    let relocations = moves["jobs"].as_array().unwrap().iter().filter(|j| !j["serves"].is_null()).count();
+    assert_eq!(
+        relocations, 1,
+        "only 1-3-2-2 needs one (2-5-1-2 waits for the retrieve of its near box): {moves}"
+    );
+    let (_, full) = app.get("/api/v1/locations?aisle=2&occupied=true").await;
+    let mut rackd: Vec<[u16; 4]> = full
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| ["row", "bay", "level", "position"].map(|k| l[k].as_u64().unwrap() as u16))
+        .collect();
+    let mut crane = sim.inventory().unwrap();
+    rackd.sort_unstable();
+    crane.sort_unstable();
+    assert_eq!(rackd, crane, "rackd's location model and the crane's own rack agree");
     app.stop().await;
 }

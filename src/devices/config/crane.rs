@@ -145,7 +145,7 @@ impl CraneConfig {
             auto_cancel: true,
             ack: Ack::Handshake,
             planner: Planner::Travel,
-            max_overtaken: 10,
+            max_overtaken: 30,
             motion: Motion::default(),
         }
     }

@@ -9,7 +9,6 @@ use serde::{Deserialize, Serialize};
 
 use super::address::{AddressError, check_unit};
 use super::crane::{self, Ack, CraneConfig, Planner, Station};
-use crate::wire::motion::Motion;
 use super::error::{DeviceConfigError, Problem};
 use super::shelf::{ShelfConfig, default_shelf_quirks};
 use super::tags::TagsConfig;
@@ -22,6 +21,7 @@ use crate::protocols::protocol::Family;
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::LinkTuning;
 use crate::protocols::{Protocol, Quirk};
+use crate::wire::motion::Motion;
 
 /// Every key any kind has; unknown keys are refused here, keys of another kind in
 /// [`TryFrom`]. Written back ([`From<&DeviceConfig>`]) with every key of the entry's kind
@@ -306,7 +306,8 @@ impl From<&DeviceConfig> for RawDevice {
                 raw.heartbeat_timeout_ms = Some(c.heartbeat_timeout_ms);
                 raw.handshake_timeout_ms = Some(c.handshake_timeout_ms);
                 (raw.auto_cancel, raw.ack) = (Some(c.auto_cancel), Some(c.ack));
-                (raw.planner, raw.max_overtaken, raw.motion) = (Some(c.planner), Some(c.max_overtaken), Some(c.motion));
+                (raw.planner, raw.max_overtaken, raw.motion) =
+                    (Some(c.planner), Some(c.max_overtaken), Some(c.motion));
             }
             DeviceConfig::Tags(c) => {
                 (raw.poll_ms, raw.offline_after) = (Some(c.poll_ms), Some(c.offline_after));

@@ -74,7 +74,8 @@ impl super::Queues {
             let ids = q.on.get(&l)?;
             ids.iter().copied().find(|id| {
                 let job = q.active.get(id).or_else(|| q.queued.get(id));
-                job.and_then(|j| j.spec()).is_some_and(|s| crate::service::planner::refusal::picks_from(&s, l))
+                job.and_then(|j| j.spec())
+                    .is_some_and(|s| crate::service::planner::refusal::picks_from(&s, l))
             })
         })
     }

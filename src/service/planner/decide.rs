@@ -5,17 +5,24 @@
 //! - a task whose far location has a box in front of it (pick far, or put far, with near
 //!   occupied) waits while another unfinished job will take that box away, and otherwise
 //!   needs a relocation: a `move` of the near box to a place [`putaway::choose`] picks;
-//! - a put into a location that holds a box (double-deep aisles, where rackd keeps the
-//!   rack's contents) is never sent: the job fails with the reason, nothing sent;
+//! - a put into a location that holds a box, or a pick from one that holds none (double-deep
+//!   aisles, where rackd keeps the rack's contents), is never sent: the job fails with the
+//!   reason, nothing sent (the crane would raise 7091/7095 or 7069/7070);
 //! - everything else can go.
+//!
+//! - a put near in front of a far location another unfinished job will fill waits for it
+//!   (putting near first would wall that far location in);
 //!
 //! Then one is chosen. `fifo` takes the first in the order rules' order (priority, then
 //! age). `travel` keeps priorities (only jobs of the best priority present compete, so a
-//! priority 0 job still goes first) and among them takes the one whose pick the crane
-//! reaches soonest from where it stands: after a store (the crane at the put) the nearest
-//! retrieve, after a retrieve (the crane at the station) a store, whose pick is the station:
-//! dual command cycles. Ties go to the older job. A job passed over `max_overtaken` times by
-//! younger ones of its priority goes next, so nothing starves.
+//! priority 0 job still goes first) and among them takes the one with the least empty
+//! travel: the run from where the crane stands to the job's pick (a job that needs a
+//! relocation first counts the relocation's two fork cycles too), plus, for a job that ends
+//! in the rack (a store), the run from its end to the nearest pick the other open jobs need.
+//! That second term makes dual command cycles: after a retrieve (the crane at the station)
+//! a store whose put lies near a waiting retrieve, then that retrieve. Ties go to the older
+//! job. A job passed over `max_overtaken` times by younger ones of its priority goes next,
+//! so nothing starves.
 
 use std::collections::{HashMap, HashSet};
 
@@ -99,6 +106,9 @@ pub enum Verdict {
 pub fn check(job: &Job, rack: &Rack, unfinished: &[&Job]) -> Verdict {
     let Some(spec) = job.spec() else { return Verdict::Go };
     let (pick, put) = ends(&spec);
+    if let Some(p) = pick.filter(|p| rack.is_deep(p.aisle) && p.bay != 0 && !rack.occupied(*p)) {
+        return Verdict::Impossible(format!("location {p} holds no box: rackd does not send a pick from it"));
+    }
     if let Some(near) = pick.and_then(|p| rack.blocker(p)) {
         return behind_or_relocate(job.id, near, unfinished);
     }
@@ -113,6 +123,12 @@ pub fn check(job: &Job, rack: &Rack, unfinished: &[&Job]) -> Verdict {
         if rack.is_far(q) && holds(near) {
             return behind_or_relocate(job.id, near, unfinished);
         }
+        let far = Rack::far_of(q);
+        if !rack.is_far(q)
+            && let Some(filler) = unfinished.iter().find(|j| j.id != job.id && puts_into(j, far))
+        {
+            return Verdict::Behind(filler.id);
+        }
     }
     Verdict::Go
 }
@@ -123,6 +139,11 @@ fn behind_or_relocate(id: i64, near: Location, unfinished: &[&Job]) -> Verdict {
         Some(j) => Verdict::Behind(j.id),
         None => Verdict::Relocate(near),
     }
+}
+
+/// Whether `job` puts a box into `l`.
+fn puts_into(job: &Job, l: Location) -> bool {
+    matches!(job.spec(), Some(JobSpec::Store { to } | JobSpec::Move { to, .. }) if to == l)
 }
 
 /// Where a job picks and where it puts, when it does (a station is neither stock nor
@@ -138,7 +159,13 @@ fn ends(spec: &JobSpec) -> (Option<Location>, Option<Location>) {
 
 /// Chooses among `candidates` (the order rules' eligible jobs, best first) for the idle
 /// crane; `unfinished` is every job of the crane not ended; `memory` is updated.
-pub fn decide(plan: &Plan, memory: &mut Memory, candidates: &[&Job], unfinished: &[&Job], rack: &Rack) -> Decision {
+pub fn decide(
+    plan: &Plan,
+    memory: &mut Memory,
+    candidates: &[&Job],
+    unfinished: &[&Job],
+    rack: &Rack,
+) -> Decision {
     let mut open: Vec<(&Job, Option<Location>)> = Vec::new();
     for job in candidates {
         match check(job, rack, unfinished) {
@@ -148,13 +175,16 @@ pub fn decide(plan: &Plan, memory: &mut Memory, candidates: &[&Job], unfinished:
             Verdict::Impossible(text) => return Decision::Refuse { job: job.id, text },
         }
     }
-    let busy: HashSet<Location> = unfinished.iter().filter_map(|j| j.spec()).flat_map(|s| s.locations()).collect();
+    let busy: HashSet<Location> =
+        unfinished.iter().filter_map(|j| j.spec()).flat_map(|s| s.locations()).collect();
     // A job whose relocation has nowhere to go waits; so does a store left to rackd while
     // its zones have no place.
     let places: HashMap<i64, Location> = open
         .iter()
         .filter_map(|(job, _)| match job.spec() {
-            Some(JobSpec::Putaway { zones, class }) => Some((job.id, place(plan, rack, &busy, &zones, class)?)),
+            Some(JobSpec::Putaway { zones, class }) => {
+                Some((job.id, place(plan, rack, &busy, &zones, class)?))
+            }
             _ => None,
         })
         .collect();
@@ -162,7 +192,7 @@ pub fn decide(plan: &Plan, memory: &mut Memory, candidates: &[&Job], unfinished:
         Some(near) => target(plan, rack, &busy, job, *near).is_some(),
         None => !matches!(job.spec(), Some(JobSpec::Putaway { .. })) || places.contains_key(&job.id),
     });
-    let Some(&(job, near)) = pick(plan, memory, &open) else { return Decision::Wait };
+    let Some(&(job, near)) = pick(plan, memory, &open, &places) else { return Decision::Wait };
     let live: HashSet<i64> = unfinished.iter().map(|j| j.id).collect();
     memory.overtaken.retain(|id, _| live.contains(id));
     for (other, _) in &open {
@@ -189,21 +219,52 @@ pub fn decide(plan: &Plan, memory: &mut Memory, candidates: &[&Job], unfinished:
     }
 }
 
-fn pick<'a>(plan: &Plan, memory: &Memory, open: &'a [(&'a Job, Option<Location>)]) -> Option<&'a (&'a Job, Option<Location>)> {
+fn pick<'a>(
+    plan: &Plan,
+    memory: &Memory,
+    open: &'a [(&'a Job, Option<Location>)],
+    places: &HashMap<i64, Location>,
+) -> Option<&'a (&'a Job, Option<Location>)> {
     let best = open.iter().map(|(j, _)| j.priority).min()?;
     let group = open.iter().filter(|(j, _)| j.priority == best);
     if plan.strategy == Planner::Fifo || best == 0 {
         return group.min_by_key(|(j, _)| j.id);
     }
-    let starved = group.clone().filter(|(j, _)| memory.overtaken.get(&j.id).copied().unwrap_or(0) >= plan.max_overtaken);
+    let starved = group
+        .clone()
+        .filter(|(j, _)| memory.overtaken.get(&j.id).copied().unwrap_or(0) >= plan.max_overtaken);
     if let Some(oldest) = starved.min_by_key(|(j, _)| j.id) {
         return Some(oldest);
     }
     let from = memory.at.unwrap_or(station_spot(plan.outbound));
-    group.min_by(|a, b| {
-        let cost = |(j, near): &(&Job, Option<Location>)| plan.motion.move_time(from, pick_spot(plan, j, *near));
-        cost(a).total_cmp(&cost(b)).then(a.0.id.cmp(&b.0.id))
-    })
+    let station = station_spot(plan.inbound);
+    // The picks in the rack the open jobs will need (retrieves, moves, relocations).
+    let picks: Vec<(i64, Spot)> = open
+        .iter()
+        .map(|(j, near)| (j.id, pick_spot(plan, j, *near)))
+        .filter(|(_, p)| *p != station)
+        .collect();
+    let cost = |(j, near): &(&Job, Option<Location>)| {
+        // A relocation is a cycle of its own before the job: two fork cycles at least.
+        let extra = near.map_or(0.0, |_| 2.0 * plan.motion.fork_time(1));
+        let now = plan.motion.move_time(from, pick_spot(plan, j, *near)) + extra;
+        // A job that ends in the rack (a store) also weighs the empty run from its end to
+        // the nearest pick it leaves for next: that is what pairs a store with a retrieve.
+        let end = match (near, places.get(&j.id)) {
+            (Some(_), _) => None,
+            (None, Some(place)) => Some(spot(*place)),
+            (None, None) => j.spec().map(|s| end_spot(plan, &s)),
+        };
+        let next = end.filter(|e| *e != station).map_or(0.0, |e| {
+            picks
+                .iter()
+                .filter(|(id, _)| *id != j.id)
+                .map(|(_, p)| plan.motion.move_time(e, *p))
+                .fold(f64::INFINITY, f64::min)
+        });
+        now + if next.is_finite() { next } else { plan.motion.move_time(end.unwrap_or(station), station) }
+    };
+    group.min_by(|a, b| cost(a).total_cmp(&cost(b)).then(a.0.id.cmp(&b.0.id)))
 }
 
 /// Where the crane first goes for a job: its pick (the inbound station for a store), the
@@ -215,7 +276,9 @@ fn pick_spot(plan: &Plan, job: &Job, near: Option<Location>) -> Spot {
     match job.spec() {
         Some(JobSpec::Store { .. } | JobSpec::Putaway { .. }) | None => station_spot(plan.inbound),
         Some(JobSpec::Retrieve { from } | JobSpec::Move { from, .. }) => spot(from),
-        Some(JobSpec::Travel { to } | JobSpec::Clear { location: to } | JobSpec::Light { location: to, .. }) => spot(to),
+        Some(
+            JobSpec::Travel { to } | JobSpec::Clear { location: to } | JobSpec::Light { location: to, .. },
+        ) => spot(to),
     }
 }
 
@@ -234,7 +297,13 @@ fn station_spot(s: Station) -> Spot {
 }
 
 /// Where the box of a store left to rackd goes: from the inbound station, in its zones.
-fn place(plan: &Plan, rack: &Rack, busy: &HashSet<Location>, zones: &[Zone], class: Option<Class>) -> Option<Location> {
+fn place(
+    plan: &Plan,
+    rack: &Rack,
+    busy: &HashSet<Location>,
+    zones: &[Zone],
+    class: Option<Class>,
+) -> Option<Location> {
     let station = station_spot(plan.inbound);
     let aisle = zones.first()?.aisle;
     let want = Want { aisle, from: station, station, class, zones, busy };

@@ -163,12 +163,18 @@ fn a_store_left_to_rackd_gets_the_nearest_far_place_in_its_zones() {
     let empty = rack(&[]);
     let decision = run(&p, &mut Memory::default(), std::slice::from_ref(&anywhere), &empty);
     assert_eq!(decision, Decision::Place { job: 1, to: at(1, 1, 2) }, "far before near");
-    let high = job(2, 10, JobSpec::Putaway { zones: vec![Zone { level: Some(4), ..Zone::aisle(2) }], class: None });
+    let high =
+        job(2, 10, JobSpec::Putaway { zones: vec![Zone { level: Some(4), ..Zone::aisle(2) }], class: None });
     assert_eq!(run(&p, &mut Memory::default(), &[high], &r), Decision::Place { job: 2, to: at(1, 4, 2) });
     let slow = job(3, 10, JobSpec::Putaway { zones: vec![Zone::aisle(2)], class: Some(Class::C) });
     let Decision::Place { to, .. } = run(&p, &mut Memory::default(), &[slow], &r) else { panic!() };
     assert!(to.bay >= 10, "class C goes to the far third: {to:?}");
     let full: Vec<Location> = (1..=4).flat_map(|level| [at(3, level, 1), at(3, level, 2)]).collect();
-    let nowhere = job(4, 10, JobSpec::Putaway { zones: vec![Zone { bay: Some(3), ..Zone::aisle(2) }], class: None });
-    assert_eq!(run(&p, &mut Memory::default(), &[nowhere], &rack(&full)), Decision::Wait, "a full zone waits");
+    let nowhere =
+        job(4, 10, JobSpec::Putaway { zones: vec![Zone { bay: Some(3), ..Zone::aisle(2) }], class: None });
+    assert_eq!(
+        run(&p, &mut Memory::default(), &[nowhere], &rack(&full)),
+        Decision::Wait,
+        "a full zone waits"
+    );
 }

@@ -32,8 +32,8 @@ use std::sync::Mutex;
 use crate::devices::config::CraneConfig;
 use crate::domain::Job;
 use crate::store::{Pool, locations};
-pub use decide::{Decision, Plan};
 use decide::Memory;
+pub use decide::{Decision, Plan};
 use rack::Rack;
 
 /// One crane's planner.

@@ -58,12 +58,15 @@ pub fn choose(rack: &Rack, motion: &Motion, want: &Want) -> Option<Location> {
         .collect();
     let band = want.class.map(|class| (class, bands(rack, motion, want)));
     let key = |l: Location| {
-        let miss = band.as_ref().map_or(0, |(class, edges)| band_miss(*class, edges, motion, want.station, l));
+        let miss =
+            band.as_ref().map_or(0, |(class, edges)| band_miss(*class, edges, motion, want.station, l));
         (miss, motion.move_time(want.from, spot(l)), u8::from(!rack.is_far(l)), l)
     };
-    candidates.into_iter().map(key).min_by(|a, b| {
-        a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)).then(a.3.cmp(&b.3))
-    }).map(|k| k.3)
+    candidates
+        .into_iter()
+        .map(key)
+        .min_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)).then(a.3.cmp(&b.3)))
+        .map(|k| k.3)
 }
 
 /// Travel times from the station at which band B and band C begin.

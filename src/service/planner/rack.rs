@@ -37,7 +37,8 @@ impl Rack {
         let cells = states
             .iter()
             .map(|s| {
-                let cell = Cell { occupied: s.occupied, reserved_by: s.reserved_by, locked: s.lock.is_some() };
+                let cell =
+                    Cell { occupied: s.occupied, reserved_by: s.reserved_by, locked: s.lock.is_some() };
                 (s.location(), cell)
             })
             .collect();

@@ -405,9 +405,10 @@ impl Group {
                 if job.state != JobState::Queued || job.to.is_some() || job.zones.is_none() {
                     return Err(WriteError::Unexpected { id, state: job.state });
                 }
-                let free = self.locations.get(to).is_some_and(|r| {
-                    !r.occupied && r.reserved_by.is_none() && r.locked_at.is_none()
-                });
+                let free = self
+                    .locations
+                    .get(to)
+                    .is_some_and(|r| !r.occupied && r.reserved_by.is_none() && r.locked_at.is_none());
                 if !free {
                     return Err(WriteError::Taken(*to));
                 }

@@ -18,8 +18,17 @@ use crate::store::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOBS, LOCATIONS};
 use crate::store::engine::Engine;
 use crate::store::on;
 
-const JOB_UPDATE: [&str; 9] =
-    ["state", "priority", "forced", "failure_kind", "failure_code", "failure_text", "updated_at", "attempt", "spec"];
+const JOB_UPDATE: [&str; 9] = [
+    "state",
+    "priority",
+    "forced",
+    "failure_kind",
+    "failure_code",
+    "failure_text",
+    "updated_at",
+    "attempt",
+    "spec",
+];
 
 /// The statements, per engine, built once.
 struct Statements {

@@ -252,7 +252,14 @@ impl Rig {
     pub fn queue(&self, spec: JobSpec) -> i64 {
         let mut jobs = self.port.jobs.lock().unwrap();
         let id = jobs.keys().last().map_or(1, |k| k + 1);
-        let new = NewJob { spec, reference: None, priority: Priority::DEFAULT, barcode: None, device: None, serves: None };
+        let new = NewJob {
+            spec,
+            reference: None,
+            priority: Priority::DEFAULT,
+            barcode: None,
+            device: None,
+            serves: None,
+        };
         jobs.insert(id, new.accepted(id, rackd::domain::time::now_ms()));
         drop(jobs);
         self.port.wake.notify_one();
