@@ -29,14 +29,14 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, ensure};
 use serde_json::{Value, json};
-use tokio::sync::oneshot;
 
-use rackd::app::Application;
 use rackd::config::Config;
 use rackd::devices::config::{CraneConfig, Planner};
 use rackd::protocols::mc3e::TransportKind;
 use rackd::sim::crane::{CraneSim, CraneSimOptions, CraneStats};
 use rackd::wire::motion::Motion;
+
+use crate::served::Served;
 
 /// `bench crane`'s options.
 #[derive(clap::Args, Debug, Clone)]
@@ -261,12 +261,8 @@ async fn one(planner: Planner, workload: &Workload, args: &CraneArgs) -> anyhow:
     (device.poll_ms, device.heartbeat_ms, device.planner) = (10, 100, planner);
     device.max_overtaken = args.max_overtaken.unwrap_or(device.max_overtaken);
     config.devices = vec![device.into()];
-    let app = Application::build(&config, false).await?;
-    let base = format!("http://{}", app.local_addr());
-    let (stop, stopped) = oneshot::channel::<()>();
-    let server = tokio::spawn(app.run_until(async {
-        let _ = stopped.await;
-    }));
+    let served = Served::start(&config).await?;
+    let base = served.base.clone();
     let client = reqwest::Client::new();
     let locations: Vec<Value> = workload
         .stock
@@ -316,8 +312,7 @@ async fn one(planner: Planner, workload: &Workload, args: &CraneArgs) -> anyhow:
     let relocations =
         moves["jobs"].as_array().map_or(0, |m| m.iter().filter(|j| !j["serves"].is_null()).count());
     let stats = sim.stats();
-    let _ = stop.send(());
-    server.await??;
+    served.stop().await?;
     sim.shutdown().await;
     Ok(Figures {
         stats,

@@ -11,10 +11,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use hdrhistogram::Histogram;
-use tokio::sync::oneshot;
 
-use rackd::app::Application;
 use rackd::config::Config;
+
+use crate::served::Served;
 
 struct Phase {
     name: &'static str,
@@ -45,12 +45,8 @@ pub async fn run(clients: usize, seconds: u64, batch: usize, database: &str) -> 
         url => config.database.url = Some(url.to_owned()),
     }
     let engine = if config.database.url.is_some() { "postgres" } else { "sqlite" };
-    let app = Application::build(&config, false).await?;
-    let base = format!("http://{}", app.local_addr());
-    let (stop, stopped) = oneshot::channel::<()>();
-    let server = tokio::spawn(app.run_until(async {
-        let _ = stopped.await;
-    }));
+    let served = Served::start(&config).await?;
+    let base = served.base.clone();
     let duration = Duration::from_secs(seconds);
     let client = reqwest::Client::builder().pool_max_idle_per_host(clients).build()?;
     println!(
@@ -92,8 +88,7 @@ pub async fn run(clients: usize, seconds: u64, batch: usize, database: &str) -> 
             100.0 * p.requests_per_sec() / trivial.requests_per_sec(),
         );
     }
-    let _ = stop.send(());
-    server.await??;
+    served.stop().await?;
     Ok(())
 }
 

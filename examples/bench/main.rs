@@ -27,6 +27,7 @@ mod fleet;
 mod intake;
 #[path = "../../tests/common/postgres.rs"]
 mod postgres;
+mod served;
 mod shelf;
 mod ws;
 

@@ -21,9 +21,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use hdrhistogram::Histogram;
-use tokio::sync::oneshot;
 
-use rackd::app::Application;
 use rackd::cli::demo::shelf_device;
 use rackd::config::Config;
 use rackd::protocols::PlcMemory;
@@ -31,6 +29,8 @@ use rackd::protocols::faults::Faults;
 use rackd::protocols::modbus::{ModbusClient, ModbusConfig};
 use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
 use rackd::wire::task_id_for;
+
+use crate::served::Served;
 
 /// The lossy comparison of `--drop`.
 pub struct Lossy {
@@ -69,12 +69,8 @@ pub async fn run(
         device.link.tuning.min_timeout = device.link.timeout;
     }
     config.devices = vec![device.into()];
-    let app = Application::build(&config, false).await?;
-    let base = format!("http://{}", app.local_addr());
-    let (stop, stopped) = oneshot::channel::<()>();
-    let server = tokio::spawn(app.run_until(async {
-        let _ = stopped.await;
-    }));
+    let served = Served::start(&config).await?;
+    let base = served.base.clone();
     let client = reqwest::Client::new();
 
     if let Some(lossy) = lossy {
@@ -96,8 +92,7 @@ pub async fn run(
         println!("{:>3.0}% requests lost:  {dropped:.1} completed jobs/s", lossy.rate * 100.0);
         println!("ratio lossy / clean: {:.1}%", 100.0 * dropped / clean);
         println!("device link after the lossy run: {}", device["link"]);
-        let _ = stop.send(());
-        server.await??;
+        served.stop().await?;
         sim.shutdown().await;
         return Ok(());
     }
@@ -147,8 +142,7 @@ pub async fn run(
         done as f64 / elapsed.as_secs_f64(),
         60
     );
-    let _ = stop.send(());
-    server.await??;
+    served.stop().await?;
     sim.shutdown().await;
     Ok(())
 }
