@@ -191,6 +191,8 @@ pub enum WaitingFilter {
     SlotsBusy,
     /// See [`WaitingReason::NoDevice`].
     NoDevice,
+    /// See [`WaitingReason::NoPlace`].
+    NoPlace,
 }
 
 impl WaitingFilter {
@@ -211,6 +213,7 @@ impl WaitingFilter {
             WaitingFilter::BehindJob => WaitingReason::BehindJob.as_str(),
             WaitingFilter::SlotsBusy => WaitingReason::SlotsBusy.as_str(),
             WaitingFilter::NoDevice => WaitingReason::NoDevice.as_str(),
+            WaitingFilter::NoPlace => WaitingReason::NoPlace.as_str(),
         }
     }
 }

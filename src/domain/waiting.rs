@@ -27,11 +27,14 @@ pub enum WaitingReason {
     SlotsBusy,
     /// No configured device runs it.
     NoDevice,
+    /// Its crane's planner finds no free location for it: a store left to rackd whose
+    /// zones are full, or a relocation it needs with nowhere to go.
+    NoPlace,
 }
 
 impl WaitingReason {
     /// Every reason.
-    pub const ALL: [WaitingReason; 8] = [
+    pub const ALL: [WaitingReason; 9] = [
         WaitingReason::DeviceOffline,
         WaitingReason::DevicePaused,
         WaitingReason::AislePaused,
@@ -40,6 +43,7 @@ impl WaitingReason {
         WaitingReason::BehindJob,
         WaitingReason::SlotsBusy,
         WaitingReason::NoDevice,
+        WaitingReason::NoPlace,
     ];
 
     /// The reason's name as the API writes it.
@@ -53,6 +57,7 @@ impl WaitingReason {
             WaitingReason::BehindJob => "behind_job",
             WaitingReason::SlotsBusy => "slots_busy",
             WaitingReason::NoDevice => "no_device",
+            WaitingReason::NoPlace => "no_place",
         }
     }
 

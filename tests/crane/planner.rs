@@ -238,3 +238,30 @@ async fn a_mixed_workload_raises_no_business_alarm_and_both_inventories_agree() 
     assert_eq!(rackd, crane, "rackd's location model and the crane's own rack agree");
     app.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_store_whose_zones_are_full_waits_and_says_so() {
+    let (app, _sim) = deep_app(|_| {}).await;
+    stock(&app, &[cloc(1, 3, 1, 1), cloc(1, 3, 1, 2)]).await;
+    let zone = json!({"kind": "store", "zones": [{"aisle": 2, "row": 1, "bay": 3, "level": 1}]});
+    let id = submit(&app, zone, "FULL-ZONE").await;
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    let waiting = loop {
+        let (_, job) = app.get(&format!("/api/v1/jobs/{id}")).await;
+        if job["waiting"]["reason"] == "no_place" {
+            break job;
+        }
+        assert!(std::time::Instant::now() < deadline, "never no_place: {job}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    assert_eq!(waiting["state"], "queued", "{waiting}");
+    let (_, listed) = app.get("/api/v1/jobs?waiting=no_place").await;
+    assert_eq!(listed["jobs"].as_array().unwrap().len(), 1, "{listed}");
+    // The near box goes out: the far place is still walled in until it does, then the
+    // near one is free; the store takes it.
+    let out = submit(&app, json!({"kind": "retrieve", "from": cloc(1, 3, 1, 1)}), "OUT").await;
+    assert_eq!(wait_job(&app, out, &["completed", "failed"], 10).await["state"], "completed");
+    let done = wait_job(&app, id, &["completed", "failed"], 10).await;
+    assert_eq!((done["state"].clone(), done["to"].clone()), (json!("completed"), cloc(1, 3, 1, 1)), "{done}");
+    app.stop().await;
+}

@@ -18,6 +18,7 @@ export const REASONS = {
   behind_job: 'behind another job',
   slots_busy: 'all slots busy',
   no_device: 'no device serves the aisle',
+  no_place: 'no free location',
 };
 
 /** How long a failed job stays among those that need attention (as the header counts it). */
@@ -43,6 +44,8 @@ function describe(w) {
       return `every slot of ${device} is busy`;
     case 'no_device':
       return 'no device serves its aisle';
+    case 'no_place':
+      return 'no free location for it';
     default:
       return 'waiting';
   }

@@ -212,6 +212,11 @@ impl Queues {
         self.0.lanes.iter().map(|(id, lane)| (id.as_str(), lane.window)).collect()
     }
 
+    /// A crane's planner.
+    pub(super) fn planner(&self, device: &str) -> Option<&Arc<CranePlanner>> {
+        self.0.lanes.get(device)?.planner.as_ref()
+    }
+
     /// The device's pause, if it is paused.
     pub(super) fn pause_of(&self, device: &str) -> Option<Pause> {
         self.0.lanes.get(device).and_then(|l| l.control.borrow().pause.clone())
@@ -386,7 +391,7 @@ impl Port for DevicePort {
     }
 
     async fn next_task(&self) -> Result<Option<Job>, ReportError> {
-        let planner = self.queues.0.lanes.get(&self.device).and_then(|l| l.planner.clone());
+        let planner = self.queues.planner(&self.device).cloned();
         match planner {
             Some(planner) => super::plan::next_task(self, &planner).await,
             None => Ok(self.eligible(1, &HashSet::new()).into_iter().next()),

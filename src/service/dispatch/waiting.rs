@@ -14,7 +14,10 @@
 //! 5. `location_locked`, then `aisle_paused`: as the dispatcher holds such jobs back;
 //! 6. `behind_job`: an older unfinished job on the same device touches one of its
 //!    locations (the job named is the nearest one ahead, the one it waits for directly);
-//! 7. `slots_busy`: every slot of its device (the crane) is taken by rackd's other jobs or
+//! 7. what the crane planner's last decision left it waiting for: `behind_job` (the job that
+//!    takes the box in front of its far location, or fills the far place behind its near
+//!    one, first) or `no_place` (no free location for it or for the box in its way);
+//! 8. `slots_busy`: every slot of its device (the crane) is taken by rackd's other jobs or
 //!    shows busy.
 //!
 //! Otherwise the job is about to be handed out and `waiting` is null, as it is for every job
@@ -41,6 +44,7 @@ use tokio::sync::watch;
 use super::queues::{Holds, Queue, Queues, because, slashed};
 use crate::devices::DeviceStatus;
 use crate::domain::{Job, JobState, Waiting, WaitingReason};
+use crate::service::planner::Wait;
 use crate::store::writer::{Record, Tell, WriteError, Writer};
 
 /// How long the watcher lets a burst of changes settle before it recomputes.
@@ -131,6 +135,9 @@ impl Queues {
             w.job = Some(id);
             return Some(w);
         }
+        if let Some(w) = self.planned(job, device) {
+            return Some(w);
+        }
         let total = status.map_or(0, |s| usize::from(s.slots_total));
         let in_use = status.map_or(0, |s| usize::from(s.slots_in_use)).max(queue.active.len());
         if total > 0 && in_use >= total {
@@ -141,6 +148,23 @@ impl Queues {
             return Some(Waiting::new(WaitingReason::SlotsBusy, text).on(device));
         }
         None
+    }
+
+    /// What the crane planner's last decision left `job` waiting for, if anything.
+    fn planned(&self, job: &Job, device: &str) -> Option<Waiting> {
+        let planner = self.planner(device)?;
+        Some(match planner.wait_of(job.id)? {
+            Wait::Behind(id) => {
+                let text = format!("behind job {id}, which clears the way in the double-deep rack first");
+                let mut w = Waiting::new(WaitingReason::BehindJob, text).on(device);
+                w.job = Some(id);
+                w
+            }
+            Wait::NoPlace => {
+                let text = "no free location: its zones are full, or a box in its way has nowhere to go";
+                Waiting::new(WaitingReason::NoPlace, text).on(device)
+            }
+        })
     }
 
     /// The writer hook: fills in each job's reason before its event is written, and

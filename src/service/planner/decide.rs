@@ -55,6 +55,19 @@ pub struct Memory {
     pub at: Option<Spot>,
     /// Times each queued job was passed over by a younger one of its priority.
     pub overtaken: HashMap<i64, u32>,
+    /// Why the last decision left each of these jobs waiting.
+    pub waits: HashMap<i64, Wait>,
+}
+
+/// Why the planner left a job waiting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Wait {
+    /// Another unfinished job takes the box in front of it, or fills a far place behind
+    /// the near one it puts into, first.
+    Behind(i64),
+    /// No free location: for a store left to rackd in its zones, or for the box a
+    /// relocation would move.
+    NoPlace,
 }
 
 /// What the crane should do next.
@@ -167,11 +180,12 @@ pub fn decide(
     rack: &Rack,
 ) -> Decision {
     let mut open: Vec<(&Job, Option<Location>)> = Vec::new();
+    memory.waits.clear();
     for job in candidates {
         match check(job, rack, unfinished) {
             Verdict::Go => open.push((job, None)),
             Verdict::Relocate(near) => open.push((job, Some(near))),
-            Verdict::Behind(_) => {}
+            Verdict::Behind(id) => drop(memory.waits.insert(job.id, Wait::Behind(id))),
             Verdict::Impossible(text) => return Decision::Refuse { job: job.id, text },
         }
     }
@@ -188,9 +202,15 @@ pub fn decide(
             _ => None,
         })
         .collect();
-    open.retain(|(job, near)| match near {
-        Some(near) => target(plan, rack, &busy, job, *near).is_some(),
-        None => !matches!(job.spec(), Some(JobSpec::Putaway { .. })) || places.contains_key(&job.id),
+    open.retain(|(job, near)| {
+        let placed = match near {
+            Some(near) => target(plan, rack, &busy, job, *near).is_some(),
+            None => !matches!(job.spec(), Some(JobSpec::Putaway { .. })) || places.contains_key(&job.id),
+        };
+        if !placed {
+            memory.waits.insert(job.id, Wait::NoPlace);
+        }
+        placed
     });
     let Some(&(job, near)) = pick(plan, memory, &open, &places) else { return Decision::Wait };
     let live: HashSet<i64> = unfinished.iter().map(|j| j.id).collect();

@@ -33,7 +33,7 @@ use crate::devices::config::CraneConfig;
 use crate::domain::Job;
 use crate::store::{Pool, locations};
 use decide::Memory;
-pub use decide::{Decision, Plan};
+pub use decide::{Decision, Plan, Wait};
 use rack::Rack;
 
 /// One crane's planner.
@@ -75,12 +75,8 @@ impl CranePlanner {
         decide::decide(&self.plan, &mut memory, candidates, unfinished, rack)
     }
 
-    /// Why a queued job waits on the rack, if it does: the job that takes the box in front
-    /// of its far location first.
-    pub fn behind(&self, job: &Job, unfinished: &[&Job], rack: &Rack) -> Option<i64> {
-        match decide::check(job, rack, unfinished) {
-            decide::Verdict::Behind(id) => Some(id),
-            _ => None,
-        }
+    /// Why the last decision left `job` waiting, if it did.
+    pub fn wait_of(&self, job: i64) -> Option<Wait> {
+        self.memory.lock().unwrap_or_else(|p| p.into_inner()).waits.get(&job).copied()
     }
 }
