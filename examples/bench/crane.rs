@@ -4,7 +4,7 @@
 //! The workload is drawn once from `--seed`:
 //! - aisle 2 of the demo site (2 rows, 20 bays, 8 levels, double-deep) starts with each
 //!   location full with probability `--fill`; rackd's inventory and the simulator's agree;
-//! - `--jobs` jobs follow, half retrieves, half stores, in an order a WMS could send them
+//! - `--jobs` jobs follow, half retrieves, half stores, shuffled, in an order a WMS could send them
 //!   (drawn against the rack as it would be if they ran in that order): a retrieve takes a
 //!   box that is there, a store names a free location (far only behind an empty near), or,
 //!   for a `--putaway` share of the stores, leaves it to rackd (`{"kind": "store", "aisle": 2}`);
@@ -175,8 +175,13 @@ impl Workload {
             .collect();
         let mut boxes = stock.clone();
         let mut jobs = Vec::new();
-        while jobs.len() < args.jobs {
-            if rng.unit() < 0.5 && !boxes.is_empty() {
+        // Half retrieves, half stores, in a shuffled order.
+        let mut kinds: Vec<bool> = (0..args.jobs).map(|i| i % 2 == 0).collect();
+        for i in (1..kinds.len()).rev() {
+            kinds.swap(i, rng.below(i + 1));
+        }
+        for retrieve in kinds {
+            if retrieve && !boxes.is_empty() {
                 let (_, barcode) = boxes.swap_remove(rng.below(boxes.len()));
                 jobs.push(Order::Retrieve(barcode));
                 continue;
@@ -187,10 +192,7 @@ impl Workload {
                 .filter(|c| !full.contains(c))
                 .filter(|&[row, bay, level, side]| side == 1 || !full.contains(&[row, bay, level, 1]))
                 .collect();
-            if open.is_empty() {
-                continue;
-            }
-            let cell = open[rng.below(open.len())];
+            let Some(&cell) = open.get(rng.below(open.len().max(1))) else { continue };
             let barcode = format!("NEW-{:04}", jobs.len());
             jobs.push(Order::Store { cell, barcode: barcode.clone(), putaway: rng.unit() < args.putaway });
             boxes.push((cell, barcode));
