@@ -67,17 +67,17 @@ pub(crate) struct JobRow {
 pub(crate) const COLUMNS: &str = "id, reference, priority, barcode, spec, device, state, forced, \
     failure_kind, failure_code, failure_text, created_at, updated_at, attempt";
 
-/// The `spec` column: what the job does, and what rackd's planner adds to it (the job a
-/// relocation serves; where a store left to rackd may go, kept once its location is
-/// chosen), as one JSON object, so that jobs keep the columns (and the bound values per
-/// row of a SQLite insert) they had.
-#[derive(Serialize, serde::Deserialize)]
+/// The `spec` column: what the job does (a [`JobSpec`] as JSON), and beside its keys what
+/// rackd's planner adds to it (`serves`: the job a relocation serves; `putaway`: where a
+/// store left to rackd may go, kept once its location is chosen), so that jobs keep the
+/// columns (and the bound values per row of a SQLite insert) they had.
+///
+/// Both directions are on the intake's path, measured: a plain job is written and read as
+/// its `JobSpec` alone, and the planner's keys are added or looked for only when present
+/// (serde's `flatten` cost intake about 15%).
 pub(crate) struct StoredSpec {
-    #[serde(flatten)]
     pub(crate) spec: JobSpec,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub(crate) serves: Option<i64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub(crate) putaway: Option<Putaway>,
 }
 
@@ -89,21 +89,46 @@ pub(crate) struct Putaway {
     class: Option<Class>,
 }
 
+/// The planner's keys of the column.
+#[derive(Serialize, serde::Deserialize)]
+struct Planned {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    serves: Option<i64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    putaway: Option<Putaway>,
+}
+
 impl StoredSpec {
     /// The column's text for `job` (`null` for a job whose fields make no spec, which
     /// [`Job`]'s constructors never build).
     pub(crate) fn json(job: &Job) -> String {
-        let stored = job.spec().map(|spec| {
-            let putaway = match (&spec, &job.zones) {
-                (JobSpec::Store { .. }, Some(zones)) => {
-                    Some(Putaway { zones: zones.clone(), class: job.class })
-                }
-                _ => None,
-            };
-            StoredSpec { spec, serves: job.serves, putaway }
-        });
         // Our own types, no maps with non-string keys: serializing cannot fail.
-        serde_json::to_string(&stored).unwrap_or_default()
+        let Some(spec) = job.spec() else { return "null".into() };
+        let putaway = match (&spec, &job.zones) {
+            (JobSpec::Store { .. }, Some(zones)) => Some(Putaway { zones: zones.clone(), class: job.class }),
+            _ => None,
+        };
+        let plain = serde_json::to_string(&spec).unwrap_or_default();
+        if job.serves.is_none() && putaway.is_none() {
+            return plain;
+        }
+        let extra = serde_json::to_string(&Planned { serves: job.serves, putaway }).unwrap_or_default();
+        // Two JSON objects, each with at least one key: one object with the keys of both.
+        match (plain.strip_suffix('}'), extra.strip_prefix('{')) {
+            (Some(head), Some(tail)) => format!("{head},{tail}"),
+            _ => plain,
+        }
+    }
+
+    /// Reads the column.
+    pub(crate) fn parse(text: &str) -> Result<StoredSpec, serde_json::Error> {
+        let spec: JobSpec = serde_json::from_str(text)?;
+        let planned = if text.contains("\"serves\"") || text.contains("\"putaway\"") {
+            serde_json::from_str::<Planned>(text)?
+        } else {
+            Planned { serves: None, putaway: None }
+        };
+        Ok(StoredSpec { spec, serves: planned.serves, putaway: planned.putaway })
     }
 }
 
@@ -122,7 +147,7 @@ impl TryFrom<JobRow> for Job {
     fn try_from(row: JobRow) -> Result<Job, CorruptRow> {
         let id = row.id;
         let corrupt = |what: &'static str| CorruptRow { id, what };
-        let stored: StoredSpec = serde_json::from_str(&row.spec).map_err(|_| corrupt("spec"))?;
+        let stored = StoredSpec::parse(&row.spec).map_err(|_| corrupt("spec"))?;
         let spec = stored.spec;
         let priority = Priority::try_from(row.priority).map_err(|_| corrupt("priority"))?;
         let state = JobState::parse(&row.state).ok_or_else(|| corrupt("state"))?;
@@ -277,4 +302,53 @@ pub async fn unfinished(db: impl Into<Reader<'_>>, device: &str) -> Result<Vec<J
     let q = sqlx::AssertSqlSafe(sql);
     let rows: Vec<JobRow> = read!(db.into(), p => sqlx::query_as(q).bind(device).fetch_all(p).await)?;
     rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::domain::Location;
+
+    fn at(bay: u16, position: u16) -> Location {
+        Location { aisle: 2, row: 1, bay, level: 3, position }
+    }
+
+    fn round_trip(new: NewJob, placed: Option<Location>) -> (String, Job) {
+        let mut job = new.accepted(7, 0);
+        job.to = placed.or(job.to);
+        let text = StoredSpec::json(&job);
+        let stored = StoredSpec::parse(&text).unwrap();
+        let mut back = NewJob { spec: stored.spec, serves: stored.serves, ..new }.accepted(7, 0);
+        if let Some(p) = stored.putaway {
+            (back.zones, back.class) = (Some(p.zones), p.class);
+        }
+        (text, back)
+    }
+
+    #[test]
+    fn the_spec_column_keeps_what_the_planner_adds() {
+        let plain = NewJob {
+            spec: JobSpec::Move { from: at(1, 1), to: at(2, 2) },
+            reference: None,
+            priority: Priority::DEFAULT,
+            barcode: None,
+            device: None,
+            serves: None,
+        };
+        let (text, back) = round_trip(plain.clone(), None);
+        assert_eq!(text, serde_json::to_string(&plain.spec).unwrap(), "a plain job is its spec alone");
+        assert_eq!(back.serves, None);
+        let relocation = NewJob { serves: Some(41), ..plain };
+        let (text, back) = round_trip(relocation.clone(), None);
+        assert!(text.ends_with("\"position\":2},\"serves\":41}"), "{text}");
+        assert_eq!((back.spec(), back.serves), (Some(relocation.spec), Some(41)));
+        let zones = vec![Zone { row: Some(1), ..Zone::aisle(2) }];
+        let putaway =
+            NewJob { spec: JobSpec::Putaway { zones: zones.clone(), class: Some(Class::B) }, ..relocation };
+        let (_, back) = round_trip(putaway.clone(), None);
+        assert_eq!((back.to, back.zones.clone(), back.class), (None, Some(zones.clone()), Some(Class::B)));
+        let (text, back) = round_trip(putaway, Some(at(4, 2)));
+        assert!(text.contains("\"putaway\":{\"zones\":[{\"aisle\":2,\"row\":1}],\"class\":\"B\"}"), "{text}");
+        assert_eq!((back.to, back.zones, back.class), (Some(at(4, 2)), Some(zones), Some(Class::B)));
+    }
 }
