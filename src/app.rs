@@ -5,6 +5,7 @@ use std::collections::BTreeSet;
 use std::future::Future;
 use std::net::SocketAddr;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
@@ -77,6 +78,7 @@ impl Application {
             .with_context(|| format!("opening database {}", database.display()))?;
         let layout = config.layout();
         locations::seed(&pool, &layout, now_ms()).await.context("seeding locations")?;
+        let commits = Arc::new(AtomicU64::new(0));
         let deep: BTreeSet<u16> =
             config.site.aisles.iter().filter(|a| a.depth == 2).map(|a| a.aisle).collect();
         let queues = Queues::new(config.devices.iter().map(|d| Setup {
@@ -84,7 +86,9 @@ impl Application {
             window: d.dispatch_window(),
             aisles: d.aisles().to_vec(),
             planner: match d {
-                DeviceConfig::Crane(c) => Some(Arc::new(CranePlanner::new(c, &deep, pool.clone()))),
+                DeviceConfig::Crane(c) => {
+                    Some(Arc::new(CranePlanner::new(c, &deep, pool.clone(), commits.clone())))
+                }
                 _ => None,
             },
         }));
@@ -93,7 +97,13 @@ impl Application {
         let hooks = Hooks {
             locked: Some(queues.locked_hook()),
             committed: Some(queues.hook()),
-            publish: Some(hub.hook()),
+            publish: Some({
+                let (publish, commits) = (hub.hook(), commits.clone());
+                Arc::new(move |events| {
+                    commits.fetch_add(1, Ordering::Release);
+                    publish(events)
+                })
+            }),
             observe: Some(metrics.writer_hook()),
             tell: Some(queues.tell_hook()),
         };

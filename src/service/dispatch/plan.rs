@@ -16,7 +16,11 @@ use crate::store::writer::{Change, Outcome, WriteError};
 pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Result<Option<Job>, ReportError> {
     // A refusal ends a job and the choice is made again among the others; a place taken
     // meanwhile is chosen again. Bounded: a crane polls again soon anyway.
+    if planner.unchanged_since_wait() {
+        return Ok(None);
+    }
     for _ in 0..ROUNDS {
+        let seen = planner.commits();
         let candidates = port.eligible(usize::MAX, &HashSet::new());
         if candidates.is_empty() {
             return Ok(None);
@@ -26,7 +30,10 @@ pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Resu
         let (c, u): (Vec<&Job>, Vec<&Job>) = (candidates.iter().collect(), unfinished.iter().collect());
         match planner.decide(&c, &u, &rack) {
             Decision::Run(id) => return Ok(candidates.into_iter().find(|j| j.id == id)),
-            Decision::Wait => return Ok(None),
+            Decision::Wait => {
+                planner.waited(seen);
+                return Ok(None);
+            }
             Decision::Place { job, to } => match port.writer.change(job, Change::Place(to)).await {
                 Ok(placed) => return Ok(Some(placed)),
                 // Taken since the rack was read (an inventory load): choose again.

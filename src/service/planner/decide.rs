@@ -191,22 +191,21 @@ pub fn decide(
     }
     let busy: HashSet<Location> =
         unfinished.iter().filter_map(|j| j.spec()).flat_map(|s| s.locations()).collect();
-    // A job whose relocation has nowhere to go waits; so does a store left to rackd while
-    // its zones have no place.
+    // Where each box rackd places goes: a store left to rackd, the near box of a job that
+    // needs a relocation. A job with no such place waits.
     let places: HashMap<i64, Location> = open
         .iter()
-        .filter_map(|(job, _)| match job.spec() {
-            Some(JobSpec::Putaway { zones, class }) => {
+        .filter_map(|(job, near)| match (near, job.spec()) {
+            (Some(near), _) => Some((job.id, target(plan, rack, &busy, job, *near)?)),
+            (None, Some(JobSpec::Putaway { zones, class })) => {
                 Some((job.id, place(plan, rack, &busy, &zones, class)?))
             }
             _ => None,
         })
         .collect();
     open.retain(|(job, near)| {
-        let placed = match near {
-            Some(near) => target(plan, rack, &busy, job, *near).is_some(),
-            None => !matches!(job.spec(), Some(JobSpec::Putaway { .. })) || places.contains_key(&job.id),
-        };
+        let placed = places.contains_key(&job.id)
+            || (near.is_none() && !matches!(job.spec(), Some(JobSpec::Putaway { .. })));
         if !placed {
             memory.waits.insert(job.id, Wait::NoPlace);
         }
@@ -232,7 +231,7 @@ pub fn decide(
             Decision::Run(job.id)
         }
         Some(from) => {
-            let to = target(plan, rack, &busy, job, from).unwrap_or(from);
+            let to = places[&job.id];
             memory.at = Some(spot(to));
             Decision::Relocate { serves: job.id, from, to }
         }

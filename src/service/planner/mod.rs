@@ -14,7 +14,10 @@
 //!
 //! The rack it reads is rackd's location model (occupancy and reservations), read afresh
 //! for each decision: a crane decides once a cycle, so a read of its aisles is cheap next
-//! to the minute a cycle takes, and nothing can go stale. Where the crane stands is where
+//! to the minute a cycle takes, and nothing can go stale. An idle crane asks at every poll,
+//! though: after a decision to wait, it is not made again (nor the rack read) until the job
+//! writer has committed something since ([`CranePlanner::unchanged_since_wait`]), since
+//! every change a decision depends on (a job, a location, a pause or a lock) is a commit. Where the crane stands is where
 //! its last task was to end (rackd's own record, not D220/D221, whose units a site's
 //! program decides).
 
@@ -27,7 +30,8 @@ pub mod refusal;
 mod decide_tests;
 
 use std::collections::BTreeSet;
-use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 
 use crate::devices::config::CraneConfig;
 use crate::domain::Job;
@@ -43,11 +47,21 @@ pub struct CranePlanner {
     deep: BTreeSet<u16>,
     memory: Mutex<Memory>,
     pool: Pool,
+    /// Commits of the job writer so far (bumped by its publish hook).
+    commits: Arc<AtomicU64>,
+    /// The commit count at the last decision to wait.
+    waited_at: Mutex<Option<u64>>,
 }
 
 impl CranePlanner {
-    /// The planner of `crane`; `deep` are the site's double-deep aisles.
-    pub fn new(crane: &CraneConfig, deep: &BTreeSet<u16>, pool: Pool) -> CranePlanner {
+    /// The planner of `crane`; `deep` are the site's double-deep aisles; `commits` counts
+    /// the job writer's commits.
+    pub fn new(
+        crane: &CraneConfig,
+        deep: &BTreeSet<u16>,
+        pool: Pool,
+        commits: Arc<AtomicU64>,
+    ) -> CranePlanner {
         let plan = Plan {
             strategy: crane.planner,
             motion: crane.motion,
@@ -56,7 +70,31 @@ impl CranePlanner {
             max_overtaken: crane.max_overtaken,
         };
         let deep = deep.iter().copied().filter(|a| crane.aisles.contains(a)).collect();
-        CranePlanner { plan, aisles: crane.aisles.clone(), deep, memory: Mutex::default(), pool }
+        let memory = Mutex::default();
+        CranePlanner {
+            plan,
+            aisles: crane.aisles.clone(),
+            deep,
+            memory,
+            pool,
+            commits,
+            waited_at: Mutex::default(),
+        }
+    }
+
+    /// The writer's commit count now, to note with a decision.
+    pub fn commits(&self) -> u64 {
+        self.commits.load(Ordering::Acquire)
+    }
+
+    /// Notes a decision to wait, made on what stood at commit count `at`.
+    pub fn waited(&self, at: u64) {
+        *self.waited_at.lock().unwrap_or_else(|p| p.into_inner()) = Some(at);
+    }
+
+    /// Whether the last decision was to wait and nothing was committed since.
+    pub fn unchanged_since_wait(&self) -> bool {
+        *self.waited_at.lock().unwrap_or_else(|p| p.into_inner()) == Some(self.commits())
     }
 
     /// The crane's aisles as the location model has them now.
