@@ -22,7 +22,9 @@
 //! That second term makes dual command cycles: after a retrieve (the crane at the station)
 //! a store whose put lies near a waiting retrieve, then that retrieve. Ties go to the older
 //! job. A job passed over `max_overtaken` times by younger ones of its priority goes next,
-//! so nothing starves.
+//! so nothing starves: at once, or one job later when one job brings the crane nearer to it
+//! than it stands (a store whose put lies near a starved retrieve makes a dual cycle of it
+//! instead of an empty run; [`Memory::due`] holds it for the next decision).
 
 use std::collections::{HashMap, HashSet};
 
@@ -57,6 +59,9 @@ pub struct Memory {
     pub overtaken: HashMap<i64, u32>,
     /// Why the last decision left each of these jobs waiting.
     pub waits: HashMap<i64, Wait>,
+    /// A starved job that goes at the next decision: the last one ran the job that brings
+    /// the crane nearest to it first.
+    pub due: Option<i64>,
 }
 
 /// Why the planner left a job waiting.
@@ -212,6 +217,9 @@ pub fn decide(
         placed
     });
     let Some(&(job, near)) = pick(plan, memory, &open, &places) else { return Decision::Wait };
+    if memory.due == Some(job.id) {
+        memory.due = None;
+    }
     let live: HashSet<i64> = unfinished.iter().map(|j| j.id).collect();
     memory.overtaken.retain(|id, _| live.contains(id));
     for (other, _) in &open {
@@ -240,7 +248,7 @@ pub fn decide(
 
 fn pick<'a>(
     plan: &Plan,
-    memory: &Memory,
+    memory: &mut Memory,
     open: &'a [(&'a Job, Option<Location>)],
     places: &HashMap<i64, Location>,
 ) -> Option<&'a (&'a Job, Option<Location>)> {
@@ -249,41 +257,84 @@ fn pick<'a>(
     if plan.strategy == Planner::Fifo || best == 0 {
         return group.min_by_key(|(j, _)| j.id);
     }
+    if let Some(due) = memory.due.take().and_then(|id| group.clone().find(|(j, _)| j.id == id)) {
+        return Some(due);
+    }
+    let from = memory.at.unwrap_or(station_spot(plan.outbound));
+    let station = station_spot(plan.inbound);
+    let travel = Travel { plan, places, from };
     let starved = group
         .clone()
         .filter(|(j, _)| memory.overtaken.get(&j.id).copied().unwrap_or(0) >= plan.max_overtaken);
     if let Some(oldest) = starved.min_by_key(|(j, _)| j.id) {
-        return Some(oldest);
+        // It goes next, or right after the one job that brings the crane nearer to it than
+        // it stands now (a store whose put lies near a starved retrieve: a dual cycle).
+        let target = travel.first(oldest);
+        let via = |c: &(&Job, Option<Location>)| {
+            travel.end(c).map(|e| travel.empty(c) + plan.motion.move_time(e, target))
+        };
+        let lead = group
+            .filter(|c| c.0.id != oldest.0.id && c.1.is_none())
+            .filter_map(|c| Some((c, via(c)?)))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        return match lead {
+            Some((lead, cost)) if cost < travel.empty(oldest) => {
+                memory.due = Some(oldest.0.id);
+                Some(lead)
+            }
+            _ => Some(oldest),
+        };
     }
-    let from = memory.at.unwrap_or(station_spot(plan.outbound));
-    let station = station_spot(plan.inbound);
     // The picks in the rack the open jobs will need (retrieves, moves, relocations).
-    let picks: Vec<(i64, Spot)> = open
-        .iter()
-        .map(|(j, near)| (j.id, pick_spot(plan, j, *near)))
-        .filter(|(_, p)| *p != station)
-        .collect();
-    let cost = |(j, near): &(&Job, Option<Location>)| {
-        // A relocation is a cycle of its own before the job: two fork cycles at least.
-        let extra = near.map_or(0.0, |_| 2.0 * plan.motion.fork_time(1));
-        let now = plan.motion.move_time(from, pick_spot(plan, j, *near)) + extra;
+    let picks: Vec<(i64, Spot)> =
+        open.iter().map(|c| (c.0.id, travel.first(c))).filter(|(_, p)| *p != station).collect();
+    let cost = |c: &(&Job, Option<Location>)| {
         // A job that ends in the rack (a store) also weighs the empty run from its end to
         // the nearest pick it leaves for next: that is what pairs a store with a retrieve.
-        let end = match (near, places.get(&j.id)) {
-            (Some(_), _) => None,
-            (None, Some(place)) => Some(spot(*place)),
-            (None, None) => j.spec().map(|s| end_spot(plan, &s)),
-        };
+        let end = travel.end(c);
         let next = end.filter(|e| *e != station).map_or(0.0, |e| {
             picks
                 .iter()
-                .filter(|(id, _)| *id != j.id)
+                .filter(|(id, _)| *id != c.0.id)
                 .map(|(_, p)| plan.motion.move_time(e, *p))
                 .fold(f64::INFINITY, f64::min)
         });
-        now + if next.is_finite() { next } else { plan.motion.move_time(end.unwrap_or(station), station) }
+        let next =
+            if next.is_finite() { next } else { plan.motion.move_time(end.unwrap_or(station), station) };
+        travel.empty(c) + next
     };
     group.min_by(|a, b| cost(a).total_cmp(&cost(b)).then(a.0.id.cmp(&b.0.id)))
+}
+
+/// The crane's empty runs, from where it stands, for the travel planner.
+struct Travel<'a> {
+    plan: &'a Plan,
+    places: &'a HashMap<i64, Location>,
+    from: Spot,
+}
+
+impl Travel<'_> {
+    /// Where the crane first goes for a candidate.
+    fn first(&self, (job, near): &(&Job, Option<Location>)) -> Spot {
+        pick_spot(self.plan, job, *near)
+    }
+
+    /// The empty run to a candidate's pick; a relocation first is a cycle of its own, two
+    /// fork cycles at least.
+    fn empty(&self, c: &(&Job, Option<Location>)) -> f64 {
+        let extra = c.1.map_or(0.0, |_| 2.0 * self.plan.motion.fork_time(1));
+        self.plan.motion.move_time(self.from, self.first(c)) + extra
+    }
+
+    /// Where the crane stands once a candidate ends (None for one that needs a relocation
+    /// first: the decision is the relocation).
+    fn end(&self, (job, near): &(&Job, Option<Location>)) -> Option<Spot> {
+        match (near, self.places.get(&job.id)) {
+            (Some(_), _) => None,
+            (None, Some(place)) => Some(spot(*place)),
+            (None, None) => job.spec().map(|s| end_spot(self.plan, &s)),
+        }
+    }
 }
 
 /// Where the crane first goes for a job: its pick (the inbound station for a store), the

@@ -149,6 +149,30 @@ fn nothing_starves_under_the_travel_planner() {
 }
 
 #[test]
+fn a_starved_retrieve_goes_behind_the_store_that_leads_to_it() {
+    // At the station, retrieve 1 (bay 20) is starved; store 3 puts at bay 19: the store
+    // goes first (a dual cycle, not an empty run to bay 20), then retrieve 1, before the
+    // nearer retrieve 2.
+    let r = rack(&[at(20, 4, 1), at(2, 1, 1)]);
+    let p = plan(Planner::Travel);
+    let jobs = [
+        job(1, 10, JobSpec::Retrieve { from: at(20, 4, 1) }),
+        job(2, 10, JobSpec::Retrieve { from: at(2, 1, 1) }),
+        job(3, 10, JobSpec::Store { to: at(19, 4, 2) }),
+    ];
+    let overtaken = [(1, 3)].into_iter().collect();
+    let mut memory = Memory { at: Some(Spot { bay: 0, level: 1 }), overtaken, ..Memory::default() };
+    assert_eq!(run(&p, &mut memory, &jobs, &r), Decision::Run(3));
+    assert_eq!(memory.due, Some(1));
+    assert_eq!(run(&p, &mut memory, &jobs[..2], &r), Decision::Run(1));
+    assert_eq!(memory.due, None);
+    // Without a job that leads nearer, the starved one goes at once.
+    let mut memory = Memory { at: Some(Spot { bay: 0, level: 1 }), ..Memory::default() };
+    memory.overtaken.insert(1, 3);
+    assert_eq!(run(&p, &mut memory, &jobs[..2], &r), Decision::Run(1));
+}
+
+#[test]
 fn a_store_left_to_rackd_gets_the_nearest_far_place_in_its_zones() {
     use crate::domain::{Class, Zone};
     let r = rack(&[at(1, 1, 2)]);
