@@ -22,6 +22,7 @@
 //!   ([`writer::Writer`]) that commits many requests per transaction.
 
 pub mod alarms;
+pub mod cluster;
 mod columns;
 pub mod controls;
 pub mod copy;

@@ -16,6 +16,8 @@ mod postgres;
 #[path = "../common/ws.rs"]
 mod ws;
 
+mod cluster;
+
 #[path = "../api/alarms.rs"]
 mod api_alarms;
 #[path = "../api/auth.rs"]

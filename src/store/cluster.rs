@@ -1,0 +1,89 @@
+//! The cluster lease's statements (PostgreSQL only; see `service::cluster` for what they
+//! mean together and the timing argument).
+//!
+//! Each statement is one compare-and-set on the lease row, so two nodes racing for it
+//! cannot both win: a renewal names the holder and epoch it believes in, a takeover the
+//! exact `(epoch, beat)` it watched stand still.
+
+use sqlx::{PgConnection, PgPool};
+
+/// The lease row as a node reads it.
+#[derive(Clone, Debug, PartialEq, Eq, sqlx::FromRow)]
+pub struct LeaseRow {
+    /// The node that holds (or last held) it.
+    pub holder: String,
+    /// The fencing token: one more at every takeover.
+    pub epoch: i64,
+    /// Renewals since the last takeover.
+    pub beat: i64,
+    /// Let go by a holder that stopped cleanly.
+    pub released: bool,
+    /// The last renewal, ms since 1970 by the server's clock (for display).
+    pub renewed_at: i64,
+}
+
+const NOW_MS: &str = "(extract(epoch from clock_timestamp()) * 1000)::bigint";
+
+/// The lease `name`, if anyone ever held it.
+pub async fn read(pool: &PgPool, name: &str) -> Result<Option<LeaseRow>, sqlx::Error> {
+    sqlx::query_as("SELECT holder, epoch, beat, released, renewed_at FROM cluster_lease WHERE name = $1")
+        .bind(name)
+        .fetch_optional(pool)
+        .await
+}
+
+/// Takes the lease for `node`: the first claim ever (epoch 1), or over `seen`, the row as
+/// the caller watched it stand still (or released). Returns the new epoch, or None when
+/// someone else got there first.
+pub async fn take(
+    pool: &PgPool,
+    name: &str,
+    node: &str,
+    seen: Option<&LeaseRow>,
+) -> Result<Option<i64>, sqlx::Error> {
+    let Some(seen) = seen else {
+        let sql = format!(
+            "INSERT INTO cluster_lease (name, holder, epoch, beat, renewed_at) VALUES ($1, $2, 1, 0, {NOW_MS}) \
+             ON CONFLICT (name) DO NOTHING RETURNING epoch"
+        );
+        return sqlx::query_scalar(sqlx::AssertSqlSafe(sql)).bind(name).bind(node).fetch_optional(pool).await;
+    };
+    let sql = format!(
+        "UPDATE cluster_lease SET holder = $2, epoch = epoch + 1, beat = 0, released = FALSE, renewed_at = {NOW_MS} \
+         WHERE name = $1 AND epoch = $3 AND beat = $4 AND released = $5 RETURNING epoch"
+    );
+    sqlx::query_scalar(sqlx::AssertSqlSafe(sql))
+        .bind(name)
+        .bind(node)
+        .bind(seen.epoch)
+        .bind(seen.beat)
+        .bind(seen.released)
+        .fetch_optional(pool)
+        .await
+}
+
+/// Renews the lease `node` holds at `epoch`; false when it no longer does.
+pub async fn renew(pool: &PgPool, name: &str, node: &str, epoch: i64) -> Result<bool, sqlx::Error> {
+    let sql = format!(
+        "UPDATE cluster_lease SET beat = beat + 1, renewed_at = {NOW_MS} \
+         WHERE name = $1 AND holder = $2 AND epoch = $3 AND NOT released"
+    );
+    let done = sqlx::query(sqlx::AssertSqlSafe(sql)).bind(name).bind(node).bind(epoch).execute(pool).await?;
+    Ok(done.rows_affected() == 1)
+}
+
+/// Lets go of the lease `node` holds at `epoch`, so a standby takes over at once.
+pub async fn release(pool: &PgPool, name: &str, node: &str, epoch: i64) -> Result<bool, sqlx::Error> {
+    let sql = "UPDATE cluster_lease SET released = TRUE WHERE name = $1 AND holder = $2 AND epoch = $3";
+    let done = sqlx::query(sql).bind(name).bind(node).bind(epoch).execute(pool).await?;
+    Ok(done.rows_affected() == 1)
+}
+
+/// Inside a write transaction: whether `epoch` still holds the lease. The row is locked
+/// for share until the transaction ends, so a takeover waits for the commit: a write made
+/// under this check is either committed before the new node starts, or not at all.
+pub async fn fence(tx: &mut PgConnection, name: &str, epoch: i64) -> Result<bool, sqlx::Error> {
+    let sql = "SELECT epoch FROM cluster_lease WHERE name = $1 AND NOT released FOR SHARE";
+    let now: Option<i64> = sqlx::query_scalar(sql).bind(name).fetch_optional(tx).await?;
+    Ok(now == Some(epoch))
+}
