@@ -203,3 +203,40 @@ async fn pipe(
         }
     }
 }
+
+#[tokio::test]
+async fn two_nodes_writers_on_one_database_number_jobs_and_events_without_clash_or_gap() {
+    use rackd::domain::{JobSpec, Location, NewJob, Priority};
+    use rackd::store::writer::{Hooks, Writer};
+    let url = crate::postgres::database().await;
+    let (a, b) = (pool(&url).await, pool(&url).await);
+    let mut writers = Vec::new();
+    for p in [a.clone(), b] {
+        let (w, _) = Writer::start_shared(&Pool::Postgres(p), 64, 1024, Hooks::default()).await.unwrap();
+        writers.push(w);
+    }
+    let job = |node: usize, n: u16| NewJob {
+        spec: JobSpec::Travel { to: Location { aisle: 1, row: 1, bay: 1 + n % 10, level: 1, position: 1 } },
+        reference: Some(format!("node{node}-{n}")),
+        priority: Priority::default(),
+        barcode: None,
+        device: None,
+        serves: None,
+    };
+    let mut tasks = Vec::new();
+    for (node, w) in writers.iter().enumerate() {
+        for n in 0..100u16 {
+            let w = w.clone();
+            tasks.push(tokio::spawn(async move { w.submit(vec![job(node, n), job(node, n + 1000)]).await }));
+        }
+    }
+    for t in tasks {
+        t.await.unwrap().expect("every submission commits");
+    }
+    let ids: Vec<i64> = sqlx::query_scalar("SELECT id FROM jobs ORDER BY id").fetch_all(&a).await.unwrap();
+    assert_eq!(ids, (1..=400).collect::<Vec<i64>>(), "400 jobs, ids unique and gapless");
+    let seqs: Vec<i64> =
+        sqlx::query_scalar("SELECT seq FROM events ORDER BY seq").fetch_all(&a).await.unwrap();
+    assert!(seqs.len() >= 400, "an event per job at least: {}", seqs.len());
+    assert_eq!(seqs, (1..=seqs.len() as i64).collect::<Vec<i64>>(), "the event log is gapless");
+}

@@ -21,8 +21,9 @@ pub(super) async fn commit(
     group: &[Command],
     next: &mut Option<Next>,
     tell: Option<&Tell>,
+    shared: bool,
 ) -> Result<(Vec<Answer>, Out), sqlx::Error> {
-    begin(db).await?;
+    begin(db, shared).await?;
     let all: Vec<&Command> = group.iter().collect();
     let start_read = next.is_none();
     let attempt = async {
@@ -56,7 +57,7 @@ pub(super) async fn commit(
             rollback(db).await;
         }
     }
-    let result = one_by_one(db, group, next, tell).await;
+    let result = one_by_one(db, group, next, tell, shared).await;
     if result.is_err() {
         rollback(db).await;
     }
@@ -69,8 +70,9 @@ async fn one_by_one(
     group: &[Command],
     next: &mut Option<Next>,
     tell: Option<&Tell>,
+    shared: bool,
 ) -> Result<(Vec<Answer>, Out), sqlx::Error> {
-    begin(db).await?;
+    begin(db, shared).await?;
     let mut numbers = match *next {
         Some(n) => n,
         None => load::next(db).await?,
@@ -119,11 +121,14 @@ async fn apply(
     Ok((answers, group))
 }
 
-/// Opens the group's transaction; on SQLite it takes the write lock at once.
-async fn begin(db: &mut Conn) -> Result<(), sqlx::Error> {
-    let sql = match db.engine() {
-        Engine::Sqlite => "BEGIN IMMEDIATE",
-        Engine::Postgres => "BEGIN",
+/// Opens the group's transaction; on SQLite it takes the write lock at once. A `shared`
+/// writer (one of several on the database) takes the writers' lock on PostgreSQL too (an
+/// advisory lock, key 7263001, released with the transaction).
+async fn begin(db: &mut Conn, shared: bool) -> Result<(), sqlx::Error> {
+    let sql = match (db.engine(), shared) {
+        (Engine::Sqlite, _) => "BEGIN IMMEDIATE",
+        (Engine::Postgres, false) => "BEGIN",
+        (Engine::Postgres, true) => "BEGIN; SELECT pg_advisory_xact_lock(7263001)",
     };
     run(db, sql).await
 }

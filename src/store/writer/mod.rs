@@ -287,9 +287,35 @@ impl Writer {
         queue: usize,
         hooks: Hooks,
     ) -> Result<(Writer, JoinHandle<()>), sqlx::Error> {
+        Writer::spawn(pool, max_group, queue, hooks, false).await
+    }
+
+    /// As [`Writer::start`], for one of several writers on one database: the nodes of a
+    /// cluster, each with its own writer. Each group then takes a lock on the database for
+    /// its transaction (a transaction-level advisory lock on PostgreSQL; SQLite's
+    /// `BEGIN IMMEDIATE` already is one), so the writers commit one group at a time, and
+    /// reads the numbering (ids, event sequence numbers) afresh under it, since the others
+    /// number too: ids stay unique and the event log gapless. That costs one or two
+    /// statements per group.
+    pub async fn start_shared(
+        pool: &Pool,
+        max_group: usize,
+        queue: usize,
+        hooks: Hooks,
+    ) -> Result<(Writer, JoinHandle<()>), sqlx::Error> {
+        Writer::spawn(pool, max_group, queue, hooks, true).await
+    }
+
+    async fn spawn(
+        pool: &Pool,
+        max_group: usize,
+        queue: usize,
+        hooks: Hooks,
+        shared: bool,
+    ) -> Result<(Writer, JoinHandle<()>), sqlx::Error> {
         let conn = Conn::acquire(pool).await?;
         let (tx, rx) = mpsc::channel(queue);
-        let task = tokio::spawn(run(pool.clone(), conn, rx, max_group.max(1), hooks));
+        let task = tokio::spawn(run(pool.clone(), conn, rx, max_group.max(1), hooks, shared));
         Ok((Writer { tx }, task))
     }
 
@@ -354,7 +380,14 @@ impl Conn {
 /// After a failed group the connection is replaced by a fresh one from the pool, so a
 /// database server that restarted (or a connection that broke) costs the groups in flight,
 /// not every group after them.
-async fn run(pool: Pool, db: Conn, mut rx: mpsc::Receiver<Command>, max_group: usize, hooks: Hooks) {
+async fn run(
+    pool: Pool,
+    db: Conn,
+    mut rx: mpsc::Receiver<Command>,
+    max_group: usize,
+    hooks: Hooks,
+    shared: bool,
+) {
     let mut next = None;
     let mut db = Some(db);
     let mut group = Vec::with_capacity(max_group);
@@ -366,8 +399,11 @@ async fn run(pool: Pool, db: Conn, mut rx: mpsc::Receiver<Command>, max_group: u
                 .inspect_err(|e| tracing::error!(error = %e, "the job writer cannot reconnect"))
                 .ok();
         }
+        if shared {
+            next = None;
+        }
         let result = match db.as_mut() {
-            Some(conn) => commit::commit(conn, &group, &mut next, hooks.tell.as_ref()).await,
+            Some(conn) => commit::commit(conn, &group, &mut next, hooks.tell.as_ref(), shared).await,
             None => Err(sqlx::Error::PoolTimedOut),
         };
         if result.is_err() {
