@@ -109,7 +109,7 @@ impl From<WriteError> for ApiError {
                 "overloaded",
                 "rackd is taking in more jobs than it can store right now; retry in a second",
             ),
-            WriteError::Closed | WriteError::Database(_) => Self::unavailable(e),
+            WriteError::Closed | WriteError::Database(_) | WriteError::Fenced(_) => Self::unavailable(e),
         }
     }
 }

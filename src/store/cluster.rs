@@ -7,6 +7,9 @@
 
 use sqlx::{PgConnection, PgPool};
 
+/// The one lease a cluster has: the right to drive the machines.
+pub const LEASE: &str = "dispatch";
+
 /// The lease row as a node reads it.
 #[derive(Clone, Debug, PartialEq, Eq, sqlx::FromRow)]
 pub struct LeaseRow {

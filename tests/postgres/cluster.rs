@@ -240,3 +240,51 @@ async fn two_nodes_writers_on_one_database_number_jobs_and_events_without_clash_
     assert!(seqs.len() >= 400, "an event per job at least: {}", seqs.len());
     assert_eq!(seqs, (1..=seqs.len() as i64).collect::<Vec<i64>>(), "the event log is gapless");
 }
+
+#[tokio::test]
+async fn a_fenced_writer_commits_only_under_the_epoch_that_holds_the_lease() {
+    use rackd::domain::{JobSpec, Location, NewJob, Priority};
+    use rackd::store::writer::{Change, Hooks, WriteError, Writer};
+    let url = crate::postgres::database().await;
+    let db = pool(&url).await;
+    let (writer, _) =
+        Writer::start_shared(&Pool::Postgres(db.clone()), 64, 1024, Hooks::default()).await.unwrap();
+    let job = |n: u16| NewJob {
+        spec: JobSpec::Travel { to: Location { aisle: 1, row: 1, bay: 1 + n % 10, level: 1, position: 1 } },
+        reference: Some(format!("job-{n}")),
+        priority: Priority::default(),
+        barcode: None,
+        device: None,
+        serves: None,
+    };
+    assert_eq!(cluster::take(&db, LEASE, "a", None).await.unwrap(), Some(1));
+    let under = |epoch: Option<i64>| writer.fenced(Arc::new(move || epoch));
+    let a = under(Some(1));
+    writer.submit((0..4).map(job).collect()).await.unwrap();
+    a.change(1, Change::cancel_queued()).await.expect("epoch 1 holds the lease");
+    assert!(matches!(under(None).change(2, Change::cancel_queued()).await, Err(WriteError::Fenced(None))));
+
+    // b takes over: a's epoch can no longer commit, in a group of its own or mixed with
+    // unfenced submissions, which commit.
+    let seen = cluster::read(&db, LEASE).await.unwrap().unwrap();
+    assert_eq!(cluster::take(&db, LEASE, "b", Some(&seen)).await.unwrap(), Some(2));
+    let mut tasks = Vec::new();
+    for n in 0..20u16 {
+        let (a, w) = (a.clone(), writer.clone());
+        tasks.push(tokio::spawn(async move {
+            let stale = a.change(2 + i64::from(n % 3), Change::cancel_queued()).await;
+            assert!(matches!(stale, Err(WriteError::Fenced(Some(1)))), "{stale:?}");
+            w.submit(vec![job(100 + n)]).await.expect("unfenced submissions commit");
+        }));
+    }
+    for t in tasks {
+        t.await.unwrap();
+    }
+    let states: Vec<(i64, String)> =
+        sqlx::query_as("SELECT id, state FROM jobs WHERE id <= 4 ORDER BY id").fetch_all(&db).await.unwrap();
+    let cancelled: Vec<i64> = states.iter().filter(|(_, s)| s == "cancelled").map(|(id, _)| *id).collect();
+    assert_eq!(cancelled, [1], "only the change under the lease's epoch was written: {states:?}");
+    let count: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM jobs").fetch_one(&db).await.unwrap();
+    assert_eq!(count, 24);
+    under(Some(2)).change(2, Change::cancel_queued()).await.expect("epoch 2 holds it now");
+}

@@ -49,8 +49,7 @@ use tokio::time::{Instant, sleep, sleep_until, timeout_at};
 use crate::store::cluster;
 use lease::{Holding, Timing, Watch};
 
-/// The one lease a cluster has: the right to drive the machines.
-pub const LEASE: &str = "dispatch";
+pub use crate::store::cluster::LEASE;
 
 /// What a node is now.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -9,29 +9,89 @@
 //! out in memory and given back with whatever rolls back, so they stay gapless.
 
 use super::apply::{Answer, Group, Next, Out};
-use super::{Command, Conn, Tell, WriteError, load, save};
+use super::{Command, Conn, Sent, Tell, WriteError, load, save};
 use crate::domain::time::now_ms;
+use crate::store::cluster::{self, LEASE};
 use crate::store::engine::Engine;
 use crate::store::on;
 
 /// Applies `group` in one transaction. `next` is the writer's numbering, read from the
 /// tables when unknown. Returns the answers, and the events and lock changes of the group.
+/// A command sent fenced whose epoch no longer holds the cluster's lease is answered
+/// [`WriteError::Fenced`] and left out; the check locks the lease row until the commit.
 pub(super) async fn commit(
     db: &mut Conn,
-    group: &[Command],
+    group: &[Sent],
     next: &mut Option<Next>,
     tell: Option<&Tell>,
     shared: bool,
 ) -> Result<(Vec<Answer>, Out), sqlx::Error> {
     begin(db, shared).await?;
-    let all: Vec<&Command> = group.iter().collect();
+    let held = match fences(db, group).await {
+        Ok(held) => held,
+        Err(e) => {
+            rollback(db).await;
+            return Err(e);
+        }
+    };
+    let kept: Vec<&Command> = group.iter().zip(&held).filter(|(_, h)| **h).map(|(s, _)| &s.cmd).collect();
+    let (answers, out) = match kept_in_one(db, &kept, next, tell).await? {
+        Some(done) => done,
+        None => {
+            let result = one_by_one(db, &kept, next, tell, shared, group, &held).await;
+            if result.is_err() {
+                rollback(db).await;
+            }
+            return result.map(|(answers, out)| (merge(group, &held, answers), out));
+        }
+    };
+    Ok((merge(group, &held, answers), out))
+}
+
+/// Whether each command of `group` may be committed: unfenced, or fenced under the epoch
+/// that holds the lease now.
+async fn fences(db: &mut Conn, group: &[Sent]) -> Result<Vec<bool>, sqlx::Error> {
+    let mut holds = std::collections::BTreeMap::new();
+    for epoch in group.iter().filter_map(|s| s.epoch) {
+        if !holds.contains_key(&epoch) {
+            let held = match db {
+                Conn::Postgres(c) => cluster::fence(c, LEASE, epoch).await?,
+                Conn::Sqlite(_) => false,
+            };
+            holds.insert(epoch, held);
+        }
+    }
+    Ok(group.iter().map(|s| s.epoch.is_none_or(|e| holds[&e])).collect())
+}
+
+/// The answers of the kept commands, with the fenced ones put back in their places.
+fn merge(group: &[Sent], held: &[bool], answers: Vec<Answer>) -> Vec<Answer> {
+    let mut answers = answers.into_iter();
+    group
+        .iter()
+        .zip(held)
+        .map(|(s, h)| match h {
+            true => answers.next().unwrap_or(Answer::Failed(WriteError::Closed)),
+            false => Answer::Failed(WriteError::Fenced(s.epoch)),
+        })
+        .collect()
+}
+
+/// The kept commands in the open transaction, committed; None when the database refused
+/// one of them and they are to be replayed one by one (rolled back already).
+async fn kept_in_one(
+    db: &mut Conn,
+    all: &[&Command],
+    next: &mut Option<Next>,
+    tell: Option<&Tell>,
+) -> Result<Option<(Vec<Answer>, Out)>, sqlx::Error> {
     let start_read = next.is_none();
     let attempt = async {
         let start = match *next {
             Some(n) => n,
             None => load::next(db).await?,
         };
-        let applied = apply(db, &all, start, tell).await?;
+        let applied = apply(db, all, start, tell).await?;
         Ok::<_, sqlx::Error>(applied)
     }
     .await;
@@ -44,42 +104,45 @@ pub(super) async fn commit(
             *next = Some(applied.next);
             let mut out = applied.out;
             out.statements += 2 + usize::from(start_read);
-            return Ok((answers, out));
+            Ok(Some((answers, out)))
         }
         // One request, or a failure that is not about what the group asked (the connection,
         // the pool): replaying request by request would only fail again.
-        Err(e) if group.len() == 1 || !matches!(e, sqlx::Error::Database(_)) => {
+        Err(e) if all.len() <= 1 || !matches!(e, sqlx::Error::Database(_)) => {
             rollback(db).await;
-            return Err(e);
+            Err(e)
         }
         Err(e) => {
-            tracing::warn!(error = %e, requests = group.len(), "group refused; committing its requests one by one");
+            tracing::warn!(error = %e, requests = all.len(), "group refused; committing its requests one by one");
             rollback(db).await;
+            Ok(None)
         }
     }
-    let result = one_by_one(db, group, next, tell, shared).await;
-    if result.is_err() {
-        rollback(db).await;
-    }
-    result
 }
 
-/// The group again, each request in a savepoint of its own.
+/// The group again, each request in a savepoint of its own (the fences checked again in
+/// the new transaction: `held` must still hold, or the group fails and is answered as a
+/// failed commit).
 async fn one_by_one(
     db: &mut Conn,
-    group: &[Command],
+    kept: &[&Command],
     next: &mut Option<Next>,
     tell: Option<&Tell>,
     shared: bool,
+    group: &[Sent],
+    held: &[bool],
 ) -> Result<(Vec<Answer>, Out), sqlx::Error> {
     begin(db, shared).await?;
+    if fences(db, group).await? != held {
+        return Err(sqlx::Error::Protocol("the cluster lease moved during the group".into()));
+    }
     let mut numbers = match *next {
         Some(n) => n,
         None => load::next(db).await?,
     };
-    let mut answers = Vec::with_capacity(group.len());
+    let mut answers = Vec::with_capacity(kept.len());
     let mut out = Out::default();
-    for cmd in group {
+    for cmd in kept {
         run(db, "SAVEPOINT request").await?;
         match apply(db, &[cmd], numbers, tell).await {
             Ok((mut answer, applied)) => {

@@ -228,6 +228,10 @@ pub enum WriteError {
     /// A location chosen for a box is no longer free.
     #[error("location {0} is not free: a box, a lock or a job holds it")]
     Taken(Location),
+    /// Sent through a fenced handle ([`Writer::fenced`]) of a node that does not hold the
+    /// cluster's lease (any more): nothing was written.
+    #[error("this node does not hold the cluster lease (epoch {0:?}): nothing was written")]
+    Fenced(Option<i64>),
     /// The database failed; nothing of the request was written.
     #[error("database error: {0}")]
     Database(Arc<sqlx::Error>),
@@ -271,10 +275,20 @@ enum Command {
     Record { record: Record, reply: oneshot::Sender<Result<(), WriteError>> },
 }
 
+/// A command and the cluster epoch it must be committed under, if sent fenced.
+struct Sent {
+    cmd: Command,
+    epoch: Option<i64>,
+}
+
+/// The epoch a node's fenced handle acts under now (None: it does not hold the lease).
+pub type Epoch = Arc<dyn Fn() -> Option<i64> + Send + Sync>;
+
 /// The handle callers use to send commands to the writer.
 #[derive(Clone)]
 pub struct Writer {
-    tx: mpsc::Sender<Command>,
+    tx: mpsc::Sender<Sent>,
+    fence: Option<Epoch>,
 }
 
 impl Writer {
@@ -316,7 +330,28 @@ impl Writer {
         let conn = Conn::acquire(pool).await?;
         let (tx, rx) = mpsc::channel(queue);
         let task = tokio::spawn(run(pool.clone(), conn, rx, max_group.max(1), hooks, shared));
-        Ok((Writer { tx }, task))
+        Ok((Writer { tx, fence: None }, task))
+    }
+
+    /// A handle of this writer for what the active node of a cluster decides about the
+    /// machines (dispatch, device reports, device state): each command is stamped with the
+    /// epoch `epoch` gives when it is sent, and committed only if that epoch still holds the
+    /// lease when its group commits (`store::cluster::fence`, in the same transaction);
+    /// otherwise, or if `epoch` gives None, it is refused with [`WriteError::Fenced`] and
+    /// nothing of it is written.
+    pub fn fenced(&self, epoch: Epoch) -> Writer {
+        Writer { tx: self.tx.clone(), fence: Some(epoch) }
+    }
+
+    /// The command as sent: stamped with the epoch if the handle is fenced.
+    fn stamp(&self, cmd: Command) -> Result<Sent, WriteError> {
+        match &self.fence {
+            None => Ok(Sent { cmd, epoch: None }),
+            Some(epoch) => match epoch() {
+                Some(e) => Ok(Sent { cmd, epoch: Some(e) }),
+                None => Err(WriteError::Fenced(None)),
+            },
+        }
     }
 
     /// Whether the writer still takes commands.
@@ -329,7 +364,7 @@ impl Writer {
     /// again" instead of holding a request for a queue that does not move).
     pub async fn submit(&self, jobs: Vec<NewJob>) -> Result<Vec<Outcome>, WriteError> {
         let (reply, answer) = oneshot::channel();
-        self.tx.try_send(Command::Submit { jobs, reply }).map_err(|e| match e {
+        self.tx.try_send(self.stamp(Command::Submit { jobs, reply })?).map_err(|e| match e {
             mpsc::error::TrySendError::Full(_) => WriteError::Overloaded,
             mpsc::error::TrySendError::Closed(_) => WriteError::Closed,
         })?;
@@ -339,7 +374,10 @@ impl Writer {
     /// Applies `change` to job `id`, answering with the job once it is on disk.
     pub async fn change(&self, id: i64, change: Change) -> Result<Job, WriteError> {
         let (reply, answer) = oneshot::channel();
-        self.tx.send(Command::Change { id, change, reply }).await.map_err(|_| WriteError::Closed)?;
+        self.tx
+            .send(self.stamp(Command::Change { id, change, reply })?)
+            .await
+            .map_err(|_| WriteError::Closed)?;
         answer.await.map_err(|_| WriteError::Closed)?
     }
 
@@ -347,14 +385,17 @@ impl Writer {
     /// stored afterwards (or why its report was refused), once they are on disk.
     pub async fn report(&self, reports: Vec<Report>) -> Result<Vec<Result<Job, WriteError>>, WriteError> {
         let (reply, answer) = oneshot::channel();
-        self.tx.send(Command::Reports { reports, reply }).await.map_err(|_| WriteError::Closed)?;
+        self.tx
+            .send(self.stamp(Command::Reports { reports, reply })?)
+            .await
+            .map_err(|_| WriteError::Closed)?;
         answer.await.map_err(|_| WriteError::Closed)
     }
 
     /// Records a change that is not a job's, answering once it is on disk.
     pub async fn record(&self, record: Record) -> Result<(), WriteError> {
         let (reply, answer) = oneshot::channel();
-        self.tx.send(Command::Record { record, reply }).await.map_err(|_| WriteError::Closed)?;
+        self.tx.send(self.stamp(Command::Record { record, reply })?).await.map_err(|_| WriteError::Closed)?;
         answer.await.map_err(|_| WriteError::Closed)?
     }
 }
@@ -383,7 +424,7 @@ impl Conn {
 async fn run(
     pool: Pool,
     db: Conn,
-    mut rx: mpsc::Receiver<Command>,
+    mut rx: mpsc::Receiver<Sent>,
     max_group: usize,
     hooks: Hooks,
     shared: bool,
@@ -439,7 +480,7 @@ async fn run(
                 committed(&jobs);
             }
         }
-        for (cmd, answer) in group.drain(..).zip(answers) {
+        for (Sent { cmd, .. }, answer) in group.drain(..).zip(answers) {
             match (cmd, answer) {
                 (Command::Submit { reply, .. }, apply::Answer::Submitted(r)) => drop(reply.send(r)),
                 (Command::Change { reply, .. }, apply::Answer::Changed(r)) => drop(reply.send(r)),
