@@ -51,15 +51,14 @@ pub(super) async fn commit(
 /// Whether each command of `group` may be committed: unfenced, or fenced under the epoch
 /// that holds the lease now.
 async fn fences(db: &mut Conn, group: &[Sent]) -> Result<Vec<bool>, sqlx::Error> {
+    let epochs: std::collections::BTreeSet<i64> = group.iter().filter_map(|s| s.epoch).collect();
     let mut holds = std::collections::BTreeMap::new();
-    for epoch in group.iter().filter_map(|s| s.epoch) {
-        if !holds.contains_key(&epoch) {
-            let held = match db {
-                Conn::Postgres(c) => cluster::fence(c, LEASE, epoch).await?,
-                Conn::Sqlite(_) => false,
-            };
-            holds.insert(epoch, held);
-        }
+    for epoch in epochs {
+        let held = match db {
+            Conn::Postgres(c) => cluster::fence(c, LEASE, epoch).await?,
+            Conn::Sqlite(_) => false,
+        };
+        holds.insert(epoch, held);
     }
     Ok(group.iter().map(|s| s.epoch.is_none_or(|e| holds[&e])).collect())
 }
