@@ -151,6 +151,19 @@ async fn a_partitioned_active_node_stops_driving_before_the_standby_starts() {
     b.abort();
 }
 
+/// A travel job with a reference.
+fn travel(reference: String, n: u16) -> rackd::domain::NewJob {
+    use rackd::domain::{JobSpec, Location, NewJob, Priority};
+    NewJob {
+        spec: JobSpec::Travel { to: Location { aisle: 1, row: 1, bay: 1 + n % 10, level: 1, position: 1 } },
+        reference: Some(reference),
+        priority: Priority::default(),
+        barcode: None,
+        device: None,
+        serves: None,
+    }
+}
+
 /// A TCP proxy to the test server that can stop forwarding (the connections stay open,
 /// nothing gets through: a partition, not a reset).
 struct Proxy {
@@ -206,7 +219,6 @@ async fn pipe(
 
 #[tokio::test]
 async fn two_nodes_writers_on_one_database_number_jobs_and_events_without_clash_or_gap() {
-    use rackd::domain::{JobSpec, Location, NewJob, Priority};
     use rackd::store::writer::{Hooks, Writer};
     let url = crate::postgres::database().await;
     let (a, b) = (pool(&url).await, pool(&url).await);
@@ -215,14 +227,7 @@ async fn two_nodes_writers_on_one_database_number_jobs_and_events_without_clash_
         let (w, _) = Writer::start_shared(&Pool::Postgres(p), 64, 1024, Hooks::default()).await.unwrap();
         writers.push(w);
     }
-    let job = |node: usize, n: u16| NewJob {
-        spec: JobSpec::Travel { to: Location { aisle: 1, row: 1, bay: 1 + n % 10, level: 1, position: 1 } },
-        reference: Some(format!("node{node}-{n}")),
-        priority: Priority::default(),
-        barcode: None,
-        device: None,
-        serves: None,
-    };
+    let job = |node: usize, n: u16| travel(format!("node{node}-{n}"), n);
     let mut tasks = Vec::new();
     for (node, w) in writers.iter().enumerate() {
         for n in 0..100u16 {
@@ -243,20 +248,12 @@ async fn two_nodes_writers_on_one_database_number_jobs_and_events_without_clash_
 
 #[tokio::test]
 async fn a_fenced_writer_commits_only_under_the_epoch_that_holds_the_lease() {
-    use rackd::domain::{JobSpec, Location, NewJob, Priority};
     use rackd::store::writer::{Change, Hooks, WriteError, Writer};
     let url = crate::postgres::database().await;
     let db = pool(&url).await;
     let (writer, _) =
         Writer::start_shared(&Pool::Postgres(db.clone()), 64, 1024, Hooks::default()).await.unwrap();
-    let job = |n: u16| NewJob {
-        spec: JobSpec::Travel { to: Location { aisle: 1, row: 1, bay: 1 + n % 10, level: 1, position: 1 } },
-        reference: Some(format!("job-{n}")),
-        priority: Priority::default(),
-        barcode: None,
-        device: None,
-        serves: None,
-    };
+    let job = |n: u16| travel(format!("job-{n}"), n);
     assert_eq!(cluster::take(&db, LEASE, "a", None).await.unwrap(), Some(1));
     let under = |epoch: Option<i64>| writer.fenced(Arc::new(move || epoch));
     let a = under(Some(1));
