@@ -23,6 +23,8 @@ fn at(row: u16, bay: u16, level: u16, position: u16, stock: Value) -> Value {
 async fn an_inventory_loads_corrects_and_tells() {
     let app = spawn_app().await;
     let mut ws = Ws::connect(&app.base, "").await;
+    // The snapshot first: a change committed before it is read is in it, not sent after it.
+    assert_eq!(ws.json().await["type"], "snapshot");
     let body = json!({"locations": [
         at(1, 2, 3, 1, json!({"occupied": true, "barcode": "BOX-1"})),
         at(1, 2, 3, 2, json!({"occupied": true})),
