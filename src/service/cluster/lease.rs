@@ -72,13 +72,8 @@ pub struct Watch {
 impl Watch {
     /// The row as read at `now`; a change restarts the wait.
     pub fn observe(&mut self, row: Option<LeaseRow>, now: Instant) {
-        let same = |a: &Option<LeaseRow>| {
-            a.as_ref().map(|r| (&r.holder, r.epoch, r.beat, r.released))
-                == row.as_ref().map(|r| (&r.holder, r.epoch, r.beat, r.released))
-        };
-        match &self.seen {
-            Some((before, _)) if same(before) => {}
-            _ => self.seen = Some((row, now)),
+        if self.seen.as_ref().is_none_or(|(before, _)| *before != row) {
+            self.seen = Some((row, now));
         }
     }
 

@@ -135,9 +135,6 @@ pub async fn run(pool: PgPool, node: String, timing: Timing, gate: Gate, role: w
                 Ok(Err(e)) => tracing::warn!(error = %e, "cluster: the lease could not be renewed"),
                 Err(_) => {}
             }
-            if !holding.valid(Instant::now()) {
-                break;
-            }
             sleep_until((sent + timing.renew_every()).min(holding.until())).await;
             if !holding.valid(Instant::now()) {
                 break;

@@ -17,9 +17,9 @@
 //! to the minute a cycle takes, and nothing can go stale. An idle crane asks at every poll,
 //! though: after a decision to wait, it is not made again (nor the rack read) until the job
 //! writer has committed something since ([`CranePlanner::unchanged_since_wait`]), since
-//! every change a decision depends on (a job, a location, a pause or a lock) is a commit. Where the crane stands is where
-//! its last task was to end (rackd's own record, not D220/D221, whose units a site's
-//! program decides).
+//! every change a decision depends on (a job, a location, a pause or a lock) is a commit.
+//! Where the crane stands is where its last task was to end (rackd's own record, not
+//! D220/D221, whose units a site's program decides).
 
 pub mod decide;
 pub mod putaway;
