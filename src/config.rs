@@ -47,6 +47,10 @@ pub struct Config {
     pub site: SiteConfig,
     /// The event log and live subscribers.
     pub events: EventsConfig,
+    /// Hot standby: this node is one of several on one PostgreSQL database
+    /// (`service::cluster`). None: a node of its own.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cluster: Option<ClusterConfig>,
     /// The machines, one `[[devices]]` entry each.
     #[serde(serialize_with = "flat_devices")]
     pub devices: Vec<crate::devices::DeviceConfig>,
@@ -94,6 +98,42 @@ pub struct IntakeConfig {
     pub max_group: usize,
     /// Requests waiting for the writer before new ones are refused with 503.
     pub queue: usize,
+}
+
+/// `[cluster]`: this node's part in a hot-standby cluster (PostgreSQL only).
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClusterConfig {
+    /// This node's name, unique in the cluster (`a`, `rackd-2`, ...).
+    pub node: String,
+    /// How long a lease renewal lets the active node drive the machines (ms).
+    #[serde(default = "lease_ms")]
+    pub lease_ms: u64,
+    /// What a standby waits beyond the lease before it takes over (ms); a fifth of the
+    /// lease when not set.
+    #[serde(default)]
+    pub margin_ms: Option<u64>,
+    /// The URL other nodes reach this node's API at, to forward what only the active node
+    /// does; `http://` + `server.listen` when not set.
+    #[serde(default)]
+    pub url: Option<String>,
+}
+
+fn lease_ms() -> u64 {
+    5000
+}
+
+impl ClusterConfig {
+    /// The lease and the margin.
+    pub fn lease(&self) -> (std::time::Duration, std::time::Duration) {
+        let lease = std::time::Duration::from_millis(self.lease_ms);
+        (lease, self.margin_ms.map_or(lease / 5, std::time::Duration::from_millis))
+    }
+
+    /// Where other nodes reach this node's API.
+    pub fn url(&self, listen: SocketAddr) -> String {
+        self.url.clone().unwrap_or_else(|| format!("http://{listen}"))
+    }
 }
 
 /// `[site]`: which locations exist.

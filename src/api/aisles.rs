@@ -41,7 +41,7 @@ fn aisle(app: &AppState, n: u16) -> Result<Aisle, ApiError> {
     }
     let pause = app.dispatcher.queues().paused_aisles().remove(&n);
     let devices = app
-        .devices
+        .devices()
         .iter()
         .filter(|(_, h)| h.status.borrow().aisles.contains(&n))
         .map(|(id, _)| id.clone())

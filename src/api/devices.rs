@@ -23,8 +23,8 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(tags::router())
 }
 
-fn device<'a>(app: &'a AppState, id: &str) -> Result<&'a DeviceHandle, ApiError> {
-    app.devices.get(id).ok_or_else(|| ApiError::not_found(format!("device {id:?} is not configured")))
+fn device(app: &AppState, id: &str) -> Result<DeviceHandle, ApiError> {
+    app.devices().get(id).cloned().ok_or_else(|| ApiError::not_found(format!("device {id:?} is not configured")))
 }
 
 /// Pauses or resumes a device (stored and audited first) and shows it.
@@ -39,14 +39,14 @@ async fn set_paused(
     let actor = actor(by, reason)?;
     tracing::info!(device = %id, paused, by = %actor.by, reason = ?actor.reason, "device pause through the API");
     app.dispatcher.set_paused(Target::Device(id.to_owned()), paused, &actor).await?;
-    Ok(shown(id, handle, app.dispatcher.queues()))
+    Ok(shown(id, &handle, app.dispatcher.queues()))
 }
 
 /// Every device with its status.
 #[utoipa::path(get, path = "/devices", tag = "devices",
     responses((status = 200, description = "Every configured device", body = Vec<DeviceStatus>)))]
 async fn list_devices(State(app): State<AppState>) -> Json<Vec<DeviceStatus>> {
-    Json(all_shown(&app.devices, app.dispatcher.queues()))
+    Json(all_shown(&app.devices(), app.dispatcher.queues()))
 }
 
 /// One device's status: online, last contact, slots in use, last error.
@@ -59,7 +59,7 @@ async fn get_device(
     State(app): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<DeviceStatus>, ApiError> {
-    Ok(Json(shown(&id, device(&app, &id)?, app.dispatcher.queues())))
+    Ok(Json(shown(&id, &device(&app, &id)?, app.dispatcher.queues())))
 }
 
 /// Pause a device: it gets no new work; what it runs goes on and is followed. Kept across

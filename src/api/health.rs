@@ -81,7 +81,7 @@ async fn health(State(app): State<AppState>) -> Response {
     };
     let active = alarms::active(&app.pool).await.unwrap_or_default();
     let now = OffsetDateTime::now_utc();
-    let devices: Vec<DeviceHealth> = all_shown(&app.devices, app.dispatcher.queues())
+    let devices: Vec<DeviceHealth> = all_shown(&app.devices(), app.dispatcher.queues())
         .into_iter()
         .map(|d| DeviceHealth {
             active_alarms: active.iter().filter(|a| a.device == d.id).count() as u32,

@@ -366,7 +366,7 @@ async fn job_history(
         (status = 503, description = "The job's device does not answer now; retry", body = ErrorBody),
     ))]
 async fn cancel_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<Json<Job>, ApiError> {
-    Ok(Json(app.dispatcher.cancel(id, &app.devices).await?))
+    Ok(Json(app.dispatcher.cancel(id, &app.devices()).await?))
 }
 
 /// Retry a failed job once its locations are checked: the same job, with the same

@@ -22,6 +22,13 @@ impl AppState {
     }
 }
 
+impl Shared {
+    /// The running devices (none on a standby node).
+    pub fn devices(&self) -> crate::devices::Devices {
+        self.running.get().cloned().unwrap_or_default()
+    }
+}
+
 impl std::ops::Deref for AppState {
     type Target = Shared;
     fn deref(&self) -> &Shared {
@@ -41,8 +48,11 @@ pub struct Shared {
     pub keys: Arc<KeyRing>,
     /// Prometheus metrics.
     pub metrics: Arc<Metrics>,
-    /// The running devices.
-    pub devices: crate::devices::Devices,
+    /// The running devices, once this node drives them (at start, or in a cluster when
+    /// it becomes the active node).
+    pub running: Arc<std::sync::OnceLock<crate::devices::Devices>>,
+    /// This node's part in a cluster, if it is in one.
+    pub cluster: Option<crate::service::cluster::Node>,
     /// The dispatcher: cancels and devices' control state.
     pub dispatcher: crate::service::dispatch::Dispatcher,
     /// Live events, for WebSocket subscribers.

@@ -51,6 +51,9 @@ pub enum Invalid {
     /// A `database.url` that is not a PostgreSQL URL.
     #[error("{0}")]
     DatabaseUrl(String),
+    /// `[cluster]` without a PostgreSQL `database.url`, or with a bad value.
+    #[error("{0}")]
+    Cluster(&'static str),
     /// An intake bound of 0.
     #[error("intake.max_group and intake.queue must be at least 1")]
     Intake,
@@ -138,6 +141,22 @@ impl Config {
             };
             if let Some(why) = why {
                 return Err(("database.url".into(), Invalid::DatabaseUrl(why)));
+            }
+        }
+        if let Some(c) = &self.cluster {
+            let flaw = if self.database.url.is_none() {
+                Some(("cluster", "a cluster shares one PostgreSQL database: set database.url"))
+            } else if c.node.is_empty() || c.node.len() > 64 {
+                Some(("cluster.node", "a node's name is 1 to 64 characters"))
+            } else if c.lease_ms < 100 {
+                Some(("cluster.lease_ms", "the lease is at least 100 ms"))
+            } else if c.margin_ms.is_some_and(|m| m < c.lease_ms / 10 || m > c.lease_ms) {
+                Some(("cluster.margin_ms", "the margin is between a tenth of the lease and the lease"))
+            } else {
+                None
+            };
+            if let Some((key, why)) = flaw {
+                return Err((key.into(), Invalid::Cluster(why)));
             }
         }
         if self.intake.max_group == 0 || self.intake.queue == 0 {

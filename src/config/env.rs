@@ -27,7 +27,7 @@ use figment::{Metadata, Profile, Provider};
 pub const PREFIX: &str = "RACKD_";
 
 /// The sections a variable may name.
-const SECTIONS: [&str; 7] = ["server", "database", "intake", "auth", "site", "events", "devices"];
+const SECTIONS: [&str; 8] = ["server", "database", "intake", "auth", "site", "events", "cluster", "devices"];
 
 /// Keys that are arrays of tables, not settable from the environment.
 const ARRAYS: [&str; 3] = ["devices", "site.aisles", "auth.keys"];

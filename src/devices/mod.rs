@@ -10,6 +10,7 @@
 pub mod cancel;
 pub mod config;
 pub mod crane;
+pub mod gate;
 pub mod port;
 pub mod repeats;
 pub mod shelf;
@@ -70,11 +71,13 @@ pub type Devices = Arc<BTreeMap<String, DeviceHandle>>;
 
 /// Connects to every device and starts its task; `port` gives each device that runs jobs
 /// its port to the dispatcher; contact bookkeeping reaches status watchers at most every
-/// `contact_refresh`.
+/// `contact_refresh`. With `gate` (the active node of a cluster), every request to a
+/// machine asks it first ([`gate::Gated`]).
 pub async fn start(
     configs: &[DeviceConfig],
     port: impl Fn(&str) -> Arc<dyn port::Port>,
     contact_refresh: Duration,
+    gate: Option<gate::MayDrive>,
 ) -> anyhow::Result<(Devices, Vec<tokio::task::JoinHandle<()>>)> {
     use anyhow::Context;
     let mut devices = BTreeMap::new();
@@ -83,6 +86,10 @@ pub async fn start(
         let id = c.id();
         let plc =
             crate::protocols::link::connect(c.link()).await.with_context(|| format!("device {id:?}"))?;
+        let plc = match &gate {
+            Some(may) => Arc::new(gate::Gated::new(plc, may.clone())),
+            None => plc,
+        };
         let slots = match c {
             DeviceConfig::Shelf(s) => s.slots,
             DeviceConfig::Crane(_) => 1,

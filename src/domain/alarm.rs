@@ -55,16 +55,20 @@ pub enum AlarmKind {
     Degraded,
     /// A shelf PLC answered again with every slot empty where rackd had tasks.
     MemoryLost,
+    /// Another node of the cluster took over driving the machines (device `cluster`);
+    /// cleared once a standby is back.
+    Takeover,
 }
 
 impl AlarmKind {
     /// Every kind.
-    pub const ALL: [AlarmKind; 5] = [
+    pub const ALL: [AlarmKind; 6] = [
         AlarmKind::Device,
         AlarmKind::Link,
         AlarmKind::Heartbeat,
         AlarmKind::Degraded,
         AlarmKind::MemoryLost,
+        AlarmKind::Takeover,
     ];
 
     /// The kind's name as the API writes it.
@@ -75,6 +79,7 @@ impl AlarmKind {
             AlarmKind::Heartbeat => "heartbeat",
             AlarmKind::Degraded => "degraded",
             AlarmKind::MemoryLost => "memory_lost",
+            AlarmKind::Takeover => "takeover",
         }
     }
 
@@ -86,7 +91,7 @@ impl AlarmKind {
     /// Who resolves an alarm of this kind that is not the device's own code.
     pub fn class(self) -> AlarmClass {
         match self {
-            AlarmKind::Link | AlarmKind::Degraded => AlarmClass::Link,
+            AlarmKind::Link | AlarmKind::Degraded | AlarmKind::Takeover => AlarmClass::Link,
             AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost => AlarmClass::Hardware,
         }
     }

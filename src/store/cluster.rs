@@ -90,3 +90,37 @@ pub async fn fence(tx: &mut PgConnection, name: &str, epoch: i64) -> Result<bool
     let now: Option<i64> = sqlx::query_scalar(sql).bind(name).fetch_optional(tx).await?;
     Ok(now == Some(epoch))
 }
+
+/// A node as it last told of itself.
+#[derive(Clone, Debug, PartialEq, Eq, sqlx::FromRow)]
+pub struct NodeRow {
+    /// Its name (`[cluster] node`).
+    pub name: String,
+    /// Where its API is reached.
+    pub url: String,
+    /// `active` or `standby`, as it last said.
+    pub role: String,
+    /// When it started, ms since 1970 by the server's clock.
+    pub started_at: i64,
+    /// When it last told, ms since 1970 by the server's clock.
+    pub seen_at: i64,
+}
+
+/// Tells the cluster that `node` is alive at `url` in `role` (started at `started_at`).
+pub async fn tell(pool: &PgPool, node: &str, url: &str, role: &str, started_at: i64) -> Result<(), sqlx::Error> {
+    let sql = format!(
+        "INSERT INTO cluster_nodes (name, url, role, started_at, seen_at) VALUES ($1, $2, $3, $4, {NOW_MS}) \
+         ON CONFLICT (name) DO UPDATE SET url = $2, role = $3, started_at = $4, seen_at = {NOW_MS}"
+    );
+    sqlx::query(sqlx::AssertSqlSafe(sql)).bind(node).bind(url).bind(role).bind(started_at).execute(pool).await?;
+    Ok(())
+}
+
+/// Every node that ever told, by name, and the server's clock now (ms).
+pub async fn nodes(pool: &PgPool) -> Result<(Vec<NodeRow>, i64), sqlx::Error> {
+    let rows = sqlx::query_as("SELECT name, url, role, started_at, seen_at FROM cluster_nodes ORDER BY name")
+        .fetch_all(pool)
+        .await?;
+    let now = sqlx::query_scalar(sqlx::AssertSqlSafe(format!("SELECT {NOW_MS}"))).fetch_one(pool).await?;
+    Ok((rows, now))
+}

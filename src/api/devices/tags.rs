@@ -37,9 +37,9 @@ pub struct TagWrite {
     pub value: serde_json::Value,
 }
 
-fn tags_of<'a>(app: &'a AppState, id: &str) -> Result<&'a TagsHandle, ApiError> {
+fn tags_of(app: &AppState, id: &str) -> Result<TagsHandle, ApiError> {
     let handle = device(app, id)?;
-    handle.tags.as_ref().ok_or_else(|| {
+    handle.tags.clone().ok_or_else(|| {
         let kind = handle.status().kind.as_str();
         ApiError::conflict("not_a_tags_device", format!("device {id:?} is a {kind} device: it has no tags"))
     })

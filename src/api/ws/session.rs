@@ -55,7 +55,7 @@ impl Session {
         let options = &app.events;
         Session {
             pool: app.pool.clone(),
-            devices: app.devices.clone(),
+            devices: app.devices(),
             queues: app.dispatcher.queues().clone(),
             events: app.hub.subscribe(),
             topics,

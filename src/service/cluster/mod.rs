@@ -38,7 +38,9 @@
 //! share, so a node that lost the lease cannot commit a dispatch, and the new node's
 //! reconciliation (as after a restart) reads every commit the old one made.
 
+pub mod follow;
 pub mod lease;
+pub mod node;
 
 use std::sync::{Arc, Mutex};
 
@@ -50,6 +52,12 @@ use crate::store::cluster;
 use lease::{Holding, Timing, Watch};
 
 pub use crate::store::cluster::LEASE;
+pub use node::Node;
+
+/// What an operator should do after a takeover (the `takeover` alarm's action).
+pub const TAKEOVER_ACTION: &str = "Find out why the node that was active stopped (its log, its host, its \
+     network to the database) and start it again: it comes back as a standby, and the alarm clears once a \
+     standby is back.";
 
 /// What a node is now.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -27,6 +27,8 @@ pub(super) enum Answer {
     Recorded,
     Refused(WriteError),
     Failed(WriteError),
+    /// Jobs read as committed, written nothing (see `Writer::adopt`).
+    Adopted(Vec<Job>),
 }
 
 impl Answer {
@@ -42,6 +44,7 @@ impl Answer {
                 .collect(),
             Answer::Changed(Ok(job)) => vec![job],
             Answer::Reported(jobs) => jobs.iter().filter_map(|r| r.as_ref().ok()).collect(),
+            Answer::Adopted(jobs) => jobs.iter().collect(),
             _ => Vec::new(),
         }
     }
@@ -171,6 +174,9 @@ impl Group {
                 Ok(()) => Answer::Recorded,
                 Err(e) => Answer::Refused(e),
             },
+            Command::Adopt { ids, .. } => {
+                Answer::Adopted(ids.iter().filter_map(|id| self.jobs.get(id)).cloned().collect())
+            }
         }
     }
 

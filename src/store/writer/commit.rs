@@ -35,7 +35,7 @@ pub(super) async fn commit(
         }
     };
     let kept: Vec<&Command> = group.iter().zip(&held).filter(|(_, h)| **h).map(|(s, _)| &s.cmd).collect();
-    let (answers, out) = match kept_in_one(db, &kept, next, tell).await? {
+    let (answers, out) = match kept_in_one(db, &kept, next, tell, shared).await? {
         Some(done) => done,
         None => {
             let result = one_by_one(db, &kept, next, tell, shared, group, &held).await;
@@ -86,6 +86,7 @@ async fn kept_in_one(
     all: &[&Command],
     next: &mut Option<Next>,
     tell: Option<&Tell>,
+    shared: bool,
 ) -> Result<Option<(Vec<Answer>, Out)>, sqlx::Error> {
     let start_read = next.is_none();
     let attempt = async {
@@ -99,7 +100,7 @@ async fn kept_in_one(
     .await;
     match attempt {
         Ok((answers, applied)) => {
-            if let Err(e) = run(db, "COMMIT").await {
+            if let Err(e) = run(db, finish(db.engine(), shared)).await {
                 rollback(db).await;
                 return Err(e);
             }
@@ -165,7 +166,7 @@ async fn one_by_one(
             }
         }
     }
-    run(db, "COMMIT").await?;
+    run(db, finish(db.engine(), shared)).await?;
     *next = Some(numbers);
     Ok((answers, out))
 }
@@ -197,6 +198,18 @@ async fn begin(db: &mut Conn, shared: bool) -> Result<(), sqlx::Error> {
     };
     run(db, sql).await
 }
+
+/// Commits. A `shared` writer on PostgreSQL first notifies [`NOTIFY_CHANNEL`] (sent by the
+/// server at the commit, and only if it commits), so the other nodes read the new events.
+fn finish(engine: Engine, shared: bool) -> &'static str {
+    match (engine, shared) {
+        (Engine::Postgres, true) => "NOTIFY rackd_commits; COMMIT",
+        _ => "COMMIT",
+    }
+}
+
+/// The channel a shared writer notifies at each commit (see [`finish`]).
+pub const NOTIFY_CHANNEL: &str = "rackd_commits";
 
 /// Rolls back; a failure to is logged (the connection then fails the next group too).
 async fn rollback(db: &mut Conn) {

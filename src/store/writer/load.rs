@@ -100,6 +100,7 @@ pub(super) async fn load(
                 }
             }
             Command::Reports { reports, .. } => ids.extend(reports.iter().map(|r| r.job)),
+            Command::Adopt { ids: adopt, .. } => ids.extend(adopt.iter().copied()),
             Command::Record { record, .. } => match record {
                 Record::Lock { location, .. } | Record::Unlock { location, .. } => {
                     places.insert(*location);

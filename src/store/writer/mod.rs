@@ -13,6 +13,7 @@
 //! channel: the hand-offs, not SQLite, would otherwise set the pace.
 mod apply;
 mod commit;
+pub use commit::NOTIFY_CHANNEL;
 mod load;
 mod save;
 mod timing;
@@ -273,6 +274,7 @@ enum Command {
     Change { id: i64, change: Change, reply: oneshot::Sender<Result<Job, WriteError>> },
     Reports { reports: Vec<Report>, reply: oneshot::Sender<Vec<Result<Job, WriteError>>> },
     Record { record: Record, reply: oneshot::Sender<Result<(), WriteError>> },
+    Adopt { ids: Vec<i64>, reply: oneshot::Sender<Result<Vec<Job>, WriteError>> },
 }
 
 /// A command and the cluster epoch it must be committed under, if sent fenced.
@@ -392,6 +394,16 @@ impl Writer {
         answer.await.map_err(|_| WriteError::Closed)
     }
 
+    /// Reads jobs another node committed, in this writer's order: they go to the
+    /// [`Committed`] hook as they stand when their group runs, after every commit of this
+    /// writer sent before and before any sent after, so what the hook is handed never goes
+    /// back in time (a job this node ended meanwhile comes as ended). Nothing is written.
+    pub async fn adopt(&self, ids: Vec<i64>) -> Result<Vec<Job>, WriteError> {
+        let (reply, answer) = oneshot::channel();
+        self.tx.send(Sent { cmd: Command::Adopt { ids, reply }, epoch: None }).await.map_err(|_| WriteError::Closed)?;
+        answer.await.map_err(|_| WriteError::Closed)?
+    }
+
     /// Records a change that is not a job's, answering once it is on disk.
     pub async fn record(&self, record: Record) -> Result<(), WriteError> {
         let (reply, answer) = oneshot::channel();
@@ -487,6 +499,9 @@ async fn run(
                 (Command::Record { reply, .. }, apply::Answer::Recorded) => drop(reply.send(Ok(()))),
                 (Command::Record { reply, .. }, apply::Answer::Refused(e)) => drop(reply.send(Err(e))),
                 (Command::Reports { reply, .. }, apply::Answer::Reported(r)) => drop(reply.send(r)),
+                (Command::Adopt { reply, .. }, apply::Answer::Adopted(jobs)) => drop(reply.send(Ok(jobs))),
+                (Command::Adopt { reply, .. }, apply::Answer::Failed(e)) => drop(reply.send(Err(e))),
+                (Command::Adopt { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
                 (Command::Reports { reply, reports }, apply::Answer::Failed(e)) => {
                     drop(reply.send(reports.iter().map(|_| Err(e.clone())).collect()))
                 }

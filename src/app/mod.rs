@@ -1,11 +1,15 @@
 //! Building and running the service: open the store, start the devices, bind, serve, and
-//! shut down gracefully.
+//! shut down gracefully. What drives the machines is [`drive`]; a cluster node's wiring is
+//! [`cluster`].
+
+mod cluster;
+mod drive;
 
 use std::collections::BTreeSet;
 use std::future::Future;
 use std::net::SocketAddr;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
@@ -18,14 +22,12 @@ use crate::api::{self, AppState};
 use crate::auth::KeyRing;
 use crate::config::Config;
 use crate::devices::config::DeviceConfig;
-use crate::devices::{self, Devices};
 use crate::domain::time::now_ms;
 use crate::service::dispatch::{Dispatcher, Queues, Setup};
 use crate::service::events::Hub;
 use crate::service::intake::Rules;
-use crate::service::monitor;
 use crate::service::planner::CranePlanner;
-use crate::store::writer::{Hooks, Record, Writer};
+use crate::store::writer::{Committed, Hooks, Writer};
 use crate::store::{self, locations};
 
 /// A bound, ready-to-run rackd.
@@ -34,8 +36,9 @@ pub struct Application {
     router: axum::Router,
     writer_task: JoinHandle<()>,
     /// Device tasks, the device monitor and retention: stopped before the writer drains.
-    device_tasks: Vec<JoinHandle<()>>,
-    devices: Devices,
+    tasks: drive::Tasks,
+    /// This node's part in a cluster.
+    cluster: Option<cluster::Clustered>,
     keep: Vec<Box<dyn std::any::Any + Send>>,
 }
 
@@ -78,6 +81,11 @@ impl Application {
             .with_context(|| format!("opening database {}", database.display()))?;
         let layout = config.layout();
         locations::seed(&pool, &layout, now_ms()).await.context("seeding locations")?;
+        let pg = match (&config.cluster, &pool) {
+            (Some(_), store::Pool::Postgres(pg)) => Some(pg.clone()),
+            (Some(_), store::Pool::Sqlite(_)) => bail!("[cluster] needs a PostgreSQL database.url"),
+            (None, _) => None,
+        };
         let commits = Arc::new(AtomicU64::new(0));
         let deep: BTreeSet<u16> =
             config.site.aisles.iter().filter(|a| a.depth == 2).map(|a| a.aisle).collect();
@@ -94,33 +102,80 @@ impl Application {
         }));
         let hub = Hub::new(config.events.buffer);
         let metrics = Arc::new(Metrics::default());
+        // A cluster node's queues take in commits only while it drives; its hub is fed
+        // from the event log, which every node writes (`app::cluster`).
+        let driving = Arc::new(AtomicBool::new(pg.is_none()));
+        let when_driving = |hook: Committed| -> Committed {
+            let driving = driving.clone();
+            Arc::new(move |jobs: &[&crate::domain::Job]| {
+                if driving.load(Ordering::Acquire) {
+                    hook(jobs)
+                }
+            })
+        };
+        let locked = queues.locked_hook();
         let hooks = Hooks {
-            locked: Some(queues.locked_hook()),
-            committed: Some(queues.hook()),
-            publish: Some({
+            locked: Some({
+                let driving = driving.clone();
+                Arc::new(move |changes: &[_]| {
+                    if driving.load(Ordering::Acquire) {
+                        locked(changes)
+                    }
+                })
+            }),
+            committed: Some(when_driving(queues.hook())),
+            publish: pg.is_none().then(|| {
                 let (publish, commits) = (hub.hook(), commits.clone());
                 Arc::new(move |events| {
                     commits.fetch_add(1, Ordering::Release);
                     publish(events)
-                })
+                }) as store::writer::Publish
             }),
             observe: Some(metrics.writer_hook()),
             tell: Some(queues.tell_hook()),
         };
-        let (writer, writer_task) = Writer::start(&pool, config.intake.max_group, config.intake.queue, hooks)
-            .await
-            .context("opening the job writer's connection")?;
-        let dispatcher = Dispatcher::new(queues.clone(), writer.clone(), pool.clone());
-        dispatcher.load(config.devices.iter().map(|d| d.id())).await.context("loading the queues")?;
-        dispatcher.restore().await.context("restoring pauses and location locks")?;
-        let contact_refresh = Duration::from_millis(config.events.contact_refresh_ms);
-        let port = |id: &str| queues.port(id, writer.clone());
-        let (devices, mut device_tasks) = devices::start(&config.devices, port, contact_refresh).await?;
-        device_tasks.extend(monitor::start(&devices, &queues, writer.clone(), &pool).await);
-        queues.watch_devices(devices.iter().map(|(id, h)| (id.clone(), h.status.clone())).collect());
-        device_tasks
-            .push(tokio::spawn(crate::service::dispatch::waiting::watch(queues.clone(), writer.clone())));
-        device_tasks.push(tokio::spawn(retention(writer.clone(), config.events.retention_hours)));
+        let (max_group, queue) = (config.intake.max_group, config.intake.queue);
+        let started = match pg {
+            Some(_) => Writer::start_shared(&pool, max_group, queue, hooks).await,
+            None => Writer::start(&pool, max_group, queue, hooks).await,
+        };
+        let (writer, writer_task) = started.context("opening the job writer's connection")?;
+        let leading = match (&config.cluster, &pg) {
+            (Some(c), Some(pg)) => Some(cluster::lead(pg, c)),
+            _ => None,
+        };
+        // What the dispatcher writes is the active node's to write: fenced in a cluster.
+        let dispatcher = match &leading {
+            Some((leadership, _)) => {
+                Dispatcher::new(queues.clone(), writer.fenced(cluster::epoch(leadership)), pool.clone())
+            }
+            None => Dispatcher::new(queues.clone(), writer.clone(), pool.clone()),
+        };
+        let running = Arc::new(OnceLock::new());
+        let tasks = drive::Tasks::default();
+        let clustered = match (leading, &config.cluster, pg) {
+            (Some((leadership, timing)), Some(c), Some(pg)) => {
+                let parts = cluster::Parts {
+                    config: config.clone(),
+                    pool: pool.clone(),
+                    pg,
+                    dispatcher: dispatcher.clone(),
+                    writer: writer.clone(),
+                    hub: hub.clone(),
+                    commits: commits.clone(),
+                    driving: driving.clone(),
+                    running: running.clone(),
+                    tasks: tasks.clone(),
+                };
+                Some(cluster::start(c, leadership, timing, parts).await?)
+            }
+            _ => {
+                let d = drive::start(config, &pool, &dispatcher, writer.clone(), None).await?;
+                let _ = running.set(d.devices);
+                tasks.lock().unwrap_or_else(|p| p.into_inner()).extend(d.tasks);
+                None
+            }
+        };
         let crane_aisles = config
             .devices
             .iter()
@@ -144,24 +199,20 @@ impl Application {
             rules: Arc::new(rules),
             keys: Arc::new(keys),
             metrics,
-            devices: devices.clone(),
+            running,
+            cluster: clustered.as_ref().map(|c| c.node.clone()),
             dispatcher,
             hub,
             events: Arc::new(config.events.clone()),
         });
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);
-        Ok(Application { listener, router, writer_task, device_tasks, devices, keep: Vec::new() })
+        Ok(Application { listener, router, writer_task, tasks, cluster: clustered, keep: Vec::new() })
     }
 
     /// The address actually bound (useful with port 0).
     pub fn local_addr(&self) -> SocketAddr {
         self.listener.local_addr().expect("a bound listener has an address")
-    }
-
-    /// The running devices.
-    pub fn devices(&self) -> &Devices {
-        &self.devices
     }
 
     /// Keeps `thing` (an in-process simulator, say) alive as long as the service runs.
@@ -180,38 +231,45 @@ impl Application {
                 tracing::debug!(error = %e, "TCP_NODELAY");
             }
         });
-        axum::serve(listener, self.router).with_graceful_shutdown(shutdown).await?;
+        let lost = self.cluster.as_ref().map(|c| c.lost.clone());
+        let stop = async move {
+            match lost {
+                Some(mut lost) => tokio::select! {
+                    _ = shutdown => {}
+                    _ = lost.wait_for(Option::is_some) => {}
+                },
+                None => shutdown.await,
+            }
+        };
+        axum::serve(listener, self.router).with_graceful_shutdown(stop).await?;
         // A device stopped between two PLC requests is the same as a crash, which the
         // hand-over order and recovery make safe.
-        for task in &self.device_tasks {
-            task.abort();
+        drive::stop(std::mem::take(&mut *self.tasks.lock().unwrap_or_else(|p| p.into_inner()))).await;
+        let mut failure = None;
+        if let Some(c) = self.cluster {
+            failure = c.lost.borrow().clone();
+            for task in &c.background {
+                task.abort();
+            }
+            // Stopped cleanly: let go of the lease, so a standby takes over at once.
+            if failure.is_none() {
+                let pool = c.node.pool.clone();
+                if let Err(e) = c.leadership.release(&pool, &c.node.name).await {
+                    tracing::warn!(error = %e, "cluster: the lease could not be let go; it runs out instead");
+                }
+            } else {
+                c.leadership.abort();
+            }
         }
-        for task in self.device_tasks {
-            let _ = task.await;
-        }
-        drop(self.devices);
         // The router and devices (and with them the last writer handles) are gone: the
         // writer drains and stops.
         self.writer_task.await.context("job writer")?;
         drop(self.keep);
+        if let Some(why) = failure {
+            bail!("{why}; start it again to stand by");
+        }
         tracing::info!("rackd stopped");
         Ok(())
-    }
-}
-
-/// Deletes events older than the retention from the log, at start and then every tenth of
-/// the retention (at most hourly).
-async fn retention(writer: Writer, hours: u64) {
-    let keep = Duration::from_secs(hours.saturating_mul(3600));
-    let mut tick = tokio::time::interval((keep / 10).min(Duration::from_secs(3600)));
-    loop {
-        tick.tick().await;
-        let before_ms = now_ms().saturating_sub(keep.as_millis() as i64);
-        match writer.record(Record::Prune { before_ms }).await {
-            Ok(()) => {}
-            Err(store::writer::WriteError::Closed) => return,
-            Err(e) => tracing::warn!(error = %e, "pruning the event log"),
-        }
     }
 }
 

@@ -1,0 +1,186 @@
+//! A cluster node's wiring (`[cluster]`, see `service::cluster`): the leadership loop, the
+//! node's row, the event log followed into the hub (and, on the active node, into the
+//! queues: jobs the standbys took in), and the takeover: driving starts when the lease is
+//! won, exactly as at a restart, and stops the instant it is lost; the process then ends
+//! ([`Clustered::lost`]) so that its supervisor starts it again as a standby, with nothing
+//! of the old term left in memory.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
+
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinHandle;
+
+use super::drive;
+use crate::config::{ClusterConfig, Config};
+use crate::devices::Devices;
+use crate::domain::time::now_ms;
+use crate::domain::{AlarmClass, AlarmKind};
+use crate::service::cluster::lease::Timing;
+use crate::service::cluster::{Leadership, Node, Role, TAKEOVER_ACTION, follow, node};
+use crate::service::dispatch::Dispatcher;
+use crate::service::events::Hub;
+use crate::store::alarms::NewAlarm;
+use crate::store::writer::{Epoch, Record, Writer};
+use crate::store::{Pool, events};
+
+/// The device of the `takeover` alarm.
+pub const CLUSTER_DEVICE: &str = "cluster";
+
+/// A running cluster node.
+pub(super) struct Clustered {
+    /// The node, for the API.
+    pub node: Node,
+    /// Its leadership loop.
+    pub leadership: Leadership,
+    /// Set when this node must stop: its lease was lost, or it could not drive.
+    pub lost: watch::Receiver<Option<String>>,
+    /// The follower, the node's row, the adopter and the takeover.
+    pub background: Vec<JoinHandle<()>>,
+}
+
+/// What the wiring needs of the rest of the application.
+pub(super) struct Parts {
+    pub config: Config,
+    pub pool: Pool,
+    pub pg: sqlx::PgPool,
+    pub dispatcher: Dispatcher,
+    pub writer: Writer,
+    pub hub: Hub,
+    pub commits: Arc<AtomicU64>,
+    pub driving: Arc<AtomicBool>,
+    pub running: Arc<OnceLock<Devices>>,
+    pub tasks: drive::Tasks,
+}
+
+/// Starts the leadership loop (before the writer: its gate fences the writer's handle).
+pub(super) fn lead(pg: &sqlx::PgPool, c: &ClusterConfig) -> (Leadership, Timing) {
+    let (lease, margin) = c.lease();
+    let timing = Timing { lease, margin };
+    (Leadership::start(pg.clone(), c.node.clone(), timing), timing)
+}
+
+/// The epoch the node's fenced writer handle acts under.
+pub(super) fn epoch(leadership: &Leadership) -> Epoch {
+    let gate = leadership.gate.clone();
+    Arc::new(move || gate.may_drive())
+}
+
+/// Starts the rest of the node around `leadership`.
+pub(super) async fn start(
+    c: &ClusterConfig,
+    leadership: Leadership,
+    timing: Timing,
+    parts: Parts,
+) -> anyhow::Result<Clustered> {
+    let node = Node {
+        name: c.node.clone(),
+        url: c.url(parts.config.server.listen),
+        role: leadership.role.clone(),
+        gate: leadership.gate.clone(),
+        pool: parts.pg.clone(),
+        timing,
+        takeovers: Arc::new(AtomicU64::new(0)),
+        started_at: now_ms(),
+    };
+    let (_, from) = events::bounds(&parts.pool).await?;
+    let (adopt, wanted) = mpsc::unbounded_channel();
+    let seen: follow::Seen = {
+        let (hub, commits, driving) = (parts.hub.clone(), parts.commits.clone(), parts.driving.clone());
+        let queues = parts.dispatcher.queues().clone();
+        Arc::new(move |batch| {
+            if driving.load(Ordering::Acquire) {
+                let ids: Vec<i64> =
+                    follow::unfinished_jobs(&batch).into_iter().filter(|id| queues.find(*id).is_none()).collect();
+                if !ids.is_empty() {
+                    let _ = adopt.send(ids);
+                }
+            }
+            commits.fetch_add(1, Ordering::Release);
+            hub.publish(batch);
+        })
+    };
+    let (lost_tx, lost) = watch::channel(None);
+    let background = vec![
+        tokio::spawn(follow::run(parts.pg.clone(), from, timing.poll_every(), seen)),
+        tokio::spawn(node::tell(node.clone())),
+        tokio::spawn(adopter(parts.writer.clone(), wanted)),
+        tokio::spawn(takeover(node.clone(), parts, lost_tx)),
+    ];
+    Ok(Clustered { node, leadership, lost, background })
+}
+
+/// Hands the jobs other nodes took in to this node's queues, through its writer (so they
+/// come in its commit order; see `Writer::adopt`).
+async fn adopter(writer: Writer, mut wanted: mpsc::UnboundedReceiver<Vec<i64>>) {
+    while let Some(ids) = wanted.recv().await {
+        if let Err(e) = writer.adopt(ids).await {
+            tracing::error!(error = %e, "cluster: jobs of another node could not be taken in");
+        }
+    }
+}
+
+/// Waits to become active, then drives until the lease is lost.
+async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>) {
+    let mut role = node.role.clone();
+    let Ok(won) = role.wait_for(|r| matches!(r, Role::Active { .. })).await.map(|r| *r) else { return };
+    let Role::Active { epoch } = won else { return };
+    parts.driving.store(true, Ordering::Release);
+    let gate = node.gate.clone();
+    let fenced = parts.writer.fenced(Arc::new(move || gate.may_drive()));
+    let gate = node.gate.clone();
+    let may = Arc::new(move || gate.may_drive().is_some());
+    match drive::start(&parts.config, &parts.pool, &parts.dispatcher, fenced.clone(), Some(may)).await {
+        Ok(d) => {
+            let _ = parts.running.set(d.devices);
+            parts.tasks.lock().unwrap_or_else(|p| p.into_inner()).extend(d.tasks);
+        }
+        Err(e) => {
+            tracing::error!(error = %format!("{e:#}"), "cluster: this node won the lease but cannot drive");
+            lost.send_replace(Some(format!("this node won the lease but cannot drive the machines: {e:#}")));
+            return;
+        }
+    }
+    node.takeovers.fetch_add(1, Ordering::Relaxed);
+    tracing::info!(node = node.name, epoch, "cluster: this node drives the machines");
+    if epoch > 1 {
+        let alarms = tokio::spawn(tell_takeover(node.clone(), fenced, epoch));
+        parts.tasks.lock().unwrap_or_else(|p| p.into_inner()).push(alarms);
+    }
+    let _ = role.wait_for(|r| *r == Role::Standby).await;
+    let tasks = std::mem::take(&mut *parts.tasks.lock().unwrap_or_else(|p| p.into_inner()));
+    drive::stop(tasks).await;
+    lost.send_replace(Some("this node lost the cluster's lease; it stopped driving the machines".into()));
+}
+
+/// Raises the `takeover` alarm, and clears it once another node stands by again.
+async fn tell_takeover(node: Node, writer: Writer, epoch: i64) {
+    let alarm = NewAlarm {
+        device: CLUSTER_DEVICE.into(),
+        kind: AlarmKind::Takeover,
+        code: 0,
+        class: AlarmClass::Link,
+        text: format!("node {:?} took over driving the machines (epoch {epoch})", node.name),
+        detail: None,
+        action: Some(TAKEOVER_ACTION.into()),
+    };
+    if let Err(e) = writer.record(Record::AlarmRaised(alarm)).await {
+        tracing::warn!(error = %e, "cluster: the takeover alarm could not be raised");
+    }
+    loop {
+        tokio::time::sleep(node.timing.renew_every()).await;
+        let Ok(view) = node.view().await else { continue };
+        let fresh = (node.timing.lease * 2).as_millis() as i64;
+        let back = view
+            .nodes
+            .iter()
+            .any(|n| n.name != node.name && n.role == "standby" && view.now - n.seen_at < fresh);
+        if back {
+            let key = (AlarmKind::Takeover, 0);
+            match writer.record(Record::AlarmCleared { device: CLUSTER_DEVICE.into(), key }).await {
+                Ok(()) => return,
+                Err(e) => tracing::warn!(error = %e, "cluster: the takeover alarm could not be cleared"),
+            }
+        }
+    }
+}

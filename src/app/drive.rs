@@ -1,0 +1,80 @@
+//! What the node that drives the machines runs: the queues filled from the store, the
+//! pauses and locks restored, the devices connected (each reconciling with its own
+//! registers before it hands anything over, as after any restart), the device monitor,
+//! the waiting-reason watcher and the log's retention. A node of its own starts it at
+//! once; a cluster node when it becomes the active one (a takeover is a restart).
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::Context;
+use tokio::task::JoinHandle;
+
+use crate::config::Config;
+use crate::devices::gate::MayDrive;
+use crate::devices::{self, Devices};
+use crate::domain::time::now_ms;
+use crate::service::dispatch::{Dispatcher, Queues};
+use crate::service::monitor;
+use crate::store::writer::{Record, Writer};
+use crate::store::{self, Pool};
+
+/// The driving part, running.
+pub(super) struct Drive {
+    /// The devices.
+    pub devices: Devices,
+    /// Their tasks and the rest: stopped before the writer drains.
+    pub tasks: Vec<JoinHandle<()>>,
+}
+
+/// Starts driving: `writer` is the handle every device-side write goes through (fenced
+/// in a cluster), `gate` the check before every request to a machine (in a cluster).
+pub(super) async fn start(
+    config: &Config,
+    pool: &Pool,
+    dispatcher: &Dispatcher,
+    writer: Writer,
+    gate: Option<MayDrive>,
+) -> anyhow::Result<Drive> {
+    let queues: &Queues = dispatcher.queues();
+    let ids: Vec<String> = config.devices.iter().map(|d| d.id().to_owned()).collect();
+    dispatcher.load(ids.iter().map(String::as_str)).await.context("loading the queues")?;
+    dispatcher.restore().await.context("restoring pauses and location locks")?;
+    let contact_refresh = Duration::from_millis(config.events.contact_refresh_ms);
+    let port = |id: &str| queues.port(id, writer.clone());
+    let (devices, mut tasks) = devices::start(&config.devices, port, contact_refresh, gate).await?;
+    tasks.extend(monitor::start(&devices, queues, writer.clone(), pool).await);
+    queues.watch_devices(devices.iter().map(|(id, h)| (id.clone(), h.status.clone())).collect());
+    tasks.push(tokio::spawn(crate::service::dispatch::waiting::watch(queues.clone(), writer.clone())));
+    tasks.push(tokio::spawn(retention(writer, config.events.retention_hours)));
+    Ok(Drive { devices, tasks })
+}
+
+/// Deletes events older than the retention from the log, at start and then every tenth of
+/// the retention (at most hourly).
+async fn retention(writer: Writer, hours: u64) {
+    let keep = Duration::from_secs(hours.saturating_mul(3600));
+    let mut tick = tokio::time::interval((keep / 10).min(Duration::from_secs(3600)));
+    loop {
+        tick.tick().await;
+        let before_ms = now_ms().saturating_sub(keep.as_millis() as i64);
+        match writer.record(Record::Prune { before_ms }).await {
+            Ok(()) => {}
+            Err(store::writer::WriteError::Closed) => return,
+            Err(e) => tracing::warn!(error = %e, "pruning the event log"),
+        }
+    }
+}
+
+/// Stops the tasks and waits for them to end.
+pub(super) async fn stop(tasks: Vec<JoinHandle<()>>) {
+    for task in &tasks {
+        task.abort();
+    }
+    for task in tasks {
+        let _ = task.await;
+    }
+}
+
+/// A shared list of the driving tasks, filled when driving starts.
+pub(super) type Tasks = Arc<std::sync::Mutex<Vec<JoinHandle<()>>>>;
