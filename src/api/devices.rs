@@ -24,7 +24,10 @@ pub fn router() -> OpenApiRouter<AppState> {
 }
 
 fn device(app: &AppState, id: &str) -> Result<DeviceHandle, ApiError> {
-    app.devices().get(id).cloned().ok_or_else(|| ApiError::not_found(format!("device {id:?} is not configured")))
+    app.devices()
+        .get(id)
+        .cloned()
+        .ok_or_else(|| ApiError::not_found(format!("device {id:?} is not configured")))
 }
 
 /// Pauses or resumes a device (stored and audited first) and shows it.

@@ -8,12 +8,14 @@ pub mod access;
 pub mod aisles;
 pub mod alarms;
 pub mod auth;
+pub mod cluster;
 pub mod contract;
 pub mod control;
 pub mod dashboard;
 pub mod devices;
 pub mod error;
 pub mod extract;
+pub mod forward;
 pub mod health;
 pub mod inventory;
 pub mod jobs;
@@ -124,6 +126,7 @@ fn protected_routes() -> OpenApiRouter<AppState> {
         .merge(aisles::router())
         .merge(control::router())
         .merge(health::router())
+        .merge(cluster::router())
         .merge(stats::router())
         .merge(whoami::router())
         .merge(ws::router());
@@ -151,8 +154,10 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
     contract::complete(&mut doc);
     // The 405 fallback is set before the key check is layered on, so that a wrong method
     // on a protected route is refused for a missing key first.
+    // A standby forwards what only the active node does, once the key is checked.
     let protected = protected
         .method_not_allowed_fallback(ops::method_not_allowed)
+        .layer(middleware::from_fn_with_state(state.clone(), forward::forward))
         .layer(middleware::from_fn_with_state(state.clone(), auth::require_key));
     Router::new()
         .merge(protected)

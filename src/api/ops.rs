@@ -17,17 +17,22 @@ use super::state::AppState;
 pub struct Health {
     /// `ok`.
     pub status: &'static str,
+    /// In a cluster (`/readyz`): `active` (this node drives the machines) or `standby`
+    /// (it serves the API and stands by); absent for a node of its own.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub role: Option<&'static str>,
 }
 
 /// Liveness: the process answers HTTP.
 #[utoipa::path(get, path = "/healthz", tag = "operations", security(()),
     responses((status = 200, description = "Alive", body = Health)))]
 pub async fn healthz() -> Json<Health> {
-    Json(Health { status: "ok" })
+    Json(Health { status: "ok", role: None })
 }
 
 /// Readiness: the database answers, every migration is applied and the job writer runs
-/// (the devices are not judged here: see `GET /api/v1/health`).
+/// (the devices are not judged here: see `GET /api/v1/health`). A standby node of a
+/// cluster is ready (it serves the whole API) and says so in `role`.
 #[utoipa::path(get, path = "/readyz", tag = "operations", security(()),
     responses(
         (status = 200, description = "Ready", body = Health),
@@ -51,7 +56,7 @@ pub async fn readyz(State(app): State<AppState>) -> Result<Json<Health>, ApiErro
             "the job writer has stopped",
         ));
     }
-    Ok(Json(Health { status: "ok" }))
+    Ok(Json(Health { status: "ok", role: app.cluster.as_ref().map(|n| n.role_name()) }))
 }
 
 /// Any path no route serves.
@@ -87,6 +92,18 @@ pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<
         alarms: crate::store::alarms::count_active(&app.pool).await?,
         now: time::OffsetDateTime::now_utc(),
         started: app.metrics.started(),
+        cluster: app.cluster.as_ref().map(|n| {
+            let epoch = match n.role() {
+                crate::service::cluster::Role::Active { epoch } => epoch,
+                crate::service::cluster::Role::Standby => 0,
+            };
+            super::metrics::scrape::ClusterSample {
+                node: n.name.clone(),
+                active: epoch != 0,
+                epoch,
+                takeovers: n.takeovers(),
+            }
+        }),
     };
     let body = app.metrics.render(scrape, app.hub.subscribers(), format)?;
     Ok(([(header::CONTENT_TYPE, format.content_type())], body).into_response())

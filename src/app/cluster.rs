@@ -42,6 +42,8 @@ pub(super) struct Clustered {
 /// What the wiring needs of the rest of the application.
 pub(super) struct Parts {
     pub config: Config,
+    /// The address the API is bound to (its port, when configured as 0).
+    pub listen: std::net::SocketAddr,
     pub pool: Pool,
     pub pg: sqlx::PgPool,
     pub dispatcher: Dispatcher,
@@ -75,7 +77,7 @@ pub(super) async fn start(
 ) -> anyhow::Result<Clustered> {
     let node = Node {
         name: c.node.clone(),
-        url: c.url(parts.config.server.listen),
+        url: c.url(parts.listen),
         role: leadership.role.clone(),
         gate: leadership.gate.clone(),
         pool: parts.pg.clone(),
@@ -90,8 +92,10 @@ pub(super) async fn start(
         let queues = parts.dispatcher.queues().clone();
         Arc::new(move |batch| {
             if driving.load(Ordering::Acquire) {
-                let ids: Vec<i64> =
-                    follow::unfinished_jobs(&batch).into_iter().filter(|id| queues.find(*id).is_none()).collect();
+                let ids: Vec<i64> = follow::unfinished_jobs(&batch)
+                    .into_iter()
+                    .filter(|id| queues.find(*id).is_none())
+                    .collect();
                 if !ids.is_empty() {
                     let _ = adopt.send(ids);
                 }

@@ -157,6 +157,7 @@ impl Application {
             (Some((leadership, timing)), Some(c), Some(pg)) => {
                 let parts = cluster::Parts {
                     config: config.clone(),
+                    listen: listener.local_addr().context("the bound address")?,
                     pool: pool.clone(),
                     pg,
                     dispatcher: dispatcher.clone(),
@@ -244,7 +245,8 @@ impl Application {
         axum::serve(listener, self.router).with_graceful_shutdown(stop).await?;
         // A device stopped between two PLC requests is the same as a crash, which the
         // hand-over order and recovery make safe.
-        drive::stop(std::mem::take(&mut *self.tasks.lock().unwrap_or_else(|p| p.into_inner()))).await;
+        let tasks = std::mem::take(&mut *self.tasks.lock().unwrap_or_else(|p| p.into_inner()));
+        drive::stop(tasks).await;
         let mut failure = None;
         if let Some(c) = self.cluster {
             failure = c.lost.borrow().clone();

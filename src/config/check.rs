@@ -148,6 +148,11 @@ impl Config {
                 Some(("cluster", "a cluster shares one PostgreSQL database: set database.url"))
             } else if c.node.is_empty() || c.node.len() > 64 {
                 Some(("cluster.node", "a node's name is 1 to 64 characters"))
+            } else if c.url.is_none() && self.server.listen.ip().is_unspecified() {
+                Some((
+                    "cluster.url",
+                    "server.listen is every interface: say in cluster.url where the other nodes reach this one",
+                ))
             } else if c.lease_ms < 100 {
                 Some(("cluster.lease_ms", "the lease is at least 100 ms"))
             } else if c.margin_ms.is_some_and(|m| m < c.lease_ms / 10 || m > c.lease_ms) {

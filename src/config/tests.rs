@@ -145,3 +145,19 @@ fn devices_are_checked_together() {
     let err = Config::parse(&shelf("a", 9), Path::new("x.toml")).unwrap_err().to_string();
     assert!(err.contains("aisle 9 is not in site.aisles"), "{err}");
 }
+
+#[test]
+fn a_cluster_needs_postgresql_and_an_address_the_others_reach() {
+    let err = |text: &str| Config::parse(text, Path::new("x.toml")).unwrap_err().to_string();
+    let e = err("[cluster]\nnode = \"a\"\n");
+    assert!(e.contains("cluster: ") && e.contains("database.url"), "{e}");
+    let pg = "[database]\nurl = \"postgres://rackd@db/rackd\"\n";
+    let e = err(&format!("{pg}[server]\nlisten = \"0.0.0.0:8080\"\n[cluster]\nnode = \"a\"\n"));
+    assert!(e.contains("cluster.url: "), "{e}");
+    let e = err(&format!("{pg}[cluster]\nnode = \"a\"\nlease_ms = 1000\nmargin_ms = 50\n"));
+    assert!(e.contains("cluster.margin_ms: "), "{e}");
+    let ok = Config::parse(&format!("{pg}[cluster]\nnode = \"a\"\n"), Path::new("x.toml")).unwrap();
+    let c = ok.cluster.unwrap();
+    assert_eq!(c.lease(), (std::time::Duration::from_secs(5), std::time::Duration::from_secs(1)));
+    assert_eq!(c.url(ok.server.listen), "http://127.0.0.1:8080");
+}

@@ -107,12 +107,24 @@ pub struct NodeRow {
 }
 
 /// Tells the cluster that `node` is alive at `url` in `role` (started at `started_at`).
-pub async fn tell(pool: &PgPool, node: &str, url: &str, role: &str, started_at: i64) -> Result<(), sqlx::Error> {
+pub async fn tell(
+    pool: &PgPool,
+    node: &str,
+    url: &str,
+    role: &str,
+    started_at: i64,
+) -> Result<(), sqlx::Error> {
     let sql = format!(
         "INSERT INTO cluster_nodes (name, url, role, started_at, seen_at) VALUES ($1, $2, $3, $4, {NOW_MS}) \
          ON CONFLICT (name) DO UPDATE SET url = $2, role = $3, started_at = $4, seen_at = {NOW_MS}"
     );
-    sqlx::query(sqlx::AssertSqlSafe(sql)).bind(node).bind(url).bind(role).bind(started_at).execute(pool).await?;
+    sqlx::query(sqlx::AssertSqlSafe(sql))
+        .bind(node)
+        .bind(url)
+        .bind(role)
+        .bind(started_at)
+        .execute(pool)
+        .await?;
     Ok(())
 }
 

@@ -17,6 +17,7 @@ mod postgres;
 mod ws;
 
 mod cluster;
+mod nodes;
 
 #[path = "../api/alarms.rs"]
 mod api_alarms;

@@ -269,8 +269,14 @@ mod tests {
             jobs: &jobs,
         });
         let now = OffsetDateTime::now_utc();
-        let scrape =
-            scrape::Scrape { devices: Vec::new(), jobs: Vec::new(), alarms: Vec::new(), now, started: now };
+        let scrape = scrape::Scrape {
+            devices: Vec::new(),
+            jobs: Vec::new(),
+            alarms: Vec::new(),
+            now,
+            started: now,
+            cluster: None,
+        };
         let text = metrics.encode(scrape, 2).unwrap();
         assert!(text.ends_with("# EOF\n"), "{text}");
         assert!(text.contains("rackd_build_info{version=\""), "{text}");

@@ -91,6 +91,26 @@ pub struct Scrape {
     pub now: OffsetDateTime,
     /// When rackd started (the age of a device never heard from).
     pub started: OffsetDateTime,
+    /// In a cluster: this node's name, whether it is active, and its takeovers.
+    pub cluster: Option<ClusterSample>,
+}
+
+/// A cluster node's figures.
+#[derive(Debug)]
+pub struct ClusterSample {
+    /// The node's name.
+    pub node: String,
+    /// Whether it drives the machines now.
+    pub active: bool,
+    /// The epoch it drives under (0 on a standby).
+    pub epoch: i64,
+    /// Times its process took over.
+    pub takeovers: u64,
+}
+
+#[derive(EncodeLabelSet, Debug, Clone, PartialEq, Eq, Hash)]
+struct NodeLabel {
+    node: Text,
 }
 
 type Result = std::result::Result<(), std::fmt::Error>;
@@ -253,6 +273,17 @@ impl Collector for Scrape {
             "alarms_active",
             "Active alarms by device and class (business, hardware, link).",
             alarms,
-        )
+        )?;
+        if let Some(c) = &self.cluster {
+            let node = || NodeLabel { node: Text(c.node.clone()) };
+            let help =
+                "1 while this node drives the machines (the active node of its cluster), 0 on a standby.";
+            gauge(&mut e, "cluster_active", help, [(node(), i64::from(c.active))])?;
+            let help = "The epoch (fencing token) this node drives under; 0 on a standby.";
+            gauge(&mut e, "cluster_epoch", help, [(node(), c.epoch)])?;
+            let help = "Times this node's process became the active node.";
+            counter(&mut e, "cluster_takeovers", help, [(node(), c.takeovers)])?;
+        }
+        Ok(())
     }
 }

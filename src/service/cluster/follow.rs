@@ -99,7 +99,8 @@ mod tests {
 
     #[test]
     fn only_unfinished_jobs_are_taken_from_a_batch() {
-        let e = |seq, kind: &str, data: &str| StoredEvent { seq, at: 0, kind: kind.into(), data: data.into() };
+        let e =
+            |seq, kind: &str, data: &str| StoredEvent { seq, at: 0, kind: kind.into(), data: data.into() };
         let batch = [
             e(1, "job.updated", r#"{"id":7,"state":"queued","kind":"travel"}"#),
             e(2, "job.updated", r#"{"id":8,"state":"completed"}"#),

@@ -75,7 +75,9 @@ impl Node {
     /// The node that holds the lease, if it is another one and tells where its API is.
     pub async fn active(&self) -> Result<Option<NodeRow>, sqlx::Error> {
         let view = self.view().await?;
-        let Some(lease) = view.lease.filter(|l| !l.released && l.holder != self.name) else { return Ok(None) };
+        let Some(lease) = view.lease.filter(|l| !l.released && l.holder != self.name) else {
+            return Ok(None);
+        };
         Ok(view.nodes.into_iter().find(|n| n.name == lease.holder))
     }
 }

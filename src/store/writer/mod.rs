@@ -400,7 +400,10 @@ impl Writer {
     /// back in time (a job this node ended meanwhile comes as ended). Nothing is written.
     pub async fn adopt(&self, ids: Vec<i64>) -> Result<Vec<Job>, WriteError> {
         let (reply, answer) = oneshot::channel();
-        self.tx.send(Sent { cmd: Command::Adopt { ids, reply }, epoch: None }).await.map_err(|_| WriteError::Closed)?;
+        self.tx
+            .send(Sent { cmd: Command::Adopt { ids, reply }, epoch: None })
+            .await
+            .map_err(|_| WriteError::Closed)?;
         answer.await.map_err(|_| WriteError::Closed)?
     }
 

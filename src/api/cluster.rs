@@ -1,0 +1,121 @@
+//! `GET /api/v1/cluster`: the nodes of a hot-standby cluster, their roles, the lease's
+//! epoch and age (see `service::cluster`). A node of its own answers 404.
+
+use axum::extract::State;
+use serde::Serialize;
+use utoipa::ToSchema;
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::error::{ApiError, ErrorBody};
+use super::extract::Json;
+use super::state::AppState;
+use crate::domain::time::from_ms;
+use crate::service::cluster::Role;
+
+/// The routes of this resource.
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new().routes(routes!(cluster))
+}
+
+/// The cluster as the answering node sees it.
+#[derive(Debug, Serialize, ToSchema)]
+#[schema(example = json!({"node": "b", "role": "active", "epoch": 4, "takeovers": 1,
+    "lease": {"holder": "b", "epoch": 4, "age_ms": 640, "released": false, "lease_ms": 5000, "margin_ms": 1000},
+    "nodes": [{"name": "a", "url": "http://10.0.0.11:8080", "role": "standby", "seen_ms_ago": 900,
+        "started_at": "2026-11-24T07:00:00Z"},
+        {"name": "b", "url": "http://10.0.0.12:8080", "role": "active", "seen_ms_ago": 300,
+        "started_at": "2026-11-20T07:00:00Z"}]}))]
+pub struct ClusterView {
+    /// The answering node.
+    pub node: String,
+    /// Its role: `active` (it drives the machines) or `standby`.
+    pub role: &'static str,
+    /// The epoch it drives under (active only).
+    pub epoch: Option<i64>,
+    /// Times this node's process took over.
+    pub takeovers: u64,
+    /// The lease, if any node ever held it.
+    pub lease: Option<LeaseView>,
+    /// Every node that ever told of itself, by name.
+    pub nodes: Vec<NodeView>,
+}
+
+/// The lease.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct LeaseView {
+    /// The node that holds it (or last held it).
+    pub holder: String,
+    /// The fencing token: one more at every takeover.
+    pub epoch: i64,
+    /// Milliseconds since its last renewal, by the database server's clock.
+    pub age_ms: i64,
+    /// Let go by a node that stopped cleanly.
+    pub released: bool,
+    /// How long a renewal lets the active node drive.
+    pub lease_ms: u64,
+    /// What a standby waits beyond the lease before it takes over.
+    pub margin_ms: u64,
+}
+
+/// A node as it last told of itself.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct NodeView {
+    /// Its name.
+    pub name: String,
+    /// Where its API is reached.
+    pub url: String,
+    /// `active` or `standby`, as it last told.
+    pub role: String,
+    /// Milliseconds since it last told (a node that stopped ages).
+    pub seen_ms_ago: i64,
+    /// When its process started.
+    #[serde(with = "time::serde::rfc3339")]
+    #[schema(value_type = String, format = DateTime)]
+    pub started_at: time::OffsetDateTime,
+}
+
+/// The cluster's nodes, roles, epoch and lease age.
+#[utoipa::path(get, path = "/cluster", tag = "operations",
+    responses(
+        (status = 200, description = "The cluster", body = ClusterView),
+        (status = 401, description = "No key, or an unknown key", body = ErrorBody),
+        (status = 404, description = "This node is not in a cluster", body = ErrorBody),
+        (status = 503, description = "The database does not answer", body = ErrorBody),
+    ))]
+async fn cluster(State(app): State<AppState>) -> Result<Json<ClusterView>, ApiError> {
+    let Some(node) = &app.cluster else {
+        return Err(ApiError::not_found("this node is not in a cluster ([cluster] is not configured)"));
+    };
+    let view = node.view().await.map_err(ApiError::unavailable)?;
+    let lease = view.lease.map(|l| LeaseView {
+        holder: l.holder,
+        epoch: l.epoch,
+        age_ms: (view.now - l.renewed_at).max(0),
+        released: l.released,
+        lease_ms: node.timing.lease.as_millis() as u64,
+        margin_ms: node.timing.margin.as_millis() as u64,
+    });
+    let nodes = view
+        .nodes
+        .into_iter()
+        .map(|n| NodeView {
+            name: n.name,
+            url: n.url,
+            role: n.role,
+            seen_ms_ago: (view.now - n.seen_at).max(0),
+            started_at: from_ms(n.started_at),
+        })
+        .collect();
+    let epoch = match node.role() {
+        Role::Active { epoch } => Some(epoch),
+        Role::Standby => None,
+    };
+    Ok(Json(ClusterView {
+        node: node.name.clone(),
+        role: node.role_name(),
+        epoch,
+        takeovers: node.takeovers(),
+        lease,
+        nodes,
+    }))
+}

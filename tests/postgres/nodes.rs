@@ -1,0 +1,103 @@
+//! Two rackd nodes of one cluster in this process, on one PostgreSQL and the demo's
+//! simulated machines: what a standby serves itself (submissions, reads, `/readyz`), what
+//! it forwards to the active node (devices, pauses), what both tell (`/api/v1/cluster`,
+//! `/metrics`), and a clean handover (the active node stops and lets go of its lease: the
+//! standby takes over at once, raises the takeover alarm and finishes the work).
+
+use std::time::{Duration, Instant};
+
+use rackd::cli::demo::{Pace, start_with};
+use rackd::config::{ClusterConfig, Config};
+use rackd::store::Database;
+use serde_json::{Value, json};
+
+use crate::helpers::{TestApp, spawn_on};
+
+const PACE: Pace = Pace { task_time: Duration::from_millis(200), crane_step: Duration::from_millis(20) };
+
+async fn node(db: &str, name: &str, devices: &Config) -> TestApp {
+    let devices = devices.devices.clone();
+    let name = name.to_owned();
+    spawn_on(Database::Postgres(db.to_owned()), move |c| {
+        c.devices = devices;
+        c.cluster = Some(ClusterConfig { node: name, lease_ms: 1000, margin_ms: None, url: None });
+    })
+    .await
+}
+
+/// Waits until `check` holds for `app`'s answer to `GET path` (bounded).
+async fn until(app: &TestApp, path: &str, secs: u64, check: impl Fn(&Value) -> bool) -> Value {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    loop {
+        let (status, body) = app.get(path).await;
+        if status == 200 && check(&body) {
+            return body;
+        }
+        assert!(Instant::now() < deadline, "GET {path} never came right: {status} {body}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+fn travel(reference: &str, bay: u16) -> Value {
+    json!({"kind": "travel", "reference": reference,
+           "to": {"aisle": 2, "row": 1, "bay": bay, "level": 1, "position": 1}})
+}
+
+async fn completed(app: &TestApp, id: i64) {
+    until(app, &format!("/api/v1/jobs/{id}"), 30, |j| j["state"] == "completed").await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_standby_serves_forwards_and_takes_over_when_the_active_node_lets_go() {
+    let db = crate::postgres::database().await;
+    let mut site = Config::demo();
+    let _sims = start_with(&mut site, PACE).await.unwrap();
+    let a = node(&db, "a", &site).await;
+    until(&a, "/api/v1/cluster", 10, |c| c["role"] == "active").await;
+    let b = node(&db, "b", &site).await;
+
+    // Both are ready; each says what it is.
+    assert_eq!(a.get("/readyz").await, (200, json!({"status": "ok", "role": "active"})));
+    assert_eq!(b.get("/readyz").await, (200, json!({"status": "ok", "role": "standby"})));
+    let view = until(&b, "/api/v1/cluster", 10, |c| c["nodes"].as_array().is_some_and(|n| n.len() == 2)).await;
+    assert_eq!((view["node"].clone(), view["role"].clone()), (json!("b"), json!("standby")));
+    assert_eq!((view["lease"]["holder"].clone(), view["lease"]["epoch"].clone()), (json!("a"), json!(1)));
+
+    // A job submitted to the standby is driven by the active node.
+    let (status, job) = b.post("/api/v1/jobs", &travel("via-b", 3)).await;
+    assert_eq!(status, 201, "{job}");
+    completed(&b, job["id"].as_i64().unwrap()).await;
+
+    // The standby has no devices of its own: it forwards, pauses included.
+    let (status, devices) = b.get("/api/v1/devices").await;
+    assert_eq!(status, 200, "{devices}");
+    assert!(devices.as_array().unwrap().iter().any(|d| d["id"] == "crane1"), "{devices}");
+    let (status, paused) = b.post("/api/v1/devices/crane1/pause", &json!({"reason": "check"})).await;
+    assert_eq!((status, paused["paused"].clone()), (200, json!(true)), "{paused}");
+    assert_eq!(a.get("/api/v1/devices/crane1").await.1["paused"], true);
+    assert_eq!(b.post("/api/v1/devices/crane1/resume", &json!({})).await.0, 200);
+
+    let metrics = |app: &TestApp| {
+        let (client, url) = (app.client.clone(), app.url("/metrics"));
+        async move { client.get(url).send().await.unwrap().text().await.unwrap() }
+    };
+    assert!(metrics(&a).await.contains("rackd_cluster_active{node=\"a\"} 1"));
+    assert!(metrics(&b).await.contains("rackd_cluster_active{node=\"b\"} 0"));
+
+    // a stops cleanly: it lets go, and b takes over without waiting out the lease.
+    let let_go = Instant::now();
+    a.stop().await;
+    let view = until(&b, "/api/v1/cluster", 10, |c| c["role"] == "active").await;
+    assert!(let_go.elapsed() < Duration::from_millis(1000), "took {:?}", let_go.elapsed());
+    assert_eq!((view["epoch"].clone(), view["takeovers"].clone()), (json!(2), json!(1)), "{view}");
+    let alarms = until(&b, "/api/v1/alarms?active=true", 10, |a| {
+        a["alarms"].as_array().is_some_and(|l| l.iter().any(|x| x["kind"] == "takeover"))
+    })
+    .await;
+    assert!(alarms.to_string().contains("cluster"), "{alarms}");
+    let (status, job) = b.post("/api/v1/jobs", &travel("after", 5)).await;
+    assert_eq!(status, 201, "{job}");
+    completed(&b, job["id"].as_i64().unwrap()).await;
+    assert!(metrics(&b).await.contains("rackd_cluster_takeovers_total{node=\"b\"} 1"));
+    b.stop().await;
+}
