@@ -52,6 +52,16 @@ pub async fn after(
     read!(db.into(), p => sqlx::query_as(sql).bind(since).bind(limit as i64).fetch_all(p).await)
 }
 
+/// The newest `limit` events of type `kind`, newest first.
+pub async fn latest(
+    db: impl Into<Reader<'_>>,
+    kind: &str,
+    limit: u32,
+) -> Result<Vec<StoredEvent>, sqlx::Error> {
+    let sql = "SELECT seq, at, type, data FROM events WHERE type = $1 ORDER BY seq DESC LIMIT $2";
+    read!(db.into(), p => sqlx::query_as(sql).bind(kind).bind(limit as i64).fetch_all(p).await)
+}
+
 /// The first and last sequence numbers in the log (0, 0 when it is empty).
 pub async fn bounds(db: impl Into<Reader<'_>>) -> Result<(i64, i64), sqlx::Error> {
     let sql = "SELECT COALESCE(MIN(seq), 0), COALESCE(MAX(seq), 0) FROM events";

@@ -12,6 +12,7 @@ use rackd::store::Database;
 use serde_json::{Value, json};
 
 use crate::helpers::{TestApp, spawn_on};
+use crate::ws::Ws;
 
 const PACE: Pace = Pace { task_time: Duration::from_millis(200), crane_step: Duration::from_millis(20) };
 
@@ -59,14 +60,28 @@ async fn a_standby_serves_forwards_and_takes_over_when_the_active_node_lets_go()
     // Both are ready; each says what it is.
     assert_eq!(a.get("/readyz").await, (200, json!({"status": "ok", "role": "active"})));
     assert_eq!(b.get("/readyz").await, (200, json!({"status": "ok", "role": "standby"})));
-    let view = until(&b, "/api/v1/cluster", 10, |c| c["nodes"].as_array().is_some_and(|n| n.len() == 2)).await;
+    let view =
+        until(&b, "/api/v1/cluster", 10, |c| c["nodes"].as_array().is_some_and(|n| n.len() == 2)).await;
     assert_eq!((view["node"].clone(), view["role"].clone()), (json!("b"), json!("standby")));
     assert_eq!((view["lease"]["holder"].clone(), view["lease"]["epoch"].clone()), (json!("a"), json!(1)));
 
-    // A job submitted to the standby is driven by the active node.
+    // A job submitted to the standby is driven by the active node, and the standby's
+    // subscribers see it run: its hub follows the log every node writes.
+    let mut ws = Ws::connect(&b.base, "").await;
+    let snapshot = ws.json().await;
+    let devices = snapshot["data"]["devices"].as_array().unwrap();
+    assert!(devices.iter().any(|d| d["id"] == "crane1"), "the standby shows devices from the log: {snapshot}");
     let (status, job) = b.post("/api/v1/jobs", &travel("via-b", 3)).await;
     assert_eq!(status, 201, "{job}");
     completed(&b, job["id"].as_i64().unwrap()).await;
+    let mut seen = Vec::new();
+    while !seen.iter().any(|e: &Value| e["data"]["id"] == job["id"] && e["data"]["state"] == "completed") {
+        seen.extend(ws.events(1).await);
+    }
+    let seqs: Vec<i64> = seen.iter().map(|e| e["seq"].as_i64().unwrap()).collect();
+    assert_eq!(seqs[0], snapshot["seq"].as_i64().unwrap() + 1, "from the snapshot on");
+    assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1), "in order, without a gap: {seqs:?}");
+    ws.close().await;
 
     // The standby has no devices of its own: it forwards, pauses included.
     let (status, devices) = b.get("/api/v1/devices").await;

@@ -6,6 +6,7 @@
 import { adoptTokenFromUrl, api, getKey, onUnauthorized, setKey } from './dashboard/api.js';
 import { Alarms } from './dashboard/alarms.js';
 import { Attention } from './dashboard/attention.js';
+import { ClusterBadge } from './dashboard/cluster.js';
 import { Counters } from './dashboard/counters.js';
 import { Devices } from './dashboard/devices.js';
 import { clock, el, throttle } from './dashboard/dom.js';
@@ -70,8 +71,10 @@ const mark = (...parts) => {
  * whether it exports alarms: at the first snapshot, and again when the key changes.
  */
 let asked = false;
+const node = new ClusterBadge($('node'));
 function askServer() {
   asked = true;
+  node.start();
   who.load();
   kpi.load();
   alarms.findExport();

@@ -39,7 +39,8 @@ pub struct SnapshotData {
     pub jobs_truncated: Option<bool>,
     /// Every device.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub devices: Option<Vec<DeviceStatus>>,
+    #[schema(value_type = Option<Vec<DeviceStatus>>)]
+    pub devices: Option<Vec<Shown>>,
     /// Active alarms.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub alarms: Option<Vec<Alarm>>,
@@ -48,9 +49,25 @@ pub struct SnapshotData {
     pub locations: Option<Vec<LocationState>>,
 }
 
+/// A device's status: as its task publishes it, or as the log last told it.
+#[derive(Debug, Serialize)]
+#[serde(untagged)]
+pub enum Shown {
+    /// From the device task (this node drives the machines).
+    Live(DeviceStatus),
+    /// From the last `device.updated` event (a standby node of a cluster).
+    Told(serde_json::Value),
+}
+
+/// The newest `device.updated` events a standby's snapshot looks through for each
+/// device's last status (a device tells at least every `contact_refresh_ms`).
+const TOLD_DEVICES: u32 = 2000;
+
 /// Reads the snapshot in one read transaction, so jobs, alarms and locations are all as of
 /// the same `seq`. Device statuses come from memory and may be a little newer, which is
-/// harmless: a `device.updated` event carries the whole status and replaces it.
+/// harmless: a `device.updated` event carries the whole status and replaces it. A node
+/// that runs no devices (a standby of a cluster) shows each device as its last
+/// `device.updated` event in the log tells it, as of the same `seq`.
 pub async fn read(
     pool: &Pool,
     devices: (&Devices, &Queues),
@@ -76,9 +93,27 @@ pub async fn read(
     if topics.contains(&Topic::Locations) {
         data.locations = Some(locations::list(tx.reader(), None).await?);
     }
+    if topics.contains(&Topic::Devices) && devices.0.is_empty() {
+        data.devices = Some(told(events::latest(tx.reader(), "device.updated", TOLD_DEVICES).await?));
+    }
     tx.finish().await?;
-    if topics.contains(&Topic::Devices) {
-        data.devices = Some(all_shown(devices.0, devices.1));
+    if topics.contains(&Topic::Devices) && !devices.0.is_empty() {
+        data.devices = Some(all_shown(devices.0, devices.1).into_iter().map(Shown::Live).collect());
     }
     Ok(Snapshot { kind: "snapshot", seq, reason, data })
+}
+
+/// Each device's newest status among `events` (newest first), by id.
+fn told(events: Vec<events::StoredEvent>) -> Vec<Shown> {
+    #[derive(serde::Deserialize)]
+    struct Id {
+        id: String,
+    }
+    let mut seen = std::collections::BTreeMap::new();
+    for e in events {
+        if let Ok(Id { id }) = serde_json::from_str(&e.data) {
+            seen.entry(id).or_insert(e.data);
+        }
+    }
+    seen.into_values().filter_map(|data| serde_json::from_str(&data).ok()).map(Shown::Told).collect()
 }
