@@ -4,11 +4,12 @@
 
 mod cluster;
 mod drive;
+mod hooks;
 
 use std::collections::BTreeSet;
 use std::future::Future;
 use std::net::SocketAddr;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
@@ -27,7 +28,7 @@ use crate::service::dispatch::{Dispatcher, Queues, Setup};
 use crate::service::events::Hub;
 use crate::service::intake::Rules;
 use crate::service::planner::CranePlanner;
-use crate::store::writer::{Committed, Hooks, Writer};
+use crate::store::writer::Writer;
 use crate::store::{self, locations};
 
 /// A bound, ready-to-run rackd.
@@ -102,38 +103,8 @@ impl Application {
         }));
         let hub = Hub::new(config.events.buffer);
         let metrics = Arc::new(Metrics::default());
-        // A cluster node's queues take in commits only while it drives; its hub is fed
-        // from the event log, which every node writes (`app::cluster`).
         let driving = Arc::new(AtomicBool::new(pg.is_none()));
-        let when_driving = |hook: Committed| -> Committed {
-            let driving = driving.clone();
-            Arc::new(move |jobs: &[&crate::domain::Job]| {
-                if driving.load(Ordering::Acquire) {
-                    hook(jobs)
-                }
-            })
-        };
-        let locked = queues.locked_hook();
-        let hooks = Hooks {
-            locked: Some({
-                let driving = driving.clone();
-                Arc::new(move |changes: &[_]| {
-                    if driving.load(Ordering::Acquire) {
-                        locked(changes)
-                    }
-                })
-            }),
-            committed: Some(when_driving(queues.hook())),
-            publish: pg.is_none().then(|| {
-                let (publish, commits) = (hub.hook(), commits.clone());
-                Arc::new(move |events| {
-                    commits.fetch_add(1, Ordering::Release);
-                    publish(events)
-                }) as store::writer::Publish
-            }),
-            observe: Some(metrics.writer_hook()),
-            tell: Some(queues.tell_hook()),
-        };
+        let hooks = hooks::hooks(&queues, &hub, &metrics, &commits, &driving, pg.is_some());
         let (max_group, queue) = (config.intake.max_group, config.intake.queue);
         let started = match pg {
             Some(_) => Writer::start_shared(&pool, max_group, queue, hooks).await,

@@ -70,7 +70,10 @@ async fn a_standby_serves_forwards_and_takes_over_when_the_active_node_lets_go()
     let mut ws = Ws::connect(&b.base, "").await;
     let snapshot = ws.json().await;
     let devices = snapshot["data"]["devices"].as_array().unwrap();
-    assert!(devices.iter().any(|d| d["id"] == "crane1"), "the standby shows devices from the log: {snapshot}");
+    assert!(
+        devices.iter().any(|d| d["id"] == "crane1"),
+        "the standby shows devices from the log: {snapshot}"
+    );
     let (status, job) = b.post("/api/v1/jobs", &travel("via-b", 3)).await;
     assert_eq!(status, 201, "{job}");
     completed(&b, job["id"].as_i64().unwrap()).await;

@@ -1,0 +1,61 @@
+//! What the job writer tells after each commit, and to whom: the dispatcher's queues
+//! (committed jobs, lock changes, why a job waits), the event hub, the metrics.
+//!
+//! A node of a cluster tells its queues only while it drives the machines (`driving`): a
+//! standby keeps no queues, and the active node's waiting watcher tells why a job waits
+//! (it retells what it never told). Its hub is fed from the event log, which every node
+//! writes (`app::cluster`), not from its own commits: the same commit would come twice.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+use crate::api::metrics::Metrics;
+use crate::domain::{Job, Location, LocationLock};
+use crate::service::dispatch::Queues;
+use crate::service::events::Hub;
+use crate::store::writer::{Hooks, Publish};
+
+/// The writer's hooks; `clustered` when the node is one of a cluster.
+pub(super) fn hooks(
+    queues: &Queues,
+    hub: &Hub,
+    metrics: &Arc<Metrics>,
+    commits: &Arc<AtomicU64>,
+    driving: &Arc<AtomicBool>,
+    clustered: bool,
+) -> Hooks {
+    let (committed, locked, tell) = (queues.hook(), queues.locked_hook(), queues.tell_hook());
+    let on = |driving: &Arc<AtomicBool>| {
+        let driving = driving.clone();
+        move || driving.load(Ordering::Acquire)
+    };
+    let (d1, d2, d3) = (on(driving), on(driving), on(driving));
+    // The crane planners' cache of the store counts commits: this node's at once, the
+    // others' as the log is followed.
+    let (hub, commits) = (hub.clone(), commits.clone());
+    let publish: Publish = Arc::new(move |events| {
+        commits.fetch_add(1, Ordering::Release);
+        if !clustered {
+            hub.publish(events)
+        }
+    });
+    Hooks {
+        committed: Some(Arc::new(move |jobs: &[&Job]| {
+            if d1() {
+                committed(jobs)
+            }
+        })),
+        locked: Some(Arc::new(move |changes: &[(Location, Option<LocationLock>)]| {
+            if d2() {
+                locked(changes)
+            }
+        })),
+        tell: Some(Arc::new(move |job: &mut Job| {
+            if d3() {
+                tell(job)
+            }
+        })),
+        publish: Some(publish),
+        observe: Some(metrics.writer_hook()),
+    }
+}
