@@ -129,6 +129,7 @@ async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>)
     let mut role = node.role.clone();
     let Ok(won) = role.wait_for(|r| matches!(r, Role::Active { .. })).await.map(|r| *r) else { return };
     let Role::Active { epoch } = won else { return };
+    node.takeovers.fetch_add(1, Ordering::Relaxed);
     parts.driving.store(true, Ordering::Release);
     let gate = node.gate.clone();
     let fenced = parts.writer.fenced(Arc::new(move || gate.may_drive()));
@@ -145,7 +146,6 @@ async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>)
             return;
         }
     }
-    node.takeovers.fetch_add(1, Ordering::Relaxed);
     tracing::info!(node = node.name, epoch, "cluster: this node drives the machines");
     if epoch > 1 {
         let alarms = tokio::spawn(tell_takeover(node.clone(), fenced, epoch));

@@ -31,6 +31,9 @@ use crate::service::planner::CranePlanner;
 use crate::store::writer::Writer;
 use crate::store::{self, locations};
 
+/// How long a node that lost its cluster lease waits for its writer to drain.
+const LOST_DRAIN: Duration = Duration::from_secs(5);
+
 /// A bound, ready-to-run rackd.
 pub struct Application {
     listener: TcpListener,
@@ -235,12 +238,17 @@ impl Application {
             }
         }
         // The router and devices (and with them the last writer handles) are gone: the
-        // writer drains and stops.
-        self.writer_task.await.context("job writer")?;
-        drop(self.keep);
+        // writer drains and stops. A node that lost its lease may have lost its database
+        // too (a partition): it waits a little for the writer, not for a TCP timeout.
         if let Some(why) = failure {
+            if tokio::time::timeout(LOST_DRAIN, self.writer_task).await.is_err() {
+                tracing::warn!("the job writer did not drain in {LOST_DRAIN:?}; stopping without it");
+            }
+            drop(self.keep);
             bail!("{why}; start it again to stand by");
         }
+        self.writer_task.await.context("job writer")?;
+        drop(self.keep);
         tracing::info!("rackd stopped");
         Ok(())
     }

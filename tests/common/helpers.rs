@@ -78,6 +78,12 @@ impl TestApp {
         (self.db.clone(), self._dir.take())
     }
 
+    /// Waits (at most `within`) for the server to stop on its own, with what it ended with.
+    pub async fn ended(mut self, within: std::time::Duration) -> anyhow::Result<()> {
+        let task = self.task.take().unwrap();
+        tokio::time::timeout(within, task).await.expect("the server stops on its own").unwrap()
+    }
+
     pub fn url(&self, path: &str) -> String {
         format!("{}{path}", self.base)
     }

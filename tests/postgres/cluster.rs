@@ -4,13 +4,12 @@
 //! forwarding) making the active node stop driving before the standby starts.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use sqlx::{Connection, PgPool};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpListener, TcpStream};
 use tokio::time::Instant;
+
+use crate::proxy::Proxy;
 
 use rackd::service::cluster::lease::Timing;
 use rackd::service::cluster::{LEASE, Leadership, Role};
@@ -114,8 +113,8 @@ async fn a_takeover_waits_for_a_write_committed_under_the_old_epoch() {
 async fn a_partitioned_active_node_stops_driving_before_the_standby_starts() {
     let url = crate::postgres::database().await;
     let db = pool(&url).await;
-    let proxy = Proxy::start(&url).await;
-    let cut_off = pool(&proxy.url).await;
+    let (proxy, proxied) = Proxy::to_postgres(&url).await;
+    let cut_off = pool(&proxied).await;
     let mut a = Leadership::start(cut_off, "a".into(), TIMING);
     active(&mut a, Duration::from_secs(5)).await;
     let mut b = Leadership::start(db.clone(), "b".into(), TIMING);
@@ -161,59 +160,6 @@ fn travel(reference: String, n: u16) -> rackd::domain::NewJob {
         barcode: None,
         device: None,
         serves: None,
-    }
-}
-
-/// A TCP proxy to the test server that can stop forwarding (the connections stay open,
-/// nothing gets through: a partition, not a reset).
-struct Proxy {
-    url: String,
-    blocked: Arc<AtomicBool>,
-}
-
-impl Proxy {
-    async fn start(url: &str) -> Proxy {
-        let (head, rest) = url.rsplit_once('@').unwrap();
-        let (server, name) = rest.split_once('/').unwrap();
-        let server = server.to_owned();
-        let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let url = format!("{head}@{}/{name}", listener.local_addr().unwrap());
-        let blocked = Arc::new(AtomicBool::new(false));
-        let flag = blocked.clone();
-        tokio::spawn(async move {
-            while let Ok((client, _)) = listener.accept().await {
-                let Ok(upstream) = TcpStream::connect(&server).await else { continue };
-                let (cr, cw) = client.into_split();
-                let (ur, uw) = upstream.into_split();
-                tokio::spawn(pipe(cr, uw, flag.clone()));
-                tokio::spawn(pipe(ur, cw, flag.clone()));
-            }
-        });
-        Proxy { url, blocked }
-    }
-
-    fn block(&self) {
-        self.blocked.store(true, Ordering::SeqCst);
-    }
-}
-
-async fn pipe(
-    mut from: impl AsyncReadExt + Unpin,
-    mut to: impl AsyncWriteExt + Unpin,
-    blocked: Arc<AtomicBool>,
-) {
-    let mut buf = vec![0u8; 16 * 1024];
-    loop {
-        let Ok(n) = from.read(&mut buf).await else { return };
-        if n == 0 {
-            return;
-        }
-        while blocked.load(Ordering::SeqCst) {
-            tokio::time::sleep(Duration::from_millis(5)).await;
-        }
-        if to.write_all(&buf[..n]).await.is_err() {
-            return;
-        }
     }
 }
 

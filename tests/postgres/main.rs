@@ -15,6 +15,8 @@ mod helpers;
 mod postgres;
 #[path = "../common/ws.rs"]
 mod ws;
+#[path = "../common/proxy.rs"]
+mod proxy;
 
 mod cluster;
 mod nodes;

@@ -8,16 +8,21 @@ use std::time::{Duration, Instant};
 
 use rackd::cli::demo::{Pace, start_with};
 use rackd::config::{ClusterConfig, Config};
+use rackd::devices::DeviceConfig;
 use rackd::store::Database;
 use serde_json::{Value, json};
 
 use crate::helpers::{TestApp, spawn_on};
+use crate::proxy::Proxy;
 use crate::ws::Ws;
 
 const PACE: Pace = Pace { task_time: Duration::from_millis(200), crane_step: Duration::from_millis(20) };
 
-async fn node(db: &str, name: &str, devices: &Config) -> TestApp {
-    let devices = devices.devices.clone();
+async fn node(db: &str, name: &str, site: &Config) -> TestApp {
+    node_with(db, name, site.devices.clone()).await
+}
+
+async fn node_with(db: &str, name: &str, devices: Vec<DeviceConfig>) -> TestApp {
     let name = name.to_owned();
     spawn_on(Database::Postgres(db.to_owned()), move |c| {
         c.devices = devices;
@@ -117,5 +122,48 @@ async fn a_standby_serves_forwards_and_takes_over_when_the_active_node_lets_go()
     assert_eq!(status, 201, "{job}");
     completed(&b, job["id"].as_i64().unwrap()).await;
     assert!(metrics(&b).await.contains("rackd_cluster_takeovers_total{node=\"b\"} 1"));
+    b.stop().await;
+}
+
+/// The site's devices with the crane reached through a proxy of its own.
+async fn crane_through_proxy(site: &Config) -> (Vec<DeviceConfig>, Proxy) {
+    let mut devices = site.devices.clone();
+    let crane = devices.iter_mut().find_map(|d| match d {
+        DeviceConfig::Crane(c) => Some(c),
+        _ => None,
+    });
+    let crane = crane.expect("the demo has a crane");
+    let proxy = Proxy::to(&crane.link.address).await;
+    crane.link.address = proxy.addr.to_string();
+    (devices, proxy)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_active_node_cut_off_from_the_database_stops_driving_before_the_standby_starts() {
+    let db = crate::postgres::database().await;
+    let mut site = Config::demo();
+    let sims = start_with(&mut site, PACE).await.unwrap();
+    // a reaches the database and the crane through proxies, b the database directly and
+    // the crane through a proxy of its own: what each node sent the crane, and when.
+    let (db_proxy, db_via_proxy) = Proxy::to_postgres(&db).await;
+    let (a_devices, a_crane) = crane_through_proxy(&site).await;
+    let (b_devices, b_crane) = crane_through_proxy(&site).await;
+    let a = node_with(&db_via_proxy, "a", a_devices).await;
+    until(&a, "/api/v1/cluster", 10, |c| c["role"] == "active").await;
+    let b = node_with(&db, "b", b_devices).await;
+    let (_, job) = b.post("/api/v1/jobs", &travel("before", 4)).await;
+    completed(&b, job["id"].as_i64().unwrap()).await;
+    assert!(a_crane.sent().is_some() && b_crane.sent().is_none(), "only the active node talks to the crane");
+
+    db_proxy.block();
+    let ended = a.ended(Duration::from_secs(10)).await.unwrap_err().to_string();
+    assert!(ended.contains("lost the cluster's lease"), "{ended}");
+    until(&b, "/api/v1/cluster", 10, |c| c["role"] == "active").await;
+    let (_, job) = b.post("/api/v1/jobs", &travel("after", 6)).await;
+    completed(&b, job["id"].as_i64().unwrap()).await;
+    let (_, a_last) = a_crane.sent().unwrap();
+    let (b_first, _) = b_crane.sent().expect("b drives the crane after the takeover");
+    assert!(a_last < b_first, "a talked to the crane until {a_last:?}, b from {b_first:?}");
+    assert_eq!(sims.1.violations(), 0, "{:?}", sims.1.violation_log());
     b.stop().await;
 }
