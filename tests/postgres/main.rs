@@ -13,12 +13,13 @@ pub const ENGINE: rackd::store::Engine = rackd::store::Engine::Postgres;
 mod helpers;
 #[path = "../common/postgres.rs"]
 mod postgres;
-#[path = "../common/ws.rs"]
-mod ws;
 #[path = "../common/proxy.rs"]
 mod proxy;
+#[path = "../common/ws.rs"]
+mod ws;
 
 mod cluster;
+mod failover;
 mod nodes;
 
 #[path = "../api/alarms.rs"]

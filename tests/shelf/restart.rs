@@ -109,3 +109,40 @@ async fn a_slot_written_just_before_a_stop_is_found_on_restart_and_not_written_a
     assert_eq!(sim.violations(), 0);
     app.stop().await;
 }
+
+/// Tasks the PLC finished while rackd was down are recorded as completed at the restart,
+/// and the PLC is not taken for one that lost its memory: it remembered them.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tasks_finished_while_rackd_was_down_are_completed_not_taken_for_a_lost_memory() {
+    let sim = rackd::sim::shelf::ShelfSim::start("127.0.0.1:0", crate::sim(800)).await.unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("rackd.db");
+    let device = device_for(&sim, |_| {});
+    let (base, kill, thread) = start_crashable(config(&db, device.clone()));
+    let client = reqwest::Client::new();
+    let light = |bay| json!({"kind": "light", "location": loc(1, bay, 1, 1), "color": "green", "on": true});
+    let jobs: Vec<_> = (1..=4).map(light).collect();
+    let r =
+        client.post(format!("{base}/api/v1/jobs/batch")).json(&json!({"jobs": jobs})).send().await.unwrap();
+    assert_eq!(r.status(), 201);
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    let ids: Vec<u16> = (1..=4).map(rackd::wire::task_id_for).collect();
+    while !ids.iter().all(|&t| sim.received(t) == 1) {
+        assert!(std::time::Instant::now() < deadline, "the tasks never reached the PLC");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    kill.send(()).unwrap();
+    tokio::task::spawn_blocking(move || thread.join()).await.unwrap().unwrap();
+    while sim.finished().0 < 4 {
+        assert!(std::time::Instant::now() < deadline, "the PLC never finished");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+
+    let app = spawn_on(rackd::store::Database::Sqlite(db.clone()), |c| c.devices = vec![device.into()]).await;
+    let done = wait_ended(&app, 4, 30).await;
+    crate::assert_each_completed_once(&app, &sim, &done).await;
+    let (_, alarms) = app.get("/api/v1/alarms").await;
+    let alarms = alarms["alarms"].as_array().unwrap();
+    assert!(!alarms.iter().any(|a| a["kind"] == "memory_lost"), "{alarms:?}");
+    assert_eq!(sim.violations(), 0);
+}

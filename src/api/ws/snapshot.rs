@@ -54,7 +54,7 @@ pub struct SnapshotData {
 #[serde(untagged)]
 pub enum Shown {
     /// From the device task (this node drives the machines).
-    Live(DeviceStatus),
+    Live(Box<DeviceStatus>),
     /// From the last `device.updated` event (a standby node of a cluster).
     Told(serde_json::Value),
 }
@@ -98,7 +98,8 @@ pub async fn read(
     }
     tx.finish().await?;
     if topics.contains(&Topic::Devices) && !devices.0.is_empty() {
-        data.devices = Some(all_shown(devices.0, devices.1).into_iter().map(Shown::Live).collect());
+        data.devices =
+            Some(all_shown(devices.0, devices.1).into_iter().map(|d| Shown::Live(Box::new(d))).collect());
     }
     Ok(Snapshot { kind: "snapshot", seq, reason, data })
 }

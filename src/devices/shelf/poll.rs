@@ -9,7 +9,7 @@
 //! gone therefore reads every slot once more before it decides (this costs a second round
 //! only when a task vanished, which is rare), and a lost memory stays one decision.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use super::handover::DispatchError;
 use super::{Shelf, Slot};
@@ -235,11 +235,14 @@ impl Shelf {
             reads.push((k, self.read(&self.slot_address(k), SLOT_WORDS as u16).await?));
         }
         let mut ours = Vec::new();
+        // The jobs some slot holds: found, not lost, even if `settle` ends and frees them.
+        let mut found = HashSet::new();
         for (k, words) in reads {
             let view = SlotView::parse(&words).ok_or(PlcError::Malformed("short slot read"))?;
             match by_task.get(&view.task_id) {
                 _ if view.task_id == 0 => self.slots[k] = Slot::Free,
                 Some(&job) => {
+                    found.insert(job);
                     self.slots[k] = Slot::Held { job, task: view.task_id, confirmed: false };
                     ours.push((k, words));
                 }
@@ -256,15 +259,11 @@ impl Shelf {
             }
         }
         self.settle(ours).await?;
-        let lost: Vec<&Job> = unfinished
-            .iter()
-            .filter(|j| j.state != JobState::Queued)
-            .filter(|j| !self.slots.iter().any(|s| matches!(s, Slot::Held { job, .. } if *job == j.id)))
-            .collect();
+        let lost: Vec<&Job> =
+            unfinished.iter().filter(|j| j.state != JobState::Queued && !found.contains(&j.id)).collect();
         // rackd's tasks all gone and the slots empty: the PLC forgot them while rackd was
-        // down, one decision as in `memory_lost`.
-        let forgot =
-            lost.len() >= MEMORY_LOSS_SLOTS && !self.slots.iter().any(|s| matches!(s, Slot::Held { .. }));
+        // down, one decision as in `memory_lost`. Tasks it finished meanwhile are not gone.
+        let forgot = lost.len() >= MEMORY_LOSS_SLOTS && found.is_empty();
         if forgot {
             tracing::error!(tasks = lost.len(), "{MEMORY_LOST}");
             self.status.update(|s| {
