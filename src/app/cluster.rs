@@ -5,7 +5,7 @@
 //! ([`Clustered::lost`]) so that its supervisor starts it again as a standby, with nothing
 //! of the old term left in memory.
 
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use tokio::sync::{mpsc, watch};
@@ -50,7 +50,6 @@ pub(super) struct Parts {
     pub writer: Writer,
     pub hub: Hub,
     pub commits: Arc<AtomicU64>,
-    pub driving: Arc<AtomicBool>,
     pub running: Arc<OnceLock<Devices>>,
     pub tasks: drive::Tasks,
 }
@@ -88,10 +87,10 @@ pub(super) async fn start(
     let (_, from) = events::bounds(&parts.pool).await?;
     let (adopt, wanted) = mpsc::unbounded_channel();
     let seen: follow::Seen = {
-        let (hub, commits, driving) = (parts.hub.clone(), parts.commits.clone(), parts.driving.clone());
+        let (hub, commits) = (parts.hub.clone(), parts.commits.clone());
         let queues = parts.dispatcher.queues().clone();
         Arc::new(move |batch| {
-            if driving.load(Ordering::Acquire) {
+            if queues.drives() {
                 let ids: Vec<i64> = follow::unfinished_jobs(&batch)
                     .into_iter()
                     .filter(|id| queues.find(*id).is_none())
@@ -130,7 +129,7 @@ async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>)
     let Ok(won) = role.wait_for(|r| matches!(r, Role::Active { .. })).await.map(|r| *r) else { return };
     let Role::Active { epoch } = won else { return };
     node.takeovers.fetch_add(1, Ordering::Relaxed);
-    parts.driving.store(true, Ordering::Release);
+    parts.dispatcher.queues().set_drives(true);
     let gate = node.gate.clone();
     let fenced = parts.writer.fenced(Arc::new(move || gate.may_drive()));
     let gate = node.gate.clone();

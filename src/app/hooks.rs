@@ -1,13 +1,14 @@
 //! What the job writer tells after each commit, and to whom: the dispatcher's queues
 //! (committed jobs, lock changes, why a job waits), the event hub, the metrics.
 //!
-//! A node of a cluster tells its queues only while it drives the machines (`driving`): a
+//! A node of a cluster tells its queues only while it drives the machines
+//! ([`Queues::drives`]): a
 //! standby keeps no queues, and the active node's waiting watcher tells why a job waits
 //! (it retells what it never told). Its hub is fed from the event log, which every node
 //! writes (`app::cluster`), not from its own commits: the same commit would come twice.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::api::metrics::Metrics;
 use crate::domain::{Job, Location, LocationLock};
@@ -21,15 +22,14 @@ pub(super) fn hooks(
     hub: &Hub,
     metrics: &Arc<Metrics>,
     commits: &Arc<AtomicU64>,
-    driving: &Arc<AtomicBool>,
     clustered: bool,
 ) -> Hooks {
     let (committed, locked, tell) = (queues.hook(), queues.locked_hook(), queues.tell_hook());
-    let on = |driving: &Arc<AtomicBool>| {
-        let driving = driving.clone();
-        move || driving.load(Ordering::Acquire)
+    let on = || {
+        let queues = queues.clone();
+        move || queues.drives()
     };
-    let (d1, d2, d3) = (on(driving), on(driving), on(driving));
+    let (d1, d2, d3) = (on(), on(), on());
     // The crane planners' cache of the store counts commits: this node's at once, the
     // others' as the log is followed.
     let (hub, commits) = (hub.clone(), commits.clone());

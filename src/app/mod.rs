@@ -9,7 +9,7 @@ mod hooks;
 use std::collections::BTreeSet;
 use std::future::Future;
 use std::net::SocketAddr;
-use std::sync::atomic::{AtomicBool, AtomicU64};
+use std::sync::atomic::AtomicU64;
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
@@ -106,8 +106,8 @@ impl Application {
         }));
         let hub = Hub::new(config.events.buffer);
         let metrics = Arc::new(Metrics::default());
-        let driving = Arc::new(AtomicBool::new(pg.is_none()));
-        let hooks = hooks::hooks(&queues, &hub, &metrics, &commits, &driving, pg.is_some());
+        queues.set_drives(pg.is_none());
+        let hooks = hooks::hooks(&queues, &hub, &metrics, &commits, pg.is_some());
         let (max_group, queue) = (config.intake.max_group, config.intake.queue);
         let started = match pg {
             Some(_) => Writer::start_shared(&pool, max_group, queue, hooks).await,
@@ -138,7 +138,6 @@ impl Application {
                     writer: writer.clone(),
                     hub: hub.clone(),
                     commits: commits.clone(),
-                    driving: driving.clone(),
                     running: running.clone(),
                     tasks: tasks.clone(),
                 };

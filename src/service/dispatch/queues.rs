@@ -117,6 +117,8 @@ pub(super) struct Inner {
     pub(super) told: Mutex<HashMap<i64, Option<Waiting>>>,
     /// Wakes the waiting watcher: something a waiting reason depends on changed.
     pub(super) changed: Notify,
+    /// Whether this node drives the machines (always, but on a standby of a cluster).
+    drives: std::sync::atomic::AtomicBool,
 }
 
 /// A device as the dispatcher sees it: its id, its dispatch window, the aisles it serves
@@ -150,7 +152,20 @@ impl Queues {
             statuses: std::sync::OnceLock::new(),
             told: Mutex::default(),
             changed: Notify::new(),
+            drives: std::sync::atomic::AtomicBool::new(true),
         }))
+    }
+
+    /// Whether this node drives the machines: a standby of a cluster keeps no queues (the
+    /// writer's hooks hand it nothing) and knows no reason why a job waits.
+    pub fn drives(&self) -> bool {
+        self.0.drives.load(std::sync::atomic::Ordering::Acquire)
+    }
+
+    /// Says whether this node drives the machines (false from start on a cluster node, true
+    /// once it becomes the active one).
+    pub fn set_drives(&self, drives: bool) {
+        self.0.drives.store(drives, std::sync::atomic::Ordering::Release);
     }
 
     pub(super) fn holds(&self) -> MutexGuard<'_, Holds> {

@@ -59,7 +59,7 @@ impl Queues {
 
     /// Why `job` is not moving now; None while it moves or is about to be handed out.
     pub fn waiting(&self, job: &Job) -> Option<Waiting> {
-        if job.state != JobState::Queued {
+        if job.state != JobState::Queued || !self.drives() {
             return None;
         }
         let status = job.device.as_deref().and_then(|d| self.status(d));
