@@ -85,8 +85,8 @@ impl Application {
             .with_context(|| format!("opening database {}", database.display()))?;
         let layout = config.layout();
         locations::seed(&pool, &layout, now_ms()).await.context("seeding locations")?;
-        let pg = match (&config.cluster, &pool) {
-            (Some(_), store::Pool::Postgres(pg)) => Some(pg.clone()),
+        let on_cluster = match (&config.cluster, &pool) {
+            (Some(c), store::Pool::Postgres(pg)) => Some((c, pg.clone())),
             (Some(_), store::Pool::Sqlite(_)) => bail!("[cluster] needs a PostgreSQL database.url"),
             (None, _) => None,
         };
@@ -106,29 +106,25 @@ impl Application {
         }));
         let hub = Hub::new(config.events.buffer);
         let metrics = Arc::new(Metrics::default());
-        queues.set_drives(pg.is_none());
-        let hooks = hooks::hooks(&queues, &hub, &metrics, &commits, pg.is_some());
+        queues.set_drives(on_cluster.is_none());
+        let hooks = hooks::hooks(&queues, &hub, &metrics, &commits, on_cluster.is_some());
         let (max_group, queue) = (config.intake.max_group, config.intake.queue);
-        let started = match pg {
+        let started = match on_cluster {
             Some(_) => Writer::start_shared(&pool, max_group, queue, hooks).await,
             None => Writer::start(&pool, max_group, queue, hooks).await,
         };
         let (writer, writer_task) = started.context("opening the job writer's connection")?;
-        let leading = match (&config.cluster, &pg) {
-            (Some(c), Some(pg)) => Some(cluster::lead(pg, c)),
-            _ => None,
-        };
+        let leading = on_cluster.map(|(c, pg)| (c, cluster::lead(&pg, c), pg));
         // What the dispatcher writes is the active node's to write: fenced in a cluster.
-        let dispatcher = match &leading {
-            Some((leadership, _)) => {
-                Dispatcher::new(queues.clone(), writer.fenced(cluster::epoch(leadership)), pool.clone())
-            }
-            None => Dispatcher::new(queues.clone(), writer.clone(), pool.clone()),
+        let dispatching = match &leading {
+            Some((_, (leadership, _), _)) => writer.fenced(cluster::epoch(leadership)),
+            None => writer.clone(),
         };
+        let dispatcher = Dispatcher::new(queues.clone(), dispatching, pool.clone());
         let running = Arc::new(OnceLock::new());
         let tasks = drive::Tasks::default();
-        let clustered = match (leading, &config.cluster, pg) {
-            (Some((leadership, timing)), Some(c), Some(pg)) => {
+        let clustered = match leading {
+            Some((c, (leadership, timing), pg)) => {
                 let parts = cluster::Parts {
                     config: config.clone(),
                     listen: listener.local_addr().context("the bound address")?,
@@ -143,34 +139,17 @@ impl Application {
                 };
                 Some(cluster::start(c, leadership, timing, parts).await?)
             }
-            _ => {
+            None => {
                 let d = drive::start(config, &pool, &dispatcher, writer.clone(), None).await?;
                 let _ = running.set(d.devices);
                 tasks.lock().unwrap_or_else(|p| p.into_inner()).extend(d.tasks);
                 None
             }
         };
-        let crane_aisles = config
-            .devices
-            .iter()
-            .filter(|d| matches!(d, DeviceConfig::Crane(_)))
-            .flat_map(|d| d.aisles().iter().copied())
-            .collect();
-        let rules = Rules {
-            layout,
-            deep,
-            crane_aisles,
-            devices: config.devices.iter().map(|d| (d.id().to_owned(), d.kind().job_kinds())).collect(),
-            routes: config
-                .devices
-                .iter()
-                .flat_map(|d| d.aisles().iter().map(|&a| (a, d.id().to_owned())))
-                .collect(),
-        };
         let state = AppState::new(Shared {
             pool,
             writer,
-            rules: Arc::new(rules),
+            rules: Arc::new(rules(config, layout, deep)),
             keys: Arc::new(keys),
             metrics,
             running,
@@ -250,6 +229,27 @@ impl Application {
         drop(self.keep);
         tracing::info!("rackd stopped");
         Ok(())
+    }
+}
+
+/// What job requests are checked against and routed by.
+fn rules(config: &Config, layout: crate::domain::Layout, deep: BTreeSet<u16>) -> Rules {
+    let crane_aisles = config
+        .devices
+        .iter()
+        .filter(|d| matches!(d, DeviceConfig::Crane(_)))
+        .flat_map(|d| d.aisles().iter().copied())
+        .collect();
+    Rules {
+        layout,
+        deep,
+        crane_aisles,
+        devices: config.devices.iter().map(|d| (d.id().to_owned(), d.kind().job_kinds())).collect(),
+        routes: config
+            .devices
+            .iter()
+            .flat_map(|d| d.aisles().iter().map(|&a| (a, d.id().to_owned())))
+            .collect(),
     }
 }
 
