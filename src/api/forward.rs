@@ -59,7 +59,7 @@ pub async fn forward(State(app): State<AppState>, req: Request, next: Next) -> R
     }
     if req.headers().contains_key(&FORWARDED_BY) {
         return unavailable(
-            "this node was active when the request was forwarded and is standby now; try again",
+            "the request was forwarded to this node, which no longer drives the machines; try again",
         );
     }
     let active = match node.active().await {
@@ -74,7 +74,12 @@ pub async fn forward(State(app): State<AppState>, req: Request, next: Next) -> R
             return unavailable("the cluster's database does not answer; try again");
         }
     };
-    match send(&active.url, &node.name, req).await {
+    let (parts, body) = req.into_parts();
+    let Ok(body) = axum::body::to_bytes(body, MOST).await else {
+        let message = format!("a body to forward is at most {MOST} bytes");
+        return ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, "body_too_large", message).into_response();
+    };
+    match send(&active.url, &node.name, parts, body).await {
         Ok(response) => response,
         Err(e) => {
             tracing::warn!(error = %e, active = %active.name, url = %active.url, "cluster: forwarding failed");
@@ -83,11 +88,14 @@ pub async fn forward(State(app): State<AppState>, req: Request, next: Next) -> R
     }
 }
 
-async fn send(base: &str, me: &str, req: Request) -> Result<Response, reqwest::Error> {
-    let (parts, body) = req.into_parts();
+async fn send(
+    base: &str,
+    me: &str,
+    parts: axum::http::request::Parts,
+    body: axum::body::Bytes,
+) -> Result<Response, reqwest::Error> {
     let path = parts.uri.path_and_query().map_or("/", |p| p.as_str());
     let url = format!("{}{path}", base.trim_end_matches('/'));
-    let body = axum::body::to_bytes(body, MOST).await.unwrap_or_default();
     let mut out = CLIENT.request(parts.method, url).body(body);
     for (name, value) in &parts.headers {
         if name != header::HOST && name != header::CONTENT_LENGTH && name != header::CONNECTION {
