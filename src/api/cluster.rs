@@ -10,7 +10,6 @@ use super::error::{ApiError, ErrorBody};
 use super::extract::Json;
 use super::state::AppState;
 use crate::domain::time::from_ms;
-use crate::service::cluster::Role;
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
@@ -106,14 +105,10 @@ async fn cluster(State(app): State<AppState>) -> Result<Json<ClusterView>, ApiEr
             started_at: from_ms(n.started_at),
         })
         .collect();
-    let epoch = match node.role() {
-        Role::Active { epoch } => Some(epoch),
-        Role::Standby => None,
-    };
     Ok(Json(ClusterView {
         node: node.name.clone(),
         role: node.role_name(),
-        epoch,
+        epoch: node.role().epoch(),
         takeovers: node.takeovers(),
         lease,
         nodes,

@@ -92,17 +92,11 @@ pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<
         alarms: crate::store::alarms::count_active(&app.pool).await?,
         now: time::OffsetDateTime::now_utc(),
         started: app.metrics.started(),
-        cluster: app.cluster.as_ref().map(|n| {
-            let epoch = match n.role() {
-                crate::service::cluster::Role::Active { epoch } => epoch,
-                crate::service::cluster::Role::Standby => 0,
-            };
-            super::metrics::scrape::ClusterSample {
-                node: n.name.clone(),
-                active: epoch != 0,
-                epoch,
-                takeovers: n.takeovers(),
-            }
+        cluster: app.cluster.as_ref().map(|n| super::metrics::scrape::ClusterSample {
+            node: n.name.clone(),
+            active: n.role().epoch().is_some(),
+            epoch: n.role().epoch().unwrap_or(0),
+            takeovers: n.takeovers(),
         }),
     };
     let body = app.metrics.render(scrape, app.hub.subscribers(), format)?;

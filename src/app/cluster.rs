@@ -21,7 +21,7 @@ use crate::service::cluster::{Leadership, Node, Role, TAKEOVER_ACTION, follow, n
 use crate::service::dispatch::Dispatcher;
 use crate::service::events::Hub;
 use crate::store::alarms::NewAlarm;
-use crate::store::writer::{Epoch, Record, Writer};
+use crate::store::writer::{Record, Writer};
 use crate::store::{Pool, events};
 
 /// The device of the `takeover` alarm.
@@ -59,12 +59,6 @@ pub(super) fn lead(pg: &sqlx::PgPool, c: &ClusterConfig) -> (Leadership, Timing)
     let (lease, margin) = c.lease();
     let timing = Timing { lease, margin };
     (Leadership::start(pg.clone(), c.node.clone(), timing), timing)
-}
-
-/// The epoch the node's fenced writer handle acts under.
-pub(super) fn epoch(leadership: &Leadership) -> Epoch {
-    let gate = leadership.gate.clone();
-    Arc::new(move || gate.may_drive())
 }
 
 /// Starts the rest of the node around `leadership`.
@@ -130,11 +124,10 @@ async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>)
     let Role::Active { epoch } = won else { return };
     node.takeovers.fetch_add(1, Ordering::Relaxed);
     parts.dispatcher.queues().set_drives(true);
-    let gate = node.gate.clone();
-    let fenced = parts.writer.fenced(Arc::new(move || gate.may_drive()));
-    let gate = node.gate.clone();
-    let may = Arc::new(move || gate.may_drive().is_some());
-    match drive::start(&parts.config, &parts.pool, &parts.dispatcher, fenced.clone(), Some(may)).await {
+    let fenced = parts.writer.fenced(node.gate.epoch());
+    match drive::start(&parts.config, &parts.pool, &parts.dispatcher, fenced.clone(), Some(node.gate.may()))
+        .await
+    {
         Ok(d) => {
             let _ = parts.running.set(d.devices);
             parts.tasks.lock().unwrap_or_else(|p| p.into_inner()).extend(d.tasks);

@@ -1,17 +1,16 @@
 //! What the job writer tells after each commit, and to whom: the dispatcher's queues
 //! (committed jobs, lock changes, why a job waits), the event hub, the metrics.
 //!
-//! A node of a cluster tells its queues only while it drives the machines
-//! ([`Queues::drives`]): a
-//! standby keeps no queues, and the active node's waiting watcher tells why a job waits
-//! (it retells what it never told). Its hub is fed from the event log, which every node
-//! writes (`app::cluster`), not from its own commits: the same commit would come twice.
+//! A node of a cluster that does not drive the machines keeps no queues: they take in
+//! nothing while [`Queues::drives`] is false, and the active node's waiting watcher tells
+//! why a job waits (it retells what it never told). Its hub is fed from the event log,
+//! which every node writes (`app::cluster`), not from its own commits: the same commit
+//! would come twice.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::api::metrics::Metrics;
-use crate::domain::{Job, Location, LocationLock};
 use crate::service::dispatch::Queues;
 use crate::service::events::Hub;
 use crate::store::writer::{Hooks, Publish};
@@ -24,12 +23,6 @@ pub(super) fn hooks(
     commits: &Arc<AtomicU64>,
     clustered: bool,
 ) -> Hooks {
-    let (committed, locked, tell) = (queues.hook(), queues.locked_hook(), queues.tell_hook());
-    let on = || {
-        let queues = queues.clone();
-        move || queues.drives()
-    };
-    let (d1, d2, d3) = (on(), on(), on());
     // The crane planners' cache of the store counts commits: this node's at once, the
     // others' as the log is followed.
     let (hub, commits) = (hub.clone(), commits.clone());
@@ -40,21 +33,9 @@ pub(super) fn hooks(
         }
     });
     Hooks {
-        committed: Some(Arc::new(move |jobs: &[&Job]| {
-            if d1() {
-                committed(jobs)
-            }
-        })),
-        locked: Some(Arc::new(move |changes: &[(Location, Option<LocationLock>)]| {
-            if d2() {
-                locked(changes)
-            }
-        })),
-        tell: Some(Arc::new(move |job: &mut Job| {
-            if d3() {
-                tell(job)
-            }
-        })),
+        committed: Some(queues.hook()),
+        locked: Some(queues.locked_hook()),
+        tell: Some(queues.tell_hook()),
         publish: Some(publish),
         observe: Some(metrics.writer_hook()),
     }

@@ -117,7 +117,7 @@ impl Application {
         let leading = on_cluster.map(|(c, pg)| (c, cluster::lead(&pg, c), pg));
         // What the dispatcher writes is the active node's to write: fenced in a cluster.
         let dispatching = match &leading {
-            Some((_, (leadership, _), _)) => writer.fenced(cluster::epoch(leadership)),
+            Some((_, (leadership, _), _)) => writer.fenced(leadership.gate.epoch()),
             None => writer.clone(),
         };
         let dispatcher = Dispatcher::new(queues.clone(), dispatching, pool.clone());

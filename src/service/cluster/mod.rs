@@ -71,6 +71,16 @@ pub enum Role {
     },
 }
 
+impl Role {
+    /// The epoch it drives under, if active.
+    pub fn epoch(self) -> Option<i64> {
+        match self {
+            Role::Active { epoch } => Some(epoch),
+            Role::Standby => None,
+        }
+    }
+}
+
 /// Whether this node may drive the machines at this instant, for the code that writes to
 /// them (checked synchronously, before each write).
 #[derive(Clone, Debug, Default)]
@@ -81,6 +91,18 @@ impl Gate {
     pub fn may_drive(&self) -> Option<i64> {
         let held = self.0.lock().unwrap_or_else(|p| p.into_inner());
         held.as_ref().filter(|h| h.valid(Instant::now())).map(|h| h.epoch)
+    }
+
+    /// The epoch a fenced writer handle acts under ([`crate::store::writer::Writer::fenced`]).
+    pub fn epoch(&self) -> crate::store::writer::Epoch {
+        let gate = self.clone();
+        Arc::new(move || gate.may_drive())
+    }
+
+    /// The check a machine link makes before each request ([`crate::devices::gate`]).
+    pub fn may(&self) -> crate::devices::gate::MayDrive {
+        let gate = self.clone();
+        Arc::new(move || gate.may_drive().is_some())
     }
 
     fn set(&self, holding: Option<Holding>) {

@@ -156,8 +156,8 @@ impl Queues {
         }))
     }
 
-    /// Whether this node drives the machines: a standby of a cluster keeps no queues (the
-    /// writer's hooks hand it nothing) and knows no reason why a job waits.
+    /// Whether this node drives the machines: a standby of a cluster keeps no queues (it
+    /// takes in no commit and no lock) and knows no reason why a job waits.
     pub fn drives(&self) -> bool {
         self.0.drives.load(std::sync::atomic::Ordering::Acquire)
     }
@@ -183,8 +183,11 @@ impl Queues {
     }
 
     /// Takes in committed jobs: new and changed ones go to their device's queue, ended ones
-    /// leave it; the device is woken.
+    /// leave it; the device is woken. A node that does not drive takes in nothing.
     pub fn committed(&self, jobs: &[&Job]) {
+        if !self.drives() {
+            return;
+        }
         let mut woken: Vec<&str> = Vec::new();
         {
             let mut queues = self.lock();
@@ -313,8 +316,12 @@ impl Queues {
         Arc::new(move |changes: &[(Location, Option<LocationLock>)]| queues.locked(changes))
     }
 
-    /// Takes in locks (`Some`) and unlocks (at start: every lock the store holds).
+    /// Takes in locks (`Some`) and unlocks (at start: every lock the store holds); a node
+    /// that does not drive takes in nothing.
     pub fn locked(&self, changes: &[(Location, Option<LocationLock>)]) {
+        if !self.drives() {
+            return;
+        }
         let unlocked = {
             let mut holds = self.holds();
             let mut unlocked = false;

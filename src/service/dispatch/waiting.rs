@@ -172,6 +172,9 @@ impl Queues {
     pub fn tell_hook(&self) -> Tell {
         let queues = self.clone();
         std::sync::Arc::new(move |job: &mut Job| {
+            if !queues.drives() {
+                return;
+            }
             job.waiting = queues.waiting(job);
             let mut told = queues.0.told.lock().unwrap_or_else(|p| p.into_inner());
             match job.state == JobState::Queued && job.device.as_deref().is_some_and(|d| queues.has(d)) {
