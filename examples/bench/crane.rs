@@ -143,6 +143,17 @@ pub async fn run(args: CraneArgs) -> anyhow::Result<()> {
             workload.jobs.len()
         );
     }
+    println!("crane seconds per cycle (relocations included): busy = empty travel + loaded travel + forks");
+    for (name, f) in [("fifo", &fifo), ("travel", &travel)] {
+        let per = |secs: f64| secs / f.completed.max(1) as f64;
+        println!(
+            "{name:<8} {:>6.1} s = {:>5.1} s + {:>5.1} s + {:>5.1} s",
+            per(f.stats.busy_secs),
+            per(f.stats.empty_secs),
+            per(f.stats.loaded_secs),
+            per(f.stats.fork_secs)
+        );
+    }
     println!(
         "travel / fifo: {:.2}x cycles per hour, {:.2}x empty travel",
         travel.cycles_per_hour() / fifo.cycles_per_hour(),

@@ -19,6 +19,13 @@ pub struct CraneStats {
     /// Simulated seconds spent running action states 1..18 and homing (state 100); time
     /// halted under an alarm, idle time and hand-overs do not count.
     pub busy_secs: f64,
+    /// Of `busy_secs`, the seconds travelling to the pick with the platform empty (action
+    /// states 1 and 2 of a transfer, and a travel task).
+    pub empty_secs: f64,
+    /// Of `busy_secs`, the seconds travelling to the put with a load (states 11 and 12).
+    pub loaded_secs: f64,
+    /// Of `busy_secs`, the seconds of fork cycles (states 3..8 and 13..18).
+    pub fork_secs: f64,
     /// Metres along the travel axis with a load on the platform (D206 = 1).
     pub travel_loaded_m: f64,
     /// Metres along the travel axis with the platform empty (D206 = 0).
@@ -38,6 +45,17 @@ impl CraneStats {
         }
     }
 
+    /// Counts `secs` spent in action state `state` of a task.
+    pub fn spent(&mut self, state: u16, secs: f64) {
+        self.busy_secs += secs;
+        match state {
+            1 | 2 => self.empty_secs += secs,
+            11 | 12 => self.loaded_secs += secs,
+            3..=8 | 13..=18 => self.fork_secs += secs,
+            _ => {}
+        }
+    }
+
     /// Counts a move of `dx` metres of travel and `dy` of lift.
     pub fn moved(&mut self, dx: f64, dy: f64, loaded: bool) {
         if loaded {
@@ -53,11 +71,14 @@ impl fmt::Display for CraneStats {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "cycles {} cancelled {} forced {} busy {:.1} s travel loaded {:.1} m empty {:.1} m lift {:.1} m alarms",
+            "cycles {} cancelled {} forced {} busy {:.1} s (empty {:.1} s, loaded {:.1} s, forks {:.1} s) travel loaded {:.1} m empty {:.1} m lift {:.1} m alarms",
             self.cycles,
             self.cancelled,
             self.forced,
             self.busy_secs,
+            self.empty_secs,
+            self.loaded_secs,
+            self.fork_secs,
             self.travel_loaded_m,
             self.travel_empty_m,
             self.lift_m

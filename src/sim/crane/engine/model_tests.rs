@@ -110,6 +110,10 @@ fn a_transfer_takes_the_models_time_scaled_and_the_axes_follow_it() {
     let stats = &rig.e.stats;
     assert_eq!((stats.cycles, stats.travel_empty_m), (1, 0.0));
     assert!((stats.busy_secs - expected).abs() < 1e-6, "{} s busy", stats.busy_secs);
+    let loaded = m.move_time(HOME, Spot { bay: 10, level: 5 });
+    assert!((stats.loaded_secs - loaded).abs() < 1e-6, "{stats}");
+    assert!((stats.fork_secs - (m.fork_time(1) + m.fork_time(2))).abs() < 1e-6, "{stats}");
+    assert_eq!(stats.empty_secs, 0.0, "the crane stood at the station: {stats}");
     assert!((stats.travel_loaded_m - 14.0).abs() < 1e-9 && (stats.lift_m - 6.0).abs() < 1e-9, "{stats}");
 
     // The crane stands where the task ended: the next pick there needs no travel.

@@ -114,7 +114,7 @@ impl Engine {
                 self.raise(bank, code);
                 return true;
             }
-            self.stats.busy_secs += length.as_secs_f64();
+            self.stats.spent(run.state(), length.as_secs_f64());
             run.elapsed = if self.model.is_some() { run.elapsed - length } else { Duration::ZERO };
             run.index += 1;
             let Some(&state) = run.states.get(run.index) else {
