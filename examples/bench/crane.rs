@@ -154,6 +154,15 @@ pub async fn run(args: CraneArgs) -> anyhow::Result<()> {
             per(f.stats.fork_secs)
         );
     }
+    // What sequencing can reach at most: every job's loaded runs and forks are the
+    // workload's own, so only travel's empty seconds can go.
+    let fixed = (travel.stats.busy_secs - travel.stats.empty_secs) / travel.completed.max(1) as f64;
+    let fifo_cycle = fifo.stats.busy_secs / fifo.completed.max(1) as f64;
+    println!(
+        "with no empty travel at all, travel would be {:.2}x fifo; 1.3x allows {:.1} s of empty travel per cycle",
+        fifo_cycle / fixed.max(f64::EPSILON),
+        fifo_cycle / 1.3 - fixed
+    );
     println!(
         "travel / fifo: {:.2}x cycles per hour, {:.2}x empty travel",
         travel.cycles_per_hour() / fifo.cycles_per_hour(),
