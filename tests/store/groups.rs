@@ -1,7 +1,10 @@
 //! Group commit, set-based: the number of statements does not grow with the group, and one
 //! request the database refuses fails alone while the rest of its group commits.
 
+use std::future::Future;
+use std::sync::atomic::{AtomicBool, Ordering::SeqCst};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use futures::future::join_all;
 use rackd::store::writer::{Hooks, Outcome, WriteError, Writer};
@@ -9,30 +12,77 @@ use rackd::store::{Engine, Pool, events, jobs};
 
 use crate::{light, on_both, open};
 
-/// A writer that notes (commands, statements) of every group.
-async fn writer(pool: &Pool) -> (Writer, Arc<Mutex<Vec<(usize, usize)>>>) {
+/// Holds the writer after a group's commit, before its answers, while `hold` is set. The
+/// writer runs on a thread of its own, so requests only make one group for sure when they
+/// are all queued while it waits.
+#[derive(Default)]
+struct Latch {
+    hold: AtomicBool,
+    parked: AtomicBool,
+}
+
+impl Latch {
+    /// Called by the writer after each group (its own thread: blocking is fine).
+    fn park(&self) {
+        if self.hold.load(SeqCst) {
+            self.parked.store(true, SeqCst);
+            while self.hold.load(SeqCst) {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            self.parked.store(false, SeqCst);
+        }
+    }
+
+    /// Runs `first`, and while the writer is held after committing it queues every one of
+    /// `then` (a submission is queued at its first poll), so that `then` makes one group.
+    async fn one_group_after<T: Send + 'static, F: Future + Unpin>(
+        &self,
+        first: impl Future<Output = T> + Send + 'static,
+        mut then: Vec<F>,
+    ) -> (T, Vec<F::Output>) {
+        self.hold.store(true, SeqCst);
+        let first = tokio::spawn(first);
+        while !self.parked.load(SeqCst) {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        for f in &mut then {
+            assert!(futures::poll!(f).is_pending(), "answered while the writer is held");
+        }
+        self.hold.store(false, SeqCst);
+        (first.await.unwrap(), join_all(then).await)
+    }
+}
+
+/// A writer that notes (commands, statements) of every group, and its latch.
+async fn writer(pool: &Pool) -> (Writer, Arc<Mutex<Vec<(usize, usize)>>>, Arc<Latch>) {
     let seen = Arc::new(Mutex::new(Vec::new()));
+    let latch = Arc::new(Latch::default());
     let hooks = Hooks {
         observe: Some({
-            let seen = seen.clone();
-            Arc::new(move |g| seen.lock().unwrap().push((g.commands, g.statements)))
+            let (seen, latch) = (seen.clone(), latch.clone());
+            Arc::new(move |g| {
+                seen.lock().unwrap().push((g.commands, g.statements));
+                latch.park();
+            })
         }),
         ..Hooks::default()
     };
     let (writer, _task) = Writer::start(pool, 4096, 4096, hooks).await.unwrap();
-    (writer, seen)
+    (writer, seen, latch)
 }
 
 async fn constant_statements(engine: Engine) {
     let (pool, _db, _dir) = open(engine).await;
-    let (writer, seen) = writer(&pool).await;
+    let (writer, seen, latch) = writer(&pool).await;
     writer.submit(vec![light("warm-up", 1)]).await.unwrap();
     writer.submit(vec![light("one", 1)]).await.unwrap();
     // Up to 2047 jobs (SQLite's 32766 bound values over 16 columns) go in one statement.
     let batch: Vec<_> = (0..2000).map(|i| light(&format!("batch-{i}"), (i % 20) as u16 + 1)).collect();
-    assert_eq!(writer.submit(batch).await.unwrap().len(), 2000);
-    // 50 requests sent before the writer runs again: one group.
-    let many = join_all((0..50).map(|i| writer.submit(vec![light(&format!("many-{i}"), 2)]))).await;
+    let w = writer.clone();
+    // 50 requests sent before the writer goes on after the batch: one group.
+    let many = (0..50).map(|i| Box::pin(writer.submit(vec![light(&format!("many-{i}"), 2)]))).collect();
+    let (batch, many) = latch.one_group_after(async move { w.submit(batch).await }, many).await;
+    assert_eq!(batch.unwrap().len(), 2000);
     assert!(many.iter().all(Result::is_ok));
     let seen = seen.lock().unwrap().clone();
     assert_eq!(seen.len(), 4, "{seen:?}");
@@ -68,9 +118,13 @@ async fn poison(pool: &Pool) {
 async fn fails_alone(engine: Engine) {
     let (pool, _db, _dir) = open(engine).await;
     poison(&pool).await;
-    let (writer, seen) = writer(&pool).await;
-    writer.submit(vec![light("first", 1)]).await.unwrap();
-    let answers = join_all(["A", "POISON", "B"].map(|r| writer.submit(vec![light(r, 3)]))).await;
+    let (writer, seen, latch) = writer(&pool).await;
+    let w = writer.clone();
+    let three =
+        ["A", "POISON", "B"].into_iter().map(|r| Box::pin(writer.submit(vec![light(r, 3)]))).collect();
+    let (first, answers) =
+        latch.one_group_after(async move { w.submit(vec![light("first", 1)]).await }, three).await;
+    first.unwrap();
     assert_eq!(seen.lock().unwrap()[1].0, 3, "the three requests made one group");
     let created = |a: &Result<Vec<Outcome>, WriteError>| match a {
         Ok(o) => match &o[0] {
@@ -99,7 +153,7 @@ on_both!(a_request_the_database_refuses_fails_alone, fails_alone);
 #[tokio::test]
 async fn a_broken_connection_costs_one_group_not_the_writer() {
     let (pool, db, _dir) = open(Engine::Postgres).await;
-    let (writer, _seen) = writer(&pool).await;
+    let (writer, _seen, _latch) = writer(&pool).await;
     writer.submit(vec![light("before", 1)]).await.unwrap();
     let rackd::store::Database::Postgres(url) = db else { unreachable!() };
     let mut admin = <sqlx::PgConnection as sqlx::Connection>::connect(&url).await.unwrap();
