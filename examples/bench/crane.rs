@@ -88,6 +88,11 @@ impl Figures {
         self.completed as f64 * 3600.0 / self.stats.busy_secs.max(f64::EPSILON)
     }
 
+    /// Crane seconds per cycle of the WMS's jobs.
+    fn per_cycle(&self, secs: f64) -> f64 {
+        secs / self.completed.max(1) as f64
+    }
+
     fn alarms(&self) -> u32 {
         self.stats.alarms.values().sum()
     }
@@ -145,19 +150,18 @@ pub async fn run(args: CraneArgs) -> anyhow::Result<()> {
     }
     println!("crane seconds per cycle (relocations included): busy = empty travel + loaded travel + forks");
     for (name, f) in [("fifo", &fifo), ("travel", &travel)] {
-        let per = |secs: f64| secs / f.completed.max(1) as f64;
         println!(
             "{name:<8} {:>6.1} s = {:>5.1} s + {:>5.1} s + {:>5.1} s",
-            per(f.stats.busy_secs),
-            per(f.stats.empty_secs),
-            per(f.stats.loaded_secs),
-            per(f.stats.fork_secs)
+            f.per_cycle(f.stats.busy_secs),
+            f.per_cycle(f.stats.empty_secs),
+            f.per_cycle(f.stats.loaded_secs),
+            f.per_cycle(f.stats.fork_secs)
         );
     }
     // What sequencing can reach at most: every job's loaded runs and forks are the
     // workload's own, so only travel's empty seconds can go.
-    let fixed = (travel.stats.busy_secs - travel.stats.empty_secs) / travel.completed.max(1) as f64;
-    let fifo_cycle = fifo.stats.busy_secs / fifo.completed.max(1) as f64;
+    let fixed = travel.per_cycle(travel.stats.busy_secs - travel.stats.empty_secs);
+    let fifo_cycle = fifo.per_cycle(fifo.stats.busy_secs);
     println!(
         "with no empty travel at all, travel would be {:.2}x fifo; 1.3x allows {:.1} s of empty travel per cycle",
         fifo_cycle / fixed.max(f64::EPSILON),

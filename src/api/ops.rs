@@ -92,11 +92,15 @@ pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<
         alarms: crate::store::alarms::count_active(&app.pool).await?,
         now: time::OffsetDateTime::now_utc(),
         started: app.metrics.started(),
-        cluster: app.cluster.as_ref().map(|n| super::metrics::scrape::ClusterSample {
-            node: n.name.clone(),
-            active: n.role().epoch().is_some(),
-            epoch: n.role().epoch().unwrap_or(0),
-            takeovers: n.takeovers(),
+        cluster: app.cluster.as_ref().map(|n| {
+            // One read of the role, so that `active` and `epoch` tell of the same moment.
+            let epoch = n.role().epoch();
+            super::metrics::scrape::ClusterSample {
+                node: n.name.clone(),
+                active: epoch.is_some(),
+                epoch: epoch.unwrap_or(0),
+                takeovers: n.takeovers(),
+            }
         }),
     };
     let body = app.metrics.render(scrape, app.hub.subscribers(), format)?;

@@ -338,6 +338,9 @@ impl Writer {
             runtime.block_on(writer);
             let _ = done.send(());
         })?;
+        // Not `spawn_blocking`: a runtime waits for its blocking tasks when dropped, and a
+        // writer some handle still holds would keep it waiting. The handle ends with the
+        // thread (or its panic, which drops `done`).
         let task = tokio::spawn(async move { drop(ended.await) });
         Ok((Writer { tx, fence: None }, task))
     }
