@@ -158,6 +158,20 @@ pub async fn run(args: CraneArgs) -> anyhow::Result<()> {
             f.per_cycle(f.stats.fork_secs)
         );
     }
+    println!("empty travel by the task before and the next: tasks x mean run = seconds per cycle");
+    for (name, f) in [("fifo", &fifo), ("travel", &travel)] {
+        let mut pairs: Vec<_> = f.stats.empty_by_pair.iter().filter(|(_, r)| r.secs > 0.0).collect();
+        pairs.sort_by(|a, b| b.1.secs.total_cmp(&a.1.secs));
+        for (pair, runs) in pairs {
+            println!(
+                "{name:<8} {:<20} {:>4} x {:>5.1} s = {:>4.1} s",
+                pair.to_string(),
+                runs.tasks,
+                runs.secs / f64::from(runs.tasks.max(1)),
+                f.per_cycle(runs.secs)
+            );
+        }
+    }
     // What sequencing can reach at most: every job's loaded runs and forks are the
     // workload's own, so only travel's empty seconds can go.
     let fixed = travel.per_cycle(travel.stats.busy_secs - travel.stats.empty_secs);

@@ -53,7 +53,7 @@ pub use commands::CommandError;
 use engine::Engine;
 pub use engine::Hold;
 use inventory::{Cell, Inventory};
-pub use stats::CraneStats;
+pub use stats::{CraneStats, Pair, Runs, TaskKind};
 
 /// Whether a code is a business alarm of the catalogue.
 pub fn is_business(code: u16) -> bool {

@@ -5,7 +5,9 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-use serde::Serialize;
+use serde::{Serialize, Serializer};
+
+use super::inventory::{Cell, is_station};
 
 /// The crane's counters since it started.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -32,6 +34,10 @@ pub struct CraneStats {
     pub travel_empty_m: f64,
     /// Metres along the lift axis, loaded and empty together.
     pub lift_m: f64,
+    /// Of `empty_secs`, the tasks and seconds of each pair of tasks in a row: the empty run
+    /// to a task's pick depends on where the one before left the crane. A task is counted
+    /// when it starts, its seconds as it runs.
+    pub empty_by_pair: BTreeMap<Pair, Runs>,
     /// Business alarms raised, by code: by the inventory rules, and by hand
     /// ([`super::CraneSim::raise_alarm`], the `alarm` command).
     pub alarms: BTreeMap<u16, u32>,
@@ -45,11 +51,19 @@ impl CraneStats {
         }
     }
 
-    /// Counts `secs` spent in action state `state` of a task.
-    pub fn spent(&mut self, state: u16, secs: f64) {
+    /// Counts a task that starts.
+    pub fn began(&mut self, pair: Pair) {
+        self.empty_by_pair.entry(pair).or_default().tasks += 1;
+    }
+
+    /// Counts `secs` spent in action state `state` of a task, which follows `pair.before`.
+    pub fn spent(&mut self, state: u16, secs: f64, pair: Pair) {
         self.busy_secs += secs;
         match state {
-            1 | 2 => self.empty_secs += secs,
+            1 | 2 => {
+                self.empty_secs += secs;
+                self.empty_by_pair.entry(pair).or_default().secs += secs;
+            }
             11 | 12 => self.loaded_secs += secs,
             3..=8 | 13..=18 => self.fork_secs += secs,
             _ => {}
@@ -65,6 +79,82 @@ impl CraneStats {
         }
         self.lift_m += dy.abs();
     }
+}
+
+/// What a task does, as the crane sees it from its cells (bay 0 is the station).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TaskKind {
+    /// A transfer from the station into the rack.
+    Store,
+    /// A transfer from the rack to the station.
+    Retrieve,
+    /// A transfer within the rack (a relocation, or a move).
+    Move,
+    /// A transfer from a station to a station.
+    Pass,
+    /// A travel task (D209 = 1): no transfer.
+    Travel,
+}
+
+impl TaskKind {
+    /// The kind of a task from `from` to `to` (`travel`: a travel task).
+    pub fn of(from: Cell, to: Cell, travel: bool) -> TaskKind {
+        match (travel, is_station(from), is_station(to)) {
+            (true, _, _) => TaskKind::Travel,
+            (false, true, true) => TaskKind::Pass,
+            (false, true, false) => TaskKind::Store,
+            (false, false, true) => TaskKind::Retrieve,
+            (false, false, false) => TaskKind::Move,
+        }
+    }
+}
+
+impl fmt::Display for TaskKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let name = match self {
+            TaskKind::Store => "store",
+            TaskKind::Retrieve => "retrieve",
+            TaskKind::Move => "move",
+            TaskKind::Pass => "pass",
+            TaskKind::Travel => "travel",
+        };
+        f.write_str(name)
+    }
+}
+
+/// Two tasks in a row: the one before (None: the crane's first task) and the next.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Pair {
+    /// The task before.
+    pub before: Option<TaskKind>,
+    /// The task that follows it.
+    pub next: TaskKind,
+}
+
+impl fmt::Display for Pair {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.before {
+            Some(before) => write!(f, "{before} -> {}", self.next),
+            None => write!(f, "first {}", self.next),
+        }
+    }
+}
+
+/// A pair as a map key in JSON: its text.
+impl Serialize for Pair {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+/// Tasks of one pair, and their empty seconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Runs {
+    /// Tasks started.
+    pub tasks: u32,
+    /// Simulated seconds of empty travel to their picks.
+    pub secs: f64,
 }
 
 impl fmt::Display for CraneStats {

@@ -36,7 +36,7 @@ use std::time::Duration;
 use tokio::time::Instant;
 
 use super::inventory::{Cell, Inventory};
-use super::stats::CraneStats;
+use super::stats::{CraneStats, TaskKind};
 use crate::protocols::mc3e::{Bank, Device};
 use crate::wire::motion::{Motion, Spot};
 use ending::Homing;
@@ -102,6 +102,8 @@ pub struct Engine {
     pub inventory: Option<Inventory>,
     /// Counters for a benchmark.
     pub stats: CraneStats,
+    /// The kind of the last task started, for the stats' pairs.
+    last_kind: Option<TaskKind>,
     /// Tasks received (mode 1 or 2 hand-overs) per task number.
     pub received: HashMap<u16, u32>,
     /// Cancels (mode 3) received.
@@ -137,6 +139,7 @@ impl Engine {
             pos: (0.0, 0.0),
             inventory: None,
             stats: CraneStats::default(),
+            last_kind: None,
             received: HashMap::new(),
             cancels: 0,
             refused: 0,

@@ -211,3 +211,30 @@ fn without_an_inventory_every_pick_finds_a_load_and_no_double_deep_alarm_comes()
     assert_eq!(rig.word(203), 20);
     assert!(rig.e.cells().is_none() && rig.e.stats.alarms.is_empty());
 }
+
+#[test]
+fn empty_runs_are_counted_by_the_pair_of_tasks_they_join() {
+    use crate::sim::crane::stats::{Pair, Runs, TaskKind};
+    let m = Motion::default();
+    let mut rig = Rig::new(1000.0, None);
+    let (put, pick, from, to) = ([1, 10, 5, 2], [2, 4, 2, 1], [1, 30, 8, 1], [2, 31, 8, 2]);
+    for (a, b) in [(STATION_IN, put), (pick, STATION_OUT), (from, to)] {
+        assert_eq!(rig.transfer(a, b), 0);
+        rig.acknowledge();
+    }
+    let at = |bay, level| Spot { bay, level };
+    let pair = |before, next| Pair { before, next };
+    let runs = &rig.e.stats.empty_by_pair;
+    assert_eq!(runs.len(), 3, "{runs:?}");
+    assert_eq!(runs[&pair(None, TaskKind::Store)], Runs { tasks: 1, secs: 0.0 }, "from the station");
+    let after_store = runs[&pair(Some(TaskKind::Store), TaskKind::Retrieve)];
+    assert_eq!(after_store.tasks, 1);
+    assert!((after_store.secs - m.move_time(at(10, 5), at(4, 2))).abs() < 1e-6, "{after_store:?}");
+    let after_retrieve = runs[&pair(Some(TaskKind::Retrieve), TaskKind::Move)];
+    assert!((after_retrieve.secs - m.move_time(HOME, at(30, 8))).abs() < 1e-6, "{after_retrieve:?}");
+    let sum: f64 = runs.values().map(|r| r.secs).sum();
+    assert!((sum - rig.e.stats.empty_secs).abs() < 1e-9, "the pairs share out the empty seconds");
+    assert_eq!(pair(Some(TaskKind::Store), TaskKind::Retrieve).to_string(), "store -> retrieve");
+    let json = serde_json::to_value(&rig.e.stats).unwrap();
+    assert_eq!(json["empty_by_pair"]["first store"]["tasks"], 1, "{json}");
+}

@@ -18,6 +18,7 @@ use tokio::time::Instant;
 use super::{Engine, d, scaled, seconds, set, spot};
 use crate::protocols::mc3e::Bank;
 use crate::sim::crane::inventory::{Cell, Inventory, is_station};
+use crate::sim::crane::stats::{Pair, TaskKind};
 
 /// Transfer: pick phase then put phase.
 const TRANSFER: [u16; 16] = [1, 2, 3, 4, 5, 6, 7, 8, 11, 12, 13, 14, 15, 16, 17, 18];
@@ -49,6 +50,8 @@ pub(super) struct Run {
     pub(super) picked: bool,
     /// Whether the load was set down at the put (state 17).
     pub(super) put: bool,
+    /// This task's kind and the one's before it, for the stats.
+    pair: Pair,
 }
 
 impl Run {
@@ -69,8 +72,12 @@ impl Engine {
         let word = |k: u32| d(bank, k);
         let from = [word(210), word(211), word(212), word(213)];
         let to = [word(214), word(215), word(216), word(217)];
-        let states: &'static [u16] = if word(209) == 1 { &TRAVEL } else { &TRANSFER };
+        let travel = word(209) == 1;
+        let states: &'static [u16] = if travel { &TRAVEL } else { &TRANSFER };
         set(bank, 203, states[0]);
+        let next = TaskKind::of(from, to, travel);
+        let pair = Pair { before: self.last_kind.replace(next), next };
+        self.stats.began(pair);
         let mut run = Run {
             states,
             index: 0,
@@ -81,6 +88,7 @@ impl Engine {
             leg: None,
             picked: false,
             put: false,
+            pair,
         };
         self.begin_leg(&mut run);
         self.run = Some(run);
@@ -114,7 +122,7 @@ impl Engine {
                 self.raise(bank, code);
                 return true;
             }
-            self.stats.spent(run.state(), length.as_secs_f64());
+            self.stats.spent(run.state(), length.as_secs_f64(), run.pair);
             run.elapsed = if self.model.is_some() { run.elapsed - length } else { Duration::ZERO };
             run.index += 1;
             let Some(&state) = run.states.get(run.index) else {
