@@ -24,7 +24,10 @@
 //! job. A job passed over `max_overtaken` times by younger ones of its priority goes next,
 //! so nothing starves: at once, or one job later when one job brings the crane nearer to it
 //! than it stands (a store whose put lies near a starved retrieve makes a dual cycle of it
-//! instead of an empty run; [`Memory::due`] holds it for the next decision).
+//! instead of an empty run; [`Memory::due`] holds it for the next decision). The job a
+//! relocation serves is held the same way: it goes right after the relocation (unless a job
+//! of a better priority came meanwhile), from beside its location, and not after a job far
+//! away that the relocation's own turn left starved.
 
 use std::collections::{HashMap, HashSet};
 
@@ -59,8 +62,8 @@ pub struct Memory {
     pub overtaken: HashMap<i64, u32>,
     /// Why the last decision left each of these jobs waiting.
     pub waits: HashMap<i64, Wait>,
-    /// A starved job that goes at the next decision: the last one ran the job that brings
-    /// the crane nearest to it first.
+    /// A job that goes at the next decision (travel planner): a starved one, after the job
+    /// that brings the crane nearest to it; or the one the last decision's relocation serves.
     pub due: Option<i64>,
 }
 
@@ -241,6 +244,9 @@ pub fn decide(
         Some(from) => {
             let to = places[&job.id];
             memory.at = Some(spot(to));
+            // The job it serves goes next, from beside its location, before any job the
+            // relocation's own turn left starved.
+            memory.due = Some(job.id);
             Decision::Relocate { serves: job.id, from, to }
         }
     }

@@ -202,3 +202,23 @@ fn a_store_left_to_rackd_gets_the_nearest_far_place_in_its_zones() {
         "a full zone waits"
     );
 }
+
+#[test]
+fn the_job_a_relocation_serves_goes_right_after_it() {
+    // Retrieve 2 (far, bay 5) needs a relocation; choosing it passes over retrieve 1 (bay 20,
+    // level 4) once more, and that makes 1 starved. 2 still goes next, from beside its
+    // location, and 1 right after: not a run across the aisle and back.
+    let (near, far) = (at(5, 1, 1), at(5, 1, 2));
+    let p = plan(Planner::Travel);
+    let jobs =
+        [job(1, 10, JobSpec::Retrieve { from: at(20, 4, 1) }), job(2, 10, JobSpec::Retrieve { from: far })];
+    let overtaken = [(1, p.max_overtaken - 1)].into_iter().collect();
+    let mut memory = Memory { at: Some(Spot { bay: 5, level: 1 }), overtaken, ..Memory::default() };
+    let decision = run(&p, &mut memory, &jobs, &rack(&[at(20, 4, 1), near, far]));
+    let Decision::Relocate { serves: 2, from, to } = decision else { panic!("{decision:?}") };
+    assert_eq!(from, near);
+    assert_eq!(memory.overtaken.get(&1), Some(&p.max_overtaken), "1 is starved now");
+    let moved = rack(&[at(20, 4, 1), to, far]);
+    assert_eq!(run(&p, &mut memory, &jobs, &moved), Decision::Run(2), "the served job first");
+    assert_eq!(run(&p, &mut memory, &jobs[..1], &moved), Decision::Run(1), "then the starved one");
+}
