@@ -50,7 +50,7 @@ pub(super) struct Run {
     pub(super) picked: bool,
     /// Whether the load was set down at the put (state 17).
     pub(super) put: bool,
-    /// This task's kind and the one's before it, for the stats.
+    /// This task's kind and that of the task before it, for the stats.
     pair: Pair,
 }
 
