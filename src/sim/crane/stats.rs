@@ -81,9 +81,9 @@ impl CraneStats {
     }
 }
 
-/// What a task does, as the crane sees it from its cells (bay 0 is the station).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
-#[serde(rename_all = "snake_case")]
+/// What a task does, as the crane sees it from its cells (bay 0 is the station). Named in
+/// text (and in JSON, inside a [`Pair`]) by its `Display`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum TaskKind {
     /// A transfer from the station into the rack.
     Store,
