@@ -97,6 +97,40 @@ async fn constant_statements(engine: Engine) {
 }
 on_both!(a_group_runs_the_same_statements_for_one_job_or_thousands, constant_statements);
 
+/// A group with more rows than one statement takes (on SQLite 2047 jobs: 32766 bound values
+/// over 16 columns) is written whole and in order, each statement after the one before.
+async fn beyond_one_statement(engine: Engine) {
+    let (pool, _db, _dir) = open(engine).await;
+    let (writer, seen, _latch) = writer(&pool).await;
+    writer.submit(vec![light("warm-up", 1)]).await.unwrap();
+    writer.submit(vec![light("one", 1)]).await.unwrap();
+    let batch: Vec<_> = (0..5000).map(|i| light(&format!("big-{i}"), (i % 20) as u16 + 1)).collect();
+    let created = writer.submit(batch).await.unwrap();
+    assert_eq!(created.len(), 5000);
+    let seen = seen.lock().unwrap().clone();
+    // SQLite: three statements of at most 2047 jobs instead of one; history and events take
+    // 8191 rows a statement. PostgreSQL: one JSON parameter a table, whatever the size.
+    let more = match engine {
+        Engine::Sqlite => 2,
+        Engine::Postgres => 0,
+    };
+    assert_eq!(seen[2].1, seen[1].1 + more, "statements of one job, then of 5000: {seen:?}");
+    let stored = jobs::list(&pool, &jobs::JobFilter { limit: 10_000, ..Default::default() }).await.unwrap();
+    let ids: Vec<i64> = stored.iter().map(|j| j.id).collect();
+    assert_eq!(ids, (1..=5002).collect::<Vec<_>>());
+    let references: Vec<String> = stored.iter().skip(2).map(|j| j.reference.clone().unwrap()).collect();
+    assert_eq!(references, (0..5000).map(|i| format!("big-{i}")).collect::<Vec<_>>());
+    for id in [3, 2049, 2050, 4096, 4097, 5002] {
+        let history = jobs::history(&pool, id).await.unwrap();
+        assert_eq!(history.len(), 1, "job {id}: {history:?}");
+    }
+    let log = events::after(&pool, 0, 10_000).await.unwrap();
+    let seqs: Vec<i64> = log.iter().map(|e| e.seq).collect();
+    assert_eq!(seqs, (1..=5002).collect::<Vec<_>>(), "one event per job, numbered without a gap");
+    assert!(log[5001].data.contains("big-4999"), "{}", log[5001].data);
+}
+on_both!(a_group_beyond_one_statement_is_written_whole_and_in_order, beyond_one_statement);
+
 /// A trigger that refuses any job with the reference `POISON`.
 async fn poison(pool: &Pool) {
     match pool {
