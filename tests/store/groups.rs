@@ -71,13 +71,18 @@ async fn writer(pool: &Pool) -> (Writer, Arc<Mutex<Vec<(usize, usize)>>>, Arc<La
     (writer, seen, latch)
 }
 
+/// `n` light jobs, referenced `{prefix}-0` onwards, over 20 bays.
+fn lights(prefix: &str, n: usize) -> Vec<rackd::store::jobs::NewJob> {
+    (0..n).map(|i| light(&format!("{prefix}-{i}"), (i % 20) as u16 + 1)).collect()
+}
+
 async fn constant_statements(engine: Engine) {
     let (pool, _db, _dir) = open(engine).await;
     let (writer, seen, latch) = writer(&pool).await;
     writer.submit(vec![light("warm-up", 1)]).await.unwrap();
     writer.submit(vec![light("one", 1)]).await.unwrap();
     // Up to 2047 jobs (SQLite's 32766 bound values over 16 columns) go in one statement.
-    let batch: Vec<_> = (0..2000).map(|i| light(&format!("batch-{i}"), (i % 20) as u16 + 1)).collect();
+    let batch = lights("batch", 2000);
     let w = writer.clone();
     // 50 requests sent before the writer goes on after the batch: one group.
     let many = (0..50).map(|i| Box::pin(writer.submit(vec![light(&format!("many-{i}"), 2)]))).collect();
@@ -104,7 +109,7 @@ async fn beyond_one_statement(engine: Engine) {
     let (writer, seen, _latch) = writer(&pool).await;
     writer.submit(vec![light("warm-up", 1)]).await.unwrap();
     writer.submit(vec![light("one", 1)]).await.unwrap();
-    let batch: Vec<_> = (0..5000).map(|i| light(&format!("big-{i}"), (i % 20) as u16 + 1)).collect();
+    let batch = lights("big", 5000);
     let created = writer.submit(batch).await.unwrap();
     assert_eq!(created.len(), 5000);
     let seen = seen.lock().unwrap().clone();
