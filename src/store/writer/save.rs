@@ -192,11 +192,12 @@ impl Chunk<'_> {
     /// Whether the chunk is a full one, whose text recurs (a shorter one's length is new in
     /// most groups: it is prepared for its one use and not kept in the statement cache).
     fn full(&self) -> bool {
-        match self {
-            Chunk::Jobs(rows) => rows.len() == Chunk::most(JOB_VALUES),
-            Chunk::History(rows) => rows.len() == Chunk::most(HISTORY_VALUES),
-            Chunk::Events(rows) => rows.len() == Chunk::most(EVENT_VALUES),
-        }
+        let (rows, values) = match self {
+            Chunk::Jobs(rows) => (rows.len(), JOB_VALUES),
+            Chunk::History(rows) => (rows.len(), HISTORY_VALUES),
+            Chunk::Events(rows) => (rows.len(), EVENT_VALUES),
+        };
+        rows == Chunk::most(values)
     }
 
     /// The chunk's statement, its values bound.
