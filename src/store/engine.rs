@@ -130,9 +130,26 @@ impl Engine {
         }
     }
 
-    /// `INSERT INTO table (columns) SELECT ...` the rows of the JSON array bound as `$1`.
+    /// `INSERT INTO table (columns) SELECT ...` the rows of the JSON array bound as `$1`
+    /// (on SQLite `INSERT OR FAIL`: see [`Engine::or_fail`]).
     pub fn insert_json(self, table: &str, columns: &[&str]) -> String {
-        format!("INSERT INTO {table} ({}) {}", columns.join(", "), self.json_rows(table, columns))
+        let or_fail = self.or_fail();
+        format!("INSERT{or_fail} INTO {table} ({}) {}", columns.join(", "), self.json_rows(table, columns))
+    }
+
+    /// What follows `INSERT` or `UPDATE` in the writer's statements: on SQLite ` OR FAIL`.
+    /// A statement that fails keeps the rows it wrote before the failing one, so
+    /// SQLite need not copy every page the statement changes to a statement journal first
+    /// (it does for a multi-row statement under the default `ABORT`). The writer never goes
+    /// on after a failed statement: it rolls the group back (or the request's savepoint),
+    /// which takes those rows back too. Measured with `bench intake` (alternating, two
+    /// pairs): single POSTs +16%, batches +3%. PostgreSQL has no such clause and no such
+    /// journal.
+    pub fn or_fail(self) -> &'static str {
+        match self {
+            Engine::Sqlite => " OR FAIL",
+            Engine::Postgres => "",
+        }
     }
 
     /// `UPDATE table SET` every column of `set` from the rows of the JSON array bound as
@@ -142,7 +159,8 @@ impl Engine {
         let assign: Vec<String> = set.iter().map(|c| format!("{c} = r.{c}")).collect();
         let on: Vec<String> = key.iter().map(|c| format!("{table}.{c} = r.{c}")).collect();
         format!(
-            "UPDATE {table} SET {} FROM ({}) AS r WHERE {}",
+            "UPDATE{} {table} SET {} FROM ({}) AS r WHERE {}",
+            self.or_fail(),
             assign.join(", "),
             self.json_rows(table, &all),
             on.join(" AND ")
@@ -292,8 +310,12 @@ mod tests {
         let sql = Engine::Sqlite.insert_json("audit", &["id", "by"]);
         assert_eq!(
             sql,
-            "INSERT INTO audit (id, by) SELECT value->>'id' AS id, value->>'by' AS by FROM json_each($1)"
+            "INSERT OR FAIL INTO audit (id, by) SELECT value->>'id' AS id, value->>'by' AS by FROM json_each($1)"
         );
+        let sql = Engine::Sqlite.update_json("jobs", &["id"], &["state"]);
+        assert!(sql.starts_with("UPDATE OR FAIL jobs SET state = r.state FROM (SELECT "), "{sql}");
+        let sql = Engine::Postgres.insert_json("audit", &["id"]);
+        assert!(sql.starts_with("INSERT INTO audit (id) SELECT id FROM json_populate_recordset"), "{sql}");
         let sql = Engine::Postgres.update_json("jobs", &["id"], &["state"]);
         assert_eq!(
             sql,

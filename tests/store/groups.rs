@@ -136,13 +136,17 @@ async fn beyond_one_statement(engine: Engine) {
 }
 on_both!(a_group_beyond_one_statement_is_written_whole_and_in_order, beyond_one_statement);
 
-/// A trigger that refuses any job with the reference `POISON`.
-async fn poison(pool: &Pool) {
+/// A trigger that refuses any job with the reference `POISON`. On SQLite, `raise` says how:
+/// `ABORT` takes back what the statement wrote, `FAIL` keeps the rows before the refused one
+/// (as the writer's `INSERT OR FAIL` does on a constraint).
+async fn poison(pool: &Pool, raise: &str) {
     match pool {
         Pool::Sqlite(p) => {
-            let sql = "CREATE TRIGGER poison BEFORE INSERT ON jobs WHEN NEW.reference = 'POISON' \
-                       BEGIN SELECT RAISE(ABORT, 'poisoned'); END";
-            sqlx::raw_sql(sql).execute(p).await.unwrap();
+            let sql = format!(
+                "CREATE TRIGGER poison BEFORE INSERT ON jobs WHEN NEW.reference = 'POISON' \
+                 BEGIN SELECT RAISE({raise}, 'poisoned'); END"
+            );
+            sqlx::raw_sql(sqlx::AssertSqlSafe(sql)).execute(p).await.unwrap();
         }
         Pool::Postgres(p) => {
             let sql = "CREATE FUNCTION poison() RETURNS trigger AS $$ BEGIN \
@@ -155,8 +159,12 @@ async fn poison(pool: &Pool) {
 }
 
 async fn fails_alone(engine: Engine) {
+    fails_alone_raised(engine, "ABORT").await;
+}
+
+async fn fails_alone_raised(engine: Engine, raise: &str) {
     let (pool, _db, _dir) = open(engine).await;
-    poison(&pool).await;
+    poison(&pool, raise).await;
     let (writer, seen, latch) = writer(&pool).await;
     let w = writer.clone();
     let three =
@@ -186,6 +194,14 @@ async fn fails_alone(engine: Engine) {
     assert!(log.iter().all(|e| !e.data.contains("POISON")), "no event of the refused request");
 }
 on_both!(a_request_the_database_refuses_fails_alone, fails_alone);
+
+/// SQLite: a statement refused after it wrote some of its rows (`A` goes in before
+/// `POISON` is refused) leaves none of them: the group is rolled back and replayed request
+/// by request, `A` and `B` stored once each.
+#[tokio::test]
+async fn rows_a_refused_statement_wrote_before_its_failure_are_taken_back() {
+    fails_alone_raised(Engine::Sqlite, "FAIL").await;
+}
 
 /// PostgreSQL only: a server that drops rackd's connections (a restart, a failover, an
 /// administrator's `pg_terminate_backend`) costs the group in flight, not the ones after it.

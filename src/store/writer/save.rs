@@ -157,12 +157,13 @@ struct PauseOut<'a> {
 /// SQLite's limit on bound parameters in one statement.
 const SQLITE_PARAMETERS: usize = 32766;
 
-/// The multi-row `INSERT` of `rows` into `$target` (`"table (columns)"`), binding each row's
-/// `[values]`; debug builds check that the values match the `$columns` the chunks were cut for.
+/// The multi-row `INSERT OR FAIL` (see [`Engine::or_fail`]) of `rows` into `$target`
+/// (`"table (columns)"`), binding each row's `[values]`; debug builds check that the values
+/// match the `$columns` the chunks were cut for.
 macro_rules! values {
     ($target:expr, $columns:expr, $rows:expr, |$r:ident| [$($value:expr),+ $(,)?]) => {{
         debug_assert_eq!([$(stringify!($value)),+].len(), $columns, "{}", $target);
-        let mut q = sqlx::QueryBuilder::<sqlx::Sqlite>::new(concat!("INSERT INTO ", $target, " "));
+        let mut q = sqlx::QueryBuilder::<sqlx::Sqlite>::new(concat!("INSERT OR FAIL INTO ", $target, " "));
         q.push_values($rows, |mut b, $r| {
             $(b.push_bind($value);)+
         });
