@@ -104,7 +104,8 @@ impl Application {
                 _ => None,
             },
         }));
-        let hub = Hub::new(config.events.buffer);
+        let (_, last_event) = store::events::bounds(&pool).await.context("reading the event log")?;
+        let hub = Hub::new(config.events.buffer, last_event);
         let metrics = Arc::new(Metrics::default());
         queues.set_drives(on_cluster.is_none());
         let hooks = hooks::hooks(&queues, &hub, &metrics, &commits, on_cluster.is_some());

@@ -8,8 +8,14 @@
 //! subscriber that falls more than the ring's size behind learns so on its next receive
 //! (and is told to resync, see [`crate::api::ws`]) instead of slowing the writer or the
 //! other subscribers.
+//!
+//! The hub also keeps the sequence number of the newest event published ([`Hub::published`]):
+//! a replay from the log stops there. An event beyond it is committed but not yet told,
+//! because on SQLite it may not be on disk yet (the writer publishes only after its sync, see
+//! `store::writer::durable`). A subscriber is never sent what a power cut could take back.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicI64, Ordering};
 
 use bytes::Bytes;
 use tokio::sync::broadcast;
@@ -91,16 +97,40 @@ pub type Commit = Arc<[Published]>;
 #[derive(Clone)]
 pub struct Hub {
     tx: broadcast::Sender<Commit>,
+    published: PublishedSeq,
+}
+
+/// The sequence number of the newest event published: what a replay may go up to.
+#[derive(Clone, Debug)]
+pub struct PublishedSeq(Arc<AtomicI64>);
+
+impl PublishedSeq {
+    /// The number now.
+    pub fn get(&self) -> i64 {
+        self.0.load(Ordering::Acquire)
+    }
 }
 
 impl Hub {
     /// A hub that lets a subscriber fall `capacity` commits behind before it must resync.
-    pub fn new(capacity: usize) -> Hub {
-        Hub { tx: broadcast::channel(capacity.max(1)).0 }
+    /// `last` is the newest event in the log when rackd starts: it is on disk, so replays
+    /// may go up to it.
+    pub fn new(capacity: usize, last: i64) -> Hub {
+        let published = PublishedSeq(Arc::new(AtomicI64::new(last)));
+        Hub { tx: broadcast::channel(capacity.max(1)).0, published }
+    }
+
+    /// The newest event published, as it moves (a session holds it without holding the
+    /// hub, whose sender would keep the stream open at shutdown).
+    pub fn published(&self) -> PublishedSeq {
+        self.published.clone()
     }
 
     /// Hands one commit's events, in sequence order, to every subscriber.
     pub fn publish(&self, events: Vec<StoredEvent>) {
+        if let Some(last) = events.last() {
+            self.published.0.fetch_max(last.seq, Ordering::AcqRel);
+        }
         if self.tx.receiver_count() == 0 {
             // Nobody listens: the log keeps the events for later replays.
             return;
@@ -143,9 +173,22 @@ mod tests {
         assert!(Topic::ALL.iter().all(|t| Topic::parse(t.as_str()) == Some(*t)));
     }
 
+    #[test]
+    fn the_published_number_follows_every_commit_with_or_without_subscribers() {
+        let hub = Hub::new(4, 7);
+        let published = hub.published();
+        assert_eq!(published.get(), 7, "the log's newest at start");
+        hub.publish(vec![stored(8, "job.updated"), stored(9, "job.updated")]);
+        assert_eq!(published.get(), 9, "no subscriber: published all the same");
+        let _subscriber = hub.subscribe();
+        hub.publish(vec![stored(10, "alarm.raised")]);
+        hub.publish(Vec::new());
+        assert_eq!(published.get(), 10);
+    }
+
     #[tokio::test]
     async fn a_subscriber_that_falls_behind_is_told_so() {
-        let hub = Hub::new(2);
+        let hub = Hub::new(2, 0);
         let mut fast = hub.subscribe();
         let mut slow = hub.subscribe();
         hub.publish(vec![stored(1, "job.updated")]);

@@ -208,8 +208,9 @@ fn supported(version_num: &str) -> bool {
     version_num.trim().parse::<i64>().is_ok_and(|v| v >= MIN_POSTGRES)
 }
 
-/// SQLite's settings: WAL, `synchronous=FULL` (a commit is on disk), foreign keys, and how
-/// long a statement waits for another connection's lock.
+/// SQLite's settings: WAL, `synchronous=FULL` (a commit is on disk; the writer's own
+/// connection lowers it to `NORMAL` and syncs the WAL itself, see `store::writer::durable`),
+/// foreign keys, and how long a statement waits for another connection's lock.
 fn sqlite_options(path: &Path, busy_timeout: Duration) -> Result<SqliteConnectOptions, sqlx::Error> {
     Ok(SqliteConnectOptions::from_str("sqlite:")?
         .filename(path)

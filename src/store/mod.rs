@@ -16,10 +16,12 @@
 //! - **No `query!` macros**: they check a query against one engine's schema at build time,
 //!   and every query here runs on two; the tests run every query on both engines instead
 //!   (tests/store and the API suite on each), which also needs no database at build time.
-//! - Durability: SQLite runs in WAL mode with `synchronous=FULL`; PostgreSQL with its
-//!   defaults (`synchronous_commit=on`). Either way a commit is on disk when it returns, so
-//!   a 201 means the job survives a power cut. Every change goes through one writer
-//!   ([`writer::Writer`]) that commits many requests per transaction.
+//! - Durability: SQLite runs in WAL mode; the writer's connection commits with
+//!   `synchronous=NORMAL` and the writer syncs the WAL itself before it answers anyone
+//!   (`writer::durable`), every other connection keeps `synchronous=FULL`. PostgreSQL runs
+//!   with its defaults (`synchronous_commit=on`). Either way nothing is answered before it
+//!   is on disk, so a 201 means the job survives a power cut. Every change goes through
+//!   one writer ([`writer::Writer`]) that commits many requests per transaction.
 
 pub mod alarms;
 pub mod cluster;

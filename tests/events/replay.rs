@@ -91,3 +91,28 @@ async fn retention_keeps_the_newest_event_so_numbers_are_never_reused() {
     assert_consecutive(&replay.events(2).await, 5);
     drop(dir);
 }
+
+/// A replay stops at the newest event published. On SQLite a commit is published only once
+/// it is on disk: a row beyond that (here one written into the log by hand, as a commit
+/// whose sync has not returned would stand) is not replayed; it comes live once published,
+/// or never if a power cut took it.
+#[tokio::test]
+async fn a_replay_stops_at_the_newest_event_published() {
+    use sqlx::{ConnectOptions, Connection};
+    let app = spawn_app().await;
+    submit(&app, 3).await;
+    let rackd::store::Database::Sqlite(path) = app.db.clone() else { panic!("these tests run on SQLite") };
+    let options =
+        sqlx::sqlite::SqliteConnectOptions::new().filename(&path).busy_timeout(Duration::from_secs(5));
+    let mut db = options.connect().await.unwrap();
+    let insert = "INSERT INTO events (seq, at, type, data) VALUES (4, 0, 'job.updated', '{\"id\":999}')";
+    sqlx::raw_sql(insert).execute(&mut db).await.unwrap();
+    let mut ws = Ws::connect(&app.base, "?since=1").await;
+    let events = ws.events(2).await;
+    assert_consecutive(&events, 2);
+    // The row goes, so that the writer's next event takes its number: the sentinel's event
+    // must come next, not the row the replay read past.
+    sqlx::raw_sql("DELETE FROM events WHERE seq = 4").execute(&mut db).await.unwrap();
+    db.close().await.unwrap();
+    assert_nothing_more(&app, &mut ws, 3).await;
+}

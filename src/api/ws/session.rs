@@ -12,7 +12,7 @@ use tokio::sync::broadcast::{Receiver, error::RecvError};
 use crate::api::state::AppState;
 use crate::devices::Devices;
 use crate::service::dispatch::Queues;
-use crate::service::events::{Commit, Topic};
+use crate::service::events::{Commit, PublishedSeq, Topic};
 use crate::store::events;
 
 /// Close code sent with `resync`: the client fell behind and should reconnect with `since`.
@@ -39,6 +39,7 @@ pub struct Session {
     devices: Devices,
     queues: Queues,
     events: Receiver<Commit>,
+    published: PublishedSeq,
     topics: Vec<Topic>,
     since: Option<i64>,
     ping: Duration,
@@ -58,6 +59,7 @@ impl Session {
             devices: app.devices(),
             queues: app.dispatcher.queues().clone(),
             events: app.hub.subscribe(),
+            published: app.hub.published(),
             topics,
             since,
             ping: Duration::from_secs(options.ping_secs),
@@ -127,14 +129,18 @@ impl Session {
     }
 
     /// Sends the replay after `since` when the log still holds it, else a snapshot; returns
-    /// the last sequence number covered.
+    /// the last sequence number covered. The log is read up to the newest event published
+    /// (read after subscribing, so what comes after it comes live): what is committed beyond
+    /// it is not on disk yet on SQLite (see [`crate::service::events`]).
     async fn start(&mut self, sink: &mut Sink) -> Result<i64, End> {
+        let published = self.published.get();
         let (first, end) = events::bounds(&self.pool).await?;
+        let end = end.min(published);
         let reason = match self.since {
             None => "requested",
             Some(since) if since > end => "since_unknown",
             Some(since) if since + 1 < first => "since_expired",
-            Some(since) => return self.replay(sink, since).await,
+            Some(since) => return self.replay(sink, since, end).await,
         };
         let snapshot = super::snapshot::read(
             &self.pool,
@@ -150,12 +156,15 @@ impl Session {
         Ok(snapshot.seq)
     }
 
-    /// Sends every event after `since` from the log, page by page.
-    async fn replay(&self, sink: &mut Sink, since: i64) -> Result<i64, End> {
+    /// Sends every event after `since` and up to `end` from the log, page by page.
+    async fn replay(&self, sink: &mut Sink, since: i64, end: i64) -> Result<i64, End> {
         let mut last = since;
         loop {
             let page = events::after(&self.pool, last, REPLAY_PAGE).await?;
             for event in &page {
+                if event.seq > end {
+                    return Ok(last);
+                }
                 last = event.seq;
                 if self.wants(Topic::of(&event.kind)) {
                     self.send(sink, Message::Text(Utf8Bytes::from(event.to_json()))).await?;

@@ -14,6 +14,7 @@
 mod apply;
 mod commit;
 pub use commit::NOTIFY_CHANNEL;
+mod durable;
 mod load;
 mod save;
 mod timing;
@@ -331,7 +332,18 @@ impl Writer {
     ) -> Result<(Writer, JoinHandle<()>), sqlx::Error> {
         let conn = Conn::acquire(pool).await?;
         let (tx, rx) = mpsc::channel(queue);
-        let writer = run(pool.clone(), conn, rx, max_group.max(1), hooks, shared);
+        let mut sync = match pool {
+            Pool::Sqlite(p) => Some(durable::wal(p.connect_options().get_filename())),
+            Pool::Postgres(_) => None,
+        };
+        // What an earlier run committed and did not sync (it stopped between its commit and
+        // its sync) is read as the truth from now on: on disk before anything acts on it.
+        match sync.as_mut().map(|s| s()) {
+            Some(Err(e)) if e.kind() != std::io::ErrorKind::NotFound => return Err(sqlx::Error::Io(e)),
+            _ => {}
+        }
+        let syncer = durable::Syncer::start(sync, hooks.clone()).map_err(sqlx::Error::Io)?;
+        let writer = run(pool.clone(), conn, rx, max_group.max(1), hooks, shared, syncer);
         let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
         let (done, ended) = oneshot::channel::<()>();
         std::thread::Builder::new().name("rackd-writer".into()).spawn(move || {
@@ -432,24 +444,31 @@ pub(crate) enum Conn {
 }
 
 impl Conn {
-    /// A connection of the pool's, taken out of it for good.
+    /// A connection of the pool's, taken out of it for good. On SQLite its commits do not
+    /// wait for the disk (`synchronous=NORMAL`): the writer syncs the WAL itself before it
+    /// answers anything (see [`durable`]).
     async fn acquire(pool: &Pool) -> Result<Conn, sqlx::Error> {
         Ok(match pool {
-            Pool::Sqlite(p) => Conn::Sqlite(p.acquire().await?.detach()),
+            Pool::Sqlite(p) => {
+                let mut conn = p.acquire().await?.detach();
+                sqlx::raw_sql("PRAGMA synchronous = NORMAL").execute(&mut conn).await?;
+                Conn::Sqlite(conn)
+            }
             Pool::Postgres(p) => Conn::Postgres(p.acquire().await?.detach()),
         })
     }
 }
 
-/// The writer: take what waits, commit it, answer, repeat until every handle is gone.
+/// The writer: take what waits, commit it, hand it to the [`durable::Syncer`] (which
+/// answers once it is on disk), repeat until every handle is gone.
 ///
 /// It runs on a thread of its own, on a runtime of its own, not among the server's tasks:
 /// a group waits on the database several times (each statement is a hand-off to the
 /// connection: on SQLite, to sqlx's worker thread), and each time the writer is woken it
 /// would otherwise queue behind HTTP requests for one of the server's threads. Measured with
 /// `bench intake` (six alternating pairs): single POSTs 13,780 a second against 12,480 as a
-/// task (+10%), a group's transaction 1.95 ms against 2.3; batches unchanged. Its hooks only
-/// hand things over (channels, locks, atomics), so running them on this thread is safe.
+/// task (+10%), a group's transaction 1.95 ms against 2.3; batches unchanged. The hooks run
+/// on the syncer's thread; they only hand things over (channels, locks, atomics).
 ///
 /// After a failed group the connection is replaced by a fresh one from the pool, so a
 /// database server that restarted (or a connection that broke) costs the groups in flight,
@@ -461,11 +480,17 @@ async fn run(
     max_group: usize,
     hooks: Hooks,
     shared: bool,
+    syncer: durable::Syncer,
 ) {
     let mut next = None;
     let mut db = Some(db);
     let mut group = Vec::with_capacity(max_group);
     while rx.recv_many(&mut group, max_group).await > 0 {
+        if syncer.failed() {
+            // What this writer committed may not be on disk: nothing more is built on it.
+            durable::refuse(std::mem::take(&mut group), &durable::stopped());
+            break;
+        }
         let started = std::time::Instant::now();
         if db.is_none() {
             db = Conn::acquire(&pool)
@@ -481,61 +506,18 @@ async fn run(
             None => Err(sqlx::Error::PoolTimedOut),
         };
         if result.is_err() {
-            db = None;
+            (db, next) = (None, None);
         }
-        let took = started.elapsed();
-        tracing::trace!(requests = group.len(), micros = took.as_micros() as u64, "group committed");
-        let timings = result.as_ref().map(|(_, out)| out.timings.as_slice()).unwrap_or_default();
-        let statements = result.as_ref().map_or(0, |(_, out)| out.statements);
-        if let Some(observe) = &hooks.observe {
-            observe(&GroupStats { commands: group.len(), statements, took, jobs: timings });
-        }
-        let answers = match result {
-            Ok((answers, out)) => {
-                if let Some(locked) = hooks.locked.as_ref().filter(|_| !out.locks.is_empty()) {
-                    locked(&out.locks);
-                }
-                if let Some(publish) = hooks.publish.as_ref().filter(|_| !out.events.is_empty()) {
-                    publish(out.events);
-                }
-                answers
-            }
-            Err(e) => {
-                tracing::error!(error = %e, requests = group.len(), "group commit failed");
-                next = None;
-                let e = WriteError::Database(Arc::new(e));
-                group.iter().map(|_| apply::Answer::Failed(e.clone())).collect()
-            }
-        };
-        if let Some(committed) = &hooks.committed {
-            let jobs: Vec<&Job> = answers.iter().flat_map(apply::Answer::jobs).collect();
-            if !jobs.is_empty() {
-                committed(&jobs);
-            }
-        }
-        for (Sent { cmd, .. }, answer) in group.drain(..).zip(answers) {
-            match (cmd, answer) {
-                (Command::Submit { reply, .. }, apply::Answer::Submitted(r)) => drop(reply.send(r)),
-                (Command::Change { reply, .. }, apply::Answer::Changed(r)) => drop(reply.send(r)),
-                (Command::Record { reply, .. }, apply::Answer::Recorded) => drop(reply.send(Ok(()))),
-                (Command::Record { reply, .. }, apply::Answer::Refused(e)) => drop(reply.send(Err(e))),
-                (Command::Reports { reply, .. }, apply::Answer::Reported(r)) => drop(reply.send(r)),
-                (Command::Adopt { reply, .. }, apply::Answer::Adopted(jobs)) => drop(reply.send(Ok(jobs))),
-                (Command::Adopt { reply, .. }, apply::Answer::Failed(e)) => drop(reply.send(Err(e))),
-                (Command::Adopt { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
-                (Command::Reports { reply, reports }, apply::Answer::Failed(e)) => {
-                    drop(reply.send(reports.iter().map(|_| Err(e.clone())).collect()))
-                }
-                (Command::Reports { reply, reports }, _) => {
-                    drop(reply.send(reports.iter().map(|_| Err(WriteError::Closed)).collect()))
-                }
-                (Command::Submit { reply, .. }, apply::Answer::Failed(e)) => drop(reply.send(Err(e))),
-                (Command::Change { reply, .. }, apply::Answer::Failed(e)) => drop(reply.send(Err(e))),
-                (Command::Record { reply, .. }, apply::Answer::Failed(e)) => drop(reply.send(Err(e))),
-                (Command::Submit { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
-                (Command::Change { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
-                (Command::Record { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
-            }
-        }
+        tracing::trace!(
+            requests = group.len(),
+            micros = started.elapsed().as_micros() as u64,
+            "group committed"
+        );
+        syncer.send(durable::Done { group: std::mem::take(&mut group), result, started });
     }
+    rx.close();
+    while let Ok(sent) = rx.try_recv() {
+        durable::refuse(vec![sent], &durable::stopped());
+    }
+    syncer.finish();
 }
