@@ -98,21 +98,45 @@ async fn retention_keeps_the_newest_event_so_numbers_are_never_reused() {
 /// or never if a power cut took it.
 #[tokio::test]
 async fn a_replay_stops_at_the_newest_event_published() {
-    use sqlx::{ConnectOptions, Connection};
     let app = spawn_app().await;
     submit(&app, 3).await;
-    let rackd::store::Database::Sqlite(path) = app.db.clone() else { panic!("these tests run on SQLite") };
-    let options =
-        sqlx::sqlite::SqliteConnectOptions::new().filename(&path).busy_timeout(Duration::from_secs(5));
-    let mut db = options.connect().await.unwrap();
-    let insert = "INSERT INTO events (seq, at, type, data) VALUES (4, 0, 'job.updated', '{\"id\":999}')";
-    sqlx::raw_sql(insert).execute(&mut db).await.unwrap();
+    let mut db = Raw::connect(&app.db).await;
+    db.run("INSERT INTO events (seq, at, type, data) VALUES (4, 0, 'job.updated', '{\"id\":999}')").await;
     let mut ws = Ws::connect(&app.base, "?since=1").await;
     let events = ws.events(2).await;
     assert_consecutive(&events, 2);
     // The row goes, so that the writer's next event takes its number: the sentinel's event
     // must come next, not the row the replay read past.
-    sqlx::raw_sql("DELETE FROM events WHERE seq = 4").execute(&mut db).await.unwrap();
-    db.close().await.unwrap();
+    db.run("DELETE FROM events WHERE seq = 4").await;
     assert_nothing_more(&app, &mut ws, 3).await;
+}
+
+/// A connection of the test's own to the app's database, on either engine.
+enum Raw {
+    Sqlite(sqlx::SqliteConnection),
+    Postgres(sqlx::PgConnection),
+}
+
+impl Raw {
+    async fn connect(db: &rackd::store::Database) -> Raw {
+        use sqlx::{ConnectOptions, Connection};
+        match db {
+            rackd::store::Database::Sqlite(path) => {
+                let options = sqlx::sqlite::SqliteConnectOptions::new()
+                    .filename(path)
+                    .busy_timeout(Duration::from_secs(5));
+                Raw::Sqlite(options.connect().await.unwrap())
+            }
+            rackd::store::Database::Postgres(url) => {
+                Raw::Postgres(sqlx::PgConnection::connect(url).await.unwrap())
+            }
+        }
+    }
+
+    async fn run(&mut self, sql: &'static str) {
+        match self {
+            Raw::Sqlite(c) => drop(sqlx::raw_sql(sql).execute(c).await.unwrap()),
+            Raw::Postgres(c) => drop(sqlx::raw_sql(sql).execute(c).await.unwrap()),
+        }
+    }
 }

@@ -81,7 +81,9 @@ impl Syncer {
     pub(super) fn send(&self, done: Done) {
         if let Err(mpsc::SendError(done)) = self.tx.send(done) {
             // The thread is gone (it only ends when this handle does, or by a panic in a
-            // hook): answer here rather than leave the callers waiting.
+            // hook): nothing syncs any more, so the writer stops, and this group is
+            // answered here rather than left waiting.
+            self.failed.store(true, Ordering::Release);
             deliver(&Hooks::default(), done, Some(&stopped()));
         }
     }
