@@ -12,9 +12,11 @@ use rackd::store::{Engine, Pool, events, jobs};
 
 use crate::{light, on_both, open};
 
-/// Holds the writer after a group's commit, before its answers, while `hold` is set. The
-/// writer runs on a thread of its own, so requests only make one group for sure when they
-/// are all queued while it waits.
+/// Holds the writer in the middle of a group, while `hold` is set. The writer runs on a
+/// thread of its own, so requests only make one group for sure when they are all queued
+/// while it waits. It parks in the `tell` hook, which the writer calls on its own thread for
+/// every job it writes; the `observe` hook would not do: it runs on the sync thread once
+/// the group is on disk, while the writer goes on.
 #[derive(Default)]
 struct Latch {
     hold: AtomicBool,
@@ -22,7 +24,7 @@ struct Latch {
 }
 
 impl Latch {
-    /// Called by the writer after each group (its own thread: blocking is fine).
+    /// Called by the writer for each job it writes (its own thread: blocking is fine).
     fn park(&self) {
         if self.hold.load(SeqCst) {
             self.parked.store(true, SeqCst);
@@ -33,7 +35,7 @@ impl Latch {
         }
     }
 
-    /// Runs `first`, and while the writer is held after committing it queues every one of
+    /// Runs `first`, and while the writer is held writing it queues every one of
     /// `then` (a submission is queued at its first poll), so that `then` makes one group.
     async fn one_group_after<T: Send + 'static, F: Future + Unpin>(
         &self,
@@ -59,11 +61,12 @@ async fn writer(pool: &Pool) -> (Writer, Arc<Mutex<Vec<(usize, usize)>>>, Arc<La
     let latch = Arc::new(Latch::default());
     let hooks = Hooks {
         observe: Some({
-            let (seen, latch) = (seen.clone(), latch.clone());
-            Arc::new(move |g| {
-                seen.lock().unwrap().push((g.commands, g.statements));
-                latch.park();
-            })
+            let seen = seen.clone();
+            Arc::new(move |g| seen.lock().unwrap().push((g.commands, g.statements)))
+        }),
+        tell: Some({
+            let latch = latch.clone();
+            Arc::new(move |_| latch.park())
         }),
         ..Hooks::default()
     };
