@@ -203,6 +203,20 @@ pub async fn connect(database: &Database, busy_timeout: Duration, max: u32) -> R
     }
 }
 
+/// The page size of a new SQLite database, in bytes.
+///
+/// A commit writes each page it changed to the WAL as a frame of its own (two `pwrite`s a
+/// frame), so the intake tables' appends cost half the frames at 8 KiB. The scattered leaf
+/// of the reference index a single job dirties costs twice the bytes, and the two balance.
+/// Measured with `bench intake`, ten alternating runs each against 4 KiB: batches 65,586 →
+/// 69,636 jobs a second (+6%), single POSTs 14,885 → 14,916 (no change). 16 KiB gave
+/// batches +12% but single POSTs -6% (six runs each), so 8 KiB it is.
+///
+/// The setting only applies when the file is created: an existing database keeps the page
+/// size it was made with (SQLite can change it only by `VACUUM`, and not in WAL mode), and
+/// works as before.
+pub const SQLITE_PAGE_SIZE: u32 = 8192;
+
 /// Whether a server saying this `server_version_num` is new enough.
 fn supported(version_num: &str) -> bool {
     version_num.trim().parse::<i64>().is_ok_and(|v| v >= MIN_POSTGRES)
@@ -211,10 +225,13 @@ fn supported(version_num: &str) -> bool {
 /// SQLite's settings: WAL, `synchronous=FULL` (a commit is on disk; the writer's own
 /// connection lowers it to `NORMAL` and syncs the WAL itself, see `store::writer::durable`),
 /// foreign keys, and how long a statement waits for another connection's lock.
+///
+/// A new database gets pages of [`SQLITE_PAGE_SIZE`] bytes, twice SQLite's default.
 fn sqlite_options(path: &Path, busy_timeout: Duration) -> Result<SqliteConnectOptions, sqlx::Error> {
     Ok(SqliteConnectOptions::from_str("sqlite:")?
         .filename(path)
         .create_if_missing(true)
+        .page_size(SQLITE_PAGE_SIZE)
         .journal_mode(SqliteJournalMode::Wal)
         .synchronous(SqliteSynchronous::Full)
         .busy_timeout(busy_timeout)

@@ -39,7 +39,7 @@ use std::time::Duration;
 
 use sqlx::{PgPool, SqlitePool};
 
-pub use engine::{Database, Engine, OpenError};
+pub use engine::{Database, Engine, OpenError, SQLITE_PAGE_SIZE};
 pub use jobs::{Job, JobEvent, JobFilter};
 
 /// The migrations of each engine, embedded in the binary.

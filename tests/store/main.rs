@@ -7,6 +7,7 @@ mod postgres;
 
 mod copy;
 mod groups;
+mod pages;
 
 use std::time::Duration;
 
