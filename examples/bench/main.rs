@@ -35,6 +35,11 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+/// The allocator the `rackd` binary uses (see `src/main.rs`), so the server it starts in
+/// this process runs as it does in production.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// The benchmarks.
 #[derive(Parser, Debug)]
 #[command(name = "bench", about = "rackd's benchmarks (see README)")]
