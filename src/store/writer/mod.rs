@@ -12,6 +12,7 @@
 //! sqlx driver runs a connection on a worker thread and hands every statement over through a
 //! channel: the hand-offs, not SQLite, would otherwise set the pace.
 mod apply;
+mod checkpoint;
 mod commit;
 pub use commit::NOTIFY_CHANNEL;
 mod durable;
@@ -343,7 +344,12 @@ impl Writer {
             _ => {}
         }
         let syncer = durable::Syncer::start(sync, hooks.clone()).map_err(sqlx::Error::Io)?;
-        let writer = run(pool.clone(), conn, rx, max_group.max(1), hooks, shared, syncer);
+        let checkpoints = match pool {
+            Pool::Sqlite(p) => Some(checkpoint::Checkpoints::start(p.acquire().await?.detach())),
+            Pool::Postgres(_) => None,
+        };
+        let after = After { syncer, checkpoints };
+        let writer = run(pool.clone(), conn, rx, max_group.max(1), hooks, shared, after);
         let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
         let (done, ended) = oneshot::channel::<()>();
         std::thread::Builder::new().name("rackd-writer".into()).spawn(move || {
@@ -459,6 +465,42 @@ impl Conn {
     }
 }
 
+/// What follows a commit: the sync and the answers, and on SQLite the checkpoint of a
+/// large group.
+struct After {
+    syncer: durable::Syncer,
+    checkpoints: Option<checkpoint::Checkpoints>,
+}
+
+impl Command {
+    /// The jobs the command writes: a large group's checkpoint is handed over (see
+    /// [`checkpoint`]).
+    fn jobs(&self) -> usize {
+        match self {
+            Command::Submit { jobs, .. } => jobs.len(),
+            Command::Reports { reports, .. } => reports.len(),
+            Command::Adopt { ids, .. } => ids.len(),
+            Command::Change { .. } | Command::Record { .. } => 1,
+        }
+    }
+}
+
+/// Commits `group` on `conn`, a large group's checkpoint handed over first (see
+/// [`checkpoint`]).
+async fn write(
+    conn: &mut Conn,
+    checkpoints: Option<&mut checkpoint::Checkpoints>,
+    group: &[Sent],
+    next: &mut Option<apply::Next>,
+    tell: Option<&Tell>,
+    shared: bool,
+) -> Result<(Vec<apply::Answer>, apply::Out), sqlx::Error> {
+    if let (Conn::Sqlite(c), Some(checkpoints)) = (&mut *conn, checkpoints) {
+        checkpoints.before(c, group.iter().map(|s| s.cmd.jobs()).sum()).await?;
+    }
+    commit::commit(conn, group, next, tell, shared).await
+}
+
 /// The writer: take what waits, commit it, hand it to the [`durable::Syncer`] (which
 /// answers once it is on disk), repeat until every handle is gone.
 ///
@@ -480,7 +522,7 @@ async fn run(
     max_group: usize,
     hooks: Hooks,
     shared: bool,
-    syncer: durable::Syncer,
+    After { syncer, mut checkpoints }: After,
 ) {
     let mut next = None;
     let mut db = Some(db);
@@ -502,11 +544,16 @@ async fn run(
             next = None;
         }
         let result = match db.as_mut() {
-            Some(conn) => commit::commit(conn, &group, &mut next, hooks.tell.as_ref(), shared).await,
+            Some(conn) => {
+                write(conn, checkpoints.as_mut(), &group, &mut next, hooks.tell.as_ref(), shared).await
+            }
             None => Err(sqlx::Error::PoolTimedOut),
         };
         if result.is_err() {
             (db, next) = (None, None);
+        }
+        if let Some(checkpoints) = checkpoints.as_mut() {
+            checkpoints.after(result.is_ok());
         }
         tracing::trace!(
             requests = group.len(),
