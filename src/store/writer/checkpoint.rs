@@ -10,32 +10,45 @@
 //!
 //! After a large group ([`LARGE_GROUP`] jobs or more) a connection of its own copies the
 //! pages instead (`PRAGMA wal_checkpoint(PASSIVE)`, which waits for no one) while the writer
-//! goes on with the next group. Measured with `bench intake` (eight ABBA blocks): batches
-//! +12%, single POSTs unchanged.
+//! goes on with the next group. Measured with `bench intake` (four ABBA blocks): batches
+//! +11%, single POSTs unchanged.
 //!
 //! Decisions:
 //! - **Small groups keep SQLite's own checkpoint.** Measured: with every group's checkpoint
 //!   on the checkpointer, batches gained 6% and single POSTs lost 4% (four ABBA blocks, each
 //!   the same way). Single POSTs are bound by CPU, so the same copying on another thread
-//!   gains them nothing, and the restarts below made their writer wait. So the writer hands
+//!   gains them nothing, and the restarts made their writer wait. So the writer hands
 //!   its checkpoints over only for a large group, and takes them back for a small one; each
 //!   switch costs one statement (`PRAGMA wal_autocheckpoint`), steady traffic none.
 //! - **At most one checkpoint per [`PAUSE`].** Each checkpoint syncs the WAL and the
 //!   database file.
-//! - **The WAL is restarted past [`RESTART_BYTES`].** SQLite starts the WAL over only when
-//!   a write transaction begins with every page already copied back, which a writer that
-//!   is never idle does not do while someone else checkpoints: without this the WAL grew to
-//!   1.7 GB in one benchmark run. Once the WAL holds more than [`RESTART_BYTES`] and a
-//!   passive checkpoint has caught up, `wal_checkpoint(RESTART)` waits for the writer's
-//!   current transaction, copies the little that is left, and makes the next transaction
-//!   start the WAL over (the writer's `BEGIN` waits for it, within the busy timeout).
-//! - **The writer still checkpoints itself past [`WRITER_CHECKPOINT_PAGES`]** while its
-//!   checkpoints are handed over (four times the restart size): should the checkpointer
-//!   fail, or readers holding old snapshots keep it from finishing, the WAL stays bounded.
+//! - **Passive only on the checkpointer: it never waits, and nobody waits for it.** It
+//!   copies what no reader still needs and leaves the rest for its next turn.
+//! - **The writer starts the WAL over past [`RESTART_BYTES`] (128 MiB).** SQLite starts the
+//!   WAL over only when a write transaction begins with every page copied back, which a
+//!   writer that is never idle does not do while someone else checkpoints: with nothing
+//!   more the WAL grew to 1.7 GB in one benchmark run. When the checkpointer finds the WAL
+//!   past that size, the writer, between two groups, runs `wal_checkpoint(RESTART)`: it
+//!   copies what is left (about its last group) and makes its next group start the WAL over.
+//!   So the writer pays one group's copy per 128 MiB instead of every group's, and the WAL
+//!   stays below about 128 MiB plus a group or two. Leaving it to SQLite's own automatic
+//!   checkpoint at that size instead gained nothing measurable: a restart then needs no
+//!   reader inside the WAL at the very moment the next group begins, and with busy readers
+//!   it kept failing, so the writer copied at every commit.
+//! - **The restart waits briefly: [`patience`].** `RESTART` waits for every reader to
+//!   leave the WAL, and the writer, which runs it, waits with it: a long read (a CSV
+//!   export, a replay) would hold up every write. It waits a quarter of the database's
+//!   busy timeout at most,
+//!   and at most a second; then the group goes on, and the restart is tried again after
+//!   the checkpointer's next turn.
+//! - **The writer's own automatic checkpoint stays, at four times [`RESTART_BYTES`]**, as
+//!   the safety net should the checkpointer fail.
 //! - **Durability is SQLite's own**: a checkpoint syncs the WAL before it copies and the
 //!   database file after, whoever runs it.
 //! - **PostgreSQL has nothing of the kind**: no checkpointer there.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use sqlx::SqliteConnection;
@@ -48,12 +61,13 @@ pub(super) const LARGE_GROUP: usize = 2048;
 /// The shortest time between two checkpoints of the checkpointer.
 pub(super) const PAUSE: Duration = Duration::from_millis(50);
 
-/// The WAL size past which the checkpointer makes SQLite start it over.
-pub(super) const RESTART_BYTES: u64 = 128 << 20;
+/// The WAL size past which the writer starts it over (see the module doc).
+pub(super) const RESTART_BYTES: i64 = 128 << 20;
 
-/// The writer's automatic checkpoint while its checkpoints are handed over (in pages of
-/// [`crate::store::SQLITE_PAGE_SIZE`]): four times [`RESTART_BYTES`], the safety net.
-pub(super) const WRITER_CHECKPOINT_PAGES: u64 = 4 * RESTART_BYTES / crate::store::SQLITE_PAGE_SIZE as u64;
+/// The writer's automatic checkpoint while its checkpoints are handed over, in pages of
+/// [`crate::store::SQLITE_PAGE_SIZE`]: four times [`RESTART_BYTES`], the safety net.
+pub(super) const WRITER_CHECKPOINT_PAGES: u64 =
+    4 * RESTART_BYTES as u64 / crate::store::SQLITE_PAGE_SIZE as u64;
 
 /// SQLite's own automatic checkpoint, in pages (its default).
 const SQLITE_CHECKPOINT_PAGES: u64 = 1000;
@@ -63,6 +77,10 @@ const SQLITE_CHECKPOINT_PAGES: u64 = 1000;
 pub(super) struct Checkpoints {
     nudge: mpsc::Sender<()>,
     handed_over: bool,
+    /// Set by the checkpointer when the WAL has grown past [`RESTART_BYTES`].
+    restart: Arc<AtomicBool>,
+    /// The writer's busy timeout (ms), read at the first restart.
+    busy_timeout: Option<i64>,
 }
 
 impl Checkpoints {
@@ -70,8 +88,9 @@ impl Checkpoints {
     /// database), as a task on the current runtime.
     pub(super) fn start(conn: SqliteConnection) -> Checkpoints {
         let (nudge, nudged) = mpsc::channel(1);
-        tokio::spawn(run(conn, nudged, RESTART_BYTES));
-        Checkpoints { nudge, handed_over: false }
+        let restart = Arc::new(AtomicBool::new(false));
+        tokio::spawn(run(conn, nudged, restart.clone(), RESTART_BYTES));
+        Checkpoints { nudge, handed_over: false, restart, busy_timeout: None }
     }
 
     /// Before a group of `jobs` jobs on the writer's connection `db`: hands its checkpoint
@@ -84,6 +103,26 @@ impl Checkpoints {
             sqlx::raw_sql(sqlx::AssertSqlSafe(sql)).execute(&mut *db).await?;
             self.handed_over = large;
         }
+        if self.restart.swap(false, Ordering::Relaxed) {
+            self.start_over(db).await?;
+        }
+        Ok(())
+    }
+
+    /// Copies back what is left and makes the next group start the WAL over, waiting for
+    /// readers no longer than its [`patience`].
+    async fn start_over(&mut self, db: &mut SqliteConnection) -> Result<(), sqlx::Error> {
+        let busy = match self.busy_timeout {
+            Some(busy) => busy,
+            None => *self
+                .busy_timeout
+                .insert(sqlx::query_scalar("PRAGMA busy_timeout").fetch_one(&mut *db).await?),
+        };
+        let sql = format!(
+            "PRAGMA busy_timeout = {}; PRAGMA wal_checkpoint(RESTART); PRAGMA busy_timeout = {busy}",
+            patience(busy)
+        );
+        sqlx::raw_sql(sqlx::AssertSqlSafe(sql)).execute(&mut *db).await?;
         Ok(())
     }
 
@@ -100,37 +139,43 @@ impl Checkpoints {
     }
 }
 
-async fn run(mut conn: SqliteConnection, mut nudged: mpsc::Receiver<()>, restart_bytes: u64) {
+/// How long the writer's restart waits for readers (ms), given its busy timeout: a
+/// quarter of it, at most a second.
+fn patience(busy_timeout_ms: i64) -> i64 {
+    (busy_timeout_ms / 4).min(1000)
+}
+
+async fn run(
+    mut conn: SqliteConnection,
+    mut nudged: mpsc::Receiver<()>,
+    restart: Arc<AtomicBool>,
+    bytes: i64,
+) {
     let page: i64 = match sqlx::query_scalar("PRAGMA page_size").fetch_one(&mut conn).await {
         Ok(page) => page,
         Err(e) => {
-            tracing::warn!(error = %e, "the checkpointer cannot read the page size; the writer checkpoints alone");
+            tracing::warn!(error = %e, "the checkpointer cannot start; the writer checkpoints alone");
             return;
         }
     };
-    let restart_frames = (restart_bytes / page.max(1) as u64) as i64;
+    let frames = bytes / page.max(1);
     while nudged.recv().await.is_some() {
-        // The writer's own checkpoint covers for a failed one (see the module doc).
-        if let Err(e) = checkpoint(&mut conn, restart_frames).await {
-            tracing::warn!(error = %e, "checkpoint failed");
+        match checkpoint(&mut conn).await {
+            Ok(wal) if wal >= frames => restart.store(true, Ordering::Relaxed),
+            Ok(_) => {}
+            // The writer's own checkpoint covers for a failed one (see the module doc).
+            Err(e) => tracing::warn!(error = %e, "checkpoint failed"),
         }
         tokio::time::sleep(PAUSE).await;
     }
 }
 
-/// One passive checkpoint, and a restart of the WAL if it holds `restart_frames` pages or
-/// more and all of them are copied back.
-async fn checkpoint(conn: &mut SqliteConnection, restart_frames: i64) -> Result<(), sqlx::Error> {
-    let (_, frames, copied): (i64, i64, i64) =
+/// Copies back what no reader still needs, waiting for no one; returns the frames in the
+/// WAL.
+async fn checkpoint(conn: &mut SqliteConnection) -> Result<i64, sqlx::Error> {
+    let (_, frames, _): (i64, i64, i64) =
         sqlx::query_as("PRAGMA wal_checkpoint(PASSIVE)").fetch_one(&mut *conn).await?;
-    if frames >= restart_frames && copied == frames {
-        let (busy, _, _): (i64, i64, i64) =
-            sqlx::query_as("PRAGMA wal_checkpoint(RESTART)").fetch_one(&mut *conn).await?;
-        if busy != 0 {
-            tracing::debug!(frames, "the WAL was not restarted: a reader holds an old snapshot");
-        }
-    }
-    Ok(())
+    Ok(frames)
 }
 
 #[cfg(test)]
@@ -188,24 +233,31 @@ mod tests {
         (dir, path, writer, checkpointer)
     }
 
-    /// Ten groups committed, the writer inside the next one, a checkpoint with
-    /// `restart_frames` run meanwhile, that group committed and one more written: the frames
-    /// in the WAL then.
-    async fn busy_writer(restart_frames: i64) -> i64 {
-        let (_dir, path, mut writer, mut checkpointer) = store().await;
+    /// The writer's side, as [`Checkpoints::start`] makes it, with no checkpointer behind it
+    /// and `restart` as the checkpointer left it.
+    fn writer_side(restart: bool) -> Checkpoints {
+        let (nudge, _) = mpsc::channel(1);
+        Checkpoints {
+            nudge,
+            handed_over: false,
+            restart: Arc::new(AtomicBool::new(restart)),
+            busy_timeout: None,
+        }
+    }
+
+    /// Ten groups committed, the writer inside the next one while the checkpointer copies,
+    /// that group committed, then the writer's side before its next group with `restart`
+    /// set or not, and that group written: the frames in the WAL then.
+    async fn busy_writer(restart: bool) -> i64 {
+        let (_dir, _path, mut writer, mut checkpointer) = store().await;
         for _ in 0..10 {
             write(&mut writer, 20).await;
         }
-        let before = size(&path);
         let mut tx = writer.begin().await.unwrap();
         sqlx::query("INSERT INTO t (b) VALUES (randomblob(1000))").execute(&mut *tx).await.unwrap();
-        let run = tokio::spawn(async move { checkpoint(&mut checkpointer, restart_frames).await });
-        // The passive checkpoint copies what was committed; a restart waits for the writer.
-        while size(&path) < before + 150_000 {
-            tokio::time::sleep(Duration::from_millis(5)).await;
-        }
+        checkpoint(&mut checkpointer).await.unwrap();
         tx.commit().await.unwrap();
-        run.await.unwrap().unwrap();
+        writer_side(restart).before(&mut writer, 1).await.unwrap();
         write(&mut writer, 20).await;
         let rows: i64 = sqlx::query_scalar("SELECT count(*) FROM t").fetch_one(&mut writer).await.unwrap();
         assert_eq!(rows, 221);
@@ -213,28 +265,84 @@ mod tests {
     }
 
     #[tokio::test]
-    async fn a_wal_past_the_restart_size_starts_over_though_the_writer_is_never_idle() {
-        let frames = busy_writer(50).await;
-        assert!(frames < 15, "after the restart the WAL holds the last write only, not {frames} frames");
+    async fn the_writers_restart_starts_the_wal_over_though_it_is_never_idle() {
+        let frames = busy_writer(true).await;
+        assert!(frames < 15, "the WAL started over: it holds the last group only, not {frames} frames");
     }
 
     #[tokio::test]
-    async fn under_the_restart_size_a_busy_writer_goes_on_in_the_same_wal() {
-        let frames = busy_writer(100_000).await;
-        assert!(frames > 60, "without a restart the WAL goes on ({frames} frames)");
+    async fn with_the_checkpointer_alone_a_busy_writer_never_starts_the_wal_over() {
+        let frames = busy_writer(false).await;
+        assert!(frames > 60, "without the restart the WAL goes on ({frames} frames)");
     }
 
     #[tokio::test]
-    async fn under_the_restart_size_it_copies_without_waiting_for_the_writer() {
+    async fn the_checkpointer_asks_for_a_restart_past_the_restart_size_only() {
+        for (bytes, asked) in [(50 * 4096, true), (RESTART_BYTES, false)] {
+            let (_dir, path, mut writer, checkpointer) = store().await;
+            for _ in 0..10 {
+                write(&mut writer, 20).await;
+            }
+            let (nudge, nudged) = mpsc::channel(1);
+            let restart = Arc::new(AtomicBool::new(false));
+            let task = tokio::spawn(run(checkpointer, nudged, restart.clone(), bytes));
+            let before = size(&path);
+            nudge.send(()).await.unwrap();
+            drop(nudge);
+            tokio::time::timeout(Duration::from_secs(10), task)
+                .await
+                .expect("it stops with the writer")
+                .unwrap();
+            assert!(size(&path) > before + 150_000, "it copied the WAL back");
+            assert_eq!(
+                restart.load(Ordering::Relaxed),
+                asked,
+                "a WAL of about 60 pages, {bytes} bytes to restart"
+            );
+        }
+    }
+
+    #[tokio::test]
+    async fn a_restart_gives_up_on_a_long_reader_within_its_patience() {
         let (_dir, path, mut writer, mut checkpointer) = store().await;
         for _ in 0..10 {
             write(&mut writer, 20).await;
         }
-        // The writer is inside its next group (a `RESTART` would wait for it to end).
+        // A reader inside the WAL (a long export, say) keeps the WAL from starting over.
+        let mut reader = open(&path).await;
+        let mut read = reader.begin().await.unwrap();
+        let _: i64 = sqlx::query_scalar("SELECT count(*) FROM t").fetch_one(&mut *read).await.unwrap();
+        checkpoint(&mut checkpointer).await.unwrap();
+        let started = std::time::Instant::now();
+        writer_side(true).before(&mut writer, 1).await.unwrap();
+        let waited = started.elapsed();
+        // The busy timeout is 5 s: the restart gave up after its patience of 1 s.
+        assert!(waited >= Duration::from_millis(900), "it waited for the reader ({waited:?})");
+        assert!(waited < Duration::from_millis(3000), "it gave up in time ({waited:?})");
+        let busy: i64 = sqlx::query_scalar("PRAGMA busy_timeout").fetch_one(&mut writer).await.unwrap();
+        assert_eq!(busy, 5000, "the writer's busy timeout is back");
+        write(&mut writer, 20).await;
+        read.commit().await.unwrap();
+    }
+
+    #[test]
+    fn the_patience_is_a_quarter_of_the_busy_timeout_and_at_most_a_second() {
+        assert_eq!(patience(5000), 1000);
+        assert_eq!(patience(400), 100);
+        assert_eq!(patience(0), 0);
+    }
+
+    #[tokio::test]
+    async fn it_copies_without_waiting_for_the_writer() {
+        let (_dir, path, mut writer, mut checkpointer) = store().await;
+        for _ in 0..10 {
+            write(&mut writer, 20).await;
+        }
+        // The writer is inside its next group.
         let mut tx = writer.begin().await.unwrap();
         sqlx::query("INSERT INTO t (b) VALUES (randomblob(1000))").execute(&mut *tx).await.unwrap();
         let before = size(&path);
-        let copy = checkpoint(&mut checkpointer, 100_000);
+        let copy = checkpoint(&mut checkpointer);
         tokio::time::timeout(Duration::from_secs(2), copy).await.expect("it did not wait").unwrap();
         assert!(size(&path) > before + 150_000, "the committed rows were copied into the database file");
         tx.commit().await.unwrap();
