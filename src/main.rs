@@ -7,8 +7,9 @@ use clap::Parser;
 use rackd::cli::{Cli, LogFormat};
 use tracing_subscriber::EnvFilter;
 
-/// mimalloc instead of glibc's malloc: measured in `bench intake` (batches +8%, +12%
-/// with the writer's statements allocated at their size), see the README's "Benchmarks". The benchmark (`examples/bench`) uses the same, so it measures this.
+/// mimalloc instead of glibc's malloc: measured in `bench intake` (batches +8%, +12% with
+/// the writer's statements allocated at their size), see the README's "Benchmarks". The
+/// benchmark (`examples/bench`) uses the same, so it measures this.
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 

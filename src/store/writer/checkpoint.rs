@@ -37,10 +37,9 @@
 //!   it kept failing, so the writer copied at every commit.
 //! - **The restart waits briefly: [`patience`].** `RESTART` waits for every reader to
 //!   leave the WAL, and the writer, which runs it, waits with it: a long read (a CSV
-//!   export, a replay) would hold up every write. It waits a quarter of the database's
-//!   busy timeout at most,
-//!   and at most a second; then the group goes on, and the restart is tried again after
-//!   the checkpointer's next turn.
+//!   export, a replay) would hold up every write. It waits at most a quarter of the
+//!   database's busy timeout, and at most a second; then the group goes on, and the restart
+//!   is tried again after the checkpointer's next turn.
 //! - **The writer's own automatic checkpoint stays, at four times [`RESTART_BYTES`]**, as
 //!   the safety net should the checkpointer fail.
 //! - **Durability is SQLite's own**: a checkpoint syncs the WAL before it copies and the
@@ -79,8 +78,6 @@ pub(super) struct Checkpoints {
     handed_over: bool,
     /// Set by the checkpointer when the WAL has grown past [`RESTART_BYTES`].
     restart: Arc<AtomicBool>,
-    /// The writer's busy timeout (ms), read at the first restart.
-    busy_timeout: Option<i64>,
 }
 
 impl Checkpoints {
@@ -90,7 +87,7 @@ impl Checkpoints {
         let (nudge, nudged) = mpsc::channel(1);
         let restart = Arc::new(AtomicBool::new(false));
         tokio::spawn(run(conn, nudged, restart.clone(), RESTART_BYTES));
-        Checkpoints { nudge, handed_over: false, restart, busy_timeout: None }
+        Checkpoints { nudge, handed_over: false, restart }
     }
 
     /// Before a group of `jobs` jobs on the writer's connection `db`: hands its checkpoint
@@ -104,25 +101,8 @@ impl Checkpoints {
             self.handed_over = large;
         }
         if self.restart.swap(false, Ordering::Relaxed) {
-            self.start_over(db).await?;
+            start_over(db).await?;
         }
-        Ok(())
-    }
-
-    /// Copies back what is left and makes the next group start the WAL over, waiting for
-    /// readers no longer than its [`patience`].
-    async fn start_over(&mut self, db: &mut SqliteConnection) -> Result<(), sqlx::Error> {
-        let busy = match self.busy_timeout {
-            Some(busy) => busy,
-            None => *self
-                .busy_timeout
-                .insert(sqlx::query_scalar("PRAGMA busy_timeout").fetch_one(&mut *db).await?),
-        };
-        let sql = format!(
-            "PRAGMA busy_timeout = {}; PRAGMA wal_checkpoint(RESTART); PRAGMA busy_timeout = {busy}",
-            patience(busy)
-        );
-        sqlx::raw_sql(sqlx::AssertSqlSafe(sql)).execute(&mut *db).await?;
         Ok(())
     }
 
@@ -137,6 +117,18 @@ impl Checkpoints {
             let _ = self.nudge.try_send(());
         }
     }
+}
+
+/// Copies back what is left and makes the next group start the WAL over, waiting for
+/// readers no longer than its [`patience`].
+async fn start_over(db: &mut SqliteConnection) -> Result<(), sqlx::Error> {
+    let busy: i64 = sqlx::query_scalar("PRAGMA busy_timeout").fetch_one(&mut *db).await?;
+    let sql = format!(
+        "PRAGMA busy_timeout = {}; PRAGMA wal_checkpoint(RESTART); PRAGMA busy_timeout = {busy}",
+        patience(busy)
+    );
+    sqlx::raw_sql(sqlx::AssertSqlSafe(sql)).execute(&mut *db).await?;
+    Ok(())
 }
 
 /// How long the writer's restart waits for readers (ms), given its busy timeout: a
@@ -205,13 +197,6 @@ mod tests {
         tx.commit().await.unwrap();
     }
 
-    /// The frames in the WAL, read with a passive checkpoint (which copies them back too).
-    async fn frames(db: &mut SqliteConnection) -> i64 {
-        let (_, frames, _): (i64, i64, i64) =
-            sqlx::query_as("PRAGMA wal_checkpoint(PASSIVE)").fetch_one(&mut *db).await.unwrap();
-        frames
-    }
-
     async fn autocheckpoint(db: &mut SqliteConnection) -> i64 {
         sqlx::query_scalar("PRAGMA wal_autocheckpoint").fetch_one(db).await.unwrap()
     }
@@ -237,12 +222,7 @@ mod tests {
     /// and `restart` as the checkpointer left it.
     fn writer_side(restart: bool) -> Checkpoints {
         let (nudge, _) = mpsc::channel(1);
-        Checkpoints {
-            nudge,
-            handed_over: false,
-            restart: Arc::new(AtomicBool::new(restart)),
-            busy_timeout: None,
-        }
+        Checkpoints { nudge, handed_over: false, restart: Arc::new(AtomicBool::new(restart)) }
     }
 
     /// Ten groups committed, the writer inside the next one while the checkpointer copies,
@@ -261,7 +241,7 @@ mod tests {
         write(&mut writer, 20).await;
         let rows: i64 = sqlx::query_scalar("SELECT count(*) FROM t").fetch_one(&mut writer).await.unwrap();
         assert_eq!(rows, 221);
-        frames(&mut writer).await
+        checkpoint(&mut writer).await.unwrap()
     }
 
     #[tokio::test]
