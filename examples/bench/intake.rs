@@ -4,7 +4,9 @@
 //! N concurrent keep-alive clients in three phases of equal length: `GET /healthz` (the
 //! ceiling: what this machine's HTTP stack does with no work), single-job POSTs, and batch
 //! POSTs of 1000 jobs. Figures are printed as rates and as ratios to the ceiling measured
-//! in the same run, since absolute numbers swing on a shared machine.
+//! in the same run, since absolute numbers swing on a shared machine, and as the process's
+//! CPU time per job (server and clients together, from `/proc/self/stat`), which swings
+//! less: another tenant of the machine takes turns from rackd, not work from each job.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -22,12 +24,34 @@ struct Phase {
     jobs_per_request: u64,
     elapsed: Duration,
     latency_us: Histogram<u64>,
+    /// The process's CPU time over the phase, if the system tells it.
+    cpu: Option<Duration>,
 }
 
 impl Phase {
     fn requests_per_sec(&self) -> f64 {
         self.requests as f64 / self.elapsed.as_secs_f64()
     }
+
+    /// CPU microseconds per job, as printed.
+    fn cpu_per_job(&self) -> String {
+        match self.cpu {
+            Some(cpu) => {
+                format!("{:.1}", cpu.as_secs_f64() * 1e6 / (self.requests * self.jobs_per_request) as f64)
+            }
+            None => "-".into(),
+        }
+    }
+}
+
+/// The CPU time this process has used (user and system, all threads), on Linux.
+fn cpu_time() -> Option<Duration> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The fields after the command name, which is in parentheses and may hold spaces:
+    // utime and stime are the 14th and 15th fields, in ticks of USER_HZ (100 on Linux).
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks: u64 = fields.get(11)?.parse::<u64>().ok()? + fields.get(12)?.parse::<u64>().ok()?;
+    Some(Duration::from_millis(ticks * 10))
 }
 
 /// Runs the intake benchmark and prints its figures.
@@ -74,18 +98,19 @@ pub async fn run(clients: usize, seconds: u64, batch: usize, database: &str) -> 
     })
     .await?;
     println!(
-        "{:<26} {:>12} {:>12} {:>10} {:>10} {:>9}",
-        "phase", "requests/s", "jobs/s", "p50 ms", "p99 ms", "vs ceiling"
+        "{:<26} {:>12} {:>12} {:>10} {:>10} {:>10} {:>11}",
+        "phase", "requests/s", "jobs/s", "p50 ms", "p99 ms", "vs ceiling", "CPU µs/job"
     );
     for p in [&trivial, &single, &batch_phase] {
         println!(
-            "{:<26} {:>12.0} {:>12.0} {:>10.2} {:>10.2} {:>8.0}%",
+            "{:<26} {:>12.0} {:>12.0} {:>10.2} {:>10.2} {:>9.0}% {:>11}",
             p.name,
             p.requests_per_sec(),
             p.requests_per_sec() * p.jobs_per_request as f64,
             p.latency_us.value_at_quantile(0.5) as f64 / 1000.0,
             p.latency_us.value_at_quantile(0.99) as f64 / 1000.0,
             100.0 * p.requests_per_sec() / trivial.requests_per_sec(),
+            p.cpu_per_job(),
         );
     }
     served.stop().await?;
@@ -121,6 +146,7 @@ where
     F: Fn(&reqwest::Client, u64) -> reqwest::RequestBuilder + Send + Sync + 'static,
 {
     let request = Arc::new(request);
+    let cpu_before = cpu_time();
     let started = Instant::now();
     let deadline = started + duration;
     let tasks: Vec<_> = (0..clients as u64)
@@ -149,5 +175,6 @@ where
         latency_us.add(t.await.context("bench client")??)?;
     }
     let elapsed = started.elapsed();
-    Ok(Phase { name, requests: latency_us.len(), jobs_per_request, elapsed, latency_us })
+    let cpu = cpu_before.zip(cpu_time()).map(|(before, after)| after.saturating_sub(before));
+    Ok(Phase { name, requests: latency_us.len(), jobs_per_request, elapsed, latency_us, cpu })
 }

@@ -139,6 +139,53 @@ async fn beyond_one_statement(engine: Engine) {
 }
 on_both!(a_group_beyond_one_statement_is_written_whole_and_in_order, beyond_one_statement);
 
+/// A group is applied as if none of its references were stored; one that was is refused by
+/// the unique index, and the group is applied again, reading them: each request is answered
+/// as if they had been read at once. The groups after it read them.
+async fn stored_reference(engine: Engine) {
+    let (pool, _db, _dir) = open(engine).await;
+    let (writer, seen, latch) = writer(&pool).await;
+    writer.submit(vec![light("warm-up", 1)]).await.unwrap();
+    writer.submit(vec![light("stored", 2)]).await.unwrap();
+    let w = writer.clone();
+    let four = vec![
+        Box::pin(writer.submit(vec![light("A", 3)])),
+        Box::pin(writer.submit(vec![light("stored", 2)])),
+        Box::pin(writer.submit(vec![light("B", 4)])),
+        Box::pin(writer.submit(vec![light("stored", 5)])),
+    ];
+    let (first, answers) =
+        latch.one_group_after(async move { w.submit(vec![light("first", 1)]).await }, four).await;
+    first.unwrap();
+    let outcome = |i: usize| match &answers[i] {
+        Ok(o) => match &o[0] {
+            Outcome::Created(job) => ("created", job.id),
+            Outcome::Existing(job) => ("existing", job.id),
+        },
+        Err(e) => panic!("request {i} refused: {e}"),
+    };
+    assert_eq!(outcome(0), ("created", 4));
+    assert_eq!(outcome(1), ("existing", 2), "the same request again: the stored job");
+    assert_eq!(outcome(2), ("created", 5), "no id lost to the attempt rolled back");
+    assert!(matches!(&answers[3], Err(WriteError::Conflict(r)) if r == "stored"), "{:?}", answers[3]);
+    writer.submit(vec![light("after", 6)]).await.unwrap();
+    let seen = seen.lock().unwrap().clone();
+    assert_eq!(seen.len(), 5, "{seen:?}");
+    assert_eq!(seen[3].0, 4, "the four requests made one group: {seen:?}");
+    assert_eq!(
+        seen[4].1,
+        seen[2].1 + 1,
+        "the group after it reads references: one statement more ({seen:?})"
+    );
+    let stored = jobs::list(&pool, &jobs::JobFilter { limit: 100, ..Default::default() }).await.unwrap();
+    let references: Vec<_> = stored.iter().map(|j| j.reference.clone().unwrap()).collect();
+    assert_eq!(references, ["warm-up", "stored", "first", "A", "B", "after"]);
+    let log = events::after(&pool, 0, 100).await.unwrap();
+    let seqs: Vec<i64> = log.iter().map(|e| e.seq).collect();
+    assert_eq!(seqs, (1..=6).collect::<Vec<_>>(), "one event per stored job, numbered without a gap");
+}
+on_both!(a_stored_reference_in_a_group_is_found_by_its_index, stored_reference);
+
 /// A trigger that refuses any job with the reference `POISON`. On SQLite, `raise` says how:
 /// `ABORT` takes back what the statement wrote, `FAIL` keeps the rows before the refused one
 /// (as the writer's `INSERT OR FAIL` does on a constraint).

@@ -159,6 +159,11 @@ impl Group {
         }
     }
 
+    /// Whether the group read a job that holds one of its submissions' references.
+    pub(super) fn read_stored(&self) -> bool {
+        !self.known.is_empty()
+    }
+
     /// Applies one command and answers it.
     pub(super) fn command(&mut self, cmd: &Command) -> Answer {
         match cmd {

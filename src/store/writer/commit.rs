@@ -7,6 +7,12 @@
 //! group commits; only a failing commit fails them all. A broken connection fails the group
 //! at once (the writer then takes a fresh one). Ids and event sequence numbers are handed
 //! out in memory and given back with whatever rolls back, so they stay gapless.
+//!
+//! A group does not read the jobs its submissions' references name unless the writer has
+//! lately seen one stored (see [`load`]): if the unique index on `jobs.reference` refuses
+//! the group, it is rolled back and applied again, reading them, before anything is
+//! answered, so each request gets the answer it would have had (its stored job, or the
+//! conflict). Only what was committed is answered: the attempt rolled back leaves nothing.
 
 use super::apply::{Answer, Group, Next, Out};
 use super::{Command, Conn, Sent, Tell, WriteError, load, save};
@@ -16,36 +22,64 @@ use crate::store::engine::Engine;
 use crate::store::on;
 
 /// Applies `group` in one transaction. `next` is the writer's numbering, read from the
-/// tables when unknown. Returns the answers, and the events and lock changes of the group.
-/// A command sent fenced whose epoch no longer holds the cluster's lease is answered
-/// [`WriteError::Fenced`] and left out; the check locks the lease row until the commit.
+/// tables when unknown; `references` says whether the group reads the stored jobs its
+/// submissions' references name first (see [`load`]): if it does not and the unique index
+/// refuses one, the group is rolled back and applied again, reading them. Returns the
+/// answers, and the events and lock changes of the group. A command sent fenced whose epoch
+/// no longer holds the cluster's lease is answered [`WriteError::Fenced`] and left out; the
+/// check locks the lease row until the commit.
 pub(super) async fn commit(
     db: &mut Conn,
     group: &[Sent],
     next: &mut Option<Next>,
+    references: &mut load::References,
     tell: Option<&Tell>,
     shared: bool,
 ) -> Result<(Vec<Answer>, Out), sqlx::Error> {
-    begin(db, shared).await?;
-    let held = match fences(db, group).await {
-        Ok(held) => held,
-        Err(e) => {
-            rollback(db).await;
-            return Err(e);
-        }
-    };
-    let kept: Vec<&Command> = group.iter().zip(&held).filter(|(_, h)| **h).map(|(s, _)| &s.cmd).collect();
-    let (answers, out) = match kept_in_one(db, &kept, next, tell, shared).await? {
-        Some(done) => done,
-        None => {
-            let result = one_by_one(db, &kept, next, tell, shared, group, &held).await;
-            if result.is_err() {
+    let mut read = references.read();
+    loop {
+        begin(db, shared).await?;
+        let held = match fences(db, group).await {
+            Ok(held) => held,
+            Err(e) => {
                 rollback(db).await;
+                return Err(e);
             }
-            return result.map(|(answers, out)| (merge(group, &held, answers), out));
+        };
+        let kept: Vec<&Command> = group.iter().zip(&held).filter(|(_, h)| **h).map(|(s, _)| &s.cmd).collect();
+        match kept_in_one(db, &kept, next, read, tell, shared).await? {
+            Attempt::Committed(answers, out, stored) => {
+                match stored {
+                    true => references.stored(),
+                    false => references.committed(),
+                }
+                return Ok((merge(group, &held, answers), out));
+            }
+            Attempt::Stored => {
+                references.stored();
+                read = true;
+            }
+            Attempt::Refused => {
+                let result = one_by_one(db, &kept, next, tell, shared, group, &held).await;
+                if result.is_err() {
+                    rollback(db).await;
+                }
+                return result.map(|(answers, out)| (merge(group, &held, answers), out));
+            }
         }
-    };
-    Ok((merge(group, &held, answers), out))
+    }
+}
+
+/// How the attempt to commit a group's kept commands in one transaction went (rolled back
+/// unless committed).
+enum Attempt {
+    /// Committed: their answers, what the group did, and whether it read a reference stored
+    /// already.
+    Committed(Vec<Answer>, Out, bool),
+    /// Refused by a unique index, its references not read: a reference was stored already.
+    Stored,
+    /// Refused by the database: to be replayed request by request.
+    Refused,
 }
 
 /// Whether each command of `group` may be committed: unfenced, or fenced under the epoch
@@ -79,22 +113,23 @@ fn merge(group: &[Sent], held: &[bool], answers: Vec<Answer>) -> Vec<Answer> {
         .collect()
 }
 
-/// The kept commands in the open transaction, committed; None when the database refused
-/// one of them and they are to be replayed one by one (rolled back already).
+/// The kept commands in the open transaction, committed (see [`Attempt`]); `read` says
+/// whether their submissions' references are read first.
 async fn kept_in_one(
     db: &mut Conn,
     all: &[&Command],
     next: &mut Option<Next>,
+    read: bool,
     tell: Option<&Tell>,
     shared: bool,
-) -> Result<Option<(Vec<Answer>, Out)>, sqlx::Error> {
+) -> Result<Attempt, sqlx::Error> {
     let start_read = next.is_none();
     let attempt = async {
         let start = match *next {
             Some(n) => n,
             None => load::next(db).await?,
         };
-        let applied = apply(db, all, start, tell).await?;
+        let applied = apply(db, all, start, read, tell).await?;
         Ok::<_, sqlx::Error>(applied)
     }
     .await;
@@ -105,9 +140,15 @@ async fn kept_in_one(
                 return Err(e);
             }
             *next = Some(applied.next);
+            let stored = applied.read_stored();
             let mut out = applied.out;
             out.statements += 2 + usize::from(start_read);
-            Ok(Some((answers, out)))
+            Ok(Attempt::Committed(answers, out, stored))
+        }
+        Err(e) if !read && e.as_database_error().is_some_and(|d| d.is_unique_violation()) => {
+            tracing::debug!(error = %e, "a reference of the group is stored already; applying it again, reading them");
+            rollback(db).await;
+            Ok(Attempt::Stored)
         }
         // One request, or a failure that is not about what the group asked (the connection,
         // the pool): replaying request by request would only fail again.
@@ -118,7 +159,7 @@ async fn kept_in_one(
         Err(e) => {
             tracing::warn!(error = %e, requests = all.len(), "group refused; committing its requests one by one");
             rollback(db).await;
-            Ok(None)
+            Ok(Attempt::Refused)
         }
     }
 }
@@ -147,7 +188,7 @@ async fn one_by_one(
     let mut out = Out::default();
     for cmd in kept {
         run(db, "SAVEPOINT request").await?;
-        match apply(db, &[cmd], numbers, tell).await {
+        match apply(db, &[cmd], numbers, true, tell).await {
             Ok((mut answer, applied)) => {
                 run(db, "RELEASE SAVEPOINT request").await?;
                 numbers = applied.next;
@@ -171,15 +212,16 @@ async fn one_by_one(
     Ok((answers, out))
 }
 
-/// Reads, applies and writes `cmds` inside the open transaction.
+/// Reads (their references if `read`), applies and writes `cmds` inside the open transaction.
 async fn apply(
     db: &mut Conn,
     cmds: &[&Command],
     next: Next,
+    read: bool,
     tell: Option<&Tell>,
 ) -> Result<(Vec<Answer>, Group), sqlx::Error> {
     let mut count = 0;
-    let loaded = load::load(db, cmds, &mut count).await?;
+    let loaded = load::load(db, cmds, read, &mut count).await?;
     let mut group = Group::new(loaded, next, now_ms(), tell.cloned());
     let answers = cmds.iter().map(|cmd| group.command(cmd)).collect();
     save::save(db, &group, &mut count).await?;

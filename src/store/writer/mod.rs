@@ -492,13 +492,14 @@ async fn write(
     checkpoints: Option<&mut checkpoint::Checkpoints>,
     group: &[Sent],
     next: &mut Option<apply::Next>,
+    references: &mut load::References,
     tell: Option<&Tell>,
     shared: bool,
 ) -> Result<(Vec<apply::Answer>, apply::Out), sqlx::Error> {
     if let (Conn::Sqlite(c), Some(checkpoints)) = (&mut *conn, checkpoints) {
         checkpoints.before(c, group.iter().map(|s| s.cmd.jobs()).sum()).await?;
     }
-    commit::commit(conn, group, next, tell, shared).await
+    commit::commit(conn, group, next, references, tell, shared).await
 }
 
 /// The writer: take what waits, commit it, hand it to the [`durable::Syncer`] (which
@@ -525,6 +526,7 @@ async fn run(
     After { syncer, mut checkpoints }: After,
 ) {
     let mut next = None;
+    let mut references = load::References::default();
     let mut db = Some(db);
     let mut group = Vec::with_capacity(max_group);
     while rx.recv_many(&mut group, max_group).await > 0 {
@@ -545,7 +547,16 @@ async fn run(
         }
         let result = match db.as_mut() {
             Some(conn) => {
-                write(conn, checkpoints.as_mut(), &group, &mut next, hooks.tell.as_ref(), shared).await
+                write(
+                    conn,
+                    checkpoints.as_mut(),
+                    &group,
+                    &mut next,
+                    &mut references,
+                    hooks.tell.as_ref(),
+                    shared,
+                )
+                .await
             }
             None => Err(sqlx::Error::PoolTimedOut),
         };

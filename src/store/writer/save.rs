@@ -157,33 +157,31 @@ struct PauseOut<'a> {
 /// SQLite's limit on bound parameters in one statement.
 const SQLITE_PARAMETERS: usize = 32766;
 
-/// The multi-row `INSERT OR FAIL` (see [`Engine::or_fail`]) of `rows` into `$target`
-/// (`"table (columns)"`), binding each row's `[values]`; debug builds check that the values
-/// match the `$columns` the chunks were cut for.
+/// Pushes the multi-row `INSERT OR FAIL` (see [`Engine::or_fail`]) of `rows` into
+/// `$target` (`"table (columns)"`) onto the builder `$q`, binding each row's `[values]`;
+/// debug builds check that the values match the `$columns` the chunks were cut for.
 macro_rules! values {
-    ($target:expr, $columns:expr, $rows:expr, |$r:ident| [$($value:expr),+ $(,)?]) => {{
+    ($q:expr, $target:expr, $columns:expr, $rows:expr, |$r:ident| [$($value:expr),+ $(,)?]) => {{
         debug_assert_eq!([$(stringify!($value)),+].len(), $columns, "{}", $target);
-        let rows = $rows;
-        let (sql, arguments) = sized(concat!("INSERT OR FAIL INTO ", $target, " "), rows.len(), $columns);
-        let mut q = sqlx::QueryBuilder::<sqlx::Sqlite>::with_arguments(sql, arguments);
-        q.push_values(rows, |mut b, $r| {
+        let q: &mut sqlx::QueryBuilder<sqlx::Sqlite> = $q;
+        q.push(concat!("INSERT OR FAIL INTO ", $target, " "));
+        q.push_values($rows, |mut b, $r| {
             $(b.push_bind($value);)+
         });
-        q
     }};
 }
 
-/// The text and arguments of a statement of `rows` rows of `values` values after `head`,
-/// allocated at their final size: grown value by value, a statement of 2047 jobs copied its
-/// 32752 arguments and its text over and over (seen in a profile of the writer).
-fn sized(head: &str, rows: usize, values: usize) -> (String, sqlx::sqlite::SqliteArguments) {
+/// A builder for statements of `rows` rows of `values` values in all, its text and
+/// arguments allocated at their final size: grown value by value, a statement of 2047 jobs
+/// copied its 32752 arguments and its text over and over (seen in a profile of the writer).
+fn sized(rows: usize, values: usize) -> sqlx::QueryBuilder<sqlx::Sqlite> {
     use sqlx::Arguments;
-    // `VALUES ` then `(?, ?, …), ` per row: three characters per value, four per row.
-    let mut sql = String::with_capacity(head.len() + "VALUES ".len() + rows * (3 * values + 4));
-    sql.push_str(head);
+    // `INSERT OR FAIL INTO table (columns) VALUES ` per statement (under 200 characters),
+    // then `(?, ?, …), ` per row: three characters per value, four per row.
+    let sql = String::with_capacity(3 * 200 + rows * 4 + values * 3);
     let mut arguments = sqlx::sqlite::SqliteArguments::default();
-    arguments.reserve(rows * values, 0);
-    (sql, arguments)
+    arguments.reserve(values, 0);
+    sqlx::QueryBuilder::with_arguments(sql, arguments)
 }
 
 /// Values per row of the intake path's three tables on SQLite.
@@ -216,12 +214,30 @@ impl Chunk<'_> {
         rows == Chunk::most(values)
     }
 
+    /// The rows and values of the chunk.
+    fn size(&self) -> (usize, usize) {
+        match self {
+            Chunk::Jobs(rows) => (rows.len(), rows.len() * JOB_VALUES),
+            Chunk::History(rows) => (rows.len(), rows.len() * HISTORY_VALUES),
+            Chunk::Events(rows) => (rows.len(), rows.len() * EVENT_VALUES),
+        }
+    }
+
     /// The chunk's statement, its values bound.
     fn statement(&self) -> sqlx::QueryBuilder<sqlx::Sqlite> {
+        let (rows, values) = self.size();
+        let mut q = sized(rows, values);
+        self.push(&mut q);
+        q
+    }
+
+    /// Pushes the chunk's statement onto `q`.
+    fn push(&self, q: &mut sqlx::QueryBuilder<sqlx::Sqlite>) {
         match self {
             Chunk::Jobs(rows) => {
                 let rows = rows.iter().map(|(job, request)| JobOut::new(job, Some(request)));
                 values!(
+                    q,
                     "jobs (id, reference, kind, priority, barcode, spec, request, device, state, forced, \
                      failure_kind, failure_code, failure_text, created_at, updated_at, attempt)",
                     JOB_VALUES,
@@ -247,7 +263,7 @@ impl Chunk<'_> {
                 )
             }
             Chunk::History(rows) => {
-                values!("job_history (job_id, state, cause, at)", HISTORY_VALUES, *rows, |r| [
+                values!(q, "job_history (job_id, state, cause, at)", HISTORY_VALUES, *rows, |r| [
                     r.job_id,
                     r.state,
                     r.cause.as_str(),
@@ -255,7 +271,7 @@ impl Chunk<'_> {
                 ])
             }
             Chunk::Events(rows) => {
-                values!("events (seq, at, type, data)", EVENT_VALUES, *rows, |r| [
+                values!(q, "events (seq, at, type, data)", EVENT_VALUES, *rows, |r| [
                     r.seq,
                     r.at,
                     r.kind.as_str(),
@@ -266,9 +282,19 @@ impl Chunk<'_> {
     }
 }
 
+/// The most rows of one table a group may write for its intake statements to go to
+/// SQLite together, as one execution kept prepared (see [`intake`]).
+const SMALL: usize = 64;
+
 /// On SQLite, writes the jobs, history entries and events `group` created with multi-row
-/// `VALUES` and bound values (see the module doc). Each statement is built while SQLite's
-/// thread runs the one before it, so the writer's thread and SQLite's work at once.
+/// `VALUES` and bound values (see the module doc).
+///
+/// A group of at most [`SMALL`] rows in each table sends its statements together, as one
+/// execution whose text recurs and is kept prepared: single POSTs make groups of a few
+/// dozen jobs, and each statement sent alone was a hand-off to SQLite's thread and back,
+/// most of them parsed afresh. A larger group sends its statements one by one, each built
+/// while SQLite's thread runs the one before it, so the writer's thread and SQLite's work
+/// at once.
 async fn intake(c: &mut sqlx::SqliteConnection, group: &Group, count: &mut usize) -> Result<(), sqlx::Error> {
     let created: Vec<(&Job, &String)> =
         group.created.iter().filter_map(|(id, request)| Some((group.jobs.get(id)?, request))).collect();
@@ -278,6 +304,22 @@ async fn intake(c: &mut sqlx::SqliteConnection, group: &Group, count: &mut usize
         .chain(group.history.chunks(Chunk::most(HISTORY_VALUES)).map(Chunk::History))
         .chain(group.out.events.chunks(Chunk::most(EVENT_VALUES)).map(Chunk::Events))
         .collect();
+    if chunks.is_empty() {
+        return Ok(());
+    }
+    if chunks.len() <= 3 && chunks.iter().all(|c| c.size().0 <= SMALL) {
+        let values = chunks.iter().map(|c| c.size().1).sum();
+        let mut q = sized(chunks.iter().map(|c| c.size().0).sum(), values);
+        for (i, chunk) in chunks.iter().enumerate() {
+            if i > 0 {
+                q.push("; ");
+            }
+            chunk.push(&mut q);
+        }
+        *count += chunks.len();
+        q.build().persistent(true).execute(&mut *c).await?;
+        return Ok(());
+    }
     let mut next = chunks.first().map(Chunk::statement);
     for (i, chunk) in chunks.iter().enumerate() {
         let Some(mut statement) = next.take() else { break };
