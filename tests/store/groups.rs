@@ -186,6 +186,84 @@ async fn stored_reference(engine: Engine) {
 }
 on_both!(a_stored_reference_in_a_group_is_found_by_its_index, stored_reference);
 
+/// Six submissions of 1000 jobs made one group: on SQLite it is written while it is
+/// applied (a statement of 2047 jobs goes to SQLite's thread while the next submissions are
+/// applied). `late` puts something in the last two submissions that only their own
+/// statements find: a job the database refuses (`POISON`), or a reference stored before the
+/// group (`stored`, sent again as it was). What went to SQLite before must then be taken
+/// back with the rest, and every request answered as if the group had not been streamed.
+async fn streamed(engine: Engine, late: &str) {
+    let (pool, _db, _dir) = open(engine).await;
+    poison(&pool, "ABORT").await;
+    let (writer, seen, latch) = writer(&pool).await;
+    writer.submit(vec![light("warm-up", 1)]).await.unwrap();
+    writer.submit(vec![light("stored", 2)]).await.unwrap();
+    let w = writer.clone();
+    let six = (0..6)
+        .map(|k| {
+            let mut jobs = lights(&format!("s{k}"), 1000);
+            match (k, late) {
+                (4, "POISON") => jobs[500] = light("POISON", 3),
+                (5, "stored") => jobs[999] = light("stored", 2),
+                _ => {}
+            }
+            Box::pin(writer.submit(jobs))
+        })
+        .collect();
+    let (first, answers) =
+        latch.one_group_after(async move { w.submit(vec![light("first", 1)]).await }, six).await;
+    first.unwrap();
+    assert_eq!(seen.lock().unwrap()[3].0, 6, "the six submissions made one group");
+    let mut expected = Vec::new();
+    for (k, answer) in answers.iter().enumerate() {
+        if (k, late) == (4, "POISON") {
+            assert!(matches!(answer, Err(WriteError::Database(_))), "{answer:?}");
+            continue;
+        }
+        let outcomes = answer.as_ref().unwrap_or_else(|e| panic!("submission {k} refused: {e}"));
+        assert_eq!(outcomes.len(), 1000);
+        for (i, outcome) in outcomes.iter().enumerate() {
+            match outcome {
+                Outcome::Created(job) => {
+                    assert_eq!(job.id, 4 + expected.len() as i64, "ids in order, without a gap");
+                    expected.push(format!("s{k}-{i}"));
+                }
+                Outcome::Existing(job) => {
+                    assert_eq!((k, i, late), (5, 999, "stored"), "{job:?}");
+                    assert_eq!(job.id, 2, "the stored job");
+                }
+            }
+        }
+    }
+    let stored = jobs::list(&pool, &jobs::JobFilter { limit: 10_000, ..Default::default() }).await.unwrap();
+    let references: Vec<String> = stored.iter().map(|j| j.reference.clone().unwrap()).collect();
+    assert_eq!(references[..3], ["warm-up", "stored", "first"]);
+    assert_eq!(references[3..], expected, "each job once, in order, nothing of a refused request");
+    let ids: Vec<i64> = stored.iter().map(|j| j.id).collect();
+    assert_eq!(ids, (1..=stored.len() as i64).collect::<Vec<_>>());
+    for id in [4, 2050, 2051, 4097, stored.len() as i64] {
+        assert_eq!(jobs::history(&pool, id).await.unwrap().len(), 1, "job {id}");
+    }
+    let log = events::after(&pool, 0, 10_000).await.unwrap();
+    let seqs: Vec<i64> = log.iter().map(|e| e.seq).collect();
+    assert_eq!(seqs, (1..=stored.len() as i64).collect::<Vec<_>>(), "one event per stored job, no gap");
+}
+
+async fn streamed_whole(engine: Engine) {
+    streamed(engine, "").await;
+}
+on_both!(a_large_group_of_submissions_is_written_whole_and_in_order, streamed_whole);
+
+async fn streamed_refused(engine: Engine) {
+    streamed(engine, "POISON").await;
+}
+on_both!(a_large_group_refused_late_takes_back_what_it_wrote_early, streamed_refused);
+
+async fn streamed_stored(engine: Engine) {
+    streamed(engine, "stored").await;
+}
+on_both!(a_large_group_finding_a_stored_reference_late_is_applied_again, streamed_stored);
+
 /// A trigger that refuses any job with the reference `POISON`. On SQLite, `raise` says how:
 /// `ABORT` takes back what the statement wrote, `FAIL` keeps the rows before the refused one
 /// (as the writer's `INSERT OR FAIL` does on a constraint).

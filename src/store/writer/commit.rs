@@ -14,8 +14,8 @@
 //! answered, so each request gets the answer it would have had (its stored job, or the
 //! conflict). Only what was committed is answered: the attempt rolled back leaves nothing.
 
-use super::apply::{Answer, Group, Next, Out};
-use super::{Command, Conn, Sent, Tell, WriteError, load, save};
+use super::apply::{Answer, Group, Loaded, Next, Out};
+use super::{Command, Conn, Sent, Tell, WriteError, load, save, stream};
 use crate::domain::time::now_ms;
 use crate::store::cluster::{self, LEASE};
 use crate::store::engine::Engine;
@@ -221,10 +221,20 @@ async fn apply(
     tell: Option<&Tell>,
 ) -> Result<(Vec<Answer>, Group), sqlx::Error> {
     let mut count = 0;
+    if let (Conn::Sqlite(c), false) = (&mut *db, read)
+        && stream::fits(cmds)
+    {
+        // Submissions only, their references not read: nothing to load.
+        let mut group = Group::new(Loaded::default(), next, now_ms(), tell.cloned());
+        let (answers, written) = stream::submissions(c, cmds, &mut group, &mut count).await?;
+        save::save(db, &group, written, &mut count).await?;
+        group.out.statements = count;
+        return Ok((answers, group));
+    }
     let loaded = load::load(db, cmds, read, &mut count).await?;
     let mut group = Group::new(loaded, next, now_ms(), tell.cloned());
     let answers = cmds.iter().map(|cmd| group.command(cmd)).collect();
-    save::save(db, &group, &mut count).await?;
+    save::save(db, &group, save::Written::default(), &mut count).await?;
     group.out.statements = count;
     Ok((answers, group))
 }

@@ -18,6 +18,7 @@ pub use commit::NOTIFY_CHANNEL;
 mod durable;
 mod load;
 mod save;
+mod stream;
 mod timing;
 
 use std::sync::Arc;

@@ -184,6 +184,9 @@ fn sized(rows: usize, values: usize) -> sqlx::QueryBuilder<sqlx::Sqlite> {
     sqlx::QueryBuilder::with_arguments(sql, arguments)
 }
 
+/// The most new jobs one insert statement takes on SQLite.
+pub(super) const JOBS_PER_STATEMENT: usize = SQLITE_PARAMETERS / JOB_VALUES;
+
 /// Values per row of the intake path's three tables on SQLite.
 const JOB_VALUES: usize = 16;
 const HISTORY_VALUES: usize = 4;
@@ -191,8 +194,8 @@ const EVENT_VALUES: usize = 4;
 
 /// One statement of the intake path on SQLite: as many rows of one table as SQLite's limit
 /// on bound parameters allows (2047 jobs, 8191 history entries or events).
-enum Chunk<'g> {
-    Jobs(&'g [(&'g Job, &'g String)]),
+pub(super) enum Chunk<'g> {
+    Jobs(Vec<(&'g Job, &'g String)>),
     History(&'g [History]),
     Events(&'g [StoredEvent]),
 }
@@ -205,7 +208,7 @@ impl Chunk<'_> {
 
     /// Whether the chunk is a full one, whose text recurs (a shorter one's length is new in
     /// most groups: it is prepared for its one use and not kept in the statement cache).
-    fn full(&self) -> bool {
+    pub(super) fn full(&self) -> bool {
         let (rows, values) = match self {
             Chunk::Jobs(rows) => (rows.len(), JOB_VALUES),
             Chunk::History(rows) => (rows.len(), HISTORY_VALUES),
@@ -224,7 +227,7 @@ impl Chunk<'_> {
     }
 
     /// The chunk's statement, its values bound.
-    fn statement(&self) -> sqlx::QueryBuilder<sqlx::Sqlite> {
+    pub(super) fn statement(&self) -> sqlx::QueryBuilder<sqlx::Sqlite> {
         let (rows, values) = self.size();
         let mut q = sized(rows, values);
         self.push(&mut q);
@@ -286,8 +289,51 @@ impl Chunk<'_> {
 /// SQLite together, as one execution kept prepared (see [`intake`]).
 const SMALL: usize = 64;
 
-/// On SQLite, writes the jobs, history entries and events `group` created with multi-row
-/// `VALUES` and bound values (see the module doc).
+/// How far a group's intake rows (see [`intake`]) have gone to SQLite.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Written {
+    /// The first id of a created job not written yet.
+    job: i64,
+    /// History entries written.
+    history: usize,
+    /// Events written.
+    events: usize,
+}
+
+impl Written {
+    /// The next full statement of rows not written yet, if one is ready, and `self` moved
+    /// past it. A history entry goes only after its job: `job_history` refers to `jobs`.
+    pub(super) fn next_full<'g>(&mut self, group: &'g Group) -> Option<Chunk<'g>> {
+        let most = JOBS_PER_STATEMENT;
+        let jobs: Vec<(&Job, &String)> = group
+            .created
+            .range(self.job..)
+            .take(most)
+            .filter_map(|(id, request)| Some((group.jobs.get(id)?, request)))
+            .collect();
+        if jobs.len() == most {
+            self.job = jobs[most - 1].0.id + 1;
+            return Some(Chunk::Jobs(jobs));
+        }
+        let most = Chunk::most(HISTORY_VALUES);
+        if let Some(rows) = group.history.get(self.history..self.history + most)
+            && rows.iter().all(|h| h.job_id < self.job || !group.created.contains_key(&h.job_id))
+        {
+            self.history += most;
+            return Some(Chunk::History(rows));
+        }
+        let most = Chunk::most(EVENT_VALUES);
+        if let Some(rows) = group.out.events.get(self.events..self.events + most) {
+            self.events += most;
+            return Some(Chunk::Events(rows));
+        }
+        None
+    }
+}
+
+/// On SQLite, writes the jobs, history entries and events `group` created (those not
+/// `written` already) with multi-row `VALUES` and bound values (see the module doc), and
+/// returns how far they are written: all of them.
 ///
 /// A group of at most [`SMALL`] rows in each table sends its statements together, as one
 /// execution whose text recurs and is kept prepared: single POSTs make groups of a few
@@ -295,17 +341,30 @@ const SMALL: usize = 64;
 /// most of them parsed afresh. A larger group sends its statements one by one, each built
 /// while SQLite's thread runs the one before it, so the writer's thread and SQLite's work
 /// at once.
-async fn intake(c: &mut sqlx::SqliteConnection, group: &Group, count: &mut usize) -> Result<(), sqlx::Error> {
-    let created: Vec<(&Job, &String)> =
-        group.created.iter().filter_map(|(id, request)| Some((group.jobs.get(id)?, request))).collect();
+pub(super) async fn intake(
+    c: &mut sqlx::SqliteConnection,
+    group: &Group,
+    written: Written,
+    count: &mut usize,
+) -> Result<Written, sqlx::Error> {
+    let all = Written {
+        job: group.created.last_key_value().map_or(written.job, |(id, _)| id + 1),
+        history: group.history.len(),
+        events: group.out.events.len(),
+    };
+    let created: Vec<(&Job, &String)> = group
+        .created
+        .range(written.job..)
+        .filter_map(|(id, request)| Some((group.jobs.get(id)?, request)))
+        .collect();
     let chunks: Vec<Chunk> = created
         .chunks(Chunk::most(JOB_VALUES))
-        .map(Chunk::Jobs)
-        .chain(group.history.chunks(Chunk::most(HISTORY_VALUES)).map(Chunk::History))
-        .chain(group.out.events.chunks(Chunk::most(EVENT_VALUES)).map(Chunk::Events))
+        .map(|rows| Chunk::Jobs(rows.to_vec()))
+        .chain(group.history[written.history..].chunks(Chunk::most(HISTORY_VALUES)).map(Chunk::History))
+        .chain(group.out.events[written.events..].chunks(Chunk::most(EVENT_VALUES)).map(Chunk::Events))
         .collect();
     if chunks.is_empty() {
-        return Ok(());
+        return Ok(all);
     }
     if chunks.len() <= 3 && chunks.iter().all(|c| c.size().0 <= SMALL) {
         let values = chunks.iter().map(|c| c.size().1).sum();
@@ -318,7 +377,7 @@ async fn intake(c: &mut sqlx::SqliteConnection, group: &Group, count: &mut usize
         }
         *count += chunks.len();
         q.build().persistent(true).execute(&mut *c).await?;
-        return Ok(());
+        return Ok(all);
     }
     let mut next = chunks.first().map(Chunk::statement);
     for (i, chunk) in chunks.iter().enumerate() {
@@ -329,7 +388,7 @@ async fn intake(c: &mut sqlx::SqliteConnection, group: &Group, count: &mut usize
         done?;
         next = built;
     }
-    Ok(())
+    Ok(all)
 }
 
 /// Awaits `run` with `work` done meanwhile on this thread: `run` is polled once first (a
@@ -361,15 +420,23 @@ async fn write<T: Serialize>(
     Ok(())
 }
 
-/// Writes everything `group` produced, inside the caller's transaction.
-pub(super) async fn save(db: &mut Conn, group: &Group, count: &mut usize) -> Result<(), sqlx::Error> {
+/// Writes everything `group` produced, inside the caller's transaction; on SQLite, of its
+/// intake rows only those not `written` already (see [`super::stream`]).
+pub(super) async fn save(
+    db: &mut Conn,
+    group: &Group,
+    written: Written,
+    count: &mut usize,
+) -> Result<(), sqlx::Error> {
     let sql: &'static Statements = match db.engine() {
         Engine::Sqlite => &SQLITE,
         Engine::Postgres => &POSTGRES,
     };
     // The intake path's three tables: bound values on SQLite, JSON on PostgreSQL.
     match db {
-        Conn::Sqlite(c) => intake(c, group, count).await?,
+        Conn::Sqlite(c) => {
+            intake(c, group, written, count).await?;
+        }
         Conn::Postgres(_) => {
             let created: Vec<JobOut> = group
                 .created
