@@ -49,10 +49,7 @@ pub(super) async fn commit(
         let kept: Vec<&Command> = group.iter().zip(&held).filter(|(_, h)| **h).map(|(s, _)| &s.cmd).collect();
         match kept_in_one(db, &kept, next, read, tell, shared).await? {
             Attempt::Committed(answers, out, stored) => {
-                match stored {
-                    true => references.stored(),
-                    false => references.committed(),
-                }
+                references.committed(stored);
                 return Ok((merge(group, &held, answers), out));
             }
             Attempt::Stored => {
@@ -221,7 +218,8 @@ async fn apply(
     tell: Option<&Tell>,
 ) -> Result<(Vec<Answer>, Group), sqlx::Error> {
     let mut count = 0;
-    if let (Conn::Sqlite(c), false) = (&mut *db, read)
+    if !read
+        && let Conn::Sqlite(c) = &mut *db
         && stream::fits(cmds)
     {
         // Submissions only, their references not read: nothing to load.

@@ -97,9 +97,12 @@ impl References {
         self.read = Self::AFTER_STORED;
     }
 
-    /// A group committed, having read or not.
-    pub(super) fn committed(&mut self) {
-        self.read = self.read.saturating_sub(1);
+    /// A group committed, having read a stored reference (`stored`) or not.
+    pub(super) fn committed(&mut self, stored: bool) {
+        self.read = match stored {
+            true => Self::AFTER_STORED,
+            false => self.read.saturating_sub(1),
+        };
     }
 }
 
@@ -112,17 +115,16 @@ pub(super) async fn next(db: &mut Conn) -> Result<Next, sqlx::Error> {
     Ok(Next { job, seq, audit, alarm })
 }
 
-/// Reads what `group` needs: the jobs its submissions' references (if `references`) and its
+/// Reads what `group` needs: the jobs its submissions' references (if `read_references`) and its
 /// changes name, the locations those jobs and its locks touch, when each of those jobs last
 /// started, and the active alarms if it raises or clears one.
 pub(super) async fn load(
     db: &mut Conn,
     group: &[&Command],
-    references: bool,
+    read_references: bool,
     count: &mut usize,
 ) -> Result<Loaded, sqlx::Error> {
     let sql = statements(db.engine());
-    let read_references = references;
     let mut loaded = Loaded::default();
     let mut references = BTreeSet::new();
     let mut ids = BTreeSet::new();

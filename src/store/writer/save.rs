@@ -302,7 +302,9 @@ pub(super) struct Written {
 
 impl Written {
     /// The next full statement of rows not written yet, if one is ready, and `self` moved
-    /// past it. A history entry goes only after its job: `job_history` refers to `jobs`.
+    /// past it; for a group of submissions only ([`super::stream`]), whose history entries
+    /// come in the order of their jobs, each entry after its job's row (`job_history`
+    /// refers to `jobs`).
     pub(super) fn next_full<'g>(&mut self, group: &'g Group) -> Option<Chunk<'g>> {
         let most = JOBS_PER_STATEMENT;
         let jobs: Vec<(&Job, &String)> = group
@@ -317,7 +319,7 @@ impl Written {
         }
         let most = Chunk::most(HISTORY_VALUES);
         if let Some(rows) = group.history.get(self.history..self.history + most)
-            && rows.iter().all(|h| h.job_id < self.job || !group.created.contains_key(&h.job_id))
+            && rows.last().is_some_and(|h| h.job_id < self.job)
         {
             self.history += most;
             return Some(Chunk::History(rows));
@@ -391,11 +393,16 @@ pub(super) async fn intake(
     Ok(all)
 }
 
+/// Polls `f` once.
+pub(super) async fn poll_once<F: std::future::Future + Unpin>(f: &mut F) -> std::task::Poll<F::Output> {
+    std::future::poll_fn(|cx| std::task::Poll::Ready(std::pin::Pin::new(&mut *f).poll(cx))).await
+}
+
 /// Awaits `run` with `work` done meanwhile on this thread: `run` is polled once first (a
 /// statement is then on its way to SQLite's thread), `work` runs, then `run` is awaited.
 async fn meanwhile<F: std::future::Future, T>(run: F, work: impl FnOnce() -> T) -> (F::Output, T) {
     let mut run = std::pin::pin!(run);
-    let first = std::future::poll_fn(|cx| std::task::Poll::Ready(run.as_mut().poll(cx))).await;
+    let first = poll_once(&mut run).await;
     let done = work();
     let output = match first {
         std::task::Poll::Ready(output) => output,

@@ -27,7 +27,7 @@ use sqlx::{QueryBuilder, Sqlite, SqliteConnection};
 
 use super::Command;
 use super::apply::{Answer, Group};
-use super::save::{self, Written};
+use super::save::{self, Written, poll_once};
 
 /// Whether `cmds` are streamed: submissions only, with more new jobs than one statement
 /// takes (fewer leave nothing to write before the end).
@@ -118,9 +118,4 @@ pub(super) async fn submissions(
     let c = line.free().await?;
     let written = save::intake(c, group, written, count).await?;
     Ok((answers, written))
-}
-
-/// Polls `f` once.
-async fn poll_once<F: Future + Unpin>(f: &mut F) -> Poll<F::Output> {
-    std::future::poll_fn(|cx| Poll::Ready(Pin::new(&mut *f).poll(cx))).await
 }
