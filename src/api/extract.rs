@@ -10,9 +10,32 @@ use serde::de::DeserializeOwned;
 use super::error::ApiError;
 
 /// `axum::Json`, rejecting with [`ApiError`]. Also usable as a response.
-#[derive(FromRequest)]
-#[from_request(via(axum::Json), rejection(ApiError))]
+///
+/// A body sent as plain `application/json` is read with `serde_json` alone first, and only
+/// a body it refuses goes through `axum::Json` again, for the rejection (which names where
+/// the body went wrong): `axum::Json` tracks that path through every value it reads. Both
+/// accept the same bodies. Any other content type (with parameters, `+json`, none) goes
+/// to `axum::Json` at once, which accepts or refuses it as before.
 pub struct Json<T>(pub T);
+
+impl<T: DeserializeOwned, S: Send + Sync> FromRequest<S> for Json<T> {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, ApiError> {
+        let plain = req
+            .headers()
+            .get(axum::http::header::CONTENT_TYPE)
+            .is_some_and(|v| v.as_bytes().eq_ignore_ascii_case(b"application/json"));
+        if !plain {
+            return Ok(Json(axum::Json::<T>::from_request(req, state).await?.0));
+        }
+        let bytes = axum::body::Bytes::from_request(req, state).await.map_err(JsonRejection::from)?;
+        match serde_json::from_slice(&bytes) {
+            Ok(value) => Ok(Json(value)),
+            Err(_) => Ok(Json(axum::Json::<T>::from_bytes(&bytes)?.0)),
+        }
+    }
+}
 
 impl<T: serde::Serialize> IntoResponse for Json<T> {
     fn into_response(self) -> Response {

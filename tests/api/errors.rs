@@ -80,6 +80,30 @@ async fn bad_requests_get_json_errors() {
 }
 
 #[tokio::test]
+async fn a_body_is_read_alike_whatever_form_of_json_content_type_it_comes_with() {
+    // A plain `application/json` body is read without tracking where it goes wrong, and read
+    // again with it only if it is refused: the answer still names the place.
+    let app = spawn_app().await;
+    let bad = json!({"jobs": [store("ct-0"), {"kind": "fly"}]}).to_string().into_bytes();
+    for ct in ["application/json", "Application/JSON", "application/json; charset=utf-8"] {
+        let got = raw(&app, reqwest::Method::POST, "/api/v1/jobs/batch", Some(ct), bad.clone()).await;
+        assert_error(&got, 422, "invalid_body");
+        assert!(got.1["error"]["message"].as_str().unwrap().contains("jobs[1]"), "{ct}: {got:?}");
+    }
+    for (i, ct) in
+        ["application/json", "Application/JSON", "application/json; charset=utf-8"].iter().enumerate()
+    {
+        let body = store(&format!("ct-{i}")).to_string().into_bytes();
+        let (status, job) = raw(&app, reqwest::Method::POST, "/api/v1/jobs", Some(ct), body).await;
+        assert_eq!(status, 201, "{ct}: {job}");
+        assert_eq!(job["reference"], format!("ct-{i}"));
+    }
+    let got =
+        raw(&app, reqwest::Method::POST, "/api/v1/jobs", Some("application/json;x"), b"{}".to_vec()).await;
+    assert_error(&got, 415, "unsupported_media_type");
+}
+
+#[tokio::test]
 async fn random_bodies_never_cause_a_server_error() {
     let app = spawn_app().await;
     let mut runner =

@@ -23,7 +23,7 @@ async fn site(pool: &Pool) {
     let mut ids = Vec::new();
     for i in 0..12u16 {
         match &writer.submit(vec![light(&format!("J-{i}"), i % 5 + 1)]).await.unwrap()[0] {
-            Outcome::Created(job) => ids.push(job.id),
+            Outcome::Created { job, .. } => ids.push(job.id),
             other => panic!("{other:?}"),
         }
     }
@@ -95,7 +95,9 @@ async fn a_store_with_history_copies_to_postgres_and_back_unchanged() {
     // The copy goes on where the original stopped: the next id and event number follow.
     let (writer, task) = Writer::start(&postgres, 64, 64, Hooks::default()).await.unwrap();
     let next = writer.submit(vec![light("after", 1)]).await.unwrap();
-    assert!(matches!(&next[0], Outcome::Created(job) if job.id == 13 && job.state == JobState::Queued));
+    assert!(
+        matches!(&next[0], Outcome::Created { job, .. } if job.id == 13 && job.state == JobState::Queued)
+    );
     drop(writer);
     task.await.unwrap();
     let (_, last) = events::bounds(&sqlite).await.unwrap();

@@ -159,7 +159,7 @@ async fn stored_reference(engine: Engine) {
     first.unwrap();
     let outcome = |i: usize| match &answers[i] {
         Ok(o) => match &o[0] {
-            Outcome::Created(job) => ("created", job.id),
+            Outcome::Created { job, .. } => ("created", job.id),
             Outcome::Existing(job) => ("existing", job.id),
         },
         Err(e) => panic!("request {i} refused: {e}"),
@@ -224,7 +224,7 @@ async fn streamed(engine: Engine, late: &str) {
         assert_eq!(outcomes.len(), 1000);
         for (i, outcome) in outcomes.iter().enumerate() {
             match outcome {
-                Outcome::Created(job) => {
+                Outcome::Created { job, .. } => {
                     assert_eq!(job.id, 4 + expected.len() as i64, "ids in order, without a gap");
                     expected.push(format!("s{k}-{i}"));
                 }
@@ -303,7 +303,7 @@ async fn fails_alone_raised(engine: Engine, raise: &str) {
     assert_eq!(seen.lock().unwrap()[1].0, 3, "the three requests made one group");
     let created = |a: &Result<Vec<Outcome>, WriteError>| match a {
         Ok(o) => match &o[0] {
-            Outcome::Created(job) => job.id,
+            Outcome::Created { job, .. } => job.id,
             Outcome::Existing(_) => panic!("not created: {a:?}"),
         },
         Err(e) => panic!("refused: {e}"),
@@ -312,7 +312,7 @@ async fn fails_alone_raised(engine: Engine, raise: &str) {
     assert!(matches!(answers[1], Err(WriteError::Database(_))), "{:?}", answers[1]);
     assert_eq!(created(&answers[2]), 3, "the refused request's id is given back: no gap");
     let next = writer.submit(vec![light("after", 4)]).await.unwrap();
-    assert!(matches!(&next[0], Outcome::Created(job) if job.id == 4));
+    assert!(matches!(&next[0], Outcome::Created { job, .. } if job.id == 4));
     let stored = jobs::list(&pool, &jobs::JobFilter { limit: 100, ..Default::default() }).await.unwrap();
     let references: Vec<_> = stored.iter().map(|j| j.reference.clone().unwrap()).collect();
     assert_eq!(references, ["first", "A", "B", "after"]);
@@ -366,7 +366,7 @@ async fn a_broken_connection_costs_one_group_not_the_writer() {
     let during = writer.submit(vec![light("during", 1)]).await;
     assert!(matches!(during, Err(WriteError::Database(_))), "the group in flight fails: {during:?}");
     let after = writer.submit(vec![light("after", 1)]).await.unwrap();
-    assert!(matches!(&after[0], Outcome::Created(job) if job.id == 2), "{after:?}");
+    assert!(matches!(&after[0], Outcome::Created { job, .. } if job.id == 2), "{after:?}");
     let stored = jobs::list(&pool, &jobs::JobFilter { limit: 10, ..Default::default() }).await.unwrap();
     assert_eq!(stored.iter().map(|j| j.reference.clone().unwrap()).collect::<Vec<_>>(), ["before", "after"]);
 }

@@ -60,7 +60,7 @@ pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Resu
                 };
                 let outcome = port.writer.submit(vec![relocation]).await.map_err(report_error)?;
                 return Ok(outcome.into_iter().find_map(|o| match o {
-                    Outcome::Created(job) => Some(job),
+                    Outcome::Created { job, .. } => Some(job),
                     Outcome::Existing(_) => None,
                 }));
             }

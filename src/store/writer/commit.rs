@@ -223,14 +223,14 @@ async fn apply(
         && stream::fits(cmds)
     {
         // Submissions only, their references not read: nothing to load.
-        let mut group = Group::new(Loaded::default(), next, now_ms(), tell.cloned());
+        let mut group = Group::new(Loaded::default(), next, now_ms(), tell.cloned(), cmds);
         let (answers, written) = stream::submissions(c, cmds, &mut group, &mut count).await?;
         save::save(db, &group, written, &mut count).await?;
         group.out.statements = count;
         return Ok((answers, group));
     }
     let loaded = load::load(db, cmds, read, &mut count).await?;
-    let mut group = Group::new(loaded, next, now_ms(), tell.cloned());
+    let mut group = Group::new(loaded, next, now_ms(), tell.cloned(), cmds);
     let answers = cmds.iter().map(|cmd| group.command(cmd)).collect();
     save::save(db, &group, save::Written::default(), &mut count).await?;
     group.out.statements = count;
