@@ -115,6 +115,16 @@ async fn batches_are_all_or_nothing() {
     let (status, body) = app.post("/api/v1/jobs/batch", &json!({"jobs": [good("B1"), good("B2")]})).await;
     assert_eq!(status, 200, "a repeated batch changes nothing: {body}");
 
+    // A stored job and a new one, answered in request order, each as reading it answers.
+    let (status, body) = app.post("/api/v1/jobs/batch", &json!({"jobs": [good("B1"), good("B5")]})).await;
+    assert_eq!(status, 201, "{body}");
+    let jobs = body["jobs"].as_array().unwrap();
+    assert_eq!((jobs[0]["reference"].clone(), jobs[1]["reference"].clone()), (json!("B1"), json!("B5")));
+    for job in jobs {
+        let (_, read) = app.get(&format!("/api/v1/jobs/{}", job["id"])).await;
+        assert_eq!(&read, job);
+    }
+
     let too_many: Vec<_> = (0..1001).map(|i| good(&format!("M{i}"))).collect();
     assert_error(&app.post("/api/v1/jobs/batch", &json!({"jobs": too_many})).await, 422, "invalid_batch");
     assert_error(&app.post("/api/v1/jobs/batch", &json!({"jobs": []})).await, 422, "invalid_batch");
