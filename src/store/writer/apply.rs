@@ -371,9 +371,6 @@ impl Group {
             created.push((request, job, json));
         }
         self.next.job += created.len() as i64;
-        self.jobs.reserve(created.len());
-        self.history.reserve(created.len());
-        self.out.events.reserve(created.len());
         for (request, job, json) in created {
             self.history(job.id, JobState::Queued, "accepted");
             self.append("job.updated", json);
@@ -660,7 +657,7 @@ impl Group {
     }
 }
 
-/// An event's data.
+/// One of our own values as JSON: an event's data (for a new job, also its answer).
 fn to_json(data: &impl serde::Serialize) -> String {
     // Serializing our own types to JSON cannot fail (no maps with non-string keys).
     serde_json::to_string(data).unwrap_or_else(|_| "null".into())
