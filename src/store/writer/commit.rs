@@ -14,16 +14,16 @@
 //! answered, so each request gets the answer it would have had (its stored job, or the
 //! conflict). Only what was committed is answered: the attempt rolled back leaves nothing.
 
-use super::apply::{Answer, Group, Loaded, Next, Out};
+use super::apply::{Answer, Group, Loaded, Next, Out, Spare};
 use super::{Command, Conn, Sent, Tell, WriteError, load, save, stream};
 use crate::domain::time::now_ms;
 use crate::store::cluster::{self, LEASE};
 use crate::store::engine::Engine;
 use crate::store::on;
 
-/// Applies `group` in one transaction. `next` is the writer's numbering, read from the
-/// tables when unknown; `references` says whether the group reads the stored jobs its
-/// submissions' references name first (see [`load`]): if it does not and the unique index
+/// Applies `group` in one transaction. `carry.next` is the writer's numbering, read from
+/// the tables when unknown; `carry.references` says whether the group reads the stored jobs
+/// its submissions' references name first (see [`load`]): if it does not and the unique index
 /// refuses one, the group is rolled back and applied again, reading them. Returns the
 /// answers, and the events and lock changes of the group. A command sent fenced whose epoch
 /// no longer holds the cluster's lease is answered [`WriteError::Fenced`] and left out; the
@@ -31,12 +31,11 @@ use crate::store::on;
 pub(super) async fn commit(
     db: &mut Conn,
     group: &[Sent],
-    next: &mut Option<Next>,
-    references: &mut load::References,
+    carry: &mut Carry,
     tell: Option<&Tell>,
     shared: bool,
 ) -> Result<(Vec<Answer>, Out), sqlx::Error> {
-    let mut read = references.read();
+    let mut read = carry.references.read();
     loop {
         begin(db, shared).await?;
         let held = match fences(db, group).await {
@@ -47,17 +46,17 @@ pub(super) async fn commit(
             }
         };
         let kept: Vec<&Command> = group.iter().zip(&held).filter(|(_, h)| **h).map(|(s, _)| &s.cmd).collect();
-        match kept_in_one(db, &kept, next, read, tell, shared).await? {
+        match kept_in_one(db, &kept, carry, read, tell, shared).await? {
             Attempt::Committed(answers, out, stored) => {
-                references.committed(stored);
+                carry.references.committed(stored);
                 return Ok((merge(group, &held, answers), out));
             }
             Attempt::Stored => {
-                references.stored();
+                carry.references.stored();
                 read = true;
             }
             Attempt::Refused => {
-                let result = one_by_one(db, &kept, next, tell, shared, group, &held).await;
+                let result = one_by_one(db, &kept, carry, tell, shared, group, &held).await;
                 if result.is_err() {
                     rollback(db).await;
                 }
@@ -65,6 +64,17 @@ pub(super) async fn commit(
             }
         }
     }
+}
+
+/// What the writer carries from one group to the next.
+#[derive(Default)]
+pub(super) struct Carry {
+    /// The writer's numbering: `None` until read, and again after a failed group.
+    pub(super) next: Option<Next>,
+    /// Whether groups read their references first (see [`load::References`]).
+    pub(super) references: load::References,
+    /// Memory a group leaves to the next.
+    spare: Spare,
 }
 
 /// How the attempt to commit a group's kept commands in one transaction went (rolled back
@@ -115,28 +125,29 @@ fn merge(group: &[Sent], held: &[bool], answers: Vec<Answer>) -> Vec<Answer> {
 async fn kept_in_one(
     db: &mut Conn,
     all: &[&Command],
-    next: &mut Option<Next>,
+    carry: &mut Carry,
     read: bool,
     tell: Option<&Tell>,
     shared: bool,
 ) -> Result<Attempt, sqlx::Error> {
-    let start_read = next.is_none();
+    let start_read = carry.next.is_none();
     let attempt = async {
-        let start = match *next {
+        let start = match carry.next {
             Some(n) => n,
             None => load::next(db).await?,
         };
-        let applied = apply(db, all, start, read, tell).await?;
+        let applied = apply(db, all, start, &mut carry.spare, read, tell).await?;
         Ok::<_, sqlx::Error>(applied)
     }
     .await;
     match attempt {
-        Ok((answers, applied)) => {
+        Ok((answers, mut applied)) => {
             if let Err(e) = run(db, finish(db.engine(), shared)).await {
                 rollback(db).await;
                 return Err(e);
             }
-            *next = Some(applied.next);
+            applied.recycle(&mut carry.spare);
+            carry.next = Some(applied.next);
             let stored = applied.read_stored();
             let mut out = applied.out;
             out.statements += 2 + usize::from(start_read);
@@ -167,7 +178,7 @@ async fn kept_in_one(
 async fn one_by_one(
     db: &mut Conn,
     kept: &[&Command],
-    next: &mut Option<Next>,
+    carry: &mut Carry,
     tell: Option<&Tell>,
     shared: bool,
     group: &[Sent],
@@ -177,7 +188,7 @@ async fn one_by_one(
     if fences(db, group).await? != held {
         return Err(sqlx::Error::Protocol("the cluster lease moved during the group".into()));
     }
-    let mut numbers = match *next {
+    let mut numbers = match carry.next {
         Some(n) => n,
         None => load::next(db).await?,
     };
@@ -185,9 +196,10 @@ async fn one_by_one(
     let mut out = Out::default();
     for cmd in kept {
         run(db, "SAVEPOINT request").await?;
-        match apply(db, &[cmd], numbers, true, tell).await {
-            Ok((mut answer, applied)) => {
+        match apply(db, &[cmd], numbers, &mut carry.spare, true, tell).await {
+            Ok((mut answer, mut applied)) => {
                 run(db, "RELEASE SAVEPOINT request").await?;
+                applied.recycle(&mut carry.spare);
                 numbers = applied.next;
                 out.events.extend(applied.out.events);
                 out.locks.extend(applied.out.locks);
@@ -205,7 +217,7 @@ async fn one_by_one(
         }
     }
     run(db, finish(db.engine(), shared)).await?;
-    *next = Some(numbers);
+    carry.next = Some(numbers);
     Ok((answers, out))
 }
 
@@ -214,6 +226,7 @@ async fn apply(
     db: &mut Conn,
     cmds: &[&Command],
     next: Next,
+    spare: &mut Spare,
     read: bool,
     tell: Option<&Tell>,
 ) -> Result<(Vec<Answer>, Group), sqlx::Error> {
@@ -223,14 +236,14 @@ async fn apply(
         && stream::fits(cmds)
     {
         // Submissions only, their references not read: nothing to load.
-        let mut group = Group::new(Loaded::default(), next, now_ms(), tell.cloned(), cmds);
+        let mut group = Group::new(Loaded::default(), next, now_ms(), tell.cloned(), cmds, spare);
         let (answers, written) = stream::submissions(c, cmds, &mut group, &mut count).await?;
         save::save(db, &group, written, &mut count).await?;
         group.out.statements = count;
         return Ok((answers, group));
     }
     let loaded = load::load(db, cmds, read, &mut count).await?;
-    let mut group = Group::new(loaded, next, now_ms(), tell.cloned(), cmds);
+    let mut group = Group::new(loaded, next, now_ms(), tell.cloned(), cmds, spare);
     let answers = cmds.iter().map(|cmd| group.command(cmd)).collect();
     save::save(db, &group, save::Written::default(), &mut count).await?;
     group.out.statements = count;

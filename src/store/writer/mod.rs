@@ -499,15 +499,14 @@ async fn write(
     conn: &mut Conn,
     checkpoints: Option<&mut checkpoint::Checkpoints>,
     group: &[Sent],
-    next: &mut Option<apply::Next>,
-    references: &mut load::References,
+    carry: &mut commit::Carry,
     tell: Option<&Tell>,
     shared: bool,
 ) -> Result<(Vec<apply::Answer>, apply::Out), sqlx::Error> {
     if let (Conn::Sqlite(c), Some(checkpoints)) = (&mut *conn, checkpoints) {
         checkpoints.before(c, group.iter().map(|s| s.cmd.jobs()).sum()).await?;
     }
-    commit::commit(conn, group, next, references, tell, shared).await
+    commit::commit(conn, group, carry, tell, shared).await
 }
 
 /// The writer: take what waits, commit it, hand it to the [`durable::Syncer`] (which
@@ -533,8 +532,7 @@ async fn run(
     shared: bool,
     After { syncer, mut checkpoints }: After,
 ) {
-    let mut next = None;
-    let mut references = load::References::default();
+    let mut carry = commit::Carry::default();
     let mut db = Some(db);
     let mut group = Vec::with_capacity(max_group);
     while rx.recv_many(&mut group, max_group).await > 0 {
@@ -551,25 +549,16 @@ async fn run(
                 .ok();
         }
         if shared {
-            next = None;
+            carry.next = None;
         }
         let result = match db.as_mut() {
             Some(conn) => {
-                write(
-                    conn,
-                    checkpoints.as_mut(),
-                    &group,
-                    &mut next,
-                    &mut references,
-                    hooks.tell.as_ref(),
-                    shared,
-                )
-                .await
+                write(conn, checkpoints.as_mut(), &group, &mut carry, hooks.tell.as_ref(), shared).await
             }
             None => Err(sqlx::Error::PoolTimedOut),
         };
         if result.is_err() {
-            (db, next) = (None, None);
+            (db, carry.next) = (None, None);
         }
         if let Some(checkpoints) = checkpoints.as_mut() {
             checkpoints.after(result.is_ok());
