@@ -19,6 +19,7 @@ WORKDIR /src
 # Cargo.toml or Cargo.lock change, so a change to rackd's own code recompiles rackd alone.
 # (examples/ stays out of the context, but Cargo.toml names the bench example.)
 COPY Cargo.toml Cargo.lock ./
+COPY .cargo .cargo
 RUN mkdir -p src examples/bench \
     && echo 'fn main() {}' > src/main.rs \
     && touch src/lib.rs \

@@ -9,7 +9,8 @@ use tracing_subscriber::EnvFilter;
 
 /// mimalloc instead of glibc's malloc: measured in `bench intake` (batches +8%, +12% with
 /// the writer's statements allocated at their size), see the README's "Benchmarks". The
-/// benchmark (`examples/bench`) uses the same, so it measures this.
+/// benchmark (`examples/bench`) uses the same, so it measures this. It serves C's `malloc`
+/// too (the crate's `override` feature, in Cargo.toml), so SQLite's allocations as well.
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 

@@ -154,10 +154,18 @@ fn dependencies_build_in_their_own_layer_before_the_sources_arrive() {
     );
     let sources = at(&|i| i.keyword == "COPY" && i.args.starts_with("src "), "COPY src");
     assert!(manifests < deps && deps < sources, "manifests, then dependencies, then sources");
+    // The shared build settings (SQLite's compile flags) reach the dependencies' build.
+    let settings = at(&|i| i.keyword == "COPY" && i.args == ".cargo .cargo", "COPY .cargo");
+    assert!(settings < deps, "build settings before the dependency build");
+    assert!(read(".cargo/config.toml").contains("LIBSQLITE3_FLAGS"));
     let ignored = read(".dockerignore");
     for entry in ["target/", ".git/"] {
         assert!(ignored.lines().any(|l| l.trim() == entry), ".dockerignore has {entry}");
     }
+    assert!(
+        !ignored.lines().any(|l| l.trim().trim_end_matches('/') == ".cargo"),
+        ".dockerignore keeps .cargo"
+    );
 }
 
 /// config/container.toml, loaded as rackd loads it.

@@ -1,4 +1,5 @@
-//! SQLite's page size: a new database gets rackd's, an existing one keeps its own.
+//! How SQLite is set up: its page size (a new database gets rackd's, an existing one keeps
+//! its own) and the options it is built with.
 
 use std::time::Duration;
 
@@ -41,4 +42,14 @@ async fn an_existing_database_keeps_its_page_size_and_works() {
     assert_eq!(created.len(), 1);
     let stored = jobs::list(&pool, &jobs::JobFilter { limit: 10, ..Default::default() }).await.unwrap();
     assert_eq!(stored.iter().map(|j| j.reference.clone().unwrap()).collect::<Vec<_>>(), ["after"]);
+}
+
+/// SQLite is built as `.cargo/config.toml` says: without memory statistics, whose mutex every
+/// allocation took (a build that missed the setting, a Dockerfile without `.cargo`, fails).
+#[tokio::test]
+async fn sqlite_is_built_without_memory_statistics() {
+    let (pool, _db, _dir) = crate::open(store::Engine::Sqlite).await;
+    let Pool::Sqlite(p) = &pool else { unreachable!("a SQLite store") };
+    let options: Vec<String> = sqlx::query_scalar("PRAGMA compile_options").fetch_all(p).await.unwrap();
+    assert!(options.iter().any(|o| o == "DEFAULT_MEMSTATUS=0"), "compile options: {options:?}");
 }
