@@ -226,7 +226,8 @@ fn supported(version_num: &str) -> bool {
 /// connection lowers it to `NORMAL` and syncs the WAL itself, see `store::writer::durable`),
 /// foreign keys, and how long a statement waits for another connection's lock.
 ///
-/// A new database gets pages of [`SQLITE_PAGE_SIZE`] bytes, twice SQLite's default.
+/// A new database gets pages of [`SQLITE_PAGE_SIZE`] bytes, twice SQLite's default. How
+/// SQLite itself is compiled (without memory statistics) is set in `.cargo/config.toml`.
 fn sqlite_options(path: &Path, busy_timeout: Duration) -> Result<SqliteConnectOptions, sqlx::Error> {
     Ok(SqliteConnectOptions::from_str("sqlite:")?
         .filename(path)
