@@ -378,7 +378,7 @@ impl Group {
     fn submit(&mut self, jobs: &[NewJob]) -> Result<Vec<Outcome>, WriteError> {
         let mut outcomes = Vec::with_capacity(jobs.len());
         let mut created: Vec<(String, Job, String)> = Vec::with_capacity(jobs.len());
-        let mut local: HashMap<&str, usize> = HashMap::new();
+        let mut local: HashMap<&str, usize> = HashMap::with_capacity(jobs.len());
         for new in jobs {
             let request = new.canonical();
             if let Some(reference) = new.reference.as_deref() {

@@ -72,7 +72,7 @@ pub(super) struct Carry {
     /// The writer's numbering: `None` until read, and again after a failed group.
     pub(super) next: Option<Next>,
     /// Whether groups read their references first (see [`load::References`]).
-    pub(super) references: load::References,
+    references: load::References,
     /// Memory a group leaves to the next.
     spare: Spare,
 }
