@@ -4,16 +4,14 @@
 use std::time::Duration;
 
 use tokio::sync::Mutex;
-use tokio_util::bytes::{Buf, BytesMut};
-use tokio_util::codec::Decoder;
 
 use super::command::{Request, Response};
 use super::error_code::{self, ErrorCode};
-use super::frame::{self, Bcc, Frame, FrameError, GLOBAL_STATION, Kind, MAX_LONG, MAX_SHORT, Scan};
+use super::frame::{self, Bcc, GLOBAL_STATION, Kind, MAX_LONG, MAX_SHORT};
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
     Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, RetryPolicy,
-    StreamLink,
+    Scanner, StreamLink,
 };
 use crate::protocols::{DeviceCode, DropReason, PlcError};
 
@@ -81,32 +79,6 @@ impl MewtocolConfig {
     /// Most words one WD or WCC command carries (`%01#WDD` + 10 digits + 4 per word + 3).
     pub fn max_write_words(&self) -> usize {
         (self.frame_limit() - 20) / 4
-    }
-}
-
-/// Finds MEWTOCOL frames in a byte stream ([`frame::scan`]): a whole frame, or the bytes
-/// from a start character that turned out not to be one.
-struct Frames;
-
-impl Decoder for Frames {
-    type Item = Result<Frame, FrameError>;
-    type Error = AttemptError;
-
-    fn decode(&mut self, src: &mut BytesMut) -> Result<Option<Self::Item>, AttemptError> {
-        Ok(match frame::scan(src) {
-            Scan::Found { end, frame } => {
-                src.advance(end);
-                Some(Ok(frame))
-            }
-            Scan::Bad { end, error } => {
-                src.advance(end);
-                Some(Err(error))
-            }
-            Scan::NeedMore { discard } => {
-                src.advance(discard);
-                None
-            }
-        })
     }
 }
 
@@ -202,8 +174,9 @@ impl MewtocolClient {
         link.send(tx, attempt.timeout).await?;
         let attempt = &attempt.restarted();
         let mut reason = None;
+        let mut frames = Scanner::new(frame::scan);
         loop {
-            let Some(scanned) = link.read_frame(&mut Frames, attempt.deadline).await? else {
+            let Some(scanned) = link.read_frame(&mut frames, attempt.deadline).await? else {
                 return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed));
             };
             let Ok(frame) = scanned else {

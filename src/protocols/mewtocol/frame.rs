@@ -147,28 +147,7 @@ pub fn decode(bytes: &[u8]) -> Result<Frame, FrameError> {
 }
 
 /// The result of looking for a frame in buffered input.
-#[derive(Debug, PartialEq, Eq)]
-pub enum Scan {
-    /// A frame ends at `end` (exclusive); drop the bytes before it.
-    Found {
-        /// Bytes consumed, up to and including the CR.
-        end: usize,
-        /// The frame.
-        frame: Frame,
-    },
-    /// Bytes up to `end` are not a frame (the error says why); drop them and scan again.
-    Bad {
-        /// Bytes to drop.
-        end: usize,
-        /// Why they are not a frame.
-        error: FrameError,
-    },
-    /// No complete frame yet; the first `discard` bytes are noise and may be dropped.
-    NeedMore {
-        /// Bytes before the first possible frame.
-        discard: usize,
-    },
-}
+pub type Scan = crate::protocols::transport::Scan<Frame, FrameError>;
 
 fn is_start(b: u8) -> bool {
     b == b'%' || b == b'<'

@@ -5,16 +5,14 @@ use std::sync::atomic::{AtomicU16, Ordering};
 use std::time::Duration;
 
 use tokio::sync::Mutex;
-use tokio_util::bytes::{Buf, BytesMut};
-use tokio_util::codec::Decoder;
 
-use super::frame::{self, FC_POLL, FC_RESPONSE, Frame, FrameError, Scan};
+use super::frame::{self, FC_POLL, FC_RESPONSE, Frame, FrameError};
 use super::pdu::{Item, Reply, Request};
 use super::return_code::ReturnCode;
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
     Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, RetryPolicy,
-    StreamLink,
+    Scanner, StreamLink,
 };
 use crate::protocols::{DeviceCode, DropReason, PlcError};
 
@@ -65,32 +63,6 @@ impl PpiConfig {
             tuning: LinkTuning::default(),
             match_pdu_ref: true,
         }
-    }
-}
-
-/// Finds PPI frames (long, short, `E5`) in a byte stream ([`frame::scan`]): a whole frame,
-/// or bytes that turned out not to be one.
-struct Frames;
-
-impl Decoder for Frames {
-    type Item = Result<Frame, FrameError>;
-    type Error = AttemptError;
-
-    fn decode(&mut self, src: &mut BytesMut) -> Result<Option<Self::Item>, AttemptError> {
-        Ok(match frame::scan(src) {
-            Scan::Found { end, frame } => {
-                src.advance(end);
-                Some(Ok(frame))
-            }
-            Scan::Bad { end, error } => {
-                src.advance(end);
-                Some(Err(error))
-            }
-            Scan::NeedMore { discard } => {
-                src.advance(discard);
-                None
-            }
-        })
     }
 }
 
@@ -218,9 +190,10 @@ impl PpiClient {
         }
         link.send(&tx, attempt.timeout).await?;
         let attempt = &attempt.restarted();
+        let mut frames = Scanner::new(frame::scan);
         // Step 1: the short acknowledgement. Whole frames before it are stale and skipped.
         loop {
-            match link.read_frame(&mut Frames, attempt.deadline).await? {
+            match link.read_frame(&mut frames, attempt.deadline).await? {
                 None => return Err(AttemptError::Timeout),
                 Some(Ok(Frame::Ack(_))) => break,
                 Some(_) => {
@@ -235,7 +208,7 @@ impl PpiClient {
         link.send(&tx, attempt.timeout).await?;
         let mut reason = None;
         loop {
-            match link.read_frame(&mut Frames, attempt.deadline).await? {
+            match link.read_frame(&mut frames, attempt.deadline).await? {
                 None => return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed)),
                 Some(Ok(Frame::Long { da, sa, fc: FC_RESPONSE, payload })) => {
                     if da != c.master || sa != c.plc {

@@ -65,28 +65,7 @@ pub enum FrameError {
 }
 
 /// The result of looking for a frame in buffered input.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum Scan {
-    /// A frame ends at `end` (exclusive).
-    Found {
-        /// Bytes consumed.
-        end: usize,
-        /// The frame.
-        frame: Frame,
-    },
-    /// The bytes up to `end` are not a frame; drop them and scan again.
-    Bad {
-        /// Bytes to drop.
-        end: usize,
-        /// Why.
-        error: FrameError,
-    },
-    /// No whole frame yet; the first `discard` bytes are noise.
-    NeedMore {
-        /// Bytes before the first possible frame.
-        discard: usize,
-    },
-}
+pub type Scan = crate::protocols::transport::Scan<Frame, FrameError>;
 
 /// The frame check sequence: the sum of the bytes, modulo 256.
 pub fn fcs(bytes: &[u8]) -> u8 {

@@ -63,6 +63,7 @@ mod health;
 mod retry;
 mod round_trips;
 mod rtt;
+mod scan;
 mod server;
 mod stream;
 
@@ -74,6 +75,8 @@ pub use health::{LinkStats, LinkTuning};
 pub use retry::RetryPolicy;
 pub(crate) use retry::{Attempt, AttemptError};
 pub use round_trips::{BOUNDS as ROUND_TRIP_BOUNDS, RoundTrips};
+pub use scan::Scan;
+pub(crate) use scan::Scanner;
 pub use server::StreamServer;
 pub(crate) use server::spawn_tcp;
 pub(crate) use stream::{Settled, StreamLink};
