@@ -16,8 +16,10 @@
 //! Then one is chosen. `fifo` takes the first in the order rules' order (priority, then
 //! age). `travel` keeps priorities (only jobs of the best priority present compete, so a
 //! priority 0 job still goes first) and among them takes the one with the least empty
-//! travel: the run from where the crane stands to the job's pick (a job that needs a
-//! relocation first counts the relocation's two fork cycles too), plus, for a job that ends
+//! travel: the run from where the crane stands to the job's pick (for a job that needs a
+//! relocation first: to the box in the way, plus the run from where that box goes back to
+//! the job's own pick; the relocation's fork cycles are spent whenever it runs, so they do
+//! not weigh against it), plus, for a job that ends
 //! in the rack (a store), the run from its end to the nearest pick the other open jobs need.
 //! That second term makes dual command cycles: after a retrieve (the crane at the station)
 //! a store whose put lies near a waiting retrieve, then that retrieve. Ties go to the older
@@ -325,11 +327,17 @@ impl Travel<'_> {
         pick_spot(self.plan, job, *near)
     }
 
-    /// The empty run to a candidate's pick; a relocation first is a cycle of its own, two
-    /// fork cycles at least.
+    /// The empty run to a candidate's pick. A job that needs a relocation first also makes
+    /// the empty run from where the relocation puts the box back to its own pick; the
+    /// relocation's fork cycles and loaded run are not counted, since they are the same
+    /// whenever it runs.
     fn empty(&self, c: &(&Job, Option<Location>)) -> f64 {
-        let extra = c.1.map_or(0.0, |_| 2.0 * self.plan.motion.fork_time(1));
-        self.plan.motion.move_time(self.from, self.first(c)) + extra
+        let motion = &self.plan.motion;
+        let back = match (c.1, self.places.get(&c.0.id)) {
+            (Some(_), Some(put)) => motion.move_time(spot(*put), pick_spot(self.plan, c.0, None)),
+            _ => 0.0,
+        };
+        motion.move_time(self.from, self.first(c)) + back
     }
 
     /// Where the crane stands once a candidate ends (None for one that needs a relocation

@@ -222,3 +222,26 @@ fn the_job_a_relocation_serves_goes_right_after_it() {
     assert_eq!(run(&p, &mut memory, &jobs, &moved), Decision::Run(2), "the served job first");
     assert_eq!(run(&p, &mut memory, &jobs[..1], &moved), Decision::Run(1), "then the starved one");
 }
+
+#[test]
+fn a_relocation_weighs_its_empty_runs_not_its_fork_cycles() {
+    // Retrieve 1 is seven bays away; retrieve 2 is a level above the crane but behind a box.
+    // The relocation's fork cycles are spent whenever it runs, so only the runs count: to
+    // the box in the way, and from where it goes back to the far box. Here they are shorter.
+    let (near, far, other) = (at(5, 2, 1), at(5, 2, 2), at(12, 1, 1));
+    let p = plan(Planner::Travel);
+    let jobs = [job(1, 10, JobSpec::Retrieve { from: other }), job(2, 10, JobSpec::Retrieve { from: far })];
+    let from = Spot { bay: 5, level: 1 };
+    let mut memory = Memory { at: Some(from), ..Memory::default() };
+    let decision = run(&p, &mut memory, &jobs, &rack(&[other, near, far]));
+    let Decision::Relocate { serves: 2, from: moved, to } = decision else { panic!("{decision:?}") };
+    assert_eq!(moved, near);
+    assert!(to.bay.abs_diff(5) + to.level.abs_diff(2) == 1, "the box goes next door: {to}");
+    // With the only free places at the far end of the aisle, the run back from there
+    // outweighs the nearer pick: retrieve 1 goes first.
+    let full: Vec<Location> = (1..=19)
+        .flat_map(|bay| (1..=4).flat_map(move |level| [at(bay, level, 1), at(bay, level, 2)]))
+        .collect();
+    let mut memory = Memory { at: Some(from), ..Memory::default() };
+    assert_eq!(run(&p, &mut memory, &jobs, &rack(&full)), Decision::Run(1));
+}
