@@ -19,8 +19,8 @@
 //! travel: the run from where the crane stands to the job's pick (for a job that needs a
 //! relocation first: to the box in the way, plus the run from where that box goes back to
 //! the job's own pick; the relocation's fork cycles are spent whenever it runs, so they do
-//! not weigh against it), plus, for a job that ends
-//! in the rack (a store), the run from its end to the nearest pick the other open jobs need.
+//! not weigh against it), plus, for a job that ends in the rack (a store), the run from its
+//! end to the nearest pick the other open jobs need.
 //! That second term makes dual command cycles: after a retrieve (the crane at the station)
 //! a store whose put lies near a waiting retrieve, then that retrieve. Ties go to the older
 //! job. A job passed over `max_overtaken` times by younger ones of its priority goes next,
