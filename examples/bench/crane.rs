@@ -38,6 +38,8 @@ use rackd::wire::motion::Motion;
 
 use crate::served::Served;
 
+mod bound;
+
 /// `bench crane`'s options.
 #[derive(clap::Args, Debug, Clone)]
 pub struct CraneArgs {
@@ -180,6 +182,22 @@ pub async fn run(args: CraneArgs) -> anyhow::Result<()> {
         "with no empty travel at all, travel would be {:.2}x fifo; 1.3x allows {:.1} s of empty travel per cycle",
         fifo_cycle / fixed.max(f64::EPSILON),
         fifo_cycle / 1.3 - fixed
+    );
+    let bound = bound::Bound::of(&workload, &Motion::default());
+    let least = bound.per_cycle();
+    println!(
+        "knowing all {} jobs in advance, no order could beat {least:.1} s per cycle ({:.2}x fifo): {:.1} s of the jobs' own runs and forks + {:.1} s for the {} relocations no order avoids + {:.1} s of empty travel",
+        bound.jobs,
+        fifo_cycle / least,
+        bound.own_secs / bound.jobs as f64,
+        bound.relocation_secs / bound.jobs as f64,
+        bound.relocations,
+        bound.empty_secs / bound.jobs as f64,
+    );
+    let with_its_relocations = fixed + bound.empty_secs / bound.jobs as f64;
+    println!(
+        "with travel's relocations as they ran ({fixed:.1} s of loaded runs and forks per cycle) and that least empty travel: {with_its_relocations:.1} s per cycle ({:.2}x fifo)",
+        fifo_cycle / with_its_relocations
     );
     println!(
         "travel / fifo: {:.2}x cycles per hour, {:.2}x empty travel",
