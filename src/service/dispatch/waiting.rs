@@ -155,7 +155,7 @@ impl Queues {
         let planner = self.planner(device)?;
         Some(match planner.wait_of(job.id)? {
             Wait::Behind(id) => {
-                let text = format!("behind job {id}, which clears the way in the double-deep rack first");
+                let text = format!("behind job {id}, which must go first in the double-deep rack");
                 let mut w = Waiting::new(WaitingReason::BehindJob, text).on(device);
                 w.job = Some(id);
                 w

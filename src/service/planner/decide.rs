@@ -10,8 +10,9 @@
 //!   reason, nothing sent (the crane would raise 7091/7095 or 7069/7070);
 //! - everything else can go.
 //!
-//! - a put near in front of a far location another unfinished job will fill waits for it
-//!   (putting near first would wall that far location in);
+//! - a put near in front of a far location another unfinished job will fill, or pick from,
+//!   waits for that job (putting near first would wall the far location in, and the box
+//!   put would then have to be relocated for it);
 //!
 //! Then one is chosen. `fifo` takes the first in the order rules' order (priority, then
 //! age). `travel` keeps priorities (only jobs of the best priority present compete, so a
@@ -147,10 +148,15 @@ pub fn check(job: &Job, rack: &Rack, unfinished: &[&Job]) -> Verdict {
             return behind_or_relocate(job.id, near, unfinished);
         }
         let far = Rack::far_of(q);
+        // A put near waits for the job that fills the far location behind it, or that
+        // picks the box there: a box put in front first would wall either in.
+        let wants_far = |j: &&&Job| {
+            j.id != job.id && (puts_into(j, far) || j.spec().is_some_and(|s| picks_from(&s, far)))
+        };
         if !rack.is_far(q)
-            && let Some(filler) = unfinished.iter().find(|j| j.id != job.id && puts_into(j, far))
+            && let Some(other) = unfinished.iter().find(wants_far)
         {
-            return Verdict::Behind(filler.id);
+            return Verdict::Behind(other.id);
         }
     }
     Verdict::Go

@@ -76,6 +76,32 @@ fn a_retrieve_behind_a_box_that_leaves_anyway_waits() {
 }
 
 #[test]
+fn a_put_near_waits_for_the_job_that_fills_or_picks_the_far_place() {
+    let r = rack(&[at(8, 3, 2)]);
+    let store = job(1, 0, JobSpec::Store { to: at(8, 3, 1) });
+    // The far box is wanted by a younger retrieve of lower priority: the store, though
+    // older and of priority 0, waits, and the retrieve runs first under either planner.
+    let retrieve = job(2, 10, JobSpec::Retrieve { from: at(8, 3, 2) });
+    assert_eq!(check(&store, &r, &[&store, &retrieve]), Verdict::Behind(2));
+    for planner in [Planner::Fifo, Planner::Travel] {
+        let jobs = [store.clone(), retrieve.clone()];
+        assert_eq!(run(&plan(planner), &mut Memory::default(), &jobs, &r), Decision::Run(2), "{planner:?}");
+    }
+    // Once the far box is gone the store goes: the wait ends with the job it waits for.
+    assert_eq!(check(&store, &rack(&[]), &[&store]), Verdict::Go);
+    // A move out of the far place counts as a pick; a store into it as a fill.
+    let out = job(3, 10, JobSpec::Move { from: at(8, 3, 2), to: at(12, 1, 2) });
+    assert_eq!(check(&store, &r, &[&store, &out]), Verdict::Behind(3));
+    let fill = job(4, 10, JobSpec::Store { to: at(8, 3, 2) });
+    assert_eq!(check(&store, &rack(&[]), &[&store, &fill]), Verdict::Behind(4));
+    // A job elsewhere does not hold it, and a single-deep aisle has no such rule.
+    let elsewhere = job(5, 10, JobSpec::Retrieve { from: at(9, 3, 2) });
+    assert_eq!(check(&store, &r, &[&store, &elsewhere]), Verdict::Go);
+    let shallow = Rack::from_cells(r.locations(), &BTreeSet::new());
+    assert_eq!(check(&store, &shallow, &[&store, &retrieve]), Verdict::Go);
+}
+
+#[test]
 fn stores_far_behind_a_box_relocate_and_puts_into_a_box_are_refused() {
     let r = rack(&[at(6, 1, 1), at(7, 1, 1)]);
     let far = job(1, 10, JobSpec::Store { to: at(6, 1, 2) });
