@@ -1,6 +1,7 @@
 //! The crane planner against the real crane simulator, in a double-deep aisle: a far box
 //! behind a near one is fetched after a relocation rackd makes; a store far behind a box is
-//! refused at intake; a put into a box fails without being sent.
+//! refused at intake; a store in front of a box an open job wants waits for that job; a put
+//! into a box fails without being sent.
 
 use std::time::Duration;
 
@@ -101,6 +102,34 @@ async fn a_store_far_behind_a_box_is_refused_unless_the_box_leaves_first() {
     let (_, moves) = app.get("/api/v1/jobs?kind=move").await;
     assert!(moves["jobs"].as_array().unwrap().is_empty(), "no relocation was needed: {moves}");
     assert_eq!(sim.violations(), 0);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_store_in_front_of_a_box_an_open_job_wants_waits_for_it() {
+    let (app, sim) = deep_app(|_| {}).await;
+    let (near, far) = (cloc(1, 9, 2, 1), cloc(1, 9, 2, 2));
+    stock(&app, std::slice::from_ref(&far)).await;
+    // The store is older and its put is on the way, but putting it first would wall the
+    // far box in and cost a relocation of the box just stored.
+    let batch = json!({"jobs": [
+        {"kind": "store", "to": near},
+        {"kind": "retrieve", "from": far},
+    ]});
+    let (status, both) = app.post("/api/v1/jobs/batch", &batch).await;
+    assert_eq!(status, 201, "{both}");
+    let ids: Vec<i64> = both["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()).collect();
+    let mut ended = Vec::new();
+    for id in &ids {
+        let done = wait_job(&app, *id, &["completed", "failed"], 20).await;
+        assert_eq!(done["state"], "completed", "{done}");
+        ended.push(done["updated_at"].as_str().unwrap().to_owned());
+    }
+    assert!(ended[1] < ended[0], "the retrieve ended before the store: {ended:?}");
+    let (_, moves) = app.get("/api/v1/jobs?kind=move").await;
+    assert!(moves["jobs"].as_array().unwrap().is_empty(), "no relocation was needed: {moves}");
+    assert!(occupied(&app, &near).await && !occupied(&app, &far).await);
+    assert_eq!(sim.violations(), 0, "{:?}", sim.violation_log());
     app.stop().await;
 }
 
