@@ -12,11 +12,11 @@
 //! - **relocations**: only those no order avoids (a far retrieve behind a box of the
 //!   starting stock that no job takes away), each at two near fork cycles and no run;
 //! - **empty travel**: an optimal assignment of where each job ends to where a job
-//!   begins, by the crane's move times (the Hungarian method of `pathfinding`'s
-//!   `kuhn_munkres_min`; no other crate is needed, and this one is made for the job). Any
-//!   order is such an assignment: the runs to, during and from a relocation between two
-//!   jobs are at least the run between the two, since the crane's move time is a metric.
-//!   The assignment may also close loops no order could, which only lowers it further.
+//!   begins, by the crane's move times (the Hungarian method, `kuhn_munkres_min` of the
+//!   `pathfinding` crate, a dev-dependency: the service never needs it). Any order is such
+//!   an assignment: the runs to, during and from a relocation between two jobs are at
+//!   least the run between the two, since the crane's move time is a metric. The
+//!   assignment may also close loops no order could, which only lowers it further.
 //!
 //! With the relocations a planner actually ran (their forks and loaded runs measured by
 //! the simulator), the jobs' own seconds and the least empty travel give a second, closer
