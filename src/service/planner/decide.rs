@@ -8,11 +8,10 @@
 //! - a put into a location that holds a box, or a pick from one that holds none (double-deep
 //!   aisles, where rackd keeps the rack's contents), is never sent: the job fails with the
 //!   reason, nothing sent (the crane would raise 7091/7095 or 7069/7070);
-//! - everything else can go.
-//!
 //! - a put near in front of a far location another unfinished job will fill, or pick from,
 //!   waits for that job (putting near first would wall the far location in, and the box
 //!   put would then have to be relocated for it);
+//! - everything else can go.
 //!
 //! Then one is chosen. `fifo` takes the first in the order rules' order (priority, then
 //! age). `travel` keeps priorities (only jobs of the best priority present compete, so a
