@@ -1,6 +1,6 @@
 //! Configuration: every key documented in `config/rackd.example.toml`, in layers
 //! (lowest first): the defaults, one TOML file, the environment (`RACKD_<SECTION>__<KEY>`,
-//! see [`env`]), the command line (`--listen`, `--database`). [`layers`] merges them with
+//! see [`env`](mod@env)), the command line (`--listen`, `--database`). [`layers`] merges them with
 //! figment and says where each value came from ([`Origin`]).
 //!
 //! With no file, [`Config::demo`] describes the demo site (the environment and command

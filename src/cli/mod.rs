@@ -54,7 +54,7 @@ pub enum Command {
     Serve(ServeArgs),
     /// Print the OpenAPI document.
     Openapi,
-    /// Check a configuration file (with the RACKD_<SECTION>__<KEY> environment) and report
+    /// Check a configuration file (with the RACKD_SECTION__KEY environment) and report
     /// the first error as FILE:LINE:COL: KEY: MESSAGE (or env VAR: KEY: MESSAGE).
     CheckConfig {
         /// The file.

@@ -9,7 +9,7 @@
 //! - **read at scrape time** ([`scrape`]): each device's status and link counters, active
 //!   alarms and jobs by device, and the process figures ([`process`]).
 //!
-//! Content negotiation ([`format`]): OpenMetrics when the scraper's `Accept` asks for it,
+//! Content negotiation ([`format`](mod@format)): OpenMetrics when the scraper's `Accept` asks for it,
 //! Prometheus text 0.0.4 otherwise; each is served exactly, with its own content type.
 //!
 //! The full list of families is in the README's "Metrics" section.

@@ -5,7 +5,7 @@
 //! ([`crate::devices::tagdef::codec`]), so a value reads the same in `rackd plc` as in a tag.
 //! Decisions of this module:
 //! - **Word order** defaults to the protocol's native one, as tags do
-//!   ([`native_order`]): high word first (ABCD) for Modbus and S7, low word first (CDAB) for
+//!   ([`native_order`](crate::devices::tagdef::spec::native_order)): high word first (ABCD) for Modbus and S7, low word first (CDAB) for
 //!   MC and MEWTOCOL. `badc` and `dcba` also swap the two bytes of every word, for devices
 //!   that store bytes little-endian inside a Modbus register; `--word-order` applies to
 //!   every format, so `-f ascii --word-order badc` reads low byte first.

@@ -13,7 +13,7 @@
 //! devices' ([`crate::protocols::link::connect`]), so `rackd plc` reaches a PLC exactly as
 //! a `[[devices]]` entry with the same settings would (MC monitoring timer included). The
 //! command uses only the [`PlcMemory`] trait. The parts: [`flags`] (unit, default ports),
-//! [`format`] (display formats and word orders), [`item`] (addresses, items and their
+//! [`format`](mod@format) (display formats and word orders), [`item`] (addresses, items and their
 //! labels), [`poll`] (output and the poll loop), [`hints`] (errors that say what to try).
 //!
 //! Every option is global (accepted before or after `read ADDR`), except `--protocol` and

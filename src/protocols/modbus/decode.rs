@@ -174,7 +174,7 @@ impl Request {
     }
 }
 
-/// For write-multiple requests: checks the byte count at d[4] and returns the data after it.
+/// For write-multiple requests: checks the byte count at `d[4]` and returns the data after it.
 fn byte_counted(d: &[u8], expected: usize) -> Result<&[u8], DecodeError> {
     let bc = *d.get(4).ok_or(DecodeError::Truncated)? as usize;
     if bc != expected {
@@ -188,7 +188,7 @@ fn words(data: &[u8]) -> Vec<u16> {
     data.chunks_exact(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect()
 }
 
-/// For read replies: checks the byte count at d[0] and returns the data after it.
+/// For read replies: checks the byte count at `d[0]` and returns the data after it.
 fn read_data(d: &[u8], expected: usize) -> Result<&[u8], DecodeError> {
     let bc = *d.first().ok_or(DecodeError::Truncated)? as usize;
     if bc != expected {

@@ -2,7 +2,7 @@
 //! per client (one client = one device) and shown in the device's status as [`LinkStats`].
 //!
 //! Decisions:
-//! - **One place.** Every client runs its requests through [`super::Retry`], which feeds
+//! - **One place.** Every client runs its requests through [`super::retry::Retry`], which feeds
 //!   this: round trips, timeouts, retries and finished requests. Links report only what
 //!   the retry loop cannot see: replies they dropped, and why ([`LinkHealth::dropped`]).
 //! - **Adaptive timeouts** follow RFC 6298 ([`super::rtt`]), between `min_timeout` and the

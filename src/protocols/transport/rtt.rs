@@ -14,7 +14,7 @@
 //!   doubled value stays until the next sample: a device that became slow is found again
 //!   (the doubled timeout lets its reply in) instead of being timed out for ever.
 //! - Karn's rule is the caller's: it only hands in a round trip it can attribute to one
-//!   transmission (see [`super::Retry::succeeded`]).
+//!   transmission (see [`super::retry::Retry::succeeded`]).
 
 use std::collections::VecDeque;
 use std::time::Duration;

@@ -27,7 +27,7 @@
 //! Telling clients: each `job.updated` event the writer commits carries the reason as of
 //! that commit ([`Queues::tell_hook`]), and the reasons told are remembered. A change of
 //! reason alone (a device goes offline, a crane raises an alarm, a slot frees up) wakes
-//! [`watch`], which recomputes the reasons of each device's oldest `dispatch_window` queued
+//! [`watch`](fn@watch), which recomputes the reasons of each device's oldest `dispatch_window` queued
 //! jobs (the ones the dispatcher weighs) at most every [`SETTLE`], and asks the writer to
 //! tell again those whose reason changed ([`Record::Retell`]); the writer re-reads each job
 //! and writes a `job.updated` only while it is still queued, with its reason as of then,

@@ -1,5 +1,5 @@
 //! The crane planner: what an idle crane does next, in the service layer beside the
-//! dispatcher, which asks it on the crane's behalf ([`CranePlanner::next`]).
+//! dispatcher, which asks it on the crane's behalf ([`CranePlanner::decide`]).
 //!
 //! - **Double-deep without business alarms** ([`decide::check`]): in an aisle with
 //!   `depth = 2` rackd never sends a task the rack makes impossible. A pick or a put far
