@@ -149,11 +149,8 @@ pub fn check(job: &Job, rack: &Rack, unfinished: &[&Job]) -> Verdict {
         let far = Rack::far_of(q);
         // A put near waits for the job that fills the far location behind it, or that
         // picks the box there: a box put in front first would wall either in.
-        let wants_far = |j: &&&Job| {
-            j.id != job.id && (puts_into(j, far) || j.spec().is_some_and(|s| picks_from(&s, far)))
-        };
         if !rack.is_far(q)
-            && let Some(other) = unfinished.iter().find(wants_far)
+            && let Some(other) = unfinished.iter().find(|j| j.id != job.id && fills_or_empties(j, far))
         {
             return Verdict::Behind(other.id);
         }
@@ -169,9 +166,11 @@ fn behind_or_relocate(id: i64, near: Location, unfinished: &[&Job]) -> Verdict {
     }
 }
 
-/// Whether `job` puts a box into `l`.
-fn puts_into(job: &Job, l: Location) -> bool {
-    matches!(job.spec(), Some(JobSpec::Store { to } | JobSpec::Move { to, .. }) if to == l)
+/// Whether `job` puts a box into `l` or picks the box there.
+fn fills_or_empties(job: &Job, l: Location) -> bool {
+    job.spec().is_some_and(|s| {
+        picks_from(&s, l) || matches!(s, JobSpec::Store { to } | JobSpec::Move { to, .. } if to == l)
+    })
 }
 
 /// Where a job picks and where it puts, when it does (a station is neither stock nor
