@@ -25,7 +25,7 @@ mod child;
 mod crane;
 mod fleet;
 mod intake;
-#[path = "../../tests/common/postgres.rs"]
+#[path = "../../tests/it/support/postgres.rs"]
 mod postgres;
 mod served;
 mod shelf;

@@ -1,0 +1,7 @@
+//! Hot standby on a real PostgreSQL (the throwaway cluster of [`crate::support::postgres`]):
+//! the lease ([`cluster`]), two real nodes in one process ([`nodes`]), and failover of
+//! real `rackd` processes killed with SIGKILL ([`failover`]).
+
+mod cluster;
+mod failover;
+mod nodes;

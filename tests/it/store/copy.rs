@@ -1,0 +1,116 @@
+//! `rackd db copy` (src/store/copy.rs): a store with history copied from SQLite to
+//! PostgreSQL and back reads the same through every query the API uses, ids and event
+//! numbers included.
+
+use rackd::domain::{AlarmClass, AlarmKind, JobState, Location, LocationLock, Pause, Target, Transition};
+use rackd::store::alarms::{AlarmFilter, NewAlarm};
+use rackd::store::writer::{Change, Hooks, Outcome, Record, Writer};
+use rackd::store::{self, Engine, Pool, alarms, controls, events, jobs, locations};
+use time::OffsetDateTime;
+
+use super::{light, open};
+
+fn step(transition: Transition) -> Change {
+    Change::Transition { transition, cause: "test".into(), expect: None, failure: None, forced: false }
+}
+
+/// A store with jobs in every state, history, locations changed and locked, a pause, an
+/// alarm raised and cleared and one active, the audit log and the events of all that.
+async fn site(pool: &Pool) {
+    let layout = rackd::config::Config::demo().layout();
+    locations::seed(pool, &layout, 1).await.unwrap();
+    let (writer, task) = Writer::start(pool, 64, 64, Hooks::default()).await.unwrap();
+    let mut ids = Vec::new();
+    for i in 0..12u16 {
+        match &writer.submit(vec![light(&format!("J-{i}"), i % 5 + 1)]).await.unwrap()[0] {
+            Outcome::Created { job, .. } => ids.push(job.id),
+            other => panic!("{other:?}"),
+        }
+    }
+    for &id in &ids[..8] {
+        writer.change(id, step(Transition::Dispatch)).await.unwrap();
+    }
+    for &id in &ids[..4] {
+        writer.change(id, step(Transition::Start)).await.unwrap();
+        writer.change(id, step(Transition::Complete)).await.unwrap();
+    }
+    writer.change(ids[9], Change::cancel_queued()).await.unwrap();
+    let at = OffsetDateTime::from_unix_timestamp(1_800_000_000).unwrap();
+    let by = Pause { by: "ops".into(), reason: Some("inspection".into()), at };
+    writer.record(Record::Pause { target: Target::Device("crane1".into()), paused: true, by }).await.unwrap();
+    let place = Location { aisle: 1, row: 2, bay: 3, level: 1, position: 1 };
+    let lock = LocationLock { by: "ops".into(), reason: "bent beam".into(), job: None, at };
+    writer.record(Record::Lock { location: place, lock }).await.unwrap();
+    for code in [41, 42] {
+        let alarm = NewAlarm {
+            device: "crane1".into(),
+            kind: AlarmKind::Device,
+            code,
+            class: AlarmClass::Hardware,
+            text: format!("alarm {code}"),
+            detail: Some("D205".into()),
+            action: Some("go to the crane".into()),
+        };
+        writer.record(Record::AlarmRaised(alarm)).await.unwrap();
+    }
+    let cleared = Record::AlarmCleared { device: "crane1".into(), key: (AlarmKind::Device, 41) };
+    writer.record(cleared).await.unwrap();
+    let ack = Record::Acknowledge { alarm: 2, by: "ops".into(), note: Some("seen".into()) };
+    writer.record(ack).await.unwrap();
+    drop(writer);
+    task.await.unwrap();
+}
+
+/// Everything the API reads, as text to compare.
+async fn read(pool: &Pool) -> Vec<String> {
+    let all = jobs::list(pool, &jobs::JobFilter { limit: 1000, ..Default::default() }).await.unwrap();
+    let mut out = vec![format!("{all:?}")];
+    for job in &all {
+        out.push(format!("{:?}", jobs::history(pool, job.id).await.unwrap()));
+    }
+    out.push(format!("{:?}", locations::list(pool, None).await.unwrap()));
+    out.push(format!(
+        "{:?}",
+        alarms::list(pool, &AlarmFilter { limit: 100, ..Default::default() }).await.unwrap()
+    ));
+    out.push(format!("{:?}", events::after(pool, 0, 10_000).await.unwrap()));
+    out.push(format!("{:?}", controls::paused(pool).await.unwrap()));
+    out.push(format!("{:?}", controls::audit(pool, None, 100).await.unwrap()));
+    out
+}
+
+#[tokio::test]
+async fn a_store_with_history_copies_to_postgres_and_back_unchanged() {
+    let (sqlite, from, _dir) = open(Engine::Sqlite).await;
+    site(&sqlite).await;
+    let before = read(&sqlite).await;
+    assert!(
+        before[0].contains("Completed") && before[0].contains("Cancelled") && before[0].contains("Queued")
+    );
+    let (postgres, to, _) = open(Engine::Postgres).await;
+    let copied = store::copy::copy(&from, &to).await.unwrap();
+    assert_eq!(copied[0], ("jobs", 12));
+    assert_eq!(read(&postgres).await, before, "the copy on PostgreSQL reads the same");
+
+    // The copy goes on where the original stopped: the next id and event number follow.
+    let (writer, task) = Writer::start(&postgres, 64, 64, Hooks::default()).await.unwrap();
+    let next = writer.submit(vec![light("after", 1)]).await.unwrap();
+    assert!(
+        matches!(&next[0], Outcome::Created { job, .. } if job.id == 13 && job.state == JobState::Queued)
+    );
+    drop(writer);
+    task.await.unwrap();
+    let (_, last) = events::bounds(&sqlite).await.unwrap();
+    assert_eq!(events::bounds(&postgres).await.unwrap().1, last + 1);
+
+    // A copy never merges into a database that holds a store.
+    let refused = store::copy::copy(&from, &to).await.unwrap_err();
+    assert!(refused.to_string().contains("already holds"), "{refused}");
+
+    // And back to a new SQLite file.
+    let (back, again, _dir2) = open(Engine::Sqlite).await;
+    back.close().await;
+    store::copy::copy(&to, &again).await.unwrap();
+    let back = store::open(&again, std::time::Duration::from_secs(5)).await.unwrap();
+    assert_eq!(read(&back).await, read(&postgres).await, "PostgreSQL to SQLite reads the same");
+}

@@ -1,0 +1,41 @@
+//! The store's writer on both engines: the same tests against a SQLite file and against a
+//! throwaway PostgreSQL cluster (see `tests/common/postgres.rs`), through the real writer
+//! and the real migrations.
+
+mod copy;
+mod groups;
+mod pages;
+
+use std::time::Duration;
+
+use rackd::domain::{JobSpec, LightColor, Location, NewJob, Priority};
+use rackd::store::{self, Database, Engine, Pool};
+
+/// A fresh, migrated store on `engine`, and the folder to keep while it is used.
+pub async fn open(engine: Engine) -> (Pool, Database, Option<tempfile::TempDir>) {
+    let (db, dir) = match engine {
+        Engine::Sqlite => {
+            let dir = tempfile::tempdir().unwrap();
+            (Database::Sqlite(dir.path().join("rackd.db")), Some(dir))
+        }
+        Engine::Postgres => (Database::Postgres(crate::support::postgres::database().await), None),
+    };
+    let pool = store::open(&db, Duration::from_secs(5)).await.expect("the store opens");
+    (pool, db, dir)
+}
+
+/// A light job with this reference.
+pub fn light(reference: &str, bay: u16) -> NewJob {
+    NewJob {
+        spec: JobSpec::Light {
+            location: Location { aisle: 1, row: 1, bay, level: 1, position: 1 },
+            color: LightColor::Green,
+            on: true,
+        },
+        reference: Some(reference.to_owned()),
+        priority: Priority::default(),
+        barcode: None,
+        device: None,
+        serves: None,
+    }
+}

@@ -1,0 +1,172 @@
+//! A throwaway PostgreSQL cluster for the tests, started by the test process itself: one
+//! cluster per run of the test binary (started on first use), one fresh database per test.
+//!
+//! The cluster comes from Debian's `postgresql` package (`/usr/lib/postgresql/*/bin`, the
+//! newest version there, or `$RACKD_PG_BIN`). PostgreSQL refuses to run as root, so as root
+//! the server runs as the package's `postgres` user (through `setpriv`). It is started by a
+//! thread that lives as long as the test process with a parent-death signal, so it dies with
+//! the tests however they end; its data folder (in the temp folder, `rackd-pg-PID`) is
+//! removed by the next run. Durability settings are off (`fsync=off`) for the tests, which
+//! check behaviour; the benchmarks set [`DURABLE`] and measure with PostgreSQL's defaults.
+//!
+//! A missing PostgreSQL fails the test with the command that installs it; nothing is
+//! skipped.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use sqlx::Connection;
+
+/// How to install what these tests need.
+const INSTALL: &str =
+    "apt-get update && apt-get install -y postgresql (or run `bash .ci/run`, which installs it)";
+
+/// The running cluster: the URL of its maintenance database, without the database name.
+struct Cluster {
+    base: String,
+}
+
+static CLUSTER: OnceLock<Result<Cluster, String>> = OnceLock::new();
+
+/// Set before first use to keep PostgreSQL's durable defaults (the benchmarks do).
+pub static DURABLE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+static NEXT: AtomicU32 = AtomicU32::new(1);
+
+/// The URL of a fresh, empty database on the test cluster (started on first use).
+pub async fn database() -> String {
+    let cluster = match CLUSTER.get_or_init(start) {
+        Ok(c) => c,
+        Err(e) => panic!("the PostgreSQL tests cannot start a server: {e}"),
+    };
+    let name = format!("t{}_{}", std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed));
+    let mut admin =
+        sqlx::PgConnection::connect(&format!("{}/postgres", cluster.base)).await.expect("admin connection");
+    sqlx::raw_sql(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}")))
+        .execute(&mut admin)
+        .await
+        .expect("create database");
+    format!("{}/{name}", cluster.base)
+}
+
+/// The newest PostgreSQL's binaries.
+fn binaries() -> Result<PathBuf, String> {
+    if let Ok(dir) = std::env::var("RACKD_PG_BIN") {
+        return Ok(PathBuf::from(dir));
+    }
+    let mut found: Vec<(u32, PathBuf)> = std::fs::read_dir("/usr/lib/postgresql")
+        .map_err(|_| format!("PostgreSQL is not installed (no /usr/lib/postgresql): {INSTALL}"))?
+        .filter_map(|e| {
+            let e = e.ok()?;
+            let version = e.file_name().to_str()?.parse().ok()?;
+            let bin = e.path().join("bin");
+            bin.join("initdb").exists().then_some((version, bin))
+        })
+        .collect();
+    found.sort();
+    found
+        .pop()
+        .map(|(_, bin)| bin)
+        .ok_or_else(|| format!("no initdb under /usr/lib/postgresql/*/bin: {INSTALL}"))
+}
+
+/// Runs `program` as the user PostgreSQL may run as (`postgres` when we are root).
+fn command(program: &Path, as_root: bool) -> Command {
+    if as_root {
+        let mut c = Command::new("setpriv");
+        c.args(["--reuid=postgres", "--regid=postgres", "--init-groups", "--pdeathsig=KILL", "--"])
+            .arg(program);
+        c
+    } else {
+        Command::new(program)
+    }
+}
+
+fn start() -> Result<Cluster, String> {
+    let bin = binaries()?;
+    let as_root = rustix::process::geteuid().is_root();
+    if as_root
+        && !Command::new("id").arg("postgres").stdout(Stdio::null()).status().is_ok_and(|s| s.success())
+    {
+        return Err(format!(
+            "running as root needs the `postgres` user, which the package creates: {INSTALL}"
+        ));
+    }
+    remove_stale();
+    let dir = std::env::temp_dir().join(format!("rackd-pg-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    if as_root {
+        let status = Command::new("chown").args(["postgres:postgres"]).arg(&dir).status();
+        if !status.is_ok_and(|s| s.success()) {
+            return Err(format!("cannot give {} to the postgres user", dir.display()));
+        }
+    }
+    let data = dir.join("data");
+    let out = command(&bin.join("initdb"), as_root)
+        .args(["-A", "trust", "-U", "postgres", "-N", "-E", "UTF8", "--locale=C", "-D"])
+        .arg(&data)
+        .output()
+        .map_err(|e| format!("initdb: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("initdb failed: {}", String::from_utf8_lossy(&out.stderr)));
+    }
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map_err(|e| e.to_string())?
+        .port();
+    let log = std::fs::File::create(dir.join("server.log")).map_err(|e| e.to_string())?;
+    let mut server = command(&bin.join("postgres"), as_root);
+    server.arg("-D").arg(&data).args(["-p", &port.to_string(), "-k"]).arg(&dir).args([
+        "-c",
+        "listen_addresses=127.0.0.1",
+        "-c",
+        "max_connections=400",
+    ]);
+    if !DURABLE.load(Ordering::Relaxed) {
+        server.args(["-c", "fsync=off", "-c", "synchronous_commit=off", "-c", "full_page_writes=off"]);
+    }
+    server.stdout(Stdio::null()).stderr(log);
+    // The thread that starts the server never ends, so the parent-death signal fires only
+    // when the whole test process does.
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let child = server.spawn();
+        let _ = tx.send(child.map(|_| ()).map_err(|e| e.to_string()));
+        loop {
+            std::thread::park();
+        }
+    });
+    rx.recv().map_err(|e| e.to_string())?.map_err(|e| format!("postgres: {e}"))?;
+    let base = format!("postgres://postgres@127.0.0.1:{port}");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let ok = std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
+            && Command::new(bin.join("pg_isready"))
+                .args(["-h", "127.0.0.1", "-p", &port.to_string()])
+                .output()
+                .is_ok_and(|o| o.status.success());
+        if ok {
+            return Ok(Cluster { base });
+        }
+        if Instant::now() > deadline {
+            let log = std::fs::read_to_string(dir.join("server.log")).unwrap_or_default();
+            return Err(format!("the server did not start in 60 s:\n{log}"));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Removes the data folders of earlier runs whose process is gone.
+fn remove_stale() {
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(pid) = name.to_str().and_then(|n| n.strip_prefix("rackd-pg-")) else { continue };
+        if !Path::new("/proc").join(pid).exists() {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
+}
