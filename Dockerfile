@@ -7,7 +7,7 @@
 #
 # Base images are pinned by version tag and digest; both are build arguments so that a
 # machine without Docker Hub can build from images it provides itself
-# (container/local-bases.sh, see the README). To move to newer bases, change the tag and
+# (container/local-bases.sh, see docs/operations/container.md). To move to newer bases, change the tag and
 # the digest together (`docker buildx imagetools inspect IMAGE:TAG` shows the digest).
 # No ENV here sets configuration: the configuration file is the one place it comes from.
 ARG RUST_IMAGE=docker.io/library/rust:1.95.0-bookworm@sha256:6258907abe69656e41cd992e0b705cdcfabcbbe3db374f92ed2d47121282d4a1

@@ -8,7 +8,7 @@ use rackd::cli::{Cli, LogFormat};
 use tracing_subscriber::EnvFilter;
 
 /// mimalloc instead of glibc's malloc: measured in `bench intake` (batches +8%, +12% with
-/// the writer's statements allocated at their size), see docs/benchmarks/intake.md. The
+/// the writer's statements allocated at their size), see docs/development/benchmarks/intake.md. The
 /// benchmark (`examples/bench`) uses the same, so it measures this. It serves C's `malloc`
 /// too (the crate's `override` feature, in Cargo.toml), so SQLite's allocations as well.
 #[global_allocator]

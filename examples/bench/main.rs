@@ -13,7 +13,7 @@
 //! An example rather than a `rackd bench` subcommand, so that `cargo build --release` of
 //! the service neither compiles nor links the load generators' crates (hdrhistogram,
 //! tokio-tungstenite, tempfile are dev-dependencies), while `cargo test` and clippy still
-//! build and check it. Figures and what they mean: the README's benchmark section.
+//! build and check it. Figures and what they mean: docs/development/benchmarks.md.
 //!
 //! `ws` and `fleet` measure the server's CPU apart from the load generator's, so they run
 //! rackd as a child process. The child is this same executable started as `bench rackd
@@ -42,7 +42,7 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 /// The benchmarks.
 #[derive(Parser, Debug)]
-#[command(name = "bench", about = "rackd's benchmarks (see README)")]
+#[command(name = "bench", about = "rackd's benchmarks (see docs/development/benchmarks.md)")]
 enum Bench {
     /// Intake: single POSTs, batch POSTs and a trivial route, at N concurrent clients.
     Intake {

@@ -103,7 +103,8 @@ impl Modify for Security {
 
 /// `/metrics`, documented.
 #[utoipa::path(get, path = "/metrics", tag = "operations",
-    responses((status = 200, description = "The metrics (README: Metrics): Prometheus text format 0.0.4 \
+    responses((status = 200, description = "The metrics (docs/operations/metrics.md): \
+Prometheus text format 0.0.4 \
 (`text/plain; version=0.0.4; charset=utf-8`), or OpenMetrics 1.0.0 (`application/openmetrics-text; version=1.0.0; \
 charset=utf-8`) when the `Accept` header asks for it", content(
         (String = "text/plain"),

@@ -20,8 +20,8 @@ use crate::sim::memory::SimMemory;
 pub struct PresetArgs {
     /// Load initial values and read-only ranges from FILE before serving (JSON, or TOML when
     /// it ends in .toml), addresses in the simulator's notation; for Modbus: {"values": [{"address": "4x100", "type": "f32", "word_order":
-    /// "cdab", "value": 3.5}, ...], "read_only": [{"address": "1x0", "count": 16}]}. See the
-    /// README, "Simulators", and config/sim/.
+    /// "cdab", "value": 3.5}, ...], "read_only": [{"address": "1x0", "count": 16}]}. See
+    /// docs/commissioning/simulators.md and config/sim/.
     #[arg(long, value_name = "FILE")]
     pub preset: Option<PathBuf>,
     /// Serve a control surface on HOST:PORT (HTTP/JSON): GET /values?address=4x100&type=f32,

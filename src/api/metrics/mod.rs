@@ -12,7 +12,7 @@
 //! Content negotiation ([`format`](mod@format)): OpenMetrics when the scraper's `Accept` asks for it,
 //! Prometheus text 0.0.4 otherwise; each is served exactly, with its own content type.
 //!
-//! The full list of families is in the README's "Metrics" section.
+//! The full list of families is in docs/operations/metrics.md.
 
 pub mod format;
 #[cfg(target_os = "linux")]

@@ -9,7 +9,7 @@
 //! reference, and the group is then rolled back and applied again, its references read (see
 //! [`super::commit`]). The read did what the index does anyway, one probe a job, plus a
 //! JSON parameter to build and parse: measured with `bench intake`, a tenth to a sixth of a
-//! group's time on either path (figures in docs/benchmarks/intake.md).
+//! group's time on either path (figures in docs/development/benchmarks/intake.md).
 
 use std::collections::{BTreeSet, HashMap};
 use std::sync::LazyLock;

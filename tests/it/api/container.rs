@@ -1,7 +1,7 @@
 //! The container files (Dockerfile, compose.yaml, config/container.toml, .dockerignore) read
 //! and checked for the properties a site relies on, so that they cannot regress silently.
-//! Building the image compiles rackd in release, far too slow for every CI run; the README's
-//! container section records the end-to-end run with podman.
+//! Building the image compiles rackd in release, far too slow for every CI run;
+//! docs/operations/container.md records the end-to-end run with podman.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
