@@ -17,8 +17,8 @@ export function getKey() {
 }
 
 /** Stores a key; an empty one removes it. */
-export function setKey(key) {
-  const k = (key || '').trim();
+export function setKey(value) {
+  const k = (value || '').trim();
   try {
     if (k) localStorage.setItem(STORAGE, k);
     else localStorage.removeItem(STORAGE);
