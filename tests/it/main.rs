@@ -11,6 +11,7 @@
 mod api;
 mod browser;
 mod crane;
+mod docs;
 mod events;
 mod mc3e;
 mod mewtocol;

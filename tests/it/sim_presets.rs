@@ -76,7 +76,10 @@ async fn start(protocol: Protocol) -> Bench {
 
 async fn client(protocol: Protocol, bench: &Bench) -> std::sync::Arc<dyn PlcMemory> {
     let mut link = LinkConfig::new(protocol, bench.server.clone());
-    (link.timeout, link.retries) = (Duration::from_secs(2), 0);
+    // A fixed 2 s timeout, no retry: these tests read presets, not the adaptive timer, whose
+    // 2 ms floor a loaded machine can overshoot.
+    (link.timeout, link.retries, link.tuning.min_timeout) =
+        (Duration::from_secs(2), 0, Duration::from_secs(2));
     connect(&link).await.unwrap()
 }
 

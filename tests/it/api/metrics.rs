@@ -135,10 +135,15 @@ async fn both_formats_parse_with_their_types_and_show_devices_alarms_and_jobs() 
     let shelf1 = [("device", "shelf1")];
     let shelf2 = [("device", "shelf2")];
     let link_alarm = [("device", "shelf2"), ("class", "link")];
-    let families = scrape_until(&app, 20, "shelf2 offline with its link alarm", |f| {
+    // The writer times a job once its group has committed, a moment after the job reads as
+    // ended: wait for that too.
+    let ended = [("kind", "store"), ("state", "completed")];
+    let what = "shelf2 offline with its link alarm, and the job timed";
+    let families = scrape_until(&app, 20, what, |f| {
         sample(f, "rackd_device_online", &shelf2) == Some(0.0)
             && sample(f, "rackd_alarms_active", &link_alarm) == Some(1.0)
             && sample(f, "rackd_device_online", &shelf1) == Some(1.0)
+            && sample(f, "rackd_job_duration_seconds_count", &ended).is_some()
     })
     .await;
 
@@ -196,7 +201,6 @@ async fn both_formats_parse_with_their_types_and_show_devices_alarms_and_jobs() 
     assert_eq!(sample(&families, "rackd_jobs", &completed), Some(1.0));
     assert_eq!(sample(&families, "rackd_jobs", &[("device", "shelf2"), ("state", "queued")]), Some(0.0));
     assert_eq!(sample(&families, "rackd_job_dispatch_seconds_count", &[("kind", "store")]), Some(1.0));
-    let ended = [("kind", "store"), ("state", "completed")];
     assert_eq!(sample(&families, "rackd_job_duration_seconds_count", &ended), Some(1.0));
     assert!(
         sample(&families, "rackd_writer_group_size_count", &[]).unwrap() >= 3.0,

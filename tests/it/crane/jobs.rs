@@ -10,7 +10,9 @@ use super::*;
 use crate::support::eventually_every;
 
 async fn every_kind(transport: TransportKind) {
-    let (app, sim) = crane_app(transport, 5, |_| {}).await;
+    // 20 ms a step: a transfer (16 steps) outlasts a poll (20 ms) many times over, so it is
+    // seen running even when the tests around it load the machine.
+    let (app, sim) = crane_app(transport, 20, |_| {}).await;
     let jobs = [
         (json!({"kind": "store", "barcode": "PAL-1", "to": cloc(1, 5, 3, 2)}), [1, 5, 3, 2], 2),
         (json!({"kind": "retrieve", "from": cloc(2, 20, 8, 1)}), [1, 0, 1, 1], 2),

@@ -12,6 +12,7 @@ use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use rackd::store::Engine;
 use rackd::wire::task_id_for;
 use serde_json::{Value, json};
+use time::format_description::well_known::Rfc3339;
 
 use super::{cloc, crane, device_for, submit, wait_job, with_crane};
 use crate::support::eventually;
@@ -125,8 +126,9 @@ async fn a_store_in_front_of_a_box_an_open_job_wants_waits_for_it() {
     for id in &ids {
         let done = wait_job(&app, *id, &["completed", "failed"], 20).await;
         assert_eq!(done["state"], "completed", "{done}");
-        ended.push(done["updated_at"].as_str().unwrap().to_owned());
+        ended.push(time::OffsetDateTime::parse(done["updated_at"].as_str().unwrap(), &Rfc3339).unwrap());
     }
+    // As times, not text: a time on the whole second is written without a fraction.
     assert!(ended[1] < ended[0], "the retrieve ended before the store: {ended:?}");
     let (_, moves) = app.get("/api/v1/jobs?kind=move").await;
     assert!(moves["jobs"].as_array().unwrap().is_empty(), "no relocation was needed: {moves}");

@@ -70,13 +70,19 @@ async fn a_standby_serves_forwards_and_takes_over_when_the_active_node_lets_go()
 
     // A job submitted to the standby is driven by the active node, and the standby's
     // subscribers see it run: its hub follows the log every node writes.
-    let mut ws = Ws::connect(&b.base, "").await;
-    let snapshot = ws.json().await;
-    let devices = snapshot["data"]["devices"].as_array().unwrap();
-    assert!(
-        devices.iter().any(|d| d["id"] == "crane1"),
-        "the standby shows devices from the log: {snapshot}"
-    );
+    // The active node logs its crane's status once it has polled it.
+    let (mut ws, snapshot) =
+        eventually("the standby to show devices from the log", Duration::from_secs(10), async || {
+            let mut ws = Ws::connect(&b.base, "").await;
+            let snapshot = ws.json().await;
+            let devices = snapshot["data"]["devices"].as_array().unwrap();
+            if devices.iter().any(|d| d["id"] == "crane1") {
+                Ok((ws, snapshot))
+            } else {
+                Err(snapshot["data"]["devices"].clone())
+            }
+        })
+        .await;
     let (status, job) = b.post("/api/v1/jobs", &travel("via-b", 3)).await;
     assert_eq!(status, 201, "{job}");
     completed(&b, job["id"].as_i64().unwrap()).await;
