@@ -19,6 +19,25 @@
 //!   where rackd listens or writes. `--listen` and `--database` stay as flags.
 //! - Variables without a double underscore are the command line's own (`RACKD_CONFIG`,
 //!   `RACKD_LOG`, `RACKD_LOG_FORMAT`, `RACKD_HEALTHCHECK_URL`) and are not settings.
+//!
+//! Why not figment's own `figment::providers::Env` (figment 0.10.19, `env` feature), which
+//! also strips a prefix, splits on `__`, lowercases and parses values. It would replace
+//! [`scalar`] and [`insert`], not the checks, and it does not fit around them:
+//! - it reads `std::env::vars_os()` itself and takes no list, while the loader takes the
+//!   variables as data (`Sources::env`): the configuration tests give theirs that way,
+//!   side by side, without touching the process environment (setting a variable is
+//!   `unsafe` in edition 2024, which the lints forbid);
+//! - the checks need each variable as it was written (the retired names, the suggestion
+//!   that keeps the variable's own case, `env RACKD_SERVER__LISTEN` as the origin in
+//!   messages), and `Env` hands over only the lowercased key; its filters cannot fail, so
+//!   the checks would walk the raw variables anyway;
+//! - it drops, silently, a variable with an empty segment (`RACKD_SERVER____LISTEN`), which
+//!   is refused here as an unknown key;
+//! - its value parser reads more than scalars, so a value would set something else: text
+//!   starting with `[`, `{`, `"` or `'` becomes an array, a table, a string without its
+//!   quotes or a character, text is trimmed, and `1e3` stays text;
+//! - the `env` feature brings pear, pear_codegen (a proc macro), proc-macro2-diagnostics,
+//!   inlinable_string and yansi, none of them in the build today.
 
 use figment::value::{Dict, Map, Value};
 use figment::{Metadata, Profile, Provider};

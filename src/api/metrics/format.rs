@@ -1,8 +1,8 @@
 //! The two text formats `/metrics` speaks, which one a scraper asked for, and the
 //! conversion from OpenMetrics (what prometheus-client writes) to Prometheus text 0.0.4.
 //!
-//! Why a converter and not a second encoder: prometheus-client writes OpenMetrics only,
-//! and for the metric types rackd uses the two formats differ in a few metadata lines,
+//! Why a converter and not a second encoder: prometheus-client 0.24 writes OpenMetrics
+//! only, and for the metric types rackd uses the two formats differ in a few metadata lines,
 //! never in samples:
 //! - a counter's `# HELP` and `# TYPE` name its family (`x`) in OpenMetrics and the sample
 //!   (`x_total`) in 0.0.4;
@@ -14,6 +14,28 @@
 //! converter refuses what it does not know how to convert (`stateset`, `gaugehistogram`,
 //! `summary`, exemplars) rather than pass on text a 0.0.4 parser would misread; rackd
 //! registers none of them, and a unit test converts the whole registry's output.
+//!
+//! The crates that could do this instead, and why none does yet:
+//! - **prometheus-client 0.26.0** adds `encoding::prometheus_text::encode`, a 0.0.4 encoder
+//!   over the same registry and collectors: the right replacement, but not byte for byte.
+//!   It writes bucket bounds as Go does (`le="1"`, `le="3600"`) where OpenMetrics, and so
+//!   today's 0.0.4, has `le="1.0"`, `le="3600.0"` (its own tests show both), so every
+//!   integer bound of rackd's histograms (`writer_group_size`, `job_dispatch_seconds`,
+//!   `job_duration_seconds`, ...) would change label value: new series for a scraper that
+//!   stores them as they come (Prometheus 2.x). The same upgrade escapes label values
+//!   itself (0.25.2), so [`super::scrape::Text`]'s escaping must go in the same change.
+//!   Moving to it, once a change of `le` in 0.0.4 is accepted, deletes [`to_prometheus`]
+//!   and that escaping.
+//! - **prometheus 0.14.0** (tikv): its `TextEncoder` writes 0.0.4 from the crate's own
+//!   protobuf-shaped `MetricFamily`s and reads no text, so it would need an OpenMetrics
+//!   parser in front of it, and a second metrics library.
+//! - **prometheus-parse 0.2.5**: reads 0.0.4 text into samples; no OpenMetrics, no writer.
+//! - **openmetrics-parser 0.5.1**: reads either format into its own model
+//!   (`OpenMetricsType`, `PrometheusType`) and prints it back in the same format, with no
+//!   conversion between the two; LGPL-3.0, with pest and pest_derive to compile.
+//!
+//! Content negotiation stays here in any case: prometheus-client reads no `Accept` header
+//! (0.26.0 has the 0.0.4 content type as a constant, nothing more).
 
 use axum::http::HeaderValue;
 

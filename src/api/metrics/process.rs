@@ -2,12 +2,29 @@
 //! `process_virtual_memory_bytes`, `process_open_fds`, `process_max_fds`,
 //! `process_start_time_seconds`), read from `/proc` at each scrape.
 //!
-//! Why by hand: prometheus-client has no process collector, and the crates that have one
-//! either belong to another metrics library (the `prometheus` crate, `metrics-process`) or
-//! bring the whole of `procfs` for the five numbers needed here. `/proc/self/stat`,
-//! `/proc/stat`, `/proc/self/fd` and `/proc/self/limits` are a stable kernel interface;
-//! the clock tick and page size come from `rustix` (the lints forbid `unsafe`, so no
-//! `libc::sysconf`).
+//! Why by hand: `/proc/self/stat`, `/proc/stat`, `/proc/self/fd` and `/proc/self/limits`
+//! are a stable kernel interface, and the parsing is [`parse`] and [`max_fds`], some
+//! twenty lines; the clock tick and page size come from `rustix` (the lints forbid
+//! `unsafe`, so no `libc::sysconf`). The crates that could do it, and why none fits:
+//! - **prometheus-client** (0.24.1 here, 0.26.0 the latest) has no process collector: its
+//!   issue #29 asks for one and pull request #232 ("WIP: process collector") is still open.
+//! - **kubert-prometheus-process 0.2.3** (Linkerd's collector for prometheus-client) is built
+//!   on prometheus-client 0.23, whose `Registry` and `Collector` are other types than
+//!   rackd's 0.24 ones (a second copy of the crate); it serves another set (its own help
+//!   texts, `# UNIT` lines, and uptime, clock time, threads and network bytes besides),
+//!   takes the start time from its own registration rather than from the kernel, and
+//!   reads through procfs 0.17 and `libc::sysconf` in `unsafe`.
+//! - **metrics-process 2.4.3** targets the `metrics` facade; without its default feature,
+//!   `collector::collect()` hands over the figures, but the start time in whole seconds
+//!   and an unlimited `max_fds` as 0 (both would change what is served), through procfs
+//!   0.18 and once_cell.
+//! - **prometheus 0.14.0** (tikv) has a `ProcessCollector` behind its `process` feature, for
+//!   its own registry: a second metrics library, on procfs and libc.
+//! - **procfs 0.18.0** alone (without default features) would replace [`parse`] and
+//!   [`max_fds`] with the same figures, but it is some 14,500 lines for all of `/proc`:
+//!   added to this build it took 8.6 s (procfs-core) then 12.6 s (procfs), one after the
+//!   other, on the project's 2-core machine, and rebuilt rustix with two more features
+//!   (`system`, `thread`), to save twenty lines.
 //!
 //! The names are the standard ones, without rackd's prefix, so that the dashboards and
 //! alerts written for every other exporter work as they are. A value that cannot be read

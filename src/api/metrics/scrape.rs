@@ -28,7 +28,8 @@ use crate::domain::{AlarmClass, JobState};
 use crate::protocols::transport::ROUND_TRIP_BOUNDS;
 
 /// A label value from outside the code (a device id, an address): escaped as both text
-/// formats want (prometheus-client writes label values as they are).
+/// formats want (prometheus-client 0.24 writes label values as they are; 0.25.2 and later
+/// escape them, and this must go with that upgrade: see [`super::format`]).
 #[derive(Clone, Debug, Hash, PartialEq, Eq)]
 pub struct Text(pub String);
 
