@@ -116,8 +116,15 @@ async fn a_silent_device_raises_a_link_alarm_until_it_answers_again(#[case] engi
     // answers, no heartbeat alarm follows the outage.
     crate::support::wait_for_more("requests of the crane", 30, 10, || sim.requests_seen()).await;
     let (_, page) = app.get("/api/v1/alarms?device=crane1").await;
-    let kinds: Vec<&str> =
-        page["alarms"].as_array().unwrap().iter().map(|a| a["kind"].as_str().unwrap()).collect();
+    // A `degraded` warning may come and go on a loaded test machine (late replies are the
+    // link's quality, which it reports); the outage itself is one link alarm, and nothing else.
+    let kinds: Vec<&str> = page["alarms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["kind"].as_str().unwrap())
+        .filter(|kind| *kind != "degraded")
+        .collect();
     assert_eq!(kinds, vec!["link"], "{page}");
 }
 
