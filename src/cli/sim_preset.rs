@@ -14,7 +14,7 @@
 //! }
 //! ```
 //!
-//! Entries use the tags' vocabulary ([`TagDef`](crate::devices::tagdef::TagDef):
+//! Entries use the tags' vocabulary ([`TagDef`](crate::wire::tags::TagDef):
 //! addresses in the protocol's notation, `ADDRESS.N` for a bit of a word, types bool, u16,
 //! i16, u32, i32, f32, `word_order`) and their codec, plus what a bench needs and a tag
 //! does not:

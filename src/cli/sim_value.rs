@@ -9,12 +9,12 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value as Json;
 
 use super::sim_text::{text_of, text_words};
-use crate::devices::tagdef::spec::TagError;
-use crate::devices::tagdef::{Place, TagDef, TagSpec, TagType, TagValue, WordOrder, codec};
 use crate::protocols::notation::{self, Items};
 use crate::protocols::protocol::Family;
 use crate::protocols::{Address, Protocol};
 use crate::sim::memory::{SimMemory, Span};
+use crate::wire::tags::spec::TagError;
+use crate::wire::tags::{Place, TagDef, TagSpec, TagType, TagValue, WordOrder, codec};
 
 /// A value's type: a tag type, or an ASCII string.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]

@@ -15,7 +15,6 @@ pub mod port;
 pub mod repeats;
 pub mod shelf;
 pub mod status;
-pub mod tagdef;
 pub mod tags;
 
 use std::collections::BTreeMap;

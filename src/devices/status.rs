@@ -80,7 +80,7 @@ pub struct DeviceStatus {
     pub crane: Option<CraneStatus>,
     /// Each tag's latest value, by name (tags devices only; absent for other kinds).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub tags: Option<std::collections::BTreeMap<String, super::tagdef::TagStatus>>,
+    pub tags: Option<std::collections::BTreeMap<String, crate::wire::tags::TagStatus>>,
 }
 
 /// A stacker crane's own registers, as last read.

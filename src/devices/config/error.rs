@@ -66,7 +66,7 @@ impl Problem {
     /// The entry's key the problem is about (`tags.beacon.red` for one tag), for
     /// pointing at its line.
     pub fn key(&self) -> String {
-        use crate::devices::tagdef::TagError;
+        use crate::wire::tags::TagError;
         let words = |e: &WordsError| match e {
             WordsError::Address { key, .. }
             | WordsError::NotWords { key, .. }

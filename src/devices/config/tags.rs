@@ -3,8 +3,8 @@
 use std::time::Duration;
 
 use super::defaults::{OFFLINE_AFTER, POLL_MS};
-use crate::devices::tagdef::{TagDef, TagError, TagSpec, TagTable};
 use crate::protocols::link::LinkConfig;
+use crate::wire::tags::{TagDef, TagError, TagSpec, TagTable};
 
 /// A tags device's settings, every default filled in.
 #[derive(Clone, Debug, PartialEq)]
