@@ -3,12 +3,12 @@
 //!
 //! Numbers and bits go through the tags' own resolution and codec ([`TagSpec`],
 //! [`codec`]), so an entry means what the same tag would mean to rackd. Strings are
-//! [`super::sim_text`]'s.
+//! [`super::text`]'s.
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value as Json;
 
-use super::sim_text::{text_of, text_words};
+use super::text::{text_of, text_words};
 use crate::protocols::notation::{self, Items};
 use crate::protocols::protocol::Family;
 use crate::protocols::{Address, Protocol};
