@@ -10,13 +10,13 @@
 //! app                building and running the service
 //! api                HTTP routes, WebSocket, OpenAPI, the dashboard
 //! service            intake, the dispatcher, the monitor, the event hub
-//! config             the configuration file
-//! auth               keys and roles
 //! devices            what machines mean (adapters), over a port the service implements
+//! config             the configuration: file, environment, layers, checks, every device's settings
+//! auth               keys and roles (leaf)
 //! store              the database
 //! sim                simulated machines, on the protocol servers
-//! protocols          how to talk to PLCs
-//! wire               the machines' interfaces word by word (only protocol names below)
+//! wire               the machines' interfaces word by word, in the protocols' notations
+//! protocols          how to talk to PLCs (leaf)
 //! domain             the words of the warehouse (leaf)
 //! ```
 //!
@@ -34,16 +34,16 @@ use std::path::{Path, PathBuf};
 /// What each top-level module may use, besides itself.
 const ALLOWED: &[(&str, &[&str])] = &[
     ("domain", &[]),
-    ("wire", &["domain", "protocols"]),
     ("protocols", &[]),
-    ("sim", &["protocols", "wire", "domain"]),
+    ("wire", &["protocols", "domain"]),
+    ("sim", &["wire", "protocols", "domain"]),
     ("store", &["domain"]),
-    ("devices", &["protocols", "wire", "domain"]),
     ("auth", &[]),
-    ("config", &["devices", "protocols", "auth", "domain"]),
-    ("service", &["devices", "store", "config", "protocols", "wire", "domain"]),
-    ("api", &["service", "devices", "store", "config", "auth", "protocols", "wire", "domain"]),
-    ("app", &["api", "service", "devices", "store", "config", "auth", "protocols", "domain"]),
+    ("config", &["auth", "wire", "protocols", "domain"]),
+    ("devices", &["config", "wire", "protocols", "domain"]),
+    ("service", &["devices", "config", "store", "wire", "protocols", "domain"]),
+    ("api", &["service", "devices", "config", "auth", "store", "wire", "protocols", "domain"]),
+    ("app", &["api", "service", "devices", "config", "auth", "store", "protocols", "domain"]),
     (
         "cli",
         &[
@@ -51,12 +51,12 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "api",
             "service",
             "devices",
-            "store",
             "config",
             "auth",
+            "store",
             "sim",
-            "protocols",
             "wire",
+            "protocols",
             "domain",
         ],
     ),

@@ -16,8 +16,7 @@ use std::time::Duration;
 use anyhow::Context;
 
 use crate::config::Config;
-use crate::devices::DeviceConfig;
-use crate::devices::config::{CraneConfig, ShelfConfig, TagsConfig};
+use crate::config::devices::{CraneConfig, DeviceConfig, ShelfConfig, TagsConfig};
 use crate::protocols::Protocol;
 use crate::protocols::link::LinkConfig;
 use crate::protocols::mc3e::TransportKind;

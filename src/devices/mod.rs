@@ -8,7 +8,6 @@
 //! answered by the device task, which alone hands work to the machine.
 
 pub mod cancel;
-pub mod config;
 pub mod crane;
 pub mod gate;
 pub mod port;
@@ -24,8 +23,9 @@ use std::time::Duration;
 use tokio::sync::{mpsc, oneshot, watch};
 use tracing::Instrument;
 
+use crate::config::devices::DeviceConfig;
+
 pub use cancel::{CancelRefusal, Withdrawal};
-pub use config::{DeviceConfig, DeviceKind};
 pub use status::{DeviceStatus, StatusCell};
 
 /// What the rest of rackd may ask of a device task.

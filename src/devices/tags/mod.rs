@@ -42,9 +42,9 @@ use std::time::Duration;
 use tokio::sync::mpsc;
 use tokio::time::{Instant, sleep_until};
 
-use super::config::TagsConfig;
 use super::status::StatusCell;
 use super::{CancelRefusal, DeviceRequest};
+use crate::config::devices::TagsConfig;
 use crate::protocols::{PlcError, PlcMemory};
 use crate::wire::tags::{Place, TagSpec, TagStatus};
 

@@ -22,10 +22,10 @@ use std::time::Duration;
 
 use crate::support::eventually_every;
 use async_trait::async_trait;
-use rackd::devices::config::CraneConfig;
+use rackd::config::devices::{CraneConfig, DeviceKind};
 use rackd::devices::crane::Crane;
 use rackd::devices::port::{Port, ReportError};
-use rackd::devices::{DeviceKind, DeviceRequest, DeviceStatus, StatusCell};
+use rackd::devices::{DeviceRequest, DeviceStatus, StatusCell};
 use rackd::domain::report::path;
 use rackd::domain::{Job, JobSpec, JobState, Location, NewJob, Priority, Report, Reported};
 use rackd::protocols::mc3e::{Bank, Device, SharedBank, device};

@@ -135,7 +135,7 @@ pub fn check_layout(config: &ShelfConfig) -> Result<(), WordsError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::config::DeviceConfig;
+    use crate::config::devices::DeviceConfig;
 
     fn shelf_over(protocol: &str, extra: &str) -> ShelfConfig {
         let text = format!(

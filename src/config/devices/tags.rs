@@ -67,7 +67,7 @@ impl TagsConfig {
 
 #[cfg(test)]
 mod tests {
-    use crate::devices::config::DeviceConfig;
+    use crate::config::devices::DeviceConfig;
 
     fn tags_entry(extra: &str) -> anyhow::Result<DeviceConfig> {
         let text = format!(

@@ -180,7 +180,7 @@ impl CraneConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::config::DeviceConfig;
+    use crate::config::devices::DeviceConfig;
 
     #[test]
     fn a_crane_entry_has_the_spec_defaults() {
