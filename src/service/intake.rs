@@ -165,7 +165,7 @@ impl Rules {
             )));
         }
         for z in &zones {
-            self.layout.check_zone(z)?;
+            z.check(&self.layout)?;
         }
         Ok(Some(JobSpec::Putaway { zones, class: req.class }))
     }

@@ -17,8 +17,8 @@ pub mod modbus;
 
 use std::time::Duration;
 
-use crate::protocols::Protocol;
 use crate::protocols::serial::SerialSettings;
+use crate::protocols::{DeviceCode, Protocol};
 use crate::sim::shelf::{ShelfProtocol, ShelfSimOptions};
 use crate::sim::standalone;
 use faults::FaultArgs;
@@ -91,7 +91,7 @@ impl SimShelfArgs {
             "--fail must be between 0 and 1, got {}",
             self.fail
         );
-        let faults = self.faults.faults_with(|text| self.protocol.device_code(text))?;
+        let faults = self.faults.faults_with(|text| DeviceCode::parse(self.protocol, text))?;
         Ok(ShelfSimOptions {
             protocol: ShelfProtocol::try_from(self.protocol)?,
             slots: self.slots,
