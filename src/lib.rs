@@ -6,11 +6,11 @@
 //! dashboard), [`service`] (intake, the dispatcher, the device monitor, the event hub),
 //! [`devices`] (what machines mean; they get work through a port the dispatcher
 //! implements), [`config`] (all of the configuration, every device's settings included),
-//! [`auth`] (keys and roles), [`store`] (SQLite, under the service), [`sim`] (simulated
-//! machines, built on the protocol servers), [`wire`] (the machines' interfaces word by
-//! word, in the protocols' notations), [`protocols`] (how to talk to PLCs, over one
-//! transport layer) and [`domain`] (the validated words every layer shares). [`auth`],
-//! [`protocols`] and [`domain`] use no other layer.
+//! [`auth`] (keys and roles), [`store`] (SQLite or PostgreSQL, written by one writer under
+//! the service), [`sim`] (simulated machines, built on the protocol servers), [`wire`] (the
+//! machines' interfaces word by word, in the protocols' notations), [`protocols`] (how to
+//! talk to PLCs, over one transport layer) and [`domain`] (the validated words every layer
+//! shares). [`auth`], [`protocols`] and [`domain`] use no other layer.
 
 pub mod api;
 pub mod app;
