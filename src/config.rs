@@ -3,6 +3,10 @@
 //! see [`env`](mod@env)), the command line (`--listen`, `--database`). [`layers`] merges them with
 //! figment and says where each value came from ([`Origin`]).
 //!
+//! Every device's settings are here too ([`devices`]: one `[[devices]]` entry per machine,
+//! a [`devices::DeviceConfig`] per kind), so the configuration is checked whole without
+//! the adapters that use it.
+//!
 //! With no file, [`Config::demo`] describes the demo site (the environment and command
 //! line still apply). Unknown keys are errors, in the file and in the environment, so a
 //! typo is reported with its key and line (or variable) rather than silently ignored.
@@ -14,6 +18,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 mod check;
+pub mod devices;
 pub mod env;
 mod error;
 mod events;
@@ -30,6 +35,7 @@ pub use origin::Origin;
 
 pub use crate::auth::{AuthConfig, KeyConfig};
 use crate::domain::{AisleLayout, Layout};
+use devices::{DeviceConfig, RawDevice};
 
 /// The whole configuration file.
 #[derive(Clone, Debug, Default, PartialEq, Deserialize, Serialize)]
@@ -53,15 +59,11 @@ pub struct Config {
     pub cluster: Option<ClusterConfig>,
     /// The machines, one `[[devices]]` entry each.
     #[serde(serialize_with = "flat_devices")]
-    pub devices: Vec<crate::devices::DeviceConfig>,
+    pub devices: Vec<DeviceConfig>,
 }
 
 /// Devices written as the file writes them, every key of their kind filled in.
-fn flat_devices<S: serde::Serializer>(
-    devices: &[crate::devices::DeviceConfig],
-    s: S,
-) -> Result<S::Ok, S::Error> {
-    use crate::devices::config::RawDevice;
+fn flat_devices<S: serde::Serializer>(devices: &[DeviceConfig], s: S) -> Result<S::Ok, S::Error> {
     s.collect_seq(devices.iter().map(RawDevice::from))
 }
 

@@ -1,7 +1,7 @@
-//! The layering, checked: a test that reads every source file and fails on a `crate::`
-//! or `super::` path that points up the layers, or on an import cycle between top-level
-//! modules or between the modules of one layer (`devices::shelf` and `devices::crane`,
-//! say).
+//! The layering, checked: a test that reads every source file and fails on a path that
+//! points up the layers, or on an import cycle between the children of any module, at
+//! any depth: between top-level modules, between `devices::shelf` and `devices::crane`,
+//! between `protocols::modbus::pdu` and `protocols::modbus::decode`.
 //!
 //! The layers, top to bottom (what each may use is [`ALLOWED`]):
 //!
@@ -10,40 +10,47 @@
 //! app                building and running the service
 //! api                HTTP routes, WebSocket, OpenAPI, the dashboard
 //! service            intake, the dispatcher, the monitor, the event hub
-//! config             the configuration file
-//! auth               keys and roles
 //! devices            what machines mean (adapters), over a port the service implements
+//! config             the configuration: file, environment, layers, checks, every device's settings
+//! auth               keys and roles (leaf)
 //! store              the database
 //! sim                simulated machines, on the protocol servers
-//! protocols          how to talk to PLCs
-//! wire               the machines' interfaces word by word (only protocol names below)
+//! wire               the machines' interfaces word by word, in the protocols' notations
+//! protocols          how to talk to PLCs (leaf)
 //! domain             the words of the warehouse (leaf)
 //! ```
 //!
-//! Unit tests (a `mod` under `#[cfg(test)]`, and `*_tests.rs` files) are not looked at: a
-//! test may build whatever it needs.
+//! What a file names is read by [`scan`]: `use` trees, paths in the code, and the names a
+//! module re-exports followed to where they are defined. `a::b::c` naming `a::b::d` is an
+//! edge `c -> d` between the children of `a::b`; a module naming its own parent or child
+//! makes none. Unit tests (`#[cfg(test)]` items, and the files they declare) are not looked
+//! at: a test may build whatever it needs.
 //!
 //! A Cargo workspace would make an upward `use` a compile error; one crate keeps builds
 //! simple on small machines, and this test makes the same promise at `cargo test`.
 
 #![cfg(test)]
 
+mod scan;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
+
+use scan::{Edge, Edges, Module};
 
 /// What each top-level module may use, besides itself.
 const ALLOWED: &[(&str, &[&str])] = &[
     ("domain", &[]),
-    ("wire", &["domain", "protocols"]),
     ("protocols", &[]),
-    ("sim", &["protocols", "wire", "domain"]),
+    ("wire", &["protocols", "domain"]),
+    ("sim", &["wire", "protocols", "domain"]),
     ("store", &["domain"]),
-    ("devices", &["protocols", "wire", "domain"]),
     ("auth", &[]),
-    ("config", &["devices", "protocols", "auth", "domain"]),
-    ("service", &["devices", "store", "config", "protocols", "wire", "domain"]),
-    ("api", &["service", "devices", "store", "config", "auth", "protocols", "wire", "domain"]),
-    ("app", &["api", "service", "devices", "store", "config", "auth", "protocols", "domain"]),
+    ("config", &["auth", "wire", "protocols", "domain"]),
+    ("devices", &["config", "wire", "protocols", "domain"]),
+    ("service", &["devices", "config", "store", "wire", "protocols", "domain"]),
+    ("api", &["service", "devices", "config", "auth", "store", "wire", "protocols", "domain"]),
+    ("app", &["api", "service", "devices", "config", "auth", "store", "protocols", "domain"]),
     (
         "cli",
         &[
@@ -51,132 +58,41 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "api",
             "service",
             "devices",
-            "store",
             "config",
             "auth",
+            "store",
             "sim",
-            "protocols",
             "wire",
+            "protocols",
             "domain",
         ],
     ),
     ("layering", &[]),
 ];
 
-/// A module path (`["devices", "shelf", "poll"]`) for a file under `src/`.
-fn module_of(src: &Path, file: &Path) -> Vec<String> {
-    let rel = file.strip_prefix(src).unwrap();
-    let mut parts: Vec<String> = rel.iter().map(|p| p.to_string_lossy().into_owned()).collect();
-    let last = parts.pop().unwrap();
-    let stem = last.trim_end_matches(".rs");
-    if stem != "mod" && stem != "lib" && stem != "main" {
-        parts.push(stem.to_owned());
-    }
-    if stem == "main" {
-        parts.push("main".to_owned());
-    }
-    parts
-}
-
-fn files(dir: &Path, out: &mut Vec<PathBuf>) {
+/// Every `.rs` file under `dir`, relative to `root`, with its text.
+fn sources(root: &Path, dir: &Path, out: &mut Vec<(PathBuf, String)>) {
     for entry in std::fs::read_dir(dir).unwrap() {
         let path = entry.unwrap().path();
         if path.is_dir() {
-            files(&path, out);
+            sources(root, &path, out);
         } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
+            let text = std::fs::read_to_string(&path).unwrap();
+            out.push((path.strip_prefix(root).unwrap().to_owned(), text));
         }
     }
 }
 
-/// The module paths a line of code names: `crate::a::b` and `super::a` (resolved from
-/// `module`), first two segments of each.
-fn targets(line: &str, module: &[String]) -> Vec<Vec<String>> {
-    let mut found = Vec::new();
-    for (start, _) in line.match_indices("crate::").chain(line.match_indices("super::")) {
-        let before = line[..start].chars().last();
-        if before.is_some_and(|c| c.is_alphanumeric() || c == '_' || c == ':') {
-            continue;
-        }
-        let rest = &line[start..];
-        let mut segs: Vec<&str> = rest.split("::").collect();
-        let mut base: Vec<String> = Vec::new();
-        let mut i = 0;
-        if segs[0] == "crate" {
-            i = 1;
-        } else {
-            // Each `super` names the parent of the module (a `mod.rs` is its folder's).
-            base = module.to_vec();
-            while i < segs.len() && segs[i] == "super" {
-                base.pop();
-                i += 1;
-            }
-        }
-        segs.drain(..i);
-        for seg in segs.iter().take(2) {
-            let name: String = seg.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
-            if name.is_empty() || name.chars().next().is_some_and(|c| c.is_uppercase()) {
-                break;
-            }
-            base.push(name);
-        }
-        if !base.is_empty() {
-            found.push(base);
-        }
-    }
-    found
-}
-
-/// Every edge between modules, at the top level and within each top-level module.
-/// Edges between modules (from, to).
-type Edges = BTreeSet<(String, String)>;
-
-fn edges() -> (Edges, Edges, Vec<String>) {
+/// Every edge of the crate.
+fn crate_edges() -> Edges {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut all = Vec::new();
-    files(&src, &mut all);
-    let (mut top, mut inner, mut where_) = (BTreeSet::new(), BTreeSet::new(), Vec::new());
-    for file in all {
-        let module = module_of(&src, &file);
-        if module.is_empty() || module[0] == "layering" {
-            continue; // lib.rs, and this file's own examples
-        }
-        if file.to_string_lossy().ends_with("_tests.rs") {
-            continue;
-        }
-        let text = std::fs::read_to_string(&file).unwrap();
-        let lines: Vec<&str> = text.lines().collect();
-        for (n, line) in lines.iter().enumerate() {
-            let code = line.trim_start();
-            // A file's tests (a `mod` after `#[cfg(test)]`, at its end by convention) may
-            // reach across: a test builds whatever it needs.
-            if code == "#[cfg(test)]" && lines.get(n + 1).is_some_and(|l| l.trim_start().starts_with("mod "))
-            {
-                break;
-            }
-            if code.starts_with("//") {
-                continue;
-            }
-            let code = code.split(" //").next().unwrap_or(code);
-            for target in targets(code, &module) {
-                let (from, to) = (&module[0], &target[0]);
-                if from != to {
-                    top.insert((from.clone(), to.clone()));
-                    where_.push(format!("{}:{}: {from} -> {to}", file.display(), n + 1));
-                } else if module.len() > 1 && target.len() > 1 && module[1] != target[1] {
-                    let a = format!("{from}::{}", module[1]);
-                    let b = format!("{to}::{}", target[1]);
-                    where_.push(format!("{}:{}: {a} -> {b}", file.display(), n + 1));
-                    inner.insert((a, b));
-                }
-            }
-        }
-    }
-    (top, inner, where_)
+    sources(&src, &src, &mut all);
+    scan::edges(&all)
 }
 
-/// A cycle in `edges`, if there is one.
-fn cycle(edges: &Edges) -> Option<Vec<String>> {
+/// A cycle among `edges` (pairs of names), if there is one.
+fn cycle<'a>(edges: impl IntoIterator<Item = (&'a str, &'a str)>) -> Option<Vec<String>> {
     let mut next: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
     for (a, b) in edges {
         next.entry(a).or_default().push(b);
@@ -213,17 +129,68 @@ fn cycle(edges: &Edges) -> Option<Vec<String>> {
     None
 }
 
+/// The circles among the children of every module: each group of children that reach
+/// one another, with one cycle through them and every edge between them, where it is
+/// made; empty when there are none.
+fn cycles(edges: &Edges) -> Vec<String> {
+    let mut by_parent: BTreeMap<&Module, Vec<&Edge>> = BTreeMap::new();
+    for e in edges.keys() {
+        by_parent.entry(&e.parent).or_default().push(e);
+    }
+    let mut found = Vec::new();
+    for (parent, inner) in by_parent {
+        let pairs: Vec<(&str, &str)> = inner.iter().map(|e| (e.from.as_str(), e.to.as_str())).collect();
+        for circle in circles(&pairs) {
+            let name = if parent.is_empty() { "the crate".to_owned() } else { parent.join("::") };
+            let within = pairs.iter().filter(|(a, b)| circle.contains(a) && circle.contains(b));
+            let c = cycle(within.clone().copied()).unwrap_or_default();
+            let mut text = format!("inside {name}: {}", c.join(" -> "));
+            for (a, b) in within {
+                let e = Edge { parent: parent.clone(), from: a.to_string(), to: b.to_string() };
+                let mut at = edges[&e].clone();
+                at.dedup();
+                text.push_str(&format!("\n  {a} -> {b} at {}", at.join(", ")));
+            }
+            found.push(text);
+        }
+    }
+    found
+}
+
+/// The groups of two or more names that reach one another through `pairs`.
+fn circles<'a>(pairs: &[(&'a str, &'a str)]) -> Vec<BTreeSet<&'a str>> {
+    let mut reach: BTreeMap<&str, BTreeSet<&str>> = BTreeMap::new();
+    for (a, b) in pairs {
+        reach.entry(a).or_default().insert(b);
+        reach.entry(b).or_default();
+    }
+    loop {
+        let before: usize = reach.values().map(BTreeSet::len).sum();
+        for n in reach.keys().copied().collect::<Vec<_>>() {
+            let further: BTreeSet<&str> = reach[n].iter().flat_map(|m| reach[m].iter().copied()).collect();
+            reach.get_mut(n).unwrap().extend(further);
+        }
+        if reach.values().map(BTreeSet::len).sum::<usize>() == before {
+            break;
+        }
+    }
+    let mut groups: Vec<BTreeSet<&str>> = Vec::new();
+    for (n, to) in &reach {
+        let group: BTreeSet<&str> = to.iter().copied().filter(|m| reach[m].contains(n)).collect();
+        if group.len() > 1 && !groups.contains(&group) {
+            groups.push(group);
+        }
+    }
+    groups
+}
+
 #[test]
 fn dependencies_point_down() {
-    let (top, _, where_) = edges();
     let allowed: BTreeMap<&str, &[&str]> = ALLOWED.iter().copied().collect();
     let mut wrong = Vec::new();
-    for (from, to) in &top {
-        let ok = allowed.get(from.as_str()).is_some_and(|a| a.contains(&to.as_str()));
-        if !ok {
-            let at: Vec<&String> =
-                where_.iter().filter(|w| w.ends_with(&format!(": {from} -> {to}"))).collect();
-            wrong.push(format!("{from} -> {to} (at {at:?})"));
+    for (e, at) in crate_edges().iter().filter(|(e, _)| e.parent.is_empty()) {
+        if !allowed.get(e.from.as_str()).is_some_and(|a| a.contains(&e.to.as_str())) {
+            wrong.push(format!("{} -> {} (at {})", e.from, e.to, at.join(", ")));
         }
     }
     assert!(wrong.is_empty(), "upward or unlisted dependencies:\n{}", wrong.join("\n"));
@@ -231,32 +198,90 @@ fn dependencies_point_down() {
 
 #[test]
 fn no_import_cycles() {
-    let (top, inner, where_) = edges();
-    let mut all = top.clone();
-    all.extend(inner.iter().cloned());
-    if let Some(c) = cycle(&inner).or_else(|| cycle(&top)) {
-        let steps: Vec<String> = c.windows(2).map(|w| format!("{} -> {}", w[0], w[1])).collect();
-        let at: Vec<&String> =
-            where_.iter().filter(|w| steps.iter().any(|s| w.ends_with(&format!(": {s}")))).collect();
-        panic!(
-            "a cycle between modules: {}\n{}",
-            c.join(" -> "),
-            at.iter().map(|s| s.as_str()).collect::<Vec<_>>().join("\n")
-        );
-    }
+    let found = cycles(&crate_edges());
+    assert!(found.is_empty(), "import cycles:\n{}", found.join("\n"));
+}
+
+/// The edges of a made-up source tree, as `parent: from -> to`.
+fn edges_of(files: &[(&str, &str)]) -> Vec<String> {
+    let files: Vec<(PathBuf, String)> =
+        files.iter().map(|(p, t)| (PathBuf::from(p), t.to_string())).collect();
+    scan::edges(&files).keys().map(|e| format!("{}: {} -> {}", e.parent.join("::"), e.from, e.to)).collect()
 }
 
 #[test]
 fn the_scanner_resolves_paths() {
     let m = |s: &str| s.split("::").map(str::to_owned).collect::<Vec<_>>();
-    assert_eq!(targets("use crate::store::jobs;", &m("devices::shelf::poll")), vec![m("store::jobs")]);
-    assert_eq!(targets("use super::config::X;", &m("devices::shelf")), vec![m("devices::config")]);
-    assert_eq!(targets("use super::slot::X;", &m("devices::shelf::poll")), vec![m("devices::shelf::slot")]);
-    assert_eq!(targets("use super::super::wire;", &m("devices::shelf::poll")), vec![m("devices::wire")]);
-    assert_eq!(targets("let x = my_crate::y;", &m("api")), Vec::<Vec<String>>::new());
-    let mut edges = BTreeSet::new();
-    edges.insert(("a".to_owned(), "b".to_owned()));
-    assert_eq!(cycle(&edges), None);
-    edges.insert(("b".to_owned(), "a".to_owned()));
-    assert!(cycle(&edges).is_some());
+    let uses = |code: &str, file: &str| {
+        let scan = scan::scan_text(code, Path::new(file));
+        scan.uses.into_iter().map(|(_, path, _)| path.join("::")).collect::<Vec<_>>()
+    };
+    assert_eq!(scan::module_of(Path::new("devices/shelf/poll.rs")), m("devices::shelf::poll"));
+    assert_eq!(scan::module_of(Path::new("devices/shelf/mod.rs")), m("devices::shelf"));
+    assert_eq!(uses("use crate::store::jobs;", "a.rs"), ["crate::store::jobs"]);
+    assert_eq!(
+        uses("pub use super::{a::{self, B as C}, d::*};\nuse ::x;", "a.rs"),
+        ["super::a", "super::a::B", "super::d", "x"]
+    );
+    let paths = scan::scan_text("let x = my_crate::y; // crate::z\nlet s = \"crate::w\";", Path::new("a.rs"));
+    assert_eq!(paths.paths, [(m("my_crate::y"), 1)]);
+    let tests = scan::scan_text("#[cfg(test)]\n#[path = \"x_tests.rs\"]\nmod tests;\n", Path::new("a/x.rs"));
+    assert_eq!(tests.test_files, [PathBuf::from("a/x_tests.rs")]);
+
+    let tree = [
+        ("lib.rs", "pub mod devices; pub mod store;"),
+        ("store/mod.rs", "pub mod jobs; pub use jobs::Job;"),
+        ("store/jobs.rs", "pub struct Job;"),
+        ("devices/mod.rs", "pub mod shelf; pub mod config; mod wire;"),
+        ("devices/config.rs", ""),
+        ("devices/wire.rs", ""),
+        ("devices/shelf/mod.rs", "pub mod poll; pub mod slot; #[cfg(test)] mod tests;"),
+        ("devices/shelf/tests.rs", "use crate::devices::shelf::poll;"),
+        ("devices/shelf/slot.rs", "fn f() { super::super::wire::g() }"),
+        (
+            "devices/shelf/poll.rs",
+            "use crate::store::Job;\nuse super::slot::X;\nuse super::super::config as c;",
+        ),
+    ];
+    assert_eq!(
+        edges_of(&tree),
+        [
+            ": devices -> store",
+            "devices: shelf -> config",
+            "devices: shelf -> wire",
+            "devices::shelf: poll -> slot"
+        ]
+    );
+    assert_eq!(cycle([("a", "b")]), None);
+    assert!(cycle([("a", "b"), ("b", "a")]).is_some());
+}
+
+#[test]
+fn a_cycle_deep_down_is_found() {
+    let m = |s: &str| s.split("::").map(str::to_owned).collect::<Vec<_>>();
+    let mut edges = Edges::new();
+    for (from, to) in [
+        ("protocols::modbus::x", "protocols::modbus::y::z"),
+        ("protocols::modbus::y::w", "protocols::modbus::x"),
+    ] {
+        edges.insert(scan::edge(&m(from), &m(to)).unwrap(), vec![format!("{from}.rs:1")]);
+    }
+    let found = cycles(&edges);
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert!(found[0].starts_with("inside protocols::modbus: x -> y -> x"), "{}", found[0]);
+
+    // From the source: through a re-export, two levels down.
+    let tree = [
+        ("lib.rs", "pub mod protocols;"),
+        ("protocols/mod.rs", "pub mod modbus;"),
+        ("protocols/modbus/mod.rs", "pub mod x; pub mod y;"),
+        ("protocols/modbus/x.rs", "use super::y::Helper;\npub fn g() {}"),
+        ("protocols/modbus/y/mod.rs", "mod z;\npub use z::Helper;"),
+        ("protocols/modbus/y/z.rs", "pub struct Helper;\nfn f() { crate::protocols::modbus::x::g() }"),
+    ];
+    assert_eq!(edges_of(&tree), ["protocols::modbus: x -> y", "protocols::modbus: y -> x"]);
+    let found = cycles(&scan::edges(&tree.map(|(p, t)| (PathBuf::from(p), t.to_owned()))));
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert!(found[0].starts_with("inside protocols::modbus: x -> y -> x"), "{}", found[0]);
+    assert!(found[0].contains("y -> x at src/protocols/modbus/y/z.rs:2"), "{}", found[0]);
 }

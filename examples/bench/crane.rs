@@ -31,7 +31,7 @@ use anyhow::{Context, ensure};
 use serde_json::{Value, json};
 
 use rackd::config::Config;
-use rackd::devices::config::{CraneConfig, Planner};
+use rackd::config::devices::{CraneConfig, Planner};
 use rackd::protocols::mc3e::TransportKind;
 use rackd::sim::crane::{CraneSim, CraneSimOptions, CraneStats};
 use rackd::wire::motion::Motion;

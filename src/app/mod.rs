@@ -22,7 +22,7 @@ use crate::api::state::Shared;
 use crate::api::{self, AppState};
 use crate::auth::KeyRing;
 use crate::config::Config;
-use crate::devices::config::DeviceConfig;
+use crate::config::devices::DeviceConfig;
 use crate::domain::time::now_ms;
 use crate::service::dispatch::{Dispatcher, Queues, Setup};
 use crate::service::events::Hub;

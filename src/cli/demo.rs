@@ -16,15 +16,14 @@ use std::time::Duration;
 use anyhow::Context;
 
 use crate::config::Config;
-use crate::devices::DeviceConfig;
-use crate::devices::config::{CraneConfig, ShelfConfig, TagsConfig};
-use crate::devices::tags::TagTable;
+use crate::config::devices::{CraneConfig, DeviceConfig, ShelfConfig, TagsConfig};
 use crate::protocols::Protocol;
 use crate::protocols::link::LinkConfig;
 use crate::protocols::mc3e::TransportKind;
 use crate::sim::crane::{CraneSim, CraneSimOptions};
 use crate::sim::shelf::{ShelfSim, ShelfSimOptions};
 use crate::sim::tower::{self, TowerSim};
+use crate::wire::tags::TagTable;
 
 /// A `[[devices]]` entry that drives the shelf simulator `sim`, reached at `address` (its
 /// local address, or the serial device at the other end of its line), serving `aisles`.

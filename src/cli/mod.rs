@@ -4,17 +4,6 @@
 pub mod demo;
 pub mod plc;
 pub mod sim;
-pub mod sim_bench;
-pub mod sim_control;
-pub mod sim_crane;
-pub mod sim_faults;
-pub mod sim_identity;
-pub mod sim_line;
-pub mod sim_mc3e;
-pub mod sim_modbus;
-pub mod sim_preset;
-pub mod sim_text;
-pub mod sim_value;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;

@@ -4,8 +4,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
+use super::devices::{DeviceConfigError, DeviceKind};
 use super::{Config, EventsConfigError, Origin};
-use crate::devices::config::DeviceConfigError;
 
 /// A configuration that parses but cannot be run.
 #[derive(Debug, thiserror::Error)]
@@ -118,7 +118,7 @@ impl Config {
         let others: BTreeSet<u16> = self
             .devices
             .iter()
-            .filter(|d| d.kind() != crate::devices::config::DeviceKind::Crane)
+            .filter(|d| d.kind() != DeviceKind::Crane)
             .flat_map(|d| d.aisles().iter().copied())
             .collect();
         let shelf_deep =

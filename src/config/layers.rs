@@ -13,12 +13,12 @@ use std::path::{Path, PathBuf};
 use figment::value::{Dict, Map, Value};
 use figment::{Figment, Metadata, Profile, Provider, Source};
 
+use super::devices::DeviceConfig;
 use super::env::{self, EnvLayer};
 use super::origin::{Lines, join};
 use super::{Config, ConfigError, Invalid, Origin};
 use crate::auth::{KeysFile, repeated_key};
-use crate::devices::DeviceConfig;
-use crate::devices::config::RawDevice;
+use crate::config::devices::RawDevice;
 
 /// Where a configuration comes from.
 #[derive(Clone, Debug, Default)]

@@ -8,14 +8,12 @@
 //! answered by the device task, which alone hands work to the machine.
 
 pub mod cancel;
-pub mod config;
 pub mod crane;
 pub mod gate;
 pub mod port;
 pub mod repeats;
 pub mod shelf;
 pub mod status;
-pub mod tagdef;
 pub mod tags;
 
 use std::collections::BTreeMap;
@@ -25,8 +23,9 @@ use std::time::Duration;
 use tokio::sync::{mpsc, oneshot, watch};
 use tracing::Instrument;
 
+use crate::config::devices::DeviceConfig;
+
 pub use cancel::{CancelRefusal, Withdrawal};
-pub use config::{DeviceConfig, DeviceKind};
 pub use status::{DeviceStatus, StatusCell};
 
 /// What the rest of rackd may ask of a device task.

@@ -22,6 +22,7 @@ use tokio::sync::watch;
 use tokio::time::Instant;
 use utoipa::ToSchema;
 
+use crate::config::devices::DeviceKind;
 use crate::protocols::transport::LinkStats;
 
 /// What rackd knows of a device right now.
@@ -35,7 +36,7 @@ pub struct DeviceStatus {
     /// The device's id from the configuration.
     pub id: String,
     /// What kind of machine it is.
-    pub kind: super::DeviceKind,
+    pub kind: DeviceKind,
     /// How rackd talks to it.
     pub protocol: String,
     /// Where it is.
@@ -80,7 +81,7 @@ pub struct DeviceStatus {
     pub crane: Option<CraneStatus>,
     /// Each tag's latest value, by name (tags devices only; absent for other kinds).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub tags: Option<std::collections::BTreeMap<String, super::tagdef::TagStatus>>,
+    pub tags: Option<std::collections::BTreeMap<String, crate::wire::tags::TagStatus>>,
 }
 
 /// A stacker crane's own registers, as last read.
@@ -152,7 +153,7 @@ impl DeviceStatus {
     }
 
     /// The status of a device not yet heard from.
-    pub fn new(id: &str, kind: super::DeviceKind, protocol: &str, address: &str, slots_total: u16) -> Self {
+    pub fn new(id: &str, kind: DeviceKind, protocol: &str, address: &str, slots_total: u16) -> Self {
         DeviceStatus {
             id: id.to_owned(),
             kind,
@@ -171,7 +172,7 @@ impl DeviceStatus {
             last_error_at: None,
             link: LinkStats::default(),
             memory_lost_at: None,
-            crane: (kind == super::DeviceKind::Crane).then(CraneStatus::default),
+            crane: (kind == DeviceKind::Crane).then(CraneStatus::default),
             tags: None,
         }
     }
@@ -257,7 +258,6 @@ impl StatusCell {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::DeviceKind;
 
     #[tokio::test(start_paused = true)]
     async fn contact_bookkeeping_reaches_watchers_at_most_every_refresh() {

@@ -90,29 +90,6 @@ impl Layout {
         Ok(())
     }
 
-    /// Checks that a zone is a part of this site: its aisle exists and each number it names
-    /// is a storage location's (a zone never names the station, bay 0).
-    pub fn check_zone(&self, zone: &crate::domain::Zone) -> Result<(), Invalid> {
-        let Some(aisle) = self.aisles.get(&zone.aisle) else {
-            return Err(Invalid(format!("zone: aisle {} does not exist", zone.aisle)));
-        };
-        let checks = [
-            ("row", zone.row, aisle.rows),
-            ("bay", zone.bay, aisle.bays),
-            ("level", zone.level, aisle.levels),
-            ("position", zone.position, aisle.positions),
-        ];
-        for (name, value, max) in checks {
-            if let Some(v) = value.filter(|v| *v < 1 || *v > max) {
-                return Err(Invalid(format!(
-                    "zone in aisle {}: {name} {v} is outside 1..={max}",
-                    zone.aisle
-                )));
-            }
-        }
-        Ok(())
-    }
-
     /// Every storage location of the site (stations excluded), in order.
     pub fn locations(&self) -> impl Iterator<Item = Location> + '_ {
         self.aisles.iter().flat_map(|(&aisle, a)| {

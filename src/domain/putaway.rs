@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::Location;
+use super::{Invalid, Layout, Location};
 
 /// A part of an aisle: the aisle, and any of row, bay, level and position to narrow it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
@@ -41,6 +41,29 @@ impl Zone {
             && fits(self.bay, l.bay)
             && fits(self.level, l.level)
             && fits(self.position, l.position)
+    }
+
+    /// Checks that the zone is a part of the site `layout` describes: its aisle exists and
+    /// each number it names is a storage location's (a zone never names the station, bay 0).
+    pub fn check(&self, layout: &Layout) -> Result<(), Invalid> {
+        let Some(aisle) = layout.aisles().get(&self.aisle) else {
+            return Err(Invalid(format!("zone: aisle {} does not exist", self.aisle)));
+        };
+        let checks = [
+            ("row", self.row, aisle.rows),
+            ("bay", self.bay, aisle.bays),
+            ("level", self.level, aisle.levels),
+            ("position", self.position, aisle.positions),
+        ];
+        for (name, value, max) in checks {
+            if let Some(v) = value.filter(|v| *v < 1 || *v > max) {
+                return Err(Invalid(format!(
+                    "zone in aisle {}: {name} {v} is outside 1..={max}",
+                    self.aisle
+                )));
+            }
+        }
+        Ok(())
     }
 }
 

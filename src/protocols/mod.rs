@@ -29,7 +29,9 @@ pub mod transport;
 
 use async_trait::async_trait;
 
-pub use error::{BadDeviceCode, DeviceCode, DropReason, Dropped, PlcError};
+use protocol::Family;
+
+pub use error::{DropReason, Dropped, PlcError};
 pub use protocol::{Protocol, Quirk};
 
 /// A named memory area of a PLC in the protocol's own notation, upper-cased
@@ -107,5 +109,116 @@ pub trait PlcMemory: Send + Sync {
     /// without a link.
     fn link_stats(&self) -> transport::LinkStats {
         transport::LinkStats::default()
+    }
+}
+
+/// A device's own error code, typed by the protocol that carried it.
+///
+/// It lives here, beside the list of protocols, rather than in [`error`]: it names every
+/// protocol's code type, and every protocol reports through [`error`], which so names none.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum DeviceCode {
+    /// A Modbus exception reply.
+    Modbus(modbus::Exception),
+    /// A nonzero MC 3E end code.
+    Mc3e(mc3e::EndCode),
+    /// A MEWTOCOL-COM `!` error code.
+    Mewtocol(mewtocol::ErrorCode),
+    /// A PPI item return code or a refused request's error class and code.
+    Ppi(ppi::ReturnCode),
+}
+
+impl DeviceCode {
+    /// Reads a device error code of `protocol` (for a simulator to answer with), as the
+    /// protocol's manual writes it.
+    pub fn parse(protocol: Protocol, text: &str) -> Result<DeviceCode, BadDeviceCode> {
+        match protocol.family() {
+            Family::Modbus => text.parse::<modbus::Exception>().map(DeviceCode::from),
+            Family::Mc3e => text.parse::<mc3e::EndCode>().map(DeviceCode::from),
+            Family::Mewtocol => text.parse::<mewtocol::ErrorCode>().map(DeviceCode::from),
+            Family::Ppi => text.parse::<ppi::ReturnCode>().map(DeviceCode::from),
+        }
+    }
+
+    /// The protocol's name as rackd spells it in logs (`modbus`, `mc3e`, `mewtocol`, `ppi`).
+    pub fn protocol(&self) -> &'static str {
+        match self {
+            DeviceCode::Modbus(_) => "modbus",
+            DeviceCode::Mc3e(_) => "mc3e",
+            DeviceCode::Mewtocol(_) => "mewtocol",
+            DeviceCode::Ppi(_) => "ppi",
+        }
+    }
+
+    /// The code as a number (for a PPI refusal: error class x 256 + code).
+    pub fn number(&self) -> u32 {
+        match self {
+            DeviceCode::Modbus(e) => u32::from(e.0),
+            DeviceCode::Mc3e(c) => u32::from(c.0),
+            DeviceCode::Mewtocol(c) => u32::from(c.0),
+            DeviceCode::Ppi(c) => c.number(),
+        }
+    }
+
+    /// What the code means, from the protocol's documentation.
+    pub fn meaning(&self) -> &'static str {
+        match self {
+            DeviceCode::Modbus(e) => e.meaning(),
+            DeviceCode::Mc3e(c) => c.meaning(),
+            DeviceCode::Mewtocol(c) => c.meaning(),
+            DeviceCode::Ppi(c) => c.meaning(),
+        }
+    }
+}
+
+impl From<modbus::Exception> for DeviceCode {
+    fn from(e: modbus::Exception) -> Self {
+        DeviceCode::Modbus(e)
+    }
+}
+
+impl From<mc3e::EndCode> for DeviceCode {
+    fn from(c: mc3e::EndCode) -> Self {
+        DeviceCode::Mc3e(c)
+    }
+}
+
+impl From<mewtocol::ErrorCode> for DeviceCode {
+    fn from(c: mewtocol::ErrorCode) -> Self {
+        DeviceCode::Mewtocol(c)
+    }
+}
+
+impl From<ppi::ReturnCode> for DeviceCode {
+    fn from(c: ppi::ReturnCode) -> Self {
+        DeviceCode::Ppi(c)
+    }
+}
+
+impl std::fmt::Display for DeviceCode {
+    /// `modbus device error 0x0002: illegal data address`: one shape for logs and alarms.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} device error {:#06X}: {}", self.protocol(), self.number(), self.meaning())
+    }
+}
+
+/// Why a device error code given as text (a simulator's `--device-error`) was refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("bad {protocol} device error code {text:?}: {expected}")]
+pub struct BadDeviceCode {
+    /// The protocol whose code was asked for.
+    pub protocol: &'static str,
+    /// The text as given.
+    pub text: String,
+    /// What a valid code looks like.
+    pub expected: &'static str,
+}
+
+/// A number in decimal, or in hexadecimal after `0x`.
+pub(crate) fn parse_number(text: &str) -> Option<u32> {
+    let text = text.trim();
+    match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+        Some(hex) => u32::from_str_radix(hex, 16).ok(),
+        None => text.parse().ok(),
     }
 }

@@ -72,9 +72,9 @@ fn modbus_shape(text: &str) -> Result<Shape, PlcError> {
 /// MC: bit devices (relays, timer/counter contacts and coils) hold bits, word devices and
 /// timer/counter current values words; `K4M100` holds words of 16 points (step 16).
 fn mc3e_shape(text: &str) -> Result<Shape, PlcError> {
-    let address = mc3e::device::parse_address(text)?;
+    let address = mc3e::address::parse_address(text)?;
     let limit = mc3e::device::MAX_DEVICE_NUMBER as u64 + 1;
-    if let Some(device) = mc3e::device::word_view(&address.area) {
+    if let Some(device) = mc3e::address::word_view(&address.area) {
         return Ok(Shape { address, items: Items::Words, step: 16, limit, writable: device.is_writable() });
     }
     let device = mc3e::Device::of_area(&address.area)?;

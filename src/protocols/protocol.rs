@@ -85,18 +85,6 @@ pub enum Family {
 }
 
 impl Protocol {
-    /// Reads a device error code of this protocol (for a simulator to answer with), as the
-    /// protocol's manual writes it.
-    pub fn device_code(self, text: &str) -> Result<super::DeviceCode, super::BadDeviceCode> {
-        use super::DeviceCode;
-        match self.family() {
-            Family::Modbus => text.parse::<super::modbus::Exception>().map(DeviceCode::from),
-            Family::Mc3e => text.parse::<super::mc3e::EndCode>().map(DeviceCode::from),
-            Family::Mewtocol => text.parse::<super::mewtocol::ErrorCode>().map(DeviceCode::from),
-            Family::Ppi => text.parse::<super::ppi::ReturnCode>().map(DeviceCode::from),
-        }
-    }
-
     /// Every protocol, in the order the documentation lists them.
     pub const ALL: [Protocol; 12] = [
         Protocol::ModbusUdp,

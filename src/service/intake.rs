@@ -165,7 +165,7 @@ impl Rules {
             )));
         }
         for z in &zones {
-            self.layout.check_zone(z)?;
+            z.check(&self.layout)?;
         }
         Ok(Some(JobSpec::Putaway { zones, class: req.class }))
     }
@@ -263,12 +263,12 @@ mod tests {
     #[test]
     fn a_tags_device_is_never_routed_jobs() {
         let mut r = rules();
-        r.devices.insert("tower1".into(), crate::devices::DeviceKind::Tags.job_kinds());
+        r.devices.insert("tower1".into(), crate::config::devices::DeviceKind::Tags.job_kinds());
         let queued = r.check(req(serde_json::json!({"kind": "store", "to": LOC()}))).unwrap();
         assert_eq!(queued.device, None, "only a tags device: the job waits for a real one");
         let err = r.check(req(serde_json::json!({"kind": "clear", "location": LOC(), "device": "tower1"})));
         assert!(err.unwrap_err().0.contains("cannot run clear jobs"));
-        r.devices.insert("shelf1".into(), crate::devices::DeviceKind::Shelf.job_kinds());
+        r.devices.insert("shelf1".into(), crate::config::devices::DeviceKind::Shelf.job_kinds());
         r.routes.insert(1, "shelf1".into());
         let routed = r.check(req(serde_json::json!({"kind": "store", "to": LOC()}))).unwrap();
         assert_eq!(routed.device.as_deref(), Some("shelf1"));

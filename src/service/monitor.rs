@@ -244,7 +244,7 @@ fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<Key>) -> (Vec<NewAlarm
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::DeviceKind;
+    use crate::config::devices::DeviceKind;
     use crate::devices::status::CraneStatus;
 
     const LINK: Key = (AlarmKind::Link, LINK_ALARM);

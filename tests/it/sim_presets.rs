@@ -6,9 +6,9 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use rackd::cli::sim_bench::PresetArgs;
-use rackd::cli::sim_faults::FaultArgs;
-use rackd::cli::{sim_line, sim_mc3e, sim_modbus};
+use rackd::cli::sim::bench::PresetArgs;
+use rackd::cli::sim::faults::FaultArgs;
+use rackd::cli::sim::{line as sim_line, mc3e as sim_mc3e, modbus as sim_modbus};
 use rackd::protocols::link::{LinkConfig, connect};
 use rackd::protocols::{DeviceCode, PlcError, PlcMemory, Protocol, mc3e, mewtocol, modbus, ppi};
 use serde_json::json;

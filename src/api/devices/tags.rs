@@ -18,8 +18,9 @@ use super::device;
 use crate::api::error::{ApiError, ErrorBody};
 use crate::api::extract::{Json, Path};
 use crate::api::state::AppState;
-use crate::devices::tags::{Tag, TagValue, TagsHandle, ValueError, WriteError};
+use crate::devices::tags::{TagsHandle, WriteError};
 use crate::protocols::PlcError;
+use crate::wire::tags::{Tag, TagValue, ValueError};
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {

@@ -2,10 +2,10 @@
 //!
 //! The numeric formats are the tag types of the configuration (`u16`, `i16`, `u32`, `i32`,
 //! `f32`, the names `[[devices.tags]]` writes) and go through the same codec
-//! ([`crate::devices::tagdef::codec`]), so a value reads the same in `rackd plc` as in a tag.
+//! ([`crate::wire::tags::codec`]), so a value reads the same in `rackd plc` as in a tag.
 //! Decisions of this module:
 //! - **Word order** defaults to the protocol's native one, as tags do
-//!   ([`native_order`](crate::devices::tagdef::spec::native_order)): high word first (ABCD) for Modbus and S7, low word first (CDAB) for
+//!   ([`native_order`](crate::wire::tags::spec::native_order)): high word first (ABCD) for Modbus and S7, low word first (CDAB) for
 //!   MC and MEWTOCOL. `badc` and `dcba` also swap the two bytes of every word, for devices
 //!   that store bytes little-endian inside a Modbus register; `--word-order` applies to
 //!   every format, so `-f ascii --word-order badc` reads low byte first.
@@ -25,7 +25,7 @@
 
 use serde_json::Value as Json;
 
-use crate::devices::tagdef::codec::{self, TagType, TagValue, ValueError, WordOrder};
+use crate::wire::tags::codec::{self, TagType, TagValue, ValueError, WordOrder};
 
 /// How words are shown and values read (`--format` / `-f`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]

@@ -36,10 +36,10 @@ use anyhow::{Context, anyhow, bail};
 use self::format::{Format, Order};
 use self::item::Target;
 use self::poll::Output;
-use crate::devices::tagdef::spec::native_order;
 use crate::protocols::link::{self, LinkConfig, LinkError};
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::{PlcMemory, Protocol, Quirk};
+use crate::wire::tags::spec::native_order;
 
 /// Examples per protocol family and the notations, shown by `rackd plc --help`.
 const EXAMPLES: &str = "\

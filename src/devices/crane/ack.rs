@@ -8,7 +8,7 @@
 //! writes the acknowledgement only after the outcome is stored, so a crash in between
 //! records the outcome again (a no-op) instead of losing it.
 
-use crate::devices::config::Ack;
+use crate::config::devices::Ack;
 
 impl Ack {
     /// What to write to D22, if anything, given the crane's D223 and the D22 rackd last

@@ -74,10 +74,10 @@ use tokio::time::{Instant, sleep_until};
 use tracing::Instrument;
 
 use super::DeviceRequest;
-use super::config::{Ack, CraneConfig};
 use super::port::{Port, ReportError};
 use super::repeats::Repeats;
 use super::status::{CraneStatus, StatusCell};
+use crate::config::devices::{Ack, CraneConfig};
 use crate::domain::{Failure, Report, Reported};
 use crate::protocols::{Address, PlcError, PlcMemory};
 use crate::wire::alarms;

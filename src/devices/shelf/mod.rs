@@ -49,10 +49,10 @@ use tokio::sync::mpsc;
 use tokio::time::{Instant, sleep_until};
 
 use super::DeviceRequest;
-use super::config::ShelfConfig;
 use super::port::Port;
 use super::repeats::Repeats;
 use super::status::StatusCell;
+use crate::config::devices::ShelfConfig;
 use crate::protocols::{Address, PlcError, PlcMemory};
 
 /// What rackd knows of one task slot.

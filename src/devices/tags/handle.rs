@@ -13,10 +13,10 @@ use std::time::Duration;
 use tokio::sync::{mpsc, oneshot, watch};
 
 use crate::devices::DeviceStatus;
-use crate::devices::tagdef::Tag;
-use crate::devices::tagdef::codec::{TagValue, ValueError};
-use crate::devices::tagdef::spec::TagSpec;
 use crate::protocols::PlcError;
+use crate::wire::tags::Tag;
+use crate::wire::tags::codec::{TagValue, ValueError};
+use crate::wire::tags::spec::TagSpec;
 
 /// A checked write on its way to the device task.
 pub(super) struct WriteRequest {

@@ -42,15 +42,12 @@ use std::time::Duration;
 use tokio::sync::mpsc;
 use tokio::time::{Instant, sleep_until};
 
-use super::config::TagsConfig;
 use super::status::StatusCell;
 use super::{CancelRefusal, DeviceRequest};
+use crate::config::devices::TagsConfig;
 use crate::protocols::{PlcError, PlcMemory};
+use crate::wire::tags::{Place, TagSpec, TagStatus};
 
-pub use crate::devices::tagdef::{
-    Place, TagDef, TagSpec, TagTable, TagType, TagValue, ValueError, WordOrder,
-};
-pub use crate::devices::tagdef::{Quality, Tag, TagStatus};
 pub use handle::{TagsHandle, WriteError};
 pub use plan::Group;
 
@@ -59,7 +56,7 @@ pub use plan::Group;
 pub enum StartError {
     /// A tag's definition is wrong.
     #[error(transparent)]
-    Tag(#[from] crate::devices::tagdef::TagError),
+    Tag(#[from] crate::wire::tags::TagError),
     /// The client does not take a tag's address.
     #[error("tag {tag:?}: {error}")]
     Address {

@@ -5,8 +5,8 @@
 //! even a gap of one word, because a PLC may refuse a read that covers an address it does
 //! not have, and then every tag of the read would turn bad for no fault of its own.
 
-use crate::devices::tagdef::spec::{Place, TagSpec};
 use crate::protocols::Address;
+use crate::wire::tags::spec::{Place, TagSpec};
 
 /// Most words in one read (one Modbus request holds 125).
 pub const MAX_WORDS: u16 = 120;
@@ -79,8 +79,8 @@ fn join(group: &mut Group, spec: &TagSpec) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::tagdef::TagDef;
-    use crate::devices::tagdef::TagType;
+    use crate::wire::tags::TagDef;
+    use crate::wire::tags::TagType;
 
     fn specs(protocol: &str, tags: &[(&str, Option<TagType>)]) -> Vec<TagSpec> {
         tags.iter()

@@ -4,10 +4,10 @@
 use std::sync::Arc;
 
 use super::{TagDevice, link_failed};
-use crate::devices::tagdef::TagFault;
-use crate::devices::tagdef::codec::TagValue;
-use crate::devices::tagdef::spec::TagSpec;
 use crate::protocols::{Address, PlcError};
+use crate::wire::tags::TagFault;
+use crate::wire::tags::codec::TagValue;
+use crate::wire::tags::spec::TagSpec;
 
 /// What one read returned.
 pub(super) enum Raw {

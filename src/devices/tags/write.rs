@@ -4,10 +4,10 @@
 use super::TagDevice;
 use super::handle::{WriteError, WriteRequest};
 use super::poll::Raw;
-use crate::devices::tagdef::Tag;
-use crate::devices::tagdef::codec::{self, TagValue, ValueError};
-use crate::devices::tagdef::spec::Place;
 use crate::protocols::{Address, PlcError};
+use crate::wire::tags::Tag;
+use crate::wire::tags::codec::{self, TagValue, ValueError};
+use crate::wire::tags::spec::Place;
 
 impl TagDevice {
     /// Performs one write request and answers it.

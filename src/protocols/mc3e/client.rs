@@ -15,7 +15,8 @@ use std::time::Duration;
 use async_trait::async_trait;
 use tokio::sync::Mutex;
 
-use super::device::{self, Device, MAX_DEVICE_NUMBER};
+use super::address;
+use super::device::{Device, MAX_DEVICE_NUMBER};
 use super::frame::{self, FrameKind, MAX_BIT_POINTS, MAX_WORD_POINTS, Route};
 use super::link::{Expect, Link, LinkConfig, TransportKind};
 use super::request::{Command, Request};
@@ -204,7 +205,7 @@ fn bit_device(device: Device) -> Result<(), PlcError> {
 
 /// The device an address reads in words: a word device, or the bit device of a `K4` view.
 pub(super) fn word_device(address: &Address) -> Result<Device, PlcError> {
-    match device::word_view(&address.area) {
+    match address::word_view(&address.area) {
         Some(device) => Ok(device),
         None => Device::of_area(&address.area),
     }
@@ -212,7 +213,7 @@ pub(super) fn word_device(address: &Address) -> Result<Device, PlcError> {
 
 /// The device an address reads in bits; a `K4` view is words only.
 fn bit_address_device(address: &Address) -> Result<Device, PlcError> {
-    if device::word_view(&address.area).is_some() {
+    if address::word_view(&address.area).is_some() {
         return Err(PlcError::OutOfRange("K4M100 names words of 16 bits; write M100 to read or write bits"));
     }
     Device::of_area(&address.area)
@@ -221,7 +222,7 @@ fn bit_address_device(address: &Address) -> Result<Device, PlcError> {
 #[async_trait]
 impl PlcMemory for Mc3eClient {
     fn parse_address(&self, text: &str) -> Result<Address, PlcError> {
-        device::parse_address(text)
+        address::parse_address(text)
     }
 
     async fn read_words(&self, start: &Address, count: u16) -> Result<Vec<u16>, PlcError> {

@@ -18,7 +18,7 @@ type Numbered = Vec<(usize, Block)>;
 
 fn device_of(address: &Address) -> Result<Device, PlcError> {
     let device = word_device(address)?;
-    if device.is_bit() && super::device::word_view(&address.area).is_none() {
+    if device.is_bit() && super::address::word_view(&address.area).is_none() {
         return Err(PlcError::OutOfRange("a bit device is read here in words: write K4M100, not M100"));
     }
     Ok(device)

@@ -154,12 +154,29 @@ impl Command {
         match (command, subcommand) {
             (CMD_READ_TYPE_NAME, SUB_WORDS) if data.is_empty() => Ok(Command::ReadTypeName),
             (CMD_READ_TYPE_NAME, SUB_WORDS) => Err(end_code::LENGTH_MISMATCH),
-            (CMD_RANDOM_READ, SUB_WORDS) => scattered::decode_random(data),
-            (CMD_READ_BLOCKS, SUB_WORDS) => scattered::decode_blocks(data),
+            (CMD_RANDOM_READ, SUB_WORDS) => {
+                scattered::decode_random(data).map(|(words, dwords)| Command::RandomRead { words, dwords })
+            }
+            (CMD_READ_BLOCKS, SUB_WORDS) => {
+                scattered::decode_blocks(data).map(|(words, bits)| Command::ReadBlocks { words, bits })
+            }
             (CMD_BATCH_READ | CMD_BATCH_WRITE, SUB_WORDS) => decode_batch(command, false, data),
             (CMD_BATCH_READ | CMD_BATCH_WRITE, SUB_BITS) => decode_batch(command, true, data),
             _ => Err(end_code::UNKNOWN_COMMAND),
         }
+    }
+
+    /// The end code a server answers to a random read or block read past the manual's
+    /// limits ([`scattered::check_random`], [`scattered::check_blocks`]), if any.
+    pub fn refusal(&self) -> Option<u16> {
+        let ok = match self {
+            Command::RandomRead { words, dwords } => scattered::check_random(words.len(), dwords.len()),
+            Command::ReadBlocks { words, bits } => {
+                scattered::check_blocks(&words.iter().chain(bits).copied().collect::<Vec<_>>())
+            }
+            _ => Ok(()),
+        };
+        ok.err().map(|_| end_code::POINTS_OUT_OF_RANGE)
     }
 }
 

@@ -223,7 +223,7 @@ impl Device {
     }
 
     /// The device an [`Address`](crate::protocols::Address)'s area names (not a `K4` word
-    /// view: see [`word_view`]).
+    /// view: see [`word_view`](super::address::word_view)).
     pub fn of_area(area: &Area) -> Result<Device, PlcError> {
         Device::from_name(area.name()).ok_or(PlcError::OutOfRange(UNKNOWN))
     }
@@ -231,8 +231,6 @@ impl Device {
 
 const UNKNOWN: &str = "not an MC device (D, W, R, ZR, SD, SW, TN, STN, CN, M, X, Y, B, L, SM, F, V, SB, \
                        TS, TC, STS, STC, CS, CC, or K4 + a bit device)";
-
-pub use super::address::{format_address, parse_address, step, word_view};
 
 #[cfg(test)]
 mod tests {

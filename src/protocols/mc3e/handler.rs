@@ -21,7 +21,6 @@ use super::end_code;
 use super::frame::{self, FrameError, MAX_BIT_POINTS, MAX_WORD_POINTS};
 use super::request::{Command, Refusal, Request, RequestHeader};
 use super::response::{ErrorInfo, Outcome, Response};
-use super::scattered;
 use super::type_name::TypeName;
 
 /// A write the server carried out, reported to the write hook.
@@ -119,7 +118,7 @@ pub fn answer(bank: &Mutex<Bank>, type_name: &TypeName, bytes: &[u8], forced: Op
 
 /// Random and block reads: the words of each device or block, in request order.
 fn read_scattered(bank: &Bank, command: &Command) -> Result<(Vec<u8>, Option<WriteEvent>), u16> {
-    if let Some(code) = scattered::refusal(command) {
+    if let Some(code) = command.refusal() {
         return Err(code);
     }
     let runs: Vec<(Device, u32, u16)> = match command {
@@ -160,6 +159,7 @@ pub fn error_response(
 mod tests {
     use super::*;
     use crate::protocols::mc3e::frame::Route;
+    use crate::protocols::mc3e::scattered;
 
     fn run(bank: &Mutex<Bank>, command: Command) -> Response {
         let bytes = Request { serial: None, route: Route::default(), monitor_timer: 4, command }.encode();

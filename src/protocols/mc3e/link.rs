@@ -36,7 +36,8 @@ use super::end_code::EndCode;
 use super::frame::{self, Direction, MAX_WORD_POINTS, Route};
 use super::response::{ErrorInfo, Outcome, Response};
 use crate::protocols::transport::{
-    Attempt, AttemptError, Backoff, DatagramLink, Endpoint, LinkHealth, LinkTuning, RetryPolicy, StreamLink,
+    Attempt, AttemptError, Backoff, DatagramLink, Endpoint, LinkHealth, LinkTuning, Retry, RetryPolicy,
+    StreamLink,
 };
 use crate::protocols::{DeviceCode, DropReason, PlcError};
 
@@ -155,7 +156,7 @@ impl Link {
     /// Sends `frame` and returns the reply's data, retrying as configured.
     pub async fn exchange(&mut self, frame: &[u8], expect: &Expect) -> Result<Vec<u8>, PlcError> {
         let health = self.health.clone();
-        let mut retry = health.start("mc3e");
+        let mut retry = Retry::start(&health, "mc3e");
         while let Some(attempt) = retry.next_attempt() {
             let outcome = match &mut self.carrier {
                 Carrier::Tcp(link) => tcp_attempt(link, frame, expect, &health, &attempt).await,

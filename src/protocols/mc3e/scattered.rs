@@ -72,7 +72,11 @@ fn device_at(bytes: &[u8]) -> Result<(Device, u32), u16> {
     Ok((device, u32::from_le_bytes([bytes[0], bytes[1], bytes[2], 0])))
 }
 
-pub(crate) fn decode_random(data: &[u8]) -> Result<super::command::Command, u16> {
+/// Devices by number, one point each.
+type Points = Vec<(Device, u32)>;
+
+/// The devices of a random read (0403) after the subcommand: words, then double words.
+pub(crate) fn decode_random(data: &[u8]) -> Result<(Points, Points), u16> {
     let [w, d, specs @ ..] = data else { return Err(end_code::LENGTH_MISMATCH) };
     let (w, d) = (usize::from(*w), usize::from(*d));
     if specs.len() != 4 * (w + d) {
@@ -80,10 +84,12 @@ pub(crate) fn decode_random(data: &[u8]) -> Result<super::command::Command, u16>
     }
     let devices = specs.chunks_exact(4).map(device_at).collect::<Result<Vec<_>, u16>>()?;
     let (words, dwords) = devices.split_at(w);
-    Ok(super::command::Command::RandomRead { words: words.to_vec(), dwords: dwords.to_vec() })
+    Ok((words.to_vec(), dwords.to_vec()))
 }
 
-pub(crate) fn decode_blocks(data: &[u8]) -> Result<super::command::Command, u16> {
+/// The blocks of a multiple-block read (0406) after the subcommand: word blocks, then bit
+/// blocks.
+pub(crate) fn decode_blocks(data: &[u8]) -> Result<(Vec<Block>, Vec<Block>), u16> {
     let [w, b, specs @ ..] = data else { return Err(end_code::LENGTH_MISMATCH) };
     let (w, b) = (usize::from(*w), usize::from(*b));
     if specs.len() != 6 * (w + b) {
@@ -98,7 +104,7 @@ pub(crate) fn decode_blocks(data: &[u8]) -> Result<super::command::Command, u16>
     if blocks.iter().any(|b| b.device.is_bit()) || bits.iter().any(|b| !b.device.is_bit()) {
         return Err(end_code::BAD_REQUEST_CONTENTS);
     }
-    Ok(super::command::Command::ReadBlocks { words: blocks, bits })
+    Ok((blocks, bits))
 }
 
 /// Why a random read cannot be sent as one request, if it cannot.
@@ -127,18 +133,6 @@ pub fn check_blocks(blocks: &[Block]) -> Result<(), PlcError> {
         ));
     }
     Ok(())
-}
-
-/// The end code a server answers to a random read or block read past the limits, if any.
-pub fn refusal(command: &super::command::Command) -> Option<u16> {
-    let ok = match command {
-        super::command::Command::RandomRead { words, dwords } => check_random(words.len(), dwords.len()),
-        super::command::Command::ReadBlocks { words, bits } => {
-            check_blocks(&words.iter().chain(bits).copied().collect::<Vec<_>>())
-        }
-        _ => Ok(()),
-    };
-    ok.err().map(|_| end_code::POINTS_OUT_OF_RANGE)
 }
 
 #[cfg(test)]
@@ -205,7 +199,7 @@ mod tests {
         assert!(check_blocks(&[Block::new(Device::D, 0, 900), Block::new(Device::M, 0, 61)]).is_err());
         assert!(check_blocks(&[]).is_err() && check_blocks(&[Block::new(Device::D, 0, 0)]).is_err());
         let too_many = Command::RandomRead { words: vec![(Device::D, 0); 193], dwords: vec![] };
-        assert_eq!(refusal(&too_many), Some(0xC051));
-        assert_eq!(refusal(&Command::ReadTypeName), None);
+        assert_eq!(too_many.refusal(), Some(0xC051));
+        assert_eq!(Command::ReadTypeName.refusal(), None);
     }
 }

@@ -10,8 +10,8 @@ use super::error_code::{self, ErrorCode};
 use super::frame::{self, Bcc, GLOBAL_STATION, Kind, MAX_LONG, MAX_SHORT};
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
-    Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, RetryPolicy,
-    Scanner, StreamLink,
+    Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, Retry,
+    RetryPolicy, Scanner, StreamLink,
 };
 use crate::protocols::{DeviceCode, DropReason, PlcError};
 
@@ -145,7 +145,7 @@ impl MewtocolClient {
             return Err(PlcError::OutOfRange("command longer than one frame"));
         }
         let mut link = self.link.lock().await;
-        let mut retry = self.health.start("mewtocol");
+        let mut retry = Retry::start(&self.health, "mewtocol");
         while let Some(attempt) = retry.next_attempt() {
             match self.attempt(&mut link, &tx, request, &attempt).await {
                 Ok(response) => {

@@ -12,7 +12,7 @@ use super::pdu::{self, Request, Response};
 use super::rtu;
 use crate::protocols::PlcError;
 use crate::protocols::transport::{
-    Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, RetryPolicy, StreamLink,
+    Attempt, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, Retry, RetryPolicy, StreamLink,
 };
 
 /// Counters of a client's traffic, for diagnostics and tests.
@@ -47,7 +47,7 @@ impl ModbusClient {
         let link = match config.transport {
             Transport::Udp => {
                 let mut udp = UdpLink::new(config.address.clone(), config.quirks, counters.clone());
-                udp.open(config.timeout).await.map_err(|e| policy.once(e))?;
+                udp.open(config.timeout).await.map_err(|e| e.once(&policy))?;
                 Link::Udp(udp)
             }
             Transport::Tcp => {
@@ -143,12 +143,12 @@ impl ModbusClient {
             if !request.is_write() {
                 return Err(PlcError::OutOfRange("unit 0 (broadcast) is for writes only"));
             }
-            return match link.send_only(&ex, &self.policy.single()).await {
+            return match link.send_only(&ex, &Attempt::single(&self.policy)).await {
                 Ok(()) => Ok(echo_of(request)),
-                Err(e) => Err(self.policy.once(e)),
+                Err(e) => Err(e.once(&self.policy)),
             };
         }
-        let mut retry = self.counters.health.start("modbus");
+        let mut retry = Retry::start(&self.counters.health, "modbus");
         while let Some(attempt) = retry.next_attempt() {
             match link.attempt(&ex, &attempt).await {
                 Ok((response, answered)) => {

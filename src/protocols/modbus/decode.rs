@@ -4,7 +4,7 @@
 //! field without checking it against the bytes actually present, and each failure says
 //! what was wrong ([`DecodeError`]).
 
-use super::device_id::{self, DeviceIdPage, MEI_DEVICE_ID, ReadDeviceIdCode};
+use super::device_id::{DeviceIdPage, DeviceObject, HEADER_LEN, MAX_PDU, MEI_DEVICE_ID, ReadDeviceIdCode};
 use super::exception::Exception;
 use super::pdu::{self, Request, Response, fc};
 
@@ -270,7 +270,7 @@ pub fn decode_response(pdu: &[u8], req: &Request) -> Result<Result<Response, Exc
             exact(d, 2 + byte_count)?;
             Response::ReadFifoQueue(words(&d[4..]))
         }
-        Request::ReadDeviceId { code, .. } => Response::ReadDeviceId(DeviceIdPage::decode(d, *code)?),
+        Request::ReadDeviceId { code, .. } => Response::ReadDeviceId(device_id_page(d, *code)?),
     };
     Ok(Ok(resp))
 }
@@ -300,9 +300,56 @@ pub fn response_pdu_len(prefix: &[u8]) -> Result<Option<usize>, DecodeError> {
         fc::WRITE_SINGLE_COIL | fc::WRITE_SINGLE_REGISTER | fc::DIAGNOSTICS => Ok(Some(5)),
         fc::WRITE_MULTIPLE_COILS | fc::WRITE_MULTIPLE_REGISTERS => Ok(Some(5)),
         fc::READ_FIFO_QUEUE => Ok(prefix.get(1..3).map(|b| 3 + u16::from_be_bytes([b[0], b[1]]) as usize)),
-        fc::ENCAPSULATED => device_id::reply_len(prefix),
+        fc::ENCAPSULATED => device_id_reply_len(prefix),
         other => Err(DecodeError::UnknownFunction(other)),
     }
+}
+
+/// Decodes the data of a Read Device Identification reply PDU (after the function code) to
+/// a request of `code`.
+fn device_id_page(d: &[u8], code: ReadDeviceIdCode) -> Result<DeviceIdPage, DecodeError> {
+    let [mei, echoed, conformity, more, next, count, objects_bytes @ ..] = d else {
+        return Err(DecodeError::Truncated);
+    };
+    let mut rest: &[u8] = objects_bytes;
+    if *mei != MEI_DEVICE_ID {
+        return Err(DecodeError::BadMeiType);
+    }
+    if *echoed != code as u8 {
+        return Err(DecodeError::EchoMismatch);
+    }
+    let next = match more {
+        0x00 => None,
+        0xFF => Some(*next),
+        _ => return Err(DecodeError::BadMoreFollows),
+    };
+    let mut objects = Vec::with_capacity(*count as usize);
+    for _ in 0..*count {
+        let [id, len, tail @ ..] = rest else { return Err(DecodeError::ObjectOverrun) };
+        let (id, len) = (*id, *len as usize);
+        let value = tail.get(..len).ok_or(DecodeError::ObjectOverrun)?;
+        objects.push(DeviceObject { id, value: value.to_vec() });
+        rest = &tail[len..];
+    }
+    if !rest.is_empty() {
+        return Err(DecodeError::TrailingBytes);
+    }
+    Ok(DeviceIdPage { code, conformity: *conformity, next, objects })
+}
+
+/// The length of a Read Device Identification reply PDU (function code included) from its
+/// first bytes: `Ok(None)` until enough bytes are there to tell.
+fn device_id_reply_len(prefix: &[u8]) -> Result<Option<usize>, DecodeError> {
+    let Some(&count) = prefix.get(HEADER_LEN - 1) else { return Ok(None) };
+    let mut at = HEADER_LEN;
+    for _ in 0..count {
+        let Some(&len) = prefix.get(at + 1) else { return Ok(None) };
+        at += 2 + len as usize;
+        if at > MAX_PDU {
+            return Err(DecodeError::ObjectOverrun);
+        }
+    }
+    Ok(Some(at))
 }
 
 #[cfg(test)]

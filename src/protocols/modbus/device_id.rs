@@ -21,10 +21,12 @@
 //!   device id code is not the request's, or whose "more follows" is neither 00 nor FF is
 //!   malformed (a typed [`super::decode::DecodeError`]); when paging, a next object id that
 //!   does not move forward is malformed too, so the loop ends after 256 requests at most.
+//!
+//! The objects and the paging are here; the bytes of a request and a reply are encoded with
+//! every other PDU's ([`super::pdu`]) and decoded with them ([`super::decode`]).
 
 use std::collections::BTreeMap;
 
-use super::decode::DecodeError;
 use super::exception::Exception;
 
 /// The MEI type of Read Device Identification.
@@ -34,9 +36,9 @@ pub const MEI_DEVICE_ID: u8 = 0x0E;
 pub const MAX_OBJECT_LEN: usize = 244;
 /// Bytes of a reply PDU before its objects: function, MEI type, code, conformity level,
 /// more follows, next object id, number of objects.
-const HEADER_LEN: usize = 7;
+pub(super) const HEADER_LEN: usize = 7;
 /// Largest PDU.
-const MAX_PDU: usize = 253;
+pub(super) const MAX_PDU: usize = 253;
 
 /// The read device id code: which objects a request asks for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -144,68 +146,6 @@ pub struct DeviceIdPage {
     pub next: Option<u8>,
     /// The objects in this reply.
     pub objects: Vec<DeviceObject>,
-}
-
-impl DeviceIdPage {
-    /// Appends the reply PDU.
-    pub fn encode(&self, out: &mut Vec<u8>) {
-        let (more, next) = match self.next {
-            Some(id) => (0xFF, id),
-            None => (0x00, 0x00),
-        };
-        out.extend_from_slice(&[super::pdu::fc::ENCAPSULATED, MEI_DEVICE_ID, self.code as u8]);
-        out.extend_from_slice(&[self.conformity, more, next, self.objects.len() as u8]);
-        for o in &self.objects {
-            out.extend_from_slice(&[o.id, o.value.len() as u8]);
-            out.extend_from_slice(&o.value);
-        }
-    }
-
-    /// Decodes the data of a reply PDU (after the function code) to a request of `code`.
-    pub fn decode(d: &[u8], code: ReadDeviceIdCode) -> Result<DeviceIdPage, DecodeError> {
-        let [mei, echoed, conformity, more, next, count, objects_bytes @ ..] = d else {
-            return Err(DecodeError::Truncated);
-        };
-        let mut rest: &[u8] = objects_bytes;
-        if *mei != MEI_DEVICE_ID {
-            return Err(DecodeError::BadMeiType);
-        }
-        if *echoed != code as u8 {
-            return Err(DecodeError::EchoMismatch);
-        }
-        let next = match more {
-            0x00 => None,
-            0xFF => Some(*next),
-            _ => return Err(DecodeError::BadMoreFollows),
-        };
-        let mut objects = Vec::with_capacity(*count as usize);
-        for _ in 0..*count {
-            let [id, len, tail @ ..] = rest else { return Err(DecodeError::ObjectOverrun) };
-            let (id, len) = (*id, *len as usize);
-            let value = tail.get(..len).ok_or(DecodeError::ObjectOverrun)?;
-            objects.push(DeviceObject { id, value: value.to_vec() });
-            rest = &tail[len..];
-        }
-        if !rest.is_empty() {
-            return Err(DecodeError::TrailingBytes);
-        }
-        Ok(DeviceIdPage { code, conformity: *conformity, next, objects })
-    }
-}
-
-/// The length of a reply PDU (function code included) from its first bytes: `Ok(None)`
-/// until enough bytes are there to tell.
-pub fn reply_len(prefix: &[u8]) -> Result<Option<usize>, DecodeError> {
-    let Some(&count) = prefix.get(HEADER_LEN - 1) else { return Ok(None) };
-    let mut at = HEADER_LEN;
-    for _ in 0..count {
-        let Some(&len) = prefix.get(at + 1) else { return Ok(None) };
-        at += 2 + len as usize;
-        if at > MAX_PDU {
-            return Err(DecodeError::ObjectOverrun);
-        }
-    }
-    Ok(Some(at))
 }
 
 /// Why an object cannot be set.

@@ -2,7 +2,7 @@
 //! Specification V1.1b3, section 6.21, paging, the server's answers and malformed replies.
 
 use super::*;
-use crate::protocols::modbus::decode::{decode_response, request_pdu_len, response_pdu_len};
+use crate::protocols::modbus::decode::{DecodeError, decode_response, request_pdu_len, response_pdu_len};
 use crate::protocols::modbus::pdu::{Request, Response};
 
 fn hex(text: &str) -> Vec<u8> {

@@ -1,6 +1,6 @@
 //! Modbus exception codes: what a device answers instead of data when it refuses a request.
 
-use crate::protocols::error::parse_number;
+use crate::protocols::parse_number;
 use crate::protocols::{BadDeviceCode, DeviceCode, PlcError};
 
 /// A Modbus exception code, as carried by an exception reply (function | 0x80, one code byte).

@@ -337,6 +337,22 @@ impl Response {
     }
 }
 
+impl DeviceIdPage {
+    /// Appends the Read Device Identification reply PDU.
+    pub fn encode(&self, out: &mut Vec<u8>) {
+        let (more, next) = match self.next {
+            Some(id) => (0xFF, id),
+            None => (0x00, 0x00),
+        };
+        out.extend_from_slice(&[fc::ENCAPSULATED, MEI_DEVICE_ID, self.code as u8]);
+        out.extend_from_slice(&[self.conformity, more, next, self.objects.len() as u8]);
+        for o in &self.objects {
+            out.extend_from_slice(&[o.id, o.value.len() as u8]);
+            out.extend_from_slice(&o.value);
+        }
+    }
+}
+
 /// Appends an exception reply PDU for `function`.
 pub fn encode_exception(function: u8, code: u8, buf: &mut Vec<u8>) {
     buf.push(function | fc::EXCEPTION_FLAG);

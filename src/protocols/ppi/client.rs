@@ -11,8 +11,8 @@ use super::pdu::{Item, Reply, Request};
 use super::return_code::ReturnCode;
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
-    Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, RetryPolicy,
-    Scanner, StreamLink,
+    Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, Retry,
+    RetryPolicy, Scanner, StreamLink,
 };
 use crate::protocols::{DeviceCode, DropReason, PlcError};
 
@@ -152,7 +152,7 @@ impl PpiClient {
         request.check().map_err(PlcError::OutOfRange)?;
         let mut link = self.link.lock().await;
         let mut refs = Vec::with_capacity(self.health.policy().attempts().min(8) as usize);
-        let mut retry = self.health.start("ppi");
+        let mut retry = Retry::start(&self.health, "ppi");
         while let Some(attempt) = retry.next_attempt() {
             refs.push(self.next_ref.fetch_add(1, Ordering::Relaxed));
             match self.attempt(&mut link, request, &refs, &attempt).await {

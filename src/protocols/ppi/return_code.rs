@@ -1,7 +1,7 @@
 //! PPI / S7 return codes: the per-item code of a data item, and the error class of a
 //! refused request, with their meanings.
 
-use crate::protocols::error::parse_number;
+use crate::protocols::parse_number;
 use crate::protocols::{BadDeviceCode, DeviceCode, PlcError};
 
 /// What an S7-200 answered instead of doing a request.

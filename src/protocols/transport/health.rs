@@ -25,48 +25,10 @@ use std::time::Duration;
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use super::retry::{Retry, RetryPolicy};
+use super::policy::RetryPolicy;
 use super::round_trips::RoundTrips;
 use super::rtt::{LossWindow, RttEstimator};
 use crate::protocols::{DropReason, Dropped};
-
-/// How a link adapts its timeout and when it counts as degraded.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LinkTuning {
-    /// The shortest reply timeout the adaptive timer may choose (`min_timeout_ms`).
-    pub min_timeout: Duration,
-    /// Recent requests the degraded judgement looks at (`degraded_window`).
-    pub degraded_window: u32,
-    /// Degraded once more than this share of them needed a retry or failed
-    /// (`degraded_above`).
-    pub degraded_above: f64,
-    /// Healthy again once this share or less did (`degraded_below`).
-    pub degraded_below: f64,
-}
-
-impl LinkTuning {
-    /// The tuning a protocol gets by default: the floor is 2 ms where replies name their
-    /// request (Modbus TCP and UDP), since a resend there costs one request and a late
-    /// reply is dropped by its transaction id; 20 ms elsewhere, where a timeout costs a
-    /// `timeout_ms` of silence on the line (or, on MC 3E, a new connection).
-    pub fn for_protocol(protocol: crate::protocols::Protocol) -> LinkTuning {
-        let floor = if protocol.matches_replies() { 2 } else { 20 };
-        LinkTuning { min_timeout: Duration::from_millis(floor), ..LinkTuning::default() }
-    }
-}
-
-impl Default for LinkTuning {
-    /// 20 ms floor; degraded above 10% troubled requests of the last 50, healthy again at
-    /// 2% (one in 50) or less.
-    fn default() -> Self {
-        LinkTuning {
-            min_timeout: Duration::from_millis(20),
-            degraded_window: 50,
-            degraded_above: 0.10,
-            degraded_below: 0.02,
-        }
-    }
-}
 
 /// A link's health as the device status shows it.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, ToSchema)]
@@ -112,6 +74,15 @@ struct State {
     this_request: [u32; 6],
     /// Time the current request's first attempt spent holding the line before its send.
     held: Duration,
+}
+
+/// What holding the line did ([`StreamLink::settle`](super::StreamLink::settle)).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Settled {
+    /// Replies that arrived while the line was held, dropped.
+    pub replies: u64,
+    /// How long the line was held.
+    pub held: Duration,
 }
 
 /// The health of one link, shared by its client and the client's link.
@@ -162,14 +133,12 @@ impl LinkHealth {
         self.state.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Starts the attempts of one request; `protocol` names it in debug logs.
-    pub fn start(&self, protocol: &'static str) -> Retry<'_> {
+    /// A request begins ([`super::retry::Retry::start`]).
+    pub(super) fn begin_request(&self) {
         let mut s = self.state();
         s.requests += 1;
         s.this_request = [0; 6];
         s.held = Duration::ZERO;
-        drop(s);
-        Retry::new(self, protocol)
     }
 
     /// The reply timeout for the next attempt.
@@ -206,7 +175,7 @@ impl LinkHealth {
 
     /// The line was held before a send (see [`super::StreamLink::settle`]); replies that
     /// arrived meanwhile were dropped as stale. The hold is not part of a round trip.
-    pub fn settled(&self, settled: super::Settled) {
+    pub fn settled(&self, settled: Settled) {
         self.dropped_n(DropReason::Stale, settled.replies);
         self.state().held += settled.held;
     }

@@ -1,5 +1,6 @@
 //! The one retry policy of every client: how many attempts, how long each may take, which
-//! failures are worth another attempt, and the error once they are spent.
+//! failures are worth another attempt, and the error once they are spent. The numbers are a
+//! [`RetryPolicy`] (`policy.rs`); this is the loop that keeps to them.
 //!
 //! Each attempt waits for its reply up to the link's adaptive timeout ([`super::health`]),
 //! at most `timeout`; the retry loop feeds the link's health with every outcome. A
@@ -19,7 +20,7 @@
 //! per-request state (transaction ids of earlier attempts) in plain locals:
 //!
 //! ```text
-//! let mut retry = self.health.start("modbus");
+//! let mut retry = Retry::start(&self.health, "modbus");
 //! while let Some(attempt) = retry.next_attempt() {
 //!     match link.attempt(&exchange, &attempt).await {
 //!         Ok(reply) => {
@@ -37,7 +38,8 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
-use super::health::{LinkHealth, LinkTuning};
+use super::health::LinkHealth;
+use super::policy::RetryPolicy;
 use crate::protocols::{DeviceCode, Dropped, PlcError};
 
 /// Why one attempt produced no answer.
@@ -68,6 +70,11 @@ impl AttemptError {
             AttemptError::Device(code) => PlcError::Device(code),
         }
     }
+
+    /// The error of a request whose single, unretried attempt failed (a broadcast).
+    pub(crate) fn once(self, policy: &RetryPolicy) -> PlcError {
+        self.into_plc_error(1, policy.timeout, None)
+    }
 }
 
 impl From<io::Error> for AttemptError {
@@ -79,42 +86,6 @@ impl From<io::Error> for AttemptError {
 impl From<DeviceCode> for AttemptError {
     fn from(code: DeviceCode) -> Self {
         AttemptError::Device(code)
-    }
-}
-
-/// How hard a client tries: `retries + 1` attempts, each waiting for its reply up to
-/// `timeout` (less once round trips are known: [`LinkTuning`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RetryPolicy {
-    /// Time allowed for one attempt (connect, send and the whole reply); the ceiling of
-    /// the adaptive reply timeout.
-    pub timeout: Duration,
-    /// Further attempts after a retryable failure (0 = send once).
-    pub retries: u32,
-    /// The adaptive timeout's floor and the degraded judgement.
-    pub tuning: LinkTuning,
-}
-
-impl RetryPolicy {
-    /// A policy with the default [`LinkTuning`].
-    pub fn new(timeout: Duration, retries: u32) -> Self {
-        RetryPolicy { timeout, retries, tuning: LinkTuning::default() }
-    }
-
-    /// Every attempt a request gets.
-    pub fn attempts(&self) -> u32 {
-        self.retries.saturating_add(1)
-    }
-
-    /// One attempt outside any retry loop: a broadcast, sent once and never answered.
-    pub(crate) fn single(&self) -> Attempt {
-        let now = Instant::now();
-        Attempt { number: 0, deadline: now + self.timeout, timeout: self.timeout, reply_window: self.timeout }
-    }
-
-    /// The error of a request whose single, unretried attempt failed (a broadcast).
-    pub(crate) fn once(&self, e: AttemptError) -> PlcError {
-        e.into_plc_error(1, self.timeout, None)
     }
 }
 
@@ -137,6 +108,17 @@ impl Attempt {
         self.number == 0
     }
 
+    /// One attempt outside any retry loop: a broadcast, sent once and never answered.
+    pub(crate) fn single(policy: &RetryPolicy) -> Attempt {
+        let now = Instant::now();
+        Attempt {
+            number: 0,
+            deadline: now + policy.timeout,
+            timeout: policy.timeout,
+            reply_window: policy.timeout,
+        }
+    }
+
     /// The attempt with its reply window starting now: for links that held the line
     /// before sending, so the hold does not eat the wait for the reply.
     pub fn restarted(&self) -> Attempt {
@@ -144,7 +126,7 @@ impl Attempt {
     }
 }
 
-/// The attempts of one request under way ([`LinkHealth::start`]).
+/// The attempts of one request under way ([`Retry::start`]).
 #[derive(Debug)]
 pub(crate) struct Retry<'a> {
     health: &'a LinkHealth,
@@ -157,7 +139,10 @@ pub(crate) struct Retry<'a> {
 }
 
 impl<'a> Retry<'a> {
-    pub(super) fn new(health: &'a LinkHealth, protocol: &'static str) -> Self {
+    /// Starts the attempts of one request over a link's `health`; `protocol` names it in
+    /// debug logs.
+    pub fn start(health: &'a LinkHealth, protocol: &'static str) -> Self {
+        health.begin_request();
         Retry {
             health,
             protocol,
@@ -261,7 +246,7 @@ mod tests {
     #[test]
     fn retryable_failures_use_every_attempt_and_report_the_last() {
         let h = health(2);
-        let mut retry = h.start("test");
+        let mut retry = Retry::start(&h, "test");
         let mut numbers = Vec::new();
         while let Some(attempt) = retry.next_attempt() {
             numbers.push((attempt.number, attempt.is_first()));
@@ -275,7 +260,7 @@ mod tests {
         assert_eq!((stats.requests, stats.retries, stats.timeouts), (1, 2, 3));
 
         let h = health(1);
-        let mut retry = h.start("test");
+        let mut retry = Retry::start(&h, "test");
         retry.next_attempt().unwrap();
         retry.failed(AttemptError::Timeout).unwrap();
         retry.next_attempt().unwrap();
@@ -287,21 +272,21 @@ mod tests {
     #[tokio::test(start_paused = true)]
     async fn karns_rule_no_round_trip_from_a_retried_request_unless_matched_by_id() {
         let h = health(2);
-        let mut retry = h.start("test");
+        let mut retry = Retry::start(&h, "test");
         retry.next_attempt().unwrap();
         retry.failed(AttemptError::Timeout).unwrap();
         retry.next_attempt().unwrap();
         tokio::time::advance(Duration::from_millis(5)).await;
         retry.succeeded();
         assert_eq!(h.stats().srtt_ms, None, "ambiguous: which attempt was answered?");
-        let mut retry = h.start("test");
+        let mut retry = Retry::start(&h, "test");
         retry.next_attempt().unwrap();
         retry.failed(AttemptError::Timeout).unwrap();
         retry.next_attempt().unwrap();
         tokio::time::advance(Duration::from_millis(5)).await;
         retry.succeeded_by(1);
         assert_eq!(h.stats().srtt_ms, Some(5.0), "the retry's own id: a clean sample");
-        let mut retry = h.start("test");
+        let mut retry = Retry::start(&h, "test");
         retry.next_attempt().unwrap();
         h.dropped(DropReason::Unit);
         h.dropped(DropReason::TransactionId);
@@ -320,7 +305,7 @@ mod tests {
     #[test]
     fn a_device_code_ends_the_request_at_once() {
         let h = health(5);
-        let mut retry = h.start("test");
+        let mut retry = Retry::start(&h, "test");
         retry.next_attempt().unwrap();
         let code = DeviceCode::Modbus(crate::protocols::modbus::Exception(2));
         assert!(matches!(retry.failed(AttemptError::Device(code)), Err(PlcError::Device(c)) if c == code));

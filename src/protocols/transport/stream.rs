@@ -27,6 +27,7 @@ use tokio_util::codec::Decoder;
 
 use super::connection::{Backoff, Connection};
 use super::endpoint::Endpoint;
+use super::health::Settled;
 use super::retry::{Attempt, AttemptError};
 
 /// Input kept while no frame is found; past it, the oldest half is noise and is cut, so a
@@ -38,15 +39,6 @@ const BURST_GAP: Duration = Duration::from_millis(5);
 
 /// The longest hold, in configured timeouts.
 const MAX_HOLD: u32 = 4;
-
-/// What holding the line did ([`StreamLink::settle`]).
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct Settled {
-    /// Replies that arrived while the line was held, dropped.
-    pub replies: u64,
-    /// How long the line was held.
-    pub held: Duration,
-}
 
 /// A byte-stream link to one device, opened on first use and reopened after a loss.
 pub(crate) struct StreamLink {

@@ -21,9 +21,19 @@ pub use cancel::CancelError;
 pub use control::{Actor, ControlError};
 pub use queues::{Control, Queues, Setup};
 
+use crate::devices::port::ReportError;
 use crate::domain::Target;
-use crate::store::writer::Writer;
+use crate::store::writer::{WriteError, Writer};
 use crate::store::{controls, jobs, locations};
+
+/// A writer's error as a device's port reports it.
+fn report_error(e: WriteError) -> ReportError {
+    match e {
+        WriteError::Closed => ReportError::Stopped,
+        WriteError::NotFound(id) => ReportError::NotFound(id),
+        other => ReportError::Store(Box::new(other)),
+    }
+}
 
 /// The dispatcher as the API uses it: cancels and control state.
 #[derive(Clone)]

@@ -5,15 +5,22 @@
 
 use std::collections::HashSet;
 
-use super::queues::{DevicePort, report_error};
+use super::report_error;
 use crate::devices::port::{Port, ReportError};
 use crate::domain::{Failure, FailureKind, Job, JobSpec, Priority, Report, Reported};
 use crate::service::planner::{CranePlanner, Decision};
 use crate::store::jobs::NewJob;
-use crate::store::writer::{Change, Outcome, WriteError};
+use crate::store::writer::{Change, Outcome, WriteError, Writer};
 
-/// The crane's next task as its planner decides, after what must come first.
-pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Result<Option<Job>, ReportError> {
+/// The next task of the crane `device` as its planner decides, after what must come first;
+/// the crane's `port` offers its jobs and takes its reports, `writer` commits what the
+/// planner adds.
+pub(super) async fn next_task(
+    port: &dyn Port,
+    device: &str,
+    writer: &Writer,
+    planner: &CranePlanner,
+) -> Result<Option<Job>, ReportError> {
     // A refusal ends a job and the choice is made again among the others; a place taken
     // meanwhile is chosen again. Bounded: a crane polls again soon anyway.
     if planner.unchanged_since_wait() {
@@ -21,7 +28,7 @@ pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Resu
     }
     for _ in 0..ROUNDS {
         let seen = planner.commits();
-        let candidates = port.eligible(usize::MAX, &HashSet::new());
+        let candidates = port.next(usize::MAX, &HashSet::new());
         if candidates.is_empty() {
             return Ok(None);
         }
@@ -34,7 +41,7 @@ pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Resu
                 planner.waited(seen);
                 return Ok(None);
             }
-            Decision::Place { job, to } => match port.writer.change(job, Change::Place(to)).await {
+            Decision::Place { job, to } => match writer.change(job, Change::Place(to)).await {
                 Ok(placed) => return Ok(Some(placed)),
                 // Taken since the rack was read (an inventory load): choose again.
                 Err(WriteError::Taken(_)) => continue,
@@ -55,10 +62,10 @@ pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Resu
                     reference: None,
                     priority,
                     barcode: None,
-                    device: Some(port.device.clone()),
+                    device: Some(device.to_owned()),
                     serves: Some(serves),
                 };
-                let outcome = port.writer.submit(vec![relocation]).await.map_err(report_error)?;
+                let outcome = writer.submit(vec![relocation]).await.map_err(report_error)?;
                 return Ok(outcome.into_iter().find_map(|o| match o {
                     Outcome::Created { job, .. } => Some(job),
                     Outcome::Existing(_) => None,
@@ -71,19 +78,3 @@ pub(super) async fn next_task(port: &DevicePort, planner: &CranePlanner) -> Resu
 
 /// Decisions made in one call at most.
 const ROUNDS: usize = 16;
-
-impl super::Queues {
-    /// The unfinished job that takes the box at `l` away (a retrieve or move from it), if
-    /// any.
-    pub fn taking_from(&self, l: crate::domain::Location) -> Option<i64> {
-        let queues = self.lock();
-        queues.values().find_map(|q| {
-            let ids = q.on.get(&l)?;
-            ids.iter().copied().find(|id| {
-                let job = q.active.get(id).or_else(|| q.queued.get(id));
-                job.and_then(|j| j.spec())
-                    .is_some_and(|s| crate::service::planner::refusal::picks_from(&s, l))
-            })
-        })
-    }
-}

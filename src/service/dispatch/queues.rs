@@ -22,11 +22,13 @@ use async_trait::async_trait;
 use tokio::sync::{Notify, watch};
 
 use super::order::next_jobs;
+use super::report_error;
 use crate::devices::DeviceStatus;
 use crate::devices::port::{Port, ReportError};
 use crate::domain::{Job, JobState, Location, LocationLock, Pause, Report, Waiting, WaitingReason};
 use crate::service::planner::CranePlanner;
-use crate::store::writer::{Committed, Locked, WriteError, Writer};
+use crate::service::planner::refusal::picks_from;
+use crate::store::writer::{Committed, Locked, Writer};
 
 /// What operators set for a device, apart from what the device reports.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -341,6 +343,19 @@ impl Queues {
         self.0.changed.notify_one();
     }
 
+    /// The unfinished job that takes the box at `l` away (a retrieve or move from it), if
+    /// any.
+    pub fn taking_from(&self, l: Location) -> Option<i64> {
+        let queues = self.lock();
+        queues.values().find_map(|q| {
+            let ids = q.on.get(&l)?;
+            ids.iter().copied().find(|id| {
+                let job = q.active.get(id).or_else(|| q.queued.get(id));
+                job.and_then(|j| j.spec()).is_some_and(|s| picks_from(&s, l))
+            })
+        })
+    }
+
     /// The port through which `device` gets its work and reports it.
     pub fn port(&self, device: &str, writer: Writer) -> Arc<dyn Port> {
         Arc::new(DevicePort { queues: self.clone(), device: device.to_owned(), writer })
@@ -415,7 +430,7 @@ impl Port for DevicePort {
     async fn next_task(&self) -> Result<Option<Job>, ReportError> {
         let planner = self.queues.planner(&self.device).cloned();
         match planner {
-            Some(planner) => super::plan::next_task(self, &planner).await,
+            Some(planner) => super::plan::next_task(self, &self.device, &self.writer, &planner).await,
             None => Ok(self.eligible(1, &HashSet::new()).into_iter().next()),
         }
     }
@@ -456,13 +471,5 @@ impl DevicePort {
             }
         }
         next_jobs(window, &held, free).into_iter().cloned().collect()
-    }
-}
-
-pub(super) fn report_error(e: WriteError) -> ReportError {
-    match e {
-        WriteError::Closed => ReportError::Stopped,
-        WriteError::NotFound(id) => ReportError::NotFound(id),
-        other => ReportError::Store(Box::new(other)),
     }
 }

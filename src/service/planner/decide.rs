@@ -36,7 +36,7 @@ use std::collections::{HashMap, HashSet};
 use super::putaway::{self, Want, spot};
 use super::rack::Rack;
 use super::refusal::picks_from;
-use crate::devices::config::{Planner, Station};
+use crate::config::devices::{Planner, Station};
 use crate::domain::{Class, Job, JobSpec, Location, Zone};
 use crate::wire::motion::{Motion, Spot};
 

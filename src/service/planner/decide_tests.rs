@@ -4,7 +4,7 @@ use std::collections::BTreeSet;
 
 use super::decide::{Decision, Memory, Plan, Verdict, check, decide};
 use super::rack::{Cell, Rack};
-use crate::devices::config::{Planner, Station};
+use crate::config::devices::{Planner, Station};
 use crate::domain::{Job, JobSpec, Location, NewJob, Priority};
 use crate::wire::motion::{Motion, Spot};
 

@@ -33,7 +33,7 @@ use std::collections::BTreeSet;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
-use crate::devices::config::CraneConfig;
+use crate::config::devices::CraneConfig;
 use crate::domain::Job;
 use crate::store::{Pool, locations};
 use decide::Memory;

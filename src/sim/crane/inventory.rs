@@ -19,6 +19,14 @@ use std::collections::BTreeSet;
 /// A rack cell: row, bay, level, side.
 pub type Cell = [u16; 4];
 
+/// Reads an inventory file: a JSON array of [row, bay, level, side].
+pub fn read_cells(path: &std::path::Path) -> anyhow::Result<Vec<Cell>> {
+    use anyhow::Context;
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text)
+        .with_context(|| format!("{}: expected a JSON array of [row, bay, level, side]", path.display()))
+}
+
 /// Whether a cell is a station (bay 0), which is never inventory.
 pub fn is_station(cell: Cell) -> bool {
     cell[1] == 0

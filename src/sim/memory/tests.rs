@@ -28,7 +28,7 @@ fn modbus_field_writes_pass_and_master_writes_are_refused() {
 #[test]
 fn mc3e_bit_and_word_devices() {
     let memory = Mc3eMemory::new(mc3e::Bank::default().shared());
-    let a = |t| at(mc3e::device::parse_address, t);
+    let a = |t| at(mc3e::address::parse_address, t);
     memory.write_bits(&a("X1A"), &[true, true]).unwrap();
     assert_eq!(memory.read_bits(&a("X19"), 4).unwrap(), vec![false, true, true, false]);
     memory.protect(&a("X10"), 16).unwrap();

@@ -74,7 +74,7 @@ async fn tasks_carry_the_mapped_coordinates_and_run_one_at_a_time() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dropped_link_mid_task_is_survived_and_nothing_is_sent_twice() {
-    let (app, sim) = crane_app(TransportKind::Tcp, 30, |d| d.ack = rackd::devices::config::Ack::Echo).await;
+    let (app, sim) = crane_app(TransportKind::Tcp, 30, |d| d.ack = rackd::config::devices::Ack::Echo).await;
     let id =
         submit(&app, json!({"kind": "move", "from": cloc(1, 3, 3, 1), "to": cloc(1, 4, 4, 2)}), "drop").await;
     wait_job(&app, id, &["running"], 5).await;

@@ -13,8 +13,8 @@ mod restart;
 
 use std::time::Duration;
 
+use rackd::config::devices::CraneConfig;
 use rackd::config::{AisleConfig, Config};
-use rackd::devices::config::CraneConfig;
 use rackd::protocols::Protocol;
 use rackd::protocols::mc3e::TransportKind;
 use rackd::sim::crane::{CraneSim, CraneSimOptions};

@@ -6,7 +6,7 @@
 use std::time::Duration;
 
 use rackd::config::Config;
-use rackd::devices::config::CraneConfig;
+use rackd::config::devices::CraneConfig;
 use rackd::protocols::mc3e::TransportKind;
 use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use rackd::store::Engine;

@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use rackd::devices::config::CraneConfig;
+use rackd::config::devices::CraneConfig;
 use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use rackd::store::Engine;
 use rstest::rstest;

@@ -3,8 +3,8 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use rackd::cli::sim::FaultArgs;
-use rackd::cli::sim_mc3e::{self, SimMc3eArgs, SimTransport};
+use rackd::cli::sim::faults::FaultArgs;
+use rackd::cli::sim::mc3e::{self as sim_mc3e, SimMc3eArgs, SimTransport};
 use rackd::protocols::faults::Fault;
 use rackd::protocols::link::LinkConfig;
 use rackd::protocols::mc3e::{

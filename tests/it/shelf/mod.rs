@@ -11,7 +11,7 @@ mod restart;
 mod safety;
 mod workload;
 
-use rackd::devices::config::ShelfConfig;
+use rackd::config::devices::ShelfConfig;
 use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
 
 use crate::support::{TestApp, spawn_with};

@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use rackd::devices::config::ShelfConfig;
+use rackd::config::devices::ShelfConfig;
 use rackd::domain::Location;
 use rackd::protocols::faults::Faults;
 use rackd::sim::shelf::{ShelfProtocol, ShelfSim, ShelfSimOptions};

@@ -30,7 +30,7 @@ fn start_crashable(config: Config) -> (String, std::sync::mpsc::Sender<()>, std:
     (addr_rx.recv().unwrap(), kill_tx, thread)
 }
 
-fn config(db: &Path, device: rackd::devices::config::ShelfConfig) -> Config {
+fn config(db: &Path, device: rackd::config::devices::ShelfConfig) -> Config {
     let mut c = Config::demo();
     c.server.listen = "127.0.0.1:0".parse().unwrap();
     c.database.path = db.to_owned();

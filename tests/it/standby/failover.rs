@@ -19,8 +19,8 @@ use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
 use rackd::cli::demo;
+use rackd::config::devices::CraneConfig;
 use rackd::config::{ClusterConfig, Config};
-use rackd::devices::config::CraneConfig;
 use rackd::domain::time::now_ms;
 use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};

@@ -7,8 +7,8 @@
 use std::time::{Duration, Instant};
 
 use rackd::cli::demo::{Pace, start_with};
+use rackd::config::devices::DeviceConfig;
 use rackd::config::{ClusterConfig, Config};
-use rackd::devices::DeviceConfig;
 use rackd::store::Database;
 use serde_json::{Value, json};
 

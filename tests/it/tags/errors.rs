@@ -1,7 +1,7 @@
 //! Every way a tag write can be refused, each with its JSON error, and none of them
 //! reaching the PLC; PLC refusals and silence as gateway errors.
 
-use rackd::devices::config::ShelfConfig;
+use rackd::config::devices::ShelfConfig;
 use rackd::protocols::faults::Faults;
 use rackd::protocols::modbus::Exception;
 use rackd::store::Engine;

@@ -12,8 +12,7 @@ mod modbus;
 use std::sync::Arc;
 use std::time::Duration;
 
-use rackd::devices::DeviceConfig;
-use rackd::devices::config::TagsConfig;
+use rackd::config::devices::{DeviceConfig, TagsConfig};
 use rackd::protocols::modbus::server::{Bank, ModbusServer, ServerHandle, ServerOptions};
 use serde_json::{Value, json};
 

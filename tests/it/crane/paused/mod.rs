@@ -22,13 +22,13 @@ use std::time::Duration;
 
 use crate::support::eventually_every;
 use async_trait::async_trait;
-use rackd::devices::config::CraneConfig;
+use rackd::config::devices::{CraneConfig, DeviceKind};
 use rackd::devices::crane::Crane;
 use rackd::devices::port::{Port, ReportError};
-use rackd::devices::{DeviceKind, DeviceRequest, DeviceStatus, StatusCell};
+use rackd::devices::{DeviceRequest, DeviceStatus, StatusCell};
 use rackd::domain::report::path;
 use rackd::domain::{Job, JobSpec, JobState, Location, NewJob, Priority, Report, Reported};
-use rackd::protocols::mc3e::{Bank, Device, SharedBank, device};
+use rackd::protocols::mc3e::{Bank, Device, SharedBank, address};
 use rackd::protocols::{Address, PlcError, PlcMemory};
 use rackd::sim::crane::engine::Engine;
 use tokio::sync::{Notify, mpsc, watch};
@@ -74,7 +74,7 @@ impl Memory {
 #[async_trait]
 impl PlcMemory for Memory {
     fn parse_address(&self, text: &str) -> Result<Address, PlcError> {
-        device::parse_address(text)
+        address::parse_address(text)
     }
 
     async fn read_words(&self, start: &Address, count: u16) -> Result<Vec<u16>, PlcError> {

@@ -1,10 +1,9 @@
-//! Why a `[[devices]]` entry cannot be used, and the word-area check the kinds share.
+//! Why a `[[devices]]` entry cannot be used.
 
+use super::words::WordsError;
 use super::{AddressError, CraneConfigError, DeviceKind, ShelfConfigError, TagsConfigError};
 use crate::protocols::link::LinkError;
-use crate::protocols::notation::{Items, shape};
 use crate::protocols::serial::SerialSettingsError;
-use crate::protocols::{PlcError, Protocol};
 
 /// A `[[devices]]` entry that cannot be used: which one, and why.
 #[derive(Debug, thiserror::Error)]
@@ -66,7 +65,7 @@ impl Problem {
     /// The entry's key the problem is about (`tags.beacon.red` for one tag), for
     /// pointing at its line.
     pub fn key(&self) -> String {
-        use crate::devices::tagdef::TagError;
+        use crate::wire::tags::TagError;
         let words = |e: &WordsError| match e {
             WordsError::Address { key, .. }
             | WordsError::NotWords { key, .. }
@@ -98,73 +97,4 @@ impl Problem {
             Problem::Tags(TagsConfigError::Tag(TagError::Def { name, .. })) => format!("tags.{name}"),
         }
     }
-}
-
-/// An area of words that does not suit what rackd does with it.
-#[derive(Debug, thiserror::Error)]
-pub enum WordsError {
-    /// The address does not parse in the protocol's notation.
-    #[error("{key} {text:?}: {source}")]
-    Address {
-        /// The configuration key.
-        key: &'static str,
-        /// Its value.
-        text: String,
-        /// The protocol's parse error.
-        source: PlcError,
-    },
-    /// The address names bits, bytes or double words.
-    #[error("{key} {text:?} must be a word address of {protocol}")]
-    NotWords {
-        /// The configuration key.
-        key: &'static str,
-        /// Its value.
-        text: String,
-        /// The link's protocol.
-        protocol: Protocol,
-    },
-    /// rackd writes the area, and the protocol's PLC refreshes it from its inputs.
-    #[error("{key} {text:?} must be a writable word address of {protocol}")]
-    NotWritable {
-        /// The configuration key.
-        key: &'static str,
-        /// Its value.
-        text: String,
-        /// The link's protocol.
-        protocol: Protocol,
-    },
-    /// The area runs past the end of the PLC's memory area.
-    #[error("{key} {text:?}: {count} words from there run past the end of the memory area")]
-    PastEnd {
-        /// The configuration key.
-        key: &'static str,
-        /// Its value.
-        text: String,
-        /// How many words rackd uses from there.
-        count: u32,
-    },
-}
-
-/// Checks, without a connection, that `count` words (`writable` ones when rackd writes
-/// them) of `protocol` start at `text` (the value of `key`).
-pub fn check_words(
-    protocol: Protocol,
-    key: &'static str,
-    text: &str,
-    count: u32,
-    writable: bool,
-) -> Result<(), WordsError> {
-    let text_owned = || text.to_owned();
-    let area =
-        shape(protocol, text).map_err(|source| WordsError::Address { key, text: text_owned(), source })?;
-    if area.items != Items::Words {
-        return Err(WordsError::NotWords { key, text: text_owned(), protocol });
-    }
-    if writable && !area.writable {
-        return Err(WordsError::NotWritable { key, text: text_owned(), protocol });
-    }
-    if !area.fits(count) {
-        return Err(WordsError::PastEnd { key, text: text_owned(), count });
-    }
-    Ok(())
 }

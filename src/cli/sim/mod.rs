@@ -1,38 +1,46 @@
-//! `rackd sim <machine>`: one simulator alone, for commissioning and tests.
+//! `rackd sim <machine>`: the arguments of each simulator, and what they mean to it (its
+//! options); the simulators themselves, and running them alone, are
+//! [`crate::sim::standalone`]'s.
 //!
 //! Every simulator takes the same fault flags ([`FaultArgs`], flattened into each
 //! subcommand) with the same meanings, from [`crate::protocols::faults`]; only the notation
 //! of `--device-error` follows each protocol's manual (hexadecimal MC end codes, decimal
-//! MEWTOCOL codes).
+//! MEWTOCOL codes). The memory simulators take `--preset` and `--control` too
+//! ([`bench::PresetArgs`]).
+
+pub mod bench;
+pub mod crane;
+pub mod faults;
+pub mod line;
+pub mod mc3e;
+pub mod modbus;
 
 use std::time::Duration;
 
-use anyhow::Context;
-
-pub use super::sim_faults::FaultArgs;
-use crate::protocols::Protocol;
 use crate::protocols::serial::SerialSettings;
-
-use crate::sim::shelf::{ShelfProtocol, ShelfSim, ShelfSimOptions};
+use crate::protocols::{DeviceCode, Protocol};
+use crate::sim::shelf::{ShelfProtocol, ShelfSimOptions};
+use crate::sim::standalone;
+use faults::FaultArgs;
 
 /// The simulators.
 #[derive(clap::Subcommand, Debug)]
 pub enum SimCommand {
     /// A Modbus server with a full register bank (all four tables, 0..65535).
-    Modbus(super::sim_modbus::SimModbusArgs),
+    Modbus(modbus::SimModbusArgs),
     /// The shelf storage PLC: task slots over Modbus UDP (answering with MBAP length 0),
     /// Modbus TCP, Modbus RTU as an S7-1200 (serial or over TCP), PPI or MEWTOCOL.
     Shelf(SimShelfArgs),
     /// A Mitsubishi MC protocol 3E (binary) server over the whole device range.
-    Mc3e(super::sim_mc3e::SimMc3eArgs),
+    Mc3e(mc3e::SimMc3eArgs),
     /// A stacker crane with the MC 3E register interface (D0..D39 / D200..D239). Reads
     /// commands on stdin: `alarm CODE`, `clear`, `heartbeat on|off`, `handshake on|off`, `force`, `drop`,
     /// `link on|off`, `status`.
-    Crane(super::sim_crane::SimCraneArgs),
+    Crane(crane::SimCraneArgs),
     /// A Panasonic PLC answering MEWTOCOL-COM (DT, X, Y, R, L, T, C) on TCP or a serial port.
-    Mewtocol(super::sim_line::SimLineArgs),
+    Mewtocol(line::SimLineArgs),
     /// A Siemens S7-200 answering PPI (V, I, Q, M, SM, S, AI, AQ, T, C) on TCP or a serial port.
-    Ppi(super::sim_line::SimLineArgs),
+    Ppi(line::SimLineArgs),
 }
 
 /// Options of `rackd sim shelf`.
@@ -83,7 +91,7 @@ impl SimShelfArgs {
             "--fail must be between 0 and 1, got {}",
             self.fail
         );
-        let faults = self.faults.faults_with(|text| self.protocol.device_code(text))?;
+        let faults = self.faults.faults_with(|text| DeviceCode::parse(self.protocol, text))?;
         Ok(ShelfSimOptions {
             protocol: ShelfProtocol::try_from(self.protocol)?,
             slots: self.slots,
@@ -109,43 +117,21 @@ impl SimShelfArgs {
     }
 }
 
-/// Runs the shelf simulator until Ctrl-C.
-async fn run_shelf(args: SimShelfArgs) -> anyhow::Result<()> {
-    let listen = args.listen()?;
-    let sim = ShelfSim::start(&listen, args.options()?)
-        .await
-        .with_context(|| format!("starting the {} shelf simulator on {listen}", args.protocol))?;
-    let at = sim.local_addr().map_or(listen, |a| a.to_string());
-    println!(
-        "shelf PLC simulator ({}) on {at}: {} slots from {}, {} words apart, unit {}",
-        sim.protocol(),
-        args.slots,
-        sim.base(),
-        sim.stride(),
-        sim.unit()
-    );
-    tokio::signal::ctrl_c().await?;
-    let (done, failed) = sim.finished();
-    println!("tasks finished {done}, failed {failed}; busy-slot violations {}", sim.violations());
-    sim.shutdown().await;
-    Ok(())
-}
-
 /// Runs a simulator until Ctrl-C.
 pub async fn run(cmd: SimCommand) -> anyhow::Result<()> {
     match cmd {
-        SimCommand::Modbus(args) => super::sim_modbus::run(args).await,
-        SimCommand::Mc3e(args) => super::sim_mc3e::run(args).await,
-        SimCommand::Crane(args) => super::sim_crane::run(args).await,
+        SimCommand::Modbus(args) => standalone::modbus::run(args.options()?).await,
+        SimCommand::Mc3e(args) => standalone::mc3e::run(args.options()?).await,
+        SimCommand::Crane(args) => standalone::crane::run(args.options()?).await,
         SimCommand::Mewtocol(args) => {
-            let server = super::sim_line::start_mewtocol(&args).await?;
-            super::sim_line::run(server, "MEWTOCOL", &args).await
+            let running = line::start_mewtocol(&args).await?;
+            standalone::line::run(running, "MEWTOCOL", &args.listen).await
         }
         SimCommand::Ppi(args) => {
-            let server = super::sim_line::start_ppi(&args).await?;
-            super::sim_line::run(server, "PPI", &args).await
+            let running = line::start_ppi(&args).await?;
+            standalone::line::run(running, "PPI", &args.listen).await
         }
-        SimCommand::Shelf(args) => run_shelf(args).await,
+        SimCommand::Shelf(args) => standalone::shelf::run(&args.listen()?, args.options()?).await,
     }
 }
 

@@ -3,9 +3,8 @@
 use std::collections::BTreeSet;
 use std::time::Duration;
 
-use super::check_words;
 use super::defaults::{OFFLINE_AFTER, POLL_MS};
-use super::error::WordsError;
+use super::words::{WordsError, check_words};
 use crate::protocols::link::LinkConfig;
 use crate::protocols::{Protocol, Quirk};
 use crate::wire::slot::SLOT_WORDS;
@@ -135,7 +134,7 @@ pub fn check_layout(config: &ShelfConfig) -> Result<(), WordsError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::config::DeviceConfig;
+    use crate::config::devices::DeviceConfig;
 
     fn shelf_over(protocol: &str, extra: &str) -> ShelfConfig {
         let text = format!(

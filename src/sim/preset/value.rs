@@ -3,18 +3,18 @@
 //!
 //! Numbers and bits go through the tags' own resolution and codec ([`TagSpec`],
 //! [`codec`]), so an entry means what the same tag would mean to rackd. Strings are
-//! [`super::sim_text`]'s.
+//! [`super::text`]'s.
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value as Json;
 
-use super::sim_text::{text_of, text_words};
-use crate::devices::tagdef::spec::TagError;
-use crate::devices::tagdef::{Place, TagDef, TagSpec, TagType, TagValue, WordOrder, codec};
+use super::text::{text_of, text_words};
 use crate::protocols::notation::{self, Items};
 use crate::protocols::protocol::Family;
 use crate::protocols::{Address, Protocol};
 use crate::sim::memory::{SimMemory, Span};
+use crate::wire::tags::spec::TagError;
+use crate::wire::tags::{Place, TagDef, TagSpec, TagType, TagValue, WordOrder, codec};
 
 /// A value's type: a tag type, or an ASCII string.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]

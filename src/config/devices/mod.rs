@@ -39,6 +39,7 @@ mod raw;
 mod shelf;
 mod tags;
 mod unit;
+mod words;
 
 use std::time::Duration;
 
@@ -47,10 +48,11 @@ use utoipa::ToSchema;
 
 pub use address::{AddressError, check_address, check_serial, check_unit};
 pub use crane::{Ack, CraneConfig, CraneConfigError, Planner, Station};
-pub use error::{DeviceConfigError, Problem, WordsError, check_words};
+pub use error::{DeviceConfigError, Problem};
 pub use raw::RawDevice;
 pub use shelf::{ShelfConfig, ShelfConfigError, default_shelf_quirks};
 pub use tags::{TagsConfig, TagsConfigError};
+pub use words::{WordsError, check_words};
 
 use crate::protocols::link::LinkConfig;
 

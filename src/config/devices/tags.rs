@@ -3,8 +3,8 @@
 use std::time::Duration;
 
 use super::defaults::{OFFLINE_AFTER, POLL_MS};
-use crate::devices::tagdef::{TagDef, TagError, TagSpec, TagTable};
 use crate::protocols::link::LinkConfig;
+use crate::wire::tags::{TagDef, TagError, TagSpec, TagTable};
 
 /// A tags device's settings, every default filled in.
 #[derive(Clone, Debug, PartialEq)]
@@ -67,7 +67,7 @@ impl TagsConfig {
 
 #[cfg(test)]
 mod tests {
-    use crate::devices::config::DeviceConfig;
+    use crate::config::devices::DeviceConfig;
 
     fn tags_entry(extra: &str) -> anyhow::Result<DeviceConfig> {
         let text = format!(

@@ -45,7 +45,7 @@ fn mc_strings_put_the_first_character_in_the_low_byte() {
         {"address": "D10", "type": "u32", "value": 65536},
     ]}));
     p.apply(Path::new("p.json"), Protocol::Mc3e, &memory).unwrap();
-    let at = |t| mc3e::device::parse_address(t).unwrap();
+    let at = |t| mc3e::address::parse_address(t).unwrap();
     assert_eq!(memory.read_words(&at("D0"), 1).unwrap(), [0x4241]);
     assert_eq!(memory.read_words(&at("D10"), 2).unwrap(), [0, 1], "MC keeps the low word first");
 }

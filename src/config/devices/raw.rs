@@ -14,7 +14,6 @@ use super::shelf::{ShelfConfig, default_shelf_quirks};
 use super::tags::TagsConfig;
 use super::unit::Unit;
 use super::{DeviceConfig, DeviceKind};
-use crate::devices::tagdef::TagTable;
 use crate::protocols::link::{DEFAULT_RETRIES, DEFAULT_TIMEOUT, LinkConfig};
 use crate::protocols::mewtocol::frame::GLOBAL_STATION;
 use crate::protocols::protocol::Family;
@@ -22,6 +21,7 @@ use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::LinkTuning;
 use crate::protocols::{Protocol, Quirk};
 use crate::wire::motion::Motion;
+use crate::wire::tags::TagTable;
 
 /// Every key any kind has; unknown keys are refused here, keys of another kind in
 /// [`TryFrom`]. Written back ([`From<&DeviceConfig>`]) with every key of the entry's kind

@@ -1,6 +1,18 @@
-//! `--preset FILE` and `--control HOST:PORT`, the options every memory simulator takes
-//! (`rackd sim modbus|mc3e|mewtocol|ppi`): load the preset before serving, then serve the
-//! control surface beside the protocol server.
+//! The simulators `rackd sim` runs alone, for commissioning and tests, each started from
+//! plain options and run until Ctrl-C: a Modbus server over a whole register bank
+//! ([`modbus`]), an MC 3E/4E PLC ([`mc3e`]), a MEWTOCOL or PPI PLC on TCP or a serial port
+//! ([`line`](mod@line)), the shelf PLC ([`shelf`]) and the stacker crane driven from stdin
+//! ([`crane`]).
+//!
+//! The memory simulators (Modbus, MC, MEWTOCOL, PPI) also take a [`Bench`]: a preset to
+//! start from ([`crate::sim::preset`]) and a control surface to serve beside the protocol
+//! server ([`crate::sim::control`]).
+
+pub mod crane;
+pub mod line;
+pub mod mc3e;
+pub mod modbus;
+pub mod shelf;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -8,30 +20,24 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::Context;
 
-use super::sim_control::{Control, ControlServer};
-use super::sim_identity::Identity;
-use super::sim_preset::{Preset, ReadOnlyRange};
+use super::control::{Control, ControlServer};
+use super::memory::SimMemory;
+use super::preset::identity::Identity;
+use super::preset::{Preset, ReadOnlyRange};
 use crate::protocols::Protocol;
 use crate::protocols::faults::SharedFaults;
-use crate::sim::memory::SimMemory;
 
-/// `--preset` and `--control`, taken by every memory simulator.
-#[derive(clap::Args, Clone, Debug, Default, PartialEq)]
-pub struct PresetArgs {
-    /// Load initial values and read-only ranges from FILE before serving (JSON, or TOML when
-    /// it ends in .toml), addresses in the simulator's notation; for Modbus: {"values": [{"address": "4x100", "type": "f32", "word_order":
-    /// "cdab", "value": 3.5}, ...], "read_only": [{"address": "1x0", "count": 16}]}. See
-    /// docs/commissioning/simulators.md and config/sim/.
-    #[arg(long, value_name = "FILE")]
+/// What every memory simulator takes besides its own options: a preset and a control
+/// surface.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Bench {
+    /// The preset to load before serving (JSON, or TOML when the name ends in `.toml`).
     pub preset: Option<PathBuf>,
-    /// Serve a control surface on HOST:PORT (HTTP/JSON): GET /values?address=4x100&type=f32,
-    /// PUT /values with a preset entry (writes pass by read-only ranges), GET /read-only,
-    /// GET /counters.
-    #[arg(long, value_name = "HOST:PORT")]
+    /// Where to serve the control surface, if anywhere.
     pub control: Option<SocketAddr>,
 }
 
-impl PresetArgs {
+impl Bench {
     /// Loads the preset, if any, into `memory`; returns the read-only ranges it set.
     pub fn load(&self, protocol: Protocol, memory: &dyn SimMemory) -> anyhow::Result<Vec<ReadOnlyRange>> {
         match &self.preset {
@@ -40,7 +46,7 @@ impl PresetArgs {
         }
     }
 
-    /// The preset's `identity` section, if it has one (see [`super::sim_identity`]).
+    /// The preset's `identity` section, if it has one (see [`crate::sim::preset::identity`]).
     pub fn identity(&self) -> anyhow::Result<Option<Identity>> {
         match &self.preset {
             Some(path) => Ok(Preset::read(path)?.identity),
@@ -74,4 +80,12 @@ impl PresetArgs {
         eprintln!("control surface on http://{}", server.local_addr());
         Ok(Some(server))
     }
+}
+
+/// A running memory simulator and its control surface, if asked for.
+pub struct Running<S> {
+    /// The protocol server.
+    pub server: S,
+    /// The control surface.
+    pub control: Option<ControlServer>,
 }

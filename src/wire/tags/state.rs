@@ -136,7 +136,7 @@ pub enum TagFault {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::tagdef::TagDef;
+    use crate::wire::tags::TagDef;
 
     #[test]
     fn only_real_changes_change_the_status() {

@@ -28,11 +28,11 @@ use axum::routing::get;
 use axum::{Json, Router};
 use serde::{Deserialize, Serialize};
 
-use super::sim_preset::{ReadOnlyRange, range_span};
-use super::sim_value::{Entry, Order, Resolved, Target, ValueType};
+use super::memory::SimMemory;
+use super::preset::value::{Entry, Order, Resolved, Target, ValueType};
+use super::preset::{ReadOnlyRange, range_span};
 use crate::protocols::Protocol;
 use crate::protocols::faults::SharedFaults;
-use crate::sim::memory::SimMemory;
 
 /// What the control surface works on.
 pub struct Control {

@@ -5,7 +5,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use super::defaults::{OFFLINE_AFTER, POLL_MS};
-use super::error::{WordsError, check_words};
+use super::words::{WordsError, check_words};
 use crate::protocols::Protocol;
 use crate::protocols::link::LinkConfig;
 use crate::wire::motion::Motion;
@@ -180,7 +180,7 @@ impl CraneConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::config::DeviceConfig;
+    use crate::config::devices::DeviceConfig;
 
     #[test]
     fn a_crane_entry_has_the_spec_defaults() {

@@ -1,19 +1,8 @@
-//! `rackd sim crane`: one simulated stacker crane on MC 3E, driven from stdin.
+//! `rackd sim crane`: the arguments of the stacker crane simulator
+//! ([`crate::sim::standalone::crane`], which lists the commands it reads on stdin).
 //!
 //! ```text
 //! rackd sim crane --listen 127.0.0.1:8000 --transport udp --step-ms 300 --alarm 7069@12
-//! > alarm 7002        raise an alarm (any code)
-//! > clear             clear the alarm
-//! > heartbeat off     stop answering the heartbeat (on: answer again)
-//! > handshake off     ignore the hand-over strobe (on: answer again)
-//! > force             force-complete the task under way (state 30)
-//! > drop              close the connection once (UDP: lose one request)
-//! > link off          ignore every request (on: answer again)
-//! > status            action state, task, alarm, load, positions
-//! > put 1 4 2 1       a load into row 1, bay 4, level 2, near (starts tracking the inventory)
-//! > take 1 4 2 1      the load out of that cell
-//! > inventory         the occupied cells
-//! > stats             cycles, busy time, distances, business alarms
 //! ```
 //!
 //! `--motion` (or any of its figures, e.g. `--travel-speed 4`) times the action states by
@@ -23,13 +12,12 @@
 
 use std::time::Duration;
 
-use tokio::io::{AsyncBufReadExt, BufReader};
-
-use super::sim_faults::FaultArgs;
-use super::sim_mc3e::SimTransport;
-use crate::protocols::mc3e::{EndCode, TransportKind};
-use crate::sim::crane::inventory::Cell;
-use crate::sim::crane::{CraneSim, CraneSimOptions};
+use super::faults::FaultArgs;
+use super::mc3e::SimTransport;
+use crate::protocols::mc3e::EndCode;
+use crate::sim::crane::CraneSimOptions;
+use crate::sim::crane::inventory::read_cells;
+use crate::sim::standalone::crane::CraneOptions;
 use crate::wire::motion::Motion;
 
 /// `rackd sim crane` options.
@@ -122,14 +110,6 @@ impl MotionArgs {
     }
 }
 
-/// Reads an inventory file: a JSON array of [row, bay, level, side].
-fn read_inventory(path: &std::path::Path) -> anyhow::Result<Vec<Cell>> {
-    use anyhow::Context;
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text)
-        .with_context(|| format!("{}: expected a JSON array of [row, bay, level, side]", path.display()))
-}
-
 /// Why a `--alarm` value was refused.
 #[derive(Debug, thiserror::Error)]
 #[error("expected CODE@SECONDS, e.g. 7069@10: {0}")]
@@ -142,54 +122,21 @@ fn scheduled_alarm(text: &str) -> Result<(u16, u64), BadScheduledAlarm> {
     Ok((code, secs))
 }
 
-/// Runs the crane until Ctrl-C or the end of stdin.
-pub async fn run(args: SimCraneArgs) -> anyhow::Result<()> {
-    let transport = match args.transport {
-        SimTransport::Tcp => TransportKind::Tcp,
-        SimTransport::Udp => TransportKind::Udp,
-    };
-    let faults = args.faults.faults::<EndCode>()?;
-    let wcs_timeout = (args.watchdog_secs > 0).then(|| Duration::from_secs(args.watchdog_secs));
-    let inventory = args.inventory.as_deref().map(read_inventory).transpose()?;
-    let options = CraneSimOptions {
-        transport,
-        step: Duration::from_millis(args.step_ms),
-        wcs_timeout,
-        motion: args.motion.model(),
-        time_scale: args.time_scale,
-        inventory,
-    };
-    let sim = std::sync::Arc::new(CraneSim::start(&args.listen, options).await?);
-    sim.set_faults(faults);
-    println!("crane simulator on {:?} {} (commands on stdin)", args.transport, sim.local_addr());
-    if let Some(m) = args.motion.model() {
-        println!("motion model {m:?}, time scale {}", args.time_scale);
+impl SimCraneArgs {
+    /// The simulator options these arguments select.
+    pub fn options(&self) -> anyhow::Result<CraneOptions> {
+        let faults = self.faults.faults::<EndCode>()?;
+        let wcs_timeout = (self.watchdog_secs > 0).then(|| Duration::from_secs(self.watchdog_secs));
+        let inventory = self.inventory.as_deref().map(read_cells).transpose()?;
+        let sim = CraneSimOptions {
+            transport: self.transport.kind(),
+            step: Duration::from_millis(self.step_ms),
+            wcs_timeout,
+            motion: self.motion.model(),
+            time_scale: self.time_scale,
+            inventory,
+        };
+        let alarms = self.alarm.iter().map(|&(code, secs)| (code, Duration::from_secs(secs))).collect();
+        Ok(CraneOptions { listen: self.listen.clone(), sim, faults, alarms })
     }
-    for (code, secs) in args.alarm.clone() {
-        let sim = sim.clone();
-        tokio::spawn(async move {
-            tokio::time::sleep(Duration::from_secs(secs)).await;
-            println!("scheduled alarm {code}");
-            sim.raise_alarm(code);
-        });
-    }
-    let mut lines = BufReader::new(tokio::io::stdin()).lines();
-    loop {
-        tokio::select! {
-            _ = tokio::signal::ctrl_c() => break,
-            line = lines.next_line() => match line? {
-                Some(line) if line.trim().is_empty() => {}
-                Some(line) => match sim.command(&line) {
-                    Ok(out) => println!("{out}"),
-                    Err(e) => println!("error: {e}"),
-                },
-                // stdin closed (run in the background): keep serving until Ctrl-C.
-                None => {
-                    tokio::signal::ctrl_c().await?;
-                    break;
-                }
-            },
-        }
-    }
-    Ok(())
 }

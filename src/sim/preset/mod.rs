@@ -14,7 +14,7 @@
 //! }
 //! ```
 //!
-//! Entries use the tags' vocabulary ([`TagDef`](crate::devices::tagdef::TagDef):
+//! Entries use the tags' vocabulary ([`TagDef`](crate::wire::tags::TagDef):
 //! addresses in the protocol's notation, `ADDRESS.N` for a bit of a word, types bool, u16,
 //! i16, u32, i32, f32, `word_order`) and their codec, plus what a bench needs and a tag
 //! does not:
@@ -35,12 +35,16 @@
 //! otherwise be silently ignored). Every refusal names the file, the entry
 //! (`values[2] (4x100)`) and what is wrong.
 
+pub mod identity;
+mod text;
+pub mod value;
+
 use std::path::Path;
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
-use super::sim_value::{Entry, Resolved};
+use self::value::{Entry, Resolved};
 use crate::protocols::Protocol;
 use crate::sim::memory::{SimMemory, Span};
 
@@ -71,7 +75,7 @@ pub struct Preset {
     pub read_only: Vec<ReadOnlyRange>,
     /// What the PLC says it is (Modbus device identification, MC CPU model name).
     #[serde(default)]
-    pub identity: Option<super::sim_identity::Identity>,
+    pub identity: Option<identity::Identity>,
 }
 
 impl Preset {
@@ -141,5 +145,4 @@ pub fn range_span(protocol: Protocol, memory: &dyn SimMemory, range: &ReadOnlyRa
 }
 
 #[cfg(test)]
-#[path = "sim_preset_tests.rs"]
 mod tests;
