@@ -1,5 +1,5 @@
 //! The OpenAPI document against the server it describes: schemathesis (an outside contract
-//! fuzzer, installed by `.ci/run` into `.ci/venv`) runs against the demo site with its
+//! fuzzer, installed by `cargo xtask test` into `.ci/venv`) runs against the demo site with its
 //! examples, fuzzing and stateful phases, and any failure of its five checks fails the test.
 //!
 //! The run is seeded (`RACKD_SCHEMATHESIS_SEED`, default 1), so that CI repeats the same
@@ -15,15 +15,15 @@ use std::time::Duration;
 
 use crate::support::eventually_blocking;
 
-/// The schemathesis executable: `RACKD_SCHEMATHESIS`, else the one `.ci/run` installs.
+/// The schemathesis executable: `RACKD_SCHEMATHESIS`, else the one `cargo xtask test` installs.
 fn schemathesis() -> PathBuf {
     let path = std::env::var_os("RACKD_SCHEMATHESIS")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.ci/venv/bin/schemathesis")));
     assert!(
         path.exists(),
-        "schemathesis is not installed at {}: run `python3 -m venv .ci/venv && .ci/venv/bin/pip install \
-         -r .ci/requirements.txt` (what .ci/run does), or set RACKD_SCHEMATHESIS",
+        "schemathesis is not installed at {}: run `cargo xtask test` (or `cargo xtask setup`), \
+         which makes .ci/venv from .ci/requirements.txt, or set RACKD_SCHEMATHESIS",
         path.display()
     );
     path

@@ -33,8 +33,8 @@ for f in text_string_to_metric_families(sys.stdin.read()):
 print(json.dumps(out))
 "#;
 
-/// The Python with `prometheus_client`: `RACKD_TEST_PYTHON`, else the virtualenv `.ci/run`
-/// makes in `.ci/venv`.
+/// The Python with `prometheus_client`: `RACKD_TEST_PYTHON`, else the virtualenv
+/// `cargo xtask test` makes in `.ci/venv`.
 fn python() -> PathBuf {
     let path = std::env::var_os("RACKD_TEST_PYTHON")
         .map(PathBuf::from)
@@ -45,9 +45,9 @@ fn python() -> PathBuf {
         .is_ok_and(|o| o.status.success());
     assert!(
         works,
-        "{} with prometheus_client is needed to parse /metrics; install it with: \
-         python3 -m venv .ci/venv && .ci/venv/bin/pip install -r .ci/requirements.txt \
-         (as .ci/run does), or point RACKD_TEST_PYTHON at a Python that has it",
+        "{} with prometheus_client is needed to parse /metrics: run `cargo xtask test` (or \
+         `cargo xtask setup`), which makes .ci/venv from .ci/requirements.txt, or point \
+         RACKD_TEST_PYTHON at a Python that has it",
         path.display()
     );
     path

@@ -130,7 +130,7 @@ impl Browser {
         let chromium = find_program("CHROMIUM", &["chromium", "chromium-browser", "google-chrome"]);
         let (Some(driver_path), Some(chromium)) = (driver_path, chromium) else {
             let what = "the browser tests need Chromium and chromedriver: install them with \
-                        `apt-get install chromium chromium-driver` (Debian/Ubuntu)";
+                        `apt-get install chromium chromium-driver` (Debian/Ubuntu), or run `cargo xtask test`, which does";
             if std::env::var("RACKD_SKIP_BROWSER").is_ok_and(|v| v == "1") {
                 // Straight to stderr: the test harness does not capture that, so it shows.
                 let banner =

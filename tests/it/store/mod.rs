@@ -1,5 +1,5 @@
 //! The store's writer on both engines: the same tests against a SQLite file and against a
-//! throwaway PostgreSQL cluster (see `tests/common/postgres.rs`), through the real writer
+//! throwaway PostgreSQL cluster (see `tests/it/support/postgres.rs`), through the real writer
 //! and the real migrations.
 
 mod copy;

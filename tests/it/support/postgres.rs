@@ -22,7 +22,7 @@ use sqlx::Connection;
 
 /// How to install what these tests need.
 const INSTALL: &str =
-    "apt-get update && apt-get install -y postgresql (or run `bash .ci/run`, which installs it)";
+    "apt-get update && apt-get install -y postgresql (or run `cargo xtask test`, which installs it)";
 
 /// The running cluster: the URL of its maintenance database, without the database name.
 struct Cluster {
