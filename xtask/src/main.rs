@@ -138,7 +138,8 @@ fn apt_install(packages: &[&str]) -> Result<(), String> {
 /// copy beside the virtualenv tells what it was made from).
 fn python_tools(root: &Path) -> Result<(), String> {
     let venv = root.join(".ci/venv");
-    let wanted = std::fs::read(root.join(".ci/requirements.txt")).map_err(|e| format!(".ci/requirements.txt: {e}"))?;
+    let wanted =
+        std::fs::read(root.join(".ci/requirements.txt")).map_err(|e| format!(".ci/requirements.txt: {e}"))?;
     let made_from = std::fs::read(venv.join("requirements.txt")).ok();
     if venv.join("bin/python").exists() && made_from.as_deref() == Some(wanted.as_slice()) {
         return Ok(());
