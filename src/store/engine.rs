@@ -178,6 +178,16 @@ impl Engine {
 
 /// A pool of at most `max` connections to `database`, with every engine setting made here
 /// (and only here); a PostgreSQL server's version is checked.
+///
+/// On PostgreSQL the server ends a session of rackd's whose transaction has waited on its
+/// client for `busy_timeout` (at least a second): `idle_in_transaction_session_timeout`.
+/// rackd never waits on anything but the database inside a transaction, so such a session
+/// belongs to a node cut off mid-transaction (a partition, a frozen process). Its
+/// transaction then rolls back and its locks go; without this, a dispatch write cut off
+/// under the lease's fence (`store::cluster::fence` locks the lease row for share) would
+/// hold that row until the server's TCP keepalive gave up, hours on a quiet link, and no
+/// standby could take over. The rollback keeps the fence's promise: the write is committed
+/// before the new node starts, or not at all.
 pub async fn connect(database: &Database, busy_timeout: Duration, max: u32) -> Result<Pool, OpenError> {
     match database {
         Database::Sqlite(path) => {
@@ -186,7 +196,10 @@ pub async fn connect(database: &Database, busy_timeout: Duration, max: u32) -> R
             Ok(Pool::Sqlite(SqlitePoolOptions::new().max_connections(max).connect_with(options).await?))
         }
         Database::Postgres(url) => {
-            let options = PgConnectOptions::from_str(url)?.application_name("rackd");
+            let idle = busy_timeout.max(Duration::from_secs(1)).as_millis();
+            let options = PgConnectOptions::from_str(url)?
+                .application_name("rackd")
+                .options([("idle_in_transaction_session_timeout", format!("{idle}ms"))]);
             let pool = PgPoolOptions::new()
                 .max_connections(max)
                 .acquire_timeout(busy_timeout.max(Duration::from_secs(5)))

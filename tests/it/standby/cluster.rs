@@ -111,6 +111,32 @@ async fn a_takeover_waits_for_a_write_committed_under_the_old_epoch() {
     assert_eq!(cluster::take(&db, LEASE, "c", Some(&stale)).await.unwrap(), None);
 }
 
+/// A node cut off while a dispatch write holds the lease row under the fence (the
+/// connection stays open, nothing gets through): the server ends that transaction after the
+/// store's busy timeout, so the standby's takeover goes through instead of waiting for ever.
+#[tokio::test]
+async fn a_fenced_transaction_cut_off_mid_way_does_not_hold_the_lease_for_ever() {
+    let url = crate::support::postgres::database().await;
+    let db = pool(&url).await;
+    let (proxy, proxied) = Proxy::to_postgres(&url).await;
+    let cut_off =
+        match rackd::store::open(&Database::Postgres(proxied), Duration::from_secs(1)).await.unwrap() {
+            Pool::Postgres(p) => p,
+            Pool::Sqlite(_) => unreachable!(),
+        };
+    assert_eq!(cluster::take(&cut_off, LEASE, "a", None).await.unwrap(), Some(1));
+    let seen = cluster::read(&db, LEASE).await.unwrap().unwrap();
+    let mut tx = cut_off.begin().await.unwrap();
+    assert!(cluster::fence(&mut tx, LEASE, 1).await.unwrap());
+    proxy.block();
+    let started = Instant::now();
+    let took =
+        tokio::time::timeout(Duration::from_secs(20), cluster::take(&db, LEASE, "b", Some(&seen))).await;
+    assert_eq!(took.expect("the takeover is not held for ever").unwrap(), Some(2));
+    assert!(started.elapsed() >= Duration::from_millis(500), "it waited for the fenced write first");
+    drop(tx);
+}
+
 #[tokio::test]
 async fn a_partitioned_active_node_stops_driving_before_the_standby_starts() {
     let url = crate::support::postgres::database().await;
