@@ -19,16 +19,31 @@ use sha2::{Digest, Sha256};
 
 /// `[auth]`: the API keys. Auth owns its configuration section, so the configuration
 /// module depends on auth and never the other way round.
-#[derive(Clone, Debug, Default, PartialEq, Deserialize, Serialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AuthConfig {
-    /// The API keys, stored hashed (`rackd hash-key` prints a hash). Once loaded, those of
-    /// `keys_file` too.
-    pub keys: Vec<KeyConfig>,
+    /// Unknown keys one client address may present within `failure_window_secs` before its
+    /// requests are answered 429 until the window ends (0: no limit). See `api::failures`.
+    pub max_failures: u32,
+    /// The window of `max_failures`, in seconds, from an address's first failure.
+    pub failure_window_secs: u64,
     /// A TOML file of more `[[keys]]` entries, relative to the working directory like
     /// `database.path`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub keys_file: Option<PathBuf>,
+    /// The API keys, stored hashed (`rackd hash-key` prints a hash). Once loaded, those of
+    /// `keys_file` too.
+    pub keys: Vec<KeyConfig>,
+}
+
+/// The largest `auth.max_failures`: the limiter keeps a fingerprint of each unknown key
+/// counted, per address (`api::failures`), so this bounds its memory.
+pub const MOST_FAILURES: u32 = 100;
+
+impl Default for AuthConfig {
+    fn default() -> Self {
+        AuthConfig { max_failures: 10, failure_window_secs: 60, keys_file: None, keys: Vec::new() }
+    }
 }
 
 /// The contents of an `auth.keys_file`: `[[keys]]` entries as in `[[auth.keys]]`.

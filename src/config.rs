@@ -23,6 +23,7 @@ pub mod env;
 mod error;
 mod events;
 mod explain;
+mod hosts;
 pub mod layers;
 pub mod origin;
 
@@ -30,6 +31,7 @@ pub use check::Invalid;
 pub use env::EnvError;
 pub use error::ConfigError;
 pub use events::{EventsConfig, EventsConfigError};
+pub use hosts::{AllowedHost, BadHost};
 pub use layers::{Loaded, Sources};
 pub use origin::Origin;
 
@@ -77,6 +79,12 @@ pub struct ServerConfig {
     pub body_limit_bytes: usize,
     /// Seconds a request may take before it is answered 503.
     pub request_timeout_secs: u64,
+    /// Without API keys: more names (`NAME` at any port, or `NAME:PORT`) the `Host` and
+    /// `Origin` of a request may give besides `localhost`, `127.0.0.1`, `[::1]` and the
+    /// listen address at the listen port (see `api::keyless`). From the environment: a
+    /// comma-separated list.
+    #[serde(deserialize_with = "hosts::list_or_commas")]
+    pub allowed_hosts: Vec<AllowedHost>,
 }
 
 /// `[database]`
@@ -216,6 +224,7 @@ impl Default for ServerConfig {
             listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
             body_limit_bytes: 2 * 1024 * 1024,
             request_timeout_secs: 30,
+            allowed_hosts: Vec::new(),
         }
     }
 }

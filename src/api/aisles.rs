@@ -61,7 +61,7 @@ async fn set_paused(
     app: AppState,
     n: u16,
     paused: bool,
-    by: String,
+    by: Caller,
     reason: Option<String>,
 ) -> Result<Json<Aisle>, ApiError> {
     aisle(&app, n)?;
@@ -83,7 +83,7 @@ async fn set_paused(
 async fn pause_aisle(
     State(app): State<AppState>,
     Path(n): Path<u16>,
-    Caller(by): Caller,
+    by: Caller,
     OptionalJson(body): OptionalJson<ControlRequest>,
 ) -> Result<Json<Aisle>, ApiError> {
     set_paused(app, n, true, by, body.reason).await
@@ -100,7 +100,7 @@ async fn pause_aisle(
 async fn resume_aisle(
     State(app): State<AppState>,
     Path(n): Path<u16>,
-    Caller(by): Caller,
+    by: Caller,
     OptionalJson(body): OptionalJson<ControlRequest>,
 ) -> Result<Json<Aisle>, ApiError> {
     set_paused(app, n, false, by, body.reason).await

@@ -56,13 +56,14 @@ pub struct AcknowledgeRequest {
 async fn acknowledge_alarm(
     State(app): State<AppState>,
     Path(id): Path<i64>,
-    Caller(by): Caller,
+    by: Caller,
     OptionalJson(body): OptionalJson<AcknowledgeRequest>,
 ) -> Result<Json<Alarm>, ApiError> {
     let actor = actor(by, body.note)?;
     tracing::info!(alarm = id, by = %actor.by, "alarm acknowledged through the API");
+    let who = actor.who();
     let record = Record::Acknowledge { alarm: id, by: actor.by, note: actor.reason };
-    app.writer.record(record).await?;
+    app.writer.record_as(record, who).await?;
     let alarm = alarms::get(&app.pool, id).await?;
     Ok(Json(alarm.ok_or_else(|| ApiError::not_found(format!("alarm {id} does not exist")))?))
 }

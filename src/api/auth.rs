@@ -3,9 +3,15 @@
 //! The role a request needs follows from its method: reads (`GET`, `HEAD`) need `viewer`,
 //! everything else `operator`; routes registered under [`admin_paths`] need `admin`, except
 //! pause, resume and tag writes (`/api/v1/devices/{id}/tags/{tag}`), which are operators'
-//! daily work. With no
-//! keys configured every request is let through (the server then only listens on loopback,
-//! see [`crate::app`]).
+//! daily work. With no keys configured every request with a key's place taken by keyless
+//! mode's checks ([`super::keyless`]) is let through (the server then only listens on
+//! loopback, see [`crate::app`]).
+//!
+//! A key is taken from `Authorization: Bearer` or `X-Api-Key`, and from `?token=` on
+//! `GET /api/v1/ws` alone (a browser cannot set headers on a WebSocket); a `token`
+//! parameter anywhere else is refused (400 `token_in_query`), in both modes. Unknown keys
+//! are counted per client address, and an address that sent too many is held off (429,
+//! [`super::failures`]).
 
 use std::borrow::Cow;
 
@@ -15,6 +21,7 @@ use axum::middleware::Next;
 use axum::response::Response;
 
 use super::error::ApiError;
+use super::extract::peer;
 use super::state::AppState;
 use crate::auth::Role;
 
@@ -47,8 +54,42 @@ fn is_tag_write(path: &str) -> bool {
     matches!(rest.split('/').collect::<Vec<_>>()[..], [id, "tags", tag] if !id.is_empty() && !tag.is_empty())
 }
 
-/// The key a request presents: `Authorization: Bearer KEY`, `X-Api-Key: KEY`, or (for
-/// browsers opening a WebSocket, which cannot set headers) `?token=KEY`, URL-decoded.
+/// The one route that takes a key from the query: browsers cannot set headers on a
+/// WebSocket handshake.
+const WS: &str = "/api/v1/ws";
+
+/// Whether the request may carry its key as `?token=`: `GET /api/v1/ws` only.
+fn token_allowed(req: &Request) -> bool {
+    req.method() == Method::GET && req.uri().path() == WS
+}
+
+/// Whether the query holds a `token` parameter.
+fn has_token(req: &Request) -> bool {
+    req.uri().query().is_some_and(|q| form_urlencoded::parse(q.as_bytes()).any(|(k, _)| k == "token"))
+}
+
+/// 400 `token_in_query` for a `?token=` anywhere but `GET /api/v1/ws`: a key in a URL ends
+/// up in proxy logs, browser history and screenshots, so it is refused outright rather
+/// than silently used (or silently dropped, which would leave the caller wondering why
+/// its key does nothing).
+fn refuse_token(req: &Request) -> Result<(), ApiError> {
+    if has_token(req) && !token_allowed(req) {
+        return Err(ApiError::bad_request(
+            "token_in_query",
+            format!(
+                "a key is not taken from the query on {} {} (URLs end up in logs and history): send \
+                 `Authorization: Bearer KEY`; `?token=` is for `GET {WS}` only, where a browser cannot set headers",
+                req.method(),
+                req.uri().path()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The key a request presents: `Authorization: Bearer KEY`, `X-Api-Key: KEY`, or on
+/// `GET /api/v1/ws` alone (browsers opening a WebSocket cannot set headers) `?token=KEY`,
+/// URL-decoded.
 fn presented_key(req: &Request) -> Option<Cow<'_, str>> {
     let headers = req.headers();
     if let Some(v) = headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()) {
@@ -59,6 +100,9 @@ fn presented_key(req: &Request) -> Option<Cow<'_, str>> {
     if let Some(v) = headers.get("x-api-key").and_then(|v| v.to_str().ok()) {
         return Some(Cow::Borrowed(v.trim()));
     }
+    if !token_allowed(req) {
+        return None;
+    }
     let query = req.uri().query()?;
     form_urlencoded::parse(query.as_bytes()).find(|(k, _)| k == "token").map(|(_, v)| v)
 }
@@ -66,10 +110,10 @@ fn presented_key(req: &Request) -> Option<Cow<'_, str>> {
 /// The request without `token` in its query, so that handlers never see (nor refuse, nor
 /// log) a key passed that way.
 fn without_token(mut req: Request) -> Request {
-    let Some(query) = req.uri().query() else { return req };
-    if !form_urlencoded::parse(query.as_bytes()).any(|(k, _)| k == "token") {
+    if !has_token(&req) {
         return req;
     }
+    let Some(query) = req.uri().query() else { return req };
     let kept: String = form_urlencoded::Serializer::new(String::new())
         .extend_pairs(form_urlencoded::parse(query.as_bytes()).filter(|(k, _)| k != "token"))
         .finish();
@@ -83,16 +127,29 @@ fn without_token(mut req: Request) -> Request {
     req
 }
 
-/// Middleware: answers 401 without a known key and 403 when the key's role is too low; a
-/// `?token=` is taken out of the query before the request goes on.
+/// Middleware on every keyed route: who is calling, and may they?
+///
+/// With keys, in this order: 429 `too_many_failures` while the client's address has used up
+/// its failed authentications ([`super::failures`]); 400 `token_in_query` for a `?token=`
+/// outside `GET /api/v1/ws`; 401 without a known key (an unknown one counts as a failure);
+/// 403 when the key's role is too low. Without keys: keyless mode's checks
+/// ([`super::keyless`]: 421, 403, 415), then the same 400. A `?token=` is taken out of the
+/// query before the request goes on.
 pub async fn require_key(
     State(app): State<AppState>,
     req: Request,
     next: Next,
 ) -> Result<Response, ApiError> {
     if app.keys.is_empty() {
+        app.hosts.check(&req)?;
+        refuse_token(&req)?;
         return Ok(next.run(without_token(req)).await);
     }
+    let peer = peer(req.extensions());
+    if let Some(wait) = peer.and_then(|ip| app.failures.blocked(ip)) {
+        return Err(too_many_failures(wait));
+    }
+    refuse_token(&req)?;
     let needed = required_role(req.method(), req.uri().path());
     let Some(key) = presented_key(&req) else {
         return Err(ApiError::new(
@@ -102,6 +159,9 @@ pub async fn require_key(
         ));
     };
     let Some(who) = app.keys.identify(&key) else {
+        if let Some(ip) = peer {
+            app.failures.failed(ip, super::failures::fingerprint(&key));
+        }
         return Err(ApiError::new(StatusCode::UNAUTHORIZED, "unauthorized", "the API key is not known"));
     };
     if who.role < needed {
@@ -115,6 +175,19 @@ pub async fn require_key(
     let mut req = without_token(req);
     req.extensions_mut().insert(who);
     Ok(next.run(req).await)
+}
+
+/// 429 for an address that has used up its failed authentications, with `Retry-After`:
+/// the whole seconds left of its window, at least 1.
+fn too_many_failures(wait: std::time::Duration) -> ApiError {
+    let secs = wait.as_secs() + u64::from(wait.subsec_nanos() > 0);
+    let secs = secs.max(1);
+    ApiError::new(
+        StatusCode::TOO_MANY_REQUESTS,
+        "too_many_failures",
+        format!("too many unknown API keys from this address; try again in {secs} s"),
+    )
+    .retry_after(secs)
 }
 
 #[cfg(test)]
@@ -142,12 +215,27 @@ mod tests {
 mod key_tests {
     use super::*;
 
+    fn request(method: &str, uri: &str) -> Request {
+        Request::builder().method(method).uri(uri).body(axum::body::Body::empty()).unwrap()
+    }
+
     #[test]
     fn a_token_in_the_query_is_url_decoded() {
-        let req = Request::builder()
-            .uri("/api/v1/ws?topics=jobs&token=a%2Bb%2Fc%3Dd%25")
-            .body(axum::body::Body::empty())
-            .unwrap();
+        let req = request("GET", "/api/v1/ws?topics=jobs&token=a%2Bb%2Fc%3Dd%25");
         assert_eq!(presented_key(&req).as_deref(), Some("a+b/c=d%"));
+        assert!(refuse_token(&req).is_ok());
+        assert_eq!(without_token(req).uri().to_string(), "/api/v1/ws?topics=jobs");
+    }
+
+    #[test]
+    fn a_token_in_the_query_is_for_the_websocket_alone() {
+        for (method, uri) in
+            [("GET", "/api/v1/jobs?token=k"), ("POST", "/api/v1/jobs/1/cancel?token=k"), ("POST", "/api/v1/ws?token=k")]
+        {
+            let req = request(method, uri);
+            assert_eq!(presented_key(&req), None, "{method} {uri}");
+            assert_eq!(refuse_token(&req).unwrap_err().code, "token_in_query", "{method} {uri}");
+        }
+        assert!(refuse_token(&request("GET", "/api/v1/jobs?tokens=1&reference=token")).is_ok());
     }
 }

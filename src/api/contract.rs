@@ -4,21 +4,28 @@
 //!
 //! They come from layers and extractors every route shares, not from the handlers:
 //! - a path parameter that is not of its type (`/jobs/9223372036854775808`): 400 `bad_path`;
-//! - a query that does not parse: 400 `bad_query`;
+//! - a query that does not parse: 400 `bad_query`; a `token` query parameter anywhere but
+//!   `GET /api/v1/ws`: 400 `token_in_query`;
 //! - a request body that is not JSON: 400 `malformed_json`; one without
 //!   `Content-Type: application/json`: 415; one over `server.body_limit_bytes`: 413;
 //! - a key missing or unknown (once keys are configured): 401; a key whose role may not do
 //!   this: 403 (only on operations that change something: every role may read);
+//! - an address that sent `auth.max_failures` unknown keys: 429 with `Retry-After`;
+//! - without keys (`api::keyless`): a `Host` that is not rackd's: 421; an `Origin` that is
+//!   not rackd's: 403; a change not sent as `application/json`, body or not: 415;
 //! - a request that runs past `server.request_timeout_secs`: 503 `timeout`.
 //!
-//! An operation that documents one of these statuses itself keeps its own description.
+//! An operation that documents one of these statuses itself keeps its own description;
+//! the new ones of issue 41 (`token_in_query`, `origin_not_allowed`) are added to it.
 
+use utoipa::openapi::header::HeaderBuilder;
 use utoipa::openapi::path::{Operation, ParameterIn};
-use utoipa::openapi::{ContentBuilder, OpenApi, Ref, RefOr, Response, ResponseBuilder};
+use utoipa::openapi::{ContentBuilder, OpenApi, Ref, RefOr, Response, ResponseBuilder, Type};
 
 /// Adds the shared error answers to every operation of `doc`.
 pub fn complete(doc: &mut OpenApi) {
-    for item in doc.paths.paths.values_mut() {
+    for (path, item) in doc.paths.paths.iter_mut() {
+        let websocket = path == "/api/v1/ws";
         let methods = [
             (&mut item.get, false),
             (&mut item.put, true),
@@ -28,13 +35,13 @@ pub fn complete(doc: &mut OpenApi) {
         ];
         for (operation, changes) in methods {
             if let Some(operation) = operation.as_mut() {
-                complete_operation(operation, changes);
+                complete_operation(operation, changes, websocket);
             }
         }
     }
 }
 
-fn complete_operation(operation: &mut Operation, changes: bool) {
+fn complete_operation(operation: &mut Operation, changes: bool, websocket: bool) {
     let within = |place: ParameterIn| {
         operation.parameters.iter().flatten().any(|p| matches!(p, RefOr::T(p) if p.parameter_in == place))
     };
@@ -42,33 +49,68 @@ fn complete_operation(operation: &mut Operation, changes: bool) {
     // An empty requirement list (`security(())`) marks a public operation.
     let keyed = operation.security.as_ref().is_none_or(|s| !s.is_empty() && !is_public(s));
     let body = operation.request_body.is_some();
-    let mut add = |status: &str, text: &str| {
-        operation.responses.responses.entry(status.to_owned()).or_insert_with(|| RefOr::T(error(text)));
+    let responses = &mut operation.responses.responses;
+    // Inserted unless the operation documents the status itself.
+    let mut add = |status: &str, response: Response| {
+        responses.entry(status.to_owned()).or_insert_with(|| RefOr::T(response));
     };
     match (path, query, body) {
         (_, _, true) => add(
             "400",
-            "`malformed_json`: the body is not JSON; `bad_path`: a path parameter is not of its type",
+            error("`malformed_json`: the body is not JSON; `bad_path`: a path parameter is not of its type"),
         ),
         (true, true, false) => add(
             "400",
-            "`bad_path`: a path parameter is not of its type; `bad_query`: the query does not parse",
+            error("`bad_path`: a path parameter is not of its type; `bad_query`: the query does not parse"),
         ),
-        (true, false, false) => add("400", "`bad_path`: a path parameter is not of its type"),
-        (false, true, false) => add("400", "`bad_query`: the query does not parse"),
+        (true, false, false) => add("400", error("`bad_path`: a path parameter is not of its type")),
+        (false, true, false) => add("400", error("`bad_query`: the query does not parse")),
         (false, false, false) => {}
     }
     if body {
-        add("413", "`body_too_large`: the body is over `server.body_limit_bytes`");
-        add("415", "`unsupported_media_type`: the body is not sent as `application/json`");
+        add("413", error("`body_too_large`: the body is over `server.body_limit_bytes`"));
+        add("415", error("`unsupported_media_type`: the body is not sent as `application/json`"));
+    } else if changes && keyed {
+        add(
+            "415",
+            error("`unsupported_media_type`: without API keys, a change must be sent with `Content-Type: application/json`, even with no body"),
+        );
     }
     if keyed {
-        add("401", "`unauthorized`: no key, or an unknown one (once keys are configured)");
+        add("401", error("`unauthorized`: no key, or an unknown one (once keys are configured; unknown keys count toward `auth.max_failures`)"));
         if changes {
-            add("403", "`forbidden`: the key's role may not do this");
+            add("403", error("`forbidden`: the key's role may not do this"));
         }
+        add("421", error("`host_not_allowed`: without API keys, the `Host` names none of rackd's own names (see `server.allowed_hosts`)"));
+        add("429", too_many());
     }
-    add("503", "`timeout`: the request took longer than `server.request_timeout_secs`");
+    add("503", error("`timeout`: the request took longer than `server.request_timeout_secs`"));
+    // Added to what the operation says of these statuses, if it says anything.
+    let mut also = |status: &str, text: &str| match responses.get_mut(status) {
+        Some(RefOr::T(r)) if !r.description.contains(text) => r.description = format!("{}; {text}", r.description),
+        Some(_) => {}
+        None => drop(responses.insert(status.to_owned(), RefOr::T(error(text)))),
+    };
+    if keyed {
+        if !websocket {
+            also("400", "`token_in_query`: a `token` query parameter (only `GET /api/v1/ws` takes the key that way)");
+        }
+        also("403", "`origin_not_allowed`: without API keys, a request from a web page of another origin (see `server.allowed_hosts`)");
+    }
+}
+
+/// 429 `too_many_failures`, with its `Retry-After`.
+fn too_many() -> Response {
+    let mut response = error(
+        "`too_many_failures`: this client address sent `auth.max_failures` unknown keys within \
+         `auth.failure_window_secs`; every request is refused until the window ends, in `Retry-After` seconds",
+    );
+    let seconds = HeaderBuilder::new()
+        .schema(Some(utoipa::openapi::ObjectBuilder::new().schema_type(Type::Integer).minimum(Some(1))))
+        .description(Some("Seconds until the window ends"))
+        .build();
+    response.headers.insert("Retry-After".to_owned(), RefOr::T(seconds));
+    response
 }
 
 /// Whether a security list is the `security(())` of a public operation: one empty requirement.

@@ -7,7 +7,7 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::error::{ApiError, ErrorBody};
-use super::extract::{Json, Query, page};
+use super::extract::{Caller, Json, Query, page};
 use super::state::AppState;
 use crate::service::dispatch::Actor;
 use crate::store::controls::{self, AuditEntry};
@@ -34,7 +34,7 @@ pub struct LockRequest {
 }
 
 /// The actor of a request, its reason checked.
-pub fn actor(by: String, reason: Option<String>) -> Result<Actor, ApiError> {
+pub fn actor(caller: Caller, reason: Option<String>) -> Result<Actor, ApiError> {
     let reason = reason.map(|r| r.trim().to_owned()).filter(|r| !r.is_empty());
     if reason.as_ref().is_some_and(|r| r.chars().count() > MAX_REASON) {
         return Err(ApiError::invalid(
@@ -42,7 +42,7 @@ pub fn actor(by: String, reason: Option<String>) -> Result<Actor, ApiError> {
             format!("a reason is at most {MAX_REASON} characters"),
         ));
     }
-    Ok(Actor { by, reason })
+    Ok(Actor { by: caller.name, client: caller.client, reason })
 }
 
 /// The routes of the audit log.
@@ -71,8 +71,10 @@ pub struct AuditPage {
     pub next_cursor: Option<String>,
 }
 
-/// Every operator action, newest first: pause, resume, lock, unlock, retry, with who, when
-/// and why.
+/// Every change made through the API, newest first: submissions (one entry per request, a
+/// batch's naming its count), cancels, priorities, retries, pauses, resumes, locks, unlocks,
+/// inventory corrections, alarm acknowledgements and tag writes, with who (the key's name),
+/// from which address, when and why.
 #[utoipa::path(get, path = "/audit", tag = "operations", params(AuditParams),
     responses(
         (status = 200, description = "A page of the audit log", body = AuditPage),

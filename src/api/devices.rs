@@ -35,7 +35,7 @@ async fn set_paused(
     app: &AppState,
     id: &str,
     paused: bool,
-    by: String,
+    by: Caller,
     reason: Option<String>,
 ) -> Result<DeviceStatus, ApiError> {
     let handle = device(app, id)?;
@@ -77,7 +77,7 @@ async fn get_device(
 async fn pause_device(
     State(app): State<AppState>,
     Path(id): Path<String>,
-    Caller(by): Caller,
+    by: Caller,
     OptionalJson(body): OptionalJson<ControlRequest>,
 ) -> Result<Json<DeviceStatus>, ApiError> {
     Ok(Json(set_paused(&app, &id, true, by, body.reason).await?))
@@ -94,7 +94,7 @@ async fn pause_device(
 async fn resume_device(
     State(app): State<AppState>,
     Path(id): Path<String>,
-    Caller(by): Caller,
+    by: Caller,
     OptionalJson(body): OptionalJson<ControlRequest>,
 ) -> Result<Json<DeviceStatus>, ApiError> {
     Ok(Json(set_paused(&app, &id, false, by, body.reason).await?))

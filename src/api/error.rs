@@ -22,6 +22,8 @@ pub struct ApiError {
     pub code: &'static str,
     /// What went wrong, for people.
     pub message: String,
+    /// Seconds to wait before asking again, sent as `Retry-After` (with 429 and 503).
+    pub retry_after: Option<u64>,
 }
 
 /// The JSON body of every error.
@@ -44,7 +46,13 @@ pub struct ErrorDetail {
 impl ApiError {
     /// An error with this status, code and message.
     pub fn new(status: StatusCode, code: &'static str, message: impl Into<String>) -> Self {
-        ApiError { status, code, message: message.into() }
+        ApiError { status, code, message: message.into(), retry_after: None }
+    }
+
+    /// The error with `Retry-After: secs`.
+    pub fn retry_after(mut self, secs: u64) -> Self {
+        self.retry_after = Some(secs);
+        self
     }
 
     /// 404 for a missing resource.
@@ -85,8 +93,8 @@ impl IntoResponse for ApiError {
         if self.status == StatusCode::UNAUTHORIZED {
             response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
-        if self.code == "overloaded" {
-            response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from_static("1"));
+        if let Some(secs) = self.retry_after {
+            response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(secs));
         }
         response
     }
@@ -108,7 +116,8 @@ impl From<WriteError> for ApiError {
                 StatusCode::SERVICE_UNAVAILABLE,
                 "overloaded",
                 "rackd is taking in more jobs than it can store right now; retry in a second",
-            ),
+            )
+            .retry_after(1),
             WriteError::Closed | WriteError::Database(_) | WriteError::Fenced(_) => Self::unavailable(e),
         }
     }

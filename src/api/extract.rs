@@ -1,13 +1,16 @@
 //! Extractors whose rejections are [`ApiError`]s, so bad input always gets JSON.
 
 use axum::extract::rejection::{JsonRejection, PathRejection, QueryRejection};
-use axum::extract::{FromRequest, FromRequestParts, Request};
+use std::net::{IpAddr, SocketAddr};
+
+use axum::extract::{ConnectInfo, FromRequest, FromRequestParts, Request};
 use axum::http::StatusCode;
 use axum::http::request::Parts;
 use axum::response::{IntoResponse, Response};
 use serde::de::DeserializeOwned;
 
 use super::error::ApiError;
+use crate::domain::Who;
 
 /// `axum::Json`, rejecting with [`ApiError`]. Also usable as a response.
 ///
@@ -78,17 +81,39 @@ impl<T: DeserializeOwned + Default, S: Send + Sync> FromRequest<S> for OptionalJ
     }
 }
 
-/// Who sends the request: the name of the API key it presented, or `anonymous` when no
-/// keys are configured. Audited with every operator action.
-pub struct Caller(pub String);
+/// Who sends the request: the name of the API key it presented (`anonymous` when no keys
+/// are configured), and the client's address. Audited with every change.
+pub struct Caller {
+    /// The key's name.
+    pub name: String,
+    /// The client's address (see [`peer`]), when known.
+    pub client: Option<IpAddr>,
+}
+
+impl Caller {
+    /// The caller, as audited.
+    pub fn who(&self) -> Who {
+        Who { name: self.name.clone(), client: self.client }
+    }
+}
 
 impl<S: Send + Sync> FromRequestParts<S> for Caller {
     type Rejection = std::convert::Infallible;
 
     async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<Self, Self::Rejection> {
         let name = parts.extensions.get::<crate::auth::Principal>().map(|p| p.name.clone());
-        Ok(Caller(name.unwrap_or_else(|| "anonymous".to_owned())))
+        Ok(Caller {
+            name: name.unwrap_or_else(|| "anonymous".to_owned()),
+            client: peer(&parts.extensions),
+        })
     }
+}
+
+/// The address of the request's TCP peer (an IPv4 address mapped into IPv6 written as
+/// IPv4), when the server recorded it (`ConnectInfo`). `X-Forwarded-For` is not read:
+/// anyone can send it, and rackd has no list of proxies to trust.
+pub fn peer(extensions: &axum::http::Extensions) -> Option<IpAddr> {
+    extensions.get::<ConnectInfo<SocketAddr>>().map(|c| c.0.ip().to_canonical())
 }
 
 impl From<JsonRejection> for ApiError {

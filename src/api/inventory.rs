@@ -81,7 +81,7 @@ pub struct InventoryRequest {
     ))]
 async fn put_inventory(
     State(app): State<AppState>,
-    Caller(by): Caller,
+    by: Caller,
     Json(body): Json<InventoryRequest>,
 ) -> Result<Json<Vec<LocationState>>, ApiError> {
     if body.locations.is_empty() || body.locations.len() > MAX_ENTRIES {

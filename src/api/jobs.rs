@@ -43,14 +43,18 @@ pub fn router() -> OpenApiRouter<AppState> {
         (status = 503, description = "`overloaded`: more jobs arrive than rackd can store now; retry after `Retry-After` seconds", body = ErrorBody,
             headers(("Retry-After" = String, description = "Seconds to wait"))),
     ))]
-async fn create_job(State(app): State<AppState>, Json(req): Json<JobRequest>) -> Result<Response, ApiError> {
+async fn create_job(
+    State(app): State<AppState>,
+    by: Caller,
+    Json(req): Json<JobRequest>,
+) -> Result<Response, ApiError> {
     let job = app.rules.check(req).map_err(|e| ApiError::invalid("invalid_job", e.0))?;
     let jobs = vec![job];
     if let Some(refused) = refused(&app, &jobs).await? {
         return Err(ApiError::conflict("near_occupied", refused.to_string()));
     }
     let started = std::time::Instant::now();
-    let outcome = app.writer.submit(jobs).await?;
+    let outcome = app.writer.submit_as(jobs, by.who()).await?;
     app.metrics.intake_seconds.observe(started.elapsed().as_secs_f64());
     Ok(match outcome.into_iter().next() {
         Some(Outcome::Created { job, json }) => {
@@ -105,6 +109,7 @@ pub struct BatchResponse {
     ))]
 async fn create_batch(
     State(app): State<AppState>,
+    by: Caller,
     Json(req): Json<BatchRequest>,
 ) -> Result<Response, ApiError> {
     if req.jobs.is_empty() || req.jobs.len() > MAX_BATCH {
@@ -125,7 +130,7 @@ async fn create_batch(
         return Err(ApiError::conflict("near_occupied", format!("jobs[{}]: {refused}", refused.index)));
     }
     let started = std::time::Instant::now();
-    let outcomes = app.writer.submit(jobs).await?;
+    let outcomes = app.writer.submit_as(jobs, by.who()).await?;
     app.metrics.intake_seconds.observe(started.elapsed().as_secs_f64());
     let created = outcomes.iter().any(|o| matches!(o, Outcome::Created { .. }));
     let jobs = outcomes
@@ -359,9 +364,10 @@ pub struct PatchJob {
 async fn patch_job(
     State(app): State<AppState>,
     Path(id): Path<i64>,
+    by: Caller,
     Json(p): Json<PatchJob>,
 ) -> Result<Json<Job>, ApiError> {
-    Ok(Json(app.writer.change(id, Change::Priority(p.priority)).await?))
+    Ok(Json(app.writer.change_as(id, Change::Priority(p.priority), by.who()).await?))
 }
 
 /// A job's history, oldest first.
@@ -389,8 +395,12 @@ async fn job_history(
         (status = 409, description = "The job has ended, or is on a device and cannot be withdrawn", body = ErrorBody),
         (status = 503, description = "The job's device does not answer now; retry", body = ErrorBody),
     ))]
-async fn cancel_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<Json<Job>, ApiError> {
-    Ok(Json(app.dispatcher.cancel(id, &app.devices()).await?))
+async fn cancel_job(
+    State(app): State<AppState>,
+    Path(id): Path<i64>,
+    by: Caller,
+) -> Result<Json<Job>, ApiError> {
+    Ok(Json(app.dispatcher.cancel(id, &app.devices(), &by.who()).await?))
 }
 
 /// Retry a failed job once its locations are checked: the same job, with the same
@@ -405,10 +415,11 @@ async fn cancel_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<
 async fn retry_job(
     State(app): State<AppState>,
     Path(id): Path<i64>,
-    Caller(by): Caller,
+    by: Caller,
 ) -> Result<Json<Job>, ApiError> {
-    tracing::info!(job = id, %by, "retried through the API");
-    let mut job = app.dispatcher.retry(id, &Actor { by, reason: None }).await?;
+    tracing::info!(job = id, by = %by.name, "retried through the API");
+    let actor = Actor { by: by.name, client: by.client, reason: None };
+    let mut job = app.dispatcher.retry(id, &actor).await?;
     job.waiting = app.dispatcher.queues().waiting(&job);
     Ok(Json(job))
 }

@@ -81,7 +81,7 @@ async fn state(app: &AppState, l: Location) -> Result<Json<LocationState>, ApiEr
 async fn lock_location(
     State(app): State<AppState>,
     Path(at): Path<(u16, u16, u16, u16, u16)>,
-    Caller(by): Caller,
+    by: Caller,
     Json(body): Json<LockRequest>,
 ) -> Result<Json<LocationState>, ApiError> {
     let l = location(&app, at)?;
@@ -106,7 +106,7 @@ async fn lock_location(
 async fn unlock_location(
     State(app): State<AppState>,
     Path(at): Path<(u16, u16, u16, u16, u16)>,
-    Caller(by): Caller,
+    by: Caller,
     OptionalJson(body): OptionalJson<ControlRequest>,
 ) -> Result<Json<LocationState>, ApiError> {
     let l = location(&app, at)?;

@@ -15,10 +15,12 @@ pub mod dashboard;
 pub mod devices;
 pub mod error;
 pub mod extract;
+pub mod failures;
 pub mod forward;
 pub mod health;
 pub mod inventory;
 pub mod jobs;
+pub mod keyless;
 pub mod locations;
 pub mod metrics;
 pub mod ops;
@@ -70,7 +72,7 @@ detail; acknowledge; export as CSV"),
 `seq` order with no gap and no duplicate. Event types and their `data`: `job.updated` (a `Job`), \
 `device.updated` (a `DeviceStatus`), `alarm.raised`, `alarm.cleared` and `alarm.updated` (an `Alarm`; \
 updated when acknowledged), `location.updated` (a `LocationState`, with its lock), `audit.recorded` (an \
-`AuditEntry`: a pause, resume, lock, unlock, retry or acknowledge). A `job.updated` also comes when only a \
+`AuditEntry`: every audited change but a submission, whose jobs' `job.updated` tell of it). A `job.updated` also comes when only a \
 queued job's `waiting` reason changed. A subscriber that falls behind gets a `Resync` and the connection closes with code \
 4000: reconnect with `?since=` its `seq`. `?topics=jobs,devices,alarms,locations,audit` filters both the \
 snapshot and the events. Browsers pass the key as `?token=`."),
@@ -155,6 +157,7 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
     contract::complete(&mut doc);
     // The 405 fallback is set before the key check is layered on, so that a wrong method
     // on a protected route is refused for a missing key first.
+    // Without keys, the checks that stand in for one (`keyless`) are made there too.
     // A standby forwards what only the active node does, once the key is checked.
     let protected = protected
         .method_not_allowed_fallback(ops::method_not_allowed)

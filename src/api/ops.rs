@@ -74,12 +74,34 @@ pub async fn method_not_allowed(method: Method, uri: Uri) -> ApiError {
 }
 
 /// Middleware: counts every request by method, matched route and status.
+///
+/// Every label has a bounded set of values, whatever clients send, since this counts
+/// requests before any key is checked: the method is one of RFC 9110's eight or PATCH, or
+/// `other` ([`method_label`]); the route the matched template or `unmatched` (never the raw
+/// path); the status the one sent.
 pub async fn count_requests(State(app): State<AppState>, req: Request, next: Next) -> Response {
-    let method = req.method().to_string();
+    let method = method_label(req.method());
     let route = req.extensions().get::<MatchedPath>().map_or("unmatched", |p| p.as_str()).to_owned();
     let response = next.run(req).await;
     app.metrics.count_request(method, route, response.status().as_u16());
     response
+}
+
+/// The method as the request counter labels it: the standard methods by name, any other
+/// (`curl -X AAAA1`, an extension method) as `other`, so that no client can add label sets.
+pub fn method_label(method: &Method) -> &'static str {
+    match *method {
+        Method::GET => "GET",
+        Method::HEAD => "HEAD",
+        Method::POST => "POST",
+        Method::PUT => "PUT",
+        Method::PATCH => "PATCH",
+        Method::DELETE => "DELETE",
+        Method::OPTIONS => "OPTIONS",
+        Method::CONNECT => "CONNECT",
+        Method::TRACE => "TRACE",
+        _ => "other",
+    }
 }
 
 /// `GET /metrics`: every family (see [`super::metrics`]), in the format `Accept` asks for.
@@ -105,4 +127,19 @@ pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<
     };
     let body = app.metrics.render(scrape, app.hub.subscribers(), format)?;
     Ok(([(header::CONTENT_TYPE, format.content_type())], body).into_response())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn methods_outside_the_standard_set_are_other() {
+        assert_eq!(method_label(&Method::GET), "GET");
+        assert_eq!(method_label(&Method::PATCH), "PATCH");
+        assert_eq!(method_label(&Method::TRACE), "TRACE");
+        for odd in ["AAAA1", "PROPFIND", "get", "BREW"] {
+            assert_eq!(method_label(&Method::from_bytes(odd.as_bytes()).unwrap()), "other", "{odd}");
+        }
+    }
 }

@@ -59,4 +59,8 @@ pub struct Shared {
     pub hub: crate::service::events::Hub,
     /// Settings of the event stream.
     pub events: Arc<crate::config::EventsConfig>,
+    /// The hosts keyless mode answers for.
+    pub hosts: super::keyless::Hosts,
+    /// Failed authentications per client address.
+    pub failures: super::failures::Failures,
 }

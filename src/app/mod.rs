@@ -158,6 +158,14 @@ impl Application {
             dispatcher,
             hub,
             events: Arc::new(config.events.clone()),
+            hosts: api::keyless::Hosts::new(
+                listener.local_addr().context("the bound address")?,
+                &config.server.allowed_hosts,
+            ),
+            failures: api::failures::Failures::new(
+                config.auth.max_failures,
+                Duration::from_secs(config.auth.failure_window_secs),
+            ),
         });
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);
@@ -195,7 +203,10 @@ impl Application {
                 None => shutdown.await,
             }
         };
-        axum::serve(listener, self.router).with_graceful_shutdown(stop).await?;
+        // Each request carries its peer's address (`ConnectInfo`): the audit log names it,
+        // and failed authentications are counted by it (`api::failures`).
+        let service = self.router.into_make_service_with_connect_info::<SocketAddr>();
+        axum::serve(listener, service).with_graceful_shutdown(stop).await?;
         // A device stopped between two PLC requests is the same as a crash, which the
         // hand-over order and recovery make safe.
         let tasks = std::mem::take(&mut *self.tasks.lock().unwrap_or_else(|p| p.into_inner()));

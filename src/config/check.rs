@@ -63,6 +63,12 @@ pub enum Invalid {
     /// An `auth.keys_file` without a single key (most likely the wrong file).
     #[error("{} names no key (expected [[keys]] entries with name, role and hash)", .0.display())]
     NoKeysInFile(PathBuf),
+    /// `auth.max_failures` above its bound, or a window of 0 with a limit.
+    #[error("auth.max_failures is 0 (no limit) to {most}, with auth.failure_window_secs at least 1")]
+    FailureLimit {
+        /// The largest `max_failures`.
+        most: u32,
+    },
     /// Two API keys with one name or one hash.
     #[error("this key's {what} is also the {what} of the key at {first}")]
     KeyTwice {
@@ -163,6 +169,16 @@ impl Config {
             if let Some((key, why)) = flaw {
                 return Err((key.into(), Invalid::Cluster(why)));
             }
+        }
+        let auth = &self.auth;
+        if auth.max_failures > crate::auth::MOST_FAILURES {
+            return Err(("auth.max_failures".into(), Invalid::FailureLimit { most: crate::auth::MOST_FAILURES }));
+        }
+        if auth.max_failures > 0 && auth.failure_window_secs == 0 {
+            return Err((
+                "auth.failure_window_secs".into(),
+                Invalid::FailureLimit { most: crate::auth::MOST_FAILURES },
+            ));
         }
         if self.intake.max_group == 0 || self.intake.queue == 0 {
             let key = if self.intake.max_group == 0 { "intake.max_group" } else { "intake.queue" };

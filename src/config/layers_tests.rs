@@ -216,3 +216,23 @@ fn a_database_url_must_be_postgres_and_may_come_from_the_environment() {
     let err = error("[database]\nurl = \"mysql://h/db\"\n");
     assert!(err.contains("database.url") && err.contains("is not a postgres:// URL"), "{err}");
 }
+
+#[test]
+fn allowed_hosts_from_the_file_or_the_environment_and_the_failure_limit_are_checked() {
+    let hosts = |l: &Loaded| l.config.server.allowed_hosts.iter().map(|h| h.to_string()).collect::<Vec<_>>();
+    let file = load("[server]\nallowed_hosts = [\"WCS.plant.local\", \"10.1.2.3:8080\"]\n", &[]).unwrap();
+    assert_eq!(hosts(&file), ["wcs.plant.local", "10.1.2.3:8080"]);
+    let env = load(FILE, &[("RACKD_SERVER__ALLOWED_HOSTS", "wcs, [::1]:9000")]).unwrap();
+    assert_eq!(hosts(&env), ["wcs", "[::1]:9000"]);
+    let again = Config::parse(&env.explain(), Path::new("explained")).unwrap();
+    assert_eq!(again.server.allowed_hosts, env.config.server.allowed_hosts, "--explain reads back");
+    let err = error("[server]\nallowed_hosts = [\"http://wcs\"]\n");
+    assert!(err.contains("server.allowed_hosts") && err.contains("http://wcs"), "{err}");
+
+    assert_eq!(load(FILE, &[]).unwrap().config.auth.max_failures, 10);
+    let err = error("[auth]\nmax_failures = 101\n");
+    assert!(err.contains("auth.max_failures") && err.contains("100"), "{err}");
+    let err = error("[auth]\nfailure_window_secs = 0\n");
+    assert!(err.contains("auth.failure_window_secs"), "{err}");
+    assert!(load("[auth]\nmax_failures = 0\nfailure_window_secs = 0\n", &[]).is_ok(), "no limit, no window");
+}

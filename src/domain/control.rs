@@ -18,6 +18,15 @@ pub struct Pause {
     pub at: OffsetDateTime,
 }
 
+/// Who asks for a change through the API, as the audit log names them.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Who {
+    /// The API key's name (`anonymous` when no keys are configured).
+    pub name: String,
+    /// The client's address (the TCP peer's IP address), when known.
+    pub client: Option<std::net::IpAddr>,
+}
+
 /// Why a location is locked: no job touching it is handed out until a person unlocks it.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 pub struct LocationLock {

@@ -15,7 +15,7 @@ pub mod values;
 pub mod waiting;
 
 pub use alarm::{AlarmClass, AlarmKind};
-pub use control::{LocationLock, Pause, Target};
+pub use control::{LocationLock, Pause, Target, Who};
 pub use job::{Job, JobKind, JobSpec, LightColor, NewJob};
 pub use location::{AisleLayout, Layout, Location};
 pub use putaway::{Class, Zone};

@@ -33,8 +33,8 @@ pub enum Topic {
     Alarms,
     /// `location.updated`
     Locations,
-    /// `audit.recorded`: an operator's pause, resume, lock, unlock or retry (no snapshot
-    /// part: the log is `GET /api/v1/audit`).
+    /// `audit.recorded`: every audited change but a submission (whose jobs' `job.updated`
+    /// tell of it); no snapshot part: the log is `GET /api/v1/audit`.
     Audit,
 }
 

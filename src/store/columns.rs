@@ -67,4 +67,4 @@ pub(crate) const ALARMS: [&str; 12] = [
 pub(crate) const CONTROLS: [&str; 5] = ["target", "paused", "by", "reason", "at"];
 
 /// `audit`.
-pub(crate) const AUDIT: [&str; 6] = ["id", "at", "by", "action", "target", "reason"];
+pub(crate) const AUDIT: [&str; 7] = ["id", "at", "by", "action", "target", "reason", "client"];

@@ -1,5 +1,7 @@
 //! What operators set, kept across restarts: pauses of devices and aisles, and the audit
-//! log of every operator action (pause, resume, lock, unlock, retry) with who, when, why.
+//! log of every change made through the API (submissions, cancels, priorities, retries,
+//! pauses, locks, the inventory, alarm acknowledgements, tag writes) with who, from which
+//! address, when and why.
 //!
 //! The writer writes both (with the action's other effects, in one commit); the API and
 //! the start-up read them through the pool.
@@ -14,7 +16,7 @@ use crate::domain::{Pause, Target};
 
 /// One operator action, as audited.
 #[derive(Clone, Debug, PartialEq, Serialize, ToSchema)]
-#[schema(example = json!({"id": 7, "at": "2026-11-21T08:00:00.000Z", "by": "ops-desk", "action": "pause",
+#[schema(example = json!({"id": 7, "at": "2026-11-21T08:00:00.000Z", "by": "ops-desk", "client": "10.20.1.14", "action": "pause",
     "target": "device:crane1", "reason": "fork inspection"}))]
 pub struct AuditEntry {
     /// The entry's number.
@@ -23,11 +25,17 @@ pub struct AuditEntry {
     #[serde(with = "time::serde::rfc3339")]
     #[schema(value_type = String, format = DateTime)]
     pub at: OffsetDateTime,
-    /// The API key's name (`anonymous` when no keys are configured).
+    /// The API key's name (`anonymous` when no keys are configured; `rackd` for what rackd
+    /// recorded of itself).
     pub by: String,
-    /// `pause`, `resume`, `lock`, `unlock` or `retry`.
+    /// The address of the client that sent the request (its TCP peer, IPv4 or IPv6),
+    /// when known; null for entries written before rackd recorded it.
+    pub client: Option<String>,
+    /// `submit`, `cancel`, `priority`, `retry`, `pause`, `resume`, `lock`, `unlock`,
+    /// `inventory`, `acknowledge` or `tag`.
     pub action: String,
-    /// What it applied to: `device:ID`, `aisle:N`, `location:A/R/B/L/P` or `job:ID`.
+    /// What it applied to: `job:ID`, `jobs:FIRST-LAST` (a batch), `device:ID`, `aisle:N`,
+    /// `location:A/R/B/L/P`, `alarm:ID` or `device:ID/TAG` (a tag written).
     pub target: String,
     /// Why, as the operator gave it.
     pub reason: Option<String>,
@@ -48,6 +56,7 @@ struct AuditRow {
     id: i64,
     at: i64,
     by: String,
+    client: Option<String>,
     action: String,
     target: String,
     reason: Option<String>,
@@ -59,6 +68,7 @@ impl From<AuditRow> for AuditEntry {
             id: r.id,
             at: from_ms(r.at),
             by: r.by,
+            client: r.client,
             action: r.action,
             target: r.target,
             reason: r.reason,
@@ -84,7 +94,7 @@ pub async fn audit(
     before_id: Option<i64>,
     limit: u32,
 ) -> Result<Vec<AuditEntry>, sqlx::Error> {
-    let sql = "SELECT id, at, by, action, target, reason FROM audit WHERE ($1 IS NULL OR id < $1) \
+    let sql = "SELECT id, at, by, client, action, target, reason FROM audit WHERE ($1 IS NULL OR id < $1) \
                ORDER BY id DESC LIMIT $2";
     let rows: Vec<AuditRow> =
         read!(db.into(), p => sqlx::query_as(sql).bind(before_id).bind(limit as i64).fetch_all(p).await)?;

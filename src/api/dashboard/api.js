@@ -1,6 +1,6 @@
 // The API key and HTTP calls to rackd. The key lives in the browser's local storage; it is
 // sent as `Authorization: Bearer` on HTTP calls and as `?token=` on the WebSocket (a browser
-// cannot set headers there).
+// cannot set headers there; rackd takes `?token=` nowhere else).
 
 const STORAGE = 'rackd.key';
 
@@ -33,17 +33,35 @@ function key() {
 }
 
 /**
- * Takes a key given in the page's own address (`/?token=KEY`), stores it and removes it
- * from the address bar, so it does not end up in bookmarks or screenshots.
+ * Takes a key offered in the page's own address (`/?token=KEY`) out of the address bar at
+ * once, so it stays in no bookmark or screenshot, and returns it (null when there is none,
+ * or it is empty). Nothing is stored: the page asks the operator first, since a link
+ * could otherwise switch this dashboard to someone else's key.
  */
-export function adoptTokenFromUrl() {
+export function takeTokenFromUrl() {
   const url = new URL(window.location.href);
-  const token = url.searchParams.get('token');
-  if (token === null) return false;
-  setKey(token);
+  if (!url.searchParams.has('token')) return null;
+  const token = (url.searchParams.get('token') || '').trim();
   url.searchParams.delete('token');
   window.history.replaceState(null, '', url.pathname + url.search + url.hash);
-  return true;
+  return token || null;
+}
+
+/**
+ * Who `candidate` belongs to, asked of rackd without using the key for anything else:
+ * `{name, role}`, `{status}` when rackd refuses it, or null when rackd cannot be reached.
+ */
+export async function whoIs(candidate) {
+  try {
+    const response = await fetch('/api/v1/whoami', {
+      headers: { Accept: 'application/json', Authorization: `Bearer ${candidate}` },
+      cache: 'no-store',
+    });
+    if (!response.ok) return { status: response.status };
+    return await response.json();
+  } catch {
+    return null;
+  }
 }
 
 /** An error answer from the API: status, the API's code and message. */
@@ -65,7 +83,9 @@ export function onUnauthorized(listener) {
 /** Calls the API; resolves to the JSON answer, rejects with an ApiError. */
 export async function api(method, path, body) {
   const h = headers('application/json');
-  if (body !== undefined) h['Content-Type'] = 'application/json';
+  // Every change says JSON, body or not: without keys rackd refuses one that does not (a
+  // web page of another site cannot send that header without asking first).
+  if (body !== undefined || (method !== 'GET' && method !== 'HEAD')) h['Content-Type'] = 'application/json';
   let response;
   try {
     response = await fetch(path, {

@@ -3,7 +3,7 @@
 // plus recent finished jobs and past alarms read over HTTP (the snapshot holds only what is
 // active), the KPIs, and who the key belongs to (which buttons to show).
 
-import { adoptTokenFromUrl, api, getKey, onUnauthorized, setKey } from './dashboard/api.js';
+import { api, getKey, onUnauthorized, setKey, takeTokenFromUrl, whoIs } from './dashboard/api.js';
 import { Alarms } from './dashboard/alarms.js';
 import { Attention } from './dashboard/attention.js';
 import { ClusterBadge } from './dashboard/cluster.js';
@@ -31,7 +31,8 @@ function notify(text) {
 window.addEventListener('error', (e) => notify(`Dashboard error: ${e.message}`));
 window.addEventListener('unhandledrejection', (e) => notify(`Dashboard error: ${e.reason}`));
 
-adoptTokenFromUrl();
+// A key offered in the address leaves it at once; it is used only once the operator says so.
+const offered = takeTokenFromUrl();
 const model = new Model();
 const locationDialog = new LocationDialog($('location-dialog'), model, notify);
 const racks = new Racks($('racks'), model, (l) => locationDialog.open(l), notify);
@@ -157,7 +158,10 @@ function showConn(state, detail) {
   const asOf = !stale ? '' : liveUntil ? `as of ${clock(liveUntil)}` : 'no data yet';
   $('as-of').textContent = asOf;
   devices.stale(asOf);
-  if (state === 'key') askKey(getKey() ? 'The key was not accepted. Enter another one.' : undefined);
+  // While a key offered by a link waits for the operator, that question comes first.
+  if (state === 'key' && !tokenDialog.open) {
+    askKey(getKey() ? 'The key was not accepted. Enter another one.' : undefined);
+  }
 }
 model.subscribe(() => {
   if (connState === 'live') $('conn-text').textContent = CONN_TEXT.live();
@@ -194,8 +198,42 @@ dialog.addEventListener('close', () => {
   showKeyState();
 });
 onUnauthorized(() => {
-  if (!dialog.open) askKey(getKey() ? 'The key was not accepted. Enter another one.' : undefined);
+  if (!dialog.open && !tokenDialog.open) askKey(getKey() ? 'The key was not accepted. Enter another one.' : undefined);
 });
+
+// A key offered by a link (`/?token=KEY`): the operator sees whose it is and decides.
+// Until then the page goes on with the key it had, if any; ignored, the offer is gone.
+const tokenDialog = $('token-dialog');
+async function offerKey(candidate) {
+  $('token-who').textContent = 'Checking the key with rackd…';
+  $('token-use').disabled = false;
+  tokenDialog.returnValue = '';
+  tokenDialog.showModal();
+  const owner = await whoIs(candidate);
+  if (owner && owner.role) {
+    $('token-who').textContent = `It is the key “${owner.name}” (${owner.role}).`;
+  } else if (owner && owner.status === 401) {
+    $('token-who').textContent = 'rackd does not know this key: it would not work.';
+    $('token-use').disabled = true;
+  } else {
+    $('token-who').textContent = 'rackd could not say whose key it is.';
+  }
+  tokenDialog.addEventListener(
+    'close',
+    () => {
+      if (tokenDialog.returnValue === 'use') {
+        setKey(candidate);
+        live.restart();
+        askServer();
+      } else {
+        notify('The key in the link was not used.');
+        if (connState === 'key') askKey();
+      }
+      showKeyState();
+    },
+    { once: true },
+  );
+}
 
 let ticks = 0;
 $('clock').textContent = clock(new Date().toISOString());
@@ -209,6 +247,7 @@ setInterval(() => {
 
 showKeyState();
 live.restart();
+if (offered) offerKey(offered);
 
 // For the browser console (and the browser tests): the state, the connection, the role.
 window.rackd = { model, live, who };

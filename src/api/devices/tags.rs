@@ -16,10 +16,11 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::device;
 use crate::api::error::{ApiError, ErrorBody};
-use crate::api::extract::{Json, Path};
+use crate::api::extract::{Caller, Json, Path};
 use crate::api::state::AppState;
 use crate::devices::tags::{TagsHandle, WriteError};
 use crate::protocols::PlcError;
+use crate::store::writer::Record;
 use crate::wire::tags::{Tag, TagValue, ValueError};
 
 /// The routes of this resource.
@@ -106,6 +107,7 @@ async fn list_tags(State(app): State<AppState>, Path(id): Path<String>) -> Resul
 async fn write_tag(
     State(app): State<AppState>,
     Path((id, tag)): Path<(String, String)>,
+    by: Caller,
     body: Result<Json<TagWrite>, ApiError>,
 ) -> Result<Json<Tag>, ApiError> {
     // Unknown device or tag first: a 404 says more than a complaint about the body.
@@ -114,5 +116,30 @@ async fn write_tag(
         return Err(WriteError::UnknownTag(tag).into());
     }
     let Json(body) = body?;
-    Ok(Json(handle.write(&tag, &body.value).await?))
+    let written = handle.write(&tag, &body.value).await;
+    audit(&app, &by, &id, &tag, &body.value, &written).await;
+    Ok(Json(written?))
+}
+
+/// Audits a tag write that reached the PLC, or may have (`tag` on `device:ID/TAG`, the
+/// value and any doubt in the reason), after the fact: the PLC, not the store, holds the
+/// value. A write refused before anything was sent, or refused by the PLC, changed nothing
+/// and is not audited.
+async fn audit(
+    app: &AppState,
+    by: &Caller,
+    id: &str,
+    tag: &str,
+    value: &serde_json::Value,
+    written: &Result<Tag, WriteError>,
+) {
+    let reason = match written {
+        Ok(_) => format!("value {value}"),
+        Err(e @ (WriteError::ReadBack(_) | WriteError::TimedOut(_))) => format!("value {value}; {e}"),
+        Err(_) => return,
+    };
+    let record = Record::Audit { action: "tag".into(), target: format!("device:{id}/{tag}"), reason: Some(reason) };
+    if let Err(e) = app.writer.record_as(record, by.who()).await {
+        tracing::error!(device = %id, tag = %tag, error = %e, "tag write: the audit entry was not stored");
+    }
 }

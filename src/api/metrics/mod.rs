@@ -37,7 +37,8 @@ use format::Format;
 /// Labels of the request counter.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct RequestLabels {
-    method: String,
+    /// A standard method or `other` (see [`super::ops::method_label`]).
+    method: &'static str,
     route: String,
     status: u16,
 }
@@ -169,7 +170,7 @@ impl Default for Metrics {
 
 impl Metrics {
     /// Counts one answered request.
-    pub fn count_request(&self, method: String, route: String, status: u16) {
+    pub fn count_request(&self, method: &'static str, route: String, status: u16) {
         self.requests.get_or_create(&RequestLabels { method, route, status }).inc();
     }
 
@@ -250,7 +251,7 @@ mod tests {
     #[test]
     fn every_family_converts_to_0_0_4() {
         let metrics = Arc::new(Metrics::default());
-        metrics.count_request("GET".into(), "/x".into(), 200);
+        metrics.count_request("GET", "/x".into(), 200);
         metrics.count_resync();
         metrics.count_snapshot("requested");
         let kind = crate::domain::JobKind::Store;

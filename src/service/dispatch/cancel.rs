@@ -15,9 +15,9 @@
 //! (500, logged by the API), a link failure is only named.
 
 use crate::devices::{CancelRefusal, Devices, Withdrawal};
-use crate::domain::{Job, JobState};
+use crate::domain::{Job, JobState, Who};
 use crate::store::jobs;
-use crate::store::writer::{Change, WriteError};
+use crate::store::writer::{Change, Record, WriteError};
 
 use super::Dispatcher;
 
@@ -63,18 +63,36 @@ pub enum CancelError {
 }
 
 impl Dispatcher {
-    /// Cancels job `id` by the rules above; answers the job as it stands afterwards
-    /// (`cancelled`, or `cancelling` while a machine carries the cancel out).
-    pub async fn cancel(&self, id: i64, devices: &Devices) -> Result<Job, CancelError> {
-        let Some(job) = self.queues.find(id) else { return self.cancel_unqueued(id).await };
+    /// Cancels job `id` for `who` by the rules above; answers the job as it stands
+    /// afterwards (`cancelled`, or `cancelling` while a machine carries the cancel out).
+    ///
+    /// A cancel is audited: a queued job's in the commit that cancels it; one the device
+    /// withdrew (its task committed that) in a commit of its own right after, naming what
+    /// the job became.
+    pub async fn cancel(&self, id: i64, devices: &Devices, who: &Who) -> Result<Job, CancelError> {
+        let Some(job) = self.queues.find(id) else { return self.cancel_unqueued(id, who).await };
         let device = job.device.clone().unwrap_or_default();
-        let Some(handle) = devices.get(&device) else { return self.cancel_unqueued(id).await };
+        let Some(handle) = devices.get(&device) else { return self.cancel_unqueued(id, who).await };
         self.queues.withhold(&device, id, true);
         let answer = handle.cancel(id).await;
         let result = match answer {
             None => Err(CancelError::Unavailable { device: device.clone() }),
-            Some(Ok(Withdrawal::NotHeld)) => self.cancel_queued(id).await,
-            Some(Ok(Withdrawal::Done)) => self.stored(id).await,
+            Some(Ok(Withdrawal::NotHeld)) => self.cancel_queued(id, who).await,
+            Some(Ok(Withdrawal::Done)) => match self.stored(id).await {
+                Ok(job) => {
+                    let audit = Record::Audit {
+                        action: "cancel".into(),
+                        target: format!("job:{id}"),
+                        reason: Some(format!("withdrawn from {device}: {}", job.state)),
+                    };
+                    // The job is cancelled whatever happens to its entry: the answer says so.
+                    if let Err(e) = self.writer.record_as(audit, who.clone()).await {
+                        tracing::error!(job = id, error = %e, "cancel: the audit entry was not stored");
+                    }
+                    Ok(job)
+                }
+                Err(e) => Err(e),
+            },
             Some(Err(CancelRefusal::Link(e))) => {
                 tracing::warn!(device = %device, job = id, error = %e, "cancel: the machine did not answer");
                 Err(CancelError::Unavailable { device: device.clone() })
@@ -88,8 +106,8 @@ impl Dispatcher {
     }
 
     /// A job no configured device has: cancelled if still queued.
-    async fn cancel_unqueued(&self, id: i64) -> Result<Job, CancelError> {
-        match self.cancel_queued(id).await {
+    async fn cancel_unqueued(&self, id: i64, who: &Who) -> Result<Job, CancelError> {
+        match self.cancel_queued(id, who).await {
             Err(CancelError::Refused { reason: CancelRefusal::NotHeld(state), .. }) => {
                 Err(CancelError::Unconfigured { id, state })
             }
@@ -98,8 +116,8 @@ impl Dispatcher {
     }
 
     /// Cancels a job that is queued.
-    async fn cancel_queued(&self, id: i64) -> Result<Job, CancelError> {
-        match self.writer.change(id, Change::cancel_queued()).await {
+    async fn cancel_queued(&self, id: i64, who: &Who) -> Result<Job, CancelError> {
+        match self.writer.change_as(id, Change::cancel_queued(), who.clone()).await {
             Ok(job) => Ok(job),
             Err(WriteError::NotFound(id)) => Err(CancelError::NotFound(id)),
             Err(WriteError::Unexpected { state, .. }) if state.is_terminal() => {

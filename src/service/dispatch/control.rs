@@ -4,7 +4,7 @@
 //! operators were told.
 
 use crate::domain::time::{from_ms, now_ms};
-use crate::domain::{Job, JobState, Location, LocationLock, Pause, Target};
+use crate::domain::{Job, JobState, Location, LocationLock, Pause, Target, Who};
 use crate::store::writer::{Change, Record, Stock, WriteError};
 
 use super::Dispatcher;
@@ -38,16 +38,23 @@ impl From<WriteError> for ControlError {
     }
 }
 
-/// Who acts and why.
+/// Who acts, from where, and why.
 #[derive(Clone, Debug)]
 pub struct Actor {
     /// The API key's name (`anonymous` without keys).
     pub by: String,
+    /// The client's address, when known.
+    pub client: Option<std::net::IpAddr>,
     /// Why, as given.
     pub reason: Option<String>,
 }
 
 impl Actor {
+    /// Who acts, as audited.
+    pub fn who(&self) -> Who {
+        Who { name: self.by.clone(), client: self.client }
+    }
+
     fn now(&self) -> Pause {
         Pause { by: self.by.clone(), reason: self.reason.clone(), at: from_ms(now_ms()) }
     }
@@ -63,7 +70,8 @@ impl Dispatcher {
             return Err(ControlError::NotFound(format!("device {id:?}")));
         }
         let by = actor.now();
-        self.writer.record(Record::Pause { target: target.clone(), paused, by: by.clone() }).await?;
+        let record = Record::Pause { target: target.clone(), paused, by: by.clone() };
+        self.writer.record_as(record, actor.who()).await?;
         let pause = paused.then_some(by);
         match target {
             Target::Device(id) => drop(self.queues.set_paused(&id, pause)),
@@ -81,24 +89,24 @@ impl Dispatcher {
             job: None,
             at: from_ms(now_ms()),
         };
-        Ok(self.writer.record(Record::Lock { location, lock }).await?)
+        Ok(self.writer.record_as(Record::Lock { location, lock }, actor.who()).await?)
     }
 
     /// Sets what locations hold, as counted or loaded at commissioning (all or nothing).
     pub async fn inventory(&self, entries: Vec<Stock>, actor: &Actor) -> Result<(), ControlError> {
         let record = Record::Inventory { entries, by: actor.by.clone(), reason: actor.reason.clone() };
-        Ok(self.writer.record(record).await?)
+        Ok(self.writer.record_as(record, actor.who()).await?)
     }
 
     /// Unlocks a location: jobs waiting on it may go.
     pub async fn unlock(&self, location: Location, actor: &Actor) -> Result<(), ControlError> {
         let record = Record::Unlock { location, by: actor.by.clone(), reason: actor.reason.clone() };
-        Ok(self.writer.record(record).await?)
+        Ok(self.writer.record_as(record, actor.who()).await?)
     }
 
     /// Puts a failed job back in the queue as its next attempt, history kept.
     pub async fn retry(&self, id: i64, actor: &Actor) -> Result<Job, ControlError> {
-        match self.writer.change(id, Change::Retry { by: actor.by.clone() }).await {
+        match self.writer.change_as(id, Change::Retry { by: actor.by.clone() }, actor.who()).await {
             Ok(job) => Ok(job),
             Err(WriteError::Illegal(e)) => Err(ControlError::NotFailed { id, state: e.from }),
             Err(e) => Err(e.into()),

@@ -238,6 +238,7 @@ async fn apply(
         // Submissions only, their references not read: nothing to load.
         let mut group = Group::new(Loaded::default(), next, now_ms(), tell.cloned(), cmds, spare);
         let (answers, written) = stream::submissions(c, cmds, &mut group, &mut count).await?;
+        group.audit_submissions();
         save::save(db, &group, written, &mut count).await?;
         group.out.statements = count;
         return Ok((answers, group));
@@ -245,6 +246,7 @@ async fn apply(
     let loaded = load::load(db, cmds, read, &mut count).await?;
     let mut group = Group::new(loaded, next, now_ms(), tell.cloned(), cmds, spare);
     let answers = cmds.iter().map(|cmd| group.command(cmd)).collect();
+    group.audit_submissions();
     save::save(db, &group, save::Written::default(), &mut count).await?;
     group.out.statements = count;
     Ok((answers, group))

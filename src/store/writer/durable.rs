@@ -239,7 +239,7 @@ mod tests {
 
     fn record(reply: oneshot::Sender<Result<(), WriteError>>) -> Sent {
         let record = super::super::Record::Prune { before_ms: 0 };
-        Sent { cmd: Command::Record { record, reply }, epoch: None }
+        Sent { cmd: Command::Record { record, who: None, reply }, epoch: None }
     }
 
     fn done(group: Vec<Sent>) -> Done {

@@ -34,7 +34,7 @@ use super::events::StoredEvent;
 use super::jobs::{Job, NewJob};
 use crate::domain::state::IllegalTransition;
 use crate::domain::{
-    Failure, JobState, Location, LocationLock, Pause, Priority, Report, Reported, Target, Transition,
+    Failure, JobState, Location, LocationLock, Pause, Priority, Report, Reported, Target, Transition, Who,
 };
 
 /// A change to one stored job.
@@ -166,6 +166,17 @@ pub enum Record {
         /// A note, if given.
         note: Option<String>,
     },
+    /// An audit entry for an action whose effect is not in this commit (a job a device
+    /// withdrew and reported cancelled, a tag written to a PLC), by whoever the command is
+    /// sent as (see [`Writer::record_as`]; `rackd` when sent without).
+    Audit {
+        /// What was done: `cancel`, `tag`, ...
+        action: String,
+        /// What it applied to: `job:ID`, `device:ID/TAG`, ...
+        target: String,
+        /// What came of it, or why.
+        reason: Option<String>,
+    },
     /// Retention: delete events committed before this time (Unix ms), always keeping the
     /// newest so that sequence numbers are never reused.
     Prune {
@@ -279,11 +290,13 @@ pub struct Hooks {
     pub tell: Option<Tell>,
 }
 
+/// What the writer is asked to do. `who` is the API's caller of an audited command: its
+/// audit entry (in the same commit) names them and their address.
 enum Command {
-    Submit { jobs: Vec<NewJob>, reply: oneshot::Sender<Result<Vec<Outcome>, WriteError>> },
-    Change { id: i64, change: Change, reply: oneshot::Sender<Result<Job, WriteError>> },
+    Submit { jobs: Vec<NewJob>, who: Option<Who>, reply: oneshot::Sender<Result<Vec<Outcome>, WriteError>> },
+    Change { id: i64, change: Change, who: Option<Who>, reply: oneshot::Sender<Result<Job, WriteError>> },
     Reports { reports: Vec<Report>, reply: oneshot::Sender<Vec<Result<Job, WriteError>>> },
-    Record { record: Record, reply: oneshot::Sender<Result<(), WriteError>> },
+    Record { record: Record, who: Option<Who>, reply: oneshot::Sender<Result<(), WriteError>> },
     Adopt { ids: Vec<i64>, reply: oneshot::Sender<Result<Vec<Job>, WriteError>> },
 }
 
@@ -401,8 +414,18 @@ impl Writer {
     /// [`WriteError::Overloaded`] while the writer's queue is full (the caller says "try
     /// again" instead of holding a request for a queue that does not move).
     pub async fn submit(&self, jobs: Vec<NewJob>) -> Result<Vec<Outcome>, WriteError> {
+        self.submit_from(jobs, None).await
+    }
+
+    /// As [`Writer::submit`], for a caller of the API: a submission that creates a job is
+    /// audited in the same commit (one entry per submission, a batch's naming its count).
+    pub async fn submit_as(&self, jobs: Vec<NewJob>, who: Who) -> Result<Vec<Outcome>, WriteError> {
+        self.submit_from(jobs, Some(who)).await
+    }
+
+    async fn submit_from(&self, jobs: Vec<NewJob>, who: Option<Who>) -> Result<Vec<Outcome>, WriteError> {
         let (reply, answer) = oneshot::channel();
-        self.tx.try_send(self.stamp(Command::Submit { jobs, reply })?).map_err(|e| match e {
+        self.tx.try_send(self.stamp(Command::Submit { jobs, who, reply })?).map_err(|e| match e {
             mpsc::error::TrySendError::Full(_) => WriteError::Overloaded,
             mpsc::error::TrySendError::Closed(_) => WriteError::Closed,
         })?;
@@ -411,9 +434,19 @@ impl Writer {
 
     /// Applies `change` to job `id`, answering with the job once it is on disk.
     pub async fn change(&self, id: i64, change: Change) -> Result<Job, WriteError> {
+        self.change_from(id, change, None).await
+    }
+
+    /// As [`Writer::change`], for a caller of the API: a cancel, a new priority or a retry
+    /// is audited in the same commit.
+    pub async fn change_as(&self, id: i64, change: Change, who: Who) -> Result<Job, WriteError> {
+        self.change_from(id, change, Some(who)).await
+    }
+
+    async fn change_from(&self, id: i64, change: Change, who: Option<Who>) -> Result<Job, WriteError> {
         let (reply, answer) = oneshot::channel();
         self.tx
-            .send(self.stamp(Command::Change { id, change, reply })?)
+            .send(self.stamp(Command::Change { id, change, who, reply })?)
             .await
             .map_err(|_| WriteError::Closed)?;
         answer.await.map_err(|_| WriteError::Closed)?
@@ -445,8 +478,21 @@ impl Writer {
 
     /// Records a change that is not a job's, answering once it is on disk.
     pub async fn record(&self, record: Record) -> Result<(), WriteError> {
+        self.record_from(record, None).await
+    }
+
+    /// As [`Writer::record`], for a caller of the API: its audit entries carry the caller's
+    /// address (the record names who already).
+    pub async fn record_as(&self, record: Record, who: Who) -> Result<(), WriteError> {
+        self.record_from(record, Some(who)).await
+    }
+
+    async fn record_from(&self, record: Record, who: Option<Who>) -> Result<(), WriteError> {
         let (reply, answer) = oneshot::channel();
-        self.tx.send(self.stamp(Command::Record { record, reply })?).await.map_err(|_| WriteError::Closed)?;
+        self.tx
+            .send(self.stamp(Command::Record { record, who, reply })?)
+            .await
+            .map_err(|_| WriteError::Closed)?;
         answer.await.map_err(|_| WriteError::Closed)?
     }
 }

@@ -2,8 +2,9 @@
 //! each carrying all its rows in one JSON parameter (see [`crate::store::engine`]), so a
 //! group of one job and a group of ten thousand cost the same number of statements.
 //!
-//! One exception, measured: on SQLite the intake path's tables (jobs, history, events) are
-//! written with multi-row `VALUES` and bound parameters, because SQLite parses a JSON row
+//! One exception, measured: on SQLite the intake path's tables (jobs, history, events, and
+//! the audit log, which every submission reaches) are written with multi-row `VALUES` and
+//! bound parameters, because SQLite parses a JSON row
 //! three to four times slower than it reads bound values. SQLite allows 32766 bound values
 //! per statement, so a group of up to 2047 new jobs still takes one statement per table,
 //! and one more per 2047 jobs beyond. Each of those statements is built on the writer's
@@ -18,6 +19,7 @@ use super::Conn;
 use super::apply::{Group, History};
 use crate::domain::Job;
 use crate::store::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOBS, LOCATIONS};
+use crate::store::controls::AuditEntry;
 use crate::store::engine::Engine;
 use crate::store::events::StoredEvent;
 use crate::store::on;
@@ -143,6 +145,7 @@ struct AuditOut<'a> {
     action: &'a str,
     target: &'a str,
     reason: Option<&'a str>,
+    client: Option<&'a str>,
 }
 
 #[derive(Serialize)]
@@ -191,6 +194,7 @@ pub(super) const JOBS_PER_STATEMENT: usize = SQLITE_PARAMETERS / JOB_VALUES;
 const JOB_VALUES: usize = 16;
 const HISTORY_VALUES: usize = 4;
 const EVENT_VALUES: usize = 4;
+const AUDIT_VALUES: usize = 7;
 
 /// One statement of the intake path on SQLite: as many rows of one table as SQLite's limit
 /// on bound parameters allows (2047 jobs, 8191 history entries or events).
@@ -198,6 +202,7 @@ pub(super) enum Chunk<'g> {
     Jobs(Vec<(&'g Job, &'g String)>),
     History(&'g [History]),
     Events(&'g [StoredEvent]),
+    Audit(&'g [AuditEntry]),
 }
 
 impl Chunk<'_> {
@@ -213,6 +218,7 @@ impl Chunk<'_> {
             Chunk::Jobs(rows) => (rows.len(), JOB_VALUES),
             Chunk::History(rows) => (rows.len(), HISTORY_VALUES),
             Chunk::Events(rows) => (rows.len(), EVENT_VALUES),
+            Chunk::Audit(rows) => (rows.len(), AUDIT_VALUES),
         };
         rows == Chunk::most(values)
     }
@@ -223,6 +229,7 @@ impl Chunk<'_> {
             Chunk::Jobs(rows) => (rows.len(), rows.len() * JOB_VALUES),
             Chunk::History(rows) => (rows.len(), rows.len() * HISTORY_VALUES),
             Chunk::Events(rows) => (rows.len(), rows.len() * EVENT_VALUES),
+            Chunk::Audit(rows) => (rows.len(), rows.len() * AUDIT_VALUES),
         }
     }
 
@@ -281,6 +288,17 @@ impl Chunk<'_> {
                     r.data.as_str(),
                 ])
             }
+            Chunk::Audit(rows) => {
+                values!(q, "audit (id, at, by, action, target, reason, client)", AUDIT_VALUES, *rows, |r| [
+                    r.id,
+                    crate::domain::time::to_ms(r.at),
+                    r.by.as_str(),
+                    r.action.as_str(),
+                    r.target.as_str(),
+                    r.reason.as_deref(),
+                    r.client.as_deref(),
+                ])
+            }
         }
     }
 }
@@ -334,8 +352,8 @@ impl Written {
 }
 
 /// On SQLite, writes the jobs, history entries and events `group` created (those not
-/// `written` already) with multi-row `VALUES` and bound values (see the module doc), and
-/// returns how far they are written: all of them.
+/// `written` already), and its audit entries, with multi-row `VALUES` and bound values (see
+/// the module doc), and returns how far they are written: all of them.
 ///
 /// A group of at most [`SMALL`] rows in each table sends its statements together, as one
 /// execution whose text recurs and is kept prepared: single POSTs make groups of a few
@@ -364,11 +382,12 @@ pub(super) async fn intake(
         .map(|rows| Chunk::Jobs(rows.to_vec()))
         .chain(group.history[written.history..].chunks(Chunk::most(HISTORY_VALUES)).map(Chunk::History))
         .chain(group.out.events[written.events..].chunks(Chunk::most(EVENT_VALUES)).map(Chunk::Events))
+        .chain(group.audit.chunks(Chunk::most(AUDIT_VALUES)).map(Chunk::Audit))
         .collect();
     if chunks.is_empty() {
         return Ok(all);
     }
-    if chunks.len() <= 3 && chunks.iter().all(|c| c.size().0 <= SMALL) {
+    if chunks.len() <= 4 && chunks.iter().all(|c| c.size().0 <= SMALL) {
         let values = chunks.iter().map(|c| c.size().1).sum();
         let mut q = sized(chunks.iter().map(|c| c.size().0).sum(), values);
         for (i, chunk) in chunks.iter().enumerate() {
@@ -439,7 +458,7 @@ pub(super) async fn save(
         Engine::Sqlite => &SQLITE,
         Engine::Postgres => &POSTGRES,
     };
-    // The intake path's three tables: bound values on SQLite, JSON on PostgreSQL.
+    // The intake path's tables: bound values on SQLite, JSON on PostgreSQL.
     match db {
         Conn::Sqlite(c) => {
             intake(c, group, written, count).await?;
@@ -459,6 +478,20 @@ pub(super) async fn save(
             write(db, count, &sql.insert_jobs, &created).await?;
             write(db, count, &sql.history, &group.history).await?;
             write(db, count, &sql.events, &events).await?;
+            let audit: Vec<AuditOut> = group
+                .audit
+                .iter()
+                .map(|a| AuditOut {
+                    id: a.id,
+                    at: crate::domain::time::to_ms(a.at),
+                    by: &a.by,
+                    action: &a.action,
+                    target: &a.target,
+                    reason: a.reason.as_deref(),
+                    client: a.client.as_deref(),
+                })
+                .collect();
+            write(db, count, &sql.audit, &audit).await?;
         }
     }
     let changed: Vec<JobOut> =
@@ -466,19 +499,6 @@ pub(super) async fn save(
     write(db, count, &sql.update_jobs, &changed).await?;
     let locations: Vec<_> = group.touched.iter().filter_map(|l| group.locations.get(l)).collect();
     write(db, count, &sql.locations, &locations).await?;
-    let audit: Vec<AuditOut> = group
-        .audit
-        .iter()
-        .map(|a| AuditOut {
-            id: a.id,
-            at: crate::domain::time::to_ms(a.at),
-            by: &a.by,
-            action: &a.action,
-            target: &a.target,
-            reason: a.reason.as_deref(),
-        })
-        .collect();
-    write(db, count, &sql.audit, &audit).await?;
     let raised: Vec<_> = group.raised.iter().filter_map(|id| group.alarms.get(id)).collect();
     write(db, count, &sql.raise, &raised).await?;
     let changed: Vec<_> = group.alarms_changed.iter().filter_map(|id| group.alarms.get(id)).collect();

@@ -121,7 +121,7 @@ async fn kpis_acknowledgement_and_whoami() {
     })
     .await;
     browser.viewport(1600, 1000).await;
-    browser.open(&app.url(&format!("/?token={OPERATOR}"))).await;
+    browser.open_with_key(&app, OPERATOR).await;
     browser
         .wait(
             "the connection to be live",

@@ -1,5 +1,6 @@
 //! With API keys configured, the page asks for a key, refuses a wrong one, and works with a
-//! good one given in its address (`/?token=`), which it keeps in local storage; a viewer's
+//! good one given in its address (`/?token=`) once the operator accepts it (the page names
+//! whose key it is first; ignored, it is not kept), keeping it in local storage; a viewer's
 //! key shows no button a viewer may not use, an operator's shows them.
 
 use fantoccini::Locator;
@@ -47,8 +48,29 @@ async fn with_keys_the_page_asks_for_one_and_works_once_given() {
         )
         .await;
 
-    // The good key in the address: live, and the key leaves the address bar for storage.
+    // A key in a link is taken out of the address bar at once, and the page asks first,
+    // naming whose key it is. Ignored, it is not kept.
     browser.open(&app.url(&format!("/?token={KEY}"))).await;
+    let asked = "const t = document.getElementById('token-who').textContent;
+        return document.getElementById('token-dialog').open && t.startsWith('It is the key') && t";
+    let who = browser.wait("the page to ask about the link's key, naming it", asked, 10).await;
+    assert_eq!(who, json!("It is the key “operator” (operator)."));
+    let url = browser.client.current_url().await.unwrap();
+    assert!(!url.as_str().contains("token"), "the key left the address before any answer: {url}");
+    let stored = "return localStorage.getItem('rackd.key')";
+    assert_eq!(browser.js(stored).await, json!("rk_wrong"), "the page's own key is kept until the answer");
+    browser.click("#token-ignore").await;
+    browser
+        .wait(
+            "the key dialog again, the link's key ignored",
+            "return document.getElementById('key-dialog').open",
+            10,
+        )
+        .await;
+    assert_eq!(browser.js(stored).await, json!("rk_wrong"), "ignored: the link's key is not kept");
+
+    // Accepted: live, and the key is kept.
+    browser.open_with_key(&app, KEY).await;
     browser
         .wait(
             "the connection to be live",
@@ -122,7 +144,7 @@ async fn a_viewer_sees_no_buttons_it_cannot_use() {
     assert_eq!(post("/api/v1/locations/1/1/2/3/1/lock", json!({"reason": "checking"})).await, 200);
 
     // The viewer: everything shown, no button that would be refused.
-    browser.open(&app.url(&format!("/?token={VIEWER}"))).await;
+    browser.open_with_key(&app, VIEWER).await;
     browser
         .wait(
             "the connection to be live",
@@ -150,7 +172,7 @@ async fn a_viewer_sees_no_buttons_it_cannot_use() {
     browser.screenshot_viewport("dashboard-viewer.png").await;
 
     // The operator, on the same page: Cancel, Resume, Pause aisle, Unlock.
-    browser.open(&app.url(&format!("/?token={KEY}"))).await;
+    browser.open_with_key(&app, KEY).await;
     browser
         .wait(
             "the connection to be live",

@@ -161,6 +161,20 @@ impl Browser {
         self.wait("the dashboard script to start", "return window.rackd !== undefined", 10).await;
     }
 
+    /// Opens the page with `key` in its address (`/?token=KEY`, as a link hands a key over)
+    /// and accepts it where the page asks whether to use it.
+    pub async fn open_with_key(&self, app: &TestApp, key: &str) {
+        self.open(&app.url(&format!("/?token={key}"))).await;
+        self.wait(
+            "the page to ask about the link's key",
+            "return document.getElementById('token-dialog').open
+                && document.getElementById('token-who').textContent.startsWith('It is the key')",
+            10,
+        )
+        .await;
+        self.click("#token-use").await;
+    }
+
     /// Makes the page's viewport `width` x `height` CSS pixels (the window is grown by what
     /// the browser itself takes).
     pub async fn viewport(&self, width: u32, height: u32) {

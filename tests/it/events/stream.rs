@@ -34,7 +34,7 @@ async fn a_snapshot_then_every_event_in_order(#[case] engine: Engine) {
     let ids = submit(&app, 5).await;
     let (status, cancelled) = app.post(&format!("/api/v1/jobs/{}/cancel", ids[0]), &json!({})).await;
     assert_eq!(status, 200, "{cancelled}");
-    let events = ws.events(6).await;
+    let events = ws.events(7).await;
     assert_consecutive(&events, 3);
     for (event, id) in events.iter().zip(&ids) {
         assert_eq!(event["type"], "job.updated");
@@ -44,7 +44,11 @@ async fn a_snapshot_then_every_event_in_order(#[case] engine: Engine) {
     }
     assert_eq!(events[5]["data"]["id"], ids[0]);
     assert_eq!(events[5]["data"]["state"], "cancelled");
-    assert_nothing_more(&app, &mut ws, 8).await;
+    // The cancel's audit entry, in the same commit; the submissions' are not published.
+    assert_eq!(events[6]["type"], "audit.recorded");
+    assert_eq!(events[6]["data"]["action"], "cancel");
+    assert_eq!(events[6]["data"]["target"], format!("job:{}", ids[0]));
+    assert_nothing_more(&app, &mut ws, 9).await;
 }
 
 #[rstest]

@@ -38,9 +38,17 @@ impl Ws {
 
     /// Connects, optionally with an `Authorization: Bearer` header; the HTTP status on refusal.
     pub async fn try_connect(base: &str, query: &str, bearer: Option<&str>) -> Result<Ws, u16> {
+        let auth = bearer.map(|key| format!("Bearer {key}"));
+        let headers: Vec<(&str, &str)> = auth.iter().map(|a| ("authorization", a.as_str())).collect();
+        Self::try_connect_with(base, query, &headers).await
+    }
+
+    /// Connects with these extra headers (`origin`, `host`, ...); the HTTP status on refusal.
+    pub async fn try_connect_with(base: &str, query: &str, headers: &[(&str, &str)]) -> Result<Ws, u16> {
         let mut request = url(base, &format!("/api/v1/ws{query}")).into_client_request().unwrap();
-        if let Some(key) = bearer {
-            request.headers_mut().insert("authorization", format!("Bearer {key}").parse().unwrap());
+        for (name, value) in headers {
+            let name = tokio_tungstenite::tungstenite::http::HeaderName::from_bytes(name.as_bytes()).unwrap();
+            request.headers_mut().insert(name, value.parse().unwrap());
         }
         match tokio_tungstenite::connect_async(request).await {
             Ok((stream, _)) => Ok(Ws { stream }),

@@ -2,30 +2,32 @@
 //! locks and inventory, alarms), applied in memory like the rest of the group.
 
 use super::{Group, location_key};
-use crate::domain::JobState;
+use crate::domain::{JobState, Who};
 use crate::store::alarms::{self, Alarm};
 use crate::store::writer::{Record, WriteError};
 
 impl Group {
-    /// Records a change that is not a job's; an error refuses it.
-    pub(super) fn record(&mut self, record: &Record) -> Result<(), WriteError> {
+    /// Records a change that is not a job's; an error refuses it. Sent by `who`, its audit
+    /// entries carry their address.
+    pub(super) fn record(&mut self, record: &Record, who: Option<&Who>) -> Result<(), WriteError> {
         let now = self.now;
+        let client = who.and_then(|w| w.client);
         match record {
             Record::Device { status } => self.append("device.updated", status.clone()),
             Record::Pause { target, paused, by } => {
                 self.controls.insert(target.key(), paused.then(|| by.clone()));
                 let action = if *paused { "pause" } else { "resume" };
-                self.audit(&by.by, action, &target.key(), by.reason.as_deref());
+                self.audit(&by.by, client, action, &target.key(), by.reason.as_deref());
             }
             Record::Lock { location, lock } => {
-                self.audit(&lock.by, "lock", &location_key(*location), Some(&lock.reason));
+                self.audit(&lock.by, client, "lock", &location_key(*location), Some(&lock.reason));
                 if self.lock(*location, lock) {
                     self.out.locks.push((*location, Some(lock.clone())));
                     self.location_events(&[*location]);
                 }
             }
             Record::Unlock { location, by, reason } => {
-                self.audit(by, "unlock", &location_key(*location), reason.as_deref());
+                self.audit(by, client, "unlock", &location_key(*location), reason.as_deref());
                 let unlocked = match self.locations.get_mut(location) {
                     Some(row) if row.locked_at.is_some() => {
                         (row.locked_at, row.locked_by, row.lock_reason, row.lock_job) =
@@ -103,7 +105,7 @@ impl Group {
                             (false, _) => "inventory: empty".to_owned(),
                         };
                         let why = reason.as_deref().map_or(what.clone(), |r| format!("{what} ({r})"));
-                        self.audit(by, "inventory", &location_key(e.location), Some(&why));
+                        self.audit(by, client, "inventory", &location_key(e.location), Some(&why));
                         changed.push(e.location);
                     }
                 }
@@ -119,7 +121,7 @@ impl Group {
                 (row.acknowledged_by, row.acknowledged_at) = (Some(by.clone()), Some(now));
                 let row = row.clone();
                 self.alarm_changed(row.id);
-                self.audit(by, "acknowledge", &format!("alarm:{alarm}"), note.as_deref());
+                self.audit(by, client, "acknowledge", &format!("alarm:{alarm}"), note.as_deref());
                 self.event("alarm.updated", &Alarm::from(row));
             }
             Record::Retell { jobs } => {
@@ -131,6 +133,10 @@ impl Group {
                         self.event("job.updated", &job);
                     }
                 }
+            }
+            Record::Audit { action, target, reason } => {
+                let by = who.map_or("rackd", |w| w.name.as_str());
+                self.audit(by, client, action, target, reason.as_deref());
             }
             Record::Prune { before_ms } => self.prune = Some(*before_ms),
         }
