@@ -13,8 +13,7 @@
 //! standby itself by then answers 503, as does a standby that finds no active node (a
 //! takeover in progress); the client tries again.
 //!
-//! The link between nodes carries the callers' keys, so ([`Forwarder`], in
-//! [`super::peer`]):
+//! The link between nodes carries the callers' keys, so ([`super::peer::Forwarder`]):
 //! - **no proxy**: the client ignores `HTTP_PROXY` and the like; nodes of one cluster talk
 //!   to each other directly, and a proxy named in a service's environment for its other
 //!   traffic must not see the keys.
