@@ -25,6 +25,7 @@ mod events;
 mod explain;
 pub mod layers;
 pub mod origin;
+pub mod tls;
 
 pub use check::Invalid;
 pub use env::EnvError;
@@ -86,8 +87,18 @@ pub struct DatabaseConfig {
     /// Path of the SQLite file; its folder is created if missing. Not used when `url` is set.
     pub path: PathBuf,
     /// A PostgreSQL server instead of the SQLite file: `postgres://user:password@host/db`
-    /// (any libpq-style URL sqlx accepts, with `?sslmode=` and the rest).
+    /// (any libpq-style URL sqlx accepts, with `?sslmode=` and the rest). A secret: shown
+    /// without its password wherever configuration is printed.
     pub url: Option<String>,
+    /// A file whose content (trimmed) is `url`, for a container secret
+    /// (`/run/secrets/database_url`); exactly one of `url` and `url_file`. Once loaded,
+    /// `url` holds what the file says.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub url_file: Option<PathBuf>,
+    /// The CA (PEM) a PostgreSQL server's certificate is checked against, for
+    /// `sslmode=verify-ca` and `verify-full` (`store::engine` says how the mode is chosen).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ca_file: Option<PathBuf>,
     /// How long a statement waits for a lock before failing, in milliseconds.
     pub busy_timeout_ms: u64,
 }
@@ -116,9 +127,13 @@ pub struct ClusterConfig {
     #[serde(default)]
     pub margin_ms: Option<u64>,
     /// The URL other nodes reach this node's API at, to forward what only the active node
-    /// does; `http://` + `server.listen` when not set.
+    /// does; `http://` + `server.listen` when not set. `https://` when the node serves TLS.
     #[serde(default)]
     pub url: Option<String>,
+    /// The CA (PEM) this node trusts when it forwards to another node over `https://`;
+    /// when not set, the public roots compiled in (webpki-roots).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ca_file: Option<PathBuf>,
 }
 
 fn lease_ms() -> u64 {
@@ -210,11 +225,14 @@ impl Config {
     }
 }
 
+/// The default of `server.body_limit_bytes`: the largest request body, 2 MiB.
+pub const BODY_LIMIT: usize = 2 * 1024 * 1024;
+
 impl Default for ServerConfig {
     fn default() -> Self {
         ServerConfig {
             listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
-            body_limit_bytes: 2 * 1024 * 1024,
+            body_limit_bytes: BODY_LIMIT,
             request_timeout_secs: 30,
         }
     }
@@ -222,7 +240,13 @@ impl Default for ServerConfig {
 
 impl Default for DatabaseConfig {
     fn default() -> Self {
-        DatabaseConfig { path: PathBuf::from("data/rackd.db"), url: None, busy_timeout_ms: 5000 }
+        DatabaseConfig {
+            path: PathBuf::from("data/rackd.db"),
+            url: None,
+            url_file: None,
+            ca_file: None,
+            busy_timeout_ms: 5000,
+        }
     }
 }
 
@@ -237,6 +261,15 @@ impl Default for SiteConfig {
         SiteConfig {
             aisles: vec![AisleConfig { aisle: 1, rows: 2, bays: 10, levels: 6, positions: 4, depth: 1 }],
         }
+    }
+}
+
+/// The database URL in the file at `path` (`database.url_file`): its content, trimmed.
+pub fn read_url_file(path: &Path) -> Result<String, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    match text.trim() {
+        "" => Err(format!("{} is empty (expected the URL: postgres://...)", path.display())),
+        url => Ok(url.to_owned()),
     }
 }
 

@@ -25,10 +25,16 @@ mod child;
 mod crane;
 mod fleet;
 mod intake;
+// The tests' PostgreSQL; its TLS-only cluster (and the certificates it needs, `tls`) is the
+// tests' alone (the tests' own build still reports what nobody uses).
+#[allow(dead_code)]
 #[path = "../../tests/it/support/postgres.rs"]
 mod postgres;
 mod served;
 mod shelf;
+#[allow(dead_code)]
+#[path = "../../tests/it/support/tls.rs"]
+mod tls;
 mod ws;
 
 use std::process::ExitCode;

@@ -76,13 +76,21 @@ impl Application {
             tracing::warn!(%listen, "no API keys configured: every request is allowed");
         }
         let db = &config.database;
-        let database = match &db.url {
-            Some(url) => store::Database::Postgres(url.clone()),
+        // The loader has read url_file into url; a configuration built in code may not have.
+        let url = match (&db.url, &db.url_file) {
+            (Some(url), _) => Some(url.clone()),
+            (None, Some(file)) => Some(crate::config::read_url_file(file).map_err(anyhow::Error::msg)?),
+            (None, None) => None,
+        };
+        let database = match url {
+            Some(url) => store::Database::Postgres(url),
             None => store::Database::Sqlite(db.path.clone()),
         };
-        let pool = store::open(&database, Duration::from_millis(db.busy_timeout_ms))
+        let ca = db.ca_file.as_deref().filter(|_| database.engine() == store::Engine::Postgres);
+        let with_ca = ca.map(|p| format!(" with database.ca_file {}", p.display())).unwrap_or_default();
+        let pool = store::open_with(&database, Duration::from_millis(db.busy_timeout_ms), ca)
             .await
-            .with_context(|| format!("opening database {}", database.display()))?;
+            .with_context(|| format!("opening database {}{with_ca}", database.display()))?;
         let layout = config.layout();
         locations::seed(&pool, &layout, now_ms()).await.context("seeding locations")?;
         let on_cluster = match (&config.cluster, &pool) {
@@ -147,6 +155,19 @@ impl Application {
                 None
             }
         };
+        let forwarder = match &config.cluster {
+            Some(c) => {
+                let listen = listener.local_addr().context("the bound address")?;
+                api::peer::warn_if_clear(&c.url(listen), !keys.is_empty(), "this node's cluster.url");
+                let forwarder = api::peer::Forwarder::new(
+                    c.ca_file.as_deref(),
+                    config.server.body_limit_bytes,
+                    !keys.is_empty(),
+                );
+                Some(forwarder.context("the cluster's forwarding client (cluster.ca_file)")?)
+            }
+            None => None,
+        };
         let state = AppState::new(Shared {
             pool,
             writer,
@@ -155,6 +176,7 @@ impl Application {
             metrics,
             running,
             cluster: clustered.as_ref().map(|c| c.node.clone()),
+            forwarder,
             dispatcher,
             hub,
             events: Arc::new(config.events.clone()),

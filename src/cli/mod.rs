@@ -52,9 +52,12 @@ pub enum Command {
         #[arg(long)]
         explain: bool,
     },
-    /// Print the hash of an API key for `[[auth.keys]]` (key from the argument or stdin).
+    /// Print the hash of an API key for `[[auth.keys]]`: the key is read from standard
+    /// input (`rackd hash-key < FILE`), never taken as an argument, which every user of the
+    /// machine can read in `ps` and which stays in the shell's history.
     HashKey {
-        /// The key; read from standard input when absent.
+        /// Refused: a key on the command line is visible to every user (see above).
+        #[arg(hide = true)]
         key: Option<String>,
         /// Make a new random key, print it and its hash.
         #[arg(long, conflicts_with = "key")]
@@ -160,20 +163,27 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             }
         },
         Command::HashKey { key, generate } => {
-            let key = match (key, generate) {
-                (Some(k), _) => k,
-                (None, true) => {
-                    let k = crate::auth::generate_key();
-                    println!("key:  {k}");
-                    k
-                }
-                (None, false) => {
-                    let mut line = String::new();
-                    std::io::stdin().read_line(&mut line)?;
-                    line.trim().to_owned()
-                }
+            if key.is_some() {
+                eprintln!(
+                    "rackd hash-key takes the key on standard input, not as an argument (which every user sees \
+                     in ps): rackd hash-key < FILE, or printf %s \"$KEY\" | rackd hash-key; or make a new one \
+                     with rackd hash-key --generate"
+                );
+                return Ok(ExitCode::FAILURE);
+            }
+            let key = if generate {
+                let k = crate::auth::generate_key();
+                println!("key:  {k}");
+                k
+            } else {
+                let mut line = String::new();
+                std::io::stdin().read_line(&mut line)?;
+                line.trim().to_owned()
             };
-            anyhow::ensure!(!key.is_empty(), "an empty key");
+            if let Err(why) = crate::auth::acceptable_key(&key) {
+                eprintln!("rackd hash-key: {why}");
+                return Ok(ExitCode::FAILURE);
+            }
             println!("{}{}", if generate { "hash: " } else { "" }, crate::auth::KeyHash::of(&key));
         }
         Command::Healthcheck { url } => {
