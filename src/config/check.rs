@@ -54,6 +54,12 @@ pub enum Invalid {
     /// `[cluster]` without a PostgreSQL `database.url`, or with a bad value.
     #[error("{0}")]
     Cluster(&'static str),
+    /// A `[server]` timeout or cap of 0.
+    #[error("{0} must be at least 1")]
+    ServerZero(&'static str),
+    /// `[server.tls]` files that cannot be served.
+    #[error(transparent)]
+    Tls(#[from] super::TlsError),
     /// An intake bound of 0.
     #[error("intake.max_group and intake.queue must be at least 1")]
     Intake,
@@ -163,6 +169,20 @@ impl Config {
             if let Some((key, why)) = flaw {
                 return Err((key.into(), Invalid::Cluster(why)));
             }
+        }
+        let server = &self.server;
+        let zero = [
+            ("server.header_timeout_ms", server.header_timeout_ms == 0),
+            ("server.idle_timeout_ms", server.idle_timeout_ms == 0),
+            ("server.max_connections", server.max_connections == 0),
+        ];
+        if let Some((key, _)) = zero.into_iter().find(|(_, zero)| *zero) {
+            return Err((key.into(), Invalid::ServerZero(key)));
+        }
+        // The files as the server would load them at its start: check-config says now
+        // what `serve` would refuse.
+        if let Some(tls) = &server.tls {
+            tls.load().map_err(|e| (e.file().key().to_owned(), Invalid::Tls(e)))?;
         }
         if self.intake.max_group == 0 || self.intake.queue == 0 {
             let key = if self.intake.max_group == 0 { "intake.max_group" } else { "intake.queue" };

@@ -18,6 +18,7 @@ mod mewtocol;
 mod modbus;
 mod plc;
 mod ppi;
+mod security;
 mod shelf;
 mod sim_presets;
 mod standby;

@@ -1,0 +1,6 @@
+//! Issue 41, "hardened for a plant network": each finding of the review reproduced as an
+//! attack over real sockets, one file per finding. Each test failed on the code before
+//! its fix.
+
+mod connections;
+mod tls;
