@@ -25,6 +25,7 @@ mod events;
 mod explain;
 pub mod layers;
 pub mod origin;
+pub mod ca;
 pub mod tls;
 
 pub use check::Invalid;
@@ -33,6 +34,7 @@ pub use error::ConfigError;
 pub use events::{EventsConfig, EventsConfigError};
 pub use layers::{Loaded, Sources};
 pub use origin::Origin;
+pub use tls::{TlsConfig, TlsError};
 
 pub use crate::auth::{AuthConfig, KeyConfig};
 use crate::domain::{AisleLayout, Layout};
@@ -78,6 +80,19 @@ pub struct ServerConfig {
     pub body_limit_bytes: usize,
     /// Seconds a request may take before it is answered 503.
     pub request_timeout_secs: u64,
+    /// Milliseconds a connection has to send a request's headers: from its accept (the TLS
+    /// handshake included) for the first request, from its first byte for each next one.
+    pub header_timeout_ms: u64,
+    /// Milliseconds a keep-alive connection may wait for its next request before it is
+    /// closed (and a response may wait for a client that does not read it).
+    pub idle_timeout_ms: u64,
+    /// Most connections open at once, WebSockets included; at the cap, a new connection
+    /// takes the place of the one that has waited longest without being served
+    /// (`app::serve` says why).
+    pub max_connections: usize,
+    /// HTTPS and WSS instead of HTTP and WS on `listen`; plain HTTP when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tls: Option<TlsConfig>,
 }
 
 /// `[database]`
@@ -127,7 +142,7 @@ pub struct ClusterConfig {
     #[serde(default)]
     pub margin_ms: Option<u64>,
     /// The URL other nodes reach this node's API at, to forward what only the active node
-    /// does; `http://` + `server.listen` when not set. `https://` when the node serves TLS.
+    /// does; `http://` (`https://` with `[server.tls]`) + `server.listen` when not set.
     #[serde(default)]
     pub url: Option<String>,
     /// The CA (PEM) this node trusts when it forwards to another node over `https://`;
@@ -147,9 +162,11 @@ impl ClusterConfig {
         (lease, self.margin_ms.map_or(lease / 5, std::time::Duration::from_millis))
     }
 
-    /// Where other nodes reach this node's API.
-    pub fn url(&self, listen: SocketAddr) -> String {
-        self.url.clone().unwrap_or_else(|| format!("http://{listen}"))
+    /// Where other nodes reach this node's API: `http://` + `listen`, or `https://` when
+    /// `tls` (the node serves `[server.tls]`), unless `url` says.
+    pub fn url(&self, listen: SocketAddr, tls: bool) -> String {
+        let scheme = if tls { "https" } else { "http" };
+        self.url.clone().unwrap_or_else(|| format!("{scheme}://{listen}"))
     }
 }
 
@@ -234,6 +251,10 @@ impl Default for ServerConfig {
             listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
             body_limit_bytes: BODY_LIMIT,
             request_timeout_secs: 30,
+            header_timeout_ms: 10_000,
+            idle_timeout_ms: 60_000,
+            max_connections: 1024,
+            tls: None,
         }
     }
 }

@@ -27,7 +27,7 @@ impl Forwarder {
             .connect_timeout(Duration::from_secs(2));
         if let Some(path) = ca_file {
             builder = builder.tls_built_in_root_certs(false);
-            for cert in crate::config::tls::read_ca(path)? {
+            for cert in crate::config::ca::read_ca(path)? {
                 builder = builder.add_root_certificate(reqwest::Certificate::from_der(&cert)?);
             }
         }

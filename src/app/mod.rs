@@ -1,10 +1,12 @@
 //! Building and running the service: open the store, start the devices, bind, serve, and
 //! shut down gracefully. What drives the machines is [`drive`]; a cluster node's wiring is
-//! [`cluster`].
+//! [`cluster`]; how connections are accepted and served (timers, the cap, TLS) is
+//! [`serve`].
 
 mod cluster;
 mod drive;
 mod hooks;
+mod serve;
 
 use std::collections::BTreeSet;
 use std::future::Future;
@@ -14,7 +16,7 @@ use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use tokio::net::TcpListener;
+use tokio::net::{TcpListener, TcpSocket};
 use tokio::task::JoinHandle;
 
 use crate::api::metrics::Metrics;
@@ -38,6 +40,10 @@ const LOST_DRAIN: Duration = Duration::from_secs(5);
 pub struct Application {
     listener: TcpListener,
     router: axum::Router,
+    /// `[server]`'s timers and cap.
+    limits: serve::Limits,
+    /// The certificate, when `[server.tls]` is set.
+    tls: Option<serve::tls::Certificates>,
     writer_task: JoinHandle<()>,
     /// Device tasks, the device monitor and retention: stopped before the writer drains.
     tasks: drive::Tasks,
@@ -66,6 +72,11 @@ impl Application {
     ) -> anyhow::Result<Application> {
         let keys = KeyRing::new(&config.auth.keys);
         let listen = config.server.listen;
+        // Before anything starts: a certificate that does not load is a start that fails.
+        let tls = match &config.server.tls {
+            Some(tls) => Some(serve::tls::Certificates::load(tls).context("server.tls")?),
+            None => None,
+        };
         if keys.is_empty() {
             if !listen.ip().is_loopback() && !insecure {
                 bail!(
@@ -158,7 +169,7 @@ impl Application {
         let forwarder = match &config.cluster {
             Some(c) => {
                 let listen = listener.local_addr().context("the bound address")?;
-                api::peer::warn_if_clear(&c.url(listen), !keys.is_empty(), "this node's cluster.url");
+                api::peer::warn_if_clear(&c.url(listen, config.server.tls.is_some()), !keys.is_empty(), "this node's cluster.url");
                 let forwarder = api::peer::Forwarder::new(
                     c.ca_file.as_deref(),
                     config.server.body_limit_bytes,
@@ -183,7 +194,16 @@ impl Application {
         });
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);
-        Ok(Application { listener, router, writer_task, tasks, cluster: clustered, keep: Vec::new() })
+        Ok(Application {
+            listener,
+            router,
+            limits: serve::Limits::of(&config.server),
+            tls,
+            writer_task,
+            tasks,
+            cluster: clustered,
+            keep: Vec::new(),
+        })
     }
 
     /// The address actually bound (useful with port 0).
@@ -199,14 +219,8 @@ impl Application {
     /// Serves until `shutdown` completes, then finishes in-flight requests, stops the
     /// devices between two steps and commits what is pending before returning.
     pub async fn run_until(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
-        tracing::info!(addr = %self.local_addr(), "rackd listening");
-        // No Nagle: live events and replies are small writes that must leave at once
-        // (Nagle's wait for an ACK, against a delayed ACK, stalls them by up to 40 ms).
-        let listener = axum::serve::ListenerExt::tap_io(self.listener, |tcp| {
-            if let Err(e) = tcp.set_nodelay(true) {
-                tracing::debug!(error = %e, "TCP_NODELAY");
-            }
-        });
+        let scheme = if self.tls.is_some() { "https" } else { "http" };
+        tracing::info!(addr = %self.local_addr(), scheme, "rackd listening");
         let lost = self.cluster.as_ref().map(|c| c.lost.clone());
         let stop = async move {
             match lost {
@@ -217,7 +231,7 @@ impl Application {
                 None => shutdown.await,
             }
         };
-        axum::serve(listener, self.router).with_graceful_shutdown(stop).await?;
+        serve::serve(self.listener, self.router, self.limits, self.tls, stop).await;
         // A device stopped between two PLC requests is the same as a crash, which the
         // hand-over order and recovery make safe.
         let tasks = std::mem::take(&mut *self.tasks.lock().unwrap_or_else(|p| p.into_inner()));
@@ -296,7 +310,21 @@ pub async fn shutdown_signal() {
     tracing::info!("shutdown requested");
 }
 
+/// Connections the kernel completes and queues for rackd to accept. The standard
+/// library's 128 overflows under a burst (a flood of connections, many clients starting at
+/// once), and the kernel then drops new connections' SYNs, which their clients send again
+/// only a second later: `/healthz` among them. The kernel caps it at `net.core.somaxconn`
+/// (4096 on current kernels).
+const BACKLOG: u32 = 1024;
+
 /// Binds the API's listener.
 pub async fn bind(listen: SocketAddr) -> anyhow::Result<TcpListener> {
-    TcpListener::bind(listen).await.with_context(|| format!("binding {listen} (is another rackd running?)"))
+    let bound = || {
+        let socket = if listen.is_ipv4() { TcpSocket::new_v4()? } else { TcpSocket::new_v6()? };
+        // As the standard library's bind: a restart does not wait for TIME_WAIT to pass.
+        socket.set_reuseaddr(true)?;
+        socket.bind(listen)?;
+        socket.listen(BACKLOG)
+    };
+    bound().with_context(|| format!("binding {listen} (is another rackd running?)"))
 }

@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
 use super::devices::{DeviceConfigError, DeviceKind};
-use super::tls::read_ca;
+use super::ca::read_ca;
 use super::{Config, EventsConfigError, Origin};
 use crate::store::{PgTls, redact};
 
@@ -63,6 +63,12 @@ pub enum Invalid {
     /// `database.url_file` that cannot be read, is empty, or comes with `database.url`.
     #[error("{0}")]
     UrlFile(String),
+    /// A `[server]` timeout or cap of 0.
+    #[error("{0} must be at least 1")]
+    ServerZero(&'static str),
+    /// `[server.tls]` files that cannot be served.
+    #[error(transparent)]
+    ServerTls(#[from] super::TlsError),
     /// An intake bound of 0.
     #[error("intake.max_group and intake.queue must be at least 1")]
     Intake,
@@ -165,6 +171,20 @@ impl Config {
             if let Some(ca) = &c.ca_file {
                 read_ca(ca).map_err(|e| ("cluster.ca_file".to_owned(), Invalid::Tls(e.to_string())))?;
             }
+        }
+        let server = &self.server;
+        let zero = [
+            ("server.header_timeout_ms", server.header_timeout_ms == 0),
+            ("server.idle_timeout_ms", server.idle_timeout_ms == 0),
+            ("server.max_connections", server.max_connections == 0),
+        ];
+        if let Some((key, _)) = zero.into_iter().find(|(_, zero)| *zero) {
+            return Err((key.into(), Invalid::ServerZero(key)));
+        }
+        // The files as the server would load them at its start: check-config says now
+        // what `serve` would refuse.
+        if let Some(tls) = &server.tls {
+            tls.load().map_err(|e| (e.file().key().to_owned(), Invalid::ServerTls(e)))?;
         }
         if self.intake.max_group == 0 || self.intake.queue == 0 {
             let key = if self.intake.max_group == 0 { "intake.max_group" } else { "intake.queue" };

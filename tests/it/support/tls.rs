@@ -42,10 +42,14 @@ impl Ca {
 
     /// A server certificate for `localhost` and 127.0.0.1, signed by this CA.
     pub fn server(&self) -> ServerCert {
+        self.server_for(&["localhost", "127.0.0.1"])
+    }
+
+    /// A server certificate for `names` (DNS names or IP addresses), signed by this CA.
+    pub fn server_for(&self, names: &[&str]) -> ServerCert {
         let key = KeyPair::generate().unwrap();
-        let mut params =
-            CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()]).unwrap();
-        params.distinguished_name.push(DnType::CommonName, "localhost");
+        let mut params = CertificateParams::new(names.iter().map(|n| n.to_string()).collect::<Vec<_>>()).unwrap();
+        params.distinguished_name.push(DnType::CommonName, names[0]);
         let cert = params.signed_by(&key, &self.issuer).unwrap();
         ServerCert { cert_pem: cert.pem(), key_pem: key.serialize_pem() }
     }
