@@ -154,6 +154,27 @@ impl TryFrom<String> for KeyHash {
     }
 }
 
+/// The fewest characters `rackd hash-key` accepts in a key.
+///
+/// Keys are stored as plain SHA-256 (see the module documentation), so a key is as strong
+/// as it is long and random: whoever reads a configuration file can try billions of
+/// candidates a second against its hashes. 16 characters from a random source are over
+/// 90 bits, beyond any such search; a short or human-chosen key is not, and a one-letter
+/// key is a typo. `--generate` makes 67 (`rk_` and 64 hex digits, 256 bits).
+pub const MIN_KEY_LEN: usize = 16;
+
+/// Whether `key` may become an API key: not empty, at least [`MIN_KEY_LEN`] characters.
+pub fn acceptable_key(key: &str) -> Result<(), String> {
+    match key.chars().count() {
+        0 => Err("no key on standard input (rackd hash-key < FILE, or --generate for a new one)".into()),
+        n if n < MIN_KEY_LEN => Err(format!(
+            "a key of {n} characters is too short: keys are at least {MIN_KEY_LEN} characters \
+             (rackd hash-key --generate makes a strong one)"
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// A new random key: 32 random bytes, hex-encoded, prefixed `rk_` so it is easy to spot.
 pub fn generate_key() -> String {
     let mut bytes = [0u8; 32];

@@ -26,6 +26,8 @@ mod explain;
 mod hosts;
 pub mod layers;
 pub mod origin;
+pub mod ca;
+pub mod tls;
 
 pub use check::Invalid;
 pub use env::EnvError;
@@ -34,6 +36,7 @@ pub use events::{EventsConfig, EventsConfigError};
 pub use hosts::{AllowedHost, BadHost};
 pub use layers::{Loaded, Sources};
 pub use origin::Origin;
+pub use tls::{TlsConfig, TlsError};
 
 pub use crate::auth::{AuthConfig, KeyConfig};
 use crate::domain::{AisleLayout, Layout};
@@ -85,6 +88,19 @@ pub struct ServerConfig {
     /// comma-separated list.
     #[serde(deserialize_with = "hosts::list_or_commas")]
     pub allowed_hosts: Vec<AllowedHost>,
+    /// Milliseconds a connection has to send a request's headers: from its accept (the TLS
+    /// handshake included) for the first request, from its first byte for each next one.
+    pub header_timeout_ms: u64,
+    /// Milliseconds a keep-alive connection may wait for its next request before it is
+    /// closed (and a response may wait for a client that does not read it).
+    pub idle_timeout_ms: u64,
+    /// Most connections open at once, WebSockets included; at the cap, a new connection
+    /// takes the place of the one that has waited longest without being served
+    /// (`app::serve` says why).
+    pub max_connections: usize,
+    /// HTTPS and WSS instead of HTTP and WS on `listen`; plain HTTP when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tls: Option<TlsConfig>,
 }
 
 /// `[database]`
@@ -94,8 +110,18 @@ pub struct DatabaseConfig {
     /// Path of the SQLite file; its folder is created if missing. Not used when `url` is set.
     pub path: PathBuf,
     /// A PostgreSQL server instead of the SQLite file: `postgres://user:password@host/db`
-    /// (any libpq-style URL sqlx accepts, with `?sslmode=` and the rest).
+    /// (any libpq-style URL sqlx accepts, with `?sslmode=` and the rest). A secret: shown
+    /// without its password wherever configuration is printed.
     pub url: Option<String>,
+    /// A file whose content (trimmed) is `url`, for a container secret
+    /// (`/run/secrets/database_url`); exactly one of `url` and `url_file`. Once loaded,
+    /// `url` holds what the file says.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub url_file: Option<PathBuf>,
+    /// The CA (PEM) a PostgreSQL server's certificate is checked against, for
+    /// `sslmode=verify-ca` and `verify-full` (`store::engine` says how the mode is chosen).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ca_file: Option<PathBuf>,
     /// How long a statement waits for a lock before failing, in milliseconds.
     pub busy_timeout_ms: u64,
 }
@@ -124,9 +150,13 @@ pub struct ClusterConfig {
     #[serde(default)]
     pub margin_ms: Option<u64>,
     /// The URL other nodes reach this node's API at, to forward what only the active node
-    /// does; `http://` + `server.listen` when not set.
+    /// does; `http://` (`https://` with `[server.tls]`) + `server.listen` when not set.
     #[serde(default)]
     pub url: Option<String>,
+    /// The CA (PEM) this node trusts when it forwards to another node over `https://`;
+    /// when not set, the public roots compiled in (webpki-roots).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ca_file: Option<PathBuf>,
 }
 
 fn lease_ms() -> u64 {
@@ -140,9 +170,11 @@ impl ClusterConfig {
         (lease, self.margin_ms.map_or(lease / 5, std::time::Duration::from_millis))
     }
 
-    /// Where other nodes reach this node's API.
-    pub fn url(&self, listen: SocketAddr) -> String {
-        self.url.clone().unwrap_or_else(|| format!("http://{listen}"))
+    /// Where other nodes reach this node's API: `http://` + `listen`, or `https://` when
+    /// `tls` (the node serves `[server.tls]`), unless `url` says.
+    pub fn url(&self, listen: SocketAddr, tls: bool) -> String {
+        let scheme = if tls { "https" } else { "http" };
+        self.url.clone().unwrap_or_else(|| format!("{scheme}://{listen}"))
     }
 }
 
@@ -218,20 +250,33 @@ impl Config {
     }
 }
 
+/// The default of `server.body_limit_bytes`: the largest request body, 2 MiB.
+pub const BODY_LIMIT: usize = 2 * 1024 * 1024;
+
 impl Default for ServerConfig {
     fn default() -> Self {
         ServerConfig {
             listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
-            body_limit_bytes: 2 * 1024 * 1024,
+            body_limit_bytes: BODY_LIMIT,
             request_timeout_secs: 30,
             allowed_hosts: Vec::new(),
+            header_timeout_ms: 10_000,
+            idle_timeout_ms: 60_000,
+            max_connections: 1024,
+            tls: None,
         }
     }
 }
 
 impl Default for DatabaseConfig {
     fn default() -> Self {
-        DatabaseConfig { path: PathBuf::from("data/rackd.db"), url: None, busy_timeout_ms: 5000 }
+        DatabaseConfig {
+            path: PathBuf::from("data/rackd.db"),
+            url: None,
+            url_file: None,
+            ca_file: None,
+            busy_timeout_ms: 5000,
+        }
     }
 }
 
@@ -246,6 +291,15 @@ impl Default for SiteConfig {
         SiteConfig {
             aisles: vec![AisleConfig { aisle: 1, rows: 2, bays: 10, levels: 6, positions: 4, depth: 1 }],
         }
+    }
+}
+
+/// The database URL in the file at `path` (`database.url_file`): its content, trimmed.
+pub fn read_url_file(path: &Path) -> Result<String, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    match text.trim() {
+        "" => Err(format!("{} is empty (expected the URL: postgres://...)", path.display())),
+        url => Ok(url.to_owned()),
     }
 }
 

@@ -46,7 +46,9 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("sim", &["wire", "protocols", "domain"]),
     ("store", &["domain"]),
     ("auth", &[]),
-    ("config", &["auth", "wire", "protocols", "domain"]),
+    // config checks a database URL as the store reads it (its TLS mode, its CA), and
+    // prints it as the store does, without the password.
+    ("config", &["auth", "store", "wire", "protocols", "domain"]),
     ("devices", &["config", "wire", "protocols", "domain"]),
     ("service", &["devices", "config", "store", "wire", "protocols", "domain"]),
     ("api", &["service", "devices", "config", "auth", "store", "wire", "protocols", "domain"]),

@@ -1,7 +1,7 @@
 //! rackd's benchmarks, kept out of the service binary and its dependencies.
 //!
 //! ```text
-//! cargo run --release --example bench -- intake [--clients 64] [--seconds 5] [--batch 1000] [--database sqlite|postgres|URL]
+//! cargo run --release --example bench -- intake [--clients 64] [--seconds 5] [--batch 1000] [--database sqlite|postgres|URL] [--tls]
 //! cargo run --release --example bench -- shelf  [--latency-jobs 1000] [--batch-jobs 20000] [--poll-ms 10]
 //!                                               [--drop 0.2 [--lossy-jobs 1000] [--fixed-timeout]
 //!                                                [--min-timeout-ms 20]]
@@ -25,10 +25,16 @@ mod child;
 mod crane;
 mod fleet;
 mod intake;
+// The tests' PostgreSQL; its TLS-only cluster (and the certificates it needs, `tls`) is the
+// tests' alone (the tests' own build still reports what nobody uses).
+#[allow(dead_code)]
 #[path = "../../tests/it/support/postgres.rs"]
 mod postgres;
 mod served;
 mod shelf;
+#[allow(dead_code)]
+#[path = "../../tests/it/support/tls.rs"]
+mod tls;
 mod ws;
 
 use std::process::ExitCode;
@@ -59,6 +65,10 @@ enum Bench {
         /// with PostgreSQL's durable defaults, from /usr/lib/postgresql) or a `postgres://` URL.
         #[arg(long, default_value = "sqlite")]
         database: String,
+        /// Then the same phases again over HTTPS (a certificate made for the run, on a
+        /// fresh database), and the ratio of each figure over TLS to the same over HTTP.
+        #[arg(long)]
+        tls: bool,
     },
     /// Shelf PLC: POST-to-slot latency and completed jobs/s against the simulator.
     Shelf {
@@ -114,8 +124,8 @@ fn main() -> ExitCode {
     let runtime = tokio::runtime::Runtime::new().expect("a tokio runtime");
     let result = runtime.block_on(async {
         match bench {
-            Bench::Intake { clients, seconds, batch, database } => {
-                intake::run(clients, seconds, batch, &database).await
+            Bench::Intake { clients, seconds, batch, database, tls } => {
+                intake::run(intake::Options { clients, seconds, batch, database, tls }).await
             }
             Bench::Shelf {
                 latency_jobs,

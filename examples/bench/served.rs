@@ -8,7 +8,7 @@ use tokio::task::JoinHandle;
 
 /// A running rackd.
 pub struct Served {
-    /// `http://ADDR`.
+    /// `http://ADDR`, or `https://ADDR` with `[server.tls]`.
     pub base: String,
     stop: oneshot::Sender<()>,
     server: JoinHandle<anyhow::Result<()>>,
@@ -18,7 +18,8 @@ impl Served {
     /// Builds rackd from `config` and serves it.
     pub async fn start(config: &Config) -> anyhow::Result<Served> {
         let app = Application::build(config, false).await?;
-        let base = format!("http://{}", app.local_addr());
+        let scheme = if config.server.tls.is_some() { "https" } else { "http" };
+        let base = format!("{scheme}://{}", app.local_addr());
         let (stop, stopped) = oneshot::channel::<()>();
         let server = tokio::spawn(app.run_until(async {
             let _ = stopped.await;

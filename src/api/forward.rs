@@ -12,33 +12,62 @@
 //! `x-rackd-forwarded-by`. A forwarded request is never forwarded again: a node that is
 //! standby itself by then answers 503, as does a standby that finds no active node (a
 //! takeover in progress); the client tries again.
+//!
+//! The link between nodes carries the callers' keys, so ([`super::peer::Forwarder`]):
+//! - **no proxy**: the client ignores `HTTP_PROXY` and the like; nodes of one cluster talk
+//!   to each other directly, and a proxy named in a service's environment for its other
+//!   traffic must not see the keys.
+//! - **https** when the active node's `[cluster] url` says so, trusting `[cluster] ca_file`
+//!   alone when it is set, otherwise the public roots compiled into the binary
+//!   (webpki-roots). Those rather than the system's store (rustls-native-certs): sqlx and
+//!   reqwest already bring webpki-roots, so they cost nothing more, and they behave the
+//!   same in a slim container without a CA bundle; a site's own CA is what `ca_file` is for.
+//! - **plain http to another machine, with keys configured**: forwarded, with a warning
+//!   logged once per process (and at startup for the node's own `cluster.url`), not
+//!   refused: a cluster on a segregated plant network may choose it, and refusing would stop
+//!   a working cluster at an upgrade. docs/operations/standby.md says how to move to https.
+//! - **no redirects** followed: a key is never sent on to where an answer points.
+//! - **the API's body limit** (`server.body_limit_bytes`): a body is buffered up to it and
+//!   no further; a larger one is answered 413 here, as the standby's own routes would.
+//! - **a key in the query** (`?token=`, for clients that cannot set headers) goes on as an
+//!   `Authorization: Bearer` header, never in the forwarded URL: [`keep_token`] notes it
+//!   before the key check takes it out of the query.
 
-use std::sync::LazyLock;
-use std::time::Duration;
+use std::sync::atomic::Ordering;
 
 use axum::body::Body;
 use axum::extract::{Request, State};
-use axum::http::{HeaderName, Method, StatusCode, header};
+use axum::http::{HeaderName, HeaderValue, Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
 use super::error::ApiError;
+use super::peer::{in_clear, warn_if_clear};
 use super::state::AppState;
 use crate::service::cluster::Role;
 
 /// Marks a forwarded request, with the name of the node that forwarded it.
 pub const FORWARDED_BY: HeaderName = HeaderName::from_static("x-rackd-forwarded-by");
 
-/// Largest body forwarded (the API's own limit is checked again by the active node).
-const MOST: usize = 16 * 1024 * 1024;
+/// A key the client gave in the query (`?token=`), noted for forwarding before the key
+/// check takes it out of the query.
+#[derive(Clone)]
+struct QueryToken(String);
 
-static CLIENT: LazyLock<reqwest::Client> = LazyLock::new(|| {
-    reqwest::Client::builder()
-        .timeout(Duration::from_secs(30))
-        .connect_timeout(Duration::from_secs(2))
-        .build()
-        .unwrap_or_default()
-});
+/// Middleware, outside the key check: on a cluster node, notes a `?token=` of a request
+/// that carries no key in its headers, so that a forwarded request carries it as a header.
+pub async fn keep_token(State(app): State<AppState>, mut req: Request, next: Next) -> Response {
+    if app.cluster.is_some()
+        && !req.headers().contains_key(header::AUTHORIZATION)
+        && !req.headers().contains_key("x-api-key")
+        && let Some(query) = req.uri().query()
+        && let Some((_, token)) = form_urlencoded::parse(query.as_bytes()).find(|(k, _)| k == "token")
+    {
+        let token = QueryToken(token.into_owned());
+        req.extensions_mut().insert(token);
+    }
+    next.run(req).await
+}
 
 /// Whether only the active node serves `method` on `path`.
 pub fn only_active(method: &Method, path: &str) -> bool {
@@ -74,12 +103,18 @@ pub async fn forward(State(app): State<AppState>, req: Request, next: Next) -> R
             return unavailable("the cluster's database does not answer; try again");
         }
     };
+    let Some(forwarder) = &app.forwarder else {
+        return unavailable("this node cannot forward to the active node; try another node");
+    };
+    if forwarder.keyed && in_clear(&active.url) && !forwarder.warned.swap(true, Ordering::Relaxed) {
+        warn_if_clear(&active.url, true, &format!("the active node {:?}'s cluster.url", active.name));
+    }
     let (parts, body) = req.into_parts();
-    let Ok(body) = axum::body::to_bytes(body, MOST).await else {
-        let message = format!("a body to forward is at most {MOST} bytes");
+    let Ok(body) = axum::body::to_bytes(body, forwarder.limit).await else {
+        let message = format!("the body is over server.body_limit_bytes ({} bytes)", forwarder.limit);
         return ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, "body_too_large", message).into_response();
     };
-    match send(&active.url, &node.name, parts, body).await {
+    match send(&forwarder.client, &active.url, &node.name, parts, body).await {
         Ok(response) => response,
         Err(e) => {
             tracing::warn!(error = %e, active = %active.name, url = %active.url, "cluster: forwarding failed");
@@ -89,6 +124,7 @@ pub async fn forward(State(app): State<AppState>, req: Request, next: Next) -> R
 }
 
 async fn send(
+    client: &reqwest::Client,
     base: &str,
     me: &str,
     parts: axum::http::request::Parts,
@@ -96,11 +132,16 @@ async fn send(
 ) -> Result<Response, reqwest::Error> {
     let path = parts.uri.path_and_query().map_or("/", |p| p.as_str());
     let url = format!("{}{path}", base.trim_end_matches('/'));
-    let mut out = CLIENT.request(parts.method, url).body(body);
+    let mut out = client.request(parts.method, url).body(body);
     for (name, value) in &parts.headers {
         if name != header::HOST && name != header::CONTENT_LENGTH && name != header::CONNECTION {
             out = out.header(name, value);
         }
+    }
+    if let Some(QueryToken(token)) = parts.extensions.get::<QueryToken>()
+        && let Ok(value) = HeaderValue::from_str(&format!("Bearer {token}"))
+    {
+        out = out.header(header::AUTHORIZATION, value);
     }
     let answer = out.header(FORWARDED_BY, me).send().await?;
     let status = answer.status();

@@ -53,6 +53,8 @@ pub struct Shared {
     pub running: Arc<std::sync::OnceLock<crate::devices::Devices>>,
     /// This node's part in a cluster, if it is in one.
     pub cluster: Option<crate::service::cluster::Node>,
+    /// How a standby forwards to the active node (in a cluster).
+    pub forwarder: Option<super::peer::Forwarder>,
     /// The dispatcher: cancels and devices' control state.
     pub dispatcher: crate::service::dispatch::Dispatcher,
     /// Live events, for WebSocket subscribers.

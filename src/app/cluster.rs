@@ -70,7 +70,7 @@ pub(super) async fn start(
 ) -> anyhow::Result<Clustered> {
     let node = Node {
         name: c.node.clone(),
-        url: c.url(parts.listen),
+        url: c.url(parts.listen, parts.config.server.tls.is_some()),
         role: leadership.role.clone(),
         gate: leadership.gate.clone(),
         pool: parts.pg.clone(),

@@ -1,10 +1,12 @@
 //! Building and running the service: open the store, start the devices, bind, serve, and
 //! shut down gracefully. What drives the machines is [`drive`]; a cluster node's wiring is
-//! [`cluster`].
+//! [`cluster`]; how connections are accepted and served (timers, the cap, TLS) is
+//! [`serve`].
 
 mod cluster;
 mod drive;
 mod hooks;
+mod serve;
 
 use std::collections::BTreeSet;
 use std::future::Future;
@@ -14,7 +16,7 @@ use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use tokio::net::TcpListener;
+use tokio::net::{TcpListener, TcpSocket};
 use tokio::task::JoinHandle;
 
 use crate::api::metrics::Metrics;
@@ -38,6 +40,10 @@ const LOST_DRAIN: Duration = Duration::from_secs(5);
 pub struct Application {
     listener: TcpListener,
     router: axum::Router,
+    /// `[server]`'s timers and cap.
+    limits: serve::Limits,
+    /// The certificate, when `[server.tls]` is set.
+    tls: Option<serve::tls::Certificates>,
     writer_task: JoinHandle<()>,
     /// Device tasks, the device monitor and retention: stopped before the writer drains.
     tasks: drive::Tasks,
@@ -66,6 +72,11 @@ impl Application {
     ) -> anyhow::Result<Application> {
         let keys = KeyRing::new(&config.auth.keys);
         let listen = config.server.listen;
+        // Before anything starts: a certificate that does not load is a start that fails.
+        let tls = match &config.server.tls {
+            Some(tls) => Some(serve::tls::Certificates::load(tls).context("server.tls")?),
+            None => None,
+        };
         if keys.is_empty() {
             if !listen.ip().is_loopback() && !insecure {
                 bail!(
@@ -76,13 +87,21 @@ impl Application {
             tracing::warn!(%listen, "no API keys configured: every request is allowed");
         }
         let db = &config.database;
-        let database = match &db.url {
-            Some(url) => store::Database::Postgres(url.clone()),
+        // The loader has read url_file into url; a configuration built in code may not have.
+        let url = match (&db.url, &db.url_file) {
+            (Some(url), _) => Some(url.clone()),
+            (None, Some(file)) => Some(crate::config::read_url_file(file).map_err(anyhow::Error::msg)?),
+            (None, None) => None,
+        };
+        let database = match url {
+            Some(url) => store::Database::Postgres(url),
             None => store::Database::Sqlite(db.path.clone()),
         };
-        let pool = store::open(&database, Duration::from_millis(db.busy_timeout_ms))
+        let ca = db.ca_file.as_deref().filter(|_| database.engine() == store::Engine::Postgres);
+        let with_ca = ca.map(|p| format!(" with database.ca_file {}", p.display())).unwrap_or_default();
+        let pool = store::open_with(&database, Duration::from_millis(db.busy_timeout_ms), ca)
             .await
-            .with_context(|| format!("opening database {}", database.display()))?;
+            .with_context(|| format!("opening database {}{with_ca}", database.display()))?;
         let layout = config.layout();
         locations::seed(&pool, &layout, now_ms()).await.context("seeding locations")?;
         let on_cluster = match (&config.cluster, &pool) {
@@ -147,6 +166,19 @@ impl Application {
                 None
             }
         };
+        let forwarder = match &config.cluster {
+            Some(c) => {
+                let listen = listener.local_addr().context("the bound address")?;
+                api::peer::warn_if_clear(&c.url(listen, config.server.tls.is_some()), !keys.is_empty(), "this node's cluster.url");
+                let forwarder = api::peer::Forwarder::new(
+                    c.ca_file.as_deref(),
+                    config.server.body_limit_bytes,
+                    !keys.is_empty(),
+                );
+                Some(forwarder.context("the cluster's forwarding client (cluster.ca_file)")?)
+            }
+            None => None,
+        };
         let state = AppState::new(Shared {
             pool,
             writer,
@@ -155,6 +187,7 @@ impl Application {
             metrics,
             running,
             cluster: clustered.as_ref().map(|c| c.node.clone()),
+            forwarder,
             dispatcher,
             hub,
             events: Arc::new(config.events.clone()),
@@ -169,7 +202,16 @@ impl Application {
         });
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);
-        Ok(Application { listener, router, writer_task, tasks, cluster: clustered, keep: Vec::new() })
+        Ok(Application {
+            listener,
+            router,
+            limits: serve::Limits::of(&config.server),
+            tls,
+            writer_task,
+            tasks,
+            cluster: clustered,
+            keep: Vec::new(),
+        })
     }
 
     /// The address actually bound (useful with port 0).
@@ -185,14 +227,8 @@ impl Application {
     /// Serves until `shutdown` completes, then finishes in-flight requests, stops the
     /// devices between two steps and commits what is pending before returning.
     pub async fn run_until(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
-        tracing::info!(addr = %self.local_addr(), "rackd listening");
-        // No Nagle: live events and replies are small writes that must leave at once
-        // (Nagle's wait for an ACK, against a delayed ACK, stalls them by up to 40 ms).
-        let listener = axum::serve::ListenerExt::tap_io(self.listener, |tcp| {
-            if let Err(e) = tcp.set_nodelay(true) {
-                tracing::debug!(error = %e, "TCP_NODELAY");
-            }
-        });
+        let scheme = if self.tls.is_some() { "https" } else { "http" };
+        tracing::info!(addr = %self.local_addr(), scheme, "rackd listening");
         let lost = self.cluster.as_ref().map(|c| c.lost.clone());
         let stop = async move {
             match lost {
@@ -203,10 +239,9 @@ impl Application {
                 None => shutdown.await,
             }
         };
-        // Each request carries its peer's address (`ConnectInfo`): the audit log names it,
-        // and failed authentications are counted by it (`api::failures`).
-        let service = self.router.into_make_service_with_connect_info::<SocketAddr>();
-        axum::serve(listener, service).with_graceful_shutdown(stop).await?;
+        // Each request carries its peer's address (`ConnectInfo`, set by `serve`): the audit
+        // log names it, and failed authentications are counted by it (`api::failures`).
+        serve::serve(self.listener, self.router, self.limits, self.tls, stop).await;
         // A device stopped between two PLC requests is the same as a crash, which the
         // hand-over order and recovery make safe.
         let tasks = std::mem::take(&mut *self.tasks.lock().unwrap_or_else(|p| p.into_inner()));
@@ -285,7 +320,21 @@ pub async fn shutdown_signal() {
     tracing::info!("shutdown requested");
 }
 
+/// Connections the kernel completes and queues for rackd to accept. The standard
+/// library's 128 overflows under a burst (a flood of connections, many clients starting at
+/// once), and the kernel then drops new connections' SYNs, which their clients send again
+/// only a second later: `/healthz` among them. The kernel caps it at `net.core.somaxconn`
+/// (4096 on current kernels).
+const BACKLOG: u32 = 1024;
+
 /// Binds the API's listener.
 pub async fn bind(listen: SocketAddr) -> anyhow::Result<TcpListener> {
-    TcpListener::bind(listen).await.with_context(|| format!("binding {listen} (is another rackd running?)"))
+    let bound = || {
+        let socket = if listen.is_ipv4() { TcpSocket::new_v4()? } else { TcpSocket::new_v6()? };
+        // As the standard library's bind: a restart does not wait for TIME_WAIT to pass.
+        socket.set_reuseaddr(true)?;
+        socket.bind(listen)?;
+        socket.listen(BACKLOG)
+    };
+    bound().with_context(|| format!("binding {listen} (is another rackd running?)"))
 }

@@ -52,9 +52,12 @@ pub enum Command {
         #[arg(long)]
         explain: bool,
     },
-    /// Print the hash of an API key for `[[auth.keys]]` (key from the argument or stdin).
+    /// Print the hash of an API key for `[[auth.keys]]`: the key is read from standard
+    /// input (`rackd hash-key < FILE`), never taken as an argument, which every user of the
+    /// machine can read in `ps` and which stays in the shell's history.
     HashKey {
-        /// The key; read from standard input when absent.
+        /// Refused: a key on the command line is visible to every user (see above).
+        #[arg(hide = true)]
         key: Option<String>,
         /// Make a new random key, print it and its hash.
         #[arg(long, conflicts_with = "key")]
@@ -65,6 +68,15 @@ pub enum Command {
         /// The server's base URL (`/healthz` is added) or the full URL to check.
         #[arg(long, env = "RACKD_HEALTHCHECK_URL", default_value = "http://127.0.0.1:8080")]
         url: String,
+        /// For https: a PEM file of the CA (or CAs) that signed the server's certificate,
+        /// trusted besides the public roots (a site's own CA).
+        #[arg(long, env = "RACKD_HEALTHCHECK_CA_FILE")]
+        ca_file: Option<PathBuf>,
+        /// For https: the name the certificate is checked against, when the URL reaches
+        /// the server by another one (`--url https://127.0.0.1:8080` in its container,
+        /// `--server-name rackd.plant.local`).
+        #[arg(long, env = "RACKD_HEALTHCHECK_SERVER_NAME")]
+        server_name: Option<String>,
     },
     /// Read or write a PLC's memory by hand (commissioning).
     Plc(plc::PlcArgs),
@@ -160,33 +172,40 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             }
         },
         Command::HashKey { key, generate } => {
-            let key = match (key, generate) {
-                (Some(k), _) => k,
-                (None, true) => {
-                    let k = crate::auth::generate_key();
-                    println!("key:  {k}");
-                    k
-                }
-                (None, false) => {
-                    let mut line = String::new();
-                    std::io::stdin().read_line(&mut line)?;
-                    line.trim().to_owned()
-                }
+            if key.is_some() {
+                eprintln!(
+                    "rackd hash-key takes the key on standard input, not as an argument (which every user sees \
+                     in ps): rackd hash-key < FILE, or printf %s \"$KEY\" | rackd hash-key; or make a new one \
+                     with rackd hash-key --generate"
+                );
+                return Ok(ExitCode::FAILURE);
+            }
+            let key = if generate {
+                let k = crate::auth::generate_key();
+                println!("key:  {k}");
+                k
+            } else {
+                let mut line = String::new();
+                std::io::stdin().read_line(&mut line)?;
+                line.trim().to_owned()
             };
-            anyhow::ensure!(!key.is_empty(), "an empty key");
+            if let Err(why) = crate::auth::acceptable_key(&key) {
+                eprintln!("rackd hash-key: {why}");
+                return Ok(ExitCode::FAILURE);
+            }
             println!("{}{}", if generate { "hash: " } else { "" }, crate::auth::KeyHash::of(&key));
         }
-        Command::Healthcheck { url } => {
+        Command::Healthcheck { url, ca_file, server_name } => {
             let url = health_url(&url);
-            let client = reqwest::Client::builder().timeout(std::time::Duration::from_secs(3)).build()?;
-            match client.get(&url).send().await {
+            let (client, target) = health_client(&url, ca_file.as_deref(), server_name.as_deref())?;
+            match client.get(target).send().await {
                 Ok(r) if r.status().is_success() => println!("{url}: ok"),
                 Ok(r) => {
                     eprintln!("{url}: {}", r.status());
                     return Ok(ExitCode::FAILURE);
                 }
                 Err(e) => {
-                    eprintln!("{url}: {e}");
+                    eprintln!("{url}: {}", describe(&e.into()));
                     return Ok(ExitCode::FAILURE);
                 }
             }
@@ -233,6 +252,33 @@ fn health_url(given: &str) -> String {
         Ok(url) if !matches!(url.path(), "" | "/") => url.to_string(),
         _ => format!("{}/healthz", given.trim_end_matches('/')),
     }
+}
+
+/// The client `healthcheck` asks with, and the URL it asks: trusting `ca_file` too, and
+/// reaching `url`'s address under `server_name` when one is given.
+fn health_client(
+    url: &str,
+    ca_file: Option<&std::path::Path>,
+    server_name: Option<&str>,
+) -> anyhow::Result<(reqwest::Client, reqwest::Url)> {
+    let mut url = reqwest::Url::parse(url).with_context(|| format!("{url} is not a URL"))?;
+    // Nothing between a health check and its server: no proxy from the environment.
+    let mut client = reqwest::Client::builder().timeout(std::time::Duration::from_secs(3)).no_proxy();
+    if let Some(path) = ca_file {
+        let pem = std::fs::read(path).with_context(|| format!("reading --ca-file {}", path.display()))?;
+        let cas = reqwest::Certificate::from_pem_bundle(&pem)
+            .with_context(|| format!("--ca-file {}: not PEM certificates", path.display()))?;
+        anyhow::ensure!(!cas.is_empty(), "--ca-file {}: no certificate in it", path.display());
+        for ca in cas {
+            client = client.add_root_certificate(ca);
+        }
+    }
+    if let Some(name) = server_name {
+        let addrs = url.socket_addrs(|| None).with_context(|| format!("resolving {url}"))?;
+        client = client.resolve_to_addrs(name, &addrs);
+        url.set_host(Some(name)).with_context(|| format!("--server-name {name:?}"))?;
+    }
+    Ok((client.build()?, url))
 }
 
 #[cfg(test)]

@@ -5,7 +5,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
 use super::devices::{DeviceConfigError, DeviceKind};
+use super::ca::read_ca;
 use super::{Config, EventsConfigError, Origin};
+use crate::store::{PgTls, redact};
 
 /// A configuration that parses but cannot be run.
 #[derive(Debug, thiserror::Error)]
@@ -54,6 +56,19 @@ pub enum Invalid {
     /// `[cluster]` without a PostgreSQL `database.url`, or with a bad value.
     #[error("{0}")]
     Cluster(&'static str),
+    /// A TLS setting rackd cannot honour: a CA file that is not one, a CA where no mode
+    /// reads it, `verify-full` without a CA.
+    #[error("{0}")]
+    Tls(String),
+    /// `database.url_file` that cannot be read, is empty, or comes with `database.url`.
+    #[error("{0}")]
+    UrlFile(String),
+    /// A `[server]` timeout or cap of 0.
+    #[error("{0} must be at least 1")]
+    ServerZero(&'static str),
+    /// `[server.tls]` files that cannot be served.
+    #[error(transparent)]
+    ServerTls(#[from] super::TlsError),
     /// An intake bound of 0.
     #[error("intake.max_group and intake.queue must be at least 1")]
     Intake,
@@ -132,23 +147,7 @@ impl Config {
         if let Some((i, a)) = shelf_deep {
             return Err((format!("site.aisles[{i}].depth"), Invalid::Depth(a.aisle)));
         }
-        if let Some(url) = &self.database.url {
-            let why = if url.starts_with("sqlite:") {
-                Some(
-                    "database.url is for PostgreSQL (postgres://...); a SQLite file goes in database.path"
-                        .into(),
-                )
-            } else if !(url.starts_with("postgres://") || url.starts_with("postgresql://")) {
-                Some(format!("{url:?} is not a postgres:// URL"))
-            } else {
-                <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url)
-                    .err()
-                    .map(|e| format!("not a PostgreSQL URL: {e}"))
-            };
-            if let Some(why) = why {
-                return Err(("database.url".into(), Invalid::DatabaseUrl(why)));
-            }
-        }
+        self.check_database()?;
         if let Some(c) = &self.cluster {
             let flaw = if self.database.url.is_none() {
                 Some(("cluster", "a cluster shares one PostgreSQL database: set database.url"))
@@ -169,6 +168,29 @@ impl Config {
             if let Some((key, why)) = flaw {
                 return Err((key.into(), Invalid::Cluster(why)));
             }
+            if let Some(url) = &c.url
+                && !(url.starts_with("http://") || url.starts_with("https://"))
+            {
+                let why = format!("{:?} is not an http:// or https:// URL", redact(url));
+                return Err(("cluster.url".into(), Invalid::Tls(why)));
+            }
+            if let Some(ca) = &c.ca_file {
+                read_ca(ca).map_err(|e| ("cluster.ca_file".to_owned(), Invalid::Tls(e.to_string())))?;
+            }
+        }
+        let server = &self.server;
+        let zero = [
+            ("server.header_timeout_ms", server.header_timeout_ms == 0),
+            ("server.idle_timeout_ms", server.idle_timeout_ms == 0),
+            ("server.max_connections", server.max_connections == 0),
+        ];
+        if let Some((key, _)) = zero.into_iter().find(|(_, zero)| *zero) {
+            return Err((key.into(), Invalid::ServerZero(key)));
+        }
+        // The files as the server would load them at its start: check-config says now
+        // what `serve` would refuse.
+        if let Some(tls) = &server.tls {
+            tls.load().map_err(|e| (e.file().key().to_owned(), Invalid::ServerTls(e)))?;
         }
         let auth = &self.auth;
         if auth.max_failures > crate::auth::MOST_FAILURES {
@@ -194,5 +216,61 @@ impl Config {
             };
             (format!("events.{key}"), e.into())
         })
+    }
+}
+
+impl Config {
+    /// `[database]`: the URL (printed without its password), its TLS mode and the CA files.
+    fn check_database(&self) -> Result<(), Flaw> {
+        let db = &self.database;
+        let url_flaw = |why: String| ("database.url".to_owned(), Invalid::DatabaseUrl(why));
+        let tls_flaw = |key: &str, why: String| (key.to_owned(), Invalid::Tls(why));
+        let Some(url) = &db.url else {
+            return match &db.ca_file {
+                Some(_) => {
+                    Err(tls_flaw("database.ca_file", "is for a PostgreSQL server: set database.url".into()))
+                }
+                None => Ok(()),
+            };
+        };
+        if url.starts_with("sqlite:") {
+            let why = "database.url is for PostgreSQL (postgres://...); a SQLite file goes in database.path";
+            return Err(url_flaw(why.into()));
+        }
+        if !(url.starts_with("postgres://") || url.starts_with("postgresql://")) {
+            return Err(url_flaw(format!("{:?} is not a postgres:// URL", redact(url))));
+        }
+        let tls = PgTls::of(url);
+        tls.check().map_err(url_flaw)?;
+        if let Err(e) = <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url) {
+            return Err(url_flaw(format!("not a PostgreSQL URL: {e}")));
+        }
+        if let Some(root) = &tls.root_cert {
+            read_ca(root).map_err(|e| url_flaw(format!("sslrootcert: {e}")))?;
+        }
+        if let Some(ca) = &db.ca_file {
+            if tls.root_cert.is_some() {
+                let why = "database.url names a CA already (sslrootcert): keep one of the two".into();
+                return Err(tls_flaw("database.ca_file", why));
+            }
+            if let Some(mode @ ("disable" | "prefer")) = tls.mode.as_deref() {
+                let why = format!(
+                    "a CA is not used with sslmode={mode}: say sslmode=verify-full (or verify-ca) in database.url"
+                );
+                return Err(tls_flaw("database.ca_file", why));
+            }
+            read_ca(ca).map_err(|e| tls_flaw("database.ca_file", e.to_string()))?;
+        }
+        let has_ca = db.ca_file.is_some() || tls.root_cert.is_some();
+        if let Some(mode @ ("verify-ca" | "verify-full")) = tls.mode.as_deref()
+            && !has_ca
+        {
+            let why = format!(
+                "sslmode={mode} needs the CA that signed the server's certificate: set database.ca_file \
+                 (or sslrootcert in the URL)"
+            );
+            return Err(url_flaw(why));
+        }
+        Ok(())
     }
 }

@@ -2,9 +2,14 @@
 //! each value followed by where it came from.
 //!
 //! The output reads back as the same configuration (less `auth.keys_file`, whose keys are
-//! shown among `[[auth.keys]]`): devices are written in the file's flat form with every
-//! key of their kind, defaults included. A setting that is absent (`serial` on a network
-//! protocol, `auth.keys_file` when unset) is left out.
+//! shown among `[[auth.keys]]`, and `database.url_file`, whose URL is shown as
+//! `database.url` with the file as its origin): devices are written in the file's flat
+//! form with every key of their kind, defaults included. A setting that is absent
+//! (`serial` on a network protocol, `auth.keys_file` when unset) is left out.
+//!
+//! Secrets are not printed: the password of a database URL (and of any URL with one, such
+//! as `cluster.url`) is shown as `***`. Keys are only ever configured as their hashes,
+//! which are not secrets (a key cannot be found from its hash), and are shown.
 
 use std::fmt::Write;
 
@@ -15,6 +20,11 @@ impl Loaded {
     pub fn explain(&self) -> String {
         let mut config = self.config.clone();
         config.auth.keys_file = None;
+        config.database.url_file = None;
+        let urls = [config.database.url.as_mut(), config.cluster.as_mut().and_then(|c| c.url.as_mut())];
+        for url in urls.into_iter().flatten() {
+            *url = crate::store::redact(url);
+        }
         let value = toml::Value::try_from(&config).expect("a loaded configuration serializes");
         let mut out = String::new();
         if let toml::Value::Table(table) = value {

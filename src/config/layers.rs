@@ -5,7 +5,8 @@
 //! come from the file's own keys ([`Lines`]), since figment does not keep them. Without a
 //! file, the demo site's layout is the default layer. `auth.keys_file` is read once the
 //! layers are merged (it may itself come from the environment), and its keys join
-//! `auth.keys`.
+//! `auth.keys`; `database.url_file` likewise, its content becoming `database.url` (whose
+//! origin is then the file's first line).
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -41,6 +42,8 @@ pub struct Loaded {
     file: Option<Lines>,
     /// `auth.keys_file`'s keys, and how many keys came before them.
     keys_file: Option<(Lines, usize)>,
+    /// `database.url_file`, once read into `database.url`.
+    url_file: Option<PathBuf>,
     /// (variable, key, value) of each setting from the environment.
     env: Vec<(String, String, String)>,
     cli: Vec<&'static str>,
@@ -88,9 +91,11 @@ impl Sources {
                 .filter_map(|(key, set)| set.then_some(key)),
         );
         figment = figment.merge(EnvLayer(env.clone())).merge(CliLayer(self.clone()));
-        let mut loaded = Loaded { config: Config::default(), file, keys_file: None, env, cli };
+        let mut loaded =
+            Loaded { config: Config::default(), file, keys_file: None, url_file: None, env, cli };
         let mut config: Config = figment.extract().map_err(|e| loaded.parse_error(&figment, e))?;
         loaded.add_keys_file(&mut config)?;
+        loaded.add_url_file(&mut config)?;
         let invalid = |(key, source): (String, Invalid), loaded: &Loaded| ConfigError::Invalid {
             origin: Box::new(loaded.locate(&key)),
             key,
@@ -121,6 +126,9 @@ impl Loaded {
 
     fn find(&self, key: &str, nearest: bool) -> Origin {
         let look = |lines: &Lines, key: &str| if nearest { lines.nearest(key) } else { lines.find(key) };
+        if let (Some(path), "database.url") = (&self.url_file, key) {
+            return Origin::File { path: path.clone(), line: 1, column: 1 };
+        }
         if self.cli.contains(&key) {
             return Origin::CommandLine;
         }
@@ -186,6 +194,27 @@ impl Loaded {
         }
         self.keys_file = Some((lines, config.auth.keys.len()));
         config.auth.keys.extend(file.keys);
+        Ok(())
+    }
+}
+
+impl Loaded {
+    /// Reads `database.url_file` into `database.url`: exactly one of them is set.
+    fn add_url_file(&mut self, config: &mut Config) -> Result<(), ConfigError> {
+        let Some(path) = config.database.url_file.clone() else { return Ok(()) };
+        let key = "database.url_file".to_owned();
+        let invalid = |why: String, loaded: &Loaded| ConfigError::Invalid {
+            origin: Box::new(loaded.locate(&key)),
+            key: key.clone(),
+            source: Invalid::UrlFile(why),
+        };
+        if config.database.url.is_some() {
+            let set = self.locate("database.url");
+            return Err(invalid(format!("database.url is set too (at {set}): keep one of the two"), self));
+        }
+        let url = super::read_url_file(&path).map_err(|why| invalid(why, self))?;
+        config.database.url = Some(url);
+        self.url_file = Some(path);
         Ok(())
     }
 }

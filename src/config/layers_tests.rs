@@ -236,3 +236,30 @@ fn allowed_hosts_from_the_file_or_the_environment_and_the_failure_limit_are_chec
     assert!(err.contains("auth.failure_window_secs"), "{err}");
     assert!(load("[auth]\nmax_failures = 0\nfailure_window_secs = 0\n", &[]).is_ok(), "no limit, no window");
 }
+
+#[test]
+fn server_timers_cap_and_tls_files_come_from_the_environment_and_are_checked() {
+    let err = load(FILE, &[("RACKD_SERVER__HEADER_TIMEOUT_MS", "0")]).unwrap_err().to_string();
+    assert!(err.starts_with("env RACKD_SERVER__HEADER_TIMEOUT_MS: server.header_timeout_ms: "), "{err}");
+    let err = error("[server]\nmax_connections = 0\n");
+    assert!(err.starts_with("x.toml:2:1: server.max_connections: "), "{err}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let made = rcgen::generate_simple_self_signed(vec!["localhost".into()]).unwrap();
+    let (cert, key) = (dir.path().join("c.pem"), dir.path().join("k.pem"));
+    std::fs::write(&cert, made.cert.pem()).unwrap();
+    std::fs::write(&key, made.signing_key.serialize_pem()).unwrap();
+    let env = [
+        ("RACKD_SERVER__TLS__CERT_FILE", cert.to_str().unwrap()),
+        ("RACKD_SERVER__TLS__KEY_FILE", key.to_str().unwrap()),
+    ];
+    let loaded = load(FILE, &env).unwrap();
+    assert_eq!(loaded.config.server.tls, Some(TlsConfig::new(&cert, &key)));
+    assert_eq!(loaded.origin("server.tls.key_file").to_string(), "env RACKD_SERVER__TLS__KEY_FILE");
+    assert!(loaded.explain().contains("\n[server.tls]\ncert_file = "), "{}", loaded.explain());
+    let swapped = [env[0], ("RACKD_SERVER__TLS__KEY_FILE", cert.to_str().unwrap())];
+    let err = load(FILE, &swapped).unwrap_err().to_string();
+    assert!(err.starts_with("env RACKD_SERVER__TLS__KEY_FILE: server.tls.key_file: "), "{err}");
+    let err = load(FILE, &env[..1]).unwrap_err().to_string();
+    assert!(err.contains("key_file"), "a certificate without its key: {err}");
+}

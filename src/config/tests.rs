@@ -159,5 +159,6 @@ fn a_cluster_needs_postgresql_and_an_address_the_others_reach() {
     let ok = Config::parse(&format!("{pg}[cluster]\nnode = \"a\"\n"), Path::new("x.toml")).unwrap();
     let c = ok.cluster.unwrap();
     assert_eq!(c.lease(), (std::time::Duration::from_secs(5), std::time::Duration::from_secs(1)));
-    assert_eq!(c.url(ok.server.listen), "http://127.0.0.1:8080");
+    assert_eq!(c.url(ok.server.listen, false), "http://127.0.0.1:8080");
+    assert_eq!(c.url(ok.server.listen, true), "https://127.0.0.1:8080", "with [server.tls]");
 }

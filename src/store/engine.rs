@@ -6,12 +6,26 @@
 //! statement, cached) and no engine's limit on bound parameters is ever reached. SQLite
 //! reads the array with `json_each` and `->>`, PostgreSQL with `json_populate_recordset`
 //! over the table's own row type, which also converts every field to its column's type.
+//!
+//! TLS to PostgreSQL ([`PgTls`]): rustls on ring. The URL's `sslmode` means what libpq
+//! says, with three decisions of rackd's where the URL leaves it open:
+//! - **no `sslmode`, a host that is not loopback**: `require`, not libpq's `prefer`
+//!   (which falls back to plaintext without a word when the server offers no TLS, and
+//!   checks no certificate when it does); a site that means plaintext says
+//!   `sslmode=disable`. Loopback and Unix sockets keep `prefer`.
+//! - **no `sslmode` and a CA** (`database.ca_file` or `sslrootcert`): `verify-full`: a
+//!   site that names its CA wants the server checked against it.
+//! - **`require` and a CA**: `verify-ca`, as libpq does.
+//!
+//! `allow` is refused (the driver never tries TLS with it), and so are `verify-ca` and
+//! `verify-full` without a CA (`config::check`). Once connected, rackd logs whether the link
+//! is encrypted (`pg_stat_ssl`), as a warning when it is not and the host is not loopback.
 
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::Duration;
 
-use sqlx::postgres::{PgConnectOptions, PgPoolOptions};
+use sqlx::postgres::{PgConnectOptions, PgPoolOptions, PgSslMode};
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 
 use super::Pool;
@@ -33,6 +47,7 @@ impl Database {
     /// `sqlite:PATH` or a `postgres://` / `postgresql://` URL.
     pub fn parse(text: &str) -> Result<Database, String> {
         if text.starts_with("postgres://") || text.starts_with("postgresql://") {
+            PgTls::of(text).check()?;
             PgConnectOptions::from_str(text).map_err(|e| format!("not a PostgreSQL URL: {e}"))?;
             Ok(Database::Postgres(text.to_owned()))
         } else if let Some(path) = text.strip_prefix("sqlite:") {
@@ -42,7 +57,7 @@ impl Database {
             }
             Ok(Database::Sqlite(PathBuf::from(path)))
         } else {
-            Err(format!("{text:?} is neither sqlite:PATH nor a postgres:// URL"))
+            Err(format!("{:?} is neither sqlite:PATH nor a postgres:// URL", redact(text)))
         }
     }
 
@@ -63,16 +78,126 @@ impl Database {
     }
 }
 
-/// `url` with the password, if any, replaced by `***`.
-fn redact(url: &str) -> String {
+/// `url` with its password, if any, replaced by `***`: the one in the user part
+/// (`postgres://rackd:***@db/rackd`, whatever characters it holds, up to the last `@`
+/// before the query) and a `password=` in the query. For every message and log line that
+/// shows a database URL, and `check-config --explain`.
+pub fn redact(url: &str) -> String {
     let Some((scheme, rest)) = url.split_once("://") else { return url.to_owned() };
-    let (authority, tail) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
-    match authority.rsplit_once('@') {
+    let (before_query, query) = match rest.split_once('?') {
+        Some((b, q)) => (b, Some(q)),
+        None => (rest, None),
+    };
+    let mut out = format!("{scheme}://");
+    match before_query.rsplit_once('@') {
         Some((user, host)) if user.contains(':') => {
             let name = user.split(':').next().unwrap_or_default();
-            format!("{scheme}://{name}:***@{host}{tail}")
+            out.push_str(&format!("{name}:***@{host}"));
         }
-        _ => url.to_owned(),
+        _ => out.push_str(before_query),
+    }
+    if let Some(query) = query {
+        let pairs: Vec<String> = query
+            .split('&')
+            .map(|pair| match pair.split_once('=') {
+                Some((k, _)) if k.eq_ignore_ascii_case("password") => format!("{k}=***"),
+                _ => pair.to_owned(),
+            })
+            .collect();
+        out.push('?');
+        out.push_str(&pairs.join("&"));
+    }
+    out
+}
+
+/// What a PostgreSQL URL says about TLS, as written (`sslmode`, `sslrootcert`; sqlx's
+/// spellings `ssl-mode`, `ssl-root-cert` and `ssl-ca` too).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct PgTls {
+    /// `sslmode`, lowercased, if the URL says it.
+    pub mode: Option<String>,
+    /// `sslrootcert`, if the URL names a CA file.
+    pub root_cert: Option<PathBuf>,
+    /// Whether the host is loopback or a Unix socket.
+    pub loopback: bool,
+}
+
+/// The `sslmode`s rackd accepts (libpq's, less `allow`).
+pub const SSL_MODES: [&str; 5] = ["disable", "prefer", "require", "verify-ca", "verify-full"];
+
+impl PgTls {
+    /// What `url` says.
+    pub fn of(url: &str) -> PgTls {
+        let mut tls = PgTls::default();
+        let rest = url.split_once("://").map_or(url, |(_, r)| r);
+        let (before_query, query) = rest.split_once('?').unwrap_or((rest, ""));
+        let after_user = before_query.rsplit_once('@').map_or(before_query, |(_, h)| h);
+        let mut host = host_of(after_user.split('/').next().unwrap_or_default()).to_owned();
+        for (key, value) in form_urlencoded::parse(query.as_bytes()) {
+            match &*key {
+                "sslmode" | "ssl-mode" => tls.mode = Some(value.to_ascii_lowercase()),
+                "sslrootcert" | "ssl-root-cert" | "ssl-ca" => tls.root_cert = Some(PathBuf::from(&*value)),
+                "host" | "hostaddr" => host = value.into_owned(),
+                _ => {}
+            }
+        }
+        tls.loopback = is_loopback(&host);
+        tls
+    }
+
+    /// Refuses a `sslmode` rackd does not support, in words for `check-config`.
+    pub fn check(&self) -> Result<(), String> {
+        match self.mode.as_deref() {
+            Some("allow") => Err("sslmode=allow is not supported: the driver would never use TLS with it; \
+                                 say prefer, require, verify-ca or verify-full (or disable)"
+                .into()),
+            Some(mode) if !SSL_MODES.contains(&mode) => {
+                Err(format!("sslmode={mode} is not one of {}", SSL_MODES.join(", ")))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// The mode rackd connects with, given the CA it has (the URL's or `ca_file`); see the
+    /// module documentation. `from_env` is the driver's mode when `PGSSLMODE` sets it.
+    pub fn effective(&self, has_ca: bool, from_env: Option<PgSslMode>) -> PgSslMode {
+        let said = self.mode.as_deref().and_then(|m| m.parse().ok()).or(from_env);
+        match said {
+            Some(PgSslMode::Require) if has_ca => PgSslMode::VerifyCa,
+            Some(mode) => mode,
+            None if has_ca => PgSslMode::VerifyFull,
+            None if self.loopback => PgSslMode::Prefer,
+            None => PgSslMode::Require,
+        }
+    }
+}
+
+/// The host of `HOST:PORT`, `[V6]:PORT` or `HOST`.
+fn host_of(authority: &str) -> &str {
+    if let Some(v6) = authority.strip_prefix('[') {
+        return v6.split(']').next().unwrap_or_default();
+    }
+    authority.split(':').next().unwrap_or_default()
+}
+
+/// A host that is this machine: `localhost`, a loopback address, a Unix socket's folder
+/// (or no host at all, which is the socket too).
+fn is_loopback(host: &str) -> bool {
+    host.is_empty()
+        || host.starts_with('/')
+        || host.eq_ignore_ascii_case("localhost")
+        || host.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
+}
+
+/// `sslmode` as written in a URL.
+pub fn mode_name(mode: PgSslMode) -> &'static str {
+    match mode {
+        PgSslMode::Disable => "disable",
+        PgSslMode::Allow => "allow",
+        PgSslMode::Prefer => "prefer",
+        PgSslMode::Require => "require",
+        PgSslMode::VerifyCa => "verify-ca",
+        PgSslMode::VerifyFull => "verify-full",
     }
 }
 
@@ -97,6 +222,19 @@ pub enum OpenError {
     /// A migration failed.
     #[error("migrating the schema: {0}")]
     Migrate(#[from] sqlx::migrate::MigrateError),
+    /// TLS with the PostgreSQL server failed: it offers none, or its certificate does not
+    /// verify.
+    #[error("TLS with the PostgreSQL server failed (sslmode={mode}{ca}): {source}; {hint}")]
+    Tls {
+        /// The mode rackd connected with.
+        mode: &'static str,
+        /// `, CA FILE` when a CA was given.
+        ca: String,
+        /// What to look at.
+        hint: &'static str,
+        /// The driver's error.
+        source: sqlx::Error,
+    },
     /// The PostgreSQL server is too old.
     #[error(
         "PostgreSQL {found} is not supported: rackd needs PostgreSQL 14 or newer (server_version_num {MIN_POSTGRES} and up)"
@@ -188,7 +326,16 @@ impl Engine {
 /// hold that row until the server's TCP keepalive gave up, hours on a quiet link, and no
 /// standby could take over. The rollback keeps the fence's promise: the write is committed
 /// before the new node starts, or not at all.
-pub async fn connect(database: &Database, busy_timeout: Duration, max: u32) -> Result<Pool, OpenError> {
+///
+/// `ca` is a PostgreSQL server's CA file (`database.ca_file`), for `verify-ca` and
+/// `verify-full`; the URL's own `sslrootcert` is used when it is `None`. How the TLS mode
+/// is chosen is in the module documentation.
+pub async fn connect(
+    database: &Database,
+    busy_timeout: Duration,
+    max: u32,
+    ca: Option<&Path>,
+) -> Result<Pool, OpenError> {
     match database {
         Database::Sqlite(path) => {
             prepare_folder(path)?;
@@ -197,22 +344,79 @@ pub async fn connect(database: &Database, busy_timeout: Duration, max: u32) -> R
         }
         Database::Postgres(url) => {
             let idle = busy_timeout.max(Duration::from_secs(1)).as_millis();
-            let options = PgConnectOptions::from_str(url)?
+            let tls = PgTls::of(url);
+            let mut options = PgConnectOptions::from_str(url)?
                 .application_name("rackd")
                 .options([("idle_in_transaction_session_timeout", format!("{idle}ms"))]);
+            if let Some(ca) = ca {
+                options = options.ssl_root_cert(ca);
+            }
+            let from_env = std::env::var("PGSSLMODE").ok().map(|_| options.get_ssl_mode());
+            let ca_file = ca.map(Path::to_owned).or_else(|| tls.root_cert.clone());
+            let mode = tls.effective(ca_file.is_some(), from_env);
+            let options = options.ssl_mode(mode);
             let pool = PgPoolOptions::new()
                 .max_connections(max)
                 .acquire_timeout(busy_timeout.max(Duration::from_secs(5)))
                 .connect_with(options)
-                .await?;
+                .await
+                .map_err(|e| tls_failure(e, mode, ca_file.as_deref(), tls.mode.is_none()))?;
             let version: String = sqlx::query_scalar("SHOW server_version_num").fetch_one(&pool).await?;
             if !supported(&version) {
                 let found =
                     sqlx::query_scalar("SHOW server_version").fetch_one(&pool).await.unwrap_or(version);
                 return Err(OpenError::Version { found });
             }
+            log_link(&pool, mode, tls.loopback).await;
             Ok(Pool::Postgres(pool))
         }
+    }
+}
+
+/// A TLS failure said in rackd's words, with what to look at; any other error as it is.
+fn tls_failure(e: sqlx::Error, mode: PgSslMode, ca: Option<&Path>, defaulted: bool) -> OpenError {
+    let sqlx::Error::Tls(cause) = &e else { return OpenError::Database(e) };
+    let hint = if cause.to_string().contains("does not support TLS") {
+        if defaulted {
+            "the server offers no TLS, which rackd requires of a host that is not loopback when the URL says no \
+             sslmode: turn on ssl on the server, or say sslmode=disable in database.url to accept plaintext"
+        } else {
+            "the server offers no TLS: turn on ssl on the server, or change sslmode in database.url"
+        }
+    } else if ca.is_some() {
+        "check that the server's certificate is signed by that CA and, with verify-full, names the URL's host"
+    } else {
+        "check the server's TLS settings"
+    };
+    let ca = ca.map(|p| format!(", CA {}", p.display())).unwrap_or_default();
+    OpenError::Tls { mode: mode_name(mode), ca, hint, source: e }
+}
+
+/// Logs whether the link to the server is encrypted: a warning when it is not and the
+/// host is not this machine.
+async fn log_link(pool: &sqlx::PgPool, mode: PgSslMode, loopback: bool) {
+    let sql = "SELECT ssl, version FROM pg_stat_ssl WHERE pid = pg_backend_pid()";
+    let row: Result<(bool, Option<String>), _> = sqlx::query_as(sql).fetch_one(pool).await;
+    let mode = mode_name(mode);
+    match row {
+        Ok((true, version)) => {
+            let version = version.unwrap_or_default();
+            let verified = match mode {
+                "verify-full" => "certificate and host name verified",
+                "verify-ca" => "certificate verified, host name not",
+                _ => "certificate not verified",
+            };
+            tracing::info!(sslmode = mode, "database link encrypted with TLS ({version}, {verified})");
+        }
+        Ok((false, _)) if loopback => {
+            tracing::info!(sslmode = mode, "database link not encrypted (a loopback host)")
+        }
+        Ok((false, _)) => tracing::warn!(
+            sslmode = mode,
+            "database link NOT encrypted: the store's data crosses the network in clear; say \
+             sslmode=verify-full (or require) in database.url"
+        ),
+        Err(e) => tracing::debug!(error = %e, "the database link's encryption is not known (pg_stat_ssl)"),
     }
 }
 
@@ -335,6 +539,36 @@ mod tests {
         assert_eq!(db.display(), "postgres://rackd:***@db.plant:5432/rackd?sslmode=require");
         assert_eq!(redact("postgres://h/db"), "postgres://h/db");
         assert_eq!(redact("postgres://u@h/db"), "postgres://u@h/db");
+        // Characters a password should have escaped, and a password in the query.
+        assert_eq!(redact("postgres://u:p/a@ss@h/db?x=1"), "postgres://u:***@h/db?x=1");
+        assert_eq!(
+            redact("postgres://u@h/db?password=s3&sslmode=require"),
+            "postgres://u@h/db?password=***&sslmode=require"
+        );
+    }
+
+    #[test]
+    fn without_sslmode_a_remote_host_requires_tls_and_a_ca_means_verify_full() {
+        let mode = |url: &str, ca: bool| mode_name(PgTls::of(url).effective(ca, None));
+        assert_eq!(mode("postgres://u:p@db.plant:5432/rackd", false), "require");
+        assert_eq!(mode("postgres://u@10.0.0.5/rackd", false), "require");
+        for local in [
+            "postgres://u@127.0.0.1:5432/rackd",
+            "postgres://u@localhost/rackd",
+            "postgres://u@[::1]:5432/rackd",
+            "postgres:///rackd?host=/run/postgresql",
+        ] {
+            assert_eq!(mode(local, false), "prefer", "{local}");
+        }
+        assert_eq!(mode("postgres://u@db.plant/rackd", true), "verify-full");
+        assert_eq!(mode("postgres://u@db.plant/rackd?sslmode=require", true), "verify-ca", "libpq's rule");
+        assert_eq!(mode("postgres://u@db.plant/rackd?sslmode=disable", false), "disable");
+        assert_eq!(mode("postgres://u@db.plant/rackd?sslmode=prefer", false), "prefer");
+        assert_eq!(mode("postgres://u@127.0.0.1/rackd?ssl-mode=VERIFY-FULL", true), "verify-full");
+        let tls = PgTls::of("postgres://u@h/db?sslmode=verify-ca&sslrootcert=%2Fetc%2Fca.pem");
+        assert_eq!(tls.root_cert.as_deref(), Some(Path::new("/etc/ca.pem")));
+        assert!(PgTls::of("postgres://u@h/db?sslmode=allow").check().unwrap_err().contains("allow"));
+        assert!(PgTls::of("postgres://u@h/db?sslmode=verify-full").check().is_ok());
     }
 
     #[test]

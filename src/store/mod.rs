@@ -39,7 +39,7 @@ use std::time::Duration;
 
 use sqlx::{PgPool, SqlitePool};
 
-pub use engine::{Database, Engine, OpenError, SQLITE_PAGE_SIZE};
+pub use engine::{Database, Engine, OpenError, PgTls, SQLITE_PAGE_SIZE, redact};
 pub use jobs::{Job, JobEvent, JobFilter};
 
 /// The migrations of each engine, embedded in the binary.
@@ -163,7 +163,16 @@ impl Pool {
 /// Opens (creating a SQLite file if needed) the store and applies pending migrations; a
 /// PostgreSQL server older than [`engine::MIN_POSTGRES`] is refused.
 pub async fn open(database: &Database, busy_timeout: Duration) -> Result<Pool, OpenError> {
-    let pool = engine::connect(database, busy_timeout, 8).await?;
+    open_with(database, busy_timeout, None).await
+}
+
+/// As [`open`], with a PostgreSQL server's CA file (`database.ca_file`).
+pub async fn open_with(
+    database: &Database,
+    busy_timeout: Duration,
+    ca: Option<&std::path::Path>,
+) -> Result<Pool, OpenError> {
+    let pool = engine::connect(database, busy_timeout, 8, ca).await?;
     on!(Pool, &pool, p => pool.migrator().run(p).await)?;
     Ok(pool)
 }

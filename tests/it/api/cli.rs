@@ -192,13 +192,48 @@ fn plc_refuses_a_quirk_flag_of_another_protocol_before_connecting() {
     assert!(!ok && err.contains("mc9"), "{err}");
 }
 
+/// `rackd ARGS` with `input` on its standard input.
+fn rackd_in(args: &[&str], input: &str) -> (bool, String, String) {
+    use std::io::Write;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .args(args)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
+    let out = child.wait_with_output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
 #[test]
-fn hash_key_prints_the_configured_form() {
-    let (ok, out, _) = rackd(&["hash-key", "secret"]);
-    assert!(ok);
-    assert_eq!(out.trim(), "sha256:2bb80d537b1da3e38bd30361aa855686bde0eacd7162fef6a25fe97bf527a25b");
+fn hash_key_reads_the_key_from_standard_input_or_makes_one() {
+    let (ok, out, err) = rackd_in(&["hash-key"], "a-key-of-24-characters!!\n");
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), rackd::auth::KeyHash::of("a-key-of-24-characters!!").to_string());
     let (ok, out, _) = rackd(&["hash-key", "--generate"]);
     assert!(ok && out.contains("key:  rk_") && out.contains("hash: sha256:"), "{out}");
+    // What --generate prints goes into the file as it is, and the key hashes to it.
+    let key = out.lines().find_map(|l| l.strip_prefix("key:  ")).unwrap();
+    let hash = out.lines().find_map(|l| l.strip_prefix("hash: ")).unwrap();
+    assert_eq!(rackd_in(&["hash-key"], key).1.trim(), hash);
+}
+
+#[test]
+fn hash_key_refuses_a_key_on_the_command_line_and_a_short_key() {
+    // An argument is in `ps` and the shell's history for everyone to read.
+    let (ok, out, err) = rackd(&["hash-key", "a-key-of-24-characters!!"]);
+    assert!(!ok && out.is_empty(), "{out}");
+    assert!(err.contains("standard input") && err.contains("| rackd hash-key"), "{err}");
+    let (ok, out, err) = rackd_in(&["hash-key"], "x\n");
+    assert!(!ok && out.is_empty() && err.contains("at least 16 characters"), "{out}{err}");
+    let (ok, _, err) = rackd_in(&["hash-key"], "");
+    assert!(!ok && err.contains("no key"), "{err}");
 }
 
 #[test]

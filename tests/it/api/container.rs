@@ -240,3 +240,33 @@ fn compose_checks_health_and_shows_a_serial_port() {
     let text = read("compose.yaml");
     assert!(text.contains("# devices:") && text.contains("/dev/ttyUSB0:/dev/ttyUSB0"), "the serial example");
 }
+
+#[test]
+fn compose_runs_read_only_without_capabilities_or_new_privileges() {
+    let (_, service) = compose_service();
+    assert_eq!(service["read_only"].as_bool(), Some(true), "a read-only root");
+    assert_eq!(strings(&service["cap_drop"]), ["ALL"], "no capabilities");
+    assert!(strings(&service["security_opt"]).contains(&"no-new-privileges:true"), "no new privileges");
+    // rackd writes nothing outside /data (SQLite keeps its temporary tables in memory:
+    // libsqlite3-sys builds it with SQLITE_TEMP_STORE=2), so no tmpfs is needed.
+    assert!(service["tmpfs"].is_badvalue(), "a tmpfs nobody writes to");
+}
+
+#[test]
+fn compose_publishes_on_loopback_and_takes_the_database_url_from_a_secret_file() {
+    let (_, service) = compose_service();
+    let port = container_config().server.listen.port();
+    assert_eq!(strings(&service["ports"]), [format!("127.0.0.1:{port}:{port}").as_str()], "loopback only");
+    let text = read("compose.yaml");
+    assert!(
+        text.contains("[server.tls]") && text.contains(&format!("\"{port}:{port}\"")),
+        "how to publish with TLS"
+    );
+    // PostgreSQL is optional: the example names the URL's secret file, never a variable.
+    for line in
+        ["#   url_file = \"/run/secrets/database_url\"", "#   - database_url", "#     file: ./database_url"]
+    {
+        assert!(text.contains(line), "{line}");
+    }
+    assert!(!text.contains("RACKD_DATABASE__URL"), "no database URL in the environment");
+}

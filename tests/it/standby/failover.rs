@@ -142,8 +142,13 @@ fn config(node: &str, database: &str, shelf: &ShelfSim, crane: &CraneSim) -> Con
     let free = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     config.server.listen = free.local_addr().unwrap();
     config.database.url = Some(database.to_owned());
-    config.cluster =
-        Some(ClusterConfig { node: node.into(), lease_ms: LEASE_MS as u64, margin_ms: None, url: None });
+    config.cluster = Some(ClusterConfig {
+        node: node.into(),
+        lease_ms: LEASE_MS as u64,
+        margin_ms: None,
+        url: None,
+        ca_file: None,
+    });
     let mut shelf1 = demo::shelf_device(shelf, "shelf1", &shelf.local_addr().unwrap().to_string(), vec![1]);
     shelf1.poll_ms = 100;
     let mut crane1 = CraneConfig::new("crane1", &crane.local_addr().to_string(), vec![2]);

@@ -28,7 +28,7 @@ async fn node_with(db: &str, name: &str, devices: Vec<DeviceConfig>, lease_ms: u
     let name = name.to_owned();
     spawn_on(Database::Postgres(db.to_owned()), move |c| {
         c.devices = devices;
-        c.cluster = Some(ClusterConfig { node: name, lease_ms, margin_ms: None, url: None });
+        c.cluster = Some(ClusterConfig { node: name, lease_ms, margin_ms: None, url: None, ca_file: None });
     })
     .await
 }

@@ -62,7 +62,8 @@ pub async fn spawn_on(db: Database, edit: impl FnOnce(&mut Config)) -> TestApp {
     use_database(&mut config, &db);
     edit(&mut config);
     let app = Application::build(&config, false).await.expect("server starts");
-    let base = format!("http://{}", app.local_addr());
+    let scheme = if config.server.tls.is_some() { "https" } else { "http" };
+    let base = format!("{scheme}://{}", app.local_addr());
     let (stop, stopped) = oneshot::channel::<()>();
     let task = tokio::spawn(app.run_until(async {
         let _ = stopped.await;

@@ -1,10 +1,12 @@
 //! What the areas share: a running rackd ([`app`]), waiting with a deadline
 //! ([`eventually`]), the throwaway PostgreSQL cluster ([`postgres`]), a WebSocket client
-//! ([`ws`]) and a TCP proxy that can cut a link ([`proxy`]).
+//! ([`ws`]), a TCP proxy that can cut a link ([`proxy`]), and certificates and an https
+//! front for the TLS tests ([`tls`]).
 
 pub mod app;
 pub mod postgres;
 pub mod proxy;
+pub mod tls;
 pub mod wait;
 pub mod ws;
 

@@ -11,6 +11,12 @@
 //!
 //! A missing PostgreSQL fails the test with the command that installs it; nothing is
 //! skipped.
+//!
+//! A second cluster, [`tls_database`], only speaks TLS (`ssl=on`, a server certificate
+//! signed by a CA of the tests' own, `pg_hba.conf` with `hostssl` lines alone, so a
+//! plaintext connection is refused); it is started on first use too, by the tests that
+//! need it (the security area), so no other test waits for it. Its databases are made
+//! over its Unix socket, so making one needs no TLS.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -31,6 +37,20 @@ struct Cluster {
 
 static CLUSTER: OnceLock<Result<Cluster, String>> = OnceLock::new();
 
+/// The TLS-only cluster.
+pub struct TlsCluster {
+    /// Its port on 127.0.0.1.
+    pub port: u16,
+    /// The CA that signed its certificate, PEM.
+    pub ca: PathBuf,
+    /// Another CA, which did not.
+    pub wrong_ca: PathBuf,
+    /// Its Unix socket's folder.
+    socket_dir: PathBuf,
+}
+
+static TLS_CLUSTER: OnceLock<Result<TlsCluster, String>> = OnceLock::new();
+
 /// Set before first use to keep PostgreSQL's durable defaults (the benchmarks do).
 pub static DURABLE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 static NEXT: AtomicU32 = AtomicU32::new(1);
@@ -49,6 +69,27 @@ pub async fn database() -> String {
         .await
         .expect("create database");
     format!("{}/{name}", cluster.base)
+}
+
+/// A fresh, empty database on the TLS-only cluster (started on first use), as a URL
+/// without `sslmode` (`postgres://postgres@127.0.0.1:PORT/NAME`), and the cluster.
+pub async fn tls_database() -> (String, &'static TlsCluster) {
+    let cluster = match TLS_CLUSTER.get_or_init(start_tls) {
+        Ok(c) => c,
+        Err(e) => panic!("the PostgreSQL TLS tests cannot start a server: {e}"),
+    };
+    let name = format!("tls{}_{}", std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed));
+    let admin = format!(
+        "postgres:///postgres?user=postgres&host={}&port={}",
+        cluster.socket_dir.display(),
+        cluster.port
+    );
+    let mut admin = sqlx::PgConnection::connect(&admin).await.expect("admin connection over the socket");
+    sqlx::raw_sql(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}")))
+        .execute(&mut admin)
+        .await
+        .expect("create database");
+    (format!("postgres://postgres@127.0.0.1:{}/{name}", cluster.port), cluster)
 }
 
 /// The newest PostgreSQL's binaries.
@@ -85,6 +126,32 @@ fn command(program: &Path, as_root: bool) -> Command {
 }
 
 fn start() -> Result<Cluster, String> {
+    let (_, port) = launch("rackd-pg", None)?;
+    Ok(Cluster { base: format!("postgres://postgres@127.0.0.1:{port}") })
+}
+
+/// Starts the TLS-only cluster: a CA and a server certificate (for 127.0.0.1 and
+/// `localhost`), `ssl=on`, and `hostssl` lines alone in `pg_hba.conf`.
+fn start_tls() -> Result<TlsCluster, String> {
+    let ca = super::tls::Ca::new("rackd test database CA");
+    let cert = ca.server();
+    let tls = Tls { cert };
+    let (dir, port) = launch("rackd-pgtls", Some(&tls))?;
+    let keep = dir.join("client");
+    std::fs::create_dir_all(&keep).map_err(|e| e.to_string())?;
+    let ca_file = ca.write(&keep, "ca.pem");
+    let wrong = super::tls::Ca::new("another CA").write(&keep, "wrong-ca.pem");
+    Ok(TlsCluster { port, ca: ca_file, wrong_ca: wrong, socket_dir: dir })
+}
+
+/// What a TLS-only cluster is given.
+struct Tls {
+    cert: super::tls::ServerCert,
+}
+
+/// Makes and starts a cluster in the temp folder's `PREFIX-PID`; answers its folder (the
+/// Unix socket's too) and its port.
+fn launch(prefix: &str, tls: Option<&Tls>) -> Result<(PathBuf, u16), String> {
     let bin = binaries()?;
     let as_root = rustix::process::geteuid().is_root();
     if as_root
@@ -94,8 +161,8 @@ fn start() -> Result<Cluster, String> {
             "running as root needs the `postgres` user, which the package creates: {INSTALL}"
         ));
     }
-    remove_stale();
-    let dir = std::env::temp_dir().join(format!("rackd-pg-{}", std::process::id()));
+    remove_stale(prefix);
+    let dir = std::env::temp_dir().join(format!("{prefix}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     if as_root {
@@ -113,6 +180,23 @@ fn start() -> Result<Cluster, String> {
     if !out.status.success() {
         return Err(format!("initdb failed: {}", String::from_utf8_lossy(&out.stderr)));
     }
+    if let Some(tls) = tls {
+        // The server's certificate and key, readable by the server alone, and only TLS
+        // connections over TCP (the Unix socket stays open for making databases).
+        let (cert, key) = (data.join("server.crt"), data.join("server.key"));
+        std::fs::write(&cert, &tls.cert.cert_pem).map_err(|e| e.to_string())?;
+        std::fs::write(&key, &tls.cert.key_pem).map_err(|e| e.to_string())?;
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600)).map_err(|e| e.to_string())?;
+        let hba = "local all all trust\nhostssl all all 127.0.0.1/32 trust\n";
+        std::fs::write(data.join("pg_hba.conf"), hba).map_err(|e| e.to_string())?;
+        if as_root {
+            let status = Command::new("chown").args(["postgres:postgres"]).arg(&cert).arg(&key).status();
+            if !status.is_ok_and(|s| s.success()) {
+                return Err("cannot give the server's key to the postgres user".into());
+            }
+        }
+    }
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .and_then(|l| l.local_addr())
         .map_err(|e| e.to_string())?
@@ -125,6 +209,9 @@ fn start() -> Result<Cluster, String> {
         "-c",
         "max_connections=400",
     ]);
+    if tls.is_some() {
+        server.args(["-c", "ssl=on", "-c", "ssl_cert_file=server.crt", "-c", "ssl_key_file=server.key"]);
+    }
     if !DURABLE.load(Ordering::Relaxed) {
         server.args(["-c", "fsync=off", "-c", "synchronous_commit=off", "-c", "full_page_writes=off"]);
     }
@@ -140,7 +227,6 @@ fn start() -> Result<Cluster, String> {
         }
     });
     rx.recv().map_err(|e| e.to_string())?.map_err(|e| format!("postgres: {e}"))?;
-    let base = format!("postgres://postgres@127.0.0.1:{port}");
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
         let ok = std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
@@ -149,7 +235,7 @@ fn start() -> Result<Cluster, String> {
                 .output()
                 .is_ok_and(|o| o.status.success());
         if ok {
-            return Ok(Cluster { base });
+            return Ok((dir, port));
         }
         if Instant::now() > deadline {
             let log = std::fs::read_to_string(dir.join("server.log")).unwrap_or_default();
@@ -159,12 +245,14 @@ fn start() -> Result<Cluster, String> {
     }
 }
 
-/// Removes the data folders of earlier runs whose process is gone.
-fn remove_stale() {
+/// Removes the data folders (`PREFIX-PID`) of earlier runs whose process is gone.
+fn remove_stale(prefix: &str) {
     let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return };
     for e in entries.flatten() {
         let name = e.file_name();
-        let Some(pid) = name.to_str().and_then(|n| n.strip_prefix("rackd-pg-")) else { continue };
+        let Some(pid) = name.to_str().and_then(|n| n.strip_prefix(prefix)?.strip_prefix('-')) else {
+            continue;
+        };
         if !Path::new("/proc").join(pid).exists() {
             let _ = std::fs::remove_dir_all(e.path());
         }
