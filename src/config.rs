@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+pub mod ca;
 mod check;
 pub mod devices;
 pub mod env;
@@ -25,7 +26,6 @@ mod events;
 mod explain;
 pub mod layers;
 pub mod origin;
-pub mod ca;
 pub mod tls;
 
 pub use check::Invalid;
