@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+pub mod ca;
 mod check;
 pub mod devices;
 pub mod env;
@@ -26,7 +27,6 @@ mod explain;
 mod hosts;
 pub mod layers;
 pub mod origin;
-pub mod ca;
 pub mod tls;
 
 pub use check::Invalid;

@@ -169,7 +169,11 @@ impl Application {
         let forwarder = match &config.cluster {
             Some(c) => {
                 let listen = listener.local_addr().context("the bound address")?;
-                api::peer::warn_if_clear(&c.url(listen, config.server.tls.is_some()), !keys.is_empty(), "this node's cluster.url");
+                api::peer::warn_if_clear(
+                    &c.url(listen, config.server.tls.is_some()),
+                    !keys.is_empty(),
+                    "this node's cluster.url",
+                );
                 let forwarder = api::peer::Forwarder::new(
                     c.ca_file.as_deref(),
                     config.server.body_limit_bytes,

@@ -4,8 +4,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
-use super::devices::{DeviceConfigError, DeviceKind};
 use super::ca::read_ca;
+use super::devices::{DeviceConfigError, DeviceKind};
 use super::{Config, EventsConfigError, Origin};
 use crate::store::{PgTls, redact};
 

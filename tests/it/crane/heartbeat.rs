@@ -180,8 +180,12 @@ async fn a_stalled_heartbeat_shows_since_when_and_the_crane_block_stays_shown() 
     assert!(secs >= 0.5, "at least the 500 ms timeout: {text}");
     sim.clear_alarm();
     sim.set_heartbeat(true);
-    let back =
-        wait_device(&app, "back", 5, |s| s["online"] == true && s["crane"]["heartbeat_ok"] == true).await;
+    // The heartbeat may be seen moving again before the poll that reads the cleared alarm
+    // (the alarm was read just before it cleared): wait for both.
+    let back = wait_device(&app, "back", 5, |s| {
+        s["online"] == true && s["crane"]["heartbeat_ok"] == true && s["crane"]["alarm_code"].is_null()
+    })
+    .await;
     assert!(back["crane"]["heartbeat_stalled_since"].is_null(), "{back}");
     assert!(back["crane"]["alarm_code"].is_null(), "{back}");
     assert!(back["last_error"].is_null(), "the heartbeat's error is over: {back}");

@@ -48,7 +48,8 @@ impl Ca {
     /// A server certificate for `names` (DNS names or IP addresses), signed by this CA.
     pub fn server_for(&self, names: &[&str]) -> ServerCert {
         let key = KeyPair::generate().unwrap();
-        let mut params = CertificateParams::new(names.iter().map(|n| n.to_string()).collect::<Vec<_>>()).unwrap();
+        let mut params =
+            CertificateParams::new(names.iter().map(|n| n.to_string()).collect::<Vec<_>>()).unwrap();
         params.distinguished_name.push(DnType::CommonName, names[0]);
         let cert = params.signed_by(&key, &self.issuer).unwrap();
         ServerCert { cert_pem: cert.pem(), key_pem: key.serialize_pem() }
