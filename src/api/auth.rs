@@ -229,9 +229,11 @@ mod key_tests {
 
     #[test]
     fn a_token_in_the_query_is_for_the_websocket_alone() {
-        for (method, uri) in
-            [("GET", "/api/v1/jobs?token=k"), ("POST", "/api/v1/jobs/1/cancel?token=k"), ("POST", "/api/v1/ws?token=k")]
-        {
+        for (method, uri) in [
+            ("GET", "/api/v1/jobs?token=k"),
+            ("POST", "/api/v1/jobs/1/cancel?token=k"),
+            ("POST", "/api/v1/ws?token=k"),
+        ] {
             let req = request(method, uri);
             assert_eq!(presented_key(&req), None, "{method} {uri}");
             assert_eq!(refuse_token(&req).unwrap_err().code, "token_in_query", "{method} {uri}");

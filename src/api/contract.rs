@@ -73,29 +73,49 @@ fn complete_operation(operation: &mut Operation, changes: bool, websocket: bool)
     } else if changes && keyed {
         add(
             "415",
-            error("`unsupported_media_type`: without API keys, a change must be sent with `Content-Type: application/json`, even with no body"),
+            error(
+                "`unsupported_media_type`: without API keys, a change must be sent with `Content-Type: application/json`, even with no body",
+            ),
         );
     }
     if keyed {
-        add("401", error("`unauthorized`: no key, or an unknown one (once keys are configured; unknown keys count toward `auth.max_failures`)"));
+        add(
+            "401",
+            error(
+                "`unauthorized`: no key, or an unknown one (once keys are configured; unknown keys count toward `auth.max_failures`)",
+            ),
+        );
         if changes {
             add("403", error("`forbidden`: the key's role may not do this"));
         }
-        add("421", error("`host_not_allowed`: without API keys, the `Host` names none of rackd's own names (see `server.allowed_hosts`)"));
+        add(
+            "421",
+            error(
+                "`host_not_allowed`: without API keys, the `Host` names none of rackd's own names (see `server.allowed_hosts`)",
+            ),
+        );
         add("429", too_many());
     }
     add("503", error("`timeout`: the request took longer than `server.request_timeout_secs`"));
     // Added to what the operation says of these statuses, if it says anything.
     let mut also = |status: &str, text: &str| match responses.get_mut(status) {
-        Some(RefOr::T(r)) if !r.description.contains(text) => r.description = format!("{}; {text}", r.description),
+        Some(RefOr::T(r)) if !r.description.contains(text) => {
+            r.description = format!("{}; {text}", r.description)
+        }
         Some(_) => {}
         None => drop(responses.insert(status.to_owned(), RefOr::T(error(text)))),
     };
     if keyed {
         if !websocket {
-            also("400", "`token_in_query`: a `token` query parameter (only `GET /api/v1/ws` takes the key that way)");
+            also(
+                "400",
+                "`token_in_query`: a `token` query parameter (only `GET /api/v1/ws` takes the key that way)",
+            );
         }
-        also("403", "`origin_not_allowed`: without API keys, a request from a web page of another origin (see `server.allowed_hosts`)");
+        also(
+            "403",
+            "`origin_not_allowed`: without API keys, a request from a web page of another origin (see `server.allowed_hosts`)",
+        );
     }
 }
 

@@ -102,10 +102,7 @@ impl<S: Send + Sync> FromRequestParts<S> for Caller {
 
     async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<Self, Self::Rejection> {
         let name = parts.extensions.get::<crate::auth::Principal>().map(|p| p.name.clone());
-        Ok(Caller {
-            name: name.unwrap_or_else(|| "anonymous".to_owned()),
-            client: peer(&parts.extensions),
-        })
+        Ok(Caller { name: name.unwrap_or_else(|| "anonymous".to_owned()), client: peer(&parts.extensions) })
     }
 }
 

@@ -155,7 +155,8 @@ impl Hosts {
         }
         if let Some(origin) = req.headers().get(header::ORIGIN) {
             let allowed = Origin::parse(origin.as_bytes()).is_some_and(|o| {
-                host.is_some_and(|h| o.named.same(&h, Some(o.default_port))) || self.allows(o.named_at_port(), false)
+                host.is_some_and(|h| o.named.same(&h, Some(o.default_port)))
+                    || self.allows(o.named_at_port(), false)
             });
             if !allowed {
                 return Err(ApiError::new(
@@ -251,8 +252,14 @@ mod tests {
     #[test]
     fn the_host_must_name_rackd() {
         let h = hosts("127.0.0.1:8080", &["wcs.plant.local"]);
-        for ok in ["localhost:8080", "LOCALHOST:8080", "127.0.0.1:8080", "[::1]:8080", "wcs.plant.local", "wcs.plant.local.:9"]
-        {
+        for ok in [
+            "localhost:8080",
+            "LOCALHOST:8080",
+            "127.0.0.1:8080",
+            "[::1]:8080",
+            "wcs.plant.local",
+            "wcs.plant.local.:9",
+        ] {
             assert_eq!(code(&h, request("GET", Some(ok), None, false)), None, "{ok}");
         }
         for bad in ["evil.example:8080", "localhost:8081", "127.0.0.2:8080", "10.0.0.5:8080", "localhost"] {
@@ -282,7 +289,14 @@ mod tests {
         assert_eq!(at("http://127.0.0.1:8080"), None);
         assert_eq!(at("http://localhost:8080"), None);
         assert_eq!(at("https://hmi.plant.local"), None);
-        for bad in ["http://evil.example", "http://localhost:3000", "null", "file://", "http://127.0.0.1", "ftp://localhost:8080"] {
+        for bad in [
+            "http://evil.example",
+            "http://localhost:3000",
+            "null",
+            "file://",
+            "http://127.0.0.1",
+            "ftp://localhost:8080",
+        ] {
             assert_eq!(at(bad), Some("origin_not_allowed"), "{bad}");
         }
         let default_port = hosts("127.0.0.1:80", &[]);
@@ -308,5 +322,4 @@ mod tests {
         assert_eq!(code(&h, plain), Some("unsupported_media_type"));
         assert_eq!(code(&h, request("GET", Some("127.0.0.1:8080"), None, false)), None);
     }
-
 }

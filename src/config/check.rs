@@ -194,7 +194,10 @@ impl Config {
         }
         let auth = &self.auth;
         if auth.max_failures > crate::auth::MOST_FAILURES {
-            return Err(("auth.max_failures".into(), Invalid::FailureLimit { most: crate::auth::MOST_FAILURES }));
+            return Err((
+                "auth.max_failures".into(),
+                Invalid::FailureLimit { most: crate::auth::MOST_FAILURES },
+            ));
         }
         if auth.max_failures > 0 && auth.failure_window_secs == 0 {
             return Err((

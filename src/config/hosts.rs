@@ -18,7 +18,9 @@ pub struct AllowedHost {
 
 /// An entry that is not `NAME` or `NAME:PORT`.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("server.allowed_hosts: {0:?} is not a host name or address with an optional :PORT (no scheme, no path)")]
+#[error(
+    "server.allowed_hosts: {0:?} is not a host name or address with an optional :PORT (no scheme, no path)"
+)]
 pub struct BadHost(pub String);
 
 impl std::str::FromStr for AllowedHost {
@@ -94,7 +96,9 @@ mod tests {
         assert_eq!(parsed("wcs:8443"), Ok(("wcs".into(), Some(8443))));
         assert_eq!(parsed("10.1.2.3"), Ok(("10.1.2.3".into(), None)));
         assert_eq!(parsed("[FE80::1]:8080"), Ok(("[fe80::1]".into(), Some(8080))));
-        for bad in ["", "http://wcs", "wcs/path", "*.plant.local", "wcs:port", "user@wcs", "[nope]", "a:1:2", "wcs:"] {
+        for bad in
+            ["", "http://wcs", "wcs/path", "*.plant.local", "wcs:port", "user@wcs", "[nope]", "a:1:2", "wcs:"]
+        {
             assert!(bad.parse::<AllowedHost>().is_err(), "{bad}");
         }
         assert_eq!("wcs:9000".parse::<AllowedHost>().unwrap().to_string(), "wcs:9000");

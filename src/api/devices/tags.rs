@@ -138,7 +138,8 @@ async fn audit(
         Err(e @ (WriteError::ReadBack(_) | WriteError::TimedOut(_))) => format!("value {value}; {e}"),
         Err(_) => return,
     };
-    let record = Record::Audit { action: "tag".into(), target: format!("device:{id}/{tag}"), reason: Some(reason) };
+    let record =
+        Record::Audit { action: "tag".into(), target: format!("device:{id}/{tag}"), reason: Some(reason) };
     if let Err(e) = app.writer.record_as(record, by.who()).await {
         tracing::error!(device = %id, tag = %tag, error = %e, "tag write: the audit entry was not stored");
     }

@@ -155,7 +155,10 @@ pub(super) async fn load(
                     acknowledged.insert(*alarm);
                 }
                 Record::Retell { jobs } => ids.extend(jobs.iter().copied()),
-                Record::Device { .. } | Record::Pause { .. } | Record::Audit { .. } | Record::Prune { .. } => {}
+                Record::Device { .. }
+                | Record::Pause { .. }
+                | Record::Audit { .. }
+                | Record::Prune { .. } => {}
             },
         }
     }

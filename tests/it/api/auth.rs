@@ -96,7 +96,11 @@ async fn each_role_reaches_exactly_its_routes(#[case] engine: Engine) {
         "/api/v1/audit?token=key-v",
         "/api/v1/jobs?token=nope",
     ] {
-        assert_error(&split(app.client.get(app.url(path)).send().await.unwrap()).await, 400, "token_in_query");
+        assert_error(
+            &split(app.client.get(app.url(path)).send().await.unwrap()).await,
+            400,
+            "token_in_query",
+        );
     }
     // The audit names the key that acted.
     let r = app.client.post(app.url("/api/v1/aisles/1/pause")).bearer_auth("key-o").send().await.unwrap();

@@ -184,8 +184,7 @@ address = "127.0.0.1:{crane}"
     assert!(back["fields"]["failures"].as_u64().is_some_and(|n| n >= 20), "{back}");
 
     // Access lines: method, route, path without the query, status, latency.
-    let answer =
-        client.get(format!("{base}/api/v1/jobs/{id}?note=not-in-the-log")).send().await.unwrap();
+    let answer = client.get(format!("{base}/api/v1/jobs/{id}?note=not-in-the-log")).send().await.unwrap();
     assert_eq!(answer.status(), 200);
     let access = lines
         .wait_for("for the GET", |l| {

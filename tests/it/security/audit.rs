@@ -25,7 +25,14 @@ fn from(n: u8) -> reqwest::Client {
     reqwest::Client::builder().local_address(IpAddr::V4(Ipv4Addr::new(127, 0, 0, n))).build().unwrap()
 }
 
-async fn call(app: &TestApp, client: &reqwest::Client, key: &str, method: &str, path: &str, body: Value) -> (u16, Value) {
+async fn call(
+    app: &TestApp,
+    client: &reqwest::Client,
+    key: &str,
+    method: &str,
+    path: &str,
+    body: Value,
+) -> (u16, Value) {
     let request = client.request(method.parse().unwrap(), app.url(path)).bearer_auth(key).json(&body);
     split(request.send().await.unwrap()).await
 }
@@ -78,7 +85,8 @@ async fn every_change_is_audited_with_the_key_and_the_address(#[case] engine: En
     assert_eq!(status, 200);
     let (status, _) = op("POST", "/api/v1/locations/1/1/1/1/1/unlock".into(), json!({})).await;
     assert_eq!(status, 200);
-    let stock = json!({"locations": [{"aisle": 1, "row": 1, "bay": 9, "level": 1, "position": 1, "occupied": true}]});
+    let stock =
+        json!({"locations": [{"aisle": 1, "row": 1, "bay": 9, "level": 1, "position": 1, "occupied": true}]});
     let (status, _) = call(&app, &desk, ADMIN, "PUT", "/api/v1/locations", stock).await;
     assert_eq!(status, 200);
     let wrote = eventually("a tag write once tags1 is online", Duration::from_secs(10), async || {
@@ -106,7 +114,8 @@ async fn every_change_is_audited_with_the_key_and_the_address(#[case] engine: En
             (s("action"), s("target"), s("by"), s("client"))
         })
         .collect();
-    let wms_at = |action: &str, target: String| (action.to_owned(), target, "wms".to_owned(), "127.0.0.7".to_owned());
+    let wms_at =
+        |action: &str, target: String| (action.to_owned(), target, "wms".to_owned(), "127.0.0.7".to_owned());
     let last = batch["jobs"][2]["id"].as_i64().unwrap();
     let expected = vec![
         wms_at("submit", format!("job:{id}")),

@@ -275,7 +275,7 @@ async fn a_stop_finishes_the_request_being_served_and_waits_for_no_half_sent_one
     let body = serde_json::to_vec(&store("stop-1")).unwrap();
     let mut serving = TcpStream::connect(&addr).await.unwrap();
     let head = format!(
-        "POST /api/v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\ncontent-type: application/json\r\n\
+        "POST /api/v1/jobs HTTP/1.1\r\nHost: {addr}\r\ncontent-type: application/json\r\n\
          content-length: {}\r\nexpect: 100-continue\r\n\r\n",
         body.len()
     );

@@ -104,12 +104,18 @@ async fn a_cross_site_page_cannot_act_read_or_listen_without_keys() {
 #[tokio::test]
 async fn a_host_in_allowed_hosts_may_call_and_be_the_origin() {
     let app =
-        spawn_with(Engine::Sqlite, |c| c.server.allowed_hosts = vec!["WCS.plant.local".parse().unwrap()]).await;
+        spawn_with(Engine::Sqlite, |c| c.server.allowed_hosts = vec!["WCS.plant.local".parse().unwrap()])
+            .await;
     let named = format!("wcs.plant.local:{}", port(&app));
-    let got = pause(&app, &[(CONTENT_TYPE, "application/json"), (HOST, &named), (ORIGIN, "http://wcs.plant.local")], "")
-        .await;
+    let got = pause(
+        &app,
+        &[(CONTENT_TYPE, "application/json"), (HOST, &named), (ORIGIN, "http://wcs.plant.local")],
+        "",
+    )
+    .await;
     assert_eq!(got.0, 200, "{got:?}");
-    let ws = Ws::try_connect_with(&app.base, "", &[("host", &named), ("origin", "https://wcs.plant.local")]).await;
+    let ws =
+        Ws::try_connect_with(&app.base, "", &[("host", &named), ("origin", "https://wcs.plant.local")]).await;
     assert!(ws.is_ok(), "{:?}", ws.err());
     let other = format!("other.plant.local:{}", port(&app));
     let got = pause(&app, &[(CONTENT_TYPE, "application/json"), (HOST, &other)], "").await;
@@ -130,9 +136,13 @@ async fn with_keys_the_key_is_the_defence_and_nothing_else_changes() {
     // An empty POST with no type, from any origin and under any name: as before.
     let got = pause(&app, &[auth.clone(), (ORIGIN, "http://evil.example"), (HOST, &rebound)], "").await;
     assert_eq!(got.0, 200, "{got:?}");
-    let got = split(app.client.post(app.url("/api/v1/jobs/999/cancel")).bearer_auth(KEY).send().await.unwrap()).await;
+    let got =
+        split(app.client.post(app.url("/api/v1/jobs/999/cancel")).bearer_auth(KEY).send().await.unwrap())
+            .await;
     assert_error(&got, 404, "not_found");
-    let ws = Ws::try_connect_with(&app.base, "", &[("origin", "http://evil.example"), ("authorization", &bearer)]).await;
+    let ws =
+        Ws::try_connect_with(&app.base, "", &[("origin", "http://evil.example"), ("authorization", &bearer)])
+            .await;
     assert!(ws.is_ok(), "{:?}", ws.err());
     app.stop().await;
 }

@@ -647,8 +647,11 @@ impl Submitted {
         let new: i64 = self.ranges.iter().map(|(a, b)| b - a + 1).sum();
         let stored = self.asked as i64 - new;
         let stored = if stored > 0 { format!(" ({stored} stored already)") } else { String::new() };
-        let ranges: Vec<String> =
-            self.ranges.iter().map(|&(a, b)| if a == b { a.to_string() } else { format!("{a}-{b}") }).collect();
+        let ranges: Vec<String> = self
+            .ranges
+            .iter()
+            .map(|&(a, b)| if a == b { a.to_string() } else { format!("{a}-{b}") })
+            .collect();
         match (self.requests, self.asked) {
             (1, 1) => (format!("job:{}", ranges[0]), None),
             (1, asked) => (format!("jobs:{}", ranges[0]), Some(format!("a batch of {asked} jobs{stored}"))),
