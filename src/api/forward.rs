@@ -28,16 +28,21 @@
 //!   a working cluster at an upgrade. docs/operations/standby.md says how to move to https.
 //! - **no redirects** followed: a key is never sent on to where an answer points.
 //! - **the API's body limit** (`server.body_limit_bytes`): a body is buffered up to it and
-//!   no further; a larger one is answered 413 here, as the standby's own routes would.
-//! - **a key in the query** (`?token=`, for clients that cannot set headers) goes on as an
-//!   `Authorization: Bearer` header, never in the forwarded URL: [`keep_token`] notes it
-//!   before the key check takes it out of the query.
+//!   no further; a larger one is answered 413 here, as the standby's own routes would. The
+//!   active node's answer is streamed back as it comes, never held whole.
+//! - **no key in a URL**: the key check refuses `?token=` on every route but the WebSocket
+//!   (400 `token_in_query`) before anything is forwarded, and the WebSocket is not
+//!   forwarded (each node streams its own events), so a key only ever travels in a header.
+//! - **`Origin` is not passed on**: this node checked it already (without keys, see
+//!   `api::keyless`), against its own names; the active node, whose names differ, would
+//!   refuse the dashboard of this node. A browser cannot send `x-rackd-forwarded-by` to
+//!   another site without a preflight, which rackd never grants.
 
 use std::sync::atomic::Ordering;
 
 use axum::body::Body;
 use axum::extract::{Request, State};
-use axum::http::{HeaderName, HeaderValue, Method, StatusCode, header};
+use axum::http::{HeaderName, Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
@@ -48,26 +53,6 @@ use crate::service::cluster::Role;
 
 /// Marks a forwarded request, with the name of the node that forwarded it.
 pub const FORWARDED_BY: HeaderName = HeaderName::from_static("x-rackd-forwarded-by");
-
-/// A key the client gave in the query (`?token=`), noted for forwarding before the key
-/// check takes it out of the query.
-#[derive(Clone)]
-struct QueryToken(String);
-
-/// Middleware, outside the key check: on a cluster node, notes a `?token=` of a request
-/// that carries no key in its headers, so that a forwarded request carries it as a header.
-pub async fn keep_token(State(app): State<AppState>, mut req: Request, next: Next) -> Response {
-    if app.cluster.is_some()
-        && !req.headers().contains_key(header::AUTHORIZATION)
-        && !req.headers().contains_key("x-api-key")
-        && let Some(query) = req.uri().query()
-        && let Some((_, token)) = form_urlencoded::parse(query.as_bytes()).find(|(k, _)| k == "token")
-    {
-        let token = QueryToken(token.into_owned());
-        req.extensions_mut().insert(token);
-    }
-    next.run(req).await
-}
 
 /// Whether only the active node serves `method` on `path`.
 pub fn only_active(method: &Method, path: &str) -> bool {
@@ -134,14 +119,10 @@ async fn send(
     let url = format!("{}{path}", base.trim_end_matches('/'));
     let mut out = client.request(parts.method, url).body(body);
     for (name, value) in &parts.headers {
-        if name != header::HOST && name != header::CONTENT_LENGTH && name != header::CONNECTION {
+        let hop = [header::HOST, header::CONTENT_LENGTH, header::CONNECTION, header::ORIGIN];
+        if !hop.contains(name) {
             out = out.header(name, value);
         }
-    }
-    if let Some(QueryToken(token)) = parts.extensions.get::<QueryToken>()
-        && let Ok(value) = HeaderValue::from_str(&format!("Bearer {token}"))
-    {
-        out = out.header(header::AUTHORIZATION, value);
     }
     let answer = out.header(FORWARDED_BY, me).send().await?;
     let status = answer.status();
@@ -151,9 +132,10 @@ async fn send(
             response = response.header(name, value);
         }
     }
-    let bytes = answer.bytes().await?;
+    // Streamed through, not buffered: an answer (a long device list, say) costs this node
+    // no more memory than its chunks in flight.
     Ok(response
-        .body(Body::from(bytes))
+        .body(Body::from_stream(answer.bytes_stream()))
         .unwrap_or_else(|_| unavailable("the active node's answer was malformed")))
 }
 

@@ -163,9 +163,7 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
     let protected = protected
         .method_not_allowed_fallback(ops::method_not_allowed)
         .layer(middleware::from_fn_with_state(state.clone(), forward::forward))
-        .layer(middleware::from_fn_with_state(state.clone(), auth::require_key))
-        // Before the key check takes `?token=` out of the query: a standby forwards it.
-        .layer(middleware::from_fn_with_state(state.clone(), forward::keep_token));
+        .layer(middleware::from_fn_with_state(state.clone(), auth::require_key));
     Router::new()
         .merge(protected)
         .merge(public)

@@ -165,18 +165,20 @@ async fn a_body_over_the_standbys_limit_is_refused_by_the_standby() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_key_in_the_query_reaches_the_active_node_as_the_standby_took_it() {
+async fn a_key_in_the_query_is_answered_by_a_standby_as_by_the_active_node() {
     let db = crate::support::postgres::database().await;
     let a = node(&db, "node = \"a\"", |_| {}).await;
     sees_active(&a.base).await;
     let b = node(&db, "node = \"b\"", |_| {}).await;
     sees_active(&b.base).await;
-    // Whatever the API does with `?token=` on this route, a standby answers as the active
-    // node does: it must not drop the key on the way.
+    // A standby answers as the active node does (400 `token_in_query`: the key is refused
+    // in a URL before anything is forwarded); it must neither drop the key on the way
+    // (401 before the fix) nor carry it on in the URL.
     let path = format!("/api/v1/devices?token={KEY}");
     let (direct, _) = get(&a.base, &path, None).await;
     let (forwarded, body) = get(&b.base, &path, None).await;
     assert_eq!(forwarded, direct, "{body}");
+    assert_eq!(direct, 400, "{body}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
