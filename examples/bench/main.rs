@@ -8,6 +8,7 @@
 //! cargo run --release --example bench -- ws     [--subscribers 1000] [--events 500] [--rate 50]
 //! cargo run --release --example bench -- fleet  [--devices 500] [--tags 30] [--poll-ms 500] [--seconds 20] [--changing 0.1]
 //! cargo run --release --example bench -- crane  [--jobs 200] [--backlog 30] [--fill 0.5] [--time-scale 200] [--seed 7]
+//! cargo run --release --example bench -- history [--jobs 10000000] [--days 365] [--database sqlite|postgres|URL]
 //! ```
 //!
 //! An example rather than a `rackd bench` subcommand, so that `cargo build --release` of
@@ -24,6 +25,7 @@
 mod child;
 mod crane;
 mod fleet;
+mod history;
 mod intake;
 // The tests' PostgreSQL; its TLS-only cluster (and the certificates it needs, `tls`) is the
 // tests' alone (the tests' own build still reports what nobody uses).
@@ -113,6 +115,9 @@ enum Bench {
     Fleet(fleet::FleetArgs),
     /// The crane planner: fifo against travel on one workload, against the simulated crane.
     Crane(crane::CraneArgs),
+    /// A year of history: the reads, start-up, memory and size on N ended jobs against an
+    /// empty store.
+    History(history::HistoryArgs),
 }
 
 fn main() -> ExitCode {
@@ -144,6 +149,7 @@ fn main() -> ExitCode {
             Bench::Ws { subscribers, events, rate } => ws::run(subscribers, events, rate).await,
             Bench::Fleet(args) => fleet::run(args).await,
             Bench::Crane(args) => crane::run(args).await,
+            Bench::History(args) => history::run(args).await,
         }
     });
     match result {

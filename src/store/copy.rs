@@ -17,7 +17,7 @@ use std::time::Duration;
 
 use super::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOB_HISTORY, JOBS, LOCATIONS};
 use super::engine::{Database, Engine, OpenError};
-use super::{Pool, on};
+use super::{Pool, Tx, on};
 
 /// Each table, in an order that satisfies its foreign keys, with its key and columns.
 const TABLES: &[(&str, &str, &[&str])] = &[
@@ -74,11 +74,7 @@ pub async fn copy(from: &Database, to: &Database) -> Result<Copied, CopyError> {
             return Err(CopyError::NotEmpty(format!("{n} rows in {table}")));
         }
     }
-    let mut tx = match &target {
-        Pool::Sqlite(p) => p.begin().await.map(Tx::Sqlite),
-        Pool::Postgres(p) => p.begin().await.map(Tx::Postgres),
-    }
-    .map_err(|error| CopyError::Table { table: "jobs", error })?;
+    let mut tx = target.write_tx().await.map_err(|error| CopyError::Table { table: "jobs", error })?;
     let mut copied = Vec::new();
     for &(table, key, columns) in TABLES {
         let insert = target.engine().insert_json(table, columns);
@@ -111,12 +107,6 @@ pub async fn copy(from: &Database, to: &Database) -> Result<Copied, CopyError> {
     source.close().await;
     target.close().await;
     Ok(copied)
-}
-
-/// The target's transaction.
-enum Tx {
-    Sqlite(sqlx::Transaction<'static, sqlx::Sqlite>),
-    Postgres(sqlx::Transaction<'static, sqlx::Postgres>),
 }
 
 /// Up to [`PAGE`] rows of `table` from `offset` on, in key order, each as a JSON object.

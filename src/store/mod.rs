@@ -30,6 +30,7 @@ pub mod controls;
 pub mod copy;
 pub mod engine;
 pub mod events;
+pub mod import;
 pub mod jobs;
 pub mod locations;
 pub mod stats;
@@ -67,6 +68,12 @@ macro_rules! on {
     };
 }
 pub(crate) use on;
+
+/// A write transaction outside the writer ([`Pool::write_tx`]).
+pub(crate) enum Tx {
+    Sqlite(sqlx::Transaction<'static, sqlx::Sqlite>),
+    Postgres(sqlx::Transaction<'static, sqlx::Postgres>),
+}
 
 /// Where a read runs: on the pool, or inside a read transaction ([`Pool::read_tx`]).
 pub enum Reader<'a> {
@@ -151,6 +158,16 @@ impl Pool {
                     .await?;
                 ReadTx::Postgres(tx)
             }
+        })
+    }
+
+    /// Starts a write transaction outside the writer (`db copy`, [`import`]): on SQLite
+    /// `BEGIN IMMEDIATE`, which takes the write lock at once (waiting up to the busy
+    /// timeout) rather than failing at the first write when rackd's writer committed since.
+    pub(crate) async fn write_tx(&self) -> Result<Tx, sqlx::Error> {
+        Ok(match self {
+            Pool::Sqlite(p) => Tx::Sqlite(p.begin_with("BEGIN IMMEDIATE").await?),
+            Pool::Postgres(p) => Tx::Postgres(p.begin().await?),
         })
     }
 

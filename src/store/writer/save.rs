@@ -18,7 +18,7 @@ use serde::Serialize;
 use super::Conn;
 use super::apply::{Group, History};
 use crate::domain::Job;
-use crate::store::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOBS, LOCATIONS};
+use crate::store::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOBS, JobOut, LOCATIONS};
 use crate::store::controls::AuditEntry;
 use crate::store::engine::Engine;
 use crate::store::events::StoredEvent;
@@ -81,52 +81,6 @@ impl Statements {
 
 static SQLITE: LazyLock<Statements> = LazyLock::new(|| Statements::new(Engine::Sqlite));
 static POSTGRES: LazyLock<Statements> = LazyLock::new(|| Statements::new(Engine::Postgres));
-
-/// A job's row, as [`JOBS`] names its columns (`device_ref` is null: a new job has none).
-#[derive(Serialize)]
-struct JobOut<'a> {
-    id: i64,
-    reference: Option<&'a str>,
-    kind: &'static str,
-    priority: u8,
-    barcode: Option<&'a str>,
-    spec: String,
-    request: Option<&'a str>,
-    device: Option<&'a str>,
-    state: &'static str,
-    forced: bool,
-    failure_kind: Option<&'static str>,
-    failure_code: Option<i64>,
-    failure_text: Option<&'a str>,
-    created_at: i64,
-    updated_at: i64,
-    attempt: u32,
-}
-
-impl<'a> JobOut<'a> {
-    fn new(job: &'a Job, request: Option<&'a str>) -> JobOut<'a> {
-        use crate::domain::time::to_ms;
-        let f = job.failure.as_ref();
-        JobOut {
-            id: job.id,
-            reference: job.reference.as_deref(),
-            kind: job.kind.as_str(),
-            priority: job.priority,
-            barcode: job.barcode.as_deref(),
-            spec: crate::store::jobs::StoredSpec::json(job),
-            request,
-            device: job.device.as_deref(),
-            state: job.state.as_str(),
-            forced: job.forced,
-            failure_kind: f.map(|f| f.kind.as_str()),
-            failure_code: f.and_then(|f| f.code),
-            failure_text: f.map(|f| f.text.as_str()),
-            created_at: to_ms(job.created_at),
-            updated_at: to_ms(job.updated_at),
-            attempt: job.attempt,
-        }
-    }
-}
 
 #[derive(Serialize)]
 struct EventOut<'a> {

@@ -4,6 +4,7 @@
 
 mod copy;
 mod groups;
+mod import;
 mod pages;
 
 use std::time::Duration;
