@@ -9,7 +9,9 @@
 //! - Rows travel as JSON: each table is read a page at a time as JSON objects (SQLite's
 //!   `json_object`, PostgreSQL's `row_to_json`) and written with the writer's own set-based
 //!   statements ([`super::engine::Engine::insert_json`]), one statement per page, all in one
-//!   transaction on the target: a failed copy leaves it empty.
+//!   transaction on the target: a failed copy leaves it empty. A page starts after the last
+//!   key of the one before (not at an offset, which would read every row before it again:
+//!   a copy of a year's history would take hours instead of minutes).
 //! - rackd must not run on either database meanwhile (the command says so; it cannot
 //!   check a server it does not run on).
 
@@ -78,21 +80,22 @@ pub async fn copy(from: &Database, to: &Database) -> Result<Copied, CopyError> {
     let mut copied = Vec::new();
     for &(table, key, columns) in TABLES {
         let insert = target.engine().insert_json(table, columns);
-        let mut offset = 0;
+        let mut after = Page::First;
+        let mut count = 0;
         loop {
-            let rows = page(&source, table, key, columns, offset)
+            let (rows, next) = page(&source, table, key, columns, after)
                 .await
                 .map_err(|error| CopyError::Table { table, error })?;
             if rows.is_empty() {
                 break;
             }
-            offset += rows.len() as i64;
+            (after, count) = (next, count + rows.len() as u64);
             let json = format!("[{}]", rows.join(","));
             let sql = sqlx::AssertSqlSafe(insert.clone());
             on!(Tx, &mut tx, t => sqlx::query(sql).bind(json).execute(&mut **t).await.map(drop))
                 .map_err(|error| CopyError::Table { table, error })?;
         }
-        copied.push((table, offset as u64));
+        copied.push((table, count));
     }
     if let Tx::Postgres(t) = &mut tx {
         // Ids given explicitly leave the history's identity behind: move it on.
@@ -109,27 +112,61 @@ pub async fn copy(from: &Database, to: &Database) -> Result<Copied, CopyError> {
     Ok(copied)
 }
 
-/// Up to [`PAGE`] rows of `table` from `offset` on, in key order, each as a JSON object.
+/// Where the next page starts.
+#[derive(Clone, Copy)]
+enum Page {
+    /// At the table's first row.
+    First,
+    /// After this key (a table keyed by one integer column: read by its index, so a page
+    /// costs the same at the end of a table of millions as at its start).
+    After(i64),
+    /// After this many rows (`locations`, keyed by five columns, a few thousand rows at
+    /// most; `controls`, a row per pause).
+    Skip(i64),
+}
+
+/// Up to [`PAGE`] rows of `table` after `after`, in key order, each as a JSON object; and
+/// where the next page starts.
 async fn page(
     source: &Pool,
     table: &str,
     key: &str,
     columns: &[&str],
-    offset: i64,
-) -> Result<Vec<String>, sqlx::Error> {
+    after: Page,
+) -> Result<(Vec<String>, Page), sqlx::Error> {
+    // Tables keyed by one integer column; `locations` and `controls` (a text key) are small.
+    let single = key == "id" || key == "seq";
+    let (filter, skip, from) = match after {
+        Page::First => ("", 0, 0),
+        Page::After(k) => (" WHERE {key} > $3", 0, k),
+        Page::Skip(n) => ("", n, 0),
+    };
+    let filter = filter.replace("{key}", key);
     let read = match source.engine() {
         Engine::Sqlite => {
             let fields: Vec<String> = columns.iter().map(|c| format!("'{c}', {c}")).collect();
             format!(
-                "SELECT json_object({}) FROM {table} ORDER BY {key} LIMIT $1 OFFSET $2",
-                fields.join(", ")
+                "SELECT json_object({}), {} FROM {table}{filter} ORDER BY {key} LIMIT $1 OFFSET $2",
+                fields.join(", "),
+                if single { key } else { "0" },
             )
         }
         Engine::Postgres => format!(
-            "SELECT row_to_json(t)::text FROM (SELECT {} FROM {table} ORDER BY {key} LIMIT $1 OFFSET $2) AS t",
+            "SELECT row_to_json(t)::text, {} FROM (SELECT {} FROM {table}{filter} ORDER BY {key} LIMIT $1 OFFSET $2) AS t",
+            if single { format!("t.{key}::bigint") } else { "0::bigint".to_owned() },
             columns.join(", ")
         ),
     };
     let sql = sqlx::AssertSqlSafe(read);
-    on!(Pool, source, p => sqlx::query_scalar(sql).bind(PAGE).bind(offset).fetch_all(p).await)
+    let rows: Vec<(String, i64)> = on!(Pool, source, p => {
+        let q = sqlx::query_as(sql).bind(PAGE).bind(skip);
+        let q = if matches!(after, Page::After(_)) { q.bind(from) } else { q };
+        q.fetch_all(p).await
+    })?;
+    let next = match (single, rows.last()) {
+        (true, Some((_, k))) => Page::After(*k),
+        (false, _) => Page::Skip(skip + rows.len() as i64),
+        (true, None) => after,
+    };
+    Ok((rows.into_iter().map(|(json, _)| json).collect(), next))
 }

@@ -114,3 +114,37 @@ async fn a_store_with_history_copies_to_postgres_and_back_unchanged() {
     let back = store::open(&again, std::time::Duration::from_secs(5)).await.unwrap();
     assert_eq!(read(&back).await, read(&postgres).await, "PostgreSQL to SQLite reads the same");
 }
+
+/// More rows than a page (5,000) in every large table: each page starts after the last
+/// key of the one before, and the copy holds every row once.
+#[tokio::test]
+async fn a_store_of_several_pages_copies_every_row_once() {
+    use rackd::domain::JobState;
+    use rackd::store::import::{self, Ended};
+    let (sqlite, from, _dir) = open(Engine::Sqlite).await;
+    let jobs: Vec<Ended> = (1..=12_001i64)
+        .map(|id| {
+            let new = light(&format!("P-{id}"), 1);
+            let mut job = new.accepted(id, id);
+            job.state = JobState::Completed;
+            let history =
+                vec![(JobState::Queued, "accepted".into(), id), (JobState::Completed, "done".into(), id)];
+            Ended { request: new.canonical(), job, history }
+        })
+        .collect();
+    import::ended_jobs(&sqlite, &jobs).await.unwrap();
+    let (postgres, to, _) = open(Engine::Postgres).await;
+    let copied = store::copy::copy(&from, &to).await.unwrap();
+    assert!(copied.contains(&("jobs", 12_001)) && copied.contains(&("job_history", 24_002)), "{copied:?}");
+    let sums = "SELECT COUNT(*), CAST(SUM(id) AS BIGINT), (SELECT COUNT(DISTINCT job_id) FROM job_history) FROM jobs";
+    let a: (i64, i64, i64) = match &sqlite {
+        Pool::Sqlite(p) => sqlx::query_as(sums).fetch_one(p).await.unwrap(),
+        Pool::Postgres(_) => unreachable!(),
+    };
+    let b: (i64, i64, i64) = match &postgres {
+        Pool::Postgres(p) => sqlx::query_as(sums).fetch_one(p).await.unwrap(),
+        Pool::Sqlite(_) => unreachable!(),
+    };
+    assert_eq!(a, (12_001, 12_001 * 12_002 / 2, 12_001));
+    assert_eq!(b, a);
+}
