@@ -283,45 +283,31 @@ async fn size(database: &Database, dir: &Path) -> anyhow::Result<u64> {
 }
 
 fn print(args: &HistoryArgs, empty: &Figures, full: &Figures) {
-    let ms = |d: Duration| format!("{:.2} ms", d.as_secs_f64() * 1000.0);
-    let ratio = |a: f64, b: f64| if a > 0.0 { format!("{:.1}x", b / a) } else { "-".to_owned() };
     println!("{:<48} {:>14} {:>14} {:>8}", "", "fresh store", format!("{} jobs", args.jobs), "ratio");
     let row = |name: &str, a: String, b: String, r: String| println!("{name:<48} {a:>14} {b:>14} {r:>8}");
+    // A figure of both stores, shown by `show`, and their ratio.
+    let pair = |name: &str, a: f64, b: f64, show: &dyn Fn(f64) -> String| {
+        let ratio = if a > 0.0 { format!("{:.1}x", b / a) } else { "-".to_owned() };
+        row(name, show(a), show(b), ratio);
+    };
+    let ms = |secs: f64| format!("{:.2} ms", secs * 1000.0);
     let secs = |d: Duration| d.as_secs_f64();
-    row("start-up to ready", ms(empty.ready), ms(full.ready), ratio(secs(empty.ready), secs(full.ready)));
+    pair("start-up to ready", secs(empty.ready), secs(full.ready), &ms);
     for ((name, a), (_, b)) in empty.reads.iter().zip(&full.reads) {
-        let r = match (a, b) {
-            (Ok(a), Ok(b)) => ratio(secs(*a), secs(*b)),
-            _ => "-".to_owned(),
-        };
-        let show = |x: &Result<Duration, String>| x.as_ref().map_or_else(|e| e.clone(), |d| ms(*d));
-        row(name, show(a), show(b), r);
+        match (a, b) {
+            (Ok(a), Ok(b)) => pair(name, secs(*a), secs(*b), &ms),
+            _ => {
+                let show =
+                    |x: &Result<Duration, String>| x.as_ref().map_or_else(|e| e.clone(), |d| ms(secs(*d)));
+                row(name, show(a), show(b), "-".to_owned());
+            }
+        }
     }
-    row(
-        "POST /api/v1/jobs, p50",
-        ms(empty.post_p50),
-        ms(full.post_p50),
-        ratio(secs(empty.post_p50), secs(full.post_p50)),
-    );
-    row(
-        "POST /api/v1/jobs, p99",
-        ms(empty.post_p99),
-        ms(full.post_p99),
-        ratio(secs(empty.post_p99), secs(full.post_p99)),
-    );
-    let mib = |kib: u64| format!("{:.0} MiB", kib as f64 / 1024.0);
-    row(
-        "resident memory after the reads",
-        mib(empty.rss_kib),
-        mib(full.rss_kib),
-        ratio(empty.rss_kib as f64, full.rss_kib as f64),
-    );
-    let size = |b: u64| format!("{:.1} MiB", b as f64 / 1_048_576.0);
-    row(
-        "database size",
-        size(empty.size_bytes),
-        size(full.size_bytes),
-        ratio(empty.size_bytes as f64, full.size_bytes as f64),
-    );
+    pair("POST /api/v1/jobs, p50", secs(empty.post_p50), secs(full.post_p50), &ms);
+    pair("POST /api/v1/jobs, p99", secs(empty.post_p99), secs(full.post_p99), &ms);
+    let mib = |kib: f64| format!("{:.0} MiB", kib / 1024.0);
+    pair("resident memory after the reads", empty.rss_kib as f64, full.rss_kib as f64, &mib);
+    let size = |bytes: f64| format!("{:.1} MiB", bytes / 1_048_576.0);
+    pair("database size", empty.size_bytes as f64, full.size_bytes as f64, &size);
     row("prune of one day", "-".to_owned(), "-".to_owned(), "no retention yet".to_owned());
 }
