@@ -18,7 +18,6 @@ use std::time::Duration;
 use crate::protocols::Protocol;
 use crate::protocols::faults::Faults;
 use crate::protocols::serial::SerialSettings;
-use crate::protocols::{BadDeviceCode, DeviceCode, mewtocol, modbus, ppi};
 
 /// The transports the shelf simulator serves, named as a device's `protocol`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -102,15 +101,6 @@ impl ShelfProtocol {
     /// than a network address.
     pub fn is_serial(self) -> bool {
         matches!(self, ShelfProtocol::ModbusRtu | ShelfProtocol::Ppi | ShelfProtocol::Mewtocol)
-    }
-
-    /// Reads a device error code for this protocol's server, as its manual writes it.
-    pub fn device_code(self, text: &str) -> Result<DeviceCode, BadDeviceCode> {
-        match self.family() {
-            Family::Modbus => text.parse::<modbus::Exception>().map(DeviceCode::from),
-            Family::Ppi => text.parse::<ppi::ReturnCode>().map(DeviceCode::from),
-            Family::Mewtocol => text.parse::<mewtocol::ErrorCode>().map(DeviceCode::from),
-        }
     }
 
     pub(super) fn family(self) -> Family {
