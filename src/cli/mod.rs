@@ -101,6 +101,26 @@ pub enum DbCommand {
         #[arg(long, value_parser = crate::store::Database::parse)]
         to: crate::store::Database,
     },
+    /// Move the jobs that ended before a date, with their history, to a gzip'd JSON Lines
+    /// file per day (rackd may run). Example: rackd db archive --database sqlite:data/rackd.db
+    /// --before 2026-08-01 --to /var/lib/rackd/archive
+    Archive {
+        /// The store: sqlite:PATH or postgres://...
+        #[arg(long, value_parser = crate::store::Database::parse)]
+        database: crate::store::Database,
+        /// Jobs that ended before this day (YYYY-MM-DD, from midnight UTC) leave the store.
+        #[arg(long, value_parser = parse_date)]
+        before: time::Date,
+        /// The folder the files go to (created if missing).
+        #[arg(long)]
+        to: PathBuf,
+    },
+}
+
+/// A day written `YYYY-MM-DD`.
+fn parse_date(text: &str) -> Result<time::Date, String> {
+    let format = time::macros::format_description!("[year]-[month]-[day]");
+    time::Date::parse(text, &format).map_err(|_| format!("{text:?} is not a day written YYYY-MM-DD"))
 }
 
 /// `rackd serve` options. Settings come from the defaults, the file, the environment
@@ -159,6 +179,25 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 println!("{table}: {rows} rows");
             }
             println!("copied {} to {}", from.display(), to.display());
+        }
+        Command::Db(DbCommand::Archive { database, before, to }) => {
+            let pool = crate::store::open(&database, std::time::Duration::from_secs(30))
+                .await
+                .with_context(|| format!("opening {}", database.display()))?;
+            let done = crate::store::archive::archive(&pool, before, &to)
+                .await
+                .with_context(|| format!("archiving {} before {before}", database.display()))?;
+            pool.close().await;
+            for file in &done.files {
+                println!("{}", file.display());
+            }
+            println!(
+                "archived {} jobs to {} files in {}; {} kept (a lock or an unfinished job names them)",
+                done.jobs,
+                done.files.len(),
+                to.display(),
+                done.kept
+            );
         }
         Command::Openapi => {
             say(crate::api::openapi().to_pretty_json().context("encoding OpenAPI")?);

@@ -24,6 +24,7 @@
 //!   one writer ([`writer::Writer`]) that commits many requests per transaction.
 
 pub mod alarms;
+pub mod archive;
 pub mod cluster;
 mod columns;
 pub mod controls;

@@ -2,6 +2,7 @@
 //! throwaway PostgreSQL cluster (see `tests/it/support/postgres.rs`), through the real writer
 //! and the real migrations.
 
+mod archive;
 mod copy;
 mod groups;
 mod import;
