@@ -27,6 +27,7 @@ mod explain;
 mod hosts;
 pub mod layers;
 pub mod origin;
+mod retention;
 pub mod tls;
 
 pub use check::Invalid;
@@ -36,6 +37,7 @@ pub use events::{EventsConfig, EventsConfigError};
 pub use hosts::{AllowedHost, BadHost};
 pub use layers::{Loaded, Sources};
 pub use origin::Origin;
+pub use retention::{ARCHIVE_ACTION, RetentionConfig};
 pub use tls::{TlsConfig, TlsError};
 
 pub use crate::auth::{AuthConfig, KeyConfig};
@@ -58,6 +60,8 @@ pub struct Config {
     pub site: SiteConfig,
     /// The event log and live subscribers.
     pub events: EventsConfig,
+    /// How long ended jobs stay in the store, and where the archive is.
+    pub retention: RetentionConfig,
     /// Hot standby: this node is one of several on one PostgreSQL database
     /// (`service::cluster`). None: a node of its own.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -91,6 +91,8 @@ async fn measure(args: &HistoryArgs, jobs: u64) -> anyhow::Result<Figures> {
     pool.close().await;
 
     let mut config = Config::demo();
+    // The seeded year stays: the prune is measured on its own (below).
+    config.retention.jobs_days = 36_500;
     if let Database::Postgres(url) = &database {
         config.database.url = Some(url.clone());
     }

@@ -10,12 +10,14 @@ use std::time::Duration;
 use anyhow::Context;
 use tokio::task::JoinHandle;
 
-use crate::config::Config;
+use crate::config::{ARCHIVE_ACTION, Config, RetentionConfig};
 use crate::devices::gate::MayDrive;
 use crate::devices::{self, Devices};
+use crate::domain::AlarmKind;
 use crate::domain::time::now_ms;
 use crate::service::dispatch::{Dispatcher, Queues};
 use crate::service::monitor;
+use crate::store::alarms::NewAlarm;
 use crate::store::writer::{Record, Writer};
 use crate::store::{self, Pool};
 
@@ -46,7 +48,9 @@ pub(super) async fn start(
     tasks.extend(monitor::start(&devices, queues, writer.clone(), pool).await);
     queues.watch_devices(devices.iter().map(|(id, h)| (id.clone(), h.status.clone())).collect());
     tasks.push(tokio::spawn(crate::service::dispatch::waiting::watch(queues.clone(), writer.clone())));
-    tasks.push(tokio::spawn(retention(writer, config.events.retention_hours)));
+    tasks.push(tokio::spawn(retention(writer.clone(), config.events.retention_hours)));
+    let folder = config.retention.folder(&config.database.path);
+    tasks.push(tokio::spawn(archive(pool.clone(), writer, config.retention.clone(), folder)));
     Ok(Drive { devices, tasks })
 }
 
@@ -65,6 +69,48 @@ async fn retention(writer: Writer, hours: u64) {
         }
     }
 }
+
+/// Moves the jobs that ended before midnight UTC `jobs_days` days ago to the archive in
+/// `folder` (`store::archive`), at start and then every hour. A run that fails deleted
+/// nothing: it raises the `archive` alarm, which the next run that works clears.
+async fn archive(pool: Pool, writer: Writer, retention: RetentionConfig, folder: std::path::PathBuf) {
+    let days = retention.jobs_days;
+    let mut tick = tokio::time::interval(retention.every);
+    loop {
+        tick.tick().await;
+        let today = time::OffsetDateTime::now_utc().date();
+        let before = today.saturating_sub(time::Duration::days(days.min(36_500) as i64));
+        let record = match store::archive::archive(&pool, before, &folder).await {
+            Ok(done) => {
+                if done.jobs > 0 {
+                    tracing::info!(jobs = done.jobs, files = done.files.len(), kept = done.kept, before = %before,
+                        "retention: ended jobs archived");
+                }
+                Record::AlarmCleared { device: ARCHIVE_DEVICE.into(), key: (AlarmKind::Archive, 0) }
+            }
+            Err(e) => {
+                tracing::error!(error = %e, "retention: archiving ended jobs failed; nothing was deleted");
+                Record::AlarmRaised(NewAlarm {
+                    device: ARCHIVE_DEVICE.into(),
+                    kind: AlarmKind::Archive,
+                    code: 0,
+                    class: AlarmKind::Archive.class(),
+                    text: format!("ended jobs could not be archived: {e}"),
+                    detail: None,
+                    action: Some(ARCHIVE_ACTION.into()),
+                })
+            }
+        };
+        match writer.record(record).await {
+            Ok(()) => {}
+            Err(store::writer::WriteError::Closed) => return,
+            Err(e) => tracing::warn!(error = %e, "retention: the archive alarm could not be recorded"),
+        }
+    }
+}
+
+/// The device an `archive` alarm is raised on.
+pub const ARCHIVE_DEVICE: &str = "store";
 
 /// Stops the tasks and waits for them to end.
 pub(super) async fn stop(tasks: Vec<JoinHandle<()>>) {

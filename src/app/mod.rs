@@ -102,6 +102,10 @@ impl Application {
         let pool = store::open_with(&database, Duration::from_millis(db.busy_timeout_ms), ca)
             .await
             .with_context(|| format!("opening database {}{with_ca}", database.display()))?;
+        // The archive's folder takes files, or the start fails (`[retention]`); after the
+        // database, whose own problems (its folder, say) say more when both are wrong.
+        store::archive::check_folder(&config.retention.folder(&config.database.path))
+            .context("retention.archive_dir")?;
         let layout = config.layout();
         locations::seed(&pool, &layout, now_ms()).await.context("seeding locations")?;
         let on_cluster = match (&config.cluster, &pool) {

@@ -72,6 +72,9 @@ pub enum Invalid {
     /// An intake bound of 0.
     #[error("intake.max_group and intake.queue must be at least 1")]
     Intake,
+    /// A retention shorter than a day.
+    #[error("retention.jobs_days must be at least 1 (there is no \"off\": keep a long time, 36500)")]
+    Retention,
     /// `[events]`.
     #[error(transparent)]
     Events(#[from] EventsConfigError),
@@ -204,6 +207,9 @@ impl Config {
                 "auth.failure_window_secs".into(),
                 Invalid::FailureLimit { most: crate::auth::MOST_FAILURES },
             ));
+        }
+        if self.retention.jobs_days == 0 {
+            return Err(("retention.jobs_days".into(), Invalid::Retention));
         }
         if self.intake.max_group == 0 || self.intake.queue == 0 {
             let key = if self.intake.max_group == 0 { "intake.max_group" } else { "intake.queue" };

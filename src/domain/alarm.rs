@@ -58,17 +58,21 @@ pub enum AlarmKind {
     /// Another node of the cluster took over driving the machines (device `cluster`);
     /// cleared once a standby is back.
     Takeover,
+    /// The retention could not archive ended jobs (device `store`: a full disk, a folder
+    /// that went read-only); nothing was deleted. Cleared by the next archive that works.
+    Archive,
 }
 
 impl AlarmKind {
     /// Every kind.
-    pub const ALL: [AlarmKind; 6] = [
+    pub const ALL: [AlarmKind; 7] = [
         AlarmKind::Device,
         AlarmKind::Link,
         AlarmKind::Heartbeat,
         AlarmKind::Degraded,
         AlarmKind::MemoryLost,
         AlarmKind::Takeover,
+        AlarmKind::Archive,
     ];
 
     /// The kind's name as the API writes it.
@@ -80,6 +84,7 @@ impl AlarmKind {
             AlarmKind::Degraded => "degraded",
             AlarmKind::MemoryLost => "memory_lost",
             AlarmKind::Takeover => "takeover",
+            AlarmKind::Archive => "archive",
         }
     }
 
@@ -92,7 +97,9 @@ impl AlarmKind {
     pub fn class(self) -> AlarmClass {
         match self {
             AlarmKind::Link | AlarmKind::Degraded | AlarmKind::Takeover => AlarmClass::Link,
-            AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost => AlarmClass::Hardware,
+            AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost | AlarmKind::Archive => {
+                AlarmClass::Hardware
+            }
         }
     }
 }

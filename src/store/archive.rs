@@ -81,10 +81,7 @@ pub struct Archived {
 /// Moves every ended job that ended before `before` (midnight UTC) and nothing names to
 /// a file per day in `dir`.
 pub async fn archive(pool: &Pool, before: Date, dir: &Path) -> Result<Archived, ArchiveError> {
-    let folder = |source| ArchiveError::Folder { path: dir.to_owned(), source };
-    std::fs::create_dir_all(dir).map_err(folder)?;
-    let probe = tempfile_in(dir).map_err(folder)?;
-    drop(probe);
+    check_folder(dir)?;
     let cut = to_ms(OffsetDateTime::new_utc(before, Time::MIDNIGHT));
     let held = held(pool).await?;
     let mut done = Archived::default();
@@ -115,12 +112,14 @@ pub async fn archive(pool: &Pool, before: Date, dir: &Path) -> Result<Archived, 
     Ok(done)
 }
 
-/// A temporary file in `dir`: proof that the folder takes files, before anything is read.
-fn tempfile_in(dir: &Path) -> std::io::Result<std::fs::File> {
+/// Creates `dir` if missing and writes and removes a file in it: proof that the folder
+/// takes files, before anything is read (and at rackd's start, `retention.archive_dir`).
+pub fn check_folder(dir: &Path) -> Result<(), ArchiveError> {
+    let folder = |source| ArchiveError::Folder { path: dir.to_owned(), source };
+    std::fs::create_dir_all(dir).map_err(folder)?;
     let path = dir.join(".rackd-archive-probe");
-    let file = std::fs::File::create(&path)?;
-    std::fs::remove_file(&path)?;
-    Ok(file)
+    std::fs::File::create(&path).map_err(folder)?;
+    std::fs::remove_file(&path).map_err(folder)
 }
 
 /// Ids of ended jobs something still names: a location's lock, an unfinished job's

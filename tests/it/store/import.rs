@@ -12,14 +12,17 @@ use rstest::rstest;
 use super::{light, open};
 use crate::support::spawn_on;
 
+/// Job `id`, ended a few seconds ago (within the retention: rackd keeps it).
 fn ended(new: &NewJob, id: i64, state: JobState) -> Ended {
-    let mut job = new.accepted(id, 1_000 * id);
+    let at = rackd::domain::time::now_ms() - 10_000 + 1_000 * id;
+    let mut job = new.accepted(id, at);
     job.device = Some("shelf1".into());
     job.state = state;
+    job.updated_at = rackd::domain::time::from_ms(at + 20);
     let history = vec![
-        (JobState::Queued, "accepted".into(), 1_000 * id),
-        (JobState::Dispatched, "handed to shelf1".into(), 1_000 * id + 10),
-        (state, "loaded".into(), 1_000 * id + 20),
+        (JobState::Queued, "accepted".into(), at),
+        (JobState::Dispatched, "handed to shelf1".into(), at + 10),
+        (state, "loaded".into(), at + 20),
     ];
     Ended { request: new.canonical(), job, history }
 }

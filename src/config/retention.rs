@@ -1,0 +1,59 @@
+//! `[retention]`: how long ended jobs stay in the store before rackd moves them to the
+//! archive (`store::archive`, the same as `rackd db archive`), and where the archive is.
+//!
+//! Decisions:
+//! - **Days, at least one** (`jobs_days`, default 90): shorter would archive jobs a WMS may
+//!   still ask about the same day, and it is refused at start. There is no "off": a site
+//!   that keeps everything sets a long time (36500).
+//! - **The archive folder** (`archive_dir`): by default `archive` in the folder of
+//!   `database.path` (`data/archive` for the default `data/rackd.db`, `/data/data/archive`
+//!   in the container), with PostgreSQL too, whose server holds no files of rackd's. rackd
+//!   checks at start that it can write a file there and refuses to start if not.
+//! - **When**: the node that drives the machines archives at start and then every hour,
+//!   the jobs that ended before midnight UTC `jobs_days` days ago. A run that fails (a full
+//!   disk) deletes nothing, raises an `archive` alarm on device `store`, and is tried again
+//!   at the next hour; the next run that works clears the alarm.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+/// What an `archive` alarm asks a person to do.
+pub const ARCHIVE_ACTION: &str = "Free space on the disk of retention.archive_dir (or make the folder writable \
+     again); rackd deleted nothing it could not archive and tries again every hour.";
+
+/// `[retention]`
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RetentionConfig {
+    /// Days an ended job stays in the store after it ended.
+    pub jobs_days: u64,
+    /// Where archived jobs go (a file per day); beside the SQLite file when not set.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub archive_dir: Option<PathBuf>,
+    /// How often the archive runs. Not a key of the file (hourly is right for any site);
+    /// the tests shorten it.
+    #[serde(skip, default = "hourly")]
+    pub every: Duration,
+}
+
+fn hourly() -> Duration {
+    Duration::from_secs(3600)
+}
+
+impl Default for RetentionConfig {
+    fn default() -> Self {
+        RetentionConfig { jobs_days: 90, archive_dir: None, every: hourly() }
+    }
+}
+
+impl RetentionConfig {
+    /// The archive folder, when `database.path` is `database_path`.
+    pub fn folder(&self, database_path: &Path) -> PathBuf {
+        match &self.archive_dir {
+            Some(dir) => dir.clone(),
+            None => database_path.parent().unwrap_or(Path::new(".")).join("archive"),
+        }
+    }
+}
