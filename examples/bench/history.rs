@@ -4,7 +4,9 @@
 //! prints each call beside the same call on an empty store in the same run, with the
 //! ratio: the time to ready, single-POST latency (the first calls, on each store: the
 //! fresh store then holds those 200 jobs), the KPI and list reads, `/metrics`, resident
-//! memory and the database's size.
+//! memory, the database's size, and the prune of the oldest day (`store::archive`, as the
+//! retention runs it) with the p99 of single POSTs sent meanwhile, beside their p99 on the
+//! same store without a prune.
 //!
 //! The seeded site is the demo's (shelf aisle 1, crane aisle 2), its devices configured but
 //! not running (no simulator answers: they are offline, as a site's at night, and cost the
@@ -56,6 +58,9 @@ struct Figures {
     post_p99: Duration,
     rss_kib: u64,
     size_bytes: u64,
+    /// The prune of the oldest day: jobs archived, how long it took, and the p99 of the
+    /// single POSTs sent meanwhile (None when none was).
+    prune: (u64, Duration, Option<Duration>),
 }
 
 /// Runs the benchmark.
@@ -139,6 +144,7 @@ async fn measure(args: &HistoryArgs, jobs: u64) -> anyhow::Result<Figures> {
         reads.push((name, time_read(&client, &format!("{base}{path}")).await));
     }
     let rss_kib = rss_kib(server.pid)?;
+    let prune = prune_a_day(&database, dir.path(), &client, &base).await?;
     server.stop().await;
     let size_bytes = size(&database, dir.path()).await?;
     Ok(Figures {
@@ -148,7 +154,45 @@ async fn measure(args: &HistoryArgs, jobs: u64) -> anyhow::Result<Figures> {
         post_p99: posts[POSTS * 99 / 100],
         rss_kib,
         size_bytes,
+        prune,
     })
+}
+
+/// Archives the oldest day of the store (`store::archive`, as the retention does) while
+/// single POSTs go on, one after the other: the jobs archived, the time, the POSTs' p99.
+async fn prune_a_day(
+    database: &Database,
+    dir: &Path,
+    client: &reqwest::Client,
+    base: &str,
+) -> anyhow::Result<(u64, Duration, Option<Duration>)> {
+    let pool = rackd::store::open(database, Duration::from_secs(30)).await?;
+    let first: Option<i64> = match &pool {
+        Pool::Sqlite(p) => sqlx::query_scalar("SELECT MIN(updated_at) FROM jobs").fetch_one(p).await?,
+        Pool::Postgres(p) => sqlx::query_scalar("SELECT MIN(updated_at) FROM jobs").fetch_one(p).await?,
+    };
+    let day = first.map_or(time::OffsetDateTime::now_utc(), rackd::domain::time::from_ms).date();
+    let before = day.next_day().unwrap_or(day);
+    let started = Instant::now();
+    let folder = dir.join("archive");
+    let archive = tokio::spawn(async move {
+        let done = rackd::store::archive::archive(&pool, before, &folder).await;
+        pool.close().await;
+        done
+    });
+    let mut posts = Vec::new();
+    while !archive.is_finished() {
+        let body = serde_json::json!({"kind": "light", "reference": format!("bench-prune-{}", posts.len()),
+            "location": {"aisle": 1, "row": 1, "bay": 2, "level": 1, "position": 1}, "color": "red", "on": true});
+        let t = Instant::now();
+        client.post(format!("{base}/api/v1/jobs")).json(&body).send().await?;
+        posts.push(t.elapsed());
+    }
+    let done = archive.await??;
+    let took = started.elapsed();
+    posts.sort();
+    let p99 = posts.get((posts.len() * 99 / 100).min(posts.len().saturating_sub(1))).copied();
+    Ok((done.jobs, took, p99.filter(|_| !posts.is_empty())))
 }
 
 /// The median of [`TIMES`] calls of `url`, or what it answered instead of 200.
@@ -311,5 +355,21 @@ fn print(args: &HistoryArgs, empty: &Figures, full: &Figures) {
     pair("resident memory after the reads", empty.rss_kib as f64, full.rss_kib as f64, &mib);
     let size = |bytes: f64| format!("{:.1} MiB", bytes / 1_048_576.0);
     pair("database size", empty.size_bytes as f64, full.size_bytes as f64, &size);
-    row("prune of one day", "-".to_owned(), "-".to_owned(), "no retention yet".to_owned());
+    let (jobs, took) = (full.prune.0, full.prune.1);
+    row(
+        &format!("prune of the oldest day ({jobs} jobs)"),
+        ms(secs(empty.prune.1)),
+        ms(secs(took)),
+        "-".to_owned(),
+    );
+    if let Some(during) = full.prune.2 {
+        let (without, during) = (secs(full.post_p99), secs(during));
+        println!(
+            "single POSTs on the {} jobs, p99: {} without a prune, {} during it ({:.1}x)",
+            args.jobs,
+            ms(without),
+            ms(during),
+            during / without
+        );
+    }
 }
