@@ -5,6 +5,7 @@ use serde::Serialize;
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
+use super::paging::Query;
 use super::{Reader, read};
 use crate::domain::time::from_ms;
 use crate::domain::{AlarmClass, AlarmKind};
@@ -128,22 +129,31 @@ pub struct AlarmFilter {
     pub limit: u32,
 }
 
-/// Alarms matching `filter`, newest first.
+/// Alarms matching `filter`, newest first, a page read on the index of its filter (see
+/// [`super::paging`]).
 pub async fn list(db: impl Into<Reader<'_>>, filter: &AlarmFilter) -> Result<Vec<Alarm>, sqlx::Error> {
-    let sql = sqlx::AssertSqlSafe(format!(
-        "SELECT {COLUMNS} FROM alarms WHERE ($1 IS NULL OR (cleared_at IS NULL) = $1) \
-         AND ($2 IS NULL OR device = $2) AND ($3 IS NULL OR id < $3) ORDER BY id DESC LIMIT $4"
-    ));
-    let rows: Vec<Row> = read!(db.into(), p => {
-        sqlx::query_as(sql)
-            .bind(filter.active)
-            .bind(&filter.device)
-            .bind(filter.before_id)
-            .bind(filter.limit as i64)
-            .fetch_all(p)
-            .await
-    })?;
+    let rows: Vec<Row> = list_query(filter).fetch_all(db.into()).await?;
     Ok(rows.into_iter().map(Alarm::from).collect())
+}
+
+/// The statement [`list`] runs for `filter`: only the conditions it sets, so that each
+/// engine matches them to an index (a condition such as `($1 IS NULL OR id < $1)` can use
+/// none).
+pub fn list_query(filter: &AlarmFilter) -> Query {
+    let mut q = Query::new(format!("SELECT {COLUMNS} FROM alarms WHERE TRUE"));
+    match filter.active {
+        Some(true) => q.push(" AND cleared_at IS NULL"),
+        Some(false) => q.push(" AND cleared_at IS NOT NULL"),
+        None => &mut q,
+    };
+    if let Some(d) = &filter.device {
+        q.push(" AND device = ").text(d);
+    }
+    if let Some(id) = filter.before_id {
+        q.push(" AND id < ").int(id);
+    }
+    q.push(" ORDER BY id DESC LIMIT ").int(filter.limit as i64);
+    q
 }
 
 /// Every active alarm, oldest first.
@@ -152,12 +162,6 @@ pub async fn active(db: impl Into<Reader<'_>>) -> Result<Vec<Alarm>, sqlx::Error
         sqlx::AssertSqlSafe(format!("SELECT {COLUMNS} FROM alarms WHERE cleared_at IS NULL ORDER BY id"));
     let rows: Vec<Row> = read!(db.into(), p => sqlx::query_as(sql).fetch_all(p).await)?;
     Ok(rows.into_iter().map(Alarm::from).collect())
-}
-
-/// Active alarms counted by device and class, in one grouped query.
-pub async fn count_active(db: impl Into<Reader<'_>>) -> Result<Vec<(String, String, i64)>, sqlx::Error> {
-    let sql = "SELECT device, class, COUNT(*) FROM alarms WHERE cleared_at IS NULL GROUP BY device, class";
-    read!(db.into(), p => sqlx::query_as(sql).fetch_all(p).await)
 }
 
 /// Alarms raised in `[from, to)` (Unix ms), oldest first, at most `limit`.

@@ -68,3 +68,6 @@ pub(crate) const CONTROLS: [&str; 5] = ["target", "paused", "by", "reason", "at"
 
 /// `audit`.
 pub(crate) const AUDIT: [&str; 7] = ["id", "at", "by", "action", "target", "reason", "client"];
+
+/// `job_counts`: the key columns first.
+pub(crate) const JOB_COUNTS: [&str; 3] = ["device", "state", "n"];
