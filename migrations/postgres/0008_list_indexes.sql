@@ -19,10 +19,13 @@ CREATE INDEX jobs_device_state ON jobs (device, state, id);
 DROP INDEX jobs_created;
 CREATE INDEX jobs_created ON jobs (created_at, id);
 
--- Alarms, newest first: by device, and the active ones (all, or a device's).
+-- Alarms, newest first: by device, and the active ones (all, or a device's); the export's
+-- period sought on alarms_raised, its ties in id order.
 CREATE INDEX alarms_device ON alarms (device, id);
 CREATE INDEX alarms_open ON alarms (id) WHERE cleared_at IS NULL;
 CREATE INDEX alarms_device_open ON alarms (device, id) WHERE cleared_at IS NULL;
+DROP INDEX alarms_raised;
+CREATE INDEX alarms_raised ON alarms (raised_at, id);
 
 -- Jobs counted by device ('' for none) and state, for `rackd_jobs`: the writer adds each
 -- commit's changes in the same commit (src/store/counts.rs), so the count is as durable as

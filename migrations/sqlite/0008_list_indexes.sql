@@ -17,7 +17,8 @@ DROP INDEX jobs_device;
 CREATE INDEX jobs_device ON jobs (device);
 CREATE INDEX jobs_device_state ON jobs (device, state);
 
--- Alarms, newest first: by device, and the active ones (all, or a device's).
+-- Alarms, newest first: by device, and the active ones (all, or a device's). The export's
+-- period is sought on alarms_raised (0004).
 CREATE INDEX alarms_device ON alarms (device);
 CREATE INDEX alarms_open ON alarms (id) WHERE cleared_at IS NULL;
 CREATE INDEX alarms_device_open ON alarms (device) WHERE cleared_at IS NULL;

@@ -164,19 +164,31 @@ pub async fn active(db: impl Into<Reader<'_>>) -> Result<Vec<Alarm>, sqlx::Error
     Ok(rows.into_iter().map(Alarm::from).collect())
 }
 
-/// Alarms raised in `[from, to)` (Unix ms), oldest first, at most `limit`.
+/// Alarms raised in `[from, to)` (Unix ms), oldest first, after the alarm `after` (0: from
+/// the first), at most `limit`: a page of the period, read as [`raised_query`] says.
 pub async fn raised_between(
     db: impl Into<Reader<'_>>,
     from: i64,
     to: i64,
+    after: i64,
     limit: u32,
 ) -> Result<Vec<Alarm>, sqlx::Error> {
-    let sql = sqlx::AssertSqlSafe(format!(
-        "SELECT {COLUMNS} FROM alarms WHERE raised_at >= $1 AND raised_at < $2 ORDER BY id LIMIT $3"
-    ));
-    let rows: Vec<Row> =
-        read!(db.into(), p => sqlx::query_as(sql).bind(from).bind(to).bind(limit as i64).fetch_all(p).await)?;
+    let rows: Vec<Row> = raised_query(from, to, after, limit).fetch_all(db.into()).await?;
     Ok(rows.into_iter().map(Alarm::from).collect())
+}
+
+/// The statement [`raised_between`] runs: the period as a range of ids, each bound sought on
+/// `alarms_raised` (ids are given in the order alarms are raised), as the jobs' period is
+/// (see [`super::paging`]); the page read on the key.
+pub fn raised_query(from: i64, to: i64, after: i64, limit: u32) -> Query {
+    const FIRST_FROM: &str = "(SELECT id FROM alarms WHERE raised_at >= ";
+    const IN_ORDER: &str = " ORDER BY raised_at, id LIMIT 1)";
+    let mut q = Query::new(format!("SELECT {COLUMNS} FROM alarms WHERE id >= "));
+    q.push(FIRST_FROM).int(from).push(IN_ORDER);
+    q.push(" AND id < COALESCE(").push(FIRST_FROM).int(to).push(IN_ORDER).push(", ").int(i64::MAX).push(")");
+    q.push(" AND +raised_at >= ").int(from).push(" AND +raised_at < ").int(to);
+    q.push(" AND id > ").int(after).push(" ORDER BY id LIMIT ").int(limit as i64);
+    q
 }
 
 /// One alarm.

@@ -72,9 +72,12 @@ pub async fn latest(
 /// The first and last sequence numbers in the log (0, 0 when it is empty): two seeks on the
 /// key (SQLite reads the whole table for a `MIN` and a `MAX` in one query).
 pub async fn bounds(db: impl Into<Reader<'_>>) -> Result<(i64, i64), sqlx::Error> {
-    let sql = "SELECT COALESCE((SELECT MIN(seq) FROM events), 0), COALESCE((SELECT MAX(seq) FROM events), 0)";
-    read!(db.into(), p => sqlx::query_as(sql).fetch_one(p).await)
+    read!(db.into(), p => sqlx::query_as(BOUNDS).fetch_one(p).await)
 }
+
+/// The statement [`bounds`] runs.
+pub const BOUNDS: &str =
+    "SELECT COALESCE((SELECT MIN(seq) FROM events), 0), COALESCE((SELECT MAX(seq) FROM events), 0)";
 
 #[cfg(test)]
 mod tests {

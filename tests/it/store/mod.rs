@@ -5,6 +5,7 @@
 mod copy;
 mod groups;
 mod pages;
+mod plans;
 
 use std::time::Duration;
 
