@@ -6,7 +6,7 @@ use time::OffsetDateTime;
 use utoipa::ToSchema;
 
 use super::paging::Query;
-use super::{Pool, Reader, read};
+use super::{Reader, read};
 use crate::domain::time::from_ms;
 use crate::domain::{Class, Failure, FailureKind, JobKind, JobSpec, JobState, Priority, Zone};
 pub use crate::domain::{Job, NewJob};
@@ -294,33 +294,21 @@ pub async fn many(db: impl Into<Reader<'_>>, ids: &[i64]) -> Result<Vec<Job>, sq
     })
 }
 
-/// The unfinished jobs of `device` a dispatcher considers: every one on the device, and the
-/// oldest `window` queued ones, oldest first. Since the queued ones are a prefix by age,
-/// every older job that could block one of them (same location) is among them too.
-pub async fn dispatch_window(db: &Pool, device: &str, window: u32) -> Result<Vec<Job>, sqlx::Error> {
-    let on_device = format!(
-        "SELECT {COLUMNS} FROM jobs WHERE device = $1 AND state IN ('dispatched', 'running', 'cancelling') ORDER BY id"
-    );
-    let queued =
-        format!("SELECT {COLUMNS} FROM jobs WHERE device = $1 AND state = 'queued' ORDER BY id LIMIT $2");
-    let (on_device, queued) = (sqlx::AssertSqlSafe(on_device), sqlx::AssertSqlSafe(queued));
-    let mut rows: Vec<JobRow> =
-        read!(Reader::from(db), p => sqlx::query_as(on_device).bind(device).fetch_all(p).await)?;
-    rows.extend(read!(Reader::from(db), p => {
-        sqlx::query_as::<_, JobRow>(queued).bind(device).bind(window as i64).fetch_all(p).await
-    })?);
+/// Every job of `device` that has not ended, oldest first.
+pub async fn unfinished(db: impl Into<Reader<'_>>, device: &str) -> Result<Vec<Job>, sqlx::Error> {
+    let mut rows: Vec<JobRow> = unfinished_query(device).fetch_all(db.into()).await?;
+    rows.sort_unstable_by_key(|r| r.id);
     rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
 }
 
-/// Every job of `device` that has not ended, oldest first.
-pub async fn unfinished(db: impl Into<Reader<'_>>, device: &str) -> Result<Vec<Job>, sqlx::Error> {
-    let sql = format!(
-        "SELECT {COLUMNS} FROM jobs WHERE device = $1 \
-         AND state IN ('queued', 'dispatched', 'running', 'cancelling') ORDER BY id"
-    );
-    let q = sqlx::AssertSqlSafe(sql);
-    let rows: Vec<JobRow> = read!(db.into(), p => sqlx::query_as(q).bind(device).fetch_all(p).await)?;
-    rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
+/// The statement [`unfinished`] runs: on `jobs_device_state`, sorted here rather than by an
+/// `ORDER BY id`, which `jobs_device` (device, id) answers without a sort, and which SQLite,
+/// without statistics, then prefers: it read every job the device ever had (measured: 0.6 s
+/// at start on a store of 2 million jobs).
+pub fn unfinished_query(device: &str) -> Query {
+    let mut q = Query::new(format!("SELECT {COLUMNS} FROM jobs WHERE device = "));
+    q.text(device).push(" AND state IN ('queued', 'dispatched', 'running', 'cancelling')");
+    q
 }
 
 #[cfg(test)]

@@ -12,12 +12,16 @@
 //!   together), the unique index on `reference`; `alarms_device`, and the active alarms'
 //!   partial indexes `alarms_open` and `alarms_device_open`. The database then seeks to the
 //!   cursor within the filter's value and reads only the entries it returns.
-//! - **Combinations** of the jobs' filters are served by one of those indexes, the others
-//!   checked on each entry read: state and device have an index of their own, the other
-//!   pairs (state and kind, kind and device) read the entries of one of the two until the
-//!   page is full. One index per combination would cost every job an index entry more for
-//!   each, at intake and at each transition, for lists nobody has asked to be fast; a page
-//!   of a combination reads as many entries as the rows of the one filter it skips over.
+//! - **Combinations** of the jobs' filters are read on one index, the other filters checked
+//!   on each entry read: device and state together have `jobs_device_state` (the
+//!   dispatcher needs it too), and with a kind as well read on it; state and kind read
+//!   `jobs_state` or `jobs_kind`, kind and device `jobs_kind` or `jobs_device`, whichever
+//!   the engine picks. A page of such a pair reads as many entries as the rows of the
+//!   other filter it passes over (50 failed stores among 2 million jobs, 1 in 50 failed:
+//!   about 2,500 entries, 1.2 ms), which depends on how common the other filter's value is,
+//!   not on how long the history is. An index for each pair would cost every job two more
+//!   index entries at intake, and each transition one more, for lists nobody has asked
+//!   to be fast (measured in docs/development/benchmarks/history.md).
 //! - **The period (`created_from`, `created_to`) is a range of ids.** Ids are given in
 //!   acceptance order and `created_at` is the acceptance time, so the jobs of a period are
 //!   the ids from the first job accepted at or after `created_from` to the last accepted
@@ -29,13 +33,23 @@
 //!   back, a job accepted before the step but timed after a bound can fall outside its
 //!   range and be left out of a period's list; the ids, and so the order and the cursor,
 //!   stay exact.
-//! - **Not indexed, and why.** The snapshot's unfinished jobs (`state IN (...)`, newest
-//!   first) and a device's unfinished jobs are read from the state index and sorted:
-//!   they are the jobs not yet ended, never the history. A standby's snapshot finds each
-//!   device's last status among the newest `device.updated` events without an index on the
-//!   event type: the log holds `events.retention_hours` of events, and every device tells
-//!   its status at least every `contact_refresh_ms`, so the read stops early; an index
-//!   there would cost every event (one per job change) an entry.
+//! - **Sorted, and why.** The snapshot's unfinished jobs (`state IN (...)`, newest first)
+//!   are read on `jobs_state` and sorted, and a device's unfinished jobs (the dispatcher's
+//!   at start) on `jobs_device_state`, sorted in Rust: both are the jobs not yet ended,
+//!   never the history. The latter asks for no order at all: with one, `jobs_device`
+//!   (device, id) gives the order without a sort, and SQLite without statistics read the
+//!   device's whole history on it.
+//! - **Not indexed, and why.** A standby's snapshot finds each device's last status among
+//!   the newest `device.updated` events without an index on the event type: the log holds
+//!   `events.retention_hours` of events, and every device tells its status at least every
+//!   `contact_refresh_ms`, so the read stops early; an index there would cost every event
+//!   (one per job change) an entry.
+//! - **Memory does not follow the history.** A list's page is at most 1000 rows; the
+//!   alarms' CSV export (up to 100,000 rows of a period) is read and sent 1000 at a time
+//!   ([`super::alarms::raised_query`], its period sought as the jobs' is); a replay goes
+//!   page by page. What is read whole is bounded by the site, not by its past: the
+//!   layout's locations, the unfinished jobs, the active alarms. (The KPIs of
+//!   [`super::stats`] still read their period: issue 39 moves them to rollups.)
 //!
 //! A list's statement is a [`Query`]: its text, with `$1`, `$2`, ... in the order they
 //! appear (SQLite numbers named parameters by first appearance, PostgreSQL by number: the

@@ -155,6 +155,13 @@ async fn every_job_filter_pages_on_an_index_in_id_order(#[case] engine: Engine) 
     let lines = plan(&pool, period.sql(), period.params(), false).await;
     assert_eq!(lines.iter().filter(|l| l.contains("jobs_created")).count(), 2, "{lines:#?}");
 
+    // A device's unfinished jobs (the dispatcher's at start), on device and state together.
+    check_query(
+        &pool,
+        &jobs::unfinished_query("shelf1"),
+        &uses("a device's unfinished", &["jobs_device_state"]),
+    )
+    .await;
     // A job's history, and the snapshot's unfinished jobs (sorted: they are not the history).
     check_query(&pool, &jobs::history_query(7), &uses("history", &["job_history_job"])).await;
     let unfinished = Expect { what: "unfinished", uses: STATE, sorts: true };
