@@ -1,10 +1,10 @@
 //! A cluster node's wiring (`[cluster]`, see `service::cluster`): the leadership loop, the
 //! node's row, the event log followed into the hub (and, on the active node, into the
 //! queues: jobs the standbys took in; on every node, into the counts of jobs and alarms
-//! `/metrics` shows, read again after each batch), and the takeover: driving starts when the lease is
-//! won, exactly as at a restart, and stops the instant it is lost; the process then ends
-//! ([`Clustered::lost`]) so that its supervisor starts it again as a standby, with nothing
-//! of the old term left in memory.
+//! `/metrics` shows, read again after each batch), and the takeover: driving starts when
+//! the lease is won, exactly as at a restart, and stops the instant it is lost; the process
+//! then ends ([`Clustered::lost`]) so that its supervisor starts it again as a standby,
+//! with nothing of the old term left in memory.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
@@ -109,7 +109,7 @@ pub(super) async fn start(
         tokio::spawn(follow::run(parts.pg.clone(), from, timing.poll_every(), seen)),
         tokio::spawn(node::tell(node.clone())),
         tokio::spawn(adopter(parts.writer.clone(), wanted)),
-        tokio::spawn(counter(parts.pool.clone(), parts.metrics.clone(), recount)),
+        tokio::spawn(refresh_counts(parts.pool.clone(), parts.metrics.clone(), recount)),
         tokio::spawn(takeover(node.clone(), parts, lost_tx)),
     ];
     Ok(Clustered { node, leadership, lost, background })
@@ -128,7 +128,7 @@ async fn adopter(writer: Writer, mut wanted: mpsc::UnboundedReceiver<Vec<i64>>) 
 /// Reads the counts of jobs and alarms again each time the follower hands on a batch (every
 /// node commits, so this node's writer alone would miss some; see `store::counts`): one
 /// read at a time, and batches followed meanwhile take one more read between them.
-async fn counter(pool: Pool, metrics: Arc<Metrics>, recount: Arc<Notify>) {
+async fn refresh_counts(pool: Pool, metrics: Arc<Metrics>, recount: Arc<Notify>) {
     loop {
         recount.notified().await;
         match crate::store::counts::load(&pool).await {
