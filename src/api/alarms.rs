@@ -24,6 +24,10 @@ use crate::store::writer::Record;
 /// The most rows one CSV export holds.
 pub const EXPORT_LIMIT: u32 = 100_000;
 
+/// Alarms an export reads from the store at a time: what it holds in memory at once,
+/// whatever the period holds.
+const EXPORT_PAGE: u32 = 1000;
+
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
@@ -101,24 +105,68 @@ async fn export_alarms(
     if p.until.is_some() && to < from {
         return Err(ApiError::bad_request("bad_query", "`until` is before `since`"));
     }
-    let rows = alarms::raised_between(&app.pool, from, to, EXPORT_LIMIT).await?;
+    // The first page before the answer: a store that fails fails the request (a 5xx),
+    // rather than an answer cut short.
+    let first = alarms::raised_between(&app.pool, from, to, 0, EXPORT_PAGE).await?;
+    let mut head = format!("{CSV_HEADER}\r\n");
+    lines(&first, &mut head);
+    let pages =
+        Pages { pool: app.pool.clone(), from, to, last: first.last().map(|a| a.id), sent: first.len() };
+    let rest = futures::stream::unfold(pages, Pages::next);
+    let body = futures::StreamExt::chain(futures::stream::once(async { Ok(bytes::Bytes::from(head)) }), rest);
     let headers = [
         (header::CONTENT_TYPE, "text/csv; charset=utf-8"),
         (header::CONTENT_DISPOSITION, "attachment; filename=\"alarms.csv\""),
     ];
-    Ok((headers, csv(&rows)))
+    Ok((headers, axum::body::Body::from_stream(body)))
+}
+
+/// The rest of an export after its first page, a page at a time (see [`EXPORT_PAGE`]).
+struct Pages {
+    pool: crate::store::Pool,
+    from: i64,
+    to: i64,
+    /// The last alarm sent; None once the period is done.
+    last: Option<i64>,
+    /// Alarms sent so far.
+    sent: usize,
+}
+
+impl Pages {
+    /// The next page's lines, if any; a store that fails now ends the answer short (the
+    /// client sees the transfer broken off), and is logged.
+    async fn next(mut self) -> Option<(Result<bytes::Bytes, std::io::Error>, Pages)> {
+        let after = self.last.filter(|_| self.sent.is_multiple_of(EXPORT_PAGE as usize))?;
+        let limit = EXPORT_PAGE.min(EXPORT_LIMIT.saturating_sub(self.sent as u32));
+        if limit == 0 {
+            return None;
+        }
+        match alarms::raised_between(&self.pool, self.from, self.to, after, limit).await {
+            Ok(page) if page.is_empty() => None,
+            Ok(page) => {
+                let mut out = String::new();
+                lines(&page, &mut out);
+                (self.last, self.sent) = (page.last().map(|a| a.id), self.sent + page.len());
+                Some((Ok(bytes::Bytes::from(out)), self))
+            }
+            Err(e) => {
+                tracing::error!(error = %e, "the alarm export could not read the store; its answer ends short");
+                self.last = None;
+                Some((Err(std::io::Error::other("the store failed")), self))
+            }
+        }
+    }
 }
 
 /// The export's header line.
 pub const CSV_HEADER: &str =
     "id,device,kind,code,class,text,detail,raised_at,cleared_at,acknowledged_by,acknowledged_at";
 
-/// Alarms as CSV lines (CRLF, as RFC 4180 writes them), header first.
-pub fn csv(alarms: &[Alarm]) -> String {
+/// Alarms as CSV lines (CRLF, as RFC 4180 writes them), appended to `out`.
+fn lines(alarms: &[Alarm], out: &mut String) {
     let at = |t: Option<OffsetDateTime>| {
         t.and_then(|t| t.format(&time::format_description::well_known::Rfc3339).ok()).unwrap_or_default()
     };
-    let mut out = format!("{CSV_HEADER}\r\n");
     for a in alarms {
         let fields = [
             a.id.to_string(),
@@ -137,7 +185,6 @@ pub fn csv(alarms: &[Alarm]) -> String {
         out.push_str(&line.join(","));
         out.push_str("\r\n");
     }
-    out
 }
 
 /// One CSV field: quoted (quotes doubled) when it holds a comma, a quote or a line break.

@@ -110,8 +110,7 @@ pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<
     let format = Format::negotiate(headers.get(header::ACCEPT));
     let scrape = Scrape {
         devices: crate::service::monitor::all_shown(&app.devices(), app.dispatcher.queues()),
-        jobs: crate::store::jobs::count_by_device_and_state(&app.pool).await?,
-        alarms: crate::store::alarms::count_active(&app.pool).await?,
+        counts: app.metrics.counts(),
         now: time::OffsetDateTime::now_utc(),
         started: app.metrics.started(),
         cluster: app.cluster.as_ref().map(|n| {

@@ -1,17 +1,19 @@
 //! A cluster node's wiring (`[cluster]`, see `service::cluster`): the leadership loop, the
 //! node's row, the event log followed into the hub (and, on the active node, into the
-//! queues: jobs the standbys took in), and the takeover: driving starts when the lease is
-//! won, exactly as at a restart, and stops the instant it is lost; the process then ends
-//! ([`Clustered::lost`]) so that its supervisor starts it again as a standby, with nothing
-//! of the old term left in memory.
+//! queues: jobs the standbys took in; on every node, into the counts of jobs and alarms
+//! `/metrics` shows, read again after each batch), and the takeover: driving starts when
+//! the lease is won, exactly as at a restart, and stops the instant it is lost; the process
+//! then ends ([`Clustered::lost`]) so that its supervisor starts it again as a standby,
+//! with nothing of the old term left in memory.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
-use tokio::sync::{mpsc, watch};
+use tokio::sync::{Notify, mpsc, watch};
 use tokio::task::JoinHandle;
 
 use super::drive;
+use crate::api::metrics::Metrics;
 use crate::config::{ClusterConfig, Config};
 use crate::devices::Devices;
 use crate::domain::time::now_ms;
@@ -49,6 +51,7 @@ pub(super) struct Parts {
     pub dispatcher: Dispatcher,
     pub writer: Writer,
     pub hub: Hub,
+    pub metrics: Arc<Metrics>,
     pub commits: Arc<AtomicU64>,
     pub running: Arc<OnceLock<Devices>>,
     pub tasks: drive::Tasks,
@@ -80,8 +83,11 @@ pub(super) async fn start(
     };
     let (_, from) = events::bounds(&parts.pool).await?;
     let (adopt, wanted) = mpsc::unbounded_channel();
+    let recount = Arc::new(Notify::new());
+    // Once at start: what committed between the counts' first read and `from` is counted.
+    recount.notify_one();
     let seen: follow::Seen = {
-        let (hub, commits) = (parts.hub.clone(), parts.commits.clone());
+        let (hub, commits, recount) = (parts.hub.clone(), parts.commits.clone(), recount.clone());
         let queues = parts.dispatcher.queues().clone();
         Arc::new(move |batch| {
             if queues.drives() {
@@ -94,6 +100,7 @@ pub(super) async fn start(
                 }
             }
             commits.fetch_add(1, Ordering::Release);
+            recount.notify_one();
             hub.publish(batch);
         })
     };
@@ -102,6 +109,7 @@ pub(super) async fn start(
         tokio::spawn(follow::run(parts.pg.clone(), from, timing.poll_every(), seen)),
         tokio::spawn(node::tell(node.clone())),
         tokio::spawn(adopter(parts.writer.clone(), wanted)),
+        tokio::spawn(refresh_counts(parts.pool.clone(), parts.metrics.clone(), recount)),
         tokio::spawn(takeover(node.clone(), parts, lost_tx)),
     ];
     Ok(Clustered { node, leadership, lost, background })
@@ -113,6 +121,24 @@ async fn adopter(writer: Writer, mut wanted: mpsc::UnboundedReceiver<Vec<i64>>) 
     while let Some(ids) = wanted.recv().await {
         if let Err(e) = writer.adopt(ids).await {
             tracing::error!(error = %e, "cluster: jobs of another node could not be taken in");
+        }
+    }
+}
+
+/// Reads the counts of jobs and alarms again each time the follower hands on a batch (every
+/// node commits, so this node's writer alone would miss some; see `store::counts`): one
+/// read at a time, and batches followed meanwhile take one more read between them.
+async fn refresh_counts(pool: Pool, metrics: Arc<Metrics>, recount: Arc<Notify>) {
+    loop {
+        recount.notified().await;
+        match crate::store::counts::load(&pool).await {
+            Ok(counts) => metrics.set_counts(counts),
+            Err(e) => {
+                tracing::warn!(error = %e, "cluster: the counts of jobs and alarms cannot be read");
+                // Tried again at the next batch, or after a pause if none comes.
+                tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+                recount.notify_one();
+            }
         }
     }
 }

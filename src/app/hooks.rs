@@ -1,11 +1,13 @@
 //! What the job writer tells after each commit, and to whom: the dispatcher's queues
-//! (committed jobs, lock changes, why a job waits), the event hub, the metrics.
+//! (committed jobs, lock changes, why a job waits), the event hub, the metrics (and the
+//! counts of jobs and alarms behind them).
 //!
 //! A node of a cluster that does not drive the machines keeps no queues: they take in
 //! nothing while [`Queues::drives`] is false, and the active node's waiting watcher tells
 //! why a job waits (it retells what it never told). Its hub is fed from the event log,
 //! which every node writes (`app::cluster`), not from its own commits: the same commit
-//! would come twice.
+//! would come twice. For the same reason its counts of jobs and alarms are read again from
+//! the store as it follows the log, not changed by its own commits.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -37,6 +39,7 @@ pub(super) fn hooks(
         locked: Some(queues.locked_hook()),
         tell: Some(queues.tell_hook()),
         publish: Some(publish),
-        observe: Some(metrics.writer_hook()),
+        // A node of a cluster reads the counts again as it follows the log (`cluster`).
+        observe: Some(metrics.writer_hook(!clustered)),
     }
 }

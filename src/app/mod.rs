@@ -130,6 +130,8 @@ impl Application {
         let (_, last_event) = store::events::bounds(&pool).await.context("reading the event log")?;
         let hub = Hub::new(config.events.buffer, last_event);
         let metrics = Arc::new(Metrics::default());
+        // Before the writer starts: from here on its commits change them.
+        metrics.set_counts(store::counts::load(&pool).await.context("reading the counts of jobs")?);
         queues.set_drives(on_cluster.is_none());
         let hooks = hooks::hooks(&queues, &hub, &metrics, &commits, on_cluster.is_some());
         let (max_group, queue) = (config.intake.max_group, config.intake.queue);
@@ -157,6 +159,7 @@ impl Application {
                     dispatcher: dispatcher.clone(),
                     writer: writer.clone(),
                     hub: hub.clone(),
+                    metrics: metrics.clone(),
                     commits: commits.clone(),
                     running: running.clone(),
                     tasks: tasks.clone(),

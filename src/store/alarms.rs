@@ -5,6 +5,7 @@ use serde::Serialize;
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
+use super::paging::Query;
 use super::{Reader, read};
 use crate::domain::time::from_ms;
 use crate::domain::{AlarmClass, AlarmKind};
@@ -128,22 +129,31 @@ pub struct AlarmFilter {
     pub limit: u32,
 }
 
-/// Alarms matching `filter`, newest first.
+/// Alarms matching `filter`, newest first, a page read on the index of its filter (see
+/// [`super::paging`]).
 pub async fn list(db: impl Into<Reader<'_>>, filter: &AlarmFilter) -> Result<Vec<Alarm>, sqlx::Error> {
-    let sql = sqlx::AssertSqlSafe(format!(
-        "SELECT {COLUMNS} FROM alarms WHERE ($1 IS NULL OR (cleared_at IS NULL) = $1) \
-         AND ($2 IS NULL OR device = $2) AND ($3 IS NULL OR id < $3) ORDER BY id DESC LIMIT $4"
-    ));
-    let rows: Vec<Row> = read!(db.into(), p => {
-        sqlx::query_as(sql)
-            .bind(filter.active)
-            .bind(&filter.device)
-            .bind(filter.before_id)
-            .bind(filter.limit as i64)
-            .fetch_all(p)
-            .await
-    })?;
+    let rows: Vec<Row> = list_query(filter).fetch_all(db.into()).await?;
     Ok(rows.into_iter().map(Alarm::from).collect())
+}
+
+/// The statement [`list`] runs for `filter`: only the conditions it sets, so that each
+/// engine matches them to an index (a condition such as `($1 IS NULL OR id < $1)` can use
+/// none).
+pub fn list_query(filter: &AlarmFilter) -> Query {
+    let mut q = Query::new(format!("SELECT {COLUMNS} FROM alarms WHERE TRUE"));
+    match filter.active {
+        Some(true) => q.push(" AND cleared_at IS NULL"),
+        Some(false) => q.push(" AND cleared_at IS NOT NULL"),
+        None => &mut q,
+    };
+    if let Some(d) = &filter.device {
+        q.push(" AND device = ").text(d);
+    }
+    if let Some(id) = filter.before_id {
+        q.push(" AND id < ").int(id);
+    }
+    q.push(" ORDER BY id DESC LIMIT ").int(filter.limit as i64);
+    q
 }
 
 /// Every active alarm, oldest first.
@@ -154,25 +164,31 @@ pub async fn active(db: impl Into<Reader<'_>>) -> Result<Vec<Alarm>, sqlx::Error
     Ok(rows.into_iter().map(Alarm::from).collect())
 }
 
-/// Active alarms counted by device and class, in one grouped query.
-pub async fn count_active(db: impl Into<Reader<'_>>) -> Result<Vec<(String, String, i64)>, sqlx::Error> {
-    let sql = "SELECT device, class, COUNT(*) FROM alarms WHERE cleared_at IS NULL GROUP BY device, class";
-    read!(db.into(), p => sqlx::query_as(sql).fetch_all(p).await)
-}
-
-/// Alarms raised in `[from, to)` (Unix ms), oldest first, at most `limit`.
+/// Alarms raised in `[from, to)` (Unix ms), oldest first, after the alarm `after` (0: from
+/// the first), at most `limit`: a page of the period, read as [`raised_query`] says.
 pub async fn raised_between(
     db: impl Into<Reader<'_>>,
     from: i64,
     to: i64,
+    after: i64,
     limit: u32,
 ) -> Result<Vec<Alarm>, sqlx::Error> {
-    let sql = sqlx::AssertSqlSafe(format!(
-        "SELECT {COLUMNS} FROM alarms WHERE raised_at >= $1 AND raised_at < $2 ORDER BY id LIMIT $3"
-    ));
-    let rows: Vec<Row> =
-        read!(db.into(), p => sqlx::query_as(sql).bind(from).bind(to).bind(limit as i64).fetch_all(p).await)?;
+    let rows: Vec<Row> = raised_query(from, to, after, limit).fetch_all(db.into()).await?;
     Ok(rows.into_iter().map(Alarm::from).collect())
+}
+
+/// The statement [`raised_between`] runs: the period as a range of ids, each bound sought on
+/// `alarms_raised` (ids are given in the order alarms are raised), as the jobs' period is
+/// (see [`super::paging`]); the page read on the key.
+pub fn raised_query(from: i64, to: i64, after: i64, limit: u32) -> Query {
+    const FIRST_FROM: &str = "(SELECT id FROM alarms WHERE raised_at >= ";
+    const IN_ORDER: &str = " ORDER BY raised_at, id LIMIT 1)";
+    let mut q = Query::new(format!("SELECT {COLUMNS} FROM alarms WHERE id >= "));
+    q.push(FIRST_FROM).int(from).push(IN_ORDER);
+    q.push(" AND id < COALESCE(").push(FIRST_FROM).int(to).push(IN_ORDER).push(", ").int(i64::MAX).push(")");
+    q.push(" AND +raised_at >= ").int(from).push(" AND +raised_at < ").int(to);
+    q.push(" AND id > ").int(after).push(" ORDER BY id LIMIT ").int(limit as i64);
+    q
 }
 
 /// One alarm.

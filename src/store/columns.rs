@@ -73,6 +73,9 @@ pub(crate) const CONTROLS: [&str; 5] = ["target", "paused", "by", "reason", "at"
 /// `audit`.
 pub(crate) const AUDIT: [&str; 7] = ["id", "at", "by", "action", "target", "reason", "client"];
 
+/// `job_counts`: the key columns first.
+pub(crate) const JOB_COUNTS: [&str; 3] = ["device", "state", "n"];
+
 /// A job's row, as [`JOBS`] names its columns (`device_ref` is null: a new job has none).
 #[derive(Serialize)]
 pub(crate) struct JobOut<'a> {

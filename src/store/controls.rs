@@ -10,6 +10,7 @@ use serde::Serialize;
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
+use super::paging::Query;
 use super::{Reader, read};
 use crate::domain::time::from_ms;
 use crate::domain::{Pause, Target};
@@ -88,15 +89,23 @@ pub async fn paused(db: impl Into<Reader<'_>>) -> Result<Vec<(Target, Pause)>, s
         .collect())
 }
 
-/// Audit entries, newest first, older than `before_id` if given.
+/// Audit entries, newest first, older than `before_id` if given: a page read on the key
+/// (see [`super::paging`]).
 pub async fn audit(
     db: impl Into<Reader<'_>>,
     before_id: Option<i64>,
     limit: u32,
 ) -> Result<Vec<AuditEntry>, sqlx::Error> {
-    let sql = "SELECT id, at, by, client, action, target, reason FROM audit WHERE ($1 IS NULL OR id < $1) \
-               ORDER BY id DESC LIMIT $2";
-    let rows: Vec<AuditRow> =
-        read!(db.into(), p => sqlx::query_as(sql).bind(before_id).bind(limit as i64).fetch_all(p).await)?;
+    let rows: Vec<AuditRow> = audit_query(before_id, limit).fetch_all(db.into()).await?;
     Ok(rows.into_iter().map(AuditEntry::from).collect())
+}
+
+/// The statement [`audit`] runs.
+pub fn audit_query(before_id: Option<i64>, limit: u32) -> Query {
+    let mut q = Query::new("SELECT id, at, by, client, action, target, reason FROM audit WHERE TRUE");
+    if let Some(id) = before_id {
+        q.push(" AND id < ").int(id);
+    }
+    q.push(" ORDER BY id DESC LIMIT ").int(limit as i64);
+    q
 }

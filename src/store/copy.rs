@@ -17,13 +17,14 @@
 
 use std::time::Duration;
 
-use super::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOB_HISTORY, JOBS, LOCATIONS};
+use super::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOB_COUNTS, JOB_HISTORY, JOBS, LOCATIONS};
 use super::engine::{Database, Engine, OpenError};
 use super::{Pool, Tx, on};
 
 /// Each table, in an order that satisfies its foreign keys, with its key and columns.
 const TABLES: &[(&str, &str, &[&str])] = &[
     ("jobs", "id", &JOBS),
+    ("job_counts", "device, state", &JOB_COUNTS),
     ("job_history", "id", &JOB_HISTORY),
     ("locations", "aisle, row, bay, level, position", &LOCATIONS),
     ("events", "seq", &EVENTS),

@@ -7,6 +7,7 @@
 //! back, so numbers have no gaps on either engine. Pruning (retention) always keeps the
 //! newest event, so a restart never reuses a number.
 
+use super::paging::Query;
 use super::{Reader, read};
 
 use crate::domain::time::from_ms;
@@ -48,8 +49,14 @@ pub async fn after(
     since: i64,
     limit: u32,
 ) -> Result<Vec<StoredEvent>, sqlx::Error> {
-    let sql = "SELECT seq, at, type, data FROM events WHERE seq > $1 ORDER BY seq LIMIT $2";
-    read!(db.into(), p => sqlx::query_as(sql).bind(since).bind(limit as i64).fetch_all(p).await)
+    after_query(since, limit).fetch_all(db.into()).await
+}
+
+/// The statement [`after`] runs: a range of the key.
+pub fn after_query(since: i64, limit: u32) -> Query {
+    let mut q = Query::new("SELECT seq, at, type, data FROM events WHERE seq > ");
+    q.int(since).push(" ORDER BY seq LIMIT ").int(limit as i64);
+    q
 }
 
 /// The newest `limit` events of type `kind`, newest first.
@@ -62,11 +69,15 @@ pub async fn latest(
     read!(db.into(), p => sqlx::query_as(sql).bind(kind).bind(limit as i64).fetch_all(p).await)
 }
 
-/// The first and last sequence numbers in the log (0, 0 when it is empty).
+/// The first and last sequence numbers in the log (0, 0 when it is empty): two seeks on the
+/// key (SQLite reads the whole table for a `MIN` and a `MAX` in one query).
 pub async fn bounds(db: impl Into<Reader<'_>>) -> Result<(i64, i64), sqlx::Error> {
-    let sql = "SELECT COALESCE(MIN(seq), 0), COALESCE(MAX(seq), 0) FROM events";
-    read!(db.into(), p => sqlx::query_as(sql).fetch_one(p).await)
+    read!(db.into(), p => sqlx::query_as(BOUNDS).fetch_one(p).await)
 }
+
+/// The statement [`bounds`] runs.
+pub const BOUNDS: &str =
+    "SELECT COALESCE((SELECT MIN(seq) FROM events), 0), COALESCE((SELECT MAX(seq) FROM events), 0)";
 
 #[cfg(test)]
 mod tests {

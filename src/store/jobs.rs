@@ -5,7 +5,8 @@ use sqlx::QueryBuilder;
 use time::OffsetDateTime;
 use utoipa::ToSchema;
 
-use super::{Pool, Reader, read};
+use super::paging::Query;
+use super::{Reader, read};
 use crate::domain::time::from_ms;
 use crate::domain::{Class, Failure, FailureKind, JobKind, JobSpec, JobState, Priority, Zone};
 pub use crate::domain::{Job, NewJob};
@@ -194,53 +195,72 @@ pub(crate) fn decode(e: CorruptRow) -> sqlx::Error {
     sqlx::Error::Decode(e.into())
 }
 
-/// Jobs matching `filter`, in id order.
+/// Jobs matching `filter`, in id order, a page read on the index of its filter (see
+/// [`super::paging`]).
 pub async fn list(db: impl Into<Reader<'_>>, filter: &JobFilter) -> Result<Vec<Job>, sqlx::Error> {
-    read!(db.into(), p => {
-    let mut q = QueryBuilder::new(format!("SELECT {COLUMNS} FROM jobs WHERE 1 = 1"));
-    if let Some(s) = filter.state {
-        q.push(" AND state = ").push_bind(s.as_str());
-    }
-    if let Some(k) = filter.kind {
-        q.push(" AND kind = ").push_bind(k.as_str());
-    }
-    if let Some(d) = &filter.device {
-        q.push(" AND device = ").push_bind(d.clone());
-    }
-    if let Some(r) = &filter.reference {
-        q.push(" AND reference = ").push_bind(r.clone());
-    }
-    if let Some(t) = filter.created_from {
-        q.push(" AND created_at >= ").push_bind(t);
-    }
-    if let Some(t) = filter.created_to {
-        q.push(" AND created_at < ").push_bind(t);
-    }
-    if let Some(id) = filter.after_id {
-        q.push(" AND id > ").push_bind(id);
-    }
-    q.push(" ORDER BY id LIMIT ").push_bind(filter.limit as i64);
-    let rows: Vec<JobRow> = q.build_query_as().fetch_all(p).await?;
+    let rows: Vec<JobRow> = list_query(filter).fetch_all(db.into()).await?;
     rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
-    })
 }
 
-/// Up to `limit` jobs not yet ended (queued, dispatched, running, cancelling), newest first.
+/// The statement [`list`] runs for `filter`.
+pub fn list_query(filter: &JobFilter) -> Query {
+    let mut q = Query::new(format!("SELECT {COLUMNS} FROM jobs WHERE TRUE"));
+    if let Some(s) = filter.state {
+        q.push(" AND state = ").text(s.as_str());
+    }
+    if let Some(k) = filter.kind {
+        q.push(" AND kind = ").text(k.as_str());
+    }
+    if let Some(d) = &filter.device {
+        q.push(" AND device = ").text(d);
+    }
+    if let Some(r) = &filter.reference {
+        q.push(" AND reference = ").text(r);
+    }
+    // The period as a range of ids: from the first job accepted at or after each bound.
+    const FIRST_FROM: &str = "(SELECT id FROM jobs WHERE created_at >= ";
+    const IN_ORDER: &str = " ORDER BY created_at, id LIMIT 1)";
+    if let Some(t) = filter.created_from {
+        q.push(" AND id >= ").push(FIRST_FROM).int(t).push(IN_ORDER);
+        q.push(" AND +created_at >= ").int(t);
+    }
+    if let Some(t) = filter.created_to {
+        q.push(" AND id < COALESCE(")
+            .push(FIRST_FROM)
+            .int(t)
+            .push(IN_ORDER)
+            .push(", ")
+            .int(i64::MAX)
+            .push(")");
+        q.push(" AND +created_at < ").int(t);
+    }
+    if let Some(id) = filter.after_id {
+        q.push(" AND id > ").int(id);
+    }
+    q.push(" ORDER BY id LIMIT ").int(filter.limit as i64);
+    q
+}
+
+/// Up to `limit` jobs not yet ended (queued, dispatched, running, cancelling), newest first:
+/// read on the state index, never the ended ones (see [`super::paging`]).
 pub async fn active(db: impl Into<Reader<'_>>, limit: u32) -> Result<Vec<Job>, sqlx::Error> {
-    let sql = format!(
-        "SELECT {COLUMNS} FROM jobs WHERE state NOT IN ('completed', 'failed', 'cancelled') \
-         ORDER BY id DESC LIMIT $1"
-    );
-    let q = sqlx::AssertSqlSafe(sql);
-    let rows: Vec<JobRow> = read!(db.into(), p => sqlx::query_as(q).bind(limit as i64).fetch_all(p).await)?;
+    let rows: Vec<JobRow> = active_query(limit).fetch_all(db.into()).await?;
     rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
+}
+
+/// The statement [`active`] runs.
+pub fn active_query(limit: u32) -> Query {
+    let mut q = Query::new(format!(
+        "SELECT {COLUMNS} FROM jobs WHERE state IN ('queued', 'dispatched', 'running', 'cancelling') \
+         ORDER BY id DESC LIMIT "
+    ));
+    q.int(limit as i64);
+    q
 }
 
 /// A job's history, oldest first.
 pub async fn history(db: impl Into<Reader<'_>>, id: i64) -> Result<Vec<JobEvent>, sqlx::Error> {
-    let sql = "SELECT state, cause, at FROM job_history WHERE job_id = $1 ORDER BY id";
-    let rows: Vec<(String, String, i64)> =
-        read!(db.into(), p => sqlx::query_as(sql).bind(id).fetch_all(p).await)?;
+    let rows: Vec<(String, String, i64)> = history_query(id).fetch_all(db.into()).await?;
     rows.into_iter()
         .map(|(state, cause, at)| {
             let state = JobState::parse(&state)
@@ -250,12 +270,11 @@ pub async fn history(db: impl Into<Reader<'_>>, id: i64) -> Result<Vec<JobEvent>
         .collect()
 }
 
-/// Jobs counted by device (empty: not routed to one) and state, in one grouped query.
-pub async fn count_by_device_and_state(
-    db: impl Into<Reader<'_>>,
-) -> Result<Vec<(String, String, i64)>, sqlx::Error> {
-    let sql = "SELECT COALESCE(device, ''), state, COUNT(*) FROM jobs GROUP BY device, state";
-    read!(db.into(), p => sqlx::query_as(sql).fetch_all(p).await)
+/// The statement [`history`] runs: on `job_history_job` (job_id, id).
+pub fn history_query(id: i64) -> Query {
+    let mut q = Query::new("SELECT state, cause, at FROM job_history WHERE job_id = ");
+    q.int(id).push(" ORDER BY id");
+    q
 }
 
 /// The jobs with these ids that exist, in id order.
@@ -275,33 +294,21 @@ pub async fn many(db: impl Into<Reader<'_>>, ids: &[i64]) -> Result<Vec<Job>, sq
     })
 }
 
-/// The unfinished jobs of `device` a dispatcher considers: every one on the device, and the
-/// oldest `window` queued ones, oldest first. Since the queued ones are a prefix by age,
-/// every older job that could block one of them (same location) is among them too.
-pub async fn dispatch_window(db: &Pool, device: &str, window: u32) -> Result<Vec<Job>, sqlx::Error> {
-    let on_device = format!(
-        "SELECT {COLUMNS} FROM jobs WHERE device = $1 AND state IN ('dispatched', 'running', 'cancelling') ORDER BY id"
-    );
-    let queued =
-        format!("SELECT {COLUMNS} FROM jobs WHERE device = $1 AND state = 'queued' ORDER BY id LIMIT $2");
-    let (on_device, queued) = (sqlx::AssertSqlSafe(on_device), sqlx::AssertSqlSafe(queued));
-    let mut rows: Vec<JobRow> =
-        read!(Reader::from(db), p => sqlx::query_as(on_device).bind(device).fetch_all(p).await)?;
-    rows.extend(read!(Reader::from(db), p => {
-        sqlx::query_as::<_, JobRow>(queued).bind(device).bind(window as i64).fetch_all(p).await
-    })?);
+/// Every job of `device` that has not ended, oldest first.
+pub async fn unfinished(db: impl Into<Reader<'_>>, device: &str) -> Result<Vec<Job>, sqlx::Error> {
+    let mut rows: Vec<JobRow> = unfinished_query(device).fetch_all(db.into()).await?;
+    rows.sort_unstable_by_key(|r| r.id);
     rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
 }
 
-/// Every job of `device` that has not ended, oldest first.
-pub async fn unfinished(db: impl Into<Reader<'_>>, device: &str) -> Result<Vec<Job>, sqlx::Error> {
-    let sql = format!(
-        "SELECT {COLUMNS} FROM jobs WHERE device = $1 \
-         AND state IN ('queued', 'dispatched', 'running', 'cancelling') ORDER BY id"
-    );
-    let q = sqlx::AssertSqlSafe(sql);
-    let rows: Vec<JobRow> = read!(db.into(), p => sqlx::query_as(q).bind(device).fetch_all(p).await)?;
-    rows.into_iter().map(|r| Job::try_from(r).map_err(decode)).collect()
+/// The statement [`unfinished`] runs: on `jobs_device_state`, sorted here rather than by an
+/// `ORDER BY id`, which `jobs_device` (device, id) answers without a sort, and which SQLite,
+/// without statistics, then prefers: it read every job the device ever had (measured: 0.6 s
+/// at start on a store of 2 million jobs).
+pub fn unfinished_query(device: &str) -> Query {
+    let mut q = Query::new(format!("SELECT {COLUMNS} FROM jobs WHERE device = "));
+    q.text(device).push(" AND state IN ('queued', 'dispatched', 'running', 'cancelling')");
+    q
 }
 
 #[cfg(test)]

@@ -29,11 +29,13 @@ pub mod cluster;
 mod columns;
 pub mod controls;
 pub mod copy;
+pub mod counts;
 pub mod engine;
 pub mod events;
 pub mod import;
 pub mod jobs;
 pub mod locations;
+pub mod paging;
 pub mod stats;
 pub mod writer;
 

@@ -6,8 +6,13 @@
 //!   WebSocket subscribers, resyncs and snapshots, the job writer's group size and commit
 //!   time, and the dispatch latency and duration of jobs, observed by the writer when it
 //!   commits the transition ([`crate::store::writer::JobTiming`]);
-//! - **read at scrape time** ([`scrape`]): each device's status and link counters, active
-//!   alarms and jobs by device, and the process figures ([`process`]).
+//! - **kept as they change** (this module's counts): jobs by device and state and active
+//!   alarms by device and class, as committed ([`crate::store::counts`]): loaded at start
+//!   (a few dozen rows), then changed by each commit of the writer once it is on disk, or
+//!   on a node of a cluster read again after each commit it follows; a scrape reads no
+//!   table, so it costs the same whatever the history holds;
+//! - **read at scrape time** ([`scrape`]): each device's status and link counters, and the
+//!   process figures ([`process`]).
 //!
 //! Content negotiation ([`format`](mod@format)): OpenMetrics when the scraper's `Accept` asks for it,
 //! Prometheus text 0.0.4 otherwise; each is served exactly, with its own content type.
@@ -31,6 +36,7 @@ use prometheus_client::registry::Registry;
 use time::OffsetDateTime;
 
 use super::error::ApiError;
+use crate::store::counts::Counts;
 use crate::store::writer::{GroupStats, JobTiming, Observe};
 use format::Format;
 
@@ -86,6 +92,8 @@ pub struct Metrics {
     dispatch_seconds: Histograms<KindLabels>,
     job_seconds: Histograms<EndLabels>,
     started: OffsetDateTime,
+    /// Jobs by device and state, active alarms by device and class, as committed.
+    counts: std::sync::Mutex<Counts>,
     /// Seconds from a submission reaching the writer to its commit.
     pub intake_seconds: Histogram,
 }
@@ -163,6 +171,7 @@ impl Default for Metrics {
             dispatch_seconds,
             job_seconds,
             started: OffsetDateTime::now_utc(),
+            counts: std::sync::Mutex::default(),
             intake_seconds,
         }
     }
@@ -184,13 +193,29 @@ impl Metrics {
         self.ws_snapshots.get_or_create(&ReasonLabels { reason }).inc();
     }
 
-    /// The job writer's hook: group size, commit time and timed transitions.
-    pub fn writer_hook(self: &Arc<Self>) -> Observe {
+    /// The job writer's hook: group size, commit time and timed transitions, and with
+    /// `counting` what each commit changed in the counts of jobs and alarms (a node of its
+    /// own; a node of a cluster reads them again instead, see [`Metrics::set_counts`]).
+    pub fn writer_hook(self: &Arc<Self>, counting: bool) -> Observe {
         let metrics = Arc::clone(self);
-        Arc::new(move |group: &GroupStats<'_>| metrics.observe_group(group))
+        Arc::new(move |group: &GroupStats<'_>| metrics.observe_group(group, counting))
     }
 
-    fn observe_group(&self, group: &GroupStats<'_>) {
+    /// Sets the counts of jobs and alarms to `counts`, as read from the store (at start,
+    /// and on a node of a cluster after each commit it follows).
+    pub fn set_counts(&self, counts: Counts) {
+        *self.counts.lock().unwrap_or_else(|p| p.into_inner()) = counts;
+    }
+
+    /// The counts of jobs and alarms now.
+    pub fn counts(&self) -> Counts {
+        self.counts.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    fn observe_group(&self, group: &GroupStats<'_>, counting: bool) {
+        if counting && !group.counts.is_empty() {
+            self.counts.lock().unwrap_or_else(|p| p.into_inner()).add(group.counts);
+        }
         self.group_size.observe(group.commands as f64);
         self.commit_seconds.observe(group.took.as_secs_f64());
         for timing in group.jobs {
@@ -263,17 +288,19 @@ mod tests {
                 took: std::time::Duration::from_secs(2),
             },
         ];
-        (metrics.writer_hook())(&GroupStats {
+        let mut counts = Counts::default();
+        counts.job(Some("shelf1"), crate::domain::JobState::Completed, 1);
+        (metrics.writer_hook(true))(&GroupStats {
             statements: 5,
             commands: 3,
             took: std::time::Duration::from_millis(2),
             jobs: &jobs,
+            counts: &counts,
         });
         let now = OffsetDateTime::now_utc();
         let scrape = scrape::Scrape {
             devices: Vec::new(),
-            jobs: Vec::new(),
-            alarms: Vec::new(),
+            counts: metrics.counts(),
             now,
             started: now,
             cluster: None,
@@ -287,6 +314,7 @@ mod tests {
             "{text}"
         );
         assert!(text.contains("rackd_writer_group_size_count 1"), "{text}");
+        assert!(text.contains("rackd_jobs{device=\"shelf1\",state=\"completed\"} 1"), "{text}");
         let old = format::to_prometheus(&text).unwrap();
         assert!(!old.contains("# EOF") && !old.contains(" info\n"), "{old}");
         assert!(old.contains("# TYPE rackd_ws_resyncs_total counter\nrackd_ws_resyncs_total 1\n"), "{old}");

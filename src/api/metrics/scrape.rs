@@ -1,6 +1,7 @@
 //! What `/metrics` reads at scrape time rather than counting as it happens: each device's
 //! status (the snapshot `/api/v1/devices` serves, its link counters and round trips
-//! included), active alarms and jobs from the store.
+//! included), and the counts of jobs and active alarms as kept in memory (see
+//! [`super`]): nothing is read from the store.
 //!
 //! Decisions:
 //! - **No second bookkeeping.** The link's counters are totals since rackd started and only
@@ -26,6 +27,7 @@ use time::OffsetDateTime;
 use crate::devices::DeviceStatus;
 use crate::domain::{AlarmClass, JobState};
 use crate::protocols::transport::ROUND_TRIP_BOUNDS;
+use crate::store::counts::Counts;
 
 /// A label value from outside the code (a device id, an address): escaped as both text
 /// formats want (prometheus-client 0.24 writes label values as they are; 0.25.2 and later
@@ -84,10 +86,8 @@ struct AlarmCount {
 pub struct Scrape {
     /// Every device's status, as the API shows it.
     pub devices: Vec<DeviceStatus>,
-    /// Jobs by (device, state), from the store.
-    pub jobs: Vec<(String, String, i64)>,
-    /// Active alarms by (device, class), from the store.
-    pub alarms: Vec<(String, String, i64)>,
+    /// Jobs by (device, state) and active alarms by (device, class), as committed.
+    pub counts: Counts,
     /// Now.
     pub now: OffsetDateTime,
     /// When rackd started (the age of a device never heard from).
@@ -142,20 +142,17 @@ fn counter<L: EncodeLabelSet>(
     Ok(())
 }
 
-/// Counts from grouped rows, with a zero for each configured device and each of `all`.
+/// `counted`, with a zero for each configured device and each of `all` not counted.
 fn counts(
-    rows: &[(String, String, i64)],
+    counted: &BTreeMap<(String, String), i64>,
     devices: &[DeviceStatus],
     all: &[&str],
 ) -> BTreeMap<(String, String), i64> {
-    let mut map = BTreeMap::new();
+    let mut map = counted.clone();
     for d in devices {
         for a in all {
-            map.insert((d.id.clone(), (*a).to_owned()), 0);
+            map.entry((d.id.clone(), (*a).to_owned())).or_insert(0);
         }
-    }
-    for (device, what, n) in rows {
-        *map.entry((device.clone(), what.clone())).or_insert(0) += n;
     }
     map
 }
@@ -262,11 +259,11 @@ impl Collector for Scrape {
     fn encode(&self, mut e: DescriptorEncoder) -> Result {
         self.devices(&mut e)?;
         let states: Vec<&str> = JobState::ALL.iter().map(|s| s.as_str()).collect();
-        let jobs = counts(&self.jobs, &self.devices, &states);
+        let jobs = counts(&self.counts.jobs, &self.devices, &states);
         let jobs = jobs.into_iter().map(|((d, s), n)| (JobCount { device: Text(d), state: Text(s) }, n));
         gauge(&mut e, "jobs", "Jobs in the store by device and state.", jobs)?;
         let classes: Vec<&str> = AlarmClass::ALL.iter().map(|c| c.as_str()).collect();
-        let alarms = counts(&self.alarms, &self.devices, &classes);
+        let alarms = counts(&self.counts.alarms, &self.devices, &classes);
         let alarms =
             alarms.into_iter().map(|((d, c), n)| (AlarmCount { device: Text(d), class: Text(c) }, n));
         gauge(

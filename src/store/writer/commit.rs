@@ -204,6 +204,7 @@ async fn one_by_one(
                 out.events.extend(applied.out.events);
                 out.locks.extend(applied.out.locks);
                 out.timings.extend(applied.out.timings);
+                out.counts.add(&applied.out.counts);
                 out.statements += applied.out.statements + 2;
                 answers.push(answer.remove(0));
             }
@@ -239,6 +240,7 @@ async fn apply(
         let mut group = Group::new(Loaded::default(), next, now_ms(), tell.cloned(), cmds, spare);
         let (answers, written) = stream::submissions(c, cmds, &mut group, &mut count).await?;
         group.audit_submissions();
+        group.counted();
         save::save(db, &group, written, &mut count).await?;
         group.out.statements = count;
         return Ok((answers, group));
@@ -247,6 +249,7 @@ async fn apply(
     let mut group = Group::new(loaded, next, now_ms(), tell.cloned(), cmds, spare);
     let answers = cmds.iter().map(|cmd| group.command(cmd)).collect();
     group.audit_submissions();
+    group.counted();
     save::save(db, &group, save::Written::default(), &mut count).await?;
     group.out.statements = count;
     Ok((answers, group))

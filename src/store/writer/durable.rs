@@ -46,6 +46,7 @@ use std::time::Instant;
 use super::apply::{Answer, Out};
 use super::timing::GroupStats;
 use super::{Command, Hooks, Sent, WriteError};
+use crate::store::counts::Counts;
 use crate::store::jobs::Job;
 
 /// Makes every commit written so far durable.
@@ -144,8 +145,11 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
     };
     let timings = result.as_ref().map(|(_, out)| out.timings.as_slice()).unwrap_or_default();
     let statements = result.as_ref().map_or(0, |(_, out)| out.statements);
+    let none = Counts::default();
+    let counts = result.as_ref().map_or(&none, |(_, out)| &out.counts);
     if let Some(observe) = &hooks.observe {
-        observe(&GroupStats { commands: group.len(), statements, took: started.elapsed(), jobs: timings });
+        let took = started.elapsed();
+        observe(&GroupStats { commands: group.len(), statements, took, jobs: timings, counts });
     }
     let answers = match result {
         Ok((answers, out)) => {

@@ -20,6 +20,7 @@ use super::apply::{Group, History};
 use crate::domain::Job;
 use crate::store::columns::{ALARMS, AUDIT, CONTROLS, EVENTS, JOBS, JobOut, LOCATIONS};
 use crate::store::controls::AuditEntry;
+use crate::store::counts::{self, Row as CountRow};
 use crate::store::engine::Engine;
 use crate::store::events::StoredEvent;
 use crate::store::on;
@@ -48,6 +49,7 @@ struct Statements {
     update_alarms: String,
     pause: String,
     resume: String,
+    counts: String,
 }
 
 impl Statements {
@@ -75,6 +77,7 @@ impl Statements {
                 "DELETE FROM controls WHERE target IN (SELECT target FROM ({}) AS k)",
                 e.json_rows("controls", &["target"])
             ),
+            counts: counts::add_json(e),
         }
     }
 }
@@ -149,6 +152,7 @@ const JOB_VALUES: usize = 16;
 const HISTORY_VALUES: usize = 4;
 const EVENT_VALUES: usize = 4;
 const AUDIT_VALUES: usize = 7;
+const COUNT_VALUES: usize = 3;
 
 /// One statement of the intake path on SQLite: as many rows of one table as SQLite's limit
 /// on bound parameters allows (2047 jobs, 8191 history entries or events).
@@ -157,6 +161,8 @@ pub(super) enum Chunk<'g> {
     History(&'g [History]),
     Events(&'g [StoredEvent]),
     Audit(&'g [AuditEntry]),
+    /// A group's change to `job_counts` (a few rows: one per device and state it moved).
+    Counts(&'g [CountRow<'g>]),
 }
 
 impl Chunk<'_> {
@@ -173,6 +179,7 @@ impl Chunk<'_> {
             Chunk::History(rows) => (rows.len(), HISTORY_VALUES),
             Chunk::Events(rows) => (rows.len(), EVENT_VALUES),
             Chunk::Audit(rows) => (rows.len(), AUDIT_VALUES),
+            Chunk::Counts(rows) => (rows.len(), COUNT_VALUES),
         };
         rows == Chunk::most(values)
     }
@@ -184,6 +191,7 @@ impl Chunk<'_> {
             Chunk::History(rows) => (rows.len(), rows.len() * HISTORY_VALUES),
             Chunk::Events(rows) => (rows.len(), rows.len() * EVENT_VALUES),
             Chunk::Audit(rows) => (rows.len(), rows.len() * AUDIT_VALUES),
+            Chunk::Counts(rows) => (rows.len(), rows.len() * COUNT_VALUES),
         }
     }
 
@@ -253,6 +261,13 @@ impl Chunk<'_> {
                     r.client.as_deref(),
                 ])
             }
+            Chunk::Counts(rows) => {
+                q.push("INSERT INTO job_counts (device, state, n) ");
+                q.push_values(*rows, |mut b, r| {
+                    b.push_bind(r.device).push_bind(r.state).push_bind(r.n);
+                });
+                q.push(" ").push(counts::UPSERT);
+            }
         }
     }
 }
@@ -306,8 +321,9 @@ impl Written {
 }
 
 /// On SQLite, writes the jobs, history entries and events `group` created (those not
-/// `written` already), and its audit entries, with multi-row `VALUES` and bound values (see
-/// the module doc), and returns how far they are written: all of them.
+/// `written` already), its audit entries and `counts` (its change to `job_counts`), with
+/// multi-row `VALUES` and bound values (see the module doc), and returns how far they are
+/// written: all of them.
 ///
 /// A group of at most [`SMALL`] rows in each table sends its statements together, as one
 /// execution whose text recurs and is kept prepared: single POSTs make groups of a few
@@ -319,6 +335,7 @@ pub(super) async fn intake(
     c: &mut sqlx::SqliteConnection,
     group: &Group,
     written: Written,
+    counts: &[CountRow<'_>],
     count: &mut usize,
 ) -> Result<Written, sqlx::Error> {
     let all = Written {
@@ -337,11 +354,12 @@ pub(super) async fn intake(
         .chain(group.history[written.history..].chunks(Chunk::most(HISTORY_VALUES)).map(Chunk::History))
         .chain(group.out.events[written.events..].chunks(Chunk::most(EVENT_VALUES)).map(Chunk::Events))
         .chain(group.audit.chunks(Chunk::most(AUDIT_VALUES)).map(Chunk::Audit))
+        .chain((!counts.is_empty()).then_some(Chunk::Counts(counts)))
         .collect();
     if chunks.is_empty() {
         return Ok(all);
     }
-    if chunks.len() <= 4 && chunks.iter().all(|c| c.size().0 <= SMALL) {
+    if chunks.len() <= 5 && chunks.iter().all(|c| c.size().0 <= SMALL) {
         let values = chunks.iter().map(|c| c.size().1).sum();
         let mut q = sized(chunks.iter().map(|c| c.size().0).sum(), values);
         for (i, chunk) in chunks.iter().enumerate() {
@@ -412,10 +430,12 @@ pub(super) async fn save(
         Engine::Sqlite => &SQLITE,
         Engine::Postgres => &POSTGRES,
     };
-    // The intake path's tables: bound values on SQLite, JSON on PostgreSQL.
+    // The intake path's tables, and the counts of jobs: bound values on SQLite, JSON on
+    // PostgreSQL.
+    let counts = group.out.counts.job_rows();
     match db {
         Conn::Sqlite(c) => {
-            intake(c, group, written, count).await?;
+            intake(c, group, written, &counts, count).await?;
         }
         Conn::Postgres(_) => {
             let created: Vec<JobOut> = group
@@ -446,6 +466,7 @@ pub(super) async fn save(
                 })
                 .collect();
             write(db, count, &sql.audit, &audit).await?;
+            write(db, count, &sql.counts, &counts).await?;
         }
     }
     let changed: Vec<JobOut> =

@@ -116,6 +116,7 @@ pub(super) async fn submissions(
         };
     }
     let c = line.free().await?;
-    let written = save::intake(c, group, written, count).await?;
+    // The group's change to the counts of jobs is written with the rest of the group.
+    let written = save::intake(c, group, written, &[], count).await?;
     Ok((answers, written))
 }

@@ -1,5 +1,6 @@
 //! What the writer tells `/metrics` after each commit: the group's size and commit time,
-//! and how long jobs took to the transitions worth a histogram.
+//! how long jobs took to the transitions worth a histogram, and what it changed in the
+//! counts of jobs and alarms ([`crate::store::counts`]).
 //!
 //! Decisions:
 //! - **Timed where transitions are applied, told after the commit.** The writer is the one
@@ -18,6 +19,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::domain::{JobKind, JobState};
+use crate::store::counts::Counts;
 
 /// How long a job took to one of the transitions timed for `/metrics`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -52,6 +54,9 @@ pub struct GroupStats<'a> {
     pub took: Duration,
     /// The timed transitions the commit made durable (none when it failed).
     pub jobs: &'a [JobTiming],
+    /// What the commit changed in the counts of jobs and active alarms (nothing when it
+    /// failed; see [`crate::store::counts`]).
+    pub counts: &'a Counts,
 }
 
 /// Called after each group with what it did (see the module doc).

@@ -201,3 +201,47 @@ async fn whoami_names_the_key_and_its_role(#[case] engine: Engine) {
     assert_eq!(open.get("/api/v1/whoami").await, (200, json!({"name": "anonymous", "role": "admin"})));
     open.stop().await;
 }
+
+/// An export longer than the pages it is read in (1000 alarms) holds every alarm of its
+/// period once, in order, and nothing outside it.
+#[rstest]
+#[case::sqlite(Engine::Sqlite)]
+#[case::postgres(Engine::Postgres)]
+#[tokio::test]
+async fn a_long_export_holds_its_whole_period_in_order(#[case] engine: Engine) {
+    use rackd::store::{self, Pool};
+    let app = spawn_with(engine, |c| c.devices = Vec::new()).await;
+    let pool = store::open(&app.db, Duration::from_secs(5)).await.unwrap();
+    // 2,345 past alarms, one a second from 1_700_000_001_000 ms on.
+    let sql = "WITH RECURSIVE n(i) AS (SELECT 1 UNION ALL SELECT i + 1 FROM n WHERE i < 2345) \
+               INSERT INTO alarms (id, device, code, class, text, raised_at, cleared_at, kind) \
+               SELECT i, 'shelf1', 0, 'link', 'alarm ' || i, 1700000000000 + i * 1000, \
+               1700000000000 + i * 1000 + 500, 'link' FROM n";
+    match &pool {
+        Pool::Sqlite(p) => drop(sqlx::query(sql).execute(p).await.unwrap()),
+        Pool::Postgres(p) => drop(sqlx::query(sql).execute(p).await.unwrap()),
+    }
+    let ids = async |query: &str| {
+        let r = app.client.get(app.url(&format!("/api/v1/alarms/export.csv{query}"))).send().await.unwrap();
+        assert_eq!(r.status(), 200);
+        let records = parse_csv(&r.text().await.unwrap());
+        assert!(records[0][0] == "id", "{:?}", records[0]);
+        records[1..].iter().map(|r| r[0].parse::<i64>().unwrap()).collect::<Vec<_>>()
+    };
+    let same = |got: Vec<i64>, want: std::ops::Range<i64>| {
+        let ends = |v: &[i64]| (v.len(), v.first().copied(), v.last().copied());
+        assert!(got.iter().copied().eq(want.clone()), "got {:?}, want {:?}", ends(&got), want);
+    };
+    same(ids("").await, 1..2346);
+    let at = |i: i64| {
+        let t = time::OffsetDateTime::from_unix_timestamp_nanos(
+            (1_700_000_000_000 + i * 1000) as i128 * 1_000_000,
+        );
+        t.unwrap().format(&time::format_description::well_known::Rfc3339).unwrap()
+    };
+    let period = format!("?since={}&until={}", at(1000), at(2100));
+    same(ids(&period).await, 1000..2100);
+    same(ids(&format!("?until={}", at(1))).await, 0..0);
+    app.stop().await;
+    pool.close().await;
+}

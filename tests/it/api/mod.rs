@@ -8,6 +8,7 @@ mod auth;
 mod cli;
 mod container;
 mod contract;
+mod counts;
 mod demo;
 mod errors;
 mod inventory;

@@ -76,6 +76,7 @@ async fn read(pool: &Pool) -> Vec<String> {
     out.push(format!("{:?}", events::after(pool, 0, 10_000).await.unwrap()));
     out.push(format!("{:?}", controls::paused(pool).await.unwrap()));
     out.push(format!("{:?}", controls::audit(pool, None, 100).await.unwrap()));
+    out.push(format!("{:?}", store::counts::load(pool).await.unwrap()));
     out
 }
 

@@ -7,6 +7,7 @@ mod copy;
 mod groups;
 mod import;
 mod pages;
+mod plans;
 mod retention;
 
 use std::time::Duration;

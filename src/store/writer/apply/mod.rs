@@ -17,6 +17,7 @@ use crate::domain::time::{from_ms, to_ms};
 use crate::domain::{Failure, JobState, LightColor, Location, LocationLock, Pause, Transition, Who};
 use crate::store::alarms;
 use crate::store::controls::AuditEntry;
+use crate::store::counts::Counts;
 use crate::store::events::StoredEvent;
 use crate::store::jobs::{Job, NewJob};
 use crate::store::locations::{self, LocationState};
@@ -66,6 +67,8 @@ pub(super) struct Out {
     pub(super) timings: Vec<JobTiming>,
     /// Statements the group's transaction ran, `BEGIN` and `COMMIT` included.
     pub(super) statements: usize,
+    /// What it changed in the counts of jobs and active alarms (see [`Group::counted`]).
+    pub(super) counts: Counts,
 }
 
 /// The next id of each numbered table, allocated here (one writer: no gaps, no races).
@@ -130,6 +133,8 @@ pub(super) struct Group {
     created_refs: HashMap<String, i64>,
     /// Every job loaded or created, as it now is.
     pub(super) jobs: HashMap<i64, Job>,
+    /// The state of each job loaded, as stored before this group.
+    was: HashMap<i64, JobState>,
     /// Jobs created by this group, with their canonical requests, in id order.
     pub(super) created: BTreeMap<i64, String>,
     /// Stored jobs this group changed.
@@ -142,6 +147,8 @@ pub(super) struct Group {
     pub(super) alarms: BTreeMap<i64, alarms::Row>,
     /// Alarms raised by this group.
     pub(super) raised: BTreeSet<i64>,
+    /// The alarms loaded that were active before this group.
+    was_active: BTreeSet<i64>,
     /// Stored alarms this group changed (cleared, acknowledged).
     pub(super) alarms_changed: BTreeSet<i64>,
     /// Fills in why a job waits, before its event is made.
@@ -175,7 +182,9 @@ impl Group {
             cmds.iter().map(|c| if let Command::Submit { jobs, .. } = *c { jobs.len() } else { 0 }).sum();
         let mut jobs = std::mem::take(&mut spare.jobs);
         jobs.reserve(loaded.jobs.len() + new);
+        let was = loaded.jobs.values().map(|j| (j.id, j.state)).collect();
         jobs.extend(loaded.jobs);
+        let was_active = loaded.alarms.values().filter(|a| a.cleared_at.is_none()).map(|a| a.id).collect();
         let mut starts = loaded.starts;
         starts.reserve(new);
         Group {
@@ -184,6 +193,7 @@ impl Group {
             known: loaded.by_reference,
             created_refs: HashMap::with_capacity(new),
             jobs,
+            was,
             created: BTreeMap::new(),
             changed: BTreeSet::new(),
             locations: loaded.locations,
@@ -191,6 +201,7 @@ impl Group {
             starts,
             alarms: loaded.alarms,
             raised: BTreeSet::new(),
+            was_active,
             alarms_changed: BTreeSet::new(),
             tell,
             controls: BTreeMap::new(),
@@ -210,6 +221,37 @@ impl Group {
             jobs.clear();
             spare.jobs = jobs;
         }
+    }
+
+    /// Notes in `out.counts` what the group changed in the counts of jobs by device and
+    /// state and of active alarms by device and class (see [`crate::store::counts`]): its
+    /// new jobs as they end up, each stored job it moved out of the state it was stored in
+    /// and into the one it ends in, each alarm it raised and left active, and each stored
+    /// active alarm it cleared. Called once the group's commands are applied.
+    pub(super) fn counted(&mut self) {
+        let mut counts = Counts::default();
+        for job in self.created.keys().filter_map(|id| self.jobs.get(id)) {
+            counts.job(job.device.as_deref(), job.state, 1);
+        }
+        for id in &self.changed {
+            if let (Some(job), Some(&was)) = (self.jobs.get(id), self.was.get(id))
+                && job.state != was
+            {
+                counts.job(job.device.as_deref(), was, -1);
+                counts.job(job.device.as_deref(), job.state, 1);
+            }
+        }
+        for alarm in self.raised.iter().filter_map(|id| self.alarms.get(id)) {
+            if alarm.cleared_at.is_none() {
+                counts.alarm(&alarm.device, &alarm.class, 1);
+            }
+        }
+        for id in self.alarms_changed.intersection(&self.was_active) {
+            if let Some(alarm) = self.alarms.get(id).filter(|a| a.cleared_at.is_some()) {
+                counts.alarm(&alarm.device, &alarm.class, -1);
+            }
+        }
+        self.out.counts = counts;
     }
 
     /// Whether the group read a job that holds one of its submissions' references.
