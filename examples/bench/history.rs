@@ -176,7 +176,9 @@ async fn prune_a_day(
     let started = Instant::now();
     let folder = dir.join("archive");
     let archive = tokio::spawn(async move {
-        let done = rackd::store::archive::archive(&pool, before, &folder).await;
+        let done =
+            rackd::store::archive::archive(&pool, before, &folder, rackd::store::archive::Delete::Direct)
+                .await;
         pool.close().await;
         done
     });

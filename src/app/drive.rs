@@ -80,7 +80,8 @@ async fn archive(pool: Pool, writer: Writer, retention: RetentionConfig, folder:
         tick.tick().await;
         let today = time::OffsetDateTime::now_utc().date();
         let before = today.saturating_sub(time::Duration::days(days.min(36_500) as i64));
-        let record = match store::archive::archive(&pool, before, &folder).await {
+        let how = store::archive::Delete::Writer(&writer);
+        let record = match store::archive::archive(&pool, before, &folder, how).await {
             Ok(done) => {
                 if done.jobs > 0 {
                     tracing::info!(jobs = done.jobs, files = done.files.len(), kept = done.kept, before = %before,

@@ -184,9 +184,10 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             let pool = crate::store::open(&database, std::time::Duration::from_secs(30))
                 .await
                 .with_context(|| format!("opening {}", database.display()))?;
-            let done = crate::store::archive::archive(&pool, before, &to)
-                .await
-                .with_context(|| format!("archiving {} before {before}", database.display()))?;
+            let done =
+                crate::store::archive::archive(&pool, before, &to, crate::store::archive::Delete::Direct)
+                    .await
+                    .with_context(|| format!("archiving {} before {before}", database.display()))?;
             pool.close().await;
             for file in &done.files {
                 println!("{}", file.display());

@@ -15,12 +15,15 @@
 //!   `jobs-YYYY-MM-DD.2.jsonl.gz`, and so on: a file, once written, is never changed.
 //! - **Written before anything is deleted, and atomically**: each file is written to a
 //!   temporary name, synced, renamed and its folder synced; only then are its jobs deleted,
-//!   in batches of [`BATCH`] jobs, a transaction each, so that a running writer waits at most
-//!   one batch. A crash between the rename and the last batch leaves jobs in the store that
+//!   in batches of [`BATCH`] jobs, a transaction each (on a running rackd, a group of its
+//!   writer each: [`Delete`]), so that new jobs wait for one batch at most. A crash between the rename and the last batch leaves jobs in the store that
 //!   are in the archive too: the next run archives them again under the next name, and a
 //!   reader de-duplicates by job id. Nothing is ever deleted that is not in a synced file.
-//! - **rackd may run meanwhile**: the writer keeps nothing of ended jobs in memory; a
-//!   re-POST of an archived job's reference afterwards makes a new job, as after any
+//! - **rackd may run meanwhile**: by hand the jobs are deleted straight in the database
+//!   (with `job_counts`, which `/metrics` shows from rackd's next start); the retention
+//!   deletes through the writer, which takes them off its counts as it commits. A job
+//!   retried while its day was being written stays in the store (its old state is in the
+//!   file too). A re-POST of an archived job's reference makes a new job, as after any
 //!   retention. Events are not touched: their own retention (`events.retention_hours`)
 //!   keeps them.
 //! - gzip through `flate2` (its pure-Rust backend); written here rather than with an
@@ -34,12 +37,15 @@ use flate2::write::GzEncoder;
 use time::{Date, OffsetDateTime, Time};
 
 use super::columns::JOBS;
+use super::counts::{self, Counts};
 use super::engine::Engine;
+use super::writer::{Record, WriteError, Writer};
 use super::{Pool, Tx, on};
+use crate::domain::JobState;
 use crate::domain::time::to_ms;
 
 /// Jobs deleted per transaction.
-pub const BATCH: usize = 1_000;
+pub const BATCH: usize = 500;
 
 const DAY_MS: i64 = 86_400_000;
 
@@ -65,6 +71,9 @@ pub enum ArchiveError {
     /// The database failed.
     #[error("the database: {0}")]
     Database(#[from] sqlx::Error),
+    /// The writer refused the deletion (it stopped, or its database failed).
+    #[error("the writer: {0}")]
+    Writer(#[from] WriteError),
 }
 
 /// What one run archived.
@@ -78,9 +87,26 @@ pub struct Archived {
     pub kept: u64,
 }
 
+/// How the archived jobs leave the store.
+#[derive(Clone, Copy)]
+pub enum Delete<'a> {
+    /// By rackd's running writer (the retention): in its own groups, so that its view of
+    /// the jobs and the counts `/metrics` shows move with them.
+    Writer(&'a Writer),
+    /// By this process, straight in the database (`rackd db archive`): with the counts in
+    /// the same transaction. A rackd running meanwhile shows the new counts from its next
+    /// start.
+    Direct,
+}
+
 /// Moves every ended job that ended before `before` (midnight UTC) and nothing names to
 /// a file per day in `dir`.
-pub async fn archive(pool: &Pool, before: Date, dir: &Path) -> Result<Archived, ArchiveError> {
+pub async fn archive(
+    pool: &Pool,
+    before: Date,
+    dir: &Path,
+    how: Delete<'_>,
+) -> Result<Archived, ArchiveError> {
     check_folder(dir)?;
     let cut = to_ms(OffsetDateTime::new_utc(before, Time::MIDNIGHT));
     let held = held(pool).await?;
@@ -102,7 +128,12 @@ pub async fn archive(pool: &Pool, before: Date, dir: &Path) -> Result<Archived, 
                 .collect();
             let path = write_day(dir, day, &lines)?;
             for batch in ids.chunks(BATCH) {
-                delete(pool, batch).await?;
+                match how {
+                    Delete::Writer(writer) => {
+                        writer.record(Record::Archived { jobs: batch.to_vec() }).await?
+                    }
+                    Delete::Direct => delete(pool, batch).await?,
+                }
             }
             done.jobs += ids.len() as u64;
             done.files.push(path);
@@ -224,16 +255,26 @@ fn write_day(dir: &Path, day: i64, lines: &[String]) -> Result<PathBuf, ArchiveE
     Ok(path)
 }
 
-/// Deletes `ids` and their history in one transaction.
+/// Deletes `ids` (those still ended) and their history, and takes them off the counts, in
+/// one transaction.
 async fn delete(pool: &Pool, ids: &[i64]) -> Result<(), sqlx::Error> {
     let list = ids.iter().map(i64::to_string).collect::<Vec<_>>().join(",");
     let mut tx = pool.write_tx().await?;
-    for sql in [
-        format!("DELETE FROM job_history WHERE job_id IN ({list})"),
-        format!("DELETE FROM jobs WHERE id IN ({list}) AND {ENDED}"),
-    ] {
-        let sql = sqlx::AssertSqlSafe(sql);
-        on!(Tx, &mut tx, t => sqlx::query(sql).execute(&mut **t).await.map(drop))?;
+    let jobs = format!("DELETE FROM jobs WHERE id IN ({list}) AND {ENDED} RETURNING id, device, state");
+    let history = format!("DELETE FROM job_history WHERE job_id IN ({list})");
+    let history = sqlx::AssertSqlSafe(history);
+    on!(Tx, &mut tx, t => sqlx::query(history).execute(&mut **t).await.map(drop))?;
+    let jobs = sqlx::AssertSqlSafe(jobs);
+    let gone: Vec<(i64, Option<String>, String)> =
+        on!(Tx, &mut tx, t => sqlx::query_as(jobs).fetch_all(&mut **t).await)?;
+    let mut counts = Counts::default();
+    for (_, device, state) in &gone {
+        if let Some(state) = JobState::parse(state) {
+            counts.job(device.as_deref(), state, -1);
+        }
     }
+    let rows = serde_json::to_string(&counts.job_rows()).unwrap_or_default();
+    let sql = sqlx::AssertSqlSafe(counts::add_json(pool.engine()));
+    on!(Tx, &mut tx, t => sqlx::query(sql).bind(rows).execute(&mut **t).await.map(drop))?;
     on!(Tx, tx, t => t.commit().await)
 }

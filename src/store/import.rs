@@ -11,7 +11,9 @@
 //!   unique-key error, and nothing of the call is written); the writer numbers the next
 //!   new job after the highest at its next start. History rows take the table's own ids.
 //! - **No events**: the event log is for live subscribers and is kept for days; a loaded
-//!   year of jobs has nothing to tell them. Audit entries are not written either.
+//!   year of jobs has nothing to tell them. Audit entries are not written either. The
+//!   counts of jobs (`job_counts`, what `/metrics` shows) are, in the same commit; a rackd
+//!   running meanwhile shows them from its next start.
 //! - **One transaction per call**, written with the writer's own set-based statements (one
 //!   statement per table, the rows as one JSON parameter): a call of a few thousand jobs
 //!   is a fast unit; a failed call leaves nothing behind.
@@ -21,6 +23,7 @@
 use serde::Serialize;
 
 use super::columns::{JOBS, JobOut};
+use super::counts::{self, Counts};
 use super::{Pool, Tx, on};
 use crate::domain::{Job, JobState};
 
@@ -89,10 +92,16 @@ pub async fn ended_jobs(pool: &Pool, jobs: &[Ended]) -> Result<(), ImportError> 
             })
         })
         .collect();
+    // The counts `/metrics` reads (`store::counts`), in the same commit as the jobs.
+    let mut counts = Counts::default();
+    for e in jobs {
+        counts.job(e.job.device.as_deref(), e.job.state, 1);
+    }
     let engine = pool.engine();
     let statements = [
         (engine.insert_json("jobs", &JOBS), serde_json::to_string(&rows)),
         (engine.insert_json("job_history", &HISTORY), serde_json::to_string(&history)),
+        (counts::add_json(engine), serde_json::to_string(&counts.job_rows())),
     ];
     let mut tx = pool.write_tx().await?;
     for (sql, json) in statements {

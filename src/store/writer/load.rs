@@ -154,7 +154,7 @@ pub(super) async fn load(
                 Record::Acknowledge { alarm, .. } => {
                     acknowledged.insert(*alarm);
                 }
-                Record::Retell { jobs } => ids.extend(jobs.iter().copied()),
+                Record::Retell { jobs } | Record::Archived { jobs } => ids.extend(jobs.iter().copied()),
                 Record::Device { .. }
                 | Record::Pause { .. }
                 | Record::Audit { .. }

@@ -183,6 +183,14 @@ pub enum Record {
         /// The cut-off.
         before_ms: i64,
     },
+    /// Retention: these jobs are in the archive (written and synced, `store::archive`):
+    /// delete them and their history, and take them off the counts, in this commit. A job
+    /// that is not ended (retried since it was read) stays; one the group's later commands
+    /// name is gone for them (404).
+    Archived {
+        /// The jobs.
+        jobs: Vec<i64>,
+    },
 }
 
 /// How a submitted job was taken.

@@ -498,5 +498,18 @@ pub(super) async fn save(
         *count += 1;
         on!(Conn, db, c => sqlx::query(sql).bind(before).execute(&mut *c).await.map(drop))?;
     }
+    if !group.archived.is_empty() {
+        // Ids are our own integers: written into the text, as a list.
+        let ids: Vec<String> = group.archived.iter().map(|(id, _, _)| id.to_string()).collect();
+        let ids = ids.join(",");
+        for sql in [
+            format!("DELETE FROM job_history WHERE job_id IN ({ids})"),
+            format!("DELETE FROM jobs WHERE id IN ({ids})"),
+        ] {
+            *count += 1;
+            let sql = sqlx::AssertSqlSafe(sql);
+            on!(Conn, db, c => sqlx::query(sql).execute(&mut *c).await.map(drop))?;
+        }
+    }
     Ok(())
 }

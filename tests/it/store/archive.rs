@@ -8,7 +8,7 @@ use std::io::Read;
 
 use rackd::domain::time::from_ms;
 use rackd::domain::{JobState, NewJob};
-use rackd::store::archive::{self, ArchiveError};
+use rackd::store::archive::{self, ArchiveError, Delete::Direct};
 use rackd::store::import::{self, Ended};
 use rackd::store::writer::{Hooks, Outcome, Writer};
 use rackd::store::{Engine, Pool, locations};
@@ -102,31 +102,38 @@ async fn ended_jobs_move_to_a_file_per_day_and_named_ones_stay(#[case] engine: E
     let dir = tempfile::tempdir().unwrap();
     let not_a_folder = dir.path().join("file");
     std::fs::write(&not_a_folder, "").unwrap();
-    let refused = archive::archive(&pool, date!(2026 - 01 - 03), &not_a_folder).await.unwrap_err();
+    let refused = archive::archive(&pool, date!(2026 - 01 - 03), &not_a_folder, Direct).await.unwrap_err();
     assert!(matches!(refused, ArchiveError::Folder { .. }), "{refused}");
     assert_eq!(ids(&pool).await.len(), 10, "nothing deleted");
 
     // Before the third day: the first two days go, but for jobs 2 and 5.
     let to = dir.path().join("archive");
-    let done = archive::archive(&pool, date!(2026 - 01 - 03), &to).await.unwrap();
+    let done = archive::archive(&pool, date!(2026 - 01 - 03), &to, Direct).await.unwrap();
     let names: Vec<String> =
         done.files.iter().map(|f| f.file_name().unwrap().to_string_lossy().into()).collect();
     assert_eq!(names, ["jobs-2026-01-01.jsonl.gz", "jobs-2026-01-02.jsonl.gz"]);
     assert_eq!((done.jobs, done.kept), (4, 2));
     assert_eq!(archived(&done.files), [vec![1, 3], vec![4, 6]]);
     assert_eq!(ids(&pool).await, BTreeSet::from([2, 5, 7, 8, 9, 10]));
+    // The counts `/metrics` starts from moved in the same transaction (9 loaded, 4 gone).
+    let sql = "SELECT n FROM job_counts WHERE device = '' AND state = 'completed'";
+    let completed: i64 = match &pool {
+        Pool::Sqlite(p) => sqlx::query_scalar(sql).fetch_one(p).await.unwrap(),
+        Pool::Postgres(p) => sqlx::query_scalar(sql).fetch_one(p).await.unwrap(),
+    };
+    assert_eq!(completed, 5);
     let leftovers: Vec<_> = std::fs::read_dir(&to).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(leftovers.len(), 2, "no temporary file left: {leftovers:?}");
 
     // Again: nothing new. Then the lock is cleared: job 2 goes, to a file of its own.
-    let again = archive::archive(&pool, date!(2026 - 01 - 03), &to).await.unwrap();
+    let again = archive::archive(&pool, date!(2026 - 01 - 03), &to, Direct).await.unwrap();
     assert_eq!((again.files.len(), again.jobs, again.kept), (0, 0, 2));
     execute(
         &pool,
         "UPDATE locations SET lock_job = NULL, locked_at = NULL, locked_by = NULL, lock_reason = NULL",
     )
     .await;
-    let later = archive::archive(&pool, date!(2026 - 01 - 03), &to).await.unwrap();
+    let later = archive::archive(&pool, date!(2026 - 01 - 03), &to, Direct).await.unwrap();
     assert_eq!(later.files, [to.join("jobs-2026-01-01.2.jsonl.gz")]);
     assert_eq!(archived(&later.files), [vec![2]]);
 

@@ -22,6 +22,7 @@ fn ended(id: i64, days: i64) -> Ended {
     let new = light(&format!("K-{id}"), 1);
     let end = now_ms() - days * DAY;
     let mut job = new.accepted(id, end - 1_000);
+    job.device = Some("shelf1".into());
     job.state = JobState::Completed;
     job.updated_at = from_ms(end);
     let history =
@@ -60,6 +61,10 @@ async fn jobs_past_the_retention_move_to_the_archive_and_a_broken_folder_raises_
     }
     let files = std::fs::read_dir(&folder).unwrap().count();
     assert_eq!(files, 2, "a file for each day: 100 and 95 days ago");
+    // `/metrics` counts what the store holds: the writer took the archived jobs off.
+    let metrics = app.client.get(app.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    let line = "rackd_jobs{device=\"shelf1\",state=\"completed\"} 2";
+    assert!(metrics.lines().any(|l| l == line), "{line} in {metrics}");
 
     // The folder stops taking files: an alarm, nothing deleted; back, the alarm clears.
     std::fs::remove_dir_all(&folder).unwrap();

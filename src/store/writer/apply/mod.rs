@@ -162,6 +162,8 @@ pub(super) struct Group {
     pub(super) history: Vec<History>,
     /// Retention: events before this time go.
     pub(super) prune: Option<i64>,
+    /// Retention: jobs moved to the archive, deleted with this group (id, device, state).
+    pub(super) archived: Vec<(i64, Option<String>, JobState)>,
     pub(super) out: Out,
 }
 
@@ -209,6 +211,7 @@ impl Group {
             submitted: Vec::new(),
             history: Vec::with_capacity(new),
             prune: None,
+            archived: Vec::new(),
             out: Out { events: Vec::with_capacity(new), ..Out::default() },
         }
     }
@@ -240,6 +243,9 @@ impl Group {
                 counts.job(job.device.as_deref(), was, -1);
                 counts.job(job.device.as_deref(), job.state, 1);
             }
+        }
+        for (_, device, state) in &self.archived {
+            counts.job(device.as_deref(), *state, -1);
         }
         for alarm in self.raised.iter().filter_map(|id| self.alarms.get(id)) {
             if alarm.cleared_at.is_none() {

@@ -139,6 +139,15 @@ impl Group {
                 self.audit(by, client, action, target, reason.as_deref());
             }
             Record::Prune { before_ms } => self.prune = Some(*before_ms),
+            Record::Archived { jobs } => {
+                for id in jobs {
+                    if self.jobs.get(id).is_some_and(|j| j.state.is_terminal())
+                        && let Some(job) = self.jobs.remove(id)
+                    {
+                        self.archived.push((job.id, job.device, job.state));
+                    }
+                }
+            }
         }
         Ok(())
     }
