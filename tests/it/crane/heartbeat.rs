@@ -64,7 +64,10 @@ async fn cancelling_a_running_job_sends_mode_3_and_a_queued_one_cancels_at_once(
     let (status, job) = app.post(&format!("/api/v1/jobs/{b}/cancel"), &json!({})).await;
     assert_eq!((status, job["state"].as_str()), (200, Some("cancelled")), "{job}");
     let (status, job) = app.post(&format!("/api/v1/jobs/{a}/cancel"), &json!({})).await;
-    assert_eq!((status, job["state"].as_str()), (200, Some("cancelling")), "{job}");
+    // The job as it stands after the cancel: `cancelling` while the crane carries it out,
+    // or already `cancelled` when the crane was quicker than the answer.
+    assert_eq!(status, 200, "{job}");
+    assert!(["cancelling", "cancelled"].contains(&job["state"].as_str().unwrap_or("")), "{job}");
     let job = wait_job(&app, a, &["completed", "failed", "cancelled"], 5).await;
     assert_eq!(job["state"], "cancelled", "{job}");
     assert_eq!(sim.cancels(), 1);
