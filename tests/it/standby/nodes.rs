@@ -152,15 +152,18 @@ async fn an_active_node_cut_off_from_the_database_stops_driving_before_the_stand
     let (db_proxy, db_via_proxy) = Proxy::to_postgres(&db).await;
     let (a_devices, a_crane) = crane_through_proxy(&site).await;
     let (b_devices, b_crane) = crane_through_proxy(&site).await;
-    let a = node_with(&db_via_proxy, "a", a_devices, 1000).await;
+    // A lease of 2 s: with 1 s, a standby renewing on a machine loaded by the whole suite
+    // could itself miss its lease and stop: the likely cause of b refusing connections
+    // once in a full run.
+    let a = node_with(&db_via_proxy, "a", a_devices, 2000).await;
     until(&a, "/api/v1/cluster", 10, |c| c["role"] == "active").await;
-    let b = node_with(&db, "b", b_devices, 1000).await;
+    let b = node_with(&db, "b", b_devices, 2000).await;
     let (_, job) = b.post("/api/v1/jobs", &travel("before", 4)).await;
     completed(&b, job["id"].as_i64().unwrap()).await;
     assert!(a_crane.sent().is_some() && b_crane.sent().is_none(), "only the active node talks to the crane");
 
     db_proxy.block();
-    // Bounds, not paces (the lease is 1 s): room for a machine the other tests load.
+    // Bounds, not paces (the lease is 2 s): room for a machine the other tests load.
     let ended = a.ended(Duration::from_secs(30)).await.unwrap_err().to_string();
     assert!(ended.contains("lost the cluster's lease"), "{ended}");
     until(&b, "/api/v1/cluster", 30, |c| c["role"] == "active").await;
