@@ -15,7 +15,7 @@ use rackd::store::{Engine, Pool, locations};
 use rstest::rstest;
 use time::macros::date;
 
-use super::{light, open};
+use super::{light, open, rows};
 
 /// 2026-01-01, midnight UTC, in Unix ms.
 const DAY0: i64 = 1_767_225_600_000;
@@ -59,12 +59,7 @@ fn archived(files: &[std::path::PathBuf]) -> Vec<Vec<i64>> {
 }
 
 async fn ids(pool: &Pool) -> BTreeSet<i64> {
-    let sql = "SELECT id FROM jobs";
-    let ids: Vec<i64> = match pool {
-        Pool::Sqlite(p) => sqlx::query_scalar(sql).fetch_all(p).await.unwrap(),
-        Pool::Postgres(p) => sqlx::query_scalar(sql).fetch_all(p).await.unwrap(),
-    };
-    ids.into_iter().collect()
+    rows::<(i64,)>(pool, "SELECT id FROM jobs").await.into_iter().map(|(id,)| id).collect()
 }
 
 async fn execute(pool: &Pool, sql: &'static str) {
@@ -117,11 +112,7 @@ async fn ended_jobs_move_to_a_file_per_day_and_named_ones_stay(#[case] engine: E
     assert_eq!(ids(&pool).await, BTreeSet::from([2, 5, 7, 8, 9, 10]));
     // The counts `/metrics` starts from moved in the same transaction (9 loaded, 4 gone).
     let sql = "SELECT n FROM job_counts WHERE device = '' AND state = 'completed'";
-    let completed: i64 = match &pool {
-        Pool::Sqlite(p) => sqlx::query_scalar(sql).fetch_one(p).await.unwrap(),
-        Pool::Postgres(p) => sqlx::query_scalar(sql).fetch_one(p).await.unwrap(),
-    };
-    assert_eq!(completed, 5);
+    assert_eq!(rows::<(i64,)>(&pool, sql).await, [(5,)]);
     let leftovers: Vec<_> = std::fs::read_dir(&to).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(leftovers.len(), 2, "no temporary file left: {leftovers:?}");
 

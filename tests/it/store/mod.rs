@@ -28,6 +28,20 @@ pub async fn open(engine: Engine) -> (Pool, Database, Option<tempfile::TempDir>)
     (pool, db, dir)
 }
 
+/// The rows of `sql` on either engine, each as `T` (a tuple of its columns).
+pub async fn rows<T>(pool: &Pool, sql: &'static str) -> Vec<T>
+where
+    T: for<'r> sqlx::FromRow<'r, sqlx::sqlite::SqliteRow>
+        + for<'r> sqlx::FromRow<'r, sqlx::postgres::PgRow>
+        + Send
+        + Unpin,
+{
+    match pool {
+        Pool::Sqlite(p) => sqlx::query_as(sql).fetch_all(p).await.unwrap(),
+        Pool::Postgres(p) => sqlx::query_as(sql).fetch_all(p).await.unwrap(),
+    }
+}
+
 /// A light job with this reference.
 pub fn light(reference: &str, bay: u16) -> NewJob {
     NewJob {
