@@ -1,11 +1,13 @@
 //! `/api/v1/stats`: the store's KPIs over a period, per device and per aisle.
 //!
 //! The period runs from `since` to now. `since` is an RFC 3339 time or a duration back
-//! from now (`90s`, `30m`, `1h`, `8h` for a shift, `2d`); the default is one hour, and
-//! it reaches back at most 31 days (the history kept for KPIs; older is a 400, as is a
-//! time in the future). Every configured device that runs jobs and every aisle of the
-//! layout is listed, with zeros when nothing happened. How the figures are made is in
-//! [`crate::store::stats`].
+//! from now (`90s`, `30m`, `1h`, `8h` for a shift, `2d`, `365d`); the default is one
+//! hour, and it reaches back at most 366 days (older is a 400, as is a time in the
+//! future). The period starts on `since`'s whole minute (its whole hour beyond the minute
+//! rollups kept, as long as the jobs); the answer's `since` is the start used. Every
+//! configured device that runs jobs and every aisle of the layout is listed, with zeros
+//! when nothing happened. How the figures are made is in [`crate::store::stats`] and
+//! [`crate::store::rollups`].
 
 use axum::extract::State;
 use serde::{Deserialize, Serialize};
@@ -19,8 +21,8 @@ use super::state::AppState;
 use crate::domain::time::{from_ms, now_ms, to_ms};
 use crate::store::stats::{self, Figures};
 
-/// How far back `since` may reach.
-pub const MAX_BACK_MS: i64 = 31 * 24 * 3_600_000;
+/// How far back `since` may reach: a year, a leap year's included.
+pub const MAX_BACK_MS: i64 = 366 * 24 * 3_600_000;
 
 /// The default period: one hour.
 const DEFAULT_BACK_MS: i64 = 3_600_000;
@@ -36,7 +38,8 @@ pub fn router() -> OpenApiRouter<AppState> {
 #[into_params(parameter_in = Query)]
 pub struct StatsParams {
     /// Start of the period: an RFC 3339 time, or a duration back from now (`30m`, `1h`,
-    /// `8h`, `2d`); default `1h`, at most 31 days back.
+    /// `8h`, `2d`, `365d`); default `1h`, at most 366 days back. Taken down to its whole
+    /// minute (its hour beyond the retention of jobs).
     #[param(example = "8h")]
     since: Option<String>,
 }
@@ -69,7 +72,7 @@ pub struct AisleStats {
     "aisles": [{"aisle": 2, "completed": 41, "per_hour": 41.0, "failed": 1, "failures": {"alarm": 1},
         "utilisation": 0.62, "durations": [{"kind": "store", "count": 30, "mean_s": 48.2, "p95_s": 61.0}]}]}))]
 pub struct Stats {
-    /// Start of the period.
+    /// Start of the period as used: `since` down to its whole minute (or hour).
     #[serde(with = "time::serde::rfc3339")]
     #[schema(value_type = String, format = DateTime)]
     pub since: OffsetDateTime,
@@ -84,11 +87,11 @@ pub struct Stats {
 }
 
 /// KPIs per device and per aisle: jobs completed (and per hour), failures by kind,
-/// utilisation, mean and p95 duration by job kind, from the job history.
+/// utilisation, mean and p95 duration by job kind (p95 within 1%), from the rollups.
 #[utoipa::path(get, path = "/stats", tag = "operations", params(StatsParams),
     responses(
         (status = 200, description = "The period's figures", body = Stats),
-        (status = 400, description = "`since` is not a time or a duration, is in the future or more than 31 days back", body = ErrorBody),
+        (status = 400, description = "`since` is not a time or a duration, is in the future or more than 366 days back", body = ErrorBody),
     ))]
 async fn get_stats(
     State(app): State<AppState>,
@@ -99,7 +102,8 @@ async fn get_stats(
         None => until - DEFAULT_BACK_MS,
         Some(text) => since(text, until).map_err(|m| ApiError::bad_request("bad_query", m))?,
     };
-    let (mut devices, mut aisles) = stats::period(&app.pool, from, until).await?;
+    let stats::Period { from, mut devices, mut aisles } =
+        stats::period(&app.pool, from, until).await?;
     let runs_jobs: Vec<String> =
         app.rules.devices.iter().filter(|(_, kinds)| !kinds.is_empty()).map(|(id, _)| id.clone()).collect();
     let devices = runs_jobs
@@ -136,7 +140,7 @@ fn since(text: &str, now: i64) -> Result<i64, String> {
         return Err(format!("since {text:?} is in the future"));
     }
     if now - from > MAX_BACK_MS {
-        return Err(format!("since {text:?} is more than 31 days back"));
+        return Err(format!("since {text:?} is more than 366 days back"));
     }
     Ok(from)
 }
@@ -163,12 +167,12 @@ mod tests {
 
     #[test]
     fn durations_and_times() {
-        let now = 100 * 86_400_000;
+        let now = 1000 * 86_400_000;
         assert_eq!(since("1h", now), Ok(now - 3_600_000));
         assert_eq!(since("8h", now), Ok(now - 8 * 3_600_000));
         assert_eq!(since("90s", now), Ok(now - 90_000));
-        assert_eq!(since("31d", now), Ok(now - MAX_BACK_MS));
-        assert!(since("32d", now).unwrap_err().contains("31 days"));
+        assert_eq!(since("366d", now), Ok(now - MAX_BACK_MS));
+        assert!(since("367d", now).unwrap_err().contains("366 days"));
         assert!(since("h", now).is_err());
         assert!(since("-1h", now).is_err());
         assert!(since("1.5h", now).is_err());

@@ -115,6 +115,18 @@ pub enum DbCommand {
         #[arg(long)]
         to: PathBuf,
     },
+    /// Recompute the KPIs' rollups from the job history, after a restore, an import or
+    /// rows written by another tool (rackd may run). Example: rackd db rollups --rebuild
+    /// --database sqlite:data/rackd.db
+    Rollups {
+        /// The store: sqlite:PATH or postgres://...
+        #[arg(long, value_parser = crate::store::Database::parse)]
+        database: crate::store::Database,
+        /// Rebuild them (the one thing this command does; said so that it is not run by
+        /// mistake).
+        #[arg(long, required = true)]
+        rebuild: bool,
+    },
 }
 
 /// A day written `YYYY-MM-DD`.
@@ -198,6 +210,27 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 done.files.len(),
                 to.display(),
                 done.kept
+            );
+        }
+        Command::Db(DbCommand::Rollups { database, rebuild: _ }) => {
+            let pool = crate::store::open(&database, std::time::Duration::from_secs(30))
+                .await
+                .with_context(|| format!("opening {}", database.display()))?;
+            let started = std::time::Instant::now();
+            let done = crate::store::rollups::rebuild::rebuild(&pool, |entries, _| {
+                if entries % 1_000_000 < crate::store::rollups::rebuild::PAGE as u64 {
+                    eprintln!("{entries} history entries replayed");
+                }
+            })
+            .await
+            .with_context(|| format!("rebuilding the rollups of {}", database.display()))?;
+            pool.close().await;
+            println!(
+                "rebuilt the rollups of {} from {} history entries: {} rows, in {:.1} s",
+                database.display(),
+                done.entries,
+                done.rows,
+                started.elapsed().as_secs_f64()
             );
         }
         Command::Openapi => {

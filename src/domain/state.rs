@@ -165,6 +165,12 @@ impl JobState {
         matches!(self, Self::Completed | Self::Failed | Self::Cancelled)
     }
 
+    /// Whether the job is on its device (handed to it and not yet back or over): the
+    /// time its device (and aisle) counts as busy.
+    pub fn on_device(self) -> bool {
+        matches!(self, Self::Dispatched | Self::Running | Self::Cancelling)
+    }
+
     /// The one transition function: the state after `t`, or why `t` is illegal here.
     pub fn apply(self, t: Transition) -> Result<JobState, IllegalTransition> {
         use JobState::*;

@@ -26,6 +26,9 @@
 //!   file too). A re-POST of an archived job's reference makes a new job, as after any
 //!   retention. Events are not touched: their own retention (`events.retention_hours`)
 //!   keeps them.
+//! - **The rollups stay.** The KPIs' hour and day rows are kept forever; the minute rows
+//!   before `DATE` go with the jobs, and the mark `history_from` says from when the store
+//!   holds every job's history (see [`super::rollups`]).
 //! - gzip through `flate2` (its pure-Rust backend); written here rather than with an
 //!   archive crate because the format is a line of JSON per job, nothing more.
 
@@ -111,7 +114,10 @@ pub async fn archive(
     let cut = to_ms(OffsetDateTime::new_utc(before, Time::MIDNIGHT));
     let held = held(pool).await?;
     let mut done = Archived::default();
-    let Some(mut day) = first_day(pool, cut).await? else { return Ok(done) };
+    let Some(mut day) = first_day(pool, cut).await? else {
+        keep_rollups_from(pool, cut).await?;
+        return Ok(done);
+    };
     while day < cut {
         let rows = ended_on(pool, day, (day + DAY_MS).min(cut)).await?;
         let (keep, go): (Vec<_>, Vec<_>) = rows.into_iter().partition(|(id, _)| held.contains(id));
@@ -140,7 +146,28 @@ pub async fn archive(
         }
         day += DAY_MS;
     }
+    keep_rollups_from(pool, cut).await?;
     Ok(done)
+}
+
+/// Once the jobs before `cut` are archived: the rollups' minute rows before it go too (hour
+/// and day rows stay forever), and the mark `history_from` moves up to it, so that a
+/// period starting earlier starts on its whole hour and a rebuild keeps the rows before it
+/// (see [`super::rollups`]).
+async fn keep_rollups_from(pool: &Pool, cut: i64) -> Result<(), sqlx::Error> {
+    use super::rollups::{MINUTE, write};
+    let mut tx = pool.write_tx().await?;
+    let mut db = match &mut tx {
+        Tx::Sqlite(t) => write::Db::Sqlite(&mut *t),
+        Tx::Postgres(t) => write::Db::Postgres(&mut *t),
+    };
+    if write::mark(&mut db, write::HISTORY_FROM).await?.is_some_and(|at| at >= cut) {
+        return Ok(());
+    }
+    write::set_mark(&mut db, write::HISTORY_FROM, cut).await?;
+    let sql = "DELETE FROM rollups WHERE grain = $1 AND bucket < $2";
+    on!(Tx, &mut tx, t => sqlx::query(sql).bind(MINUTE).bind(cut).execute(&mut **t).await.map(drop))?;
+    on!(Tx, tx, t => t.commit().await)
 }
 
 /// Creates `dir` if missing and writes and removes a file in it: proof that the folder

@@ -31,7 +31,15 @@ const TABLES: &[(&str, &str, &[&str])] = &[
     ("alarms", "id", &ALARMS),
     ("controls", "target", &CONTROLS),
     ("audit", "id", &AUDIT),
+    ("rollups", "grain, bucket, scope", &ROLLUPS),
+    ("rollup_busy", "scope", &ROLLUP_BUSY),
+    ("rollup_marks", "name", &ROLLUP_MARKS),
 ];
+
+/// The rollups' tables' columns (see [`super::rollups`]).
+const ROLLUPS: [&str; 4] = ["grain", "bucket", "scope", "figures"];
+const ROLLUP_BUSY: [&str; 3] = ["scope", "active", "since"];
+const ROLLUP_MARKS: [&str; 2] = ["name", "at"];
 
 /// Rows per page.
 const PAGE: i64 = 5000;
@@ -78,6 +86,13 @@ pub async fn copy(from: &Database, to: &Database) -> Result<Copied, CopyError> {
         }
     }
     let mut tx = target.write_tx().await.map_err(|error| CopyError::Table { table: "jobs", error })?;
+    // Opening the empty target filled its rollups from its empty history: the source's
+    // take their place.
+    for table in ["rollups", "rollup_busy", "rollup_marks"] {
+        let sql = sqlx::AssertSqlSafe(format!("DELETE FROM {table}"));
+        on!(Tx, &mut tx, t => sqlx::query(sql).execute(&mut **t).await.map(drop))
+            .map_err(|error| CopyError::Table { table: "rollups", error })?;
+    }
     let mut copied = Vec::new();
     for &(table, key, columns) in TABLES {
         let insert = target.engine().insert_json(table, columns);

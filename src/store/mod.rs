@@ -36,6 +36,7 @@ pub mod import;
 pub mod jobs;
 pub mod locations;
 pub mod paging;
+pub mod rollups;
 pub mod stats;
 pub mod writer;
 
@@ -194,6 +195,7 @@ pub async fn open_with(
 ) -> Result<Pool, OpenError> {
     let pool = engine::connect(database, busy_timeout, 8, ca).await?;
     on!(Pool, &pool, p => pool.migrator().run(p).await)?;
+    rollups::rebuild::fill_once(&pool).await?;
     Ok(pool)
 }
 

@@ -1,85 +1,24 @@
-//! KPIs of a period, from the job history: per device and per aisle, jobs completed (and
-//! per hour), failures by kind, utilisation, and durations by job kind.
+//! KPIs of a period, from the rollups ([`crate::store::rollups`]): per device and per
+//! aisle, jobs completed (and per hour), failures by kind, utilisation, and durations by
+//! job kind. What each figure means, and what was decided where the spec is silent, is in
+//! the rollups' module doc; here, how a period is read.
 //!
-//! Decisions where the spec is silent:
-//! - A job counts from the moment its device took it (`dispatched`) until it ended
-//!   (`completed`, `failed`, `cancelled`); a retry starts the count again. That span is
-//!   the job's duration (only completed jobs' durations are reported: a failure's duration
-//!   says little) and, clipped to the period, what utilisation adds up: the share of the
-//!   period during which at least one job of the device (aisle) was on it. A job still on
-//!   its device counts until the end of the period.
-//! - A job belongs to its device and to every aisle its locations are in.
-//! - Failures are counted per failed attempt in the period, by the job's failure kind as
-//!   stored; an attempt retried since has no kind left and counts as `unknown`.
-//! - p95 is the nearest-rank percentile.
-//!
-//! One query streams the history of every job that changed in the period or is still on a
-//! device, a job at a time; the arithmetic is a pure function, tested on its own.
+//! A period `[from, to]` starts on its whole minute (on its whole hour when it starts
+//! before the minute rows kept, `history_from`), and is cut into the largest whole buckets
+//! that fit ([`plan`]); the bucket holding `to` is read whole (it holds what was committed
+//! up to now). One read transaction reads them and the scopes still busy, whose open
+//! interval counts up to `to`. Means are exact; p95 is the nearest-rank percentile read
+//! from the merged sketches, within 1% of the exact one (plus the rounding to the
+//! millisecond).
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use futures::TryStreamExt;
-
-use super::{Reader, read};
-use crate::domain::JobSpec;
-
-/// One history entry with what the KPIs need of its job.
-#[derive(Clone, Debug, sqlx::FromRow)]
-pub struct Step {
-    /// The job.
-    pub job_id: i64,
-    /// Its kind (`store`, ...).
-    pub kind: String,
-    /// Its device, if any.
-    pub device: Option<String>,
-    /// Its spec as stored (JSON).
-    pub spec: String,
-    /// Its failure kind as stored (the last attempt's).
-    pub failure_kind: Option<String>,
-    /// The state entered.
-    pub state: String,
-    /// When (Unix ms).
-    pub at: i64,
-}
-
-/// The history entries that matter for `[from, to]` (Unix ms): every entry up to `to` of
-/// every job that changed in the period or is still on a device, by job then in order.
-const STEPS: &str = "SELECT h.job_id, j.kind, j.device, j.spec, j.failure_kind, h.state, h.at \
-     FROM job_history h JOIN jobs j ON j.id = h.job_id \
-     WHERE h.at <= $2 AND h.job_id IN ( \
-         SELECT job_id FROM job_history WHERE at >= $1 AND at <= $2 \
-         UNION SELECT id FROM jobs WHERE state IN ('dispatched', 'running', 'cancelling')) \
-     ORDER BY h.job_id, h.id";
-
-/// The figures per device and per aisle for `[from, to]` (Unix ms), from the history as
-/// it streams from the database: a job at a time is held, never the period's history (at
-/// 1,000 jobs an hour, 30 days of it are 330,000 rows: 150 MiB held, and kept by the
-/// allocator, when they were read whole).
-pub async fn period(
-    db: impl Into<Reader<'_>>,
-    from: i64,
-    to: i64,
-) -> Result<(BTreeMap<String, Figures>, BTreeMap<u16, Figures>), sqlx::Error> {
-    let mut tallies = Tallies::default();
-    let mut job: Vec<Step> = Vec::new();
-    read!(db.into(), p => {
-        let mut rows = sqlx::query_as::<_, Step>(STEPS).bind(from).bind(to).fetch(p);
-        while let Some(step) = rows.try_next().await? {
-            if job.first().is_some_and(|first| first.job_id != step.job_id) {
-                tallies.job(&job, from, to);
-                job.clear();
-            }
-            job.push(step);
-        }
-    });
-    if !job.is_empty() {
-        tallies.job(&job, from, to);
-    }
-    Ok(tallies.finish(from, to))
-}
+use super::rollups::write::HISTORY_FROM;
+use super::rollups::{DAY, GRAINS, HOUR, MINUTE, Tally, floor};
+use super::{Pool, read};
 
 /// The figures of one device or aisle.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, ToSchema)]
@@ -107,211 +46,170 @@ pub struct KindDurations {
     pub count: u64,
     /// Mean duration, seconds.
     pub mean_s: f64,
-    /// 95th percentile (nearest rank), seconds.
+    /// 95th percentile (nearest rank, within 1%), seconds.
     pub p95_s: f64,
 }
 
-/// What is being added up for one device or aisle.
-#[derive(Default)]
-struct Tally {
-    completed: u64,
-    failures: BTreeMap<String, u64>,
-    spans: Vec<(i64, i64)>,
-    durations: BTreeMap<String, Vec<i64>>,
+/// The figures of a period.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Period {
+    /// Its start as used (Unix ms): the start asked, down to its minute or hour.
+    pub from: i64,
+    /// Per device that had anything, by id.
+    pub devices: BTreeMap<String, Figures>,
+    /// Per aisle that had anything, by number.
+    pub aisles: BTreeMap<u16, Figures>,
 }
 
-/// The figures per device and per aisle for `[from, to]`, from `steps` in job order.
-pub fn figures(steps: &[Step], from: i64, to: i64) -> (BTreeMap<String, Figures>, BTreeMap<u16, Figures>) {
-    let mut tallies = Tallies::default();
-    for job in steps.chunk_by(|a, b| a.job_id == b.job_id) {
-        tallies.job(job, from, to);
+/// The whole buckets `[from, to]` is cut into, as (grain, first bucket, end) runs: the
+/// largest grain that fits at each point, the bucket holding `to` included.
+pub fn plan(from: i64, to: i64) -> Vec<(i64, i64, i64)> {
+    let end = floor(to, MINUTE) + MINUTE;
+    let mut runs: Vec<(i64, i64, i64)> = Vec::new();
+    let mut t = floor(from, MINUTE);
+    while t < end {
+        let grain = GRAINS.into_iter().rev().find(|&g| floor(t, g) == t && t + g <= end).unwrap_or(MINUTE);
+        match runs.last_mut() {
+            Some((g, _, hi)) if *g == grain && *hi == t => *hi = t + grain,
+            _ => runs.push((grain, t, t + grain)),
+        }
+        t += grain;
     }
-    tallies.finish(from, to)
+    runs
 }
 
-/// The tallies of every device and aisle, a job at a time.
-#[derive(Default)]
-struct Tallies {
-    devices: BTreeMap<String, Tally>,
-    aisles: BTreeMap<u16, Tally>,
-}
-
-impl Tallies {
-    /// Adds one job's steps (its history entries, in order).
-    fn job(&mut self, job: &[Step], from: i64, to: i64) {
-        let Some(first) = job.first() else { return };
-        let spec: Option<JobSpec> = serde_json::from_str(&first.spec).ok().flatten();
-        let job_aisles: BTreeSet<u16> =
-            spec.map(|s| s.locations()).unwrap_or_default().iter().map(|l| l.aisle).collect();
-        let mut started: Option<i64> = None;
-        let mut events: Vec<Event> = Vec::new();
-        for step in job {
-            match step.state.as_str() {
-                "dispatched" => started = Some(step.at),
-                "queued" => started = None,
-                "completed" | "failed" | "cancelled" => {
-                    if let Some(start) = started.take() {
-                        events.push(Event::Span(start, step.at));
-                        if step.state == "completed" && step.at >= from {
-                            events.push(Event::Took(step.at - start));
-                        }
-                    }
-                    if step.at >= from && step.state == "completed" {
-                        events.push(Event::Completed);
-                    }
-                    if step.at >= from && step.state == "failed" {
-                        events.push(Event::Failed(
-                            step.failure_kind.clone().unwrap_or_else(|| "unknown".into()),
-                        ));
-                    }
-                }
-                _ => {}
+/// The figures of `[from, to]` (Unix ms); see the module doc.
+pub async fn period(pool: &Pool, from: i64, to: i64) -> Result<Period, sqlx::Error> {
+    let mut tx = pool.read_tx().await?;
+    let minutes_from: Option<i64> = read!(tx.reader(), p => {
+        sqlx::query_scalar("SELECT at FROM rollup_marks WHERE name = $1").bind(HISTORY_FROM).fetch_optional(p).await
+    })?;
+    let from = if minutes_from.is_some_and(|m| from < m) { floor(from, HOUR) } else { floor(from, MINUTE) };
+    let runs = plan(from, to);
+    let mut tallies: BTreeMap<String, Tally> = BTreeMap::new();
+    if !runs.is_empty() {
+        let sql: Vec<String> = (0..runs.len())
+            .map(|i| {
+                let n = 3 * i;
+                format!(
+                    "SELECT scope, figures FROM rollups WHERE grain = ${} AND bucket >= ${} AND bucket < ${}",
+                    n + 1,
+                    n + 2,
+                    n + 3
+                )
+            })
+            .collect();
+        let sql = sqlx::AssertSqlSafe(sql.join(" UNION ALL "));
+        let rows: Vec<(String, String)> = read!(tx.reader(), p => {
+            let mut q = sqlx::query_as(sql);
+            for (grain, lo, hi) in &runs {
+                q = q.bind(*grain).bind(*lo).bind(*hi);
+            }
+            q.fetch_all(p).await
+        })?;
+        for (scope, figures) in rows {
+            if let Ok(t) = serde_json::from_str::<Tally>(&figures) {
+                tallies.entry(scope).or_default().merge(&t);
             }
         }
-        if let Some(start) = started {
-            events.push(Event::Span(start, to));
-        }
-        if let Some(d) = &first.device {
-            apply(self.devices.entry(d.clone()).or_default(), &events, &first.kind);
-        }
-        for a in job_aisles {
-            apply(self.aisles.entry(a).or_default(), &events, &first.kind);
+    }
+    let busy: Vec<(String, i64)> = read!(tx.reader(), p => {
+        sqlx::query_as("SELECT scope, since FROM rollup_busy WHERE active > 0").fetch_all(p).await
+    })?;
+    tx.finish().await?;
+    for (scope, since) in busy {
+        let open = to - since.max(from);
+        if open > 0 {
+            tallies.entry(scope).or_default().busy_ms += open;
         }
     }
-
-    /// The figures of each device and aisle.
-    fn finish(self, from: i64, to: i64) -> (BTreeMap<String, Figures>, BTreeMap<u16, Figures>) {
-        let hours = (to - from).max(1) as f64 / 3_600_000.0;
-        let done = |t: Tally| finish(t, from, to, hours);
-        (
-            self.devices.into_iter().map(|(k, t)| (k, done(t))).collect(),
-            self.aisles.into_iter().map(|(k, t)| (k, done(t))).collect(),
-        )
-    }
-}
-
-/// What one job adds to a tally.
-enum Event {
-    Span(i64, i64),
-    Took(i64),
-    Completed,
-    Failed(String),
-}
-
-fn apply(tally: &mut Tally, events: &[Event], kind: &str) {
-    for e in events {
-        match e {
-            Event::Span(a, b) => tally.spans.push((*a, *b)),
-            Event::Took(ms) => tally.durations.entry(kind.to_owned()).or_default().push(*ms),
-            Event::Completed => tally.completed += 1,
-            Event::Failed(k) => *tally.failures.entry(k.clone()).or_default() += 1,
+    let mut out = Period { from, ..Period::default() };
+    for (scope, tally) in tallies {
+        let figures = figures(tally, from, to);
+        if let Some(device) = scope.strip_prefix("device:") {
+            out.devices.insert(device.to_owned(), figures);
+        } else if let Some(aisle) = scope.strip_prefix("aisle:").and_then(|a| a.parse().ok()) {
+            out.aisles.insert(aisle, figures);
         }
     }
+    Ok(out)
 }
 
-fn finish(mut t: Tally, from: i64, to: i64, hours: f64) -> Figures {
+/// A tally of `[from, to]` as figures.
+fn figures(t: Tally, from: i64, to: i64) -> Figures {
+    let span = (to - from).max(1);
     let durations = t
-        .durations
-        .iter_mut()
-        .map(|(kind, ms)| {
-            ms.sort_unstable();
-            let count = ms.len();
-            let mean = ms.iter().sum::<i64>() as f64 / count as f64;
-            let rank = ((count as f64) * 0.95).ceil() as usize;
-            let p95 = ms[rank.clamp(1, count) - 1];
-            KindDurations {
-                kind: kind.clone(),
-                count: count as u64,
-                mean_s: mean / 1000.0,
-                p95_s: p95 as f64 / 1000.0,
-            }
+        .kinds
+        .iter()
+        .filter(|(_, d)| d.count > 0)
+        .map(|(kind, d)| KindDurations {
+            kind: kind.clone(),
+            count: d.count,
+            mean_s: d.sum_ms as f64 / d.count as f64 / 1000.0,
+            p95_s: d.sketch.quantile(0.95).unwrap_or(0.0).round() / 1000.0,
         })
         .collect();
     Figures {
         completed: t.completed,
-        per_hour: t.completed as f64 / hours,
+        per_hour: t.completed as f64 / (span as f64 / HOUR as f64),
         failed: t.failures.values().sum(),
         failures: t.failures,
-        utilisation: covered(&mut t.spans, from, to) as f64 / (to - from).max(1) as f64,
+        utilisation: (t.busy_ms as f64 / span as f64).min(1.0),
         durations,
     }
 }
 
-/// How much of `[from, to]` the spans cover together (overlaps counted once).
-fn covered(spans: &mut [(i64, i64)], from: i64, to: i64) -> i64 {
-    spans.sort_unstable();
-    let mut total = 0;
-    let mut reach = from;
-    for &(a, b) in spans.iter() {
-        let (a, b) = (a.max(reach), b.min(to));
-        if b > a {
-            total += b - a;
-            reach = b;
-        }
-    }
-    total
+/// The most buckets a period of `days` reads per scope (for the docs and the tests).
+pub fn most_buckets(days: i64) -> i64 {
+    days + 2 * (DAY / HOUR - 1) + 2 * (HOUR / MINUTE - 1) + 1
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    const SPEC_A1: &str = r#"{"kind":"store","to":{"aisle":1,"row":1,"bay":1,"level":1,"position":1}}"#;
-
-    fn step(job_id: i64, state: &str, at: i64, failure: Option<&str>) -> Step {
-        Step {
-            job_id,
-            kind: "store".into(),
-            device: Some("shelf1".into()),
-            spec: SPEC_A1.into(),
-            failure_kind: failure.map(str::to_owned),
-            state: state.into(),
-            at,
+    #[test]
+    fn a_period_is_cut_into_the_largest_whole_buckets() {
+        let t = |d: i64, h: i64, m: i64| d * DAY + h * HOUR + m * MINUTE;
+        // 8 hours from 02:37:20 to 10:37:25: minutes to 03:00, hours to 10:00, minutes to 10:38.
+        let runs = plan(t(10, 2, 37) + 20_000, t(10, 10, 37) + 25_000);
+        assert_eq!(runs, vec![(MINUTE, t(10, 2, 37), t(10, 3, 0)), (HOUR, t(10, 3, 0), t(10, 10, 0)), (MINUTE, t(10, 10, 0), t(10, 10, 38))]);
+        // A year: the first day's hours, whole days, the last day's hours and minutes.
+        let runs = plan(t(0, 5, 10), t(365, 4, 3));
+        assert_eq!(runs[0], (MINUTE, t(0, 5, 10), t(0, 6, 0)));
+        assert_eq!(runs[1], (HOUR, t(0, 6, 0), t(1, 0, 0)));
+        assert_eq!(runs[2], (DAY, t(1, 0, 0), t(365, 0, 0)));
+        assert_eq!(runs[3], (HOUR, t(365, 0, 0), t(365, 4, 0)));
+        assert_eq!(runs[4], (MINUTE, t(365, 4, 0), t(365, 4, 4)));
+        let buckets: i64 = runs.iter().map(|(g, lo, hi)| (hi - lo) / g).sum();
+        assert!(buckets <= most_buckets(365), "{buckets}");
+        // Within one minute: that minute.
+        assert_eq!(plan(t(3, 0, 0) + 5, t(3, 0, 0) + 7), vec![(MINUTE, t(3, 0, 0), t(3, 0, 1))]);
+        // Every millisecond of the period is in exactly one bucket.
+        for (from, to) in [(t(1, 23, 59), t(3, 0, 1)), (t(0, 0, 0), t(2, 0, 0) - 1), (t(5, 1, 1), t(5, 1, 1))] {
+            let runs = plan(from, to);
+            assert_eq!(runs[0].1, floor(from, MINUTE));
+            for pair in runs.windows(2) {
+                assert_eq!(pair[0].2, pair[1].1, "{runs:?}");
+            }
+            assert_eq!(runs.last().unwrap().2, floor(to, MINUTE) + MINUTE);
         }
     }
 
     #[test]
-    fn completions_failures_durations_and_utilisation() {
-        let hour = 3_600_000;
-        let steps = vec![
-            step(1, "queued", 0, None),
-            step(1, "dispatched", 1000, None),
-            step(1, "running", 1500, None),
-            step(1, "completed", 3000, None),
-            step(2, "queued", 0, None),
-            step(2, "dispatched", 2000, None),
-            step(2, "completed", 6000, None),
-            step(3, "dispatched", 10_000, None),
-            step(3, "failed", 11_000, Some("device_fault")),
-            step(4, "dispatched", hour - 1000, None),
-        ];
-        let (devices, aisles) = figures(&steps, 0, hour);
-        let d = &devices["shelf1"];
-        assert_eq!((d.completed, d.failed), (2, 1));
-        assert_eq!(d.failures["device_fault"], 1);
-        assert!((d.per_hour - 2.0).abs() < 1e-9);
-        assert_eq!(d.durations.len(), 1);
-        assert_eq!((d.durations[0].count, d.durations[0].mean_s, d.durations[0].p95_s), (2, 3.0, 4.0));
-        // 1000..6000 (two jobs overlapping), 10000..11000, the last second still running.
-        let expected = (5000 + 1000 + 1000) as f64 / hour as f64;
-        assert!((d.utilisation - expected).abs() < 1e-12, "{}", d.utilisation);
-        assert_eq!(&aisles[&1], d, "one aisle, one device: the same figures");
-    }
-
-    #[test]
-    fn a_retry_starts_the_count_again_and_the_period_clips() {
-        let steps = vec![
-            step(1, "dispatched", -5000, None),
-            step(1, "failed", 1000, None),
-            step(1, "queued", 2000, None),
-            step(1, "dispatched", 3000, None),
-            step(1, "completed", 4000, None),
-        ];
-        let (devices, _) = figures(&steps, 0, 10_000);
-        let d = &devices["shelf1"];
-        assert_eq!((d.completed, d.failed), (1, 1));
-        assert_eq!(d.failures["unknown"], 1, "retried since: its kind is gone");
-        assert_eq!(d.durations[0].mean_s, 1.0);
-        assert!((d.utilisation - 0.2).abs() < 1e-12, "0..1000 and 3000..4000 of 10000");
+    fn figures_are_made_from_a_tally() {
+        let mut t = Tally { completed: 6, busy_ms: HOUR / 2, ..Tally::default() };
+        t.failures.insert("alarm".into(), 2);
+        let mut d = super::super::rollups::Durations::default();
+        for ms in [1000, 2000, 3000, 4000] {
+            d.count += 1;
+            d.sum_ms += ms;
+            d.sketch.add(ms);
+        }
+        t.kinds.insert("store".into(), d);
+        let f = figures(t, 0, 2 * HOUR);
+        assert_eq!((f.completed, f.failed, f.per_hour, f.utilisation), (6, 2, 3.0, 0.25));
+        assert_eq!(f.durations[0].mean_s, 2.5);
+        assert!((f.durations[0].p95_s - 4.0).abs() <= 0.04 + 0.0005, "{}", f.durations[0].p95_s);
     }
 }

@@ -493,6 +493,11 @@ pub(super) async fn save(
     }
     write(db, count, &sql.pause, &paused).await?;
     write(db, count, &sql.resume, &resumed).await?;
+    let mut rollups = match db {
+        Conn::Sqlite(c) => crate::store::rollups::write::Db::Sqlite(c),
+        Conn::Postgres(c) => crate::store::rollups::write::Db::Postgres(c),
+    };
+    *count += crate::store::rollups::write::save(&mut rollups, &group.out.moves).await?;
     if let Some(before) = group.prune {
         let sql = "DELETE FROM events WHERE at < $1 AND seq < (SELECT MAX(seq) FROM events)";
         *count += 1;

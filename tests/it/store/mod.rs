@@ -9,6 +9,7 @@ mod import;
 mod pages;
 mod plans;
 mod retention;
+mod rollups;
 
 use std::time::Duration;
 

@@ -16,6 +16,7 @@ use crate::domain::report::path;
 use crate::domain::time::{from_ms, to_ms};
 use crate::domain::{Failure, JobState, LightColor, Location, LocationLock, Pause, Transition, Who};
 use crate::store::alarms;
+use crate::store::rollups::{self, fold::End};
 use crate::store::controls::AuditEntry;
 use crate::store::counts::Counts;
 use crate::store::events::StoredEvent;
@@ -69,6 +70,8 @@ pub(super) struct Out {
     pub(super) statements: usize,
     /// What it changed in the counts of jobs and active alarms (see [`Group::counted`]).
     pub(super) counts: Counts,
+    /// What its transitions add to the rollups (see [`crate::store::rollups`]).
+    pub(super) moves: Vec<rollups::Move>,
 }
 
 /// The next id of each numbered table, allocated here (one writer: no gaps, no races).
@@ -454,8 +457,10 @@ impl Group {
         forced: bool,
     ) -> Result<(), WriteError> {
         let (id, now) = (job.id, self.now);
+        let was = job.state;
         job.state = job.state.apply(transition)?;
         // Read before `save` notes this transition's own history entry.
+        let since = self.starts.get(&id).copied();
         if transition == Transition::Dispatch || job.state.is_terminal() {
             let since = self.starts.get(&id).copied().unwrap_or(to_ms(job.created_at));
             let (kind, elapsed) = (job.kind, timing::between(since, now));
@@ -473,6 +478,7 @@ impl Group {
             job.failure = None;
             job.attempt += 1;
         }
+        self.rollup(job, was, since);
         if transition == Transition::Dispatch
             && let Some(spec) = job.spec()
         {
@@ -524,6 +530,31 @@ impl Group {
         }
         self.save(job, cause);
         Ok(())
+    }
+
+    /// Notes what the transition of `job` from `was` adds to the rollups; `since` is when
+    /// it entered its latest `queued` or `dispatched` state (its dispatch, if it was on its
+    /// device).
+    fn rollup(&mut self, job: &Job, was: JobState, since: Option<i64>) {
+        let on = i64::from(job.state.on_device()) - i64::from(was.on_device());
+        let end = match job.state {
+            JobState::Completed => {
+                Some(End::Completed(since.filter(|_| was.on_device()).map(|s| (self.now - s).max(0))))
+            }
+            JobState::Failed => {
+                Some(End::Failed(job.failure.as_ref().map_or("unknown", |f| f.kind.as_str()).to_owned()))
+            }
+            _ => None,
+        };
+        if on == 0 && end.is_none() {
+            return;
+        }
+        let mut scopes: Vec<String> = job.device.iter().map(|d| rollups::device_scope(d)).collect();
+        let mut aisles: Vec<u16> = job.spec().map(|s| s.locations()).unwrap_or_default().iter().map(|l| l.aisle).collect();
+        aisles.sort_unstable();
+        aisles.dedup();
+        scopes.extend(aisles.into_iter().map(rollups::aisle_scope));
+        self.out.moves.push(rollups::Move { at: self.now, kind: job.kind.as_str().to_owned(), scopes, on, end });
     }
 
     /// Notes the job's new row, a history entry and a `job.updated` event.
