@@ -1,6 +1,6 @@
 //! `bench history`: what a year of history costs the reads. Seeds a store with N ended jobs
 //! spread over a year (through `rackd::store::import`, the store's own statements, at full
-//! speed: not by replaying the API), starts `rackd serve` on it as a child process, and
+//! speed: not by replaying the API), rebuilds the KPIs' rollups from it (timed), starts `rackd serve` on it as a child process, and
 //! prints each call beside the same call on an empty store in the same run, with the
 //! ratio: the time to ready, single-POST latency (the first calls, on each store: the
 //! fresh store then holds those 200 jobs), the KPI and list reads, `/metrics`, resident
@@ -92,6 +92,17 @@ async fn measure(args: &HistoryArgs, jobs: u64) -> anyhow::Result<Figures> {
     if jobs > 0 {
         let secs = seeded.elapsed().as_secs_f64();
         println!("seeded {jobs} jobs in {secs:.0} s ({:.0} jobs/s)", jobs as f64 / secs);
+        // Loaded by another tool than the writer: the KPIs' rollups are rebuilt from the
+        // history, as `rackd db rollups --rebuild` does.
+        let t = Instant::now();
+        let done = rackd::store::rollups::rebuild::rebuild(&pool, |_, _| {}).await?;
+        let secs = t.elapsed().as_secs_f64();
+        println!(
+            "rebuilt the rollups from {} history entries in {secs:.0} s ({:.0} entries/s): {} rows",
+            done.entries,
+            done.entries as f64 / secs,
+            done.rows
+        );
     }
     pool.close().await;
 

@@ -222,10 +222,6 @@ pub enum OpenError {
     /// A migration failed.
     #[error("migrating the schema: {0}")]
     Migrate(#[from] sqlx::migrate::MigrateError),
-    /// Filling the rollups from the history, at the first start after the upgrade that
-    /// brought them, failed.
-    #[error("filling the rollups from the job history: {0}")]
-    Rollups(#[from] super::rollups::rebuild::RebuildError),
     /// TLS with the PostgreSQL server failed: it offers none, or its certificate does not
     /// verify.
     #[error("TLS with the PostgreSQL server failed (sslmode={mode}{ca}): {source}; {hint}")]

@@ -206,7 +206,7 @@ pub async fn rebuild(pool: &Pool, progress: impl Fn(u64, i64)) -> Result<Rebuilt
 
 /// Fills the rollups from the history once, at the first start after the upgrade that
 /// brought them (the mark `built` absent); tells the logs how far it is on a large store.
-pub async fn fill_once(pool: &Pool) -> Result<(), RebuildError> {
+pub async fn fill_once(pool: &Pool) -> Result<(), sqlx::Error> {
     let built: Option<i64> = on!(Pool, pool, p => sqlx::query_scalar("SELECT at FROM rollup_marks WHERE name = 'built'")
         .fetch_optional(p)
         .await)?;
@@ -226,7 +226,8 @@ pub async fn fill_once(pool: &Pool) -> Result<(), RebuildError> {
             tracing::warn!(age_s = age, "another node is filling the rollups; KPIs are partial until it is done");
             return Ok(());
         }
-        done => done?,
+        Err(RebuildError::Database(e)) => return Err(e),
+        Ok(done) => done,
     };
     if done.entries > 0 {
         tracing::info!(entries = done.entries, rows = done.rows, took_ms = started.elapsed().as_millis() as u64, "rollups filled from the job history");
