@@ -258,7 +258,7 @@ async fn seed(pool: &Pool, n: u64, days: u64) -> anyhow::Result<Option<(i64, i64
 }
 
 /// One ended job, created at `created` (Unix ms).
-fn job(rng: &mut StdRng, id: i64, created: i64) -> Ended {
+pub(crate) fn job(rng: &mut StdRng, id: i64, created: i64) -> Ended {
     let crane = rng.random_bool(0.5);
     let (aisle, bays, levels, positions) = if crane { (2, 20, 8, 2) } else { (1, 10, 6, 4) };
     let place = |rng: &mut StdRng| Location {
@@ -324,7 +324,7 @@ fn rss_kib(pid: u32) -> anyhow::Result<u64> {
 }
 
 /// The database's size on disk: SQLite's file and its WAL, or PostgreSQL's database.
-async fn size(database: &Database, dir: &Path) -> anyhow::Result<u64> {
+pub(crate) async fn size(database: &Database, dir: &Path) -> anyhow::Result<u64> {
     Ok(match database {
         Database::Sqlite(_) => ["bench.db", "bench.db-wal"]
             .iter()

@@ -32,6 +32,7 @@ mod intake;
 #[allow(dead_code)]
 #[path = "../../tests/it/support/postgres.rs"]
 mod postgres;
+mod retention;
 mod served;
 mod shelf;
 #[allow(dead_code)]
@@ -118,6 +119,9 @@ enum Bench {
     /// A year of history: the reads, start-up, memory and size on N ended jobs against an
     /// empty store.
     History(history::HistoryArgs),
+    /// A simulated year with `[retention]`: the store's size, and every job in the store or
+    /// the archive.
+    Retention(retention::RetentionArgs),
 }
 
 fn main() -> ExitCode {
@@ -150,6 +154,7 @@ fn main() -> ExitCode {
             Bench::Fleet(args) => fleet::run(args).await,
             Bench::Crane(args) => crane::run(args).await,
             Bench::History(args) => history::run(args).await,
+            Bench::Retention(args) => retention::run(args).await,
         }
     });
     match result {

@@ -102,8 +102,7 @@ async fn get_stats(
         None => until - DEFAULT_BACK_MS,
         Some(text) => since(text, until).map_err(|m| ApiError::bad_request("bad_query", m))?,
     };
-    let stats::Period { from, mut devices, mut aisles } =
-        stats::period(&app.pool, from, until).await?;
+    let stats::Period { from, mut devices, mut aisles } = stats::period(&app.pool, from, until).await?;
     let runs_jobs: Vec<String> =
         app.rules.devices.iter().filter(|(_, kinds)| !kinds.is_empty()).map(|(id, _)| id.clone()).collect();
     let devices = runs_jobs

@@ -17,7 +17,7 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use super::rollups::write::HISTORY_FROM;
-use super::rollups::{DAY, GRAINS, HOUR, MINUTE, Tally, floor};
+use super::rollups::{DAY, GRAINS, HOUR, MINUTE, Tally, WEEK, floor};
 use super::{Pool, read};
 
 /// The figures of one device or aisle.
@@ -161,7 +161,7 @@ fn figures(t: Tally, from: i64, to: i64) -> Figures {
 
 /// The most buckets a period of `days` reads per scope (for the docs and the tests).
 pub fn most_buckets(days: i64) -> i64 {
-    days + 2 * (DAY / HOUR - 1) + 2 * (HOUR / MINUTE - 1) + 1
+    days / 7 + 2 * (WEEK / DAY - 1) + 2 * (DAY / HOUR - 1) + 2 * (HOUR / MINUTE - 1) + 1
 }
 
 #[cfg(test)]
@@ -173,20 +173,31 @@ mod tests {
         let t = |d: i64, h: i64, m: i64| d * DAY + h * HOUR + m * MINUTE;
         // 8 hours from 02:37:20 to 10:37:25: minutes to 03:00, hours to 10:00, minutes to 10:38.
         let runs = plan(t(10, 2, 37) + 20_000, t(10, 10, 37) + 25_000);
-        assert_eq!(runs, vec![(MINUTE, t(10, 2, 37), t(10, 3, 0)), (HOUR, t(10, 3, 0), t(10, 10, 0)), (MINUTE, t(10, 10, 0), t(10, 10, 38))]);
-        // A year: the first day's hours, whole days, the last day's hours and minutes.
+        assert_eq!(
+            runs,
+            vec![
+                (MINUTE, t(10, 2, 37), t(10, 3, 0)),
+                (HOUR, t(10, 3, 0), t(10, 10, 0)),
+                (MINUTE, t(10, 10, 0), t(10, 10, 38))
+            ]
+        );
+        // A year from a Thursday (day 0, as the epoch) 05:10: the first day's minutes and
+        // hours, the days to the next week, whole weeks, then days, hours and minutes.
         let runs = plan(t(0, 5, 10), t(365, 4, 3));
         assert_eq!(runs[0], (MINUTE, t(0, 5, 10), t(0, 6, 0)));
         assert_eq!(runs[1], (HOUR, t(0, 6, 0), t(1, 0, 0)));
-        assert_eq!(runs[2], (DAY, t(1, 0, 0), t(365, 0, 0)));
-        assert_eq!(runs[3], (HOUR, t(365, 0, 0), t(365, 4, 0)));
-        assert_eq!(runs[4], (MINUTE, t(365, 4, 0), t(365, 4, 4)));
+        assert_eq!(runs[2], (DAY, t(1, 0, 0), t(7, 0, 0)));
+        assert_eq!(runs[3], (WEEK, t(7, 0, 0), t(364, 0, 0)));
+        assert_eq!(runs[4], (DAY, t(364, 0, 0), t(365, 0, 0)));
+        assert_eq!(runs[5], (HOUR, t(365, 0, 0), t(365, 4, 0)));
+        assert_eq!(runs[6], (MINUTE, t(365, 4, 0), t(365, 4, 4)));
         let buckets: i64 = runs.iter().map(|(g, lo, hi)| (hi - lo) / g).sum();
         assert!(buckets <= most_buckets(365), "{buckets}");
         // Within one minute: that minute.
         assert_eq!(plan(t(3, 0, 0) + 5, t(3, 0, 0) + 7), vec![(MINUTE, t(3, 0, 0), t(3, 0, 1))]);
         // Every millisecond of the period is in exactly one bucket.
-        for (from, to) in [(t(1, 23, 59), t(3, 0, 1)), (t(0, 0, 0), t(2, 0, 0) - 1), (t(5, 1, 1), t(5, 1, 1))] {
+        for (from, to) in [(t(1, 23, 59), t(3, 0, 1)), (t(0, 0, 0), t(2, 0, 0) - 1), (t(5, 1, 1), t(5, 1, 1))]
+        {
             let runs = plan(from, to);
             assert_eq!(runs[0].1, floor(from, MINUTE));
             for pair in runs.windows(2) {

@@ -58,7 +58,13 @@ pub struct Fold {
 
 impl Default for Fold {
     fn default() -> Fold {
-        Fold { busy: BTreeMap::new(), rows: BTreeMap::new(), clip: i64::MIN, minutes_from: i64::MIN, strays: 0 }
+        Fold {
+            busy: BTreeMap::new(),
+            rows: BTreeMap::new(),
+            clip: i64::MIN,
+            minutes_from: i64::MIN,
+            strays: 0,
+        }
     }
 }
 
@@ -114,7 +120,11 @@ impl Fold {
     /// Adds the busy interval `[from, to)` to every row it overlaps, at each grain.
     fn add_busy(&mut self, scope: &str, from: i64, to: i64) {
         for grain in GRAINS {
-            let start = if grain == MINUTE { from.max(self.clip).max(self.minutes_from) } else { from.max(self.clip) };
+            let start = if grain == MINUTE {
+                from.max(self.clip).max(self.minutes_from)
+            } else {
+                from.max(self.clip)
+            };
             let mut bucket = floor(start, grain);
             while bucket < to {
                 let part = to.min(bucket + grain) - start.max(bucket);
@@ -129,7 +139,7 @@ impl Fold {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{DAY, HOUR};
+    use super::super::{DAY, HOUR, WEEK};
     use super::*;
 
     fn on(at: i64, on: i64, end: Option<End>) -> Move {
@@ -156,6 +166,7 @@ mod tests {
         assert_eq!(busy(&f, MINUTE, t(62, 0)), 15_000);
         assert_eq!((busy(&f, HOUR, 0), busy(&f, HOUR, HOUR)), (30_000, 135_000));
         assert_eq!(busy(&f, DAY, 0), 165_000);
+        assert_eq!(busy(&f, WEEK, 0), 165_000);
         let hour1 = &f.rows[&(HOUR, HOUR, "device:crane1".to_owned())];
         assert_eq!((hour1.completed, hour1.failures["device_fault"]), (1, 1));
         assert_eq!((hour1.kinds["store"].count, hour1.kinds["store"].sum_ms), (1, 90_000));

@@ -11,17 +11,18 @@
 //!   rebuilt rows: about a second per 300,000 on this project's machine).
 //! - **What the history no longer holds is kept.** Days archived (before the mark
 //!   `history_from`) have no history left: their rows stay as they are, and the replay adds
-//!   nothing before that time. Their hour and day rows are the only record of them.
+//!   nothing before that time. Their hour, day and week rows are the only record of them.
+//!   The week the mark falls in is summed again from its days, kept and rebuilt.
 //! - **One rebuild at a time**: the mark `rebuilding`, refreshed at every page; another
 //!   rebuild refuses while it is younger than [`STALE_MS`] (a rebuild killed midway
 //!   leaves it; the next may start once it is stale).
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
 use super::fold::End;
 use super::write::{self, BUILT, Db, HISTORY_FROM};
-use super::{Fold, LOCK, Move, aisle_scope, device_scope};
+use super::{DAY, Fold, LOCK, Move, Tally, WEEK, floor, scopes};
 use crate::domain::time::now_ms;
 use crate::domain::{JobSpec, JobState};
 use crate::store::{Pool, Tx, on};
@@ -82,10 +83,7 @@ impl Replay {
             .entry(job)
             .or_insert_with(|| {
                 let spec: Option<JobSpec> = serde_json::from_str(&spec).ok().flatten();
-                let mut aisles: Vec<u16> = spec.map(|s| s.locations()).unwrap_or_default().iter().map(|l| l.aisle).collect();
-                aisles.sort_unstable();
-                aisles.dedup();
-                device.iter().map(|d| device_scope(d)).chain(aisles.into_iter().map(aisle_scope)).collect()
+                scopes(device.as_deref(), spec.as_ref()).into()
             })
             .clone();
         let was_on = self.on.contains_key(&job);
@@ -183,6 +181,8 @@ pub async fn rebuild(pool: &Pool, progress: impl Fn(u64, i64)) -> Result<Rebuilt
     let rows: i64 = on!(Tx, &mut tx, t => sqlx::query_scalar("SELECT COUNT(*) FROM rollups_rebuild").fetch_one(&mut **t).await)?;
     for sql in [
         "DELETE FROM rollups WHERE bucket >= $1",
+        // The part after the cut of the week the cut falls in: that week is summed below.
+        "DELETE FROM rollups_rebuild WHERE bucket < $1",
         "INSERT INTO rollups (grain, bucket, scope, figures) SELECT grain, bucket, scope, figures FROM rollups_rebuild",
         "DELETE FROM rollups_rebuild",
         "DELETE FROM rollup_busy",
@@ -194,6 +194,9 @@ pub async fn rebuild(pool: &Pool, progress: impl Fn(u64, i64)) -> Result<Rebuilt
             q.execute(&mut **t).await.map(drop)
         })?;
     }
+    if clip > i64::MIN && floor(clip, WEEK) < clip {
+        week_of_days(&mut tx, floor(clip, WEEK)).await?;
+    }
     let busy = replay.fold.busy.into_iter().filter(|(_, b)| b.active > 0).collect();
     write::write_busy(&mut db(&mut tx), &busy).await?;
     write::set_mark(&mut db(&mut tx), BUILT, now_ms()).await?;
@@ -202,6 +205,29 @@ pub async fn rebuild(pool: &Pool, progress: impl Fn(u64, i64)) -> Result<Rebuilt
         tracing::warn!(strays = replay.fold.strays, "rollups rebuilt: jobs left a device no job was on");
     }
     Ok(Rebuilt { entries: replay.entries, rows: rows as u64 })
+}
+
+/// Puts the rows of the week starting at `week` together again from its days' rows: the
+/// week the mark `history_from` falls in, its days before the mark kept, those after
+/// rebuilt.
+async fn week_of_days(tx: &mut Tx, week: i64) -> Result<(), sqlx::Error> {
+    let sql = "SELECT scope, figures FROM rollups WHERE grain = $1 AND bucket >= $2 AND bucket < $3";
+    let days: Vec<(String, String)> = on!(Tx, tx, t => sqlx::query_as(sql)
+        .bind(DAY)
+        .bind(week)
+        .bind(week + WEEK)
+        .fetch_all(&mut **t)
+        .await)?;
+    let mut rows: BTreeMap<super::Key, Tally> = BTreeMap::new();
+    for (scope, figures) in days {
+        if let Ok(t) = serde_json::from_str::<Tally>(&figures) {
+            rows.entry((WEEK, week, scope)).or_default().merge(&t);
+        }
+    }
+    let sql = "DELETE FROM rollups WHERE grain = $1 AND bucket = $2";
+    on!(Tx, tx, t => sqlx::query(sql).bind(WEEK).bind(week).execute(&mut **t).await.map(drop))?;
+    write::merge(&mut db(tx), "rollups", &rows).await?;
+    Ok(())
 }
 
 /// Fills the rollups from the history once, at the first start after the upgrade that
@@ -223,14 +249,22 @@ pub async fn fill_once(pool: &Pool) -> Result<(), sqlx::Error> {
     {
         // Another node of the cluster fills them.
         Err(RebuildError::Running(age)) => {
-            tracing::warn!(age_s = age, "another node is filling the rollups; KPIs are partial until it is done");
+            tracing::warn!(
+                age_s = age,
+                "another node is filling the rollups; KPIs are partial until it is done"
+            );
             return Ok(());
         }
         Err(RebuildError::Database(e)) => return Err(e),
         Ok(done) => done,
     };
     if done.entries > 0 {
-        tracing::info!(entries = done.entries, rows = done.rows, took_ms = started.elapsed().as_millis() as u64, "rollups filled from the job history");
+        tracing::info!(
+            entries = done.entries,
+            rows = done.rows,
+            took_ms = started.elapsed().as_millis() as u64,
+            "rollups filled from the job history"
+        );
     }
     Ok(())
 }

@@ -14,8 +14,6 @@
 //! `[bin, count]`), not a crate's internal layout, which its next version may change. The
 //! arithmetic is a dozen lines.
 
-use std::collections::BTreeMap;
-
 use serde::{Deserialize, Serialize};
 
 /// The relative error of a value read from the sketch.
@@ -24,45 +22,83 @@ pub const ALPHA: f64 = 0.01;
 /// The ratio between a bin's bounds.
 const GAMMA: f64 = (1.0 + ALPHA) / (1.0 - ALPHA);
 
-/// Durations (ms) by bin; stored as a list of `[bin, count]`, bins ascending.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+/// Durations (ms) by bin: the counts of the bins from `first` on, held densely (adding a
+/// year of days' sketches is adding arrays); stored as a list of `[bin, count]` of the bins
+/// that hold any, ascending.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 #[serde(from = "Vec<(i32, u64)>", into = "Vec<(i32, u64)>")]
 pub struct Sketch {
-    bins: BTreeMap<i32, u64>,
+    first: i32,
+    counts: Vec<u64>,
+}
+
+impl PartialEq for Sketch {
+    /// The same durations, whatever room each has made for bins.
+    fn eq(&self, other: &Sketch) -> bool {
+        let held = |s: &Sketch| (s.first..).zip(s.counts.clone()).filter(|(_, n)| *n > 0).collect::<Vec<_>>();
+        held(self) == held(other)
+    }
 }
 
 impl From<Vec<(i32, u64)>> for Sketch {
     fn from(pairs: Vec<(i32, u64)>) -> Sketch {
-        let mut bins = BTreeMap::new();
-        for (bin, n) in pairs {
-            *bins.entry(bin).or_insert(0) += n;
+        let mut s = Sketch::default();
+        if let (Some(lo), Some(hi)) = (pairs.iter().map(|p| p.0).min(), pairs.iter().map(|p| p.0).max()) {
+            s.cover(lo, hi);
         }
-        Sketch { bins }
+        for (bin, n) in pairs {
+            s.counts[(bin - s.first) as usize] += n;
+        }
+        s
     }
 }
 
 impl From<Sketch> for Vec<(i32, u64)> {
     fn from(s: Sketch) -> Vec<(i32, u64)> {
-        s.bins.into_iter().collect()
+        (s.first..).zip(s.counts).filter(|(_, n)| *n > 0).collect()
     }
 }
 
 impl Sketch {
+    /// Makes room for the bins `lo..=hi`.
+    fn cover(&mut self, lo: i32, hi: i32) {
+        if self.counts.is_empty() {
+            (self.first, self.counts) = (lo, vec![0; (hi - lo + 1) as usize]);
+            return;
+        }
+        if lo < self.first {
+            let mut grown = vec![0; (self.first - lo) as usize];
+            grown.append(&mut self.counts);
+            (self.first, self.counts) = (lo, grown);
+        }
+        let last = self.first + self.counts.len() as i32 - 1;
+        if hi > last {
+            self.counts.resize(self.counts.len() + (hi - last) as usize, 0);
+        }
+    }
+
     /// Adds one duration (ms).
     pub fn add(&mut self, ms: i64) {
-        *self.bins.entry(bin(ms)).or_insert(0) += 1;
+        let b = bin(ms);
+        self.cover(b, b);
+        self.counts[(b - self.first) as usize] += 1;
     }
 
     /// Adds every duration of `other`.
     pub fn merge(&mut self, other: &Sketch) {
-        for (bin, n) in &other.bins {
-            *self.bins.entry(*bin).or_insert(0) += n;
+        if other.counts.is_empty() {
+            return;
+        }
+        self.cover(other.first, other.first + other.counts.len() as i32 - 1);
+        let at = (other.first - self.first) as usize;
+        for (mine, n) in self.counts[at..].iter_mut().zip(&other.counts) {
+            *mine += n;
         }
     }
 
     /// How many durations it holds.
     pub fn count(&self) -> u64 {
-        self.bins.values().sum()
+        self.counts.iter().sum()
     }
 
     /// The `q` quantile (0 < q <= 1) by nearest rank, in ms, within [`ALPHA`] of the true
@@ -74,13 +110,13 @@ impl Sketch {
         }
         let rank = ((count as f64) * q).ceil().clamp(1.0, count as f64) as u64;
         let mut seen = 0;
-        for (bin, n) in &self.bins {
+        for (bin, n) in (self.first..).zip(&self.counts) {
             seen += n;
             if seen >= rank {
-                return Some(value(*bin));
+                return Some(value(bin));
             }
         }
-        self.bins.keys().next_back().map(|b| value(*b))
+        None
     }
 }
 
@@ -145,6 +181,16 @@ mod tests {
         }
         a.merge(&b);
         assert_eq!(a, all);
+        let (mut low, mut high) = (Sketch::default(), Sketch::default());
+        low.add(3);
+        high.add(90_000);
+        high.merge(&low);
+        low.add(90_000);
+        assert_eq!(high, low, "merged either way round");
+        let mut wide = Sketch::default();
+        wide.merge(&high);
+        wide.add(1);
+        assert_ne!(wide, high);
         let stored = serde_json::to_string(&a).unwrap();
         assert!(stored.starts_with("[[0,1],[1,"), "{stored}");
         assert_eq!(serde_json::from_str::<Sketch>(&stored).unwrap(), all);

@@ -56,7 +56,10 @@ pub async fn save(db: &mut Db<'_>, moves: &[Move]) -> Result<usize, sqlx::Error>
         fold.add(m);
     }
     if fold.strays > 0 {
-        tracing::warn!(strays = fold.strays, "jobs left a device or aisle no job was on, by the rollups' count");
+        tracing::warn!(
+            strays = fold.strays,
+            "jobs left a device or aisle no job was on, by the rollups' count"
+        );
     }
     statements += merge(db, "rollups", &fold.rows).await?;
     let changed: BTreeMap<String, Busy> =
@@ -122,8 +125,15 @@ pub async fn merge(db: &mut Db<'_>, table: &str, rows: &BTreeMap<Key, Tally>) ->
         return Ok(0);
     }
     let engine = db.engine();
-    let keys: Vec<RowOut> =
-        rows.keys().map(|(grain, bucket, scope)| RowOut { grain: *grain, bucket: *bucket, scope, figures: String::new() }).collect();
+    let keys: Vec<RowOut> = rows
+        .keys()
+        .map(|(grain, bucket, scope)| RowOut {
+            grain: *grain,
+            bucket: *bucket,
+            scope,
+            figures: String::new(),
+        })
+        .collect();
     let keys = serde_json::to_string(&keys).unwrap_or_default();
     let sql = sqlx::AssertSqlSafe(format!(
         "SELECT grain, bucket, scope, figures FROM {table} WHERE (grain, bucket, scope) IN \
@@ -141,7 +151,12 @@ pub async fn merge(db: &mut Db<'_>, table: &str, rows: &BTreeMap<Key, Tally>) ->
                 .and_then(|text| serde_json::from_str(&text).ok())
                 .unwrap_or_default();
             tally.merge(add);
-            RowOut { grain: *grain, bucket: *bucket, scope, figures: serde_json::to_string(&tally).unwrap_or_default() }
+            RowOut {
+                grain: *grain,
+                bucket: *bucket,
+                scope,
+                figures: serde_json::to_string(&tally).unwrap_or_default(),
+            }
         })
         .collect();
     let sql = format!(

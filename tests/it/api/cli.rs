@@ -344,3 +344,17 @@ fn logs_to_a_pipe_carry_no_colour_and_the_format_comes_from_the_environment() {
     assert!(text.contains("DEBUG") || text.contains("WARN"), "text logs: {text}");
     assert!(!text.contains('\u{1b}'), "no ANSI escapes into a pipe: {text:?}");
 }
+
+#[test]
+fn db_rollups_rebuilds_only_when_told_to() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = format!("sqlite:{}", dir.path().join("rackd.db").display());
+    let (ok, _, err) = rackd(&["db", "rollups", "--database", &db]);
+    assert!(!ok && err.contains("--rebuild"), "{err}");
+    let (ok, out, err) = rackd(&["db", "rollups", "--rebuild", "--database", &db]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("rebuilt the rollups of") && out.contains("from 0 history entries: 0 rows"),
+        "{out}"
+    );
+}

@@ -97,7 +97,11 @@ fn check(p: &Period, jobs: &[Ended], to: i64) {
     assert_eq!((d.kind.as_str(), d.count), ("light", completed));
     assert!((d.mean_s - took as f64 / completed as f64 / 1000.0).abs() < 1e-9, "{d:?}");
     let span = (to - 1 - p.from) as f64;
-    assert!((shelf.utilisation * span - busy as f64).abs() < 1.0, "{} against {busy}", shelf.utilisation * span);
+    assert!(
+        (shelf.utilisation * span - busy as f64).abs() < 1.0,
+        "{} against {busy}",
+        shelf.utilisation * span
+    );
     assert_eq!(&p.aisles[&1], shelf, "one shelf, one aisle");
 }
 
@@ -139,13 +143,22 @@ async fn figures_come_from_the_rollups_and_outlive_the_archived_history(#[case] 
     };
     assert!((shelf.durations[0].p95_s - exact).abs() <= 0.01 * exact + 0.0005, "{shelf:?} against {exact}");
 
+    // Eight days: a whole week's row (DAY0 is a Thursday, as weeks start), then a day's.
+    let eight = stats::period(&pool, from, from + 8 * DAY - 1).await.unwrap();
+    check(&eight, &jobs, from + 8 * DAY);
+
     // Archiving the first two days keeps the hour and day rows; the minute rows go.
     let dir = tempfile::tempdir().unwrap();
     let cut = DAY0 + 2 * DAY;
     archive::archive(&pool, date!(2026 - 01 - 03), dir.path(), archive::Delete::Direct).await.unwrap();
-    let minutes: Vec<(i64,)> = rows(&pool, "SELECT COUNT(*) FROM rollups WHERE grain = 60000 AND bucket < 1767398400000").await;
+    let minutes: Vec<(i64,)> =
+        rows(&pool, "SELECT COUNT(*) FROM rollups WHERE grain = 60000 AND bucket < 1767398400000").await;
     assert_eq!(minutes, vec![(0,)], "no minute rows before the cut");
-    assert_eq!(stats::period(&pool, from, to - 1).await.unwrap(), whole, "the same figures without the history");
+    assert_eq!(
+        stats::period(&pool, from, to - 1).await.unwrap(),
+        whole,
+        "the same figures without the history"
+    );
     // A period starting before the cut starts on its whole hour.
     let early = stats::period(&pool, a - DAY, b - 1).await.unwrap();
     assert_eq!(early.from, DAY0 + 5 * HOUR);
@@ -154,12 +167,26 @@ async fn figures_come_from_the_rollups_and_outlive_the_archived_history(#[case] 
     let again = rebuilt(&pool).await;
     assert!(again.entries < done.entries);
     assert_eq!(stats::period(&pool, from, to - 1).await.unwrap(), whole);
+    assert_eq!(
+        stats::period(&pool, from, from + 8 * DAY - 1).await.unwrap(),
+        eight,
+        "the week the cut is in"
+    );
+    // Jobs loaded after the cut (a restore): a rebuild counts them, in the cut's week too.
+    let mut jobs = jobs;
+    let late: Vec<Ended> = (0..3).map(|n| job(900_000 + n, cut + DAY + n * HOUR, 50_000, false)).collect();
+    import::ended_jobs(&pool, &late).await.unwrap();
+    jobs.extend(late);
+    rebuilt(&pool).await;
+    check(&stats::period(&pool, from, to - 1).await.unwrap(), &jobs, to);
+    check(&stats::period(&pool, from, from + 8 * DAY - 1).await.unwrap(), &jobs, from + 8 * DAY);
     assert_eq!(stats::period(&pool, cut + 17 * MINUTE, to).await.unwrap().from, cut + 17 * MINUTE);
 
     // Opened again (a start): filled once, never again.
+    let now = stats::period(&pool, from, to - 1).await.unwrap();
     pool.close().await;
     let pool = rackd::store::open(&db, Duration::from_secs(5)).await.unwrap();
-    assert_eq!(stats::period(&pool, from, to - 1).await.unwrap(), whole);
+    assert_eq!(stats::period(&pool, from, to - 1).await.unwrap(), now);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -168,7 +195,11 @@ async fn one_rebuild_at_a_time() {
     let now = rackd::domain::time::now_ms();
     match &pool {
         Pool::Sqlite(p) => {
-            sqlx::query("INSERT INTO rollup_marks (name, at) VALUES ('rebuilding', $1)").bind(now).execute(p).await.unwrap();
+            sqlx::query("INSERT INTO rollup_marks (name, at) VALUES ('rebuilding', $1)")
+                .bind(now)
+                .execute(p)
+                .await
+                .unwrap();
         }
         Pool::Postgres(_) => unreachable!(),
     }
@@ -178,7 +209,11 @@ async fn one_rebuild_at_a_time() {
     match &pool {
         Pool::Sqlite(p) => {
             let stale = now - rebuild::STALE_MS - 1;
-            sqlx::query("UPDATE rollup_marks SET at = $1 WHERE name = 'rebuilding'").bind(stale).execute(p).await.unwrap();
+            sqlx::query("UPDATE rollup_marks SET at = $1 WHERE name = 'rebuilding'")
+                .bind(stale)
+                .execute(p)
+                .await
+                .unwrap();
         }
         Pool::Postgres(_) => unreachable!(),
     }

@@ -16,12 +16,12 @@ use crate::domain::report::path;
 use crate::domain::time::{from_ms, to_ms};
 use crate::domain::{Failure, JobState, LightColor, Location, LocationLock, Pause, Transition, Who};
 use crate::store::alarms;
-use crate::store::rollups::{self, fold::End};
 use crate::store::controls::AuditEntry;
 use crate::store::counts::Counts;
 use crate::store::events::StoredEvent;
 use crate::store::jobs::{Job, NewJob};
 use crate::store::locations::{self, LocationState};
+use crate::store::rollups::{self, fold::End};
 
 /// What the writer answers for one command.
 // One answer per command of a group, alive until it is sent: their size does not matter,
@@ -549,12 +549,14 @@ impl Group {
         if on == 0 && end.is_none() {
             return;
         }
-        let mut scopes: Vec<String> = job.device.iter().map(|d| rollups::device_scope(d)).collect();
-        let mut aisles: Vec<u16> = job.spec().map(|s| s.locations()).unwrap_or_default().iter().map(|l| l.aisle).collect();
-        aisles.sort_unstable();
-        aisles.dedup();
-        scopes.extend(aisles.into_iter().map(rollups::aisle_scope));
-        self.out.moves.push(rollups::Move { at: self.now, kind: job.kind.as_str().to_owned(), scopes, on, end });
+        let scopes = rollups::scopes(job.device.as_deref(), job.spec().as_ref());
+        self.out.moves.push(rollups::Move {
+            at: self.now,
+            kind: job.kind.as_str().to_owned(),
+            scopes,
+            on,
+            end,
+        });
     }
 
     /// Notes the job's new row, a history entry and a `job.updated` event.
