@@ -226,11 +226,12 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             .with_context(|| format!("rebuilding the rollups of {}", database.display()))?;
             pool.close().await;
             println!(
-                "rebuilt the rollups of {} from {} history entries: {} rows, in {:.1} s",
+                "rebuilt the rollups of {} from {} history entries: {} rows, in {:.1} s (the swap {:.2} s)",
                 database.display(),
                 done.entries,
                 done.rows,
-                started.elapsed().as_secs_f64()
+                started.elapsed().as_secs_f64(),
+                done.swap.as_secs_f64()
             );
         }
         Command::Openapi => {

@@ -17,7 +17,7 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use super::rollups::write::HISTORY_FROM;
-use super::rollups::{DAY, GRAINS, HOUR, MINUTE, Tally, WEEK, floor};
+use super::rollups::{DAY, GRAINS, HOUR, MINUTE, TEN_MINUTES, Tally, WEEK, floor};
 use super::{Pool, read};
 
 /// The figures of one device or aisle.
@@ -161,7 +161,12 @@ fn figures(t: Tally, from: i64, to: i64) -> Figures {
 
 /// The most buckets a period of `days` reads per scope (for the docs and the tests).
 pub fn most_buckets(days: i64) -> i64 {
-    days / 7 + 2 * (WEEK / DAY - 1) + 2 * (DAY / HOUR - 1) + 2 * (HOUR / MINUTE - 1) + 1
+    days / 7
+        + 2 * (WEEK / DAY - 1)
+        + 2 * (DAY / HOUR - 1)
+        + 2 * (HOUR / TEN_MINUTES - 1)
+        + 2 * (TEN_MINUTES / MINUTE - 1)
+        + 1
 }
 
 #[cfg(test)]
@@ -171,20 +176,25 @@ mod tests {
     #[test]
     fn a_period_is_cut_into_the_largest_whole_buckets() {
         let t = |d: i64, h: i64, m: i64| d * DAY + h * HOUR + m * MINUTE;
-        // 8 hours from 02:37:20 to 10:37:25: minutes to 03:00, hours to 10:00, minutes to 10:38.
+        // 8 hours from 02:37:20 to 10:37:25: minutes to 02:40, tens to 03:00, hours to
+        // 10:00, tens to 10:30, minutes to 10:38.
         let runs = plan(t(10, 2, 37) + 20_000, t(10, 10, 37) + 25_000);
         assert_eq!(
             runs,
             vec![
-                (MINUTE, t(10, 2, 37), t(10, 3, 0)),
+                (MINUTE, t(10, 2, 37), t(10, 2, 40)),
+                (TEN_MINUTES, t(10, 2, 40), t(10, 3, 0)),
                 (HOUR, t(10, 3, 0), t(10, 10, 0)),
-                (MINUTE, t(10, 10, 0), t(10, 10, 38))
+                (TEN_MINUTES, t(10, 10, 0), t(10, 10, 30)),
+                (MINUTE, t(10, 10, 30), t(10, 10, 38))
             ]
         );
-        // A year from a Thursday (day 0, as the epoch) 05:10: the first day's minutes and
-        // hours, the days to the next week, whole weeks, then days, hours and minutes.
+        let buckets: i64 = runs.iter().map(|(g, lo, hi)| (hi - lo) / g).sum();
+        assert_eq!(buckets, 3 + 2 + 7 + 3 + 8);
+        // A year from a Thursday (day 0, as the epoch) 05:10: the first day's tens and
+        // hours, the days to the next week, whole weeks, then days, hours, tens, minutes.
         let runs = plan(t(0, 5, 10), t(365, 4, 3));
-        assert_eq!(runs[0], (MINUTE, t(0, 5, 10), t(0, 6, 0)));
+        assert_eq!(runs[0], (TEN_MINUTES, t(0, 5, 10), t(0, 6, 0)));
         assert_eq!(runs[1], (HOUR, t(0, 6, 0), t(1, 0, 0)));
         assert_eq!(runs[2], (DAY, t(1, 0, 0), t(7, 0, 0)));
         assert_eq!(runs[3], (WEEK, t(7, 0, 0), t(364, 0, 0)));

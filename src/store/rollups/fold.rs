@@ -5,7 +5,7 @@
 
 use std::collections::BTreeMap;
 
-use super::{Durations, GRAINS, Key, MINUTE, Tally, floor};
+use super::{Durations, GRAINS, Key, SHORT, Tally, floor};
 
 /// What one transition of a job adds to the rollups.
 #[derive(Clone, Debug, PartialEq)]
@@ -49,7 +49,8 @@ pub struct Fold {
     pub rows: BTreeMap<Key, Tally>,
     /// Busy time before this is not added to any row (a rebuild's start).
     pub clip: i64,
-    /// Busy time before this is not added to minute rows (kept only since then).
+    /// Busy time before this is not added to minute and ten-minute rows (kept only since
+    /// then).
     pub minutes_from: i64,
     /// Jobs that left a scope no job was on (the state lost, e.g. rows written by another
     /// tool): not counted, told in the logs.
@@ -120,7 +121,7 @@ impl Fold {
     /// Adds the busy interval `[from, to)` to every row it overlaps, at each grain.
     fn add_busy(&mut self, scope: &str, from: i64, to: i64) {
         for grain in GRAINS {
-            let start = if grain == MINUTE {
+            let start = if SHORT.contains(&grain) {
                 from.max(self.clip).max(self.minutes_from)
             } else {
                 from.max(self.clip)
@@ -139,7 +140,7 @@ impl Fold {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{DAY, HOUR, WEEK};
+    use super::super::{DAY, HOUR, MINUTE, TEN_MINUTES, WEEK};
     use super::*;
 
     fn on(at: i64, on: i64, end: Option<End>) -> Move {
@@ -165,6 +166,7 @@ mod tests {
         assert_eq!(busy(&f, MINUTE, t(61, 0)), 60_000);
         assert_eq!(busy(&f, MINUTE, t(62, 0)), 15_000);
         assert_eq!((busy(&f, HOUR, 0), busy(&f, HOUR, HOUR)), (30_000, 135_000));
+        assert_eq!((busy(&f, TEN_MINUTES, t(50, 0)), busy(&f, TEN_MINUTES, t(60, 0))), (30_000, 135_000));
         assert_eq!(busy(&f, DAY, 0), 165_000);
         assert_eq!(busy(&f, WEEK, 0), 165_000);
         let hour1 = &f.rows[&(HOUR, HOUR, "device:crane1".to_owned())];

@@ -47,12 +47,15 @@ pub enum RebuildError {
 }
 
 /// What a rebuild did.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Rebuilt {
     /// History entries replayed.
     pub entries: u64,
     /// Rollup rows it put in place.
     pub rows: u64,
+    /// How long its last transaction took (the last page and the swap): what a running
+    /// writer waited for.
+    pub swap: std::time::Duration,
 }
 
 /// The entries after a position, with what the rollups need of their jobs.
@@ -172,6 +175,7 @@ pub async fn rebuild(pool: &Pool, progress: impl Fn(u64, i64)) -> Result<Rebuilt
     }
 
     // The rest, and the swap, in one transaction the writer waits for.
+    let swap = std::time::Instant::now();
     let mut tx = pool.write_tx().await?;
     if let Tx::Postgres(t) = &mut tx {
         sqlx::query("SELECT pg_advisory_xact_lock($1)").bind(LOCK).execute(&mut **t).await?;
@@ -204,7 +208,7 @@ pub async fn rebuild(pool: &Pool, progress: impl Fn(u64, i64)) -> Result<Rebuilt
     if replay.fold.strays > 0 {
         tracing::warn!(strays = replay.fold.strays, "rollups rebuilt: jobs left a device no job was on");
     }
-    Ok(Rebuilt { entries: replay.entries, rows: rows as u64 })
+    Ok(Rebuilt { entries: replay.entries, rows: rows as u64, swap: swap.elapsed() })
 }
 
 /// Puts the rows of the week starting at `week` together again from its days' rows: the

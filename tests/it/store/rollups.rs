@@ -147,13 +147,14 @@ async fn figures_come_from_the_rollups_and_outlive_the_archived_history(#[case] 
     let eight = stats::period(&pool, from, from + 8 * DAY - 1).await.unwrap();
     check(&eight, &jobs, from + 8 * DAY);
 
-    // Archiving the first two days keeps the hour and day rows; the minute rows go.
+    // Archiving the first two days keeps the hour, day and week rows; the finer ones go.
     let dir = tempfile::tempdir().unwrap();
     let cut = DAY0 + 2 * DAY;
     archive::archive(&pool, date!(2026 - 01 - 03), dir.path(), archive::Delete::Direct).await.unwrap();
-    let minutes: Vec<(i64,)> =
-        rows(&pool, "SELECT COUNT(*) FROM rollups WHERE grain = 60000 AND bucket < 1767398400000").await;
-    assert_eq!(minutes, vec![(0,)], "no minute rows before the cut");
+    let sql = "SELECT COUNT(*) FROM rollups WHERE grain < 3600000 AND bucket < 1767398400000";
+    assert_eq!(rows::<(i64,)>(&pool, sql).await, vec![(0,)], "no minute or ten-minute rows before the cut");
+    let sql = "SELECT COUNT(*) FROM rollups WHERE grain = 600000 AND bucket >= 1767398400000";
+    assert!(rows::<(i64,)>(&pool, sql).await[0].0 > 0, "ten-minute rows after it");
     assert_eq!(
         stats::period(&pool, from, to - 1).await.unwrap(),
         whole,
