@@ -3,8 +3,8 @@
 //! The period runs from `since` to now. `since` is an RFC 3339 time or a duration back
 //! from now (`90s`, `30m`, `1h`, `8h` for a shift, `2d`, `365d`); the default is one
 //! hour, and it reaches back at most 366 days (older is a 400, as is a time in the
-//! future). The period starts on `since`'s whole minute (its whole hour beyond the minute
-//! rollups kept, as long as the jobs); the answer's `since` is the start used. Every
+//! future). The period starts on `since`'s whole minute (its whole day, UTC, beyond the
+//! minute rollups, kept as long as the jobs); the answer's `since` is the start used. Every
 //! configured device that runs jobs and every aisle of the layout is listed, with zeros
 //! when nothing happened. How the figures are made is in [`crate::store::stats`] and
 //! [`crate::store::rollups`].
@@ -39,7 +39,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 pub struct StatsParams {
     /// Start of the period: an RFC 3339 time, or a duration back from now (`30m`, `1h`,
     /// `8h`, `2d`, `365d`); default `1h`, at most 366 days back. Taken down to its whole
-    /// minute (its hour beyond the retention of jobs).
+    /// minute (its day beyond the retention of jobs).
     #[param(example = "8h")]
     since: Option<String>,
 }

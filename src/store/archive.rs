@@ -26,8 +26,8 @@
 //!   file too). A re-POST of an archived job's reference makes a new job, as after any
 //!   retention. Events are not touched: their own retention (`events.retention_hours`)
 //!   keeps them.
-//! - **The rollups stay.** The KPIs' hour, day and week rows are kept forever; the minute and
-//!   ten-minute rows before `DATE` go with the jobs, and the mark `history_from` says from when the store
+//! - **The rollups stay.** The KPIs' day and week rows are kept forever; the minute,
+//!   ten-minute and hour rows before `DATE` go with the jobs, and the mark `history_from` says from when the store
 //!   holds every job's history (see [`super::rollups`]).
 //! - **No partitions on PostgreSQL.** Partitioning `jobs` by month would let a month go
 //!   with one `DROP`, but a partitioned table's unique indexes must hold its partition key,
@@ -156,12 +156,13 @@ pub async fn archive(
     Ok(done)
 }
 
-/// Once the jobs before `cut` are archived: the rollups' minute and ten-minute rows before
-/// it go too (hour, day and week rows stay forever), and the mark `history_from` moves up to it, so that a
-/// period starting earlier starts on its whole hour and a rebuild keeps the rows before it
+/// Once the jobs before `cut` are archived: the rollups' rows finer than a day before it go
+/// too (day and week rows stay forever), and the mark `history_from` moves up to it, so
+/// that a period starting earlier starts on its whole day and a rebuild keeps the rows
+/// before it
 /// (see [`super::rollups`]).
 async fn keep_rollups_from(pool: &Pool, cut: i64) -> Result<(), sqlx::Error> {
-    use super::rollups::{MINUTE, TEN_MINUTES, write};
+    use super::rollups::{DAY, write};
     let mut tx = pool.write_tx().await?;
     let mut db = match &mut tx {
         Tx::Sqlite(t) => write::Db::Sqlite(&mut *t),
@@ -171,8 +172,8 @@ async fn keep_rollups_from(pool: &Pool, cut: i64) -> Result<(), sqlx::Error> {
         return Ok(());
     }
     write::set_mark(&mut db, write::HISTORY_FROM, cut).await?;
-    let sql = "DELETE FROM rollups WHERE grain IN ($1, $2) AND bucket < $3";
-    on!(Tx, &mut tx, t => sqlx::query(sql).bind(MINUTE).bind(TEN_MINUTES).bind(cut).execute(&mut **t).await.map(drop))?;
+    let sql = "DELETE FROM rollups WHERE grain < $1 AND bucket < $2";
+    on!(Tx, &mut tx, t => sqlx::query(sql).bind(DAY).bind(cut).execute(&mut **t).await.map(drop))?;
     on!(Tx, tx, t => t.commit().await)
 }
 

@@ -3,7 +3,7 @@
 //! job kind. What each figure means, and what was decided where the spec is silent, is in
 //! the rollups' module doc; here, how a period is read.
 //!
-//! A period `[from, to]` starts on its whole minute (on its whole hour when it starts
+//! A period `[from, to]` starts on its whole minute (on its whole day when it starts
 //! before the minute rows kept, `history_from`), and is cut into the largest whole buckets
 //! that fit ([`plan`]); the bucket holding `to` is read whole (it holds what was committed
 //! up to now). One read transaction reads them and the scopes still busy, whose open
@@ -53,7 +53,7 @@ pub struct KindDurations {
 /// The figures of a period.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Period {
-    /// Its start as used (Unix ms): the start asked, down to its minute or hour.
+    /// Its start as used (Unix ms): the start asked, down to its minute or day.
     pub from: i64,
     /// Per device that had anything, by id.
     pub devices: BTreeMap<String, Figures>,
@@ -84,7 +84,7 @@ pub async fn period(pool: &Pool, from: i64, to: i64) -> Result<Period, sqlx::Err
     let minutes_from: Option<i64> = read!(tx.reader(), p => {
         sqlx::query_scalar("SELECT at FROM rollup_marks WHERE name = $1").bind(HISTORY_FROM).fetch_optional(p).await
     })?;
-    let from = if minutes_from.is_some_and(|m| from < m) { floor(from, HOUR) } else { floor(from, MINUTE) };
+    let from = if minutes_from.is_some_and(|m| from < m) { floor(from, DAY) } else { floor(from, MINUTE) };
     let runs = plan(from, to);
     let mut tallies: BTreeMap<String, Tally> = BTreeMap::new();
     if !runs.is_empty() {

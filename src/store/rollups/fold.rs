@@ -49,7 +49,7 @@ pub struct Fold {
     pub rows: BTreeMap<Key, Tally>,
     /// Busy time before this is not added to any row (a rebuild's start).
     pub clip: i64,
-    /// Busy time before this is not added to minute and ten-minute rows (kept only since
+    /// Busy time before this is not added to the rows finer than a day (kept only since
     /// then).
     pub minutes_from: i64,
     /// Jobs that left a scope no job was on (the state lost, e.g. rows written by another
@@ -183,8 +183,9 @@ mod tests {
         f.add(&on(HOUR - 1000, 1, None));
         f.add(&on(HOUR + 31 * MINUTE, -1, None));
         assert_eq!(busy(&f, HOUR, 0), 0, "before the clip");
-        assert_eq!(busy(&f, HOUR, HOUR), 31 * MINUTE);
-        assert_eq!(busy(&f, MINUTE, HOUR), 0, "minute rows start later");
+        assert_eq!(busy(&f, DAY, 0), 31 * MINUTE, "from the clip");
+        assert_eq!(busy(&f, HOUR, HOUR), MINUTE, "rows finer than a day start later");
+        assert_eq!(busy(&f, MINUTE, HOUR), 0);
         assert_eq!(busy(&f, MINUTE, HOUR + 30 * MINUTE), MINUTE);
     }
 }

@@ -11,7 +11,7 @@
 //!   rebuilt rows: about a second per 300,000 on this project's machine).
 //! - **What the history no longer holds is kept.** Days archived (before the mark
 //!   `history_from`) have no history left: their rows stay as they are, and the replay adds
-//!   nothing before that time. Their hour, day and week rows are the only record of them.
+//!   nothing before that time. Their day and week rows are the only record of them.
 //!   The week the mark falls in is summed again from its days, kept and rebuilt.
 //! - **One rebuild at a time**: the mark `rebuilding`, refreshed at every page; another
 //!   rebuild refuses while it is younger than [`STALE_MS`] (a rebuild killed midway

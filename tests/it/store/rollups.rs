@@ -147,22 +147,22 @@ async fn figures_come_from_the_rollups_and_outlive_the_archived_history(#[case] 
     let eight = stats::period(&pool, from, from + 8 * DAY - 1).await.unwrap();
     check(&eight, &jobs, from + 8 * DAY);
 
-    // Archiving the first two days keeps the hour, day and week rows; the finer ones go.
+    // Archiving the first two days keeps the day and week rows; the finer ones go.
     let dir = tempfile::tempdir().unwrap();
     let cut = DAY0 + 2 * DAY;
     archive::archive(&pool, date!(2026 - 01 - 03), dir.path(), archive::Delete::Direct).await.unwrap();
-    let sql = "SELECT COUNT(*) FROM rollups WHERE grain < 3600000 AND bucket < 1767398400000";
-    assert_eq!(rows::<(i64,)>(&pool, sql).await, vec![(0,)], "no minute or ten-minute rows before the cut");
-    let sql = "SELECT COUNT(*) FROM rollups WHERE grain = 600000 AND bucket >= 1767398400000";
-    assert!(rows::<(i64,)>(&pool, sql).await[0].0 > 0, "ten-minute rows after it");
+    let sql = "SELECT COUNT(*) FROM rollups WHERE grain < 86400000 AND bucket < 1767398400000";
+    assert_eq!(rows::<(i64,)>(&pool, sql).await, vec![(0,)], "no rows finer than a day before the cut");
+    let sql = "SELECT COUNT(*) FROM rollups WHERE grain = 3600000 AND bucket >= 1767398400000";
+    assert!(rows::<(i64,)>(&pool, sql).await[0].0 > 0, "hour rows after it");
     assert_eq!(
         stats::period(&pool, from, to - 1).await.unwrap(),
         whole,
         "the same figures without the history"
     );
-    // A period starting before the cut starts on its whole hour.
+    // A period starting before the cut starts on its whole day.
     let early = stats::period(&pool, a - DAY, b - 1).await.unwrap();
-    assert_eq!(early.from, DAY0 + 5 * HOUR);
+    assert_eq!(early.from, DAY0);
     check(&early, &jobs, b);
     // A rebuild replays what is left and keeps what is not.
     let again = rebuilt(&pool).await;
