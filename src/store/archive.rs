@@ -162,8 +162,11 @@ pub async fn archive(
 /// before it
 /// (see [`super::rollups`]).
 async fn keep_rollups_from(pool: &Pool, cut: i64) -> Result<(), sqlx::Error> {
-    use super::rollups::{DAY, write};
+    use super::rollups::{DAY, LOCK, write};
     let mut tx = pool.write_tx().await?;
+    if let Tx::Postgres(t) = &mut tx {
+        sqlx::query("SELECT pg_advisory_xact_lock($1)").bind(LOCK).execute(&mut **t).await?;
+    }
     let mut db = match &mut tx {
         Tx::Sqlite(t) => write::Db::Sqlite(&mut *t),
         Tx::Postgres(t) => write::Db::Postgres(&mut *t),

@@ -14,8 +14,9 @@
 //!   other rows ([`write::save`]), so rollups are exactly as durable as the jobs. The rows a
 //!   group touches are read, added to and written back (read-modify-write: a sketch is not
 //!   a sum SQL can do); on PostgreSQL under a transaction-level advisory lock
-//!   ([`LOCK`]), since every node of a cluster commits; on SQLite the write transaction is
-//!   the lock already.
+//!   ([`LOCK`]), since every node of a cluster commits, taken by the last statements of a
+//!   writer's transaction (so that no holder of it waits for another lock); on SQLite the
+//!   write transaction is the lock already.
 //! - **Five grains: minute, ten minutes, hour, day (UTC) and week (from Thursday, as Unix
 //!   time).** A period is cut into whole buckets, the largest that fit: minutes up to the
 //!   first whole ten minutes, then tens up to the hour, hours up to the day, days up to the

@@ -493,11 +493,6 @@ pub(super) async fn save(
     }
     write(db, count, &sql.pause, &paused).await?;
     write(db, count, &sql.resume, &resumed).await?;
-    let mut rollups = match db {
-        Conn::Sqlite(c) => crate::store::rollups::write::Db::Sqlite(c),
-        Conn::Postgres(c) => crate::store::rollups::write::Db::Postgres(c),
-    };
-    *count += crate::store::rollups::write::save(&mut rollups, &group.out.moves).await?;
     if let Some(before) = group.prune {
         let sql = "DELETE FROM events WHERE at < $1 AND seq < (SELECT MAX(seq) FROM events)";
         *count += 1;
@@ -516,5 +511,13 @@ pub(super) async fn save(
             on!(Conn, db, c => sqlx::query(sql).execute(&mut *c).await.map(drop))?;
         }
     }
+    // Last: on PostgreSQL it takes the rollups' advisory lock, which must be the last lock
+    // any writer's transaction waits for (a node holding it never waits for a job's row
+    // another node holds while waiting for it).
+    let mut rollups = match db {
+        Conn::Sqlite(c) => crate::store::rollups::write::Db::Sqlite(c),
+        Conn::Postgres(c) => crate::store::rollups::write::Db::Postgres(c),
+    };
+    *count += crate::store::rollups::write::save(&mut rollups, &group.out.moves).await?;
     Ok(())
 }
