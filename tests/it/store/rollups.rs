@@ -204,30 +204,18 @@ async fn figures_come_from_the_rollups_and_outlive_the_archived_history(#[case] 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn one_rebuild_at_a_time() {
     let (pool, _db, _dir) = open(Engine::Sqlite).await;
+    let Pool::Sqlite(p) = &pool else { unreachable!("a SQLite store") };
     let now = rackd::domain::time::now_ms();
-    match &pool {
-        Pool::Sqlite(p) => {
-            sqlx::query("INSERT INTO rollup_marks (name, at) VALUES ('rebuilding', $1)")
-                .bind(now)
-                .execute(p)
-                .await
-                .unwrap();
-        }
-        Pool::Postgres(_) => unreachable!(),
-    }
+    let mark = |at: i64| {
+        sqlx::query("INSERT INTO rollup_marks (name, at) VALUES ('rebuilding', $1) ON CONFLICT (name) DO UPDATE SET at = excluded.at")
+            .bind(at)
+            .execute(p)
+    };
+    mark(now).await.unwrap();
     let err = rebuild::rebuild(&pool, |_, _| {}).await.unwrap_err();
     assert!(matches!(err, RebuildError::Running(_)), "{err}");
     assert!(err.to_string().contains("another rebuild"), "{err}");
-    match &pool {
-        Pool::Sqlite(p) => {
-            let stale = now - rebuild::STALE_MS - 1;
-            sqlx::query("UPDATE rollup_marks SET at = $1 WHERE name = 'rebuilding'")
-                .bind(stale)
-                .execute(p)
-                .await
-                .unwrap();
-        }
-        Pool::Postgres(_) => unreachable!(),
-    }
+    // A mark left by a rebuild killed midway goes stale: the next may start.
+    mark(now - rebuild::STALE_MS - 1).await.unwrap();
     rebuilt(&pool).await;
 }
