@@ -159,18 +159,12 @@ pub async fn archive(
 /// Once the jobs before `cut` are archived: the rollups' rows finer than a day before it go
 /// too (day and week rows stay forever), and the mark `history_from` moves up to it, so
 /// that a period starting earlier starts on its whole day and a rebuild keeps the rows
-/// before it
-/// (see [`super::rollups`]).
+/// before it (see [`super::rollups`]).
 async fn keep_rollups_from(pool: &Pool, cut: i64) -> Result<(), sqlx::Error> {
-    use super::rollups::{DAY, LOCK, write};
+    use super::rollups::{DAY, write};
     let mut tx = pool.write_tx().await?;
-    if let Tx::Postgres(t) = &mut tx {
-        sqlx::query("SELECT pg_advisory_xact_lock($1)").bind(LOCK).execute(&mut **t).await?;
-    }
-    let mut db = match &mut tx {
-        Tx::Sqlite(t) => write::Db::Sqlite(&mut *t),
-        Tx::Postgres(t) => write::Db::Postgres(&mut *t),
-    };
+    let mut db = write::Db::from(&mut tx);
+    write::lock(&mut db).await?;
     if write::mark(&mut db, write::HISTORY_FROM).await?.is_some_and(|at| at >= cut) {
         return Ok(());
     }

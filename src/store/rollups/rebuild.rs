@@ -22,7 +22,7 @@ use std::sync::Arc;
 
 use super::fold::End;
 use super::write::{self, BUILT, Db, HISTORY_FROM};
-use super::{DAY, Fold, LOCK, Move, Tally, WEEK, floor, scopes};
+use super::{DAY, Fold, Move, Tally, WEEK, floor, scopes};
 use crate::domain::time::now_ms;
 use crate::domain::{JobSpec, JobState};
 use crate::store::{Pool, Tx, on};
@@ -122,13 +122,6 @@ impl Replay {
     }
 }
 
-fn db(tx: &mut Tx) -> Db<'_> {
-    match tx {
-        Tx::Sqlite(t) => Db::Sqlite(&mut *t),
-        Tx::Postgres(t) => Db::Postgres(&mut *t),
-    }
-}
-
 /// Reads the next page into the replay; the entries read.
 async fn page(tx: &mut Tx, replay: &mut Replay) -> Result<usize, sqlx::Error> {
     let rows: Vec<Entry> = on!(Tx, tx, t => sqlx::query_as(ENTRIES)
@@ -149,14 +142,14 @@ async fn page(tx: &mut Tx, replay: &mut Replay) -> Result<usize, sqlx::Error> {
 pub async fn rebuild(pool: &Pool, progress: impl Fn(u64, i64)) -> Result<Rebuilt, RebuildError> {
     let mut tx = pool.write_tx().await?;
     let now = now_ms();
-    if let Some(at) = write::mark(&mut db(&mut tx), REBUILDING).await?
+    if let Some(at) = write::mark(&mut Db::from(&mut tx), REBUILDING).await?
         && now - at < STALE_MS
     {
         return Err(RebuildError::Running((now - at) / 1000));
     }
-    write::set_mark(&mut db(&mut tx), REBUILDING, now).await?;
+    write::set_mark(&mut Db::from(&mut tx), REBUILDING, now).await?;
     on!(Tx, &mut tx, t => sqlx::query("DELETE FROM rollups_rebuild").execute(&mut **t).await.map(drop))?;
-    let clip = write::mark(&mut db(&mut tx), HISTORY_FROM).await?.unwrap_or(i64::MIN);
+    let clip = write::mark(&mut Db::from(&mut tx), HISTORY_FROM).await?.unwrap_or(i64::MIN);
     on!(Tx, tx, t => t.commit().await)?;
 
     let fold = Fold { clip, minutes_from: clip, ..Fold::default() };
@@ -165,8 +158,9 @@ pub async fn rebuild(pool: &Pool, progress: impl Fn(u64, i64)) -> Result<Rebuilt
     loop {
         let mut tx = pool.write_tx().await?;
         let n = page(&mut tx, &mut replay).await?;
-        write::merge(&mut db(&mut tx), "rollups_rebuild", &std::mem::take(&mut replay.fold.rows)).await?;
-        write::set_mark(&mut db(&mut tx), REBUILDING, now_ms()).await?;
+        write::merge(&mut Db::from(&mut tx), "rollups_rebuild", &std::mem::take(&mut replay.fold.rows))
+            .await?;
+        write::set_mark(&mut Db::from(&mut tx), REBUILDING, now_ms()).await?;
         on!(Tx, tx, t => t.commit().await)?;
         progress(replay.entries, replay.at);
         if (n as i64) < PAGE {
@@ -177,11 +171,9 @@ pub async fn rebuild(pool: &Pool, progress: impl Fn(u64, i64)) -> Result<Rebuilt
     // The rest, and the swap, in one transaction the writer waits for.
     let swap = std::time::Instant::now();
     let mut tx = pool.write_tx().await?;
-    if let Tx::Postgres(t) = &mut tx {
-        sqlx::query("SELECT pg_advisory_xact_lock($1)").bind(LOCK).execute(&mut **t).await?;
-    }
+    write::lock(&mut Db::from(&mut tx)).await?;
     while page(&mut tx, &mut replay).await? as i64 == PAGE {}
-    write::merge(&mut db(&mut tx), "rollups_rebuild", &std::mem::take(&mut replay.fold.rows)).await?;
+    write::merge(&mut Db::from(&mut tx), "rollups_rebuild", &std::mem::take(&mut replay.fold.rows)).await?;
     let rows: i64 = on!(Tx, &mut tx, t => sqlx::query_scalar("SELECT COUNT(*) FROM rollups_rebuild").fetch_one(&mut **t).await)?;
     for sql in [
         "DELETE FROM rollups WHERE bucket >= $1",
@@ -202,8 +194,8 @@ pub async fn rebuild(pool: &Pool, progress: impl Fn(u64, i64)) -> Result<Rebuilt
         week_of_days(&mut tx, floor(clip, WEEK)).await?;
     }
     let busy = replay.fold.busy.into_iter().filter(|(_, b)| b.active > 0).collect();
-    write::write_busy(&mut db(&mut tx), &busy).await?;
-    write::set_mark(&mut db(&mut tx), BUILT, now_ms()).await?;
+    write::write_busy(&mut Db::from(&mut tx), &busy).await?;
+    write::set_mark(&mut Db::from(&mut tx), BUILT, now_ms()).await?;
     on!(Tx, tx, t => t.commit().await)?;
     if replay.fold.strays > 0 {
         tracing::warn!(strays = replay.fold.strays, "rollups rebuilt: jobs left a device no job was on");
@@ -230,7 +222,7 @@ async fn week_of_days(tx: &mut Tx, week: i64) -> Result<(), sqlx::Error> {
     }
     let sql = "DELETE FROM rollups WHERE grain = $1 AND bucket = $2";
     on!(Tx, tx, t => sqlx::query(sql).bind(WEEK).bind(week).execute(&mut **t).await.map(drop))?;
-    write::merge(&mut db(tx), "rollups", &rows).await?;
+    write::merge(&mut Db::from(&mut *tx), "rollups", &rows).await?;
     Ok(())
 }
 

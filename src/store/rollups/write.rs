@@ -8,8 +8,8 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use super::{Busy, Fold, Key, LOCK, Move, Tally};
-use crate::store::Engine;
 use crate::store::on;
+use crate::store::{Engine, Tx};
 
 /// A connection inside a write transaction, on either engine.
 pub enum Db<'a> {
@@ -17,6 +17,15 @@ pub enum Db<'a> {
     Sqlite(&'a mut sqlx::SqliteConnection),
     /// PostgreSQL.
     Postgres(&'a mut sqlx::PgConnection),
+}
+
+impl<'a> From<&'a mut Tx> for Db<'a> {
+    fn from(tx: &'a mut Tx) -> Db<'a> {
+        match tx {
+            Tx::Sqlite(t) => Db::Sqlite(&mut *t),
+            Tx::Postgres(t) => Db::Postgres(&mut *t),
+        }
+    }
 }
 
 impl Db<'_> {
@@ -43,11 +52,7 @@ pub async fn save(db: &mut Db<'_>, moves: &[Move]) -> Result<usize, sqlx::Error>
     if moves.is_empty() {
         return Ok(0);
     }
-    let mut statements = 0;
-    if let Db::Postgres(c) = db {
-        sqlx::query("SELECT pg_advisory_xact_lock($1)").bind(LOCK).execute(&mut **c).await?;
-        statements += 1;
-    }
+    let mut statements = lock(db).await?;
     let mut fold = Fold { busy: load_busy(db).await?, ..Fold::default() };
     fold.minutes_from = mark(db, HISTORY_FROM).await?.unwrap_or(i64::MIN);
     statements += 2;
@@ -66,6 +71,19 @@ pub async fn save(db: &mut Db<'_>, moves: &[Move]) -> Result<usize, sqlx::Error>
         fold.busy.into_iter().filter(|(scope, b)| before.get(scope) != Some(b)).collect();
     statements += write_busy(db, &changed).await?;
     Ok(statements)
+}
+
+/// Takes the rollups' lock for the rest of the transaction: on PostgreSQL the advisory
+/// lock [`LOCK`] (taken last in any transaction, see the module doc); on SQLite the write
+/// transaction holds the lock already. Returns the statements it ran.
+pub async fn lock(db: &mut Db<'_>) -> Result<usize, sqlx::Error> {
+    match db {
+        Db::Postgres(c) => {
+            sqlx::query("SELECT pg_advisory_xact_lock($1)").bind(LOCK).execute(&mut **c).await?;
+            Ok(1)
+        }
+        Db::Sqlite(_) => Ok(0),
+    }
 }
 
 /// Every scope's busy state.
