@@ -29,6 +29,7 @@ pub mod layers;
 pub mod origin;
 mod retention;
 pub mod tls;
+pub mod webhooks;
 
 pub use check::Invalid;
 pub use env::EnvError;
@@ -39,6 +40,7 @@ pub use layers::{Loaded, Sources};
 pub use origin::Origin;
 pub use retention::{ARCHIVE_ACTION, RetentionConfig};
 pub use tls::{TlsConfig, TlsError};
+pub use webhooks::WebhookConfig;
 
 pub use crate::auth::{AuthConfig, KeyConfig};
 use crate::domain::{AisleLayout, Layout};
@@ -69,6 +71,9 @@ pub struct Config {
     /// The machines, one `[[devices]]` entry each.
     #[serde(serialize_with = "flat_devices")]
     pub devices: Vec<DeviceConfig>,
+    /// Subscriptions that push events to a WMS, one `[[webhooks]]` entry each.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub webhooks: Vec<WebhookConfig>,
 }
 
 /// Devices written as the file writes them, every key of their kind filled in.

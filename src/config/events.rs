@@ -20,6 +20,11 @@ pub struct EventsConfig {
     pub snapshot_jobs: u32,
     /// Longest time a device's new last contact goes unpublished, in milliseconds.
     pub contact_refresh_ms: u64,
+    /// Hours beyond `retention_hours` the log keeps events an active `[[webhooks]]`
+    /// subscription has not delivered yet; older ones are pruned all the same (and the
+    /// subscription's `webhook` alarm says which were lost), so a receiver gone for good
+    /// cannot fill the disk.
+    pub webhook_hold_hours: u64,
 }
 
 impl Default for EventsConfig {
@@ -31,6 +36,7 @@ impl Default for EventsConfig {
             send_timeout_secs: 10,
             snapshot_jobs: 5000,
             contact_refresh_ms: 5000,
+            webhook_hold_hours: 168,
         }
     }
 }
