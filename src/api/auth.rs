@@ -34,6 +34,9 @@ pub fn admin_paths() -> &'static [&'static str] {
 pub fn required_role(method: &Method, path: &str) -> Role {
     if method == Method::GET || method == Method::HEAD {
         Role::Viewer
+    } else if path.starts_with("/api/v1/webhooks") {
+        // Where the events go and from where: the site's integration, not its operation.
+        Role::Admin
     } else if method == Method::PUT && path.trim_end_matches('/') == "/api/v1/locations" {
         // The inventory: what the store holds, for commissioning.
         Role::Admin
@@ -198,6 +201,8 @@ mod tests {
     fn roles_by_method_and_path() {
         assert_eq!(required_role(&Method::GET, "/api/v1/jobs"), Role::Viewer);
         assert_eq!(required_role(&Method::POST, "/api/v1/jobs"), Role::Operator);
+        assert_eq!(required_role(&Method::POST, "/api/v1/webhooks/wms/pause"), Role::Admin);
+        assert_eq!(required_role(&Method::GET, "/api/v1/webhooks/wms/deliveries"), Role::Viewer);
         assert_eq!(required_role(&Method::PATCH, "/api/v1/jobs/1"), Role::Operator);
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/registers"), Role::Admin);
         assert_eq!(required_role(&Method::PUT, "/api/v1/locations"), Role::Admin);

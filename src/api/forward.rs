@@ -63,6 +63,7 @@ pub fn only_active(method: &Method, path: &str) -> bool {
         || p == "health"
         || (method != Method::GET && p.starts_with("jobs/") && p != "jobs/batch")
         || (method != Method::GET && under("locations"))
+        || (method != Method::GET && under("webhooks"))
 }
 
 /// Middleware: forwards what only the active node does, on a standby.

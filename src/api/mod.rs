@@ -27,6 +27,7 @@ pub mod ops;
 pub mod peer;
 pub mod state;
 pub mod stats;
+pub mod webhooks;
 pub mod whoami;
 pub mod ws;
 
@@ -77,6 +78,8 @@ updated when acknowledged), `location.updated` (a `LocationState`, with its lock
 queued job's `waiting` reason changed. A subscriber that falls behind gets a `Resync` and the connection closes with code \
 4000: reconnect with `?since=` its `seq`. `?topics=jobs,devices,alarms,locations,audit` filters both the \
 snapshot and the events. Browsers pass the key as `?token=`."),
+        (name = "webhooks", description = "Events pushed to the WMS: signed (Standard Webhooks), at least once, \
+in order; each subscription's state, its delivery log, pause, resume and replay (administrators)"),
         (name = "operations", description = "Health, readiness, metrics and the audit log of operator actions"),
     ),
     components(schemas(ws::Snapshot, ws::SnapshotData, ws::Resync)),
@@ -132,6 +135,7 @@ fn protected_routes() -> OpenApiRouter<AppState> {
         .merge(health::router())
         .merge(cluster::router())
         .merge(stats::router())
+        .merge(webhooks::router())
         .merge(whoami::router())
         .merge(ws::router());
     OpenApiRouter::with_openapi(ApiDoc::openapi()).nest("/api/v1", v1).routes(routes!(metrics_route))

@@ -23,6 +23,7 @@ impl Forwarder {
         let mut builder = reqwest::Client::builder()
             .no_proxy()
             .redirect(reqwest::redirect::Policy::none())
+            .tls_built_in_native_certs(false)
             .timeout(Duration::from_secs(30))
             .connect_timeout(Duration::from_secs(2));
         if let Some(path) = ca_file {

@@ -51,6 +51,10 @@ pub struct Shared {
     /// The running devices, once this node drives them (at start, or in a cluster when
     /// it becomes the active node).
     pub running: Arc<std::sync::OnceLock<crate::devices::Devices>>,
+    /// The webhook subscriptions' deliverers, once this node drives the machines.
+    pub webhooks: Arc<std::sync::OnceLock<crate::service::webhooks::Webhooks>>,
+    /// The webhook subscriptions as configured (every node lists them).
+    pub subscriptions: Arc<Vec<crate::config::WebhookConfig>>,
     /// This node's part in a cluster, if it is in one.
     pub cluster: Option<crate::service::cluster::Node>,
     /// How a standby forwards to the active node (in a cluster).

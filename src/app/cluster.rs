@@ -22,6 +22,7 @@ use crate::service::cluster::lease::Timing;
 use crate::service::cluster::{Leadership, Node, Role, TAKEOVER_ACTION, follow, node};
 use crate::service::dispatch::Dispatcher;
 use crate::service::events::Hub;
+use crate::service::webhooks::Webhooks;
 use crate::store::alarms::NewAlarm;
 use crate::store::writer::{Record, Writer};
 use crate::store::{Pool, events};
@@ -54,6 +55,7 @@ pub(super) struct Parts {
     pub metrics: Arc<Metrics>,
     pub commits: Arc<AtomicU64>,
     pub running: Arc<OnceLock<Devices>>,
+    pub webhooks: Arc<OnceLock<Webhooks>>,
     pub tasks: drive::Tasks,
 }
 
@@ -151,11 +153,11 @@ async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>)
     node.takeovers.fetch_add(1, Ordering::Relaxed);
     parts.dispatcher.queues().set_drives(true);
     let fenced = parts.writer.fenced(node.gate.epoch());
-    match drive::start(&parts.config, &parts.pool, &parts.dispatcher, fenced.clone(), Some(node.gate.may()))
-        .await
-    {
+    let may = Some(node.gate.may());
+    match drive::start(&parts.config, &parts.pool, &parts.dispatcher, fenced.clone(), &parts.hub, may).await {
         Ok(d) => {
             let _ = parts.running.set(d.devices);
+            let _ = parts.webhooks.set(d.webhooks);
             parts.tasks.lock().unwrap_or_else(|p| p.into_inner()).extend(d.tasks);
         }
         Err(e) => {

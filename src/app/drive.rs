@@ -16,7 +16,9 @@ use crate::devices::{self, Devices};
 use crate::domain::AlarmKind;
 use crate::domain::time::now_ms;
 use crate::service::dispatch::{Dispatcher, Queues};
+use crate::service::events::Hub;
 use crate::service::monitor;
+use crate::service::webhooks::{self, Webhooks};
 use crate::store::alarms::NewAlarm;
 use crate::store::writer::{Record, Writer};
 use crate::store::{self, Pool};
@@ -25,6 +27,8 @@ use crate::store::{self, Pool};
 pub(super) struct Drive {
     /// The devices.
     pub devices: Devices,
+    /// The webhook subscriptions' deliverers.
+    pub webhooks: Webhooks,
     /// Their tasks and the rest: stopped before the writer drains.
     pub tasks: Vec<JoinHandle<()>>,
 }
@@ -36,6 +40,7 @@ pub(super) async fn start(
     pool: &Pool,
     dispatcher: &Dispatcher,
     writer: Writer,
+    hub: &Hub,
     gate: Option<MayDrive>,
 ) -> anyhow::Result<Drive> {
     let queues: &Queues = dispatcher.queues();
@@ -44,25 +49,39 @@ pub(super) async fn start(
     dispatcher.restore().await.context("restoring pauses and location locks")?;
     let contact_refresh = Duration::from_millis(config.events.contact_refresh_ms);
     let port = |id: &str| queues.port(id, writer.clone());
-    let (devices, mut tasks) = devices::start(&config.devices, port, contact_refresh, gate).await?;
+    let (devices, mut tasks) = devices::start(&config.devices, port, contact_refresh, gate.clone()).await?;
+    let parts = webhooks::Parts { pool: pool.clone(), writer: writer.clone(), hub: hub.clone(), gate };
+    let (webhooks, delivering) = Webhooks::start(&config.webhooks, parts).await?;
+    tasks.extend(delivering);
     tasks.extend(monitor::start(&devices, queues, writer.clone(), pool).await);
     queues.watch_devices(devices.iter().map(|(id, h)| (id.clone(), h.status.clone())).collect());
     tasks.push(tokio::spawn(crate::service::dispatch::waiting::watch(queues.clone(), writer.clone())));
-    tasks.push(tokio::spawn(retention(writer.clone(), config.events.retention_hours)));
+    tasks.push(tokio::spawn(retention(pool.clone(), writer.clone(), config.clone())));
     let folder = config.retention.folder(&config.database.path);
     tasks.push(tokio::spawn(archive(pool.clone(), writer, config.retention.clone(), folder)));
-    Ok(Drive { devices, tasks })
+    Ok(Drive { devices, webhooks, tasks })
 }
 
 /// Deletes events older than the retention from the log, at start and then every tenth of
-/// the retention (at most hourly).
-async fn retention(writer: Writer, hours: u64) {
-    let keep = Duration::from_secs(hours.saturating_mul(3600));
+/// the retention (at most hourly); those an active webhook subscription has not delivered
+/// yet stay up to `events.webhook_hold_hours` longer (`service::webhooks`).
+async fn retention(pool: Pool, writer: Writer, config: Config) {
+    let hours = |h: u64| Duration::from_secs(h.saturating_mul(3600));
+    let keep = hours(config.events.retention_hours);
+    let hold = hours(config.events.webhook_hold_hours);
     let mut tick = tokio::time::interval((keep / 10).min(Duration::from_secs(3600)));
     loop {
         tick.tick().await;
         let before_ms = now_ms().saturating_sub(keep.as_millis() as i64);
-        match writer.record(Record::Prune { before_ms }).await {
+        let hard_ms = before_ms.saturating_sub(hold.as_millis() as i64);
+        let through = match store::webhooks::rows(&pool).await {
+            Ok(rows) => webhooks::held_through(&config.webhooks, &rows),
+            Err(e) => {
+                tracing::warn!(error = %e, "reading the webhooks' cursors: the log is not pruned this time");
+                continue;
+            }
+        };
+        match writer.record(Record::Prune { before_ms, through, hard_ms }).await {
             Ok(()) => {}
             Err(store::writer::WriteError::Closed) => return,
             Err(e) => tracing::warn!(error = %e, "pruning the event log"),

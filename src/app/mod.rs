@@ -148,6 +148,7 @@ impl Application {
         };
         let dispatcher = Dispatcher::new(queues.clone(), dispatching, pool.clone());
         let running = Arc::new(OnceLock::new());
+        let webhooks = Arc::new(OnceLock::new());
         let tasks = drive::Tasks::default();
         let clustered = match leading {
             Some((c, (leadership, timing), pg)) => {
@@ -162,13 +163,15 @@ impl Application {
                     metrics: metrics.clone(),
                     commits: commits.clone(),
                     running: running.clone(),
+                    webhooks: webhooks.clone(),
                     tasks: tasks.clone(),
                 };
                 Some(cluster::start(c, leadership, timing, parts).await?)
             }
             None => {
-                let d = drive::start(config, &pool, &dispatcher, writer.clone(), None).await?;
+                let d = drive::start(config, &pool, &dispatcher, writer.clone(), &hub, None).await?;
                 let _ = running.set(d.devices);
+                let _ = webhooks.set(d.webhooks);
                 tasks.lock().unwrap_or_else(|p| p.into_inner()).extend(d.tasks);
                 None
             }
@@ -197,6 +200,8 @@ impl Application {
             keys: Arc::new(keys),
             metrics,
             running,
+            webhooks,
+            subscriptions: Arc::new(config.webhooks.clone()),
             cluster: clustered.as_ref().map(|c| c.node.clone()),
             forwarder,
             dispatcher,

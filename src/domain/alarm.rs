@@ -61,11 +61,16 @@ pub enum AlarmKind {
     /// The retention could not archive ended jobs (device `store`: a full disk, a folder
     /// that went read-only); nothing was deleted. Cleared by the next archive that works.
     Archive,
+    /// A webhook subscription's receiver has failed every delivery for longer than its
+    /// `alarm_after_secs` (code 0), or events were pruned before it got them (code 1);
+    /// device `webhook:NAME`. Cleared by the next success (code 0), or once it has caught
+    /// up (code 1).
+    Webhook,
 }
 
 impl AlarmKind {
     /// Every kind.
-    pub const ALL: [AlarmKind; 7] = [
+    pub const ALL: [AlarmKind; 8] = [
         AlarmKind::Device,
         AlarmKind::Link,
         AlarmKind::Heartbeat,
@@ -73,6 +78,7 @@ impl AlarmKind {
         AlarmKind::MemoryLost,
         AlarmKind::Takeover,
         AlarmKind::Archive,
+        AlarmKind::Webhook,
     ];
 
     /// The kind's name as the API writes it.
@@ -85,6 +91,7 @@ impl AlarmKind {
             AlarmKind::MemoryLost => "memory_lost",
             AlarmKind::Takeover => "takeover",
             AlarmKind::Archive => "archive",
+            AlarmKind::Webhook => "webhook",
         }
     }
 
@@ -96,7 +103,9 @@ impl AlarmKind {
     /// Who resolves an alarm of this kind that is not the device's own code.
     pub fn class(self) -> AlarmClass {
         match self {
-            AlarmKind::Link | AlarmKind::Degraded | AlarmKind::Takeover => AlarmClass::Link,
+            AlarmKind::Link | AlarmKind::Degraded | AlarmKind::Takeover | AlarmKind::Webhook => {
+                AlarmClass::Link
+            }
             AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost | AlarmKind::Archive => {
                 AlarmClass::Hardware
             }

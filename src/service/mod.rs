@@ -8,3 +8,4 @@ pub mod events;
 pub mod intake;
 pub mod monitor;
 pub mod planner;
+pub mod webhooks;

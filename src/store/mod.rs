@@ -38,6 +38,7 @@ pub mod locations;
 pub mod paging;
 pub mod rollups;
 pub mod stats;
+pub mod webhooks;
 pub mod writer;
 
 use std::time::Duration;

@@ -242,7 +242,7 @@ mod tests {
     use tokio::sync::oneshot;
 
     fn record(reply: oneshot::Sender<Result<(), WriteError>>) -> Sent {
-        let record = super::super::Record::Prune { before_ms: 0 };
+        let record = super::super::Record::Prune { before_ms: 0, through: i64::MAX, hard_ms: 0 };
         Sent { cmd: Command::Record { record, who: None, reply }, epoch: None }
     }
 

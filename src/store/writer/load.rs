@@ -158,7 +158,8 @@ pub(super) async fn load(
                 Record::Device { .. }
                 | Record::Pause { .. }
                 | Record::Audit { .. }
-                | Record::Prune { .. } => {}
+                | Record::Prune { .. }
+                | Record::Webhook { .. } => {}
             },
         }
     }

@@ -177,11 +177,26 @@ pub enum Record {
         /// What came of it, or why.
         reason: Option<String>,
     },
-    /// Retention: delete events committed before this time (Unix ms), always keeping the
-    /// newest so that sequence numbers are never reused.
+    /// Retention: delete events committed before `before_ms` (Unix ms) that every active
+    /// webhook subscription is done with (`through`: the lowest cursor), and any before
+    /// `hard_ms` regardless; always keeping the newest so that sequence numbers are never
+    /// reused. The webhooks' delivery log goes with the events before `before_ms`.
     Prune {
         /// The cut-off.
         before_ms: i64,
+        /// The highest seq every active subscription is done with (`i64::MAX`: none holds).
+        through: i64,
+        /// Before this, events go even if a subscription still needs them.
+        hard_ms: i64,
+    },
+    /// A webhook subscription's row and its deliveries since the last one (see
+    /// [`crate::store::webhooks`]); with `audit`, what an operator did (`pause`, `resume`,
+    /// `replay`) and why, audited on `webhook:NAME`.
+    Webhook {
+        /// The row and the deliveries.
+        progress: crate::store::webhooks::Progress,
+        /// The operator's action and its reason.
+        audit: Option<(String, Option<String>)>,
     },
     /// Retention: these jobs are in the archive (written and synced, `store::archive`):
     /// delete them and their history, and take them off the counts, in this commit. A job

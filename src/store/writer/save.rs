@@ -493,11 +493,15 @@ pub(super) async fn save(
     }
     write(db, count, &sql.pause, &paused).await?;
     write(db, count, &sql.resume, &resumed).await?;
-    if let Some(before) = group.prune {
-        let sql = "DELETE FROM events WHERE at < $1 AND seq < (SELECT MAX(seq) FROM events)";
-        *count += 1;
+    if let Some((before, through, hard)) = group.prune {
+        let sql = "DELETE FROM events WHERE seq < (SELECT MAX(seq) FROM events) \
+                   AND ((at < $1 AND seq <= $2) OR at < $3)";
+        *count += 2;
+        on!(Conn, db, c => sqlx::query(sql).bind(before).bind(through).bind(hard).execute(&mut *c).await.map(drop))?;
+        let sql = "DELETE FROM webhook_deliveries WHERE at < $1";
         on!(Conn, db, c => sqlx::query(sql).bind(before).execute(&mut *c).await.map(drop))?;
     }
+    save_webhooks(db, count, &group.webhooks).await?;
     if !group.archived.is_empty() {
         // Ids are our own integers: written into the text, as a list.
         let ids: Vec<String> = group.archived.iter().map(|(id, _, _)| id.to_string()).collect();
@@ -520,4 +524,45 @@ pub(super) async fn save(
     };
     *count += crate::store::rollups::write::save(&mut rollups, &group.out.moves).await?;
     Ok(())
+}
+
+/// Webhook subscriptions' rows (the last of each name in the group) and their deliveries.
+async fn save_webhooks(
+    db: &mut Conn,
+    count: &mut usize,
+    progress: &[crate::store::webhooks::Progress],
+) -> Result<(), sqlx::Error> {
+    use crate::store::webhooks::{DELIVERY_COLUMNS, DeliveryOut, UPSERT};
+    static DELIVERIES: LazyLock<[String; 2]> = LazyLock::new(|| {
+        [Engine::Sqlite, Engine::Postgres].map(|e| e.insert_json("webhook_deliveries", &DELIVERY_COLUMNS))
+    });
+    let mut last = std::collections::BTreeMap::new();
+    for p in progress {
+        last.insert(p.row.name.as_str(), &p.row);
+    }
+    for r in last.into_values() {
+        *count += 1;
+        on!(Conn, db, c => sqlx::query(UPSERT)
+            .bind(&r.name)
+            .bind(r.cursor)
+            .bind(r.paused)
+            .bind(&r.paused_reason)
+            .bind(r.last_ok_at)
+            .bind(&r.last_error)
+            .bind(r.last_error_at)
+            .bind(r.failing_since)
+            .bind(r.updated_at)
+            .execute(&mut *c)
+            .await
+            .map(drop))?;
+    }
+    let rows: Vec<DeliveryOut<'_>> = progress
+        .iter()
+        .flat_map(|p| p.deliveries.iter().map(|d| DeliveryOut { name: &p.row.name, delivery: d }))
+        .collect();
+    let sql = match db {
+        Conn::Sqlite(_) => DELIVERIES[0].as_str(),
+        Conn::Postgres(_) => DELIVERIES[1].as_str(),
+    };
+    write(db, count, sql, &rows).await
 }

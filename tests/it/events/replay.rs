@@ -90,7 +90,7 @@ async fn retention_keeps_the_newest_event_so_numbers_are_never_reused(#[case] en
     let pool = rackd::store::open(&db, Duration::from_secs(5)).await.unwrap();
     let (writer, task) = Writer::start(&pool, 16, 16, Hooks::default()).await.unwrap();
     let now = rackd::domain::time::now_ms() + 1;
-    writer.record(Record::Prune { before_ms: now }).await.unwrap();
+    writer.record(Record::Prune { before_ms: now, through: i64::MAX, hard_ms: now }).await.unwrap();
     drop(writer);
     task.await.unwrap();
     pool.close().await;

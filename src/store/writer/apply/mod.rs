@@ -163,8 +163,10 @@ pub(super) struct Group {
     /// of the group (see [`Group::audit_submissions`]).
     submitted: Vec<Submitted>,
     pub(super) history: Vec<History>,
-    /// Retention: events before this time go.
-    pub(super) prune: Option<i64>,
+    /// Retention: events before this time go, through this seq, and any before the last.
+    pub(super) prune: Option<(i64, i64, i64)>,
+    /// Webhook subscriptions' rows and deliveries, in the order recorded.
+    pub(super) webhooks: Vec<crate::store::webhooks::Progress>,
     /// Retention: jobs moved to the archive, deleted with this group (id, device, state).
     pub(super) archived: Vec<(i64, Option<String>, JobState)>,
     pub(super) out: Out,
@@ -214,6 +216,7 @@ impl Group {
             submitted: Vec::new(),
             history: Vec::with_capacity(new),
             prune: None,
+            webhooks: Vec::new(),
             archived: Vec::new(),
             out: Out { events: Vec::with_capacity(new), ..Out::default() },
         }

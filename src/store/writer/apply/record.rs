@@ -138,7 +138,15 @@ impl Group {
                 let by = who.map_or("rackd", |w| w.name.as_str());
                 self.audit(by, client, action, target, reason.as_deref());
             }
-            Record::Prune { before_ms } => self.prune = Some(*before_ms),
+            Record::Prune { before_ms, through, hard_ms } => self.prune = Some((*before_ms, *through, *hard_ms)),
+            Record::Webhook { progress, audit } => {
+                if let Some((action, reason)) = audit {
+                    let by = who.map_or("rackd", |w| w.name.as_str());
+                    let target = format!("webhook:{}", progress.row.name);
+                    self.audit(by, client, action, &target, reason.as_deref());
+                }
+                self.webhooks.push(progress.clone());
+            }
             Record::Archived { jobs } => {
                 for id in jobs {
                     if self.jobs.get(id).is_some_and(|j| j.state.is_terminal())

@@ -1,0 +1,473 @@
+//! One subscription's deliverer: reads the log after its cursor, POSTs each event of its
+//! types until the receiver answers 2xx, and records every try and the cursor through the
+//! writer (the rules are the parent module's).
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use futures::StreamExt;
+use tokio::sync::{broadcast, mpsc};
+use tokio::task::JoinHandle;
+
+use super::{Action, ActionError, Command, Live, Parts, alarm_device, sign};
+use crate::config::WebhookConfig;
+use crate::domain::AlarmKind;
+use crate::domain::time::now_ms;
+use crate::store::alarms::NewAlarm;
+use crate::store::events::{self, StoredEvent};
+use crate::store::webhooks::{Delivery, Progress, Row};
+use crate::store::writer::{Record, WriteError};
+
+/// Events read from the log at a time.
+const PAGE: u32 = 500;
+/// The most of an answer's body kept in a delivery's error.
+const EXCERPT: usize = 200;
+
+/// A subscription's deliverer.
+pub(super) struct Deliverer {
+    config: WebhookConfig,
+    key: Vec<u8>,
+    client: reqwest::Client,
+    parts: Parts,
+    live: Arc<Mutex<Live>>,
+    commands: mpsc::Receiver<Command>,
+    /// The row as it now stands.
+    row: Row,
+    /// Tries not yet handed to the writer.
+    pending: Vec<Delivery>,
+    /// Whether the row changed since it was last handed to the writer.
+    dirty: bool,
+    /// The write in flight.
+    writing: Option<JoinHandle<Result<(), WriteError>>>,
+    /// Whether this deliverer raised the alarms of code 0 (failing) and 1 (events lost).
+    alarmed: [bool; 2],
+    /// Set when the cursor moved by command: the events read are stale.
+    moved: bool,
+}
+
+/// Why the deliverer stops.
+enum Stop {
+    /// The writer is closed, or this node's writes are fenced: it no longer drives.
+    Writer,
+}
+
+impl Deliverer {
+    pub(super) fn new(
+        config: WebhookConfig,
+        key: Vec<u8>,
+        client: reqwest::Client,
+        parts: Parts,
+        live: Arc<Mutex<Live>>,
+        commands: mpsc::Receiver<Command>,
+    ) -> Deliverer {
+        Deliverer {
+            config,
+            key,
+            client,
+            parts,
+            live,
+            commands,
+            row: Row::default(),
+            pending: Vec::new(),
+            dirty: false,
+            writing: None,
+            alarmed: [false; 2],
+            moved: false,
+        }
+    }
+
+    /// Runs until the writer closes or fences this node out; `stored` is the row in the
+    /// store, if the subscription has one.
+    pub(super) async fn run(mut self, stored: Option<Row>) {
+        let name = self.config.name.clone();
+        let mut commits = self.parts.hub.subscribe();
+        self.row = match stored {
+            Some(row) => row,
+            None => {
+                // A new subscription starts from the newest event (see the parent module).
+                let newest = self.parts.hub.published().get();
+                self.dirty = true;
+                Row { name: name.clone(), cursor: newest, updated_at: now_ms(), ..Row::default() }
+            }
+        };
+        // Alarms this subscription left active before a restart are its own to clear.
+        self.alarmed = [true, true];
+        self.show(None);
+        tracing::info!(webhook = %name, cursor = self.row.cursor, "webhook deliverer started");
+        match self.work(&mut commits).await {
+            Stop::Writer => tracing::info!(webhook = %name, "webhook deliverer stopped: no writer"),
+        }
+    }
+
+    async fn work(&mut self, commits: &mut broadcast::Receiver<crate::service::events::Commit>) -> Stop {
+        loop {
+            if let Err(stop) = self.flush(true).await {
+                return stop;
+            }
+            while let Ok(command) = self.commands.try_recv() {
+                self.obey(command).await;
+            }
+            let published = self.parts.hub.published().get();
+            if self.row.paused != 0 || self.row.cursor >= published {
+                if self.row.cursor >= published && self.alarmed[1] {
+                    self.alarm(1, None).await;
+                }
+                self.show(None);
+                tokio::select! {
+                    command = self.commands.recv() => match command {
+                        Some(command) => self.obey(command).await,
+                        None => std::future::pending().await,
+                    },
+                    // A commit, or a lag (commits were missed): either way, read the log.
+                    _ = commits.recv() => {}
+                }
+                continue;
+            }
+            let page = match events::after(&self.parts.pool, self.row.cursor, PAGE).await {
+                Ok(page) => page,
+                Err(e) => {
+                    tracing::warn!(webhook = %self.config.name, error = %e, "reading the event log");
+                    tokio::time::sleep(Duration::from_secs(1)).await;
+                    continue;
+                }
+            };
+            self.moved = false;
+            if let Some(first) = page.first()
+                && first.seq > self.row.cursor + 1
+            {
+                let lost = format!(
+                    "events {} to {} were pruned before they were delivered (events.webhook_hold_hours)",
+                    self.row.cursor + 1,
+                    first.seq - 1
+                );
+                tracing::error!(webhook = %self.config.name, "{lost}");
+                self.alarm(1, Some(lost)).await;
+            }
+            for event in page.iter().filter(|e| e.seq <= published) {
+                if !self.config.wants(&event.kind) {
+                    self.row.cursor = event.seq;
+                    self.dirty = true;
+                    continue;
+                }
+                if let Err(stop) = self.deliver(event).await {
+                    return stop;
+                }
+                if self.moved || self.row.paused != 0 {
+                    break;
+                }
+            }
+        }
+    }
+
+    /// Delivers `event` until it is acknowledged, or the subscription is paused or moved.
+    async fn deliver(&mut self, event: &StoredEvent) -> Result<(), Stop> {
+        let body = bytes::Bytes::from(event.to_json());
+        let id = format!("{}-{}", self.config.name, event.seq);
+        let mut attempt = 1;
+        loop {
+            self.show(Some(event.at));
+            while let Ok(command) = self.commands.try_recv() {
+                self.obey(command).await;
+            }
+            if self.moved || self.row.paused != 0 {
+                return Ok(());
+            }
+            if self.parts.gate.as_ref().is_some_and(|may| !may()) {
+                // This node is losing its lease: it sends nothing more, and its writer is
+                // about to be fenced out.
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                self.flush(false).await?;
+                continue;
+            }
+            let delivery = self.post(event.seq, &id, &body, attempt).await;
+            let outcome = delivery.outcome.clone();
+            self.count(&delivery);
+            self.pending.push(delivery);
+            self.dirty = true;
+            let now = now_ms();
+            match outcome.as_str() {
+                "delivered" => {
+                    self.row.cursor = event.seq;
+                    (self.row.last_ok_at, self.row.failing_since) = (Some(now), None);
+                    self.flush(false).await?;
+                    if self.alarmed[0] {
+                        self.alarm(0, None).await;
+                    }
+                    return Ok(());
+                }
+                "gone" => {
+                    self.row.paused = 1;
+                    self.row.paused_reason = Some("the receiver answered 410 Gone".into());
+                    tracing::warn!(webhook = %self.config.name, "the receiver answered 410 Gone: paused");
+                    self.flush(true).await?;
+                    return Ok(());
+                }
+                _ => {
+                    let since = *self.row.failing_since.get_or_insert(now);
+                    let alarm_after = (self.config.alarm_after_secs as i64).saturating_mul(1000);
+                    if now - since >= alarm_after && !self.alarmed[0] {
+                        let error = self.row.last_error.clone().unwrap_or_default();
+                        let text = format!(
+                            "webhook {:?} has failed every delivery for {} s: {error}",
+                            self.config.name,
+                            (now - since) / 1000
+                        );
+                        self.alarm(0, Some(text)).await;
+                    }
+                    self.flush(false).await?;
+                    let wait = backoff(&self.config, attempt);
+                    tokio::select! {
+                        _ = tokio::time::sleep(wait) => {}
+                        command = self.commands.recv() => if let Some(command) = command {
+                            self.obey(command).await;
+                        },
+                    }
+                    attempt += 1;
+                }
+            }
+        }
+    }
+
+    /// One try: the signed POST and what came of it.
+    async fn post(&mut self, seq: i64, id: &str, body: &bytes::Bytes, attempt: i64) -> Delivery {
+        let timestamp = now_ms() / 1000;
+        let signed = sign::sign(&self.key, id, timestamp, body);
+        let started = Instant::now();
+        let answer = self
+            .client
+            .post(&self.config.url)
+            .header("content-type", "application/json")
+            .header("webhook-id", &signed.id)
+            .header("webhook-timestamp", signed.timestamp.to_string())
+            .header("webhook-signature", &signed.signature)
+            .body(body.clone())
+            .send()
+            .await;
+        let (status, outcome, error) = match answer {
+            Ok(answer) => {
+                let status = answer.status();
+                let excerpt = read_excerpt(answer).await;
+                if status.is_success() {
+                    (Some(status.as_u16()), "delivered", None)
+                } else {
+                    let outcome = if status == reqwest::StatusCode::GONE { "gone" } else { "failed" };
+                    let said = if excerpt.is_empty() { String::new() } else { format!(": {excerpt}") };
+                    (Some(status.as_u16()), outcome, Some(format!("answered {status}{said}")))
+                }
+            }
+            Err(e) => (None, "failed", Some(describe(&e, self.config.timeout_ms))),
+        };
+        let at = now_ms();
+        if let Some(error) = &error {
+            (self.row.last_error, self.row.last_error_at) = (Some(error.clone()), Some(at));
+        }
+        Delivery {
+            id: 0,
+            name: self.config.name.clone(),
+            seq,
+            attempt,
+            status: status.map(i64::from),
+            outcome: outcome.to_owned(),
+            latency_ms: started.elapsed().as_millis() as i64,
+            error,
+            at,
+        }
+    }
+
+    /// Does what an operator asked, and answers with the row after it.
+    async fn obey(&mut self, command: Command) {
+        let Command { action, who, reason, reply } = command;
+        let answer = self.apply(&action, who, reason).await;
+        let _ = reply.send(answer);
+    }
+
+    async fn apply(
+        &mut self,
+        action: &Action,
+        who: crate::domain::Who,
+        reason: Option<String>,
+    ) -> Result<Row, ActionError> {
+        let before = self.row.clone();
+        match action {
+            Action::Pause => {
+                self.row.paused = 1;
+                self.row.paused_reason = Some(match &reason {
+                    Some(why) => format!("paused by {}: {why}", who.name),
+                    None => format!("paused by {}", who.name),
+                });
+            }
+            Action::Resume => (self.row.paused, self.row.paused_reason) = (0, None),
+            Action::Replay(from) => {
+                let (first, last) = events::bounds(&self.parts.pool).await.map_err(ActionError::Read)?;
+                if *from < first || *from > last {
+                    return Err(ActionError::OutOfLog { first, last });
+                }
+                self.row.cursor = from - 1;
+                self.moved = true;
+            }
+        }
+        self.row.updated_at = now_ms();
+        // The tries so far first, then the change with its audit entry, in one commit.
+        if let Some(write) = self.writing.take() {
+            let _ = write.await;
+        }
+        let progress = Progress { row: self.row.clone(), deliveries: std::mem::take(&mut self.pending) };
+        let detail = match action {
+            Action::Replay(from) => Some(match &reason {
+                Some(why) => format!("from seq {from}: {why}"),
+                None => format!("from seq {from}"),
+            }),
+            _ => reason,
+        };
+        let audit = Some((action.as_str().to_owned(), detail));
+        let written = self.parts.writer.record_as(Record::Webhook { progress, audit }, who).await;
+        if let Err(e) = written {
+            self.row = before;
+            self.moved = false;
+            return Err(e.into());
+        }
+        self.dirty = false;
+        self.show(None);
+        Ok(self.row.clone())
+    }
+
+    /// Hands the row and the pending tries to the writer: waits for it with `wait`,
+    /// otherwise only when no write is in flight (so a fast receiver's deliveries are
+    /// committed in groups, one write at a time).
+    async fn flush(&mut self, wait: bool) -> Result<(), Stop> {
+        if let Some(write) = &self.writing {
+            if !wait && !write.is_finished() {
+                return Ok(());
+            }
+            let write = self.writing.take().expect("a write in flight");
+            match write.await {
+                Ok(Ok(())) => {}
+                Ok(Err(WriteError::Closed | WriteError::Fenced(_))) => return Err(Stop::Writer),
+                Ok(Err(e)) => {
+                    tracing::warn!(webhook = %self.config.name, error = %e, "recording deliveries");
+                    self.dirty = true;
+                }
+                Err(_) => self.dirty = true,
+            }
+        }
+        if !self.dirty {
+            return Ok(());
+        }
+        self.dirty = false;
+        self.row.updated_at = now_ms();
+        let progress = Progress { row: self.row.clone(), deliveries: std::mem::take(&mut self.pending) };
+        let writer = self.parts.writer.clone();
+        let write = tokio::spawn(async move { writer.record(Record::Webhook { progress, audit: None }).await });
+        if wait {
+            match write.await {
+                Ok(Ok(())) => {}
+                Ok(Err(WriteError::Closed | WriteError::Fenced(_))) => return Err(Stop::Writer),
+                Ok(Err(e)) => {
+                    tracing::warn!(webhook = %self.config.name, error = %e, "recording deliveries");
+                    self.dirty = true;
+                }
+                Err(_) => self.dirty = true,
+            }
+        } else {
+            self.writing = Some(write);
+        }
+        Ok(())
+    }
+
+    /// Raises (`text`) or clears alarm `code` of this subscription.
+    async fn alarm(&mut self, code: u16, text: Option<String>) {
+        let device = alarm_device(&self.config.name);
+        let raised = text.is_some();
+        let record = match text {
+            Some(text) => Record::AlarmRaised(NewAlarm {
+                device,
+                kind: AlarmKind::Webhook,
+                code,
+                class: AlarmKind::Webhook.class(),
+                text,
+                detail: None,
+                action: Some(super::ACTION.to_owned()),
+            }),
+            None => Record::AlarmCleared { device, key: (AlarmKind::Webhook, code) },
+        };
+        match self.parts.writer.record(record).await {
+            Ok(()) => self.alarmed[usize::from(code)] = raised,
+            Err(e) => tracing::warn!(webhook = %self.config.name, error = %e, "recording the webhook alarm"),
+        }
+    }
+
+    fn count(&self, delivery: &Delivery) {
+        let mut live = self.live.lock().unwrap_or_else(|p| p.into_inner());
+        let outcome = match delivery.outcome.as_str() {
+            "delivered" => "delivered",
+            "gone" => "gone",
+            _ => "failed",
+        };
+        *live.outcomes.entry(outcome).or_default() += 1;
+        if delivery.attempt > 1 {
+            live.retries += 1;
+        }
+    }
+
+    /// Publishes the row and what is being delivered for the metrics and the API.
+    fn show(&self, pending_at: Option<i64>) {
+        let mut live = self.live.lock().unwrap_or_else(|p| p.into_inner());
+        live.row = self.row.clone();
+        live.oldest_pending_at = pending_at;
+    }
+}
+
+/// How long to wait after the `attempt`th failed try of an event: `backoff_ms` doubled
+/// per try, at most `max_backoff_ms`, then a uniform pick between half of it and all.
+pub(super) fn backoff(config: &WebhookConfig, attempt: i64) -> Duration {
+    let doublings = (attempt - 1).clamp(0, 40) as u32;
+    let full = config.backoff_ms.saturating_mul(1u64 << doublings).min(config.max_backoff_ms).max(1);
+    Duration::from_millis(rand::random_range(full.div_ceil(2)..=full))
+}
+
+/// A failed request in words for the delivery log: what kind of failure, and the innermost
+/// cause (never the URL, which may carry credentials).
+fn describe(e: &reqwest::Error, timeout_ms: u64) -> String {
+    if e.is_timeout() {
+        return format!("no answer within {timeout_ms} ms");
+    }
+    let mut cause: &dyn std::error::Error = e;
+    while let Some(inner) = cause.source() {
+        cause = inner;
+    }
+    let what = if e.is_connect() { "could not connect" } else { "the request failed" };
+    format!("{what}: {cause}")
+}
+
+/// Reads up to [`super::BODY_LIMIT`] bytes of an answer's body (so the connection can be
+/// kept), and returns the first [`EXCERPT`] characters of it, printable only.
+async fn read_excerpt(answer: reqwest::Response) -> String {
+    let mut body = Vec::new();
+    let mut stream = answer.bytes_stream();
+    while let Some(Ok(chunk)) = stream.next().await {
+        body.extend_from_slice(&chunk);
+        if body.len() > super::BODY_LIMIT {
+            break;
+        }
+    }
+    let text = String::from_utf8_lossy(&body[..body.len().min(4 * EXCERPT)]);
+    text.chars().map(|c| if c.is_control() { ' ' } else { c }).take(EXCERPT).collect::<String>().trim().to_owned()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn backoff_doubles_with_jitter_up_to_its_cap() {
+        let mut config = WebhookConfig::new("w", "http://wms", &["*"], "");
+        (config.backoff_ms, config.max_backoff_ms) = (100, 1000);
+        for _ in 0..50 {
+            let ms = |attempt| backoff(&config, attempt).as_millis() as u64;
+            assert!((50..=100).contains(&ms(1)));
+            assert!((100..=200).contains(&ms(2)));
+            assert!((400..=800).contains(&ms(4)));
+            assert!((500..=1000).contains(&ms(5)) && (500..=1000).contains(&ms(60)));
+        }
+    }
+}

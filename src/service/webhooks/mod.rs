@@ -1,0 +1,238 @@
+//! Webhooks: the event log pushed to a WMS over HTTP, signed, at least once and in order
+//! (`[[webhooks]]`, [`crate::config::webhooks`]).
+//!
+//! The `events` table is the outbox: the writer appends each change's events in the commit
+//! of the change, with a gapless `seq`. Each subscription has a cursor in the store (the
+//! last `seq` it is done with) and one task on the node that drives the machines
+//! ([`deliver`]), which reads the log after its cursor and POSTs each event of its types,
+//! one at a time, in `seq` order, until the receiver answers 2xx.
+//!
+//! Decisions:
+//! - **At least once.** The cursor moves in the same commit as the deliveries that moved
+//!   it (the writer's [`Record::Webhook`](crate::store::writer::Record::Webhook)), after
+//!   the receiver's 2xx, never before. A crash between the two, or a timeout after the
+//!   receiver acted, sends the event again with the same `webhook-id` (`NAME-SEQ`), which a
+//!   receiver de-duplicates on. Deliveries are committed in small groups (at most one
+//!   write in flight per subscription), so a crash repeats at most the events of the
+//!   groups not yet committed.
+//! - **Only what is on disk, in order.** A subscription reads no further than the hub's
+//!   published seq: an event a power cut could take back is never sent. It wakes on each
+//!   commit the hub publishes.
+//! - **A new subscription starts from now**: the log's newest event when it is first seen.
+//!   `POST /api/v1/webhooks/{name}/replay` sends older ones again (as far back as the log
+//!   keeps them).
+//! - **Retries** wait `backoff_ms`, doubling each time up to `max_backoff_ms`, with jitter
+//!   (uniformly between half and all of the wait), for as long as it takes: an event is
+//!   never skipped. 410 Gone pauses the subscription (the receiver says it is not coming
+//!   back). Failures in a row for `alarm_after_secs` raise the `webhook` alarm (code 0)
+//!   on device `webhook:NAME`; the next success clears it.
+//! - **Retention waits** for the lowest cursor of the subscriptions that are configured
+//!   and not paused, up to `events.webhook_hold_hours` beyond the log's retention; past
+//!   that, events go all the same, and the subscription that finds the gap raises the
+//!   `webhook` alarm with code 1, saying which events it lost, until it catches up.
+//! - **Hot standby**: only the node that drives the machines delivers (its deliverers start
+//!   and stop with the devices), every request first asks the lease's gate (as a device's
+//!   request does), and its writes are fenced: a node that lost its lease sends nothing
+//!   more and cannot move a cursor. The new active node starts from the stored cursor.
+//! - **Never on the job path**: deliverers read the log through the pool and write through
+//!   the writer's queue like any record; a slow or dead receiver holds only its own task.
+
+mod client;
+mod deliver;
+pub mod sign;
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+
+use tokio::sync::{mpsc, oneshot};
+use tokio::task::JoinHandle;
+
+use crate::config::WebhookConfig;
+use crate::devices::gate::MayDrive;
+use crate::domain::Who;
+use crate::service::events::Hub;
+use crate::store::Pool;
+use crate::store::webhooks::Row;
+use crate::store::writer::{WriteError, Writer};
+
+pub use client::BODY_LIMIT;
+
+/// What a `webhook` alarm asks a person to do.
+pub const ACTION: &str = "Check that the WMS's receiver is up and answers 2xx (its last error is on \
+     GET /api/v1/webhooks and the dashboard); rackd keeps every event and retries by itself.";
+
+/// The device the `webhook` alarms of subscription `name` are raised on.
+pub fn alarm_device(name: &str) -> String {
+    format!("webhook:{name}")
+}
+
+/// What an operator asks of a subscription.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Action {
+    /// Stop delivering (deliveries in flight end first).
+    Pause,
+    /// Deliver again.
+    Resume,
+    /// Deliver again from this seq on (the cursor goes to the seq before it).
+    Replay(i64),
+}
+
+impl Action {
+    /// The audit's name for it.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Action::Pause => "pause",
+            Action::Resume => "resume",
+            Action::Replay(_) => "replay",
+        }
+    }
+}
+
+/// Why an action was not taken.
+#[derive(Debug, thiserror::Error)]
+pub enum ActionError {
+    /// No subscription of that name is configured.
+    #[error("no webhook subscription is named {0:?}")]
+    Unknown(String),
+    /// A replay from before the oldest event the log keeps, or after the newest.
+    #[error("the log holds events {first} to {last}: replay from one of them")]
+    OutOfLog {
+        /// The oldest kept.
+        first: i64,
+        /// The newest.
+        last: i64,
+    },
+    /// The store refused or is gone.
+    #[error(transparent)]
+    Write(#[from] WriteError),
+    /// The log could not be read.
+    #[error("the event log could not be read")]
+    Read(#[source] sqlx::Error),
+    /// The deliverer stopped (the node is shutting down or lost its lease).
+    #[error("the subscription's deliverer is not running")]
+    Stopped,
+}
+
+/// A request to a deliverer.
+struct Command {
+    action: Action,
+    who: Who,
+    reason: Option<String>,
+    reply: oneshot::Sender<Result<Row, ActionError>>,
+}
+
+/// What a subscription's deliverer counts as it works (the metrics and the API's list).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Live {
+    /// The row as the deliverer holds it (ahead of the store by the group being written).
+    pub row: Row,
+    /// The commit time (Unix ms) of the event being delivered, None when caught up.
+    pub oldest_pending_at: Option<i64>,
+    /// Tries by outcome (`delivered`, `failed`, `gone`).
+    pub outcomes: BTreeMap<&'static str, u64>,
+    /// Tries that were a retry of an event.
+    pub retries: u64,
+}
+
+/// One running subscription.
+struct Running {
+    config: WebhookConfig,
+    live: Arc<Mutex<Live>>,
+    commands: mpsc::Sender<Command>,
+}
+
+/// The running deliverers of the node that drives the machines.
+#[derive(Clone, Default)]
+pub struct Webhooks {
+    running: Arc<BTreeMap<String, Running>>,
+}
+
+/// What a subscription's deliverer needs besides its configuration.
+#[derive(Clone)]
+pub struct Parts {
+    /// Where the log is read.
+    pub pool: Pool,
+    /// Where cursors and deliveries are written (fenced in a cluster).
+    pub writer: Writer,
+    /// The commits as they are published (and how far that is).
+    pub hub: Hub,
+    /// In a cluster, the lease's gate.
+    pub gate: Option<MayDrive>,
+}
+
+impl Webhooks {
+    /// Starts a deliverer per subscription; their tasks are the caller's to stop. A
+    /// subscription whose client cannot be built (a CA file gone since the check) is an
+    /// error: the start fails.
+    pub async fn start(
+        configs: &[WebhookConfig],
+        parts: Parts,
+    ) -> anyhow::Result<(Webhooks, Vec<JoinHandle<()>>)> {
+        use anyhow::Context;
+        let stored = crate::store::webhooks::rows(&parts.pool).await.context("reading the webhooks' cursors")?;
+        let mut running = BTreeMap::new();
+        let mut tasks = Vec::new();
+        for config in configs {
+            let what = || format!("webhooks {:?}", config.name);
+            let key = config.key().map_err(anyhow::Error::msg).with_context(what)?;
+            let client = client::client(config).with_context(what)?;
+            let row = stored.iter().find(|r| r.name == config.name).cloned();
+            let live = Arc::new(Mutex::new(Live::default()));
+            let (tx, rx) = mpsc::channel(16);
+            let deliverer = deliver::Deliverer::new(config.clone(), key, client, parts.clone(), live.clone(), rx);
+            tasks.push(tokio::spawn(deliverer.run(row)));
+            running.insert(config.name.clone(), Running { config: config.clone(), live, commands: tx });
+        }
+        Ok((Webhooks { running: Arc::new(running) }, tasks))
+    }
+
+    /// Asks subscription `name` to do `action`, as `who`; answers with its row after.
+    pub async fn act(
+        &self,
+        name: &str,
+        action: Action,
+        who: Who,
+        reason: Option<String>,
+    ) -> Result<Row, ActionError> {
+        let running = self.running.get(name).ok_or_else(|| ActionError::Unknown(name.to_owned()))?;
+        let (reply, answer) = oneshot::channel();
+        let command = Command { action, who, reason, reply };
+        running.commands.send(command).await.map_err(|_| ActionError::Stopped)?;
+        answer.await.map_err(|_| ActionError::Stopped)?
+    }
+
+    /// Each running subscription's configuration and figures, by name.
+    pub fn live(&self) -> Vec<(WebhookConfig, Live)> {
+        let lock = |l: &Mutex<Live>| l.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        self.running.values().map(|r| (r.config.clone(), lock(&r.live))).collect()
+    }
+}
+
+/// What the log's retention may delete for the subscriptions: the lowest cursor of those
+/// in `configs` that are not paused (`i64::MAX` when none holds anything). A subscription
+/// never seen (no row yet) starts from the newest event, which is always kept.
+pub fn held_through(configs: &[WebhookConfig], rows: &[Row]) -> i64 {
+    configs
+        .iter()
+        .filter_map(|c| rows.iter().find(|r| r.name == c.name))
+        .filter(|r| r.paused == 0)
+        .map(|r| r.cursor)
+        .min()
+        .unwrap_or(i64::MAX)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn retention_waits_for_the_lowest_active_cursor() {
+        let config = |name: &str| WebhookConfig::new(name, "http://wms", &["*"], "");
+        let row = |name: &str, cursor, paused| Row { name: name.into(), cursor, paused, ..Row::default() };
+        let configs = [config("a"), config("b"), config("c")];
+        let rows = [row("a", 50, 0), row("b", 20, 1), row("c", 70, 0), row("gone", 1, 0)];
+        assert_eq!(held_through(&configs, &rows), 50, "b is paused; `gone` is not configured");
+        assert_eq!(held_through(&configs[1..2], &rows), i64::MAX);
+        assert_eq!(held_through(&[], &rows), i64::MAX);
+    }
+}
