@@ -316,3 +316,5 @@ pub fn read_url_file(path: &Path) -> Result<String, String> {
 mod layers_tests;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod webhooks_tests;

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use super::ca::read_ca;
 use super::devices::{DeviceConfigError, DeviceKind};
+use super::webhooks::WebhookConfigError;
 use super::{Config, EventsConfigError, Origin};
 use crate::store::{PgTls, redact};
 
@@ -78,6 +79,12 @@ pub enum Invalid {
     /// `[events]`.
     #[error(transparent)]
     Events(#[from] EventsConfigError),
+    /// A `[[webhooks]]` entry.
+    #[error(transparent)]
+    Webhook(#[from] WebhookConfigError),
+    /// Two webhooks with one name (the name is the subscription's identity).
+    #[error("webhooks: name {0:?} is used twice")]
+    WebhookName(String),
     /// An `auth.keys_file` without a single key (most likely the wrong file).
     #[error("{} names no key (expected [[keys]] entries with name, role and hash)", .0.display())]
     NoKeysInFile(PathBuf),
@@ -219,12 +226,29 @@ impl Config {
             let ev = &self.events;
             let key = match e {
                 EventsConfigError::Retention => "retention_hours",
+                EventsConfigError::WebhookHold => "webhook_hold_hours",
                 EventsConfigError::Zero if ev.buffer == 0 => "buffer",
                 EventsConfigError::Zero if ev.ping_secs == 0 => "ping_secs",
                 EventsConfigError::Zero => "send_timeout_secs",
             };
             (format!("events.{key}"), e.into())
-        })
+        })?;
+        self.check_webhooks()
+    }
+}
+
+impl Config {
+    /// `[[webhooks]]`: each entry alone (its secret and CA file read as the start reads
+    /// them), then their names together.
+    fn check_webhooks(&self) -> Result<(), Flaw> {
+        let mut names = BTreeSet::new();
+        for (i, w) in self.webhooks.iter().enumerate() {
+            w.check().map_err(|e| (format!("webhooks[{i}].{}", e.problem.key(w)), e.into()))?;
+            if !names.insert(w.name.as_str()) {
+                return Err((format!("webhooks[{i}].name"), Invalid::WebhookName(w.name.clone())));
+            }
+        }
+        Ok(())
     }
 }
 

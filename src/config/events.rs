@@ -50,6 +50,9 @@ pub enum EventsConfigError {
     /// A log that keeps nothing (replay with `?since=` would never work).
     #[error("events.retention_hours must be at least 1")]
     Retention,
+    /// No hold for undelivered webhook events.
+    #[error("events.webhook_hold_hours must be at least 1")]
+    WebhookHold,
 }
 
 impl EventsConfig {
@@ -60,6 +63,9 @@ impl EventsConfig {
         }
         if self.retention_hours == 0 {
             return Err(EventsConfigError::Retention);
+        }
+        if self.webhook_hold_hours == 0 {
+            return Err(EventsConfigError::WebhookHold);
         }
         Ok(())
     }

@@ -15,6 +15,10 @@
 //! - **Outbound calls**: `ca_file` (PEM) replaces the trusted roots when set (a site's own
 //!   CA); otherwise the system's store. No proxy unless `proxy` names one (the environment's
 //!   `HTTP_PROXY` is ignored: a proxy meant for other traffic must not see the events).
+//! - **Checked whole when loaded** ([`WebhookConfig::check`], so by `rackd check-config` as
+//!   by the start): the secret is decoded and `secret_file` and `ca_file` are read, and each
+//!   problem names its key. `url` and `proxy` need a host as written: the URL standard reads
+//!   `http:///x` as `http://x/`, which here would be a typo delivered to a wrong host.
 
 use std::path::PathBuf;
 
@@ -150,6 +154,153 @@ pub fn decode_secret(text: &str) -> Result<Vec<u8>, String> {
         return Err(format!("the secret decodes to {} bytes: 16 to 64 are needed", key.len()));
     }
     Ok(key)
+}
+
+/// A `[[webhooks]]` entry that cannot be used: which one, and why.
+#[derive(Debug, thiserror::Error)]
+#[error("webhooks {name:?}: {problem}")]
+pub struct WebhookConfigError {
+    /// The entry's `name`.
+    pub name: String,
+    /// What is wrong with it.
+    pub problem: WebhookProblem,
+}
+
+/// What is wrong with a `[[webhooks]]` entry. No variant carries the secret.
+#[derive(Debug, thiserror::Error)]
+pub enum WebhookProblem {
+    /// A name that cannot be a path segment, a label and a header value as it is.
+    #[error("a name is 1 to 64 characters of A-Z, a-z, 0-9, '_' and '-'")]
+    Name,
+    /// `url` or `proxy` is not an `http://` or `https://` URL with a host; the URL is
+    /// shown without its password.
+    #[error("{key} {url:?} is not an http:// or https:// URL with a host: {why}")]
+    Url {
+        /// `url` or `proxy`.
+        key: &'static str,
+        /// The URL, redacted.
+        url: String,
+        /// What is wrong.
+        why: String,
+    },
+    /// No event type at all: the subscription would deliver nothing.
+    #[error("events is empty: name event types (job.updated), families (job.*) or \"*\"")]
+    NoEvents,
+    /// A pattern that covers no event type rackd writes (a typo would deliver nothing).
+    #[error("{0:?} is not an event type: {types}", types = known_patterns())]
+    UnknownEvent(String),
+    /// The secret cannot be read or decoded (`secret_file`'s path is named, the secret never).
+    #[error("{0}")]
+    Secret(String),
+    /// A time that must be above 0.
+    #[error("{0} must be at least 1")]
+    Zero(&'static str),
+    /// A longest wait shorter than the first.
+    #[error("max_backoff_ms ({max}) is less than backoff_ms ({first})")]
+    Backoff {
+        /// `backoff_ms`.
+        first: u64,
+        /// `max_backoff_ms`.
+        max: u64,
+    },
+    /// `ca_file` is not a usable CA file.
+    #[error(transparent)]
+    Ca(#[from] super::ca::CaError),
+}
+
+impl WebhookProblem {
+    /// The entry's key the problem is about, for pointing at its line.
+    pub fn key(&self, entry: &WebhookConfig) -> &'static str {
+        match self {
+            WebhookProblem::Name => "name",
+            WebhookProblem::Url { key, .. } | WebhookProblem::Zero(key) => key,
+            WebhookProblem::NoEvents | WebhookProblem::UnknownEvent(_) => "events",
+            // Both set, or only the file: the file's line; neither: the entry's.
+            WebhookProblem::Secret(_) if entry.secret_file.is_some() => "secret_file",
+            WebhookProblem::Secret(_) => "secret",
+            WebhookProblem::Backoff { .. } => "max_backoff_ms",
+            WebhookProblem::Ca(_) => "ca_file",
+        }
+    }
+}
+
+/// What `events` may name, in words: every type, every family, `*`.
+fn known_patterns() -> String {
+    let mut families: Vec<String> = Vec::new();
+    for family in EVENT_TYPES.iter().filter_map(|t| t.split('.').next()).map(|f| format!("{f}.*")) {
+        if !families.contains(&family) {
+            families.push(family);
+        }
+    }
+    format!(
+        "the types are {}; the families {}; and \"*\" for all",
+        EVENT_TYPES.join(", "),
+        families.join(", ")
+    )
+}
+
+impl WebhookConfig {
+    /// Checks the entry alone, reading `secret_file` and `ca_file` as the start would.
+    pub fn check(&self) -> Result<(), WebhookConfigError> {
+        self.problem().map_or(Ok(()), |problem| Err(WebhookConfigError { name: self.name.clone(), problem }))
+    }
+
+    fn problem(&self) -> Option<WebhookProblem> {
+        let name_ok = (1..=64).contains(&self.name.len())
+            && self.name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
+        if !name_ok {
+            return Some(WebhookProblem::Name);
+        }
+        if let Err(why) = http_url(&self.url) {
+            return Some(WebhookProblem::Url { key: "url", url: crate::store::redact(&self.url), why });
+        }
+        if self.events.is_empty() {
+            return Some(WebhookProblem::NoEvents);
+        }
+        if let Some(pattern) = self.events.iter().find(|p| !known(p)) {
+            return Some(WebhookProblem::UnknownEvent(pattern.clone()));
+        }
+        if let Err(why) = self.key() {
+            return Some(WebhookProblem::Secret(why));
+        }
+        let zero = [
+            ("timeout_ms", self.timeout_ms),
+            ("backoff_ms", self.backoff_ms),
+            ("max_backoff_ms", self.max_backoff_ms),
+            ("alarm_after_secs", self.alarm_after_secs),
+        ];
+        if let Some((key, _)) = zero.into_iter().find(|&(_, n)| n == 0) {
+            return Some(WebhookProblem::Zero(key));
+        }
+        if self.max_backoff_ms < self.backoff_ms {
+            return Some(WebhookProblem::Backoff { first: self.backoff_ms, max: self.max_backoff_ms });
+        }
+        if let Some(Err(e)) = self.ca_file.as_deref().map(super::ca::read_ca) {
+            return Some(e.into());
+        }
+        if let Some(proxy) = &self.proxy
+            && let Err(why) = http_url(proxy)
+        {
+            return Some(WebhookProblem::Url { key: "proxy", url: crate::store::redact(proxy), why });
+        }
+        None
+    }
+}
+
+/// Whether `text` is an `http://` or `https://` URL with a host. The URL standard reads
+/// `http:///x` and `http:x` as `http://x/`; a missing host is a mistake here, so the text
+/// itself must have one after `//`.
+fn http_url(text: &str) -> Result<(), String> {
+    let url = reqwest::Url::parse(text).map_err(|e| e.to_string())?;
+    if !matches!(url.scheme(), "http" | "https") {
+        return Err(format!("the scheme is {}", url.scheme()));
+    }
+    let authority = text.split_once("://").map(|(_, rest)| rest);
+    let written = authority.is_some_and(|a| !a.starts_with('/'));
+    if !written || url.host_str().is_none_or(str::is_empty) {
+        return Err("no host".into());
+    }
+    Ok(())
 }
 
 #[cfg(test)]

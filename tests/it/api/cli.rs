@@ -41,6 +41,37 @@ fn check_config_accepts_the_example_and_names_the_bad_key_and_line() {
     assert!(!ok && err.contains("bad.toml:4:1: auth.keys[0].hash: "), "{err}");
 }
 
+/// A webhook with an event type rackd does not write, on line 4.
+const BAD_WEBHOOK: &str = "[[webhooks]]\nname = \"wms\"\nurl = \"https://wms.plant.local/events\"\n\
+                           events = [\"job.created\"]\nsecret = \"whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw\"\n";
+
+#[test]
+fn check_config_names_a_bad_webhooks_key_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, BAD_WEBHOOK).unwrap();
+    let (ok, _, err) = rackd(&["check-config", bad.to_str().unwrap()]);
+    assert!(!ok && err.contains("bad.toml:4:1: webhooks[0].events: "), "{err}");
+    assert!(err.contains("\"job.created\" is not an event type") && err.contains("job.updated"), "{err}");
+    assert!(!err.contains("MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw"), "{err}");
+    std::fs::write(&bad, BAD_WEBHOOK.replace("job.created", "job.*")).unwrap();
+    let (ok, out, err) = rackd(&["check-config", bad.to_str().unwrap()]);
+    assert!(ok && out.contains("ok"), "{err}");
+}
+
+#[test]
+fn serve_refuses_to_start_with_a_bad_webhook() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("bad.toml");
+    let db = dir.path().join("rackd.db");
+    let server = format!("[server]\nlisten = \"127.0.0.1:0\"\n[database]\npath = {db:?}\n");
+    std::fs::write(&file, format!("{BAD_WEBHOOK}{server}")).unwrap();
+    let (ok, _, err) = rackd(&["serve", "--config", file.to_str().unwrap()]);
+    assert!(!ok && err.contains("bad.toml:4:1: webhooks[0].events: "), "{err}");
+    assert!(err.contains("\"job.created\" is not an event type"), "{err}");
+    assert!(!db.exists(), "refused before anything started: {err}");
+}
+
 #[test]
 fn check_config_refuses_a_key_of_another_kind_and_a_quirk_of_another_protocol() {
     let dir = tempfile::tempdir().unwrap();

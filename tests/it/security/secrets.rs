@@ -84,3 +84,27 @@ fn the_database_url_comes_from_a_secret_file_and_a_bad_one_is_named() {
     let (ok, _, err) = check_config(&file, false);
     assert!(!ok && err.contains("database.url_file: ") && err.contains("database.url"), "{err}");
 }
+
+#[test]
+fn explain_shows_a_webhooks_secret_as_stars_and_an_error_never_quotes_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("site.toml");
+    let secret = "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw";
+    let entry = format!(
+        "[[webhooks]]\nname = \"wms\"\nurl = \"https://rackd:{PASSWORD}@wms.plant/events\"\n\
+         events = [\"*\"]\nsecret = \"{secret}\"\n"
+    );
+    std::fs::write(&file, &entry).unwrap();
+    let (ok, out, err) = check_config(&file, true);
+    assert!(ok, "{err}");
+    let line = |start: &str| out.lines().find(|l| l.starts_with(start)).unwrap_or_else(|| panic!("{out}"));
+    assert!(line("secret = ").starts_with("secret = \"***\""), "{out}");
+    assert!(line("url = ").contains("https://rackd:***@wms.plant/events"), "{out}");
+    assert!(!out.contains(&secret[6..]) && !out.contains(PASSWORD), "{out}");
+
+    // A secret one character short of base64 is refused without being quoted.
+    std::fs::write(&file, entry.replace(secret, &secret[..secret.len() - 1])).unwrap();
+    let (ok, out, err) = check_config(&file, false);
+    assert!(!ok && err.contains("site.toml:5:1: webhooks[0].secret: "), "{err}");
+    assert!(!err.contains(&secret[6..secret.len() - 1]) && !err.contains(PASSWORD), "{out}{err}");
+}
