@@ -25,3 +25,4 @@ mod standby;
 mod store;
 mod support;
 mod tags;
+mod webhooks;

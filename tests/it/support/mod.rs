@@ -6,6 +6,7 @@
 pub mod app;
 pub mod postgres;
 pub mod proxy;
+pub mod receiver;
 pub mod tls;
 pub mod wait;
 pub mod ws;
