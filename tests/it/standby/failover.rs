@@ -12,10 +12,6 @@
 //! their p50/p99.
 
 use std::collections::VecDeque;
-use std::fs::OpenOptions;
-use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
 use rackd::cli::demo;
@@ -31,6 +27,7 @@ use sqlx::PgPool;
 use tokio::time::sleep;
 
 use crate::support::eventually;
+use crate::support::node::Node;
 
 const LEASE_MS: i64 = 1000;
 /// The default margin: a fifth of the lease.
@@ -46,7 +43,7 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
     let (shelf, crane) = machines().await;
     let dir = tempfile::tempdir().unwrap();
     let mut nodes: Vec<Node> =
-        ["a", "b"].iter().map(|n| Node::new(dir.path(), &config(n, &url, &shelf, &crane))).collect();
+        ["a", "b"].iter().map(|n| Node::new(dir.path(), n, &config(n, &url, &shelf, &crane))).collect();
     let urls: Vec<String> = nodes.iter().map(|n| n.url.clone()).collect();
     let http = reqwest::Client::builder().timeout(Duration::from_secs(5)).build().unwrap();
     nodes.iter_mut().for_each(Node::start);
@@ -155,63 +152,6 @@ fn config(node: &str, database: &str, shelf: &ShelfSim, crane: &CraneSim) -> Con
     crane1.poll_ms = 100;
     config.devices = vec![shelf1.into(), crane1.into()];
     config
-}
-
-/// A `rackd serve` child process with its config file and log; killed when dropped (and
-/// its log printed if the test fails).
-struct Node {
-    name: String,
-    url: String,
-    config: PathBuf,
-    log: PathBuf,
-    child: Option<Child>,
-}
-
-impl Node {
-    fn new(dir: &Path, config: &Config) -> Node {
-        let name = config.cluster.as_ref().unwrap().node.clone();
-        let path = dir.join(format!("{name}.toml"));
-        std::fs::write(&path, toml::to_string(config).unwrap()).unwrap();
-        let url = format!("http://{}", config.server.listen);
-        Node { log: dir.join(format!("{name}.log")), config: path, url, name, child: None }
-    }
-
-    fn start(&mut self) {
-        let mut log = OpenOptions::new().create(true).append(true).open(&self.log).unwrap();
-        writeln!(log, "===== test: starting node {} =====", self.name).unwrap();
-        let mut command = Command::new(env!("CARGO_BIN_EXE_rackd"));
-        // The test's own RACKD_ variables (this test's, the harness's) are not the node's.
-        for (key, _) in std::env::vars().filter(|(k, _)| k.starts_with("RACKD_")) {
-            command.env_remove(key);
-        }
-        command.args(["serve", "--config"]).arg(&self.config).env("RACKD_LOG", "info");
-        command.current_dir(self.config.parent().unwrap()).stdout(log.try_clone().unwrap()).stderr(log);
-        self.child = Some(command.spawn().unwrap());
-    }
-
-    /// SIGKILL: the process ends without a word, its lease left to run out.
-    fn kill(&mut self) {
-        if let Some(mut child) = self.child.take() {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-    }
-
-    fn running(&mut self) -> bool {
-        self.child.as_mut().is_some_and(|c| matches!(c.try_wait(), Ok(None)))
-    }
-}
-
-impl Drop for Node {
-    fn drop(&mut self) {
-        self.kill();
-        if std::thread::panicking() {
-            let log = std::fs::read_to_string(&self.log).unwrap_or_default();
-            let tail: Vec<&str> = log.lines().rev().take(80).collect();
-            eprintln!("----- node {} (last lines of {}) -----", self.name, self.log.display());
-            tail.iter().rev().for_each(|l| eprintln!("{l}"));
-        }
-    }
 }
 
 /// The jobs posted, on each aisle in turn: a store into a free near place, a light (shelf)

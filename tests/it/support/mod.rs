@@ -4,6 +4,7 @@
 //! front for the TLS tests ([`tls`]).
 
 pub mod app;
+pub mod node;
 pub mod postgres;
 pub mod proxy;
 pub mod receiver;

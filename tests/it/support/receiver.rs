@@ -16,7 +16,6 @@ use rackd::service::webhooks::sign::verify;
 use serde_json::Value;
 use tokio::net::TcpListener;
 use tokio::task::JoinSet;
-use tokio::time::Instant;
 
 /// A test secret, as a WMS would be given it.
 pub const SECRET: &str = "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw";
@@ -51,8 +50,8 @@ pub struct Received {
     pub valid: bool,
     /// The status it was answered with.
     pub status: u16,
-    /// When it arrived.
-    pub at: Instant,
+    /// Answered after `Mode::late` (past rackd's timeout: rackd never saw the answer).
+    pub late: bool,
 }
 
 #[derive(Default)]
@@ -112,16 +111,19 @@ impl Receiver {
         self.shared.lock().unwrap().received.clone()
     }
 
-    /// The seqs acknowledged (answered 2xx), each once.
+    /// The seqs acknowledged (answered 2xx in time), each once.
     pub fn acked(&self) -> std::collections::BTreeSet<i64> {
-        self.received().iter().filter(|r| r.status < 300).map(|r| r.seq).collect()
+        self.received().iter().filter(|r| r.status < 300 && !r.late).map(|r| r.seq).collect()
     }
 
     /// Checks what every delivery must be whatever the receiver did: each signature valid,
-    /// each `webhook-id` naming one event (`NAME-SEQ`) with one body however often it came,
-    /// and each event arriving for the first time after every event before it.
-    pub fn check(&self, name: &str) {
+    /// each event of a type the subscription takes (`prefix`), each `webhook-id` naming one
+    /// event (`NAME-SEQ`) with one body however often it came, and each event arriving for
+    /// the first time after every event before it.
+    pub fn check(&self, name: &str, prefix: &str) {
         let received = self.received();
+        let foreign: Vec<_> = received.iter().filter(|r| !r.kind.starts_with(prefix)).map(|r| &r.kind).collect();
+        assert!(foreign.is_empty(), "types the subscription does not take: {foreign:?}");
         let invalid: Vec<_> = received.iter().filter(|r| !r.valid).map(|r| &r.id).collect();
         assert!(invalid.is_empty(), "signatures that do not verify: {invalid:?}");
         let mut bodies: BTreeMap<&str, &Bytes> = BTreeMap::new();
@@ -162,7 +164,6 @@ async fn serve(listener: TcpListener, shared: Arc<Mutex<Shared>>) {
 }
 
 async fn receive(State(shared): State<Arc<Mutex<Shared>>>, headers: HeaderMap, body: Bytes) -> StatusCode {
-    let at = Instant::now();
     let header = |name: &str| headers.get(name).and_then(|v| v.to_str().ok()).unwrap_or_default().to_owned();
     let (id, timestamp, signature) = (header("webhook-id"), header("webhook-timestamp"), header("webhook-signature"));
     let key = rackd::config::webhooks::decode_secret(SECRET).unwrap();
@@ -170,17 +171,17 @@ async fn receive(State(shared): State<Arc<Mutex<Shared>>>, headers: HeaderMap, b
     let event: Value = serde_json::from_slice(&body).unwrap_or_default();
     let mode = shared.lock().unwrap().mode.clone();
     let roll: f64 = rand::random();
-    let (status, wait) = if mode.gone {
-        (StatusCode::GONE, mode.delay)
+    let (status, late) = if mode.gone {
+        (StatusCode::GONE, false)
     } else if roll < mode.fail {
-        (StatusCode::INTERNAL_SERVER_ERROR, mode.delay)
-    } else if roll < mode.fail + mode.late_share {
-        (StatusCode::OK, mode.late)
+        (StatusCode::INTERNAL_SERVER_ERROR, false)
     } else {
-        (StatusCode::OK, mode.delay)
+        (StatusCode::OK, roll < mode.fail + mode.late_share)
     };
+    let wait = if late { mode.late } else { mode.delay };
     tokio::time::sleep(wait).await;
-    // Recorded as answered: a late answer rackd gave up on is a 2xx the receiver acted on.
+    // Recorded once answered; a late answer is one rackd gave up on (the receiver acted on
+    // it all the same: the event comes again, with the same id).
     let received = Received {
         id,
         seq: event["seq"].as_i64().unwrap_or(-1),
@@ -188,7 +189,7 @@ async fn receive(State(shared): State<Arc<Mutex<Shared>>>, headers: HeaderMap, b
         body,
         valid,
         status: status.as_u16(),
-        at,
+        late,
     };
     shared.lock().unwrap().received.push(received);
     status

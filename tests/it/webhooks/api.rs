@@ -72,7 +72,7 @@ async fn events_reach_the_receiver_signed_in_order_and_can_be_paused_replayed_an
     assert_eq!(receiver.acked(), wanted.iter().copied().collect(), "every job event, acknowledged");
     assert_eq!(w["cursor"].as_i64(), wanted.last().copied(), "{w}");
     assert_eq!(w["url"], receiver.url());
-    receiver.check("wms");
+    receiver.check("wms", "job.");
     let (status, log) = app.get("/api/v1/webhooks/wms/deliveries?limit=5").await;
     assert_eq!(status, 200, "{log}");
     let tries = log["deliveries"].as_array().unwrap();
@@ -134,7 +134,7 @@ async fn events_reach_the_receiver_signed_in_order_and_can_be_paused_replayed_an
     let received = receiver.received();
     let again = received.iter().filter(|r| r.seq == first).count();
     assert!(again >= 2, "the first event twice: {again}");
-    receiver.check("wms");
+    receiver.check("wms", "job.");
 
     // Refusals.
     assert_error(&app.post("/api/v1/webhooks/wms/replay", &json!({"from_seq": 0})).await, 409, "not_in_log");

@@ -4,3 +4,4 @@
 //! crane simulators ([`kills`]; the two-node failover is `standby::failover`).
 
 mod api;
+mod kills;

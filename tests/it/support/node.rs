@@ -1,0 +1,68 @@
+//! A `rackd serve` child process for tests that kill it (SIGKILL, no goodbye) and start it
+//! again: the failover of `standby::failover`, the webhooks' deliveries of
+//! `webhooks::kills`.
+
+use std::fs::OpenOptions;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+
+use rackd::config::Config;
+
+/// A `rackd serve` child process with its config file and log; killed when dropped (and
+/// its log printed if the test fails).
+pub struct Node {
+    pub name: String,
+    pub url: String,
+    config: PathBuf,
+    log: PathBuf,
+    child: Option<Child>,
+}
+
+impl Node {
+    pub fn new(dir: &Path, name: &str, config: &Config) -> Node {
+        let name = name.to_owned();
+        let path = dir.join(format!("{name}.toml"));
+        std::fs::write(&path, toml::to_string(config).unwrap()).unwrap();
+        let url = format!("http://{}", config.server.listen);
+        Node { log: dir.join(format!("{name}.log")), config: path, url, name, child: None }
+    }
+
+    pub fn start(&mut self) {
+        let mut log = OpenOptions::new().create(true).append(true).open(&self.log).unwrap();
+        writeln!(log, "===== test: starting node {} =====", self.name).unwrap();
+        let mut command = Command::new(env!("CARGO_BIN_EXE_rackd"));
+        // The test's own RACKD_ variables (this test's, the harness's) are not the node's.
+        for (key, _) in std::env::vars().filter(|(k, _)| k.starts_with("RACKD_")) {
+            command.env_remove(key);
+        }
+        command.args(["serve", "--config"]).arg(&self.config).env("RACKD_LOG", "info");
+        command.current_dir(self.config.parent().unwrap()).stdout(log.try_clone().unwrap()).stderr(log);
+        self.child = Some(command.spawn().unwrap());
+    }
+
+    /// SIGKILL: the process ends without a word, its lease left to run out.
+    pub fn kill(&mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+
+    pub fn running(&mut self) -> bool {
+        self.child.as_mut().is_some_and(|c| matches!(c.try_wait(), Ok(None)))
+    }
+}
+
+impl Drop for Node {
+    fn drop(&mut self) {
+        self.kill();
+        if std::thread::panicking() {
+            let log = std::fs::read_to_string(&self.log).unwrap_or_default();
+            let tail: Vec<&str> = log.lines().rev().take(80).collect();
+            eprintln!("----- node {} (last lines of {}) -----", self.name, self.log.display());
+            tail.iter().rev().for_each(|l| eprintln!("{l}"));
+        }
+    }
+}
+
