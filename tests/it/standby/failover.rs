@@ -9,7 +9,9 @@
 //! and dispatches within a few seconds of it; every job still completes, exactly once; no
 //! task reaches a machine twice; neither simulator sees a breach of its interface. It
 //! prints each takeover time ("last lease renewal to first dispatch by the new node") and
-//! their p50/p99.
+//! their p50/p99. A webhook subscription delivers every `job.*` event throughout, to a
+//! receiver that fails a fifth of calls and is slow around each kill: each event reaches it
+//! at least once, in order, and the stored cursor never passes one it did not acknowledge.
 
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
@@ -28,6 +30,7 @@ use tokio::time::sleep;
 
 use crate::support::eventually;
 use crate::support::node::Node;
+use crate::support::receiver::{Mode, Receiver};
 
 const LEASE_MS: i64 = 1000;
 /// The default margin: a fifth of the lease.
@@ -41,9 +44,15 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
     let kills: usize = std::env::var("RACKD_FAILOVER_KILLS").map_or(3, |k| k.parse().expect("a number"));
     let url = crate::support::postgres::database().await;
     let (shelf, crane) = machines().await;
+    let receiver = Receiver::start().await;
+    // Between the kills a receiver that fails a fifth of calls; around each, a slow one.
+    let (flaky, slow) = (Mode { fail: 0.2, ..Mode::default() }, Mode { delay: Duration::from_millis(300), ..Mode::default() });
+    receiver.set(flaky.clone());
     let dir = tempfile::tempdir().unwrap();
-    let mut nodes: Vec<Node> =
-        ["a", "b"].iter().map(|n| Node::new(dir.path(), n, &config(n, &url, &shelf, &crane))).collect();
+    let mut nodes: Vec<Node> = ["a", "b"]
+        .iter()
+        .map(|n| Node::new(dir.path(), n, &config(n, &url, &shelf, &crane, &receiver)))
+        .collect();
     let urls: Vec<String> = nodes.iter().map(|n| n.url.clone()).collect();
     let http = reqwest::Client::builder().timeout(Duration::from_secs(5)).build().unwrap();
     nodes.iter_mut().for_each(Node::start);
@@ -65,6 +74,7 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
         // Each kill at another point of the crane's cycle.
         sleep(Duration::from_millis(300 * (round as u64 % 4))).await;
         crane_busy(&db).await;
+        receiver.set(slow.clone());
         let active = nodes.iter().position(|n| n.name == lease.holder).unwrap();
         let watch = tokio::spawn(next_term(db.clone(), lease));
         nodes[active].kill();
@@ -80,6 +90,8 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
         assert!(took >= LEASE_MS + MARGIN_MS, "takeover {round} before the lease ran out: {took} ms");
         assert!(took < LEASE_MS + MARGIN_MS + SLACK_MS, "takeover {round} took {took} ms");
         takeovers.push(took);
+        receiver.set(flaky.clone());
+        cursor_is_acknowledged(&db, &receiver).await;
         lease = new;
         healthy(&http, &nodes[active]).await;
         for i in 0..12 {
@@ -95,6 +107,16 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
         if open.is_empty() { Ok(()) } else { Err(format!("still open: {open:?}")) }
     })
     .await;
+    let wanted: Vec<i64> =
+        sqlx::query_scalar("SELECT seq FROM events WHERE type LIKE 'job.%' ORDER BY seq").fetch_all(&db).await.unwrap();
+    eventually("every job event delivered", Duration::from_secs(60), async || {
+        let acked = receiver.acked();
+        let missing = wanted.iter().filter(|s| !acked.contains(s)).count();
+        if missing == 0 { Ok(()) } else { Err(format!("{missing} missing")) }
+    })
+    .await;
+    cursor_is_acknowledged(&db, &receiver).await;
+    receiver.check("wms", "job.");
     for node in &mut nodes {
         assert!(node.running(), "node {} exited", node.name);
     }
@@ -133,8 +155,21 @@ async fn machines() -> (ShelfSim, CraneSim) {
     (shelf, CraneSim::start("127.0.0.1:0", crane).await.unwrap())
 }
 
-/// A node's configuration: the demo layout, its two devices on the simulators, the cluster.
-fn config(node: &str, database: &str, shelf: &ShelfSim, crane: &CraneSim) -> Config {
+/// The stored cursor passes no `job.*` event the receiver has not acknowledged.
+async fn cursor_is_acknowledged(db: &PgPool, receiver: &Receiver) {
+    let sql = "SELECT cursor FROM webhooks WHERE name = 'wms'";
+    let Some(cursor) = sqlx::query_scalar::<_, i64>(sql).fetch_optional(db).await.unwrap() else { return };
+    let passed: Vec<i64> = sqlx::query_scalar("SELECT seq FROM events WHERE type LIKE 'job.%' AND seq <= $1")
+        .bind(cursor)
+        .fetch_all(db)
+        .await
+        .unwrap();
+    crate::webhooks::assert_cursor_acknowledged(cursor, &passed, receiver);
+}
+
+/// A node's configuration: the demo layout, its two devices on the simulators, the cluster,
+/// a webhook subscription to `receiver`.
+fn config(node: &str, database: &str, shelf: &ShelfSim, crane: &CraneSim, receiver: &Receiver) -> Config {
     let mut config = Config::demo();
     let free = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     config.server.listen = free.local_addr().unwrap();
@@ -151,6 +186,9 @@ fn config(node: &str, database: &str, shelf: &ShelfSim, crane: &CraneSim) -> Con
     let mut crane1 = CraneConfig::new("crane1", &crane.local_addr().to_string(), vec![2]);
     crane1.poll_ms = 100;
     config.devices = vec![shelf1.into(), crane1.into()];
+    let mut webhook = crate::webhooks::api::subscription(receiver);
+    webhook.timeout_ms = 1000;
+    config.webhooks = vec![webhook];
     config
 }
 

@@ -160,22 +160,19 @@ async fn post(http: &reqwest::Client, url: &str, n: usize) -> (i64, u16) {
     .await
 }
 
-/// The stored cursor passes no `job.*` event the receiver has not acknowledged (read in
-/// that order: what the receiver acknowledged after the cursor was read counts too).
+/// The stored cursor passes no `job.*` event the receiver has not acknowledged.
 async fn cursor_is_acknowledged(db: &SqlitePool, receiver: &Receiver) {
     let Ok(Some(cursor)) =
         sqlx::query_scalar::<_, i64>("SELECT cursor FROM webhooks WHERE name = 'wms'").fetch_optional(db).await
     else {
         return;
     };
-    let acked = receiver.acked();
     let passed: Vec<i64> = sqlx::query_scalar("SELECT seq FROM events WHERE type LIKE 'job.%' AND seq <= $1")
         .bind(cursor)
         .fetch_all(db)
         .await
         .unwrap();
-    let unacked: Vec<_> = passed.iter().filter(|s| !acked.contains(s)).collect();
-    assert!(unacked.is_empty(), "the cursor {cursor} passed events never acknowledged: {unacked:?}");
+    super::assert_cursor_acknowledged(cursor, &passed, receiver);
 }
 
 /// Ok when the active `webhook` alarms are (`raised`) or are not there.

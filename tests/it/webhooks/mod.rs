@@ -3,5 +3,17 @@
 //! ([`api`]), and delivery through SIGKILLs of a `rackd serve` process driving the shelf and
 //! crane simulators ([`kills`]; the two-node failover is `standby::failover`).
 
-mod api;
+pub mod api;
 mod kills;
+
+use crate::support::receiver::Receiver;
+
+/// The stored `cursor` passes no event of `passed` (the `job.*` events up to it) that the
+/// receiver has not acknowledged; `receiver` is read after the cursor, so what it
+/// acknowledged meanwhile counts too.
+pub fn assert_cursor_acknowledged(cursor: i64, passed: &[i64], receiver: &Receiver) {
+    let acked = receiver.acked();
+    let unacked: Vec<_> = passed.iter().filter(|s| !acked.contains(s)).collect();
+    assert!(unacked.is_empty(), "the cursor {cursor} passed events never acknowledged: {unacked:?}");
+}
+
