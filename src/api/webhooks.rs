@@ -212,7 +212,7 @@ async fn list_deliveries(
 /// Where a replay starts.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-#[schema(example = json!({"from_seq": 1200, "reason": "the WMS restored yesterday's backup"}))]
+#[schema(example = json!({"from_seq": 1, "reason": "the WMS restored yesterday's backup"}))]
 pub struct ReplayRequest {
     /// The first event to deliver again (one the log still holds).
     pub from_seq: i64,

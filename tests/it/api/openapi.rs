@@ -20,7 +20,12 @@ fn committed_openapi_matches_the_code() {
 async fn every_request_example_is_accepted_by_the_demo_site() {
     let tower = rackd::sim::tower::TowerSim::start("127.0.0.1:0", None).await.unwrap();
     let device = rackd::cli::demo::tower_device("tower1", &tower.local_addr().to_string());
-    let app = spawn_with(Engine::Sqlite, |c| c.devices = vec![device]).await;
+    let webhook = rackd::config::WebhookConfig::new("wms", "http://127.0.0.1:9/", &["job.*"], receiver::SECRET);
+    let app = spawn_with(Engine::Sqlite, |c| {
+        c.devices = vec![device];
+        c.webhooks = vec![webhook];
+    })
+    .await;
     // Tag writes need the device online, which its first poll makes it.
     eventually("the tower to come online", std::time::Duration::from_secs(5), async || {
         app.get("/api/v1/devices/tower1").await.1["online"] == true
@@ -42,7 +47,8 @@ async fn every_request_example_is_accepted_by_the_demo_site() {
                 Some("{tag}") => "/api/v1/devices/tower1/tags/tower.green".to_owned(),
                 _ => ["{aisle}", "{row}", "{bay}", "{level}", "{position}"]
                     .iter()
-                    .fold(path.replace("{id}", &job["id"].to_string()), |p, k| p.replace(k, "1")),
+                    .fold(path.replace("{id}", &job["id"].to_string()), |p, k| p.replace(k, "1"))
+                    .replace("{name}", "wms"),
             };
             let r = app
                 .client
