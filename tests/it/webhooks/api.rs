@@ -19,7 +19,7 @@ pub fn subscription(receiver: &Receiver) -> WebhookConfig {
 }
 
 /// Posts a store job to its own place (`n` < 160).
-async fn post_job(app: &TestApp, n: u16) -> i64 {
+pub async fn post_job(app: &TestApp, n: u16) -> i64 {
     let to = loc(1 + n % 2, 1 + n / 2 % 10, 1 + n / 20 % 8, 1);
     let (status, job) = app.post("/api/v1/jobs", &json!({"kind": "store", "barcode": format!("B{n}"), "to": to})).await;
     assert_eq!(status, 201, "{job}");
