@@ -14,7 +14,8 @@
 //!   `$CHROMEDRIVER` name others.
 //! - PostgreSQL's binaries (the second engine, the hot standby): Debian's `postgresql`,
 //!   unless `$RACKD_PG_BIN` names others. The tests start a throwaway cluster of their own.
-//! - schemathesis and prometheus_client (the OpenAPI contract, the metrics' parsers): a
+//! - schemathesis, prometheus_client and standardwebhooks (the OpenAPI contract, the
+//!   metrics' parsers, a webhook receiver built on the specification's own library): a
 //!   virtualenv of the project's own, `.ci/venv`, from `.ci/requirements.txt` (pinned),
 //!   made again when that file changes; Debian's `python3-venv` where Python lacks it.
 //! - Node.js and npm, for `eslint` alone: Debian's `nodejs` and `npm`.

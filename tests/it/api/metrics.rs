@@ -3,7 +3,6 @@
 //! simulator over UDP) and one that does not (a UDP socket nobody reads).
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 use std::time::Duration;
 
 use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
@@ -11,6 +10,7 @@ use rackd::store::Engine;
 use serde_json::Value;
 
 use crate::support::eventually;
+use crate::support::python::python_with;
 use crate::support::{TestApp, spawn_with, store, wait_ended};
 
 const OPENMETRICS_ACCEPT: &str = "application/openmetrics-text;version=1.0.0;q=0.5,\
@@ -33,30 +33,10 @@ for f in text_string_to_metric_families(sys.stdin.read()):
 print(json.dumps(out))
 "#;
 
-/// The Python with `prometheus_client`: `RACKD_TEST_PYTHON`, else the virtualenv
-/// `cargo xtask test` makes in `.ci/venv`.
-fn python() -> PathBuf {
-    let path = std::env::var_os("RACKD_TEST_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(".ci/venv/bin/python"));
-    let works = std::process::Command::new(&path)
-        .args(["-c", "import prometheus_client"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    assert!(
-        works,
-        "{} with prometheus_client is needed to parse /metrics: run `cargo xtask test` (or \
-         `cargo xtask setup`), which makes .ci/venv from .ci/requirements.txt, or point \
-         RACKD_TEST_PYTHON at a Python that has it",
-        path.display()
-    );
-    path
-}
-
 /// The families of `text` as the parser for `format` reads them; fails on a parse error.
 fn parse(text: &str, format: &str) -> BTreeMap<String, Value> {
     use std::io::Write;
-    let mut child = std::process::Command::new(python())
+    let mut child = std::process::Command::new(python_with("prometheus_client", "to parse /metrics"))
         .args(["-c", PARSE, format])
         .stdin(std::process::Stdio::piped())
         .stdout(std::process::Stdio::piped())

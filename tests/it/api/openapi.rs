@@ -20,7 +20,8 @@ fn committed_openapi_matches_the_code() {
 async fn every_request_example_is_accepted_by_the_demo_site() {
     let tower = rackd::sim::tower::TowerSim::start("127.0.0.1:0", None).await.unwrap();
     let device = rackd::cli::demo::tower_device("tower1", &tower.local_addr().to_string());
-    let webhook = rackd::config::WebhookConfig::new("wms", "http://127.0.0.1:9/", &["job.*"], receiver::SECRET);
+    let webhook =
+        rackd::config::WebhookConfig::new("wms", "http://127.0.0.1:9/", &["job.*"], receiver::SECRET);
     let app = spawn_with(Engine::Sqlite, |c| {
         c.devices = vec![device];
         c.webhooks = vec![webhook];

@@ -46,7 +46,10 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
     let (shelf, crane) = machines().await;
     let receiver = Receiver::start().await;
     // Between the kills a receiver that fails a fifth of calls; around each, a slow one.
-    let (flaky, slow) = (Mode { fail: 0.2, ..Mode::default() }, Mode { delay: Duration::from_millis(300), ..Mode::default() });
+    let (flaky, slow) = (
+        Mode { fail: 0.2, ..Mode::default() },
+        Mode { delay: Duration::from_millis(300), ..Mode::default() },
+    );
     receiver.set(flaky.clone());
     let dir = tempfile::tempdir().unwrap();
     let mut nodes: Vec<Node> = ["a", "b"]
@@ -107,8 +110,10 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
         if open.is_empty() { Ok(()) } else { Err(format!("still open: {open:?}")) }
     })
     .await;
-    let wanted: Vec<i64> =
-        sqlx::query_scalar("SELECT seq FROM events WHERE type LIKE 'job.%' ORDER BY seq").fetch_all(&db).await.unwrap();
+    let wanted: Vec<i64> = sqlx::query_scalar("SELECT seq FROM events WHERE type LIKE 'job.%' ORDER BY seq")
+        .fetch_all(&db)
+        .await
+        .unwrap();
     eventually("every job event delivered", Duration::from_secs(60), async || {
         let acked = receiver.acked();
         let missing = wanted.iter().filter(|s| !acked.contains(s)).count();

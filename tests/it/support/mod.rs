@@ -1,12 +1,14 @@
 //! What the areas share: a running rackd ([`app`]), waiting with a deadline
 //! ([`eventually`]), the throwaway PostgreSQL cluster ([`postgres`]), a WebSocket client
-//! ([`ws`]), a TCP proxy that can cut a link ([`proxy`]), and certificates and an https
-//! front for the TLS tests ([`tls`]).
+//! ([`ws`]), a TCP proxy that can cut a link ([`proxy`]), certificates and an https
+//! front for the TLS tests ([`tls`]), a webhook receiver ([`receiver`]) and the Python
+//! that runs the tests' Python libraries ([`python`]).
 
 pub mod app;
 pub mod node;
 pub mod postgres;
 pub mod proxy;
+pub mod python;
 pub mod receiver;
 pub mod tls;
 pub mod wait;

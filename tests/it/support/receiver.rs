@@ -122,7 +122,8 @@ impl Receiver {
     /// the first time after every event before it.
     pub fn check(&self, name: &str, prefix: &str) {
         let received = self.received();
-        let foreign: Vec<_> = received.iter().filter(|r| !r.kind.starts_with(prefix)).map(|r| &r.kind).collect();
+        let foreign: Vec<_> =
+            received.iter().filter(|r| !r.kind.starts_with(prefix)).map(|r| &r.kind).collect();
         assert!(foreign.is_empty(), "types the subscription does not take: {foreign:?}");
         let invalid: Vec<_> = received.iter().filter(|r| !r.valid).map(|r| &r.id).collect();
         assert!(invalid.is_empty(), "signatures that do not verify: {invalid:?}");
@@ -138,7 +139,10 @@ impl Receiver {
                 firsts.push(r.seq);
             }
         }
-        assert!(firsts.windows(2).all(|w| w[0] < w[1]), "events came for the first time out of order: {firsts:?}");
+        assert!(
+            firsts.windows(2).all(|w| w[0] < w[1]),
+            "events came for the first time out of order: {firsts:?}"
+        );
     }
 }
 
@@ -165,7 +169,8 @@ async fn serve(listener: TcpListener, shared: Arc<Mutex<Shared>>) {
 
 async fn receive(State(shared): State<Arc<Mutex<Shared>>>, headers: HeaderMap, body: Bytes) -> StatusCode {
     let header = |name: &str| headers.get(name).and_then(|v| v.to_str().ok()).unwrap_or_default().to_owned();
-    let (id, timestamp, signature) = (header("webhook-id"), header("webhook-timestamp"), header("webhook-signature"));
+    let (id, timestamp, signature) =
+        (header("webhook-id"), header("webhook-timestamp"), header("webhook-signature"));
     let key = rackd::config::webhooks::decode_secret(SECRET).unwrap();
     let valid = timestamp.parse().is_ok_and(|t| verify(&key, &id, t, &body, &signature));
     let event: Value = serde_json::from_slice(&body).unwrap_or_default();

@@ -14,14 +14,16 @@ use crate::support::{TestApp, assert_error, eventually, loc, spawn_with};
 /// A subscription to `receiver` for `job.*`, retrying fast, alarmed after a second.
 pub fn subscription(receiver: &Receiver) -> WebhookConfig {
     let mut config = WebhookConfig::new("wms", &receiver.url(), &["job.*"], SECRET);
-    (config.backoff_ms, config.max_backoff_ms, config.timeout_ms, config.alarm_after_secs) = (20, 100, 500, 1);
+    (config.backoff_ms, config.max_backoff_ms, config.timeout_ms, config.alarm_after_secs) =
+        (20, 100, 500, 1);
     config
 }
 
 /// Posts a store job to its own place (`n` < 160).
-async fn post_job(app: &TestApp, n: u16) -> i64 {
+pub async fn post_job(app: &TestApp, n: u16) -> i64 {
     let to = loc(1 + n % 2, 1 + n / 2 % 10, 1 + n / 20 % 8, 1);
-    let (status, job) = app.post("/api/v1/jobs", &json!({"kind": "store", "barcode": format!("B{n}"), "to": to})).await;
+    let (status, job) =
+        app.post("/api/v1/jobs", &json!({"kind": "store", "barcode": format!("B{n}"), "to": to})).await;
     assert_eq!(status, 201, "{job}");
     job["id"].as_i64().unwrap()
 }
@@ -107,7 +109,11 @@ async fn events_reach_the_receiver_signed_in_order_and_can_be_paused_replayed_an
     let failed = log["deliveries"].as_array().unwrap().iter().filter(|d| d["outcome"] == "failed").count();
     assert!(failed >= 3, "tries of the failing second: {log}");
     assert!(
-        log["deliveries"].as_array().unwrap().iter().any(|d| d["error"].as_str().is_some_and(|e| e.contains("connect"))),
+        log["deliveries"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|d| d["error"].as_str().is_some_and(|e| e.contains("connect"))),
         "a try while the receiver was down: {log}"
     );
 

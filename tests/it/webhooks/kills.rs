@@ -60,7 +60,8 @@ async fn deliveries_survive_sigkills_and_a_receiver_that_fails_and_goes_down() {
         http.get(&health).send().await?.error_for_status()
     })
     .await;
-    let db = SqlitePool::connect(&format!("sqlite:{}?mode=ro", config.database.path.display())).await.unwrap();
+    let db =
+        SqlitePool::connect(&format!("sqlite:{}?mode=ro", config.database.path.display())).await.unwrap();
     let mut posted = Vec::new();
     for n in 0..JOBS {
         posted.push(post(&http, &node.url, n).await);
@@ -93,12 +94,18 @@ async fn deliveries_survive_sigkills_and_a_receiver_that_fails_and_goes_down() {
         if open == 0 { Ok(()) } else { Err(open) }
     })
     .await;
-    let wanted: Vec<i64> =
-        sqlx::query_scalar("SELECT seq FROM events WHERE type LIKE 'job.%' ORDER BY seq").fetch_all(&db).await.unwrap();
+    let wanted: Vec<i64> = sqlx::query_scalar("SELECT seq FROM events WHERE type LIKE 'job.%' ORDER BY seq")
+        .fetch_all(&db)
+        .await
+        .unwrap();
     eventually("every job event delivered", Duration::from_secs(60), async || {
         let acked = receiver.acked();
         let missing: Vec<_> = wanted.iter().filter(|s| !acked.contains(s)).collect();
-        if missing.is_empty() { Ok(()) } else { Err(format!("{} missing, first {:?}", missing.len(), missing[0])) }
+        if missing.is_empty() {
+            Ok(())
+        } else {
+            Err(format!("{} missing, first {:?}", missing.len(), missing[0]))
+        }
     })
     .await;
     cursor_is_acknowledged(&db, &receiver).await;
@@ -109,7 +116,8 @@ async fn deliveries_survive_sigkills_and_a_receiver_that_fails_and_goes_down() {
     .await;
     assert!(node.running(), "rackd exited");
 
-    let jobs: Vec<(i64, String)> = sqlx::query_as("SELECT id, state FROM jobs ORDER BY id").fetch_all(&db).await.unwrap();
+    let jobs: Vec<(i64, String)> =
+        sqlx::query_as("SELECT id, state FROM jobs ORDER BY id").fetch_all(&db).await.unwrap();
     assert_eq!(jobs.len(), JOBS, "only the posted jobs exist");
     let not_completed: Vec<_> = jobs.iter().filter(|(_, state)| state != "completed").collect();
     assert!(not_completed.is_empty(), "jobs that did not complete: {not_completed:?}");
@@ -140,7 +148,9 @@ async fn post(http: &reqwest::Client, url: &str, n: usize) -> (i64, u16) {
                 let to = json!({"aisle": 2, "row": 1 + k / 2 % 2, "bay": 1 + k / 4 % 20, "level": 1 + k / 80 % 7, "position": 1});
                 json!({"kind": "store", "barcode": format!("C-{n}"), "to": to})
             }
-            _ => json!({"kind": "travel", "to": {"aisle": 2, "row": 1, "bay": 1 + k % 20, "level": 8, "position": 1}}),
+            _ => {
+                json!({"kind": "travel", "to": {"aisle": 2, "row": 1, "bay": 1 + k % 20, "level": 8, "position": 1}})
+            }
         };
         (2, job)
     } else {
@@ -151,7 +161,8 @@ async fn post(http: &reqwest::Client, url: &str, n: usize) -> (i64, u16) {
     // While rackd restarts the post is tried again; the reference makes a second try of a
     // job already taken answer that job.
     eventually("rackd to take a job", Duration::from_secs(30), async || {
-        let answer = http.post(format!("{url}/api/v1/jobs")).json(&job).send().await.map_err(|e| e.to_string())?;
+        let answer =
+            http.post(format!("{url}/api/v1/jobs")).json(&job).send().await.map_err(|e| e.to_string())?;
         let status = answer.status().as_u16();
         let body: Value = answer.json().await.unwrap_or_default();
         assert!(!(400..500).contains(&status), "refused {job}: {status} {body}");
@@ -162,8 +173,9 @@ async fn post(http: &reqwest::Client, url: &str, n: usize) -> (i64, u16) {
 
 /// The stored cursor passes no `job.*` event the receiver has not acknowledged.
 async fn cursor_is_acknowledged(db: &SqlitePool, receiver: &Receiver) {
-    let Ok(Some(cursor)) =
-        sqlx::query_scalar::<_, i64>("SELECT cursor FROM webhooks WHERE name = 'wms'").fetch_optional(db).await
+    let Ok(Some(cursor)) = sqlx::query_scalar::<_, i64>("SELECT cursor FROM webhooks WHERE name = 'wms'")
+        .fetch_optional(db)
+        .await
     else {
         return;
     };

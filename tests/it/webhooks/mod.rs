@@ -1,10 +1,13 @@
 //! Webhooks to a WMS (`service::webhooks`), against the test receiver of
 //! [`crate::support::receiver`]: the API and the rules of delivery in one process
-//! ([`api`]), and delivery through SIGKILLs of a `rackd serve` process driving the shelf and
-//! crane simulators ([`kills`]; the two-node failover is `standby::failover`).
+//! ([`api`]); verified by a receiver built on the Standard Webhooks library for Python,
+//! with nothing of rackd's ([`python`]); and delivery through SIGKILLs of a `rackd serve`
+//! process driving the shelf and crane simulators ([`kills`]; the two-node failover is
+//! `standby::failover`).
 
 pub mod api;
 mod kills;
+mod python;
 
 use crate::support::receiver::Receiver;
 
@@ -16,4 +19,3 @@ pub fn assert_cursor_acknowledged(cursor: i64, passed: &[i64], receiver: &Receiv
     let unacked: Vec<_> = passed.iter().filter(|s| !acked.contains(s)).collect();
     assert!(unacked.is_empty(), "the cursor {cursor} passed events never acknowledged: {unacked:?}");
 }
-
