@@ -238,3 +238,6 @@ mod tests {
         assert_eq!(held_through(&[], &rows), i64::MAX);
     }
 }
+
+#[cfg(test)]
+mod gate_tests;
