@@ -337,8 +337,10 @@ fn health_client(
 ) -> anyhow::Result<(reqwest::Client, reqwest::Url)> {
     let mut url = reqwest::Url::parse(url).with_context(|| format!("{url} is not a URL"))?;
     // Nothing between a health check and its server: no proxy from the environment.
-    let mut client =
-        reqwest::Client::builder().timeout(std::time::Duration::from_secs(3)).no_proxy().tls_built_in_native_certs(false);
+    let mut client = reqwest::Client::builder()
+        .timeout(std::time::Duration::from_secs(3))
+        .no_proxy()
+        .tls_built_in_native_certs(false);
     if let Some(path) = ca_file {
         let pem = std::fs::read(path).with_context(|| format!("reading --ca-file {}", path.display()))?;
         let cas = reqwest::Certificate::from_pem_bundle(&pem)

@@ -357,7 +357,8 @@ impl Deliverer {
         self.row.updated_at = now_ms();
         let progress = Progress { row: self.row.clone(), deliveries: std::mem::take(&mut self.pending) };
         let writer = self.parts.writer.clone();
-        let write = tokio::spawn(async move { writer.record(Record::Webhook { progress, audit: None }).await });
+        let write =
+            tokio::spawn(async move { writer.record(Record::Webhook { progress, audit: None }).await });
         if wait {
             match write.await {
                 Ok(Ok(())) => {}
@@ -451,7 +452,12 @@ async fn read_excerpt(answer: reqwest::Response) -> String {
         }
     }
     let text = String::from_utf8_lossy(&body[..body.len().min(4 * EXCERPT)]);
-    text.chars().map(|c| if c.is_control() { ' ' } else { c }).take(EXCERPT).collect::<String>().trim().to_owned()
+    text.chars()
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .take(EXCERPT)
+        .collect::<String>()
+        .trim()
+        .to_owned()
 }
 
 #[cfg(test)]

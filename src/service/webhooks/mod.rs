@@ -169,7 +169,8 @@ impl Webhooks {
         parts: Parts,
     ) -> anyhow::Result<(Webhooks, Vec<JoinHandle<()>>)> {
         use anyhow::Context;
-        let stored = crate::store::webhooks::rows(&parts.pool).await.context("reading the webhooks' cursors")?;
+        let stored =
+            crate::store::webhooks::rows(&parts.pool).await.context("reading the webhooks' cursors")?;
         let mut running = BTreeMap::new();
         let mut tasks = Vec::new();
         for config in configs {
@@ -179,7 +180,8 @@ impl Webhooks {
             let row = stored.iter().find(|r| r.name == config.name).cloned();
             let live = Arc::new(Mutex::new(Live::default()));
             let (tx, rx) = mpsc::channel(16);
-            let deliverer = deliver::Deliverer::new(config.clone(), key, client, parts.clone(), live.clone(), rx);
+            let deliverer =
+                deliver::Deliverer::new(config.clone(), key, client, parts.clone(), live.clone(), rx);
             tasks.push(tokio::spawn(deliverer.run(row)));
             running.insert(config.name.clone(), Running { config: config.clone(), live, commands: tx });
         }

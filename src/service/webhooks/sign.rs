@@ -21,7 +21,8 @@ pub struct Signed {
 
 /// Signs `body` as message `id` sent at `timestamp` (Unix seconds).
 pub fn sign(key: &[u8], id: &str, timestamp: i64, body: &[u8]) -> Signed {
-    let signature = format!("v1,{}", base64::engine::general_purpose::STANDARD.encode(mac(key, id, timestamp, body)));
+    let signature =
+        format!("v1,{}", base64::engine::general_purpose::STANDARD.encode(mac(key, id, timestamp, body)));
     Signed { id: id.to_owned(), timestamp, signature }
 }
 

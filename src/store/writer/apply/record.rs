@@ -138,7 +138,9 @@ impl Group {
                 let by = who.map_or("rackd", |w| w.name.as_str());
                 self.audit(by, client, action, target, reason.as_deref());
             }
-            Record::Prune { before_ms, through, hard_ms } => self.prune = Some((*before_ms, *through, *hard_ms)),
+            Record::Prune { before_ms, through, hard_ms } => {
+                self.prune = Some((*before_ms, *through, *hard_ms))
+            }
             Record::Webhook { progress, audit } => {
                 if let Some((action, reason)) = audit {
                     let by = who.map_or("rackd", |w| w.name.as_str());
