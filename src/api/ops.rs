@@ -123,9 +123,22 @@ pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<
                 takeovers: n.takeovers(),
             }
         }),
+        webhooks: webhook_samples(&app),
     };
     let body = app.metrics.render(scrape, app.hub.subscribers(), format)?;
     Ok(([(header::CONTENT_TYPE, format.content_type())], body).into_response())
+}
+
+/// Each running webhook subscription's figures; none on a node that does not deliver them.
+fn webhook_samples(app: &AppState) -> Vec<super::metrics::scrape::WebhookSample> {
+    let Some(webhooks) = app.webhooks.get() else { return Vec::new() };
+    let published = app.hub.published().get();
+    let sample = |(config, live): (crate::config::WebhookConfig, _)| super::metrics::scrape::WebhookSample {
+        name: config.name,
+        published,
+        live,
+    };
+    webhooks.live().into_iter().map(sample).collect()
 }
 
 #[cfg(test)]

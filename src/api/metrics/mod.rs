@@ -11,8 +11,9 @@
 //!   (a few dozen rows), then changed by each commit of the writer once it is on disk, or
 //!   on a node of a cluster read again after each commit it follows; a scrape reads no
 //!   table, so it costs the same whatever the history holds;
-//! - **read at scrape time** ([`scrape`]): each device's status and link counters, and the
-//!   process figures ([`process`]).
+//! - **read at scrape time** ([`scrape`]): each device's status and link counters, each
+//!   webhook subscription's lag and tries (on the node that delivers them), and the process
+//!   figures ([`process`]).
 //!
 //! Content negotiation ([`format`](mod@format)): OpenMetrics when the scraper's `Accept` asks for it,
 //! Prometheus text 0.0.4 otherwise; each is served exactly, with its own content type.
@@ -298,12 +299,19 @@ mod tests {
             counts: &counts,
         });
         let now = OffsetDateTime::now_utc();
+        let live = crate::service::webhooks::Live {
+            row: crate::store::webhooks::Row { name: "wms".into(), cursor: 4, ..Default::default() },
+            outcomes: [("failed", 3)].into(),
+            retries: 2,
+            ..Default::default()
+        };
         let scrape = scrape::Scrape {
             devices: Vec::new(),
             counts: metrics.counts(),
             now,
             started: now,
             cluster: None,
+            webhooks: vec![scrape::WebhookSample { name: "wms".into(), published: 7, live }],
         };
         let text = metrics.encode(scrape, 2).unwrap();
         assert!(text.ends_with("# EOF\n"), "{text}");
@@ -319,5 +327,15 @@ mod tests {
         assert!(!old.contains("# EOF") && !old.contains(" info\n"), "{old}");
         assert!(old.contains("# TYPE rackd_ws_resyncs_total counter\nrackd_ws_resyncs_total 1\n"), "{old}");
         assert!(old.contains("# TYPE rackd_build_info gauge\n"), "{old}");
+        assert!(
+            old.contains(
+                "# TYPE rackd_webhook_deliveries_total counter\n\
+                 rackd_webhook_deliveries_total{webhook=\"wms\",outcome=\"delivered\"} 0\n\
+                 rackd_webhook_deliveries_total{webhook=\"wms\",outcome=\"failed\"} 3\n"
+            ),
+            "{old}"
+        );
+        assert!(old.contains("rackd_webhook_retries_total{webhook=\"wms\"} 2\n"), "{old}");
+        assert!(old.contains("# TYPE rackd_webhook_events_behind gauge\n"), "{old}");
     }
 }

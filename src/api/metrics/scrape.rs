@@ -1,7 +1,8 @@
 //! What `/metrics` reads at scrape time rather than counting as it happens: each device's
 //! status (the snapshot `/api/v1/devices` serves, its link counters and round trips
-//! included), and the counts of jobs and active alarms as kept in memory (see
-//! [`super`]): nothing is read from the store.
+//! included), the counts of jobs and active alarms as kept in memory (see [`super`]), and
+//! on the node that delivers webhooks each subscription's figures as its deliverer keeps
+//! them ([`crate::service::webhooks::Live`]): nothing is read from the store.
 //!
 //! Decisions:
 //! - **No second bookkeeping.** The link's counters are totals since rackd started and only
@@ -14,6 +15,11 @@
 //!   occurrence to have a series.
 //! - **A device never heard from** counts its seconds since contact from rackd's start: it
 //!   has been silent at least that long, and an alert on the age fires for it too.
+//! - **Webhooks only where they are delivered.** The figures live in the deliverers, which
+//!   run on the node that drives the machines: a standby (or a node with no `[[webhooks]]`)
+//!   has no `rackd_webhook_*` family at all, rather than zeros that would read as caught up.
+//!   Each subscription has the one label `webhook` (its name), and its deliveries one more,
+//!   `outcome`, with a sample for each outcome from the start, zero included.
 
 use std::collections::BTreeMap;
 
@@ -27,6 +33,7 @@ use time::OffsetDateTime;
 use crate::devices::DeviceStatus;
 use crate::domain::{AlarmClass, JobState};
 use crate::protocols::transport::ROUND_TRIP_BOUNDS;
+use crate::service::webhooks::{Live, OUTCOMES};
 use crate::store::counts::Counts;
 
 /// A label value from outside the code (a device id, an address): escaped as both text
@@ -94,6 +101,19 @@ pub struct Scrape {
     pub started: OffsetDateTime,
     /// In a cluster: this node's name, whether it is active, and its takeovers.
     pub cluster: Option<ClusterSample>,
+    /// On the node that delivers webhooks, each running subscription; empty elsewhere.
+    pub webhooks: Vec<WebhookSample>,
+}
+
+/// A webhook subscription's figures, as its deliverer keeps them.
+#[derive(Debug)]
+pub struct WebhookSample {
+    /// The subscription's name.
+    pub name: String,
+    /// The newest event seq published (on disk): what its cursor is behind of.
+    pub published: i64,
+    /// What its deliverer counts.
+    pub live: Live,
 }
 
 /// A cluster node's figures.
@@ -112,6 +132,17 @@ pub struct ClusterSample {
 #[derive(EncodeLabelSet, Debug, Clone, PartialEq, Eq, Hash)]
 struct NodeLabel {
     node: Text,
+}
+
+#[derive(EncodeLabelSet, Debug, Clone, PartialEq, Eq, Hash)]
+struct WebhookLabel {
+    webhook: Text,
+}
+
+#[derive(EncodeLabelSet, Debug, Clone, PartialEq, Eq, Hash)]
+struct WebhookOutcome {
+    webhook: Text,
+    outcome: &'static str,
 }
 
 type Result = std::result::Result<(), std::fmt::Error>;
@@ -253,6 +284,58 @@ impl Scrape {
         }
         Ok(())
     }
+
+    fn webhooks(&self, e: &mut DescriptorEncoder) -> Result {
+        if self.webhooks.is_empty() {
+            return Ok(());
+        }
+        let name = |w: &WebhookSample| WebhookLabel { webhook: Text(w.name.clone()) };
+        // A deliverer shows its row as soon as its task first runs. Before that its cursor
+        // and pause are unknown, so those gauges have no sample for it rather than a wrong one.
+        let shown = || self.webhooks.iter().filter(|w| !w.live.row.name.is_empty());
+        let now_ms = (self.now.unix_timestamp_nanos() / 1_000_000) as i64;
+        let behind = |w: &WebhookSample| (w.published - w.live.row.cursor).max(0);
+        gauge(
+            e,
+            "webhook_events_behind",
+            "Events published that the subscription is not done with (acknowledged, or not of its types).",
+            shown().map(|w| (name(w), behind(w))),
+        )?;
+        let seconds = |w: &WebhookSample| match w.live.oldest_pending_at {
+            Some(at) => (now_ms - at).max(0) as f64 / 1000.0,
+            None => 0.0,
+        };
+        gauge(
+            e,
+            "webhook_seconds_behind",
+            "Age of the event being delivered (since its commit); 0 when caught up or paused.",
+            shown().map(|w| (name(w), seconds(w))),
+        )?;
+        let outcomes = self.webhooks.iter().flat_map(|w| {
+            OUTCOMES.map(|outcome| {
+                let n = w.live.outcomes.get(outcome).copied().unwrap_or(0);
+                (WebhookOutcome { webhook: Text(w.name.clone()), outcome }, n)
+            })
+        });
+        counter(
+            e,
+            "webhook_deliveries",
+            "Tries to deliver an event: delivered (2xx), failed (another status, or none), gone (410).",
+            outcomes,
+        )?;
+        counter(
+            e,
+            "webhook_retries",
+            "Tries that were a retry of an event already tried.",
+            self.webhooks.iter().map(|w| (name(w), w.live.retries)),
+        )?;
+        gauge(
+            e,
+            "webhook_paused",
+            "1 while the subscription is paused (by an operator, or by the receiver's 410 Gone).",
+            shown().map(|w| (name(w), i64::from(w.live.row.paused != 0))),
+        )
+    }
 }
 
 impl Collector for Scrape {
@@ -282,6 +365,76 @@ impl Collector for Scrape {
             let help = "Times this node's process became the active node.";
             counter(&mut e, "cluster_takeovers", help, [(node(), c.takeovers)])?;
         }
-        Ok(())
+        self.webhooks(&mut e)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::webhooks::Row;
+
+    fn text(webhooks: Vec<WebhookSample>, now: OffsetDateTime) -> String {
+        let scrape = Scrape {
+            devices: Vec::new(),
+            counts: Counts::default(),
+            now,
+            started: now,
+            cluster: None,
+            webhooks,
+        };
+        let mut registry = prometheus_client::registry::Registry::with_prefix("rackd");
+        registry.register_collector(Box::new(scrape));
+        let mut out = String::new();
+        prometheus_client::encoding::text::encode(&mut out, &registry).unwrap();
+        out
+    }
+
+    fn sample(name: &str, published: i64, row: Row, oldest_pending_at: Option<i64>) -> WebhookSample {
+        let live = Live { row, oldest_pending_at, ..Live::default() };
+        WebhookSample { name: name.into(), published, live }
+    }
+
+    #[test]
+    fn webhooks_show_their_lag_pause_and_every_outcome_from_zero() {
+        let now = OffsetDateTime::from_unix_timestamp(1_700_000_000).unwrap();
+        let now_ms = 1_700_000_000_000;
+        let row = |name: &str, cursor, paused| Row { name: name.into(), cursor, paused, ..Row::default() };
+        let mut failing = sample("wms", 10, row("wms", 4, 0), Some(now_ms - 90_500));
+        failing.live.outcomes.insert("delivered", 4);
+        failing.live.outcomes.insert("failed", 7);
+        failing.live.retries = 6;
+        let paused = sample("erp", 10, row("erp", 2, 1), None);
+        // A cursor ahead of what this node has published yet (a new node's hub): not behind.
+        let ahead = sample("ahead", 10, row("ahead", 12, 0), None);
+        // A deliverer whose task has not run yet: counters only.
+        let unstarted = sample("new\"one", 10, Row::default(), None);
+        let out = text(vec![failing, paused, ahead, unstarted], now);
+        for line in [
+            "rackd_webhook_events_behind{webhook=\"wms\"} 6\n",
+            "rackd_webhook_events_behind{webhook=\"erp\"} 8\n",
+            "rackd_webhook_events_behind{webhook=\"ahead\"} 0\n",
+            "rackd_webhook_seconds_behind{webhook=\"wms\"} 90.5\n",
+            "rackd_webhook_seconds_behind{webhook=\"erp\"} 0.0\n",
+            "rackd_webhook_deliveries_total{webhook=\"wms\",outcome=\"delivered\"} 4\n",
+            "rackd_webhook_deliveries_total{webhook=\"wms\",outcome=\"failed\"} 7\n",
+            "rackd_webhook_deliveries_total{webhook=\"wms\",outcome=\"gone\"} 0\n",
+            "rackd_webhook_deliveries_total{webhook=\"erp\",outcome=\"gone\"} 0\n",
+            "rackd_webhook_deliveries_total{webhook=\"new\\\"one\",outcome=\"failed\"} 0\n",
+            "rackd_webhook_retries_total{webhook=\"wms\"} 6\n",
+            "rackd_webhook_retries_total{webhook=\"new\\\"one\"} 0\n",
+            "rackd_webhook_paused{webhook=\"wms\"} 0\n",
+            "rackd_webhook_paused{webhook=\"erp\"} 1\n",
+        ] {
+            assert!(out.contains(line), "{line}{out}");
+        }
+        let unstarted_gauges = out.lines().filter(|l| l.contains("new\\\"one") && !l.contains("_total{"));
+        assert_eq!(unstarted_gauges.count(), 0, "{out}");
+    }
+
+    #[test]
+    fn no_webhook_family_where_none_is_delivered() {
+        let out = text(Vec::new(), OffsetDateTime::now_utc());
+        assert!(!out.contains("webhook"), "{out}");
     }
 }

@@ -121,6 +121,10 @@ struct Command {
     reply: oneshot::Sender<Result<Row, ActionError>>,
 }
 
+/// The outcomes of a try, as [`Live::outcomes`] counts them (and the metrics list them,
+/// each from zero).
+pub const OUTCOMES: [&str; 3] = ["delivered", "failed", "gone"];
+
 /// What a subscription's deliverer counts as it works (the metrics and the API's list).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Live {
@@ -128,7 +132,7 @@ pub struct Live {
     pub row: Row,
     /// The commit time (Unix ms) of the event being delivered, None when caught up.
     pub oldest_pending_at: Option<i64>,
-    /// Tries by outcome (`delivered`, `failed`, `gone`).
+    /// Tries by outcome (one of [`OUTCOMES`]).
     pub outcomes: BTreeMap<&'static str, u64>,
     /// Tries that were a retry of an event.
     pub retries: u64,

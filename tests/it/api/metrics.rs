@@ -223,3 +223,59 @@ async fn both_formats_parse_with_their_types_and_show_devices_alarms_and_jobs() 
     app.stop().await;
     drop(silent);
 }
+
+#[tokio::test]
+async fn a_webhook_that_cannot_deliver_shows_its_failures_and_lag() {
+    let app = spawn_with(Engine::Sqlite, |c| {
+        // Nothing listens on the discard port: every try fails at once.
+        let secret = "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw";
+        let mut wms = rackd::config::WebhookConfig::new("wms", "http://127.0.0.1:9/", &["job.*"], secret);
+        (wms.backoff_ms, wms.max_backoff_ms, wms.timeout_ms) = (20, 50, 200);
+        c.webhooks = vec![wms];
+    })
+    .await;
+    let wms = [("webhook", "wms")];
+    let outcome = |o| [("webhook", "wms"), ("outcome", o)];
+    let families = scrape_until(&app, 10, "the subscription's families, caught up", |f| {
+        sample(f, "rackd_webhook_paused", &wms).is_some()
+    })
+    .await;
+    assert_eq!(sample(&families, "rackd_webhook_events_behind", &wms), Some(0.0));
+    assert_eq!(sample(&families, "rackd_webhook_seconds_behind", &wms), Some(0.0));
+    for o in ["delivered", "failed", "gone"] {
+        assert_eq!(sample(&families, "rackd_webhook_deliveries_total", &outcome(o)), Some(0.0), "{o}");
+    }
+
+    let (status, job) = app.post("/api/v1/jobs", &store("W1")).await;
+    assert_eq!(status, 201, "{job}");
+    let families = scrape_until(&app, 10, "a failed try and the job's events behind", |f| {
+        sample(f, "rackd_webhook_deliveries_total", &outcome("failed")).is_some_and(|n| n >= 1.0)
+            && sample(f, "rackd_webhook_events_behind", &wms).is_some_and(|n| n >= 1.0)
+    })
+    .await;
+    let failed = sample(&families, "rackd_webhook_deliveries_total", &outcome("failed")).unwrap();
+    assert_eq!(sample(&families, "rackd_webhook_deliveries_total", &outcome("delivered")), Some(0.0));
+    assert_eq!(sample(&families, "rackd_webhook_paused", &wms), Some(0.0));
+    for (name, want) in [
+        ("rackd_webhook_events_behind", "gauge"),
+        ("rackd_webhook_seconds_behind", "gauge"),
+        ("rackd_webhook_deliveries", "counter"),
+        ("rackd_webhook_retries", "counter"),
+        ("rackd_webhook_paused", "gauge"),
+    ] {
+        assert_eq!(kind(&families, name), want, "{name} in 0.0.4");
+    }
+    // It keeps trying (with backoff), the retries and the age of the event growing with it.
+    scrape_until(&app, 10, "more failed tries, counted as retries, and the event's age", |f| {
+        sample(f, "rackd_webhook_deliveries_total", &outcome("failed")).is_some_and(|n| n > failed)
+            && sample(f, "rackd_webhook_retries_total", &wms).is_some_and(|n| n >= 1.0)
+            && sample(f, "rackd_webhook_seconds_behind", &wms).is_some_and(|s| s > 0.0)
+    })
+    .await;
+
+    let (_, text) = scrape(&app, Some(OPENMETRICS_ACCEPT)).await;
+    let families = parse(&text, "openmetrics");
+    assert_eq!(kind(&families, "rackd_webhook_deliveries"), "counter", "{text}");
+    assert!(sample(&families, "rackd_webhook_events_behind", &wms).is_some_and(|n| n >= 1.0), "{text}");
+    app.stop().await;
+}
