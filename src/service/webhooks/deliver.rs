@@ -13,7 +13,7 @@ use super::{Action, ActionError, Command, Live, Parts, alarm_device, sign};
 use crate::config::WebhookConfig;
 use crate::domain::AlarmKind;
 use crate::domain::time::now_ms;
-use crate::store::alarms::NewAlarm;
+use crate::store::alarms::{AlarmFilter, NewAlarm};
 use crate::store::events::{self, StoredEvent};
 use crate::store::webhooks::{Delivery, Progress, Row};
 use crate::store::writer::{Record, WriteError};
@@ -90,8 +90,14 @@ impl Deliverer {
                 Row { name: name.clone(), cursor: newest, updated_at: now_ms(), ..Row::default() }
             }
         };
-        // Alarms this subscription left active before a restart are its own to clear.
-        self.alarmed = [true, true];
+        // Alarms this subscription left active before a restart (or another node's
+        // deliverer did) are its own to clear; the others are raised when due.
+        let filter = AlarmFilter { active: Some(true), device: Some(alarm_device(&name)), before_id: None, limit: 10 };
+        let active = crate::store::alarms::list(&self.parts.pool, &filter).await.unwrap_or_else(|e| {
+            tracing::warn!(webhook = %name, error = %e, "reading the webhook's alarms");
+            Vec::new()
+        });
+        self.alarmed = [0, 1].map(|code| active.iter().any(|a| a.kind == AlarmKind::Webhook && a.code == code));
         self.show(None);
         tracing::info!(webhook = %name, cursor = self.row.cursor, "webhook deliverer started");
         match self.work(&mut commits).await {

@@ -8,6 +8,7 @@
 pub mod api;
 mod kills;
 mod python;
+mod retention;
 
 use crate::support::receiver::Receiver;
 
