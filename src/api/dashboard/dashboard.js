@@ -1,7 +1,8 @@
 // rackd's operator dashboard: wires the live connection, the model and the parts of the
 // page. Everything on the page comes from the server: the WebSocket snapshot and events,
 // plus recent finished jobs and past alarms read over HTTP (the snapshot holds only what is
-// active), the KPIs, and who the key belongs to (which buttons to show).
+// active), the KPIs, the webhook subscriptions, and who the key belongs to (which buttons
+// to show).
 
 import { api, getKey, onUnauthorized, setKey, takeTokenFromUrl, whoIs } from './dashboard/api.js';
 import { Alarms } from './dashboard/alarms.js';
@@ -17,6 +18,7 @@ import { LocationDialog } from './dashboard/locations.js';
 import { Model } from './dashboard/model.js';
 import { Racks } from './dashboard/racks.js';
 import { Who } from './dashboard/roles.js';
+import { Webhooks } from './dashboard/webhooks.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -42,6 +44,7 @@ const alarms = new Alarms($('alarms'), model, notify);
 const attention = new Attention($('attention'), model, notify);
 const counters = new Counters($('counters'), model);
 const kpi = new Kpi($('kpi-panel'), $('kpi'), (hour) => counters.setStats(hour));
+const webhooks = new Webhooks($('webhooks-panel'), $('webhooks'), model, notify);
 const who = new Who((w) => {
   $('who').textContent = w.role ? `${w.name ? `${w.name} · ` : ''}${w.role}` : '';
 });
@@ -52,7 +55,10 @@ const dirty = { jobs: false, devices: false, alarms: false, cranes: false };
 const render = throttle(() => {
   if (dirty.jobs) jobs.render();
   if (dirty.devices) devices.render();
-  if (dirty.alarms) alarms.render();
+  if (dirty.alarms) {
+    alarms.render();
+    webhooks.render();
+  }
   if (dirty.cranes) racks.devices();
   if (dirty.jobs || dirty.devices || dirty.alarms) {
     attention.render();
@@ -68,8 +74,9 @@ const mark = (...parts) => {
 };
 
 /**
- * Asks rackd, once per key, who the key is, the KPIs (read every minute from then on) and
- * whether it exports alarms: at the first snapshot, and again when the key changes.
+ * Asks rackd, once per key, who the key is, the KPIs (read every minute from then on), the
+ * webhook subscriptions (every few seconds from then on) and whether it exports alarms: at
+ * the first snapshot, and again when the key changes.
  */
 let asked = false;
 const node = new ClusterBadge($('node'));
@@ -78,6 +85,7 @@ function askServer() {
   node.start();
   who.load();
   kpi.load();
+  webhooks.start();
   alarms.findExport();
 }
 
@@ -240,6 +248,7 @@ $('clock').textContent = clock(new Date().toISOString());
 setInterval(() => {
   $('clock').textContent = clock(new Date().toISOString());
   devices.tick();
+  webhooks.tick();
   // Failed jobs leave the attention list and the counter an hour after they failed.
   ticks += 1;
   if (ticks % 10 === 0) mark('jobs');
@@ -249,5 +258,6 @@ showKeyState();
 live.restart();
 if (offered) offerKey(offered);
 
-// For the browser console (and the browser tests): the state, the connection, the role.
-window.rackd = { model, live, who };
+// For the browser console (and the browser tests): the state, the connection, the role,
+// the webhook subscriptions.
+window.rackd = { model, live, who, webhooks };

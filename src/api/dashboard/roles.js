@@ -5,7 +5,8 @@
 //
 // Until the role is known the page shows no buttons: a viewer never sees one flash by.
 // Action buttons carry the class `op`; the stylesheet hides them unless the body's
-// `data-role` is `operator` or `admin`.
+// `data-role` is `operator` or `admin`. The few that are an administrator's alone (a
+// webhook's Pause, Resume and Replay) carry `admin-op`, hidden unless it is `admin`.
 
 import { api } from './api.js';
 

@@ -17,6 +17,7 @@ mod control;
 mod keys;
 mod layout;
 mod store;
+mod webhooks;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
