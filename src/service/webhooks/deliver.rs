@@ -92,12 +92,14 @@ impl Deliverer {
         };
         // Alarms this subscription left active before a restart (or another node's
         // deliverer did) are its own to clear; the others are raised when due.
-        let filter = AlarmFilter { active: Some(true), device: Some(alarm_device(&name)), before_id: None, limit: 10 };
+        let filter =
+            AlarmFilter { active: Some(true), device: Some(alarm_device(&name)), before_id: None, limit: 10 };
         let active = crate::store::alarms::list(&self.parts.pool, &filter).await.unwrap_or_else(|e| {
             tracing::warn!(webhook = %name, error = %e, "reading the webhook's alarms");
             Vec::new()
         });
-        self.alarmed = [0, 1].map(|code| active.iter().any(|a| a.kind == AlarmKind::Webhook && a.code == code));
+        self.alarmed =
+            [0, 1].map(|code| active.iter().any(|a| a.kind == AlarmKind::Webhook && a.code == code));
         self.show(None);
         tracing::info!(webhook = %name, cursor = self.row.cursor, "webhook deliverer started");
         match self.work(&mut commits).await {

@@ -33,7 +33,11 @@ async fn retention_holds_what_a_subscription_needs_until_its_limit_then_the_loss
     // Failing from its first try: the alarm comes after `alarm_after_secs` all the same.
     eventually("the failing alarm", Duration::from_secs(10), async || {
         let (_, page) = app.get("/api/v1/alarms?active=true&device=webhook:wms").await;
-        if page["alarms"].as_array().is_some_and(|a| a.iter().any(|a| a["code"] == 0)) { Ok(()) } else { Err(page) }
+        if page["alarms"].as_array().is_some_and(|a| a.iter().any(|a| a["code"] == 0)) {
+            Ok(())
+        } else {
+            Err(page)
+        }
     })
     .await;
     let (db, dir) = app.stop().await;
