@@ -34,7 +34,25 @@ const TABLES: &[(&str, &str, &[&str])] = &[
     ("rollups", "grain, bucket, scope", &ROLLUPS),
     ("rollup_busy", "scope", &ROLLUP_BUSY),
     ("rollup_marks", "name", &ROLLUP_MARKS),
+    ("webhooks", "name", &WEBHOOKS),
+    ("webhook_deliveries", "id", &WEBHOOK_DELIVERIES),
 ];
+
+/// The webhooks' tables' columns (see [`super::webhooks`]): the cursors come along, so a
+/// subscription goes on from where it was rather than from the copy's newest event.
+const WEBHOOKS: [&str; 9] = [
+    "name",
+    "cursor",
+    "paused",
+    "paused_reason",
+    "last_ok_at",
+    "last_error",
+    "last_error_at",
+    "failing_since",
+    "updated_at",
+];
+const WEBHOOK_DELIVERIES: [&str; 9] =
+    ["id", "name", "seq", "attempt", "status", "outcome", "latency_ms", "error", "at"];
 
 /// The rollups' tables' columns (see [`super::rollups`]).
 const ROLLUPS: [&str; 4] = ["grain", "bucket", "scope", "figures"];
@@ -114,13 +132,13 @@ pub async fn copy(from: &Database, to: &Database) -> Result<Copied, CopyError> {
         copied.push((table, count));
     }
     if let Tx::Postgres(t) = &mut tx {
-        // Ids given explicitly leave the history's identity behind: move it on.
-        let sql = "SELECT setval(pg_get_serial_sequence('job_history', 'id'), \
-                   (SELECT COALESCE(MAX(id), 0) + 1 FROM job_history), false)";
-        sqlx::query(sql)
-            .execute(&mut **t)
-            .await
-            .map_err(|error| CopyError::Table { table: "job_history", error })?;
+        // Ids given explicitly leave the identities behind: move them on.
+        for table in ["job_history", "webhook_deliveries"] {
+            let sql = sqlx::AssertSqlSafe(format!(
+                "SELECT setval(pg_get_serial_sequence('{table}', 'id'), (SELECT COALESCE(MAX(id), 0) + 1 FROM {table}), false)"
+            ));
+            sqlx::query(sql).execute(&mut **t).await.map_err(|error| CopyError::Table { table, error })?;
+        }
     }
     on!(Tx, tx, t => t.commit().await).map_err(|error| CopyError::Table { table: "audit", error })?;
     source.close().await;

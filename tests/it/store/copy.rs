@@ -5,7 +5,7 @@
 use rackd::domain::{AlarmClass, AlarmKind, JobState, Location, LocationLock, Pause, Target, Transition};
 use rackd::store::alarms::{AlarmFilter, NewAlarm};
 use rackd::store::writer::{Change, Hooks, Outcome, Record, Writer};
-use rackd::store::{self, Engine, Pool, alarms, controls, events, jobs, locations};
+use rackd::store::{self, Engine, Pool, alarms, controls, events, jobs, locations, webhooks};
 use time::OffsetDateTime;
 
 use super::{light, open};
@@ -57,6 +57,28 @@ async fn site(pool: &Pool) {
     writer.record(cleared).await.unwrap();
     let ack = Record::Acknowledge { alarm: 2, by: "ops".into(), note: Some("seen".into()) };
     writer.record(ack).await.unwrap();
+    let row = webhooks::Row {
+        name: "wms".into(),
+        cursor: 7,
+        last_ok_at: Some(5),
+        updated_at: 6,
+        ..Default::default()
+    };
+    let tries = [(6, "failed", Some(500)), (7, "delivered", Some(204))].map(|(seq, outcome, status)| {
+        webhooks::Delivery {
+            id: 0,
+            name: "wms".into(),
+            seq,
+            attempt: 1,
+            status,
+            outcome: outcome.into(),
+            latency_ms: 3,
+            error: None,
+            at: 5,
+        }
+    });
+    let progress = webhooks::Progress { row, deliveries: tries.to_vec() };
+    writer.record(Record::Webhook { progress, audit: None }).await.unwrap();
     drop(writer);
     task.await.unwrap();
 }
@@ -77,6 +99,8 @@ async fn read(pool: &Pool) -> Vec<String> {
     out.push(format!("{:?}", controls::paused(pool).await.unwrap()));
     out.push(format!("{:?}", controls::audit(pool, None, 100).await.unwrap()));
     out.push(format!("{:?}", store::counts::load(pool).await.unwrap()));
+    out.push(format!("{:?}", webhooks::rows(pool).await.unwrap()));
+    out.push(format!("{:?}", webhooks::deliveries(pool, "wms", None, 10).await.unwrap()));
     out
 }
 
