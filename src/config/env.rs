@@ -46,10 +46,11 @@ use figment::{Metadata, Profile, Provider};
 pub const PREFIX: &str = "RACKD_";
 
 /// The sections a variable may name.
-const SECTIONS: [&str; 8] = ["server", "database", "intake", "auth", "site", "events", "cluster", "devices"];
+const SECTIONS: [&str; 10] =
+    ["server", "database", "intake", "auth", "site", "events", "retention", "cluster", "devices", "webhooks"];
 
 /// Keys that are arrays of tables, not settable from the environment.
-const ARRAYS: [&str; 3] = ["devices", "site.aisles", "auth.keys"];
+const ARRAYS: [&str; 4] = ["devices", "site.aisles", "auth.keys", "webhooks"];
 
 /// A variable rackd refuses.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -229,5 +230,9 @@ mod tests {
         assert!(err.contains("devices is an array of tables"), "{err}");
         let err = settings(&vars(&[("RACKD_AUTH__KEYS", "[]")])).unwrap_err().to_string();
         assert!(err.contains("auth.keys_file"), "{err}");
+        let err = settings(&vars(&[("RACKD_WEBHOOKS__0__URL", "x")])).unwrap_err().to_string();
+        assert!(err.contains("webhooks is an array of tables"), "{err}");
+        let err = settings(&vars(&[("RACKD_RETENTION_JOBS_DAYS", "9")])).unwrap_err().to_string();
+        assert!(err.contains("RACKD_RETENTION__JOBS_DAYS"), "{err}");
     }
 }
