@@ -348,15 +348,7 @@ impl Deliverer {
                 return Ok(());
             }
             let write = self.writing.take().expect("a write in flight");
-            match write.await {
-                Ok(Ok(())) => {}
-                Ok(Err(WriteError::Closed | WriteError::Fenced(_))) => return Err(Stop::Writer),
-                Ok(Err(e)) => {
-                    tracing::warn!(webhook = %self.config.name, error = %e, "recording deliveries");
-                    self.dirty = true;
-                }
-                Err(_) => self.dirty = true,
-            }
+            self.settle(write.await)?;
         }
         if !self.dirty {
             return Ok(());
@@ -368,17 +360,27 @@ impl Deliverer {
         let write =
             tokio::spawn(async move { writer.record(Record::Webhook { progress, audit: None }).await });
         if wait {
-            match write.await {
-                Ok(Ok(())) => {}
-                Ok(Err(WriteError::Closed | WriteError::Fenced(_))) => return Err(Stop::Writer),
-                Ok(Err(e)) => {
-                    tracing::warn!(webhook = %self.config.name, error = %e, "recording deliveries");
-                    self.dirty = true;
-                }
-                Err(_) => self.dirty = true,
-            }
+            self.settle(write.await)?;
         } else {
             self.writing = Some(write);
+        }
+        Ok(())
+    }
+
+    /// What came of a write: a writer that is gone or fences this node out stops the
+    /// deliverer; another failure leaves the row to be written again with the next.
+    fn settle(
+        &mut self,
+        written: Result<Result<(), WriteError>, tokio::task::JoinError>,
+    ) -> Result<(), Stop> {
+        match written {
+            Ok(Ok(())) => {}
+            Ok(Err(WriteError::Closed | WriteError::Fenced(_))) => return Err(Stop::Writer),
+            Ok(Err(e)) => {
+                tracing::warn!(webhook = %self.config.name, error = %e, "recording deliveries");
+                self.dirty = true;
+            }
+            Err(_) => self.dirty = true,
         }
         Ok(())
     }

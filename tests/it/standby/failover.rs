@@ -23,7 +23,6 @@ use rackd::domain::time::now_ms;
 use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
 use rackd::store::cluster::{self, LEASE, LeaseRow};
-use rackd::wire::task_id_for;
 use serde_json::{Value, json};
 use sqlx::PgPool;
 use tokio::time::sleep;
@@ -114,12 +113,7 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
         .fetch_all(&db)
         .await
         .unwrap();
-    eventually("every job event delivered", Duration::from_secs(60), async || {
-        let acked = receiver.acked();
-        let missing = wanted.iter().filter(|s| !acked.contains(s)).count();
-        if missing == 0 { Ok(()) } else { Err(format!("{missing} missing")) }
-    })
-    .await;
+    crate::webhooks::every_event_acked(&receiver, &wanted).await;
     cursor_is_acknowledged(&db, &receiver).await;
     receiver.check("wms", "job.");
     for node in &mut nodes {
@@ -131,14 +125,7 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
     let count = |kind: &str| kinds.iter().find(|(k, _)| k == kind).map_or(0, |(_, n)| *n);
     assert_eq!(count("memory_lost"), 0, "a takeover is no power cycle: {kinds:?}");
     assert_eq!(count("takeover"), kills as i64, "one takeover alarm per takeover: {kinds:?}");
-    for (id, aisle) in &posted {
-        let task = task_id_for(*id);
-        let received = if *aisle == 1 { shelf.received(task) } else { crane.received(task) };
-        assert_eq!(received, 1, "job {id} (aisle {aisle}, task {task}) reached its machine {received} times");
-    }
-    assert_eq!(shelf.violations(), 0, "the shelf PLC saw writes into busy slots");
-    assert_eq!(crane.violations(), 0, "the crane saw breaches: {:#?}", crane.violation_log());
-    assert_eq!(crane.refused(), 0, "tasks handed to a busy crane");
+    crate::support::machines::each_task_once_and_no_breach(&shelf, &crane, &posted);
 
     takeovers.sort_unstable();
     let pick = |q: f64| takeovers[((takeovers.len() - 1) as f64 * q).round() as usize];

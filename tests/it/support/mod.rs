@@ -5,6 +5,7 @@
 //! that runs the tests' Python libraries ([`python`]).
 
 pub mod app;
+pub mod machines;
 pub mod node;
 pub mod postgres;
 pub mod proxy;

@@ -19,7 +19,6 @@ use rackd::config::Config;
 use rackd::config::devices::CraneConfig;
 use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
-use rackd::wire::task_id_for;
 use serde_json::{Value, json};
 use sqlx::SqlitePool;
 
@@ -98,16 +97,7 @@ async fn deliveries_survive_sigkills_and_a_receiver_that_fails_and_goes_down() {
         .fetch_all(&db)
         .await
         .unwrap();
-    eventually("every job event delivered", Duration::from_secs(60), async || {
-        let acked = receiver.acked();
-        let missing: Vec<_> = wanted.iter().filter(|s| !acked.contains(s)).collect();
-        if missing.is_empty() {
-            Ok(())
-        } else {
-            Err(format!("{} missing, first {:?}", missing.len(), missing[0]))
-        }
-    })
-    .await;
+    super::every_event_acked(&receiver, &wanted).await;
     cursor_is_acknowledged(&db, &receiver).await;
     receiver.check("wms", "job.");
     eventually("the webhook alarm to clear", Duration::from_secs(15), async || {
@@ -121,13 +111,7 @@ async fn deliveries_survive_sigkills_and_a_receiver_that_fails_and_goes_down() {
     assert_eq!(jobs.len(), JOBS, "only the posted jobs exist");
     let not_completed: Vec<_> = jobs.iter().filter(|(_, state)| state != "completed").collect();
     assert!(not_completed.is_empty(), "jobs that did not complete: {not_completed:?}");
-    for (id, aisle) in &posted {
-        let task = task_id_for(*id);
-        let received = if *aisle == 1 { shelf.received(task) } else { crane.received(task) };
-        assert_eq!(received, 1, "job {id} (aisle {aisle}) reached its machine {received} times");
-    }
-    assert_eq!(shelf.violations(), 0, "the shelf PLC saw writes into busy slots");
-    assert_eq!(crane.violations(), 0, "the crane saw breaches: {:#?}", crane.violation_log());
+    crate::support::machines::each_task_once_and_no_breach(&shelf, &crane, &posted);
     let received = receiver.received();
     let failed = received.iter().filter(|r| r.status >= 300 || r.late).count();
     eprintln!(

@@ -20,3 +20,16 @@ pub fn assert_cursor_acknowledged(cursor: i64, passed: &[i64], receiver: &Receiv
     let unacked: Vec<_> = passed.iter().filter(|s| !acked.contains(s)).collect();
     assert!(unacked.is_empty(), "the cursor {cursor} passed events never acknowledged: {unacked:?}");
 }
+
+/// Waits (at most a minute) until the receiver has acknowledged every event of `wanted`.
+pub async fn every_event_acked(receiver: &Receiver, wanted: &[i64]) {
+    crate::support::eventually("every job event delivered", std::time::Duration::from_secs(60), async || {
+        let acked = receiver.acked();
+        let missing: Vec<_> = wanted.iter().filter(|s| !acked.contains(s)).collect();
+        match missing.first() {
+            None => Ok(()),
+            Some(first) => Err(format!("{} missing, the first {first}", missing.len())),
+        }
+    })
+    .await
+}
