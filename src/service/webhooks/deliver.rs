@@ -3,13 +3,12 @@
 //! writer (the rules are the parent module's).
 
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use futures::StreamExt;
 use tokio::sync::{broadcast, mpsc};
 use tokio::task::JoinHandle;
 
-use super::{Action, ActionError, Command, Live, Parts, alarm_device, sign};
+use super::{Action, ActionError, Command, Live, Parts, alarm_device, send};
 use crate::config::WebhookConfig;
 use crate::domain::AlarmKind;
 use crate::domain::time::now_ms;
@@ -20,8 +19,6 @@ use crate::store::writer::{Record, WriteError};
 
 /// Events read from the log at a time.
 const PAGE: u32 = 500;
-/// The most of an answer's body kept in a delivery's error.
-const EXCERPT: usize = 200;
 
 /// A subscription's deliverer.
 pub(super) struct Deliverer {
@@ -187,7 +184,11 @@ impl Deliverer {
                 self.flush(false).await?;
                 continue;
             }
-            let delivery = self.post(event.seq, &id, &body, attempt).await;
+            let delivery =
+                send::post(&self.client, &self.config, &self.key, (event.seq, &id, &body), attempt).await;
+            if let Some(error) = &delivery.error {
+                (self.row.last_error, self.row.last_error_at) = (Some(error.clone()), Some(delivery.at));
+            }
             let outcome = delivery.outcome.clone();
             self.count(&delivery);
             self.pending.push(delivery);
@@ -233,52 +234,6 @@ impl Deliverer {
                     attempt += 1;
                 }
             }
-        }
-    }
-
-    /// One try: the signed POST and what came of it.
-    async fn post(&mut self, seq: i64, id: &str, body: &bytes::Bytes, attempt: i64) -> Delivery {
-        let timestamp = now_ms() / 1000;
-        let signed = sign::sign(&self.key, id, timestamp, body);
-        let started = Instant::now();
-        let answer = self
-            .client
-            .post(&self.config.url)
-            .header("content-type", "application/json")
-            .header("webhook-id", &signed.id)
-            .header("webhook-timestamp", signed.timestamp.to_string())
-            .header("webhook-signature", &signed.signature)
-            .body(body.clone())
-            .send()
-            .await;
-        let (status, outcome, error) = match answer {
-            Ok(answer) => {
-                let status = answer.status();
-                let excerpt = read_excerpt(answer).await;
-                if status.is_success() {
-                    (Some(status.as_u16()), "delivered", None)
-                } else {
-                    let outcome = if status == reqwest::StatusCode::GONE { "gone" } else { "failed" };
-                    let said = if excerpt.is_empty() { String::new() } else { format!(": {excerpt}") };
-                    (Some(status.as_u16()), outcome, Some(format!("answered {status}{said}")))
-                }
-            }
-            Err(e) => (None, "failed", Some(describe(&e, self.config.timeout_ms))),
-        };
-        let at = now_ms();
-        if let Some(error) = &error {
-            (self.row.last_error, self.row.last_error_at) = (Some(error.clone()), Some(at));
-        }
-        Delivery {
-            id: 0,
-            name: self.config.name.clone(),
-            seq,
-            attempt,
-            status: status.map(i64::from),
-            outcome: outcome.to_owned(),
-            latency_ms: started.elapsed().as_millis() as i64,
-            error,
-            at,
         }
     }
 
@@ -434,40 +389,6 @@ pub(super) fn backoff(config: &WebhookConfig, attempt: i64) -> Duration {
     let doublings = (attempt - 1).clamp(0, 40) as u32;
     let full = config.backoff_ms.saturating_mul(1u64 << doublings).min(config.max_backoff_ms).max(1);
     Duration::from_millis(rand::random_range(full.div_ceil(2)..=full))
-}
-
-/// A failed request in words for the delivery log: what kind of failure, and the innermost
-/// cause (never the URL, which may carry credentials).
-fn describe(e: &reqwest::Error, timeout_ms: u64) -> String {
-    if e.is_timeout() {
-        return format!("no answer within {timeout_ms} ms");
-    }
-    let mut cause: &dyn std::error::Error = e;
-    while let Some(inner) = cause.source() {
-        cause = inner;
-    }
-    let what = if e.is_connect() { "could not connect" } else { "the request failed" };
-    format!("{what}: {cause}")
-}
-
-/// Reads up to [`super::BODY_LIMIT`] bytes of an answer's body (so the connection can be
-/// kept), and returns the first [`EXCERPT`] characters of it, printable only.
-async fn read_excerpt(answer: reqwest::Response) -> String {
-    let mut body = Vec::new();
-    let mut stream = answer.bytes_stream();
-    while let Some(Ok(chunk)) = stream.next().await {
-        body.extend_from_slice(&chunk);
-        if body.len() > super::BODY_LIMIT {
-            break;
-        }
-    }
-    let text = String::from_utf8_lossy(&body[..body.len().min(4 * EXCERPT)]);
-    text.chars()
-        .map(|c| if c.is_control() { ' ' } else { c })
-        .take(EXCERPT)
-        .collect::<String>()
-        .trim()
-        .to_owned()
 }
 
 #[cfg(test)]

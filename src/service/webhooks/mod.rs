@@ -39,6 +39,7 @@
 
 mod client;
 mod deliver;
+mod send;
 pub mod sign;
 
 use std::collections::BTreeMap;
