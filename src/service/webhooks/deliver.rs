@@ -19,6 +19,8 @@ use crate::store::writer::{Record, WriteError};
 
 /// Events read from the log at a time.
 const PAGE: u32 = 500;
+/// The longest a cursor moved over other types' events stays unwritten.
+const SKIPS_WRITTEN_AFTER: Duration = Duration::from_secs(1);
 
 /// A subscription's deliverer.
 pub(super) struct Deliverer {
@@ -34,6 +36,10 @@ pub(super) struct Deliverer {
     pending: Vec<Delivery>,
     /// Whether the row changed since it was last handed to the writer.
     dirty: bool,
+    /// Since when the cursor has moved only over events of types this subscription does not
+    /// take, unwritten: written with the next delivery, or after [`SKIPS_WRITTEN_AFTER`]
+    /// (so a stream of other events does not cost the writer a command per commit).
+    skipped_since: Option<tokio::time::Instant>,
     /// The write in flight.
     writing: Option<JoinHandle<Result<(), WriteError>>>,
     /// Whether this deliverer raised the alarms of code 0 (failing) and 1 (events lost).
@@ -67,6 +73,7 @@ impl Deliverer {
             row: Row::default(),
             pending: Vec::new(),
             dirty: false,
+            skipped_since: None,
             writing: None,
             alarmed: [false; 2],
             moved: false,
@@ -118,6 +125,12 @@ impl Deliverer {
                     self.alarm(1, None).await;
                 }
                 self.show(None);
+                let skips_due = async {
+                    match self.skipped_since {
+                        Some(since) => tokio::time::sleep_until(since + SKIPS_WRITTEN_AFTER).await,
+                        None => std::future::pending().await,
+                    }
+                };
                 tokio::select! {
                     command = self.commands.recv() => match command {
                         Some(command) => self.obey(command).await,
@@ -125,6 +138,7 @@ impl Deliverer {
                     },
                     // A commit, or a lag (commits were missed): either way, read the log.
                     _ = commits.recv() => {}
+                    () = skips_due => self.dirty = true,
                 }
                 continue;
             }
@@ -151,7 +165,7 @@ impl Deliverer {
             for event in page.iter().filter(|e| e.seq <= published) {
                 if !self.config.wants(&event.kind) {
                     self.row.cursor = event.seq;
-                    self.dirty = true;
+                    self.skipped_since.get_or_insert_with(tokio::time::Instant::now);
                     continue;
                 }
                 if let Err(stop) = self.deliver(event).await {
@@ -289,7 +303,7 @@ impl Deliverer {
             self.moved = false;
             return Err(e.into());
         }
-        self.dirty = false;
+        (self.dirty, self.skipped_since) = (false, None);
         self.show(None);
         Ok(self.row.clone())
     }
@@ -305,10 +319,13 @@ impl Deliverer {
             let write = self.writing.take().expect("a write in flight");
             self.settle(write.await)?;
         }
+        if self.skipped_since.is_some_and(|since| since.elapsed() >= SKIPS_WRITTEN_AFTER) {
+            self.dirty = true;
+        }
         if !self.dirty {
             return Ok(());
         }
-        self.dirty = false;
+        (self.dirty, self.skipped_since) = (false, None);
         self.row.updated_at = now_ms();
         let progress = Progress { row: self.row.clone(), deliveries: std::mem::take(&mut self.pending) };
         let writer = self.parts.writer.clone();
