@@ -14,7 +14,9 @@
 //!   receiver acted, sends the event again with the same `webhook-id` (`NAME-SEQ`), which a
 //!   receiver de-duplicates on. Deliveries are committed in small groups (at most one
 //!   write in flight per subscription), so a crash repeats at most the events of the
-//!   groups not yet committed.
+//!   groups not yet committed. A cursor that moved only over events of types the
+//!   subscription does not take is written with its next delivery, or within a second:
+//!   a site's stream of device events costs the writer nothing per commit.
 //! - **Only what is on disk, in order.** A subscription reads no further than the hub's
 //!   published seq: an event a power cut could take back is never sent. It wakes on each
 //!   commit the hub publishes.
