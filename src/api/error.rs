@@ -112,6 +112,7 @@ impl From<WriteError> for ApiError {
             WriteError::Unexpected { .. } | WriteError::Illegal(_) => {
                 Self::conflict("invalid_state", e.to_string())
             }
+            WriteError::Refused(_) => Self::conflict("bulk_refused", e.to_string()),
             WriteError::Overloaded => Self::new(
                 StatusCode::SERVICE_UNAVAILABLE,
                 "overloaded",

@@ -34,6 +34,7 @@
 //!   the WAL file is new (first commit, or another inode after SQLite removed and
 //!   recreated it), the folder is synced once too, so the file's name is on disk as well.
 
+use std::collections::HashMap;
 use std::fs::File;
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
@@ -46,6 +47,7 @@ use std::time::Instant;
 use super::apply::{Answer, Out};
 use super::timing::GroupStats;
 use super::{Command, Hooks, Sent, WriteError};
+use crate::domain::{Location, LocationLock};
 use crate::store::counts::Counts;
 use crate::store::jobs::Job;
 
@@ -151,19 +153,20 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
         let took = started.elapsed();
         observe(&GroupStats { commands: group.len(), statements, took, jobs: timings, counts });
     }
-    let answers = match result {
+    let (answers, unlocks) = match result {
         Ok((answers, out)) => {
-            if let Some(locked) = hooks.locked.as_ref().filter(|_| !out.locks.is_empty()) {
-                locked(&out.locks);
+            let (locks, unlocks) = locks_and_unlocks(out.locks);
+            if let Some(locked) = hooks.locked.as_ref().filter(|_| !locks.is_empty()) {
+                locked(&locks);
             }
             if let Some(publish) = hooks.publish.as_ref().filter(|_| !out.events.is_empty()) {
                 publish(out.events);
             }
-            answers
+            (answers, unlocks)
         }
         Err(e) => {
             tracing::error!(error = %e, requests = group.len(), "group commit failed");
-            group.iter().map(|_| Answer::Failed(e.clone())).collect()
+            (group.iter().map(|_| Answer::Failed(e.clone())).collect(), Vec::new())
         }
     };
     if let Some(committed) = &hooks.committed {
@@ -172,10 +175,32 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
             committed(&jobs);
         }
     }
+    if let Some(locked) = hooks.locked.as_ref().filter(|_| !unlocks.is_empty()) {
+        locked(&unlocks);
+    }
     for (Sent { cmd, .. }, answer) in group.into_iter().zip(answers) {
         reply(cmd, answer);
     }
 }
+
+/// A commit's lock changes as the dispatcher is handed them: the locations it leaves
+/// locked, before its jobs, and those it leaves unlocked, after them (each location as the
+/// commit leaves it, its last change). A job that failed and locked its location is then
+/// never seen gone with the location still free, and a failed job retried in the commit
+/// that unlocks its location is back in its queue, ahead of the later jobs there, before
+/// the location frees: otherwise a device could take a later job on the location first.
+fn locks_and_unlocks(changes: Vec<(Location, Option<LocationLock>)>) -> (Vec<LockChange>, Vec<LockChange>) {
+    let last: HashMap<Location, usize> = changes.iter().enumerate().map(|(i, (l, _))| (*l, i)).collect();
+    changes
+        .into_iter()
+        .enumerate()
+        .filter(|(i, (l, _))| last.get(l) == Some(i))
+        .map(|(_, change)| change)
+        .partition(|(_, lock)| lock.is_some())
+}
+
+/// A lock (`Some`) or unlock of a location.
+type LockChange = (Location, Option<LocationLock>);
 
 /// Sends a command its answer.
 fn reply(cmd: Command, answer: Answer) {
@@ -186,6 +211,9 @@ fn reply(cmd: Command, answer: Answer) {
         (Command::Record { reply, .. }, Answer::Refused(e)) => drop(reply.send(Err(e))),
         (Command::Reports { reply, .. }, Answer::Reported(r)) => drop(reply.send(r)),
         (Command::Adopt { reply, .. }, Answer::Adopted(jobs)) => drop(reply.send(Ok(jobs))),
+        (Command::Bulk { reply, .. }, Answer::Bulked(r)) => drop(reply.send(r)),
+        (Command::Bulk { reply, .. }, Answer::Failed(e)) => drop(reply.send(Err(e))),
+        (Command::Bulk { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
         (Command::Adopt { reply, .. }, Answer::Failed(e)) => drop(reply.send(Err(e))),
         (Command::Adopt { reply, .. }, _) => drop(reply.send(Err(WriteError::Closed))),
         (Command::Reports { reply, reports }, Answer::Failed(e)) => {
@@ -317,6 +345,59 @@ mod tests {
         syncer.finish();
         assert!(matches!(b_rx.blocking_recv(), Ok(Err(WriteError::Database(_)))));
         assert_eq!(*published.lock().unwrap(), 0, "nothing of a group that may not be on disk is published");
+    }
+
+    #[test]
+    fn locks_reach_the_dispatcher_before_the_jobs_and_unlocks_after_them() {
+        let calls = Arc::new(Mutex::new(Vec::<String>::new()));
+        let (seen, told) = (calls.clone(), calls.clone());
+        let hooks = Hooks {
+            locked: Some(Arc::new(move |changes: &[(Location, Option<LocationLock>)]| {
+                let text: Vec<String> = changes
+                    .iter()
+                    .map(|(l, lock)| format!("{}{}", l.bay, if lock.is_some() { "+" } else { "-" }))
+                    .collect();
+                seen.lock().unwrap().push(text.join(" "));
+            })),
+            committed: Some(Arc::new(move |jobs: &[&Job]| {
+                told.lock().unwrap().push(format!("jobs {}", jobs.len()))
+            })),
+            ..Hooks::default()
+        };
+        let at = |bay| Location { aisle: 1, row: 1, bay, level: 1, position: 1 };
+        let lock = LocationLock {
+            by: "rackd".into(),
+            reason: "lost".into(),
+            job: Some(1),
+            at: crate::domain::time::from_ms(0),
+        };
+        let job = crate::domain::NewJob {
+            spec: crate::domain::JobSpec::Store { to: at(1) },
+            reference: None,
+            priority: Default::default(),
+            barcode: None,
+            device: None,
+            serves: None,
+        }
+        .accepted(1, 0);
+        let (reply, _answer) = oneshot::channel();
+        let change = super::super::Change::Priority(Default::default());
+        let group = vec![Sent { cmd: Command::Change { id: 1, change, who: None, reply }, epoch: None }];
+        let out = Out {
+            // 2 is locked then unlocked, 3 unlocked then locked: each as the commit leaves it.
+            locks: vec![
+                (at(1), Some(lock.clone())),
+                (at(2), Some(lock.clone())),
+                (at(3), None),
+                (at(2), None),
+                (at(3), Some(lock)),
+                (at(4), None),
+            ],
+            ..Out::default()
+        };
+        let done = Done { group, result: Ok((vec![Answer::Changed(Ok(job))], out)), started: Instant::now() };
+        deliver(&hooks, done, None);
+        assert_eq!(*calls.lock().unwrap(), ["1+ 3+", "jobs 1", "2- 4-"]);
     }
 
     #[test]

@@ -15,7 +15,7 @@ use std::collections::{BTreeSet, HashMap};
 use std::sync::LazyLock;
 
 use super::apply::{Loaded, Next};
-use super::{Change, Command, Conn, Record};
+use super::{BulkAction, Change, Command, Conn, Record};
 use crate::domain::{Job, Location};
 use crate::store::engine::Engine;
 use crate::store::jobs::{COLUMNS, JobRow, decode};
@@ -145,6 +145,10 @@ pub(super) async fn load(
             }
             Command::Reports { reports, .. } => ids.extend(reports.iter().map(|r| r.job)),
             Command::Adopt { ids: adopt, .. } => ids.extend(adopt.iter().copied()),
+            Command::Bulk { bulk, .. } => match &bulk.action {
+                BulkAction::Unlock(locations) => places.extend(locations.iter().map(|(l, _)| *l)),
+                BulkAction::Retry { jobs, .. } | BulkAction::Cancel(jobs) => ids.extend(jobs.iter().copied()),
+            },
             Command::Record { record, .. } => match record {
                 Record::Lock { location, .. } | Record::Unlock { location, .. } => {
                     places.insert(*location);

@@ -12,6 +12,7 @@
 //! sqlx driver runs a connection on a worker thread and hands every statement over through a
 //! channel: the hand-offs, not SQLite, would otherwise set the pace.
 mod apply;
+mod bulk;
 mod checkpoint;
 mod commit;
 pub use commit::NOTIFY_CHANNEL;
@@ -26,6 +27,7 @@ use std::sync::Arc;
 use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
 
+pub use bulk::{Bulk, BulkAction, Bulked, Refusal, describe};
 pub use timing::{GroupStats, JobTiming, Observe};
 
 use super::Pool;
@@ -273,6 +275,9 @@ pub enum WriteError {
     /// A location chosen for a box is no longer free.
     #[error("location {0} is not free: a box, a lock or a job holds it")]
     Taken(Location),
+    /// Items of a bulk action cannot be done as asked: nothing of it was written.
+    #[error("{}", bulk::describe(.0))]
+    Refused(Vec<Refusal>),
     /// Sent through a fenced handle ([`Writer::fenced`]) of a node that does not hold the
     /// cluster's lease (any more): nothing was written.
     #[error("this node does not hold the cluster lease (epoch {0:?}): nothing was written")]
@@ -290,8 +295,9 @@ pub type Committed = Arc<dyn Fn(&[&Job]) + Send + Sync>;
 /// forwards them to subscribers). Only committed events are passed on.
 pub type Publish = Arc<dyn Fn(Vec<StoredEvent>) + Send + Sync>;
 
-/// Called after each commit, before [`Committed`], with every location the commit locked
-/// (`Some`) or unlocked (`None`), so the dispatcher holds back jobs on locked locations.
+/// Called after each commit with the locations it locked (`Some`) or unlocked (`None`), so
+/// the dispatcher holds back jobs on locked locations: those it leaves locked before
+/// [`Committed`], those it leaves unlocked after it (see `durable::locks_and_unlocks`).
 pub type Locked = Arc<dyn Fn(&[(Location, Option<LocationLock>)]) + Send + Sync>;
 
 /// Called for each job as a commit writes its `job.updated` event, to fill in why it waits
@@ -320,6 +326,7 @@ enum Command {
     Change { id: i64, change: Change, who: Option<Who>, reply: oneshot::Sender<Result<Job, WriteError>> },
     Reports { reports: Vec<Report>, reply: oneshot::Sender<Vec<Result<Job, WriteError>>> },
     Record { record: Record, who: Option<Who>, reply: oneshot::Sender<Result<(), WriteError>> },
+    Bulk { bulk: Bulk, who: Who, reply: oneshot::Sender<Result<Bulked, WriteError>> },
     Adopt { ids: Vec<i64>, reply: oneshot::Sender<Result<Vec<Job>, WriteError>> },
 }
 
@@ -510,6 +517,18 @@ impl Writer {
         self.record_from(record, Some(who)).await
     }
 
+    /// Checks an operator's bulk action item by item and does all of it in one commit, or
+    /// none of it ([`WriteError::Refused`]), audited as `who`; a dry run only checks.
+    /// Answers once it is on disk.
+    pub async fn bulk(&self, bulk: Bulk, who: Who) -> Result<Bulked, WriteError> {
+        let (reply, answer) = oneshot::channel();
+        self.tx
+            .send(self.stamp(Command::Bulk { bulk, who, reply })?)
+            .await
+            .map_err(|_| WriteError::Closed)?;
+        answer.await.map_err(|_| WriteError::Closed)?
+    }
+
     async fn record_from(&self, record: Record, who: Option<Who>) -> Result<(), WriteError> {
         let (reply, answer) = oneshot::channel();
         self.tx
@@ -557,6 +576,7 @@ impl Command {
             Command::Submit { jobs, .. } => jobs.len(),
             Command::Reports { reports, .. } => reports.len(),
             Command::Adopt { ids, .. } => ids.len(),
+            Command::Bulk { bulk, .. } => bulk.action.len(),
             Command::Change { .. } | Command::Record { .. } => 1,
         }
     }

@@ -5,6 +5,7 @@
 //! records (what a group changes besides jobs: pauses, locks, inventory, alarms) are applied
 //! in [`record`].
 
+mod bulk;
 mod record;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -33,6 +34,7 @@ pub(super) enum Answer {
     Reported(Vec<Result<Job, WriteError>>),
     Recorded,
     Refused(WriteError),
+    Bulked(Result<super::Bulked, WriteError>),
     Failed(WriteError),
     /// Jobs read as committed, written nothing (see `Writer::adopt`).
     Adopted(Vec<Job>),
@@ -52,6 +54,7 @@ impl Answer {
             Answer::Changed(Ok(job)) => vec![job],
             Answer::Reported(jobs) => jobs.iter().filter_map(|r| r.as_ref().ok()).collect(),
             Answer::Adopted(jobs) => jobs.iter().collect(),
+            Answer::Bulked(Ok(done)) if done.applied => done.jobs.iter().collect(),
             _ => Vec::new(),
         }
     }
@@ -289,6 +292,7 @@ impl Group {
                 Ok(()) => Answer::Recorded,
                 Err(e) => Answer::Refused(e),
             },
+            Command::Bulk { bulk, who, .. } => Answer::Bulked(self.bulk(bulk, who)),
             Command::Adopt { ids, .. } => {
                 Answer::Adopted(ids.iter().filter_map(|id| self.jobs.get(id)).cloned().collect())
             }
@@ -599,6 +603,22 @@ impl Group {
             }
             _ => false,
         }
+    }
+
+    /// Lifts the lock of `l`, if it has one, with its `location.updated` event; whether it
+    /// did.
+    fn unlock(&mut self, l: Location) -> bool {
+        match self.locations.get_mut(&l) {
+            Some(row) if row.locked_at.is_some() => {
+                (row.locked_at, row.locked_by, row.lock_reason, row.lock_job) = (None, None, None, None);
+                row.updated_at = self.now;
+            }
+            _ => return false,
+        }
+        self.touched.insert(l);
+        self.out.locks.push((l, None));
+        self.location_events(&[l]);
+        true
     }
 
     /// Applies what a completed job did to the locations it touched; returns them.

@@ -28,20 +28,7 @@ impl Group {
             }
             Record::Unlock { location, by, reason } => {
                 self.audit(by, client, "unlock", &location_key(*location), reason.as_deref());
-                let unlocked = match self.locations.get_mut(location) {
-                    Some(row) if row.locked_at.is_some() => {
-                        (row.locked_at, row.locked_by, row.lock_reason, row.lock_job) =
-                            (None, None, None, None);
-                        row.updated_at = now;
-                        true
-                    }
-                    _ => false,
-                };
-                if unlocked {
-                    self.touched.insert(*location);
-                    self.out.locks.push((*location, None));
-                    self.location_events(&[*location]);
-                }
+                self.unlock(*location);
             }
             Record::AlarmRaised(new) => {
                 let active = |a: &&alarms::Row| {
