@@ -207,6 +207,9 @@ mod tests {
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/registers"), Role::Admin);
         assert_eq!(required_role(&Method::PUT, "/api/v1/locations"), Role::Admin);
         assert_eq!(required_role(&Method::POST, "/api/v1/locations/1/1/1/1/1/lock"), Role::Operator);
+        for bulk in ["/api/v1/locations/unlock", "/api/v1/jobs/retry", "/api/v1/jobs/cancel"] {
+            assert_eq!(required_role(&Method::POST, bulk), Role::Operator, "{bulk}");
+        }
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/pause"), Role::Operator);
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/tower1/tags/beacon.red"), Role::Operator);
         assert_eq!(required_role(&Method::GET, "/api/v1/devices/tower1/tags"), Role::Viewer);

@@ -10,7 +10,7 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use crate::service::dispatch::{CancelError, ControlError};
+use crate::service::dispatch::{BulkError, CancelError, ControlError};
 use crate::store::writer::WriteError;
 
 /// An error answer.
@@ -148,6 +148,20 @@ impl From<ControlError> for ApiError {
             ControlError::NotFound(_) => Self::not_found(message),
             ControlError::NotFailed { .. } => Self::conflict("job_not_failed", message),
             ControlError::Store(cause) => Self::from(cause),
+        }
+    }
+}
+
+impl From<BulkError> for ApiError {
+    fn from(e: BulkError) -> Self {
+        let message = e.to_string();
+        match e {
+            BulkError::TooMany { .. } => Self::invalid("bulk_too_large", message),
+            BulkError::Refused(_) => Self::conflict("bulk_refused", message),
+            BulkError::Unavailable { .. } => {
+                Self::new(StatusCode::SERVICE_UNAVAILABLE, "unavailable", message)
+            }
+            BulkError::Store(cause) => Self::from(cause),
         }
     }
 }

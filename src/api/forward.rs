@@ -1,10 +1,10 @@
 //! On a standby node of a cluster, what only the active node can do is forwarded to it:
 //! everything about devices and aisles (their status lives in the active node's device
 //! tasks; a pause acts on its dispatcher), and every change to a job or location after
-//! its submission (cancel, retry, priority, locks, the inventory), since the active
-//! node's dispatcher decides on those against what it holds in memory. Submissions and
-//! every read of the store are served by the standby itself (a submission reaches the
-//! active node through the database's notifications).
+//! its submission (cancel, retry, priority, locks, the inventory, the bulk actions on many
+//! of them), since the active node's dispatcher decides on those against what it holds in
+//! memory. Submissions and every read of the store are served by the standby itself (a
+//! submission reaches the active node through the database's notifications).
 //!
 //! The active node is found from the lease row and the address it tells
 //! (`[cluster] url`); the request goes on with its method, path, query, body and
@@ -159,6 +159,9 @@ mod tests {
             (Method::PATCH, "/api/v1/jobs/7"),
             (Method::PUT, "/api/v1/locations"),
             (Method::POST, "/api/v1/locations/1/1/1/1/1/lock"),
+            (Method::POST, "/api/v1/locations/unlock"),
+            (Method::POST, "/api/v1/jobs/retry"),
+            (Method::POST, "/api/v1/jobs/cancel"),
         ] {
             assert!(only_active(&method, path), "{method} {path}");
         }

@@ -8,6 +8,7 @@ pub mod access;
 pub mod aisles;
 pub mod alarms;
 pub mod auth;
+pub mod bulk;
 pub mod cluster;
 pub mod contract;
 pub mod control;
@@ -128,6 +129,7 @@ fn protected_routes() -> OpenApiRouter<AppState> {
     let v1 = jobs::router()
         .merge(devices::router())
         .merge(locations::router())
+        .merge(bulk::router())
         .merge(inventory::router())
         .merge(alarms::router())
         .merge(aisles::router())

@@ -38,6 +38,15 @@ pub enum DeviceRequest {
         /// What the device did, or why it cannot.
         reply: oneshot::Sender<Result<Withdrawal, CancelRefusal>>,
     },
+    /// Which of these jobs the device holds (written into a slot, or being handed to the
+    /// machine). Asked between two rounds of the device task, so whatever hand-over began
+    /// before is recorded by the time it answers.
+    Holding {
+        /// The jobs.
+        jobs: Vec<i64>,
+        /// Those of them it holds.
+        reply: oneshot::Sender<Vec<i64>>,
+    },
 }
 
 /// The handle to one running device.
@@ -61,6 +70,14 @@ impl DeviceHandle {
     pub async fn cancel(&self, job: i64) -> Option<Result<Withdrawal, CancelRefusal>> {
         let (reply, answer) = oneshot::channel();
         self.requests.send(DeviceRequest::Cancel { job, reply }).await.ok()?;
+        answer.await.ok()
+    }
+
+    /// Which of `jobs` the device holds (see [`DeviceRequest::Holding`]); `None` if its
+    /// task has stopped.
+    pub async fn holding(&self, jobs: Vec<i64>) -> Option<Vec<i64>> {
+        let (reply, answer) = oneshot::channel();
+        self.requests.send(DeviceRequest::Holding { jobs, reply }).await.ok()?;
         answer.await.ok()
     }
 }

@@ -294,6 +294,45 @@ pub async fn many(db: impl Into<Reader<'_>>, ids: &[i64]) -> Result<Vec<Job>, sq
     })
 }
 
+/// The ids of up to `limit` failed jobs, in id order: of `device`, of failure kind `kind`,
+/// failed at or after `since` (Unix ms), each filter if given (an operator's bulk retry
+/// or unlock, `service::dispatch::bulk`).
+pub async fn failed(
+    db: impl Into<Reader<'_>>,
+    device: Option<&str>,
+    kind: Option<FailureKind>,
+    since: Option<i64>,
+    limit: u32,
+) -> Result<Vec<i64>, sqlx::Error> {
+    let rows: Vec<(i64,)> = failed_query(device, kind, since, limit).fetch_all(db.into()).await?;
+    Ok(rows.into_iter().map(|(id,)| id).collect())
+}
+
+/// The statement [`failed`] runs: the failed jobs in id order on `jobs_device_state` with a
+/// device, else on `jobs_state`, the other filters checked on each (`+updated_at`, so that
+/// neither engine reads them off `jobs_ended`, which is not in id order). It reads the
+/// failed jobs the store keeps (ended jobs go with the retention), not the whole history.
+pub fn failed_query(
+    device: Option<&str>,
+    kind: Option<FailureKind>,
+    since: Option<i64>,
+    limit: u32,
+) -> Query {
+    let mut q = Query::new("SELECT id FROM jobs WHERE state = ");
+    q.text(JobState::Failed.as_str());
+    if let Some(d) = device {
+        q.push(" AND device = ").text(d);
+    }
+    if let Some(k) = kind {
+        q.push(" AND failure_kind = ").text(k.as_str());
+    }
+    if let Some(t) = since {
+        q.push(" AND +updated_at >= ").int(t);
+    }
+    q.push(" ORDER BY id LIMIT ").int(limit as i64);
+    q
+}
+
 /// Every job of `device` that has not ended, oldest first.
 pub async fn unfinished(db: impl Into<Reader<'_>>, device: &str) -> Result<Vec<Job>, sqlx::Error> {
     let mut rows: Vec<JobRow> = unfinished_query(device).fetch_all(db.into()).await?;

@@ -237,6 +237,12 @@ impl Crane {
             DeviceRequest::Cancel { job, reply } => {
                 let _ = reply.send(self.cancel(job).await);
             }
+            DeviceRequest::Holding { mut jobs, reply } => {
+                let current = self.current.as_ref().map(|c| c.job);
+                let handing = self.handing.as_ref().map(|h| h.job);
+                jobs.retain(|id| current == Some(*id) || handing == Some(*id));
+                let _ = reply.send(jobs);
+            }
         }
     }
 

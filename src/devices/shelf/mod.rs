@@ -131,6 +131,10 @@ impl Shelf {
             DeviceRequest::Cancel { job, reply } => {
                 let _ = reply.send(self.cancel(job).await);
             }
+            DeviceRequest::Holding { mut jobs, reply } => {
+                jobs.retain(|id| self.slots.iter().any(|s| matches!(s, Slot::Held { job, .. } if job == id)));
+                let _ = reply.send(jobs);
+            }
         }
     }
 

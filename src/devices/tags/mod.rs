@@ -141,6 +141,9 @@ impl TagDevice {
                     DeviceRequest::Cancel { reply, .. } => {
                         let _ = reply.send(Err(CancelRefusal::NoJobs));
                     }
+                    DeviceRequest::Holding { reply, .. } => {
+                        let _ = reply.send(Vec::new());
+                    }
                 },
                 _ = sleep_until(next_poll) => {
                     self.poll().await;

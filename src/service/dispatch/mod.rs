@@ -1,4 +1,5 @@
-//! The dispatcher: which job runs next, on which device, and cancels.
+//! The dispatcher: which job runs next, on which device, cancels, and operators' actions
+//! on many jobs at once ([`bulk`]).
 //!
 //! The job writer hands every committed job to the [`Queues`] (in memory, one queue per
 //! device); each device task asks its [`Port`](crate::devices::port::Port) for the best
@@ -8,6 +9,7 @@
 //! report: a paused device is simply offered no work. Why each queued job waits is
 //! worked out beside those decisions, never instead of them ([`waiting`]).
 
+pub mod bulk;
 pub mod cancel;
 pub mod control;
 pub mod order;
@@ -17,6 +19,7 @@ pub mod waiting;
 
 use crate::store::Pool;
 
+pub use bulk::{BulkError, FailedJobs, MAX_BULK, QueuedJobs};
 pub use cancel::CancelError;
 pub use control::{Actor, ControlError};
 pub use queues::{Control, Queues, Setup};

@@ -162,6 +162,16 @@ async fn every_job_filter_pages_on_an_index_in_id_order(#[case] engine: Engine) 
         &uses("a device's unfinished", &["jobs_device_state"]),
     )
     .await;
+    // The failed jobs a bulk retry or unlock selects: in id order on the failed jobs' entries.
+    let lost = Some(rackd::domain::FailureKind::Lost);
+    for (device, kind, since, expect) in [
+        (Some("shelf1"), lost, from, uses("a device's failed", &["jobs_device_state"])),
+        (Some("shelf1"), None, None, uses("a device's failed, any kind", &["jobs_device_state"])),
+        (None, lost, from, uses("failed of a kind", STATE)),
+        (None, None, from, uses("failed since", STATE)),
+    ] {
+        check_query(&pool, &jobs::failed_query(device, kind, since, 10_001), &expect).await;
+    }
     // A job's history, and the snapshot's unfinished jobs (sorted: they are not the history).
     check_query(&pool, &jobs::history_query(7), &uses("history", &["job_history_job"])).await;
     let unfinished = Expect { what: "unfinished", uses: STATE, sorts: true };
