@@ -10,6 +10,7 @@
 
 mod api;
 mod browser;
+mod bulk;
 mod crane;
 mod docs;
 mod events;

@@ -2,7 +2,7 @@
 //! each through execution state 0 → 1 → 2 (or 3 with a failure kind) in the configured
 //! time. It works on [`SlotMemory`], so it runs the same behind every transport.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use rand::Rng;
@@ -19,9 +19,11 @@ pub(super) struct Machine {
     pub fail_rate: f64,
 }
 
-/// Runs the machine until the task is aborted.
-pub(super) async fn run(memory: Arc<dyn SlotMemory>, core: Core, machine: Machine) {
+/// Runs the machine until the task is aborted; how it works is read for each task, so it
+/// can be changed while it runs ([`super::ShelfSim::set_task_time`]).
+pub(super) async fn run(memory: Arc<dyn SlotMemory>, core: Core, machine: Arc<Mutex<Machine>>) {
     loop {
+        let machine = *machine.lock().unwrap_or_else(|p| p.into_inner());
         let Some(slot) = start_next(memory.as_ref(), &core) else {
             // Writes ring the bell; the timeout also catches slots changed behind the
             // server's back (tests setting words directly).
@@ -148,7 +150,7 @@ mod tests {
         let memory = Arc::new(VecMemory(Mutex::new(vec![0; 100])));
         let core = Core::new(Layout { slots: 1, stride: 100 });
         let machine = Machine { task_time: Duration::from_millis(30), fail_rate: 0.0 };
-        let engine = tokio::spawn(run(memory.clone(), core.clone(), machine));
+        let engine = tokio::spawn(run(memory.clone(), core.clone(), Arc::new(Mutex::new(machine))));
         let at = Location { aisle: 1, row: 1, bay: 2, level: 1, position: 1 };
         put(
             &memory,

@@ -97,6 +97,7 @@ pub struct ShelfSim {
     server: Server,
     faults: SharedFaults,
     engine: JoinHandle<()>,
+    machine: Arc<std::sync::Mutex<Machine>>,
     protocol: ShelfProtocol,
     base: String,
     unit: u8,
@@ -148,8 +149,9 @@ impl ShelfSim {
             Family::Mewtocol => mewtocol::start(endpoint, &setup).await?,
         };
         let machine = Machine { task_time: options.task_time, fail_rate: options.fail_rate };
-        let engine = tokio::spawn(engine::run(memory.clone(), core.clone(), machine));
-        Ok(ShelfSim { core, memory, server, faults, engine, protocol, base, unit, options })
+        let machine = Arc::new(std::sync::Mutex::new(machine));
+        let engine = tokio::spawn(engine::run(memory.clone(), core.clone(), machine.clone()));
+        Ok(ShelfSim { core, memory, server, faults, engine, machine, protocol, base, unit, options })
     }
 
     /// The address it answers on (`None` on a serial line).
@@ -259,6 +261,12 @@ impl ShelfSim {
         drop(words);
         tracing::warn!("power cycle: the slot area is cleared");
         self.core.wake.notify_one();
+    }
+
+    /// Changes the time each task takes from the next task on (the one running keeps
+    /// its time): a test holds tasks in their slots, then lets the machine work fast.
+    pub fn set_task_time(&self, time: std::time::Duration) {
+        self.machine.lock().unwrap_or_else(|p| p.into_inner()).task_time = time;
     }
 
     /// Changes the standing link faults while running (a queued script stays).
