@@ -6,11 +6,15 @@
 // itself may still want a look); a rackd without acknowledgements (no `acknowledged_by`
 // in its alarms) shows none.
 //
+// A PLC's memory loss also offers Unlock and retry… (recovery.js): the dry run's jobs and
+// locations, then, once the aisle is checked, one action that unlocks and retries them.
+//
 // Items are kept per alarm and rebuilt only when the alarm changed, keeping an open
-// disclosure open.
+// disclosure (and an open Unlock and retry plan) open.
 
 import { api, download, probe } from './api.js';
 import { clock, duration, el, ms } from './dom.js';
+import { Recovery } from './recovery.js';
 
 /** How far back the CSV export reaches. */
 const EXPORT_HOURS = 24;
@@ -21,6 +25,7 @@ export class Alarms {
     this.model = model;
     this.notify = notify;
     this.items = new Map();
+    this.recovery = new Recovery(model, notify);
     this.summary = document.getElementById('alarm-summary');
     this.export = document.getElementById('alarm-export');
     this.export.addEventListener('click', () => this.download());
@@ -57,6 +62,7 @@ export class Alarms {
         this.items.delete(id);
       }
     }
+    this.recovery.keep(new Set(this.model.alarms.keys()));
     const order = [...active, ...past].map((a) => {
       let item = this.items.get(a.id);
       if (!item || item.alarm !== a) {
@@ -113,6 +119,7 @@ export class Alarms {
         ack,
       ),
       acked,
+      Recovery.offers(a) ? this.recovery.control(a) : null,
     );
   }
 

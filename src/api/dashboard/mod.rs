@@ -8,7 +8,8 @@
 //! `/dashboard/`, `api.js` (key and HTTP calls), `live.js` (the WebSocket, reconnection),
 //! `model.js` (the state the events build), `dom.js` (element and time helpers), and one
 //! module per part of the page: `counters.js` (the header), `attention.js` (the jobs that
-//! need a person), `alarms.js`, `devices.js`, `racks.js` (with `crane.js`, where a crane is
+//! need a person), `alarms.js` (with `recovery.js`, a memory loss's Unlock and retry),
+//! `devices.js`, `racks.js` (with `crane.js`, where a crane is
 //! drawn, and `locations.js`, a location's dialog), `kpi.js` (the KPIs, as SVG charts drawn by the page), `jobs.js` (with
 //! `actions.js`, the job buttons), `webhooks.js` (the webhook subscriptions, their lag,
 //! last error and delivery log); `reasons.js` says why a job waits, `cluster.js` which node
@@ -47,6 +48,7 @@ const FILES: &[(&str, &str, &str)] = &[
     ("/dashboard/devices.js", JS, include_str!("devices.js")),
     ("/dashboard/jobs.js", JS, include_str!("jobs.js")),
     ("/dashboard/alarms.js", JS, include_str!("alarms.js")),
+    ("/dashboard/recovery.js", JS, include_str!("recovery.js")),
     ("/dashboard/actions.js", JS, include_str!("actions.js")),
     ("/dashboard/attention.js", JS, include_str!("attention.js")),
     ("/dashboard/counters.js", JS, include_str!("counters.js")),

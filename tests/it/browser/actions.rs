@@ -158,3 +158,94 @@ async fn an_operator_unlocks_retries_pauses_and_locks_from_the_page() {
     browser.close().await;
     app.stop().await;
 }
+
+/// The shelf PLC loses its memory with three stores in its slots: the memory-loss alarm's
+/// Unlock and retry shows what it would do (the lost jobs and the locations they locked),
+/// changes nothing until the second click on its confirm button, then unlocks and retries
+/// exactly those jobs, which run before the retrieves queued behind them.
+#[tokio::test]
+async fn a_memory_loss_is_unlocked_and_retried_from_its_alarm() {
+    let Some(browser) = Browser::start().await else { return };
+    let (app, sims) = demo_app(|_| {}).await;
+    browser.viewport(1600, 1000).await;
+    browser.open(&app.url("/")).await;
+    browser
+        .wait(
+            "the connection to be live",
+            "return document.getElementById('conn').dataset.state === 'live'",
+            15,
+        )
+        .await;
+    browser.wait("the role", "return window.rackd.who.can('operator')", 10).await;
+
+    // The stores stay in their slots (10 s a task) until the power cycle.
+    sims.shelf.set_task_time(std::time::Duration::from_secs(10));
+    let place = |bay: u16| json!({"aisle": 1, "row": 1, "bay": bay, "level": 1, "position": 1});
+    let stores = (1..=3).map(|b| json!({"kind": "store", "barcode": format!("BOX-{b}"), "to": place(b)}));
+    let retrieves = (1..=3).map(|b| json!({"kind": "retrieve", "from": place(b)}));
+    let (status, batch) =
+        app.post("/api/v1/jobs/batch", &json!({"jobs": stores.chain(retrieves).collect::<Vec<_>>()})).await;
+    assert_eq!(status, 201, "{batch}");
+    let ids: Vec<i64> = batch["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()).collect();
+    let state = async |id: i64| app.get(&format!("/api/v1/jobs/{id}")).await.1["state"].clone();
+    crate::support::eventually("the stores in their slots", std::time::Duration::from_secs(10), async || {
+        for id in &ids[..3] {
+            if state(*id).await == "queued" {
+                return false;
+            }
+        }
+        true
+    })
+    .await;
+    sims.shelf.power_cycle();
+    sims.shelf.set_task_time(std::time::Duration::from_millis(100));
+
+    browser
+        .wait(
+            "the memory-loss alarm's button",
+            "return document.querySelector('#alarms button.recover') !== null",
+            20,
+        )
+        .await;
+    browser.click("#alarms button.recover").await;
+    browser
+        .wait(
+            "the plan",
+            "return document.querySelectorAll('#alarms .recovery-jobs li').length === 3 \
+             && document.querySelectorAll('#alarms .recovery-locations li').length === 3",
+            10,
+        )
+        .await;
+    let check = browser.text("#alarms .recovery-check").await;
+    assert!(check.as_str().unwrap().starts_with("Check aisle 1 first"), "{check}");
+    for id in &ids[..3] {
+        assert_eq!(state(*id).await, "failed", "the plan changed nothing");
+    }
+    confirm(&browser, "#alarms button.recover-apply", "Confirm: unlock and retry 3").await;
+    browser
+        .wait(
+            "the jobs queued again",
+            "const d = document.querySelector('#alarms .recovery-done'); \
+             return d !== null && d.textContent === '3 jobs queued again, 3 locations unlocked.'",
+            10,
+        )
+        .await;
+    crate::support::eventually("every job completed", std::time::Duration::from_secs(30), async || {
+        for id in &ids {
+            if state(*id).await != "completed" {
+                return false;
+            }
+        }
+        true
+    })
+    .await;
+    assert_eq!(sims.shelf.finished().1, 0, "no retrieve ran before its store");
+    let (_, audit) = app.get("/api/v1/audit?limit=6").await;
+    let reasons: Vec<&str> =
+        audit["entries"].as_array().unwrap().iter().map(|e| e["reason"].as_str().unwrap_or("")).collect();
+    assert!(reasons.iter().all(|r| r.contains("after shelf1 lost its memory")), "{audit}");
+    let toasts = browser.js("return [...document.querySelectorAll('.toast')].map(t => t.textContent)").await;
+    assert_eq!(toasts, json!([]), "no error was shown on the page");
+    browser.close().await;
+    app.stop().await;
+}
