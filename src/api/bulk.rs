@@ -164,7 +164,10 @@ fn device(app: &AppState, device: Option<String>) -> Result<Option<String>, ApiE
 }
 
 /// A list of 1..=[`MAX_BULK`] items, each once.
-fn listed<T: Eq + std::hash::Hash + std::fmt::Debug + Copy>(name: &str, items: &[T]) -> Result<(), ApiError> {
+fn listed<T: Eq + std::hash::Hash + std::fmt::Display + Copy>(
+    name: &str,
+    items: &[T],
+) -> Result<(), ApiError> {
     if items.len() > MAX_BULK {
         let message = format!("`{name}` lists {} items; one action takes at most {MAX_BULK}", items.len());
         return Err(ApiError::invalid("bulk_too_large", message));
@@ -174,7 +177,7 @@ fn listed<T: Eq + std::hash::Hash + std::fmt::Debug + Copy>(name: &str, items: &
     }
     let mut seen = HashSet::with_capacity(items.len());
     match items.iter().enumerate().find(|(_, item)| !seen.insert(**item)) {
-        Some((i, item)) => Err(invalid(format!("{name}[{i}]: {item:?} is listed twice"))),
+        Some((i, item)) => Err(invalid(format!("{name}[{i}]: {item} is listed twice"))),
         None => Ok(()),
     }
 }

@@ -64,11 +64,13 @@ pub struct FailedJobs {
 }
 
 impl FailedJobs {
+    /// Whether `job` is one of them (compared in milliseconds, as the store keeps times,
+    /// so that both ways of selecting agree: `store::jobs::failed` and this).
     fn passes(&self, job: &jobs::Job) -> bool {
         job.state == JobState::Failed
             && self.device.as_ref().is_none_or(|d| job.device.as_ref() == Some(d))
             && self.kind.is_none_or(|k| job.failure.as_ref().is_some_and(|f| f.kind == k))
-            && self.since.is_none_or(|t| job.updated_at >= t)
+            && self.since.is_none_or(|t| to_ms(job.updated_at) >= to_ms(t))
     }
 }
 

@@ -191,7 +191,7 @@ async fn retry_by_failure_kind_since_a_time_and_unlock_by_cause(#[case] engine: 
     let entries = audit(&app, 4).await;
     assert_eq!(
         entries[0],
-        ("retry".into(), format!("job:{second}"), "bulk retry of 1 jobs: box found".into())
+        ("retry".into(), format!("job:{second}"), "bulk retry of 1 job: box found".into())
     );
     assert_eq!(entries[1].0, "unlock");
     assert_eq!(entries[1].2, "bulk unlock of 2 locations: bays 1-2 checked");

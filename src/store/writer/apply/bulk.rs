@@ -102,15 +102,17 @@ impl Group {
 
 /// The reason audited with each item: the action and its size, then the operator's reason.
 fn reason(bulk: &Bulk) -> String {
-    let (what, n, items) = match &bulk.action {
-        BulkAction::Unlock(l) => ("unlock", l.len(), "locations"),
-        BulkAction::Retry { jobs, unlock: false } => ("retry", jobs.len(), "jobs"),
-        BulkAction::Retry { jobs, unlock: true } => ("unlock and retry", jobs.len(), "jobs"),
-        BulkAction::Cancel(jobs) => ("cancel", jobs.len(), "jobs"),
+    let (what, item) = match &bulk.action {
+        BulkAction::Unlock(_) => ("unlock", "location"),
+        BulkAction::Retry { unlock: false, .. } => ("retry", "job"),
+        BulkAction::Retry { unlock: true, .. } => ("unlock and retry", "job"),
+        BulkAction::Cancel(_) => ("cancel", "job"),
     };
+    let n = bulk.action.len();
+    let s = if n == 1 { "" } else { "s" };
     match &bulk.reason {
-        Some(r) => format!("bulk {what} of {n} {items}: {r}"),
-        None => format!("bulk {what} of {n} {items}"),
+        Some(r) => format!("bulk {what} of {n} {item}{s}: {r}"),
+        None => format!("bulk {what} of {n} {item}{s}"),
     }
 }
 
