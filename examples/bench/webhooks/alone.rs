@@ -2,15 +2,16 @@
 //! else running, from a client built as the deliverer's (`service::webhooks::client`), in a
 //! process of its own as rackd's deliverer is (this executable run as `bench
 //! webhooks-round-trips URL N BODY_FILE`), on one thread: the fastest sequential client
-//! tried. In the benchmark's own process, or on a multi-thread runtime (rackd's), the same
-//! loop made 8,000-8,500 round trips a second at 80 µs of client CPU each; on one thread,
-//! 11,000-17,000 at 34-42 µs.
+//! tried (on a multi-thread runtime, as rackd's, 7,800-8,400 round trips a second at 74-86
+//! µs of client CPU each, against 11,300-13,600 at 34-39 µs on one thread, same session).
 //!
-//! It is not a hard bound on this machine (a VM): a ping-pong alone lets both cores idle
-//! between its steps, and waking an idle core is slow. With a busy loop at the lowest
-//! priority keeping the cores awake, the same baseline made 23,000-29,000 round trips a
-//! second at under 25 µs of CPU on each side. rackd keeps a core busy while it delivers
-//! (its SQLite thread and writer), so it can beat the baseline.
+//! It is not a hard bound on this machine (a shared VM). A ping-pong alone lets the cores
+//! idle between its steps, and waking an idle core there is slow: the same baseline ran at
+//! 11,300-13,600 round trips a second (32-39 µs of client CPU each) in some runs and at
+//! 25,000-46,000 (11-19 µs) in others, at times both in one run; an earlier version of it
+//! (in the benchmark's process) ran at 23,000-29,000 with a busy loop at the lowest
+//! priority keeping the cores awake and at 10,400-17,300 without, minutes apart. rackd
+//! keeps a core busy while it delivers (its SQLite thread, writer and sync thread).
 
 use std::ffi::OsString;
 use std::path::Path;

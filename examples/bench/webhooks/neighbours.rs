@@ -5,7 +5,9 @@
 //! nothing listens on (every try refused, retried with the default backoff), each with
 //! `job.*`. A round runs the three in turn, starting one later each round (abc, bca, cab),
 //! so that a drift of the machine's load falls on each alike. Figures of (b) and (c) are
-//! printed as ratios to (a) of the same round, and their mean over the rounds.
+//! printed as ratios to (a) of the same round, and their mean over the rounds; beside
+//! intake's rates and CPU per job, the process's peak resident memory over each intake run
+//! (a subscriber that stops reading the hub can hold commits in memory).
 
 use std::time::Duration;
 
