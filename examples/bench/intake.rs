@@ -57,23 +57,27 @@ mod tls {
     }
 }
 
-struct Phase {
-    name: &'static str,
+/// What one phase measured.
+pub struct Phase {
+    /// The phase, as printed.
+    pub name: &'static str,
     requests: u64,
     jobs_per_request: u64,
     elapsed: Duration,
-    latency_us: Histogram<u64>,
+    /// Each request's latency, in µs.
+    pub latency_us: Histogram<u64>,
     /// The process's CPU time over the phase, if the system tells it.
     cpu: Option<Duration>,
 }
 
 impl Phase {
-    fn requests_per_sec(&self) -> f64 {
+    /// Requests answered per second.
+    pub fn requests_per_sec(&self) -> f64 {
         self.requests as f64 / self.elapsed.as_secs_f64()
     }
 
     /// CPU microseconds per job, if the system tells the CPU time.
-    fn cpu_us_per_job(&self) -> Option<f64> {
+    pub fn cpu_us_per_job(&self) -> Option<f64> {
         let cpu = self.cpu?;
         Some(cpu.as_secs_f64() * 1e6 / (self.requests * self.jobs_per_request) as f64)
     }
@@ -174,8 +178,9 @@ async fn use_database(config: &mut Config, database: &str, path: &std::path::Pat
     };
 }
 
-/// Serves `config` and runs the three phases against it.
-async fn measure(
+/// Serves `config` and runs the three phases against it (`bench webhooks --neighbours`
+/// runs them with and without a subscription in `config`).
+pub async fn measure(
     config: &Config,
     client: reqwest::ClientBuilder,
     options: &Options,

@@ -9,6 +9,9 @@
 //! cargo run --release --example bench -- fleet  [--devices 500] [--tags 30] [--poll-ms 500] [--seconds 20] [--changing 0.1]
 //! cargo run --release --example bench -- crane  [--jobs 200] [--backlog 30] [--fill 0.5] [--time-scale 200] [--seed 7]
 //! cargo run --release --example bench -- history [--jobs 10000000] [--days 365] [--database sqlite|postgres|URL]
+//! cargo run --release --example bench -- webhooks [--rate 200] [--seconds 5] [--backlog 20000] [--round-trips 10000]
+//! cargo run --release --example bench -- webhooks --neighbours [--rounds 3] [--intake-seconds 2]
+//!                                               [--shelf-latency-jobs 500] [--shelf-batch-jobs 5000]
 //! ```
 //!
 //! An example rather than a `rackd bench` subcommand, so that `cargo build --release` of
@@ -16,7 +19,7 @@
 //! tokio-tungstenite, tempfile are dev-dependencies), while `cargo test` and clippy still
 //! build and check it. Figures and what they mean: docs/development/benchmarks.md.
 //!
-//! `ws` and `fleet` measure the server's CPU apart from the load generator's, so they run
+//! `ws`, `fleet` and `webhooks` measure the server's CPU apart from the load generator's, so they run
 //! rackd as a child process. The child is this same executable started as `bench rackd
 //! serve ...`, which hands the rest of its arguments to rackd's own command line exactly as
 //! the `rackd` binary does: `cargo run --example` does not rebuild the `rackd` binary, and
@@ -38,6 +41,7 @@ mod shelf;
 #[allow(dead_code)]
 #[path = "../../tests/it/support/tls.rs"]
 mod tls;
+mod webhooks;
 mod ws;
 
 use std::process::ExitCode;
@@ -122,12 +126,18 @@ enum Bench {
     /// A simulated year with `[retention]`: the store's size, and every job in the store or
     /// the archive.
     Retention(retention::RetentionArgs),
+    /// Webhooks: delivery lag and events/s to one receiver; with `--neighbours`, what a
+    /// slow or dead receiver costs `intake` and `shelf`.
+    Webhooks(webhooks::WebhooksArgs),
 }
 
 fn main() -> ExitCode {
     let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
     if args.get(1).is_some_and(|a| a == child::RACKD) {
         return child::run_rackd(&args[1..]);
+    }
+    if args.get(1).is_some_and(|a| a == webhooks::alone::ARG) {
+        return webhooks::alone::run_child(&args[2..]);
     }
     let bench = Bench::parse();
     let runtime = tokio::runtime::Runtime::new().expect("a tokio runtime");
@@ -155,6 +165,7 @@ fn main() -> ExitCode {
             Bench::Crane(args) => crane::run(args).await,
             Bench::History(args) => history::run(args).await,
             Bench::Retention(args) => retention::run(args).await,
+            Bench::Webhooks(args) => webhooks::run(args).await,
         }
     });
     match result {

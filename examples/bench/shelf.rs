@@ -23,7 +23,7 @@ use anyhow::Context;
 use hdrhistogram::Histogram;
 
 use rackd::cli::demo::shelf_device;
-use rackd::config::Config;
+use rackd::config::{Config, WebhookConfig};
 use rackd::protocols::PlcMemory;
 use rackd::protocols::faults::Faults;
 use rackd::protocols::modbus::{ModbusClient, ModbusConfig};
@@ -52,6 +52,45 @@ pub async fn run(
     poll_ms: u64,
     lossy: Option<Lossy>,
 ) -> anyhow::Result<()> {
+    let Some(lossy) = lossy else {
+        let figures = measure(latency_jobs, batch_jobs, poll_ms, Vec::new()).await?;
+        println!("bench shelf: simulator with zero-duration tasks, poll every {poll_ms} ms");
+        figures.print();
+        return Ok(());
+    };
+    let (sim, served, _dir) = start(poll_ms, Some(&lossy), Vec::new()).await?;
+    let base = served.base.clone();
+    let client = reqwest::Client::new();
+    let clean = rate(batch(&client, &base, &sim, 0, lossy.jobs).await?);
+    sim.set_faults(Faults { drop_rate: lossy.rate, ..Faults::default() });
+    let dropped = rate(batch(&client, &base, &sim, lossy.jobs, lossy.jobs).await?);
+    let device: serde_json::Value =
+        client.get(format!("{base}/api/v1/devices/shelf1")).send().await?.json().await?;
+    let timer = match (lossy.fixed_timeout, lossy.min_timeout_ms) {
+        (true, _) => "fixed timeout".to_owned(),
+        (false, Some(ms)) => format!("adaptive timeout, floor {ms} ms"),
+        (false, None) => "adaptive timeout, default floor".to_owned(),
+    };
+    println!(
+        "bench shelf --drop {}: {} jobs per run, poll every {poll_ms} ms, {timer}",
+        lossy.rate, lossy.jobs
+    );
+    println!("clean link:          {clean:.1} completed jobs/s");
+    println!("{:>3.0}% requests lost:  {dropped:.1} completed jobs/s", lossy.rate * 100.0);
+    println!("ratio lossy / clean: {:.1}%", 100.0 * dropped / clean);
+    println!("device link after the lossy run: {}", device["link"]);
+    served.stop().await?;
+    sim.shutdown().await;
+    Ok(())
+}
+
+/// The simulator, and rackd driving it (with `webhooks` subscribed) on a database in the
+/// temporary folder returned.
+async fn start(
+    poll_ms: u64,
+    lossy: Option<&Lossy>,
+    webhooks: Vec<WebhookConfig>,
+) -> anyhow::Result<(ShelfSim, Served, tempfile::TempDir)> {
     let sim =
         ShelfSim::start("127.0.0.1:0", ShelfSimOptions { task_time: Duration::ZERO, ..Default::default() })
             .await?;
@@ -59,44 +98,78 @@ pub async fn run(
     let mut config = Config::demo();
     config.server.listen = "127.0.0.1:0".parse()?;
     config.database.path = dir.path().join("bench.db");
+    config.webhooks = webhooks;
     let plc_addr = sim.local_addr().context("a UDP simulator has an address")?.to_string();
     let mut device = shelf_device(&sim, "shelf1", &plc_addr, vec![1]);
     device.poll_ms = poll_ms;
-    if let Some(ms) = lossy.as_ref().and_then(|l| l.min_timeout_ms) {
+    if let Some(ms) = lossy.and_then(|l| l.min_timeout_ms) {
         device.link.tuning.min_timeout = Duration::from_millis(ms);
     }
-    if lossy.as_ref().is_some_and(|l| l.fixed_timeout) {
+    if lossy.is_some_and(|l| l.fixed_timeout) {
         device.link.tuning.min_timeout = device.link.timeout;
     }
     config.devices = vec![device.into()];
     let served = Served::start(&config).await?;
-    let base = served.base.clone();
-    let client = reqwest::Client::new();
+    Ok((sim, served, dir))
+}
 
-    if let Some(lossy) = lossy {
-        let clean = rate(batch(&client, &base, &sim, 0, lossy.jobs).await?);
-        sim.set_faults(Faults { drop_rate: lossy.rate, ..Faults::default() });
-        let dropped = rate(batch(&client, &base, &sim, lossy.jobs, lossy.jobs).await?);
-        let device: serde_json::Value =
-            client.get(format!("{base}/api/v1/devices/shelf1")).send().await?.json().await?;
-        let timer = match (lossy.fixed_timeout, lossy.min_timeout_ms) {
-            (true, _) => "fixed timeout".to_owned(),
-            (false, Some(ms)) => format!("adaptive timeout, floor {ms} ms"),
-            (false, None) => "adaptive timeout, default floor".to_owned(),
-        };
-        println!(
-            "bench shelf --drop {}: {} jobs per run, poll every {poll_ms} ms, {timer}",
-            lossy.rate, lossy.jobs
-        );
-        println!("clean link:          {clean:.1} completed jobs/s");
-        println!("{:>3.0}% requests lost:  {dropped:.1} completed jobs/s", lossy.rate * 100.0);
-        println!("ratio lossy / clean: {:.1}%", 100.0 * dropped / clean);
-        println!("device link after the lossy run: {}", device["link"]);
-        served.stop().await?;
-        sim.shutdown().await;
-        return Ok(());
+/// What the clean run of `bench shelf` measures.
+pub struct Figures {
+    /// One Modbus UDP read round trip to the simulator, in µs.
+    pub rtt: Histogram<u64>,
+    /// From sending a job's POST to its task id in a slot, in µs.
+    pub handover: Histogram<u64>,
+    /// Jobs completed in the sustained run.
+    pub done: u64,
+    /// How long they took.
+    pub elapsed: Duration,
+}
+
+impl Figures {
+    /// Completed jobs per second in the sustained run.
+    pub fn sustained(&self) -> f64 {
+        rate((self.done, self.elapsed))
     }
 
+    fn print(&self) {
+        let ms = |h: &Histogram<u64>, q: f64| h.value_at_quantile(q) as f64 / 1000.0;
+        let (rtt, handover) = (&self.rtt, &self.handover);
+        let jobs = handover.len();
+        println!(
+            "Modbus UDP round trip (baseline)   p50 {:.3} ms  p99 {:.3} ms",
+            ms(rtt, 0.5),
+            ms(rtt, 0.99)
+        );
+        println!(
+            "POST -> task in slot ({jobs} jobs)    p50 {:.3} ms  p99 {:.3} ms  = {:.1}x / {:.1}x three round trips",
+            ms(handover, 0.5),
+            ms(handover, 0.99),
+            ms(handover, 0.5) / (3.0 * ms(rtt, 0.5)),
+            ms(handover, 0.99) / (3.0 * ms(rtt, 0.5)),
+        );
+        println!(
+            "sustained: {} jobs completed in {:.2} s = {:.0} jobs/s ({} slots)",
+            self.done,
+            self.elapsed.as_secs_f64(),
+            self.sustained(),
+            60
+        );
+    }
+}
+
+/// The clean run: the round trips, `latency_jobs` hand-overs one at a time, then
+/// `batch_jobs` in batches, against a fresh simulator and rackd with `webhooks` subscribed
+/// (`bench webhooks --neighbours` runs it with and without a subscription).
+pub async fn measure(
+    latency_jobs: usize,
+    batch_jobs: usize,
+    poll_ms: u64,
+    webhooks: Vec<WebhookConfig>,
+) -> anyhow::Result<Figures> {
+    let (sim, served, _dir) = start(poll_ms, None, webhooks).await?;
+    let base = served.base.clone();
+    let client = reqwest::Client::new();
+    let plc_addr = sim.local_addr().context("a UDP simulator has an address")?.to_string();
     let plc = ModbusClient::connect(ModbusConfig::shelf_plc(plc_addr)).await?;
     let at = plc.parse_address("4x4000")?;
     let mut rtt = Histogram::<u64>::new(3)?;
@@ -125,26 +198,9 @@ pub async fn run(
     }
 
     let (done, elapsed) = batch(&client, &base, &sim, latency_jobs, batch_jobs).await?;
-
-    let ms = |h: &Histogram<u64>, q: f64| h.value_at_quantile(q) as f64 / 1000.0;
-    println!("bench shelf: simulator with zero-duration tasks, poll every {poll_ms} ms");
-    println!("Modbus UDP round trip (baseline)   p50 {:.3} ms  p99 {:.3} ms", ms(&rtt, 0.5), ms(&rtt, 0.99));
-    println!(
-        "POST -> task in slot ({latency_jobs} jobs)    p50 {:.3} ms  p99 {:.3} ms  = {:.1}x / {:.1}x three round trips",
-        ms(&handover, 0.5),
-        ms(&handover, 0.99),
-        ms(&handover, 0.5) / (3.0 * ms(&rtt, 0.5)),
-        ms(&handover, 0.99) / (3.0 * ms(&rtt, 0.5)),
-    );
-    println!(
-        "sustained: {done} jobs completed in {:.2} s = {:.0} jobs/s ({} slots)",
-        elapsed.as_secs_f64(),
-        done as f64 / elapsed.as_secs_f64(),
-        60
-    );
     served.stop().await?;
     sim.shutdown().await;
-    Ok(())
+    Ok(Figures { rtt, handover, done, elapsed })
 }
 
 /// Posts `count` light jobs (numbered from `first`) in batches and waits until every one

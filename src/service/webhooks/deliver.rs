@@ -5,7 +5,7 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use tokio::sync::{broadcast, mpsc};
+use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
 use super::{Action, ActionError, Command, Live, Parts, alarm_device, send};
@@ -84,7 +84,6 @@ impl Deliverer {
     /// store, if the subscription has one.
     pub(super) async fn run(mut self, stored: Option<Row>) {
         let name = self.config.name.clone();
-        let mut commits = self.parts.hub.subscribe();
         self.row = match stored {
             Some(row) => row,
             None => {
@@ -106,12 +105,12 @@ impl Deliverer {
             [0, 1].map(|code| active.iter().any(|a| a.kind == AlarmKind::Webhook && a.code == code));
         self.show(None);
         tracing::info!(webhook = %name, cursor = self.row.cursor, "webhook deliverer started");
-        match self.work(&mut commits).await {
+        match self.work().await {
             Stop::Writer => tracing::info!(webhook = %name, "webhook deliverer stopped: no writer"),
         }
     }
 
-    async fn work(&mut self, commits: &mut broadcast::Receiver<crate::service::events::Commit>) -> Stop {
+    async fn work(&mut self) -> Stop {
         loop {
             if let Err(stop) = self.flush(true).await {
                 return stop;
@@ -119,6 +118,12 @@ impl Deliverer {
             while let Ok(command) = self.commands.try_recv() {
                 self.obey(command).await;
             }
+            // Subscribed to the hub only while waiting for a commit: a subscriber that does
+            // not read (this task, while a slow or dead receiver holds it in `deliver`) pins
+            // the hub's last `events.buffer` commits in memory, and makes every commit
+            // serialize its events for it. Subscribed before `published` is read, so that a
+            // commit published after the read wakes it.
+            let mut commits = self.parts.hub.subscribe();
             let published = self.parts.hub.published().get();
             if self.row.paused != 0 || self.row.cursor >= published {
                 if self.row.cursor >= published && self.alarmed[1] {
@@ -142,6 +147,7 @@ impl Deliverer {
                 }
                 continue;
             }
+            drop(commits);
             let page = match events::after(&self.parts.pool, self.row.cursor, PAGE).await {
                 Ok(page) => page,
                 Err(e) => {

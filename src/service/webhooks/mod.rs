@@ -38,6 +38,8 @@
 //!   more and cannot move a cursor. The new active node starts from the stored cursor.
 //! - **Never on the job path**: deliverers read the log through the pool and write through
 //!   the writer's queue like any record; a slow or dead receiver holds only its own task.
+//!   A deliverer listens to the hub's commits only while it waits for one, so one held by
+//!   its receiver pins no commits in memory (`bench webhooks --neighbours`).
 
 mod client;
 mod deliver;
@@ -248,3 +250,6 @@ mod tests {
 
 #[cfg(test)]
 mod gate_tests;
+
+#[cfg(test)]
+mod hold_tests;
