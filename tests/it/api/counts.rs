@@ -91,7 +91,10 @@ async fn the_counts_in_metrics_are_the_tables_through_work_alarms_and_a_restart(
     let device = |id: &str, address: String, aisle: u16| {
         let mut d = rackd::cli::demo::shelf_device(&sim, id, &address, vec![aisle]);
         d.poll_ms = 20;
-        d.link.timeout = Duration::from_millis(30);
+        // Short enough that shelf2 is offline at once, long enough (with a fixed timer)
+        // that a loaded machine's late replies do not take shelf1 offline too.
+        d.link.timeout = Duration::from_millis(200);
+        d.link.tuning.min_timeout = d.link.timeout;
         d.link.retries = 0;
         d.offline_after = 2;
         DeviceConfig::from(d)
