@@ -38,13 +38,7 @@ async fn an_operator_unlocks_retries_pauses_and_locks_from_the_page() {
     let (app, sims) = demo_app(|_| {}).await;
     browser.viewport(1600, 1000).await;
     browser.open(&app.url("/")).await;
-    browser
-        .wait(
-            "the connection to be live",
-            "return document.getElementById('conn').dataset.state === 'live'",
-            15,
-        )
-        .await;
+    browser.live().await;
     browser.wait("the role", "return window.rackd.who.can('operator')", 10).await;
 
     // A business alarm (no load at the pick) fails the running job and locks its location.
@@ -169,13 +163,7 @@ async fn a_memory_loss_is_unlocked_and_retried_from_its_alarm() {
     let (app, sims) = demo_app(|_| {}).await;
     browser.viewport(1600, 1000).await;
     browser.open(&app.url("/")).await;
-    browser
-        .wait(
-            "the connection to be live",
-            "return document.getElementById('conn').dataset.state === 'live'",
-            15,
-        )
-        .await;
+    browser.live().await;
     browser.wait("the role", "return window.rackd.who.can('operator')", 10).await;
 
     // The stores stay in their slots (10 s a task) until the power cycle.

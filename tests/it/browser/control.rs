@@ -39,13 +39,7 @@ async fn the_page_says_why_each_job_waits() {
     let (app, sims) = demo_app(|_| {}).await;
     browser.viewport(1600, 1000).await;
     browser.open(&app.url("/")).await;
-    browser
-        .wait(
-            "the connection to be live",
-            "return document.getElementById('conn').dataset.state === 'live'",
-            15,
-        )
-        .await;
+    browser.live().await;
 
     // A locked location: the job on it waits, naming who locked it.
     let (status, _) = app.post("/api/v1/locations/1/1/2/3/1/lock", &json!({"reason": "box damaged"})).await;
@@ -122,13 +116,7 @@ async fn kpis_acknowledgement_and_whoami() {
     .await;
     browser.viewport(1600, 1000).await;
     browser.open_with_key(&app, OPERATOR).await;
-    browser
-        .wait(
-            "the connection to be live",
-            "return document.getElementById('conn').dataset.state === 'live'",
-            15,
-        )
-        .await;
+    browser.live().await;
     browser
         .wait("whoami", "return document.getElementById('who').textContent === 'alice · operator'", 10)
         .await;

@@ -71,13 +71,7 @@ async fn with_keys_the_page_asks_for_one_and_works_once_given() {
 
     // Accepted: live, and the key is kept.
     browser.open_with_key(&app, KEY).await;
-    browser
-        .wait(
-            "the connection to be live",
-            "return document.getElementById('conn').dataset.state === 'live'",
-            15,
-        )
-        .await;
+    browser.live().await;
     browser.wait("the devices", "return document.querySelectorAll('[data-device]').length === 3", 10).await;
     let open = browser.js("return document.getElementById('key-dialog').open").await;
     assert_eq!(open, json!(false), "no dialog once the key is good");
@@ -145,13 +139,7 @@ async fn a_viewer_sees_no_buttons_it_cannot_use() {
 
     // The viewer: everything shown, no button that would be refused.
     browser.open_with_key(&app, VIEWER).await;
-    browser
-        .wait(
-            "the connection to be live",
-            "return document.getElementById('conn').dataset.state === 'live'",
-            15,
-        )
-        .await;
+    browser.live().await;
     browser.wait("the role", "return window.rackd.who.role === 'viewer'", 10).await;
     browser
         .wait("the queued job", "return document.querySelector('#jobs tbody tr[data-job-id]') !== null", 10)
@@ -173,13 +161,7 @@ async fn a_viewer_sees_no_buttons_it_cannot_use() {
 
     // The operator, on the same page: Cancel, Resume, Pause aisle, Unlock.
     browser.open_with_key(&app, KEY).await;
-    browser
-        .wait(
-            "the connection to be live",
-            "return document.getElementById('conn').dataset.state === 'live'",
-            15,
-        )
-        .await;
+    browser.live().await;
     browser.wait("the role", "return window.rackd.who.role === 'operator'", 10).await;
     browser
         .wait("the queued job", "return document.querySelector('#jobs tbody tr[data-job-id]') !== null", 10)

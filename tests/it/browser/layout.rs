@@ -54,13 +54,7 @@ async fn the_first_screen_shows_what_needs_attention() {
     let (app, sims) = demo_app(|_| {}).await;
     browser.viewport(1600, 1000).await;
     browser.open(&app.url("/")).await;
-    browser
-        .wait(
-            "the connection to be live",
-            "return document.getElementById('conn').dataset.state === 'live'",
-            15,
-        )
-        .await;
+    browser.live().await;
 
     // The crane runs a job and halts on an emergency stop mid-way: the job needs attention.
     let held = submit(
@@ -219,13 +213,7 @@ async fn tiles_go_stale_when_the_live_connection_drops() {
     let (app, sims) = demo_app(|_| {}).await;
     browser.viewport(1600, 1000).await;
     browser.open(&app.url("/")).await;
-    browser
-        .wait(
-            "the connection to be live",
-            "return document.getElementById('conn').dataset.state === 'live'",
-            15,
-        )
-        .await;
+    browser.live().await;
     browser.wait("the devices", "return document.querySelectorAll('[data-device]').length === 3", 10).await;
     let fresh = browser
         .js("return [document.body.classList.contains('stale'), getComputedStyle(document.querySelector('[data-device] .as-of')).display]")

@@ -162,6 +162,16 @@ impl Browser {
         self.wait("the dashboard script to start", "return window.rackd !== undefined", 10).await;
     }
 
+    /// Waits (15 s at most) until the page's connection to the event stream is live.
+    pub async fn live(&self) {
+        self.wait(
+            "the connection to be live",
+            "return document.getElementById('conn').dataset.state === 'live'",
+            15,
+        )
+        .await;
+    }
+
     /// Opens the page with `key` in its address (`/?token=KEY`, as a link hands a key over)
     /// and accepts it where the page asks whether to use it.
     pub async fn open_with_key(&self, app: &TestApp, key: &str) {

@@ -43,13 +43,7 @@ async fn the_dashboard_follows_the_demo_store_live() {
     browser.open(&app.url("/")).await;
 
     // The snapshot: connected, both devices online, every location drawn.
-    browser
-        .wait(
-            "the connection to be live",
-            "return document.getElementById('conn').dataset.state === 'live'",
-            15,
-        )
-        .await;
+    browser.live().await;
     for device in ["shelf1", "crane1", "tower1"] {
         let script = format!(
             "const b = document.querySelector('[data-device=\"{device}\"] .badge.online'); return b && !b.hidden;"
