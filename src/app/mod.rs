@@ -247,6 +247,11 @@ impl Application {
         self.reload.read_from(sources);
     }
 
+    /// The running configuration and where to read it again.
+    pub fn reload(&self) -> Reload {
+        self.reload.clone()
+    }
+
     /// Keeps `thing` (an in-process simulator, say) alive as long as the service runs.
     pub fn keep(&mut self, thing: impl std::any::Any + Send) {
         self.keep.push(Box::new(thing));

@@ -178,6 +178,13 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 // The demo site's devices point at its simulators: it is not reloaded.
                 None => app.reload_from(sources),
             }
+            // Listening before the server answers: a SIGHUP from then on is a reload.
+            #[cfg(unix)]
+            {
+                use tokio::signal::unix::{SignalKind, signal};
+                let hangups = signal(SignalKind::hangup()).context("listening for SIGHUP")?;
+                tokio::spawn(crate::service::reload::on_hangups(app.reload(), hangups));
+            }
             app.run_until(shutdown_signal()).await?;
         }
         Command::Db(DbCommand::Copy { from, to }) => {

@@ -13,7 +13,9 @@
 //!   have no sources: there is nothing to read again, and a reload says so (409).
 //! - A key that cannot change at run time ([`crate::config::diff::FIXED`]) refuses the
 //!   whole reload, naming the key and where it is set: all or nothing.
-//! - Applying is not done yet: only the dry run answers (see `api::config`).
+//! - Applying is not done yet: only the dry run answers (see `api::config`), and SIGHUP
+//!   ([`on_hangups`]) runs the same check and logs its outcome. A SIGHUP no longer ends
+//!   the process (its default action), with or without a file.
 //! - Reading runs on a blocking thread: the loader reads files (the configuration, keys,
 //!   certificates) with the standard library.
 
@@ -90,5 +92,22 @@ impl Reload {
             return Err(ReloadError::Fixed(keys));
         }
         Ok(Plan { config: loaded.config, difference })
+    }
+}
+
+/// On each SIGHUP, the check of `POST /config/reload?dry_run=true`, its outcome logged:
+/// the difference, or why the configuration is refused.
+#[cfg(unix)]
+pub async fn on_hangups(reload: Reload, mut hangups: tokio::signal::unix::Signal) {
+    while hangups.recv().await.is_some() {
+        match reload.check().await {
+            Ok(plan) => {
+                let difference = serde_json::to_string(&plan.difference).unwrap_or_default();
+                tracing::info!(%difference, "SIGHUP: the configuration was read again and checks; not applied (dry run only so far)");
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "SIGHUP: the configuration was read again and is refused; nothing was applied")
+            }
+        }
     }
 }

@@ -4,11 +4,13 @@
 //! admin role. SQLite alone: a reload reads files, not the store.
 
 use std::path::Path;
+use std::time::Duration;
 
 use rackd::auth::KeyHash;
 use rackd::config::{Config, Sources};
 use serde_json::{Value, json};
 
+use crate::support::node::Node;
 use crate::support::*;
 
 /// Two aisles of the demo site, a shelf and a crane (at addresses where nothing answers:
@@ -170,4 +172,45 @@ async fn a_server_not_started_from_a_file_has_nothing_to_reload() {
     let app = spawn_app(rackd::store::Engine::Sqlite).await;
     assert_error(&reload(&app, "?dry_run=true", "none").await, 409, "no_config_file");
     app.stop().await;
+}
+
+/// SIGHUP runs the same check in a `rackd serve --config` process, logs its outcome, and
+/// no longer ends the process.
+#[tokio::test]
+async fn sighup_checks_the_file_again_and_logs_the_outcome() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = Config::demo();
+    config.server.listen = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
+    config.database.path = dir.path().join("rackd.db");
+    let mut node = Node::new(dir.path(), "rackd", &config);
+    node.start();
+    let http = reqwest::Client::new();
+    let health = format!("{}/healthz", node.url);
+    eventually("rackd to answer", Duration::from_secs(30), async || {
+        http.get(&health).send().await?.error_for_status()
+    })
+    .await;
+
+    config.events.buffer += 1;
+    std::fs::write(node.config_file(), toml::to_string(&config).unwrap()).unwrap();
+    node.hang_up();
+    eventually("the checked difference in the log", Duration::from_secs(10), async || {
+        let log = node.log();
+        let line = log.lines().find(|l| l.contains("SIGHUP: the configuration was read again and checks"));
+        line.filter(|l| l.contains("events.buffer")).map(str::to_owned).ok_or(log)
+    })
+    .await;
+
+    let text = std::fs::read_to_string(node.config_file()).unwrap();
+    std::fs::write(node.config_file(), text.replacen("[server]\n", "[server]\nlisen = 1\n", 1)).unwrap();
+    let checked = Sources::file(node.config_file()).load().unwrap_err().to_string();
+    node.hang_up();
+    eventually("the refusal in the log", Duration::from_secs(10), async || {
+        let log = node.log();
+        let refused = log.lines().any(|l| l.contains("is refused") && l.contains(&checked));
+        if refused { Ok(()) } else { Err(log) }
+    })
+    .await;
+    assert!(node.running(), "a SIGHUP does not end rackd");
+    http.get(&health).send().await.unwrap().error_for_status().unwrap();
 }
