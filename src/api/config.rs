@@ -6,8 +6,9 @@
 //! the configuration checks, so a caller learns first what is wrong with its file. Refusals:
 //! 422 `invalid_config` for a file that `check-config` refuses (the same
 //! `WHERE: KEY: MESSAGE`), 409 `fixed_key` for a key that cannot change while rackd runs
-//! (the listen address, the database, the cluster node), 409 `no_config_file` when rackd
-//! did not start from a file.
+//! (the listen address, the database, the cluster node), 409 `aisle_in_use` for an aisle
+//! removed or shrunk while a box or a job uses a location it would lose (naming them), 409
+//! `no_config_file` when rackd did not start from a file.
 
 use axum::extract::State;
 use axum::http::StatusCode;
@@ -56,7 +57,8 @@ impl From<ReloadError> for ApiError {
             ReloadError::NoSources => ApiError::conflict("no_config_file", e.to_string()),
             ReloadError::Invalid(_) => ApiError::invalid("invalid_config", e.to_string()),
             ReloadError::Fixed(_) => ApiError::conflict("fixed_key", e.to_string()),
-            ReloadError::Task(_) => ApiError::unavailable(e),
+            ReloadError::InUse(_) => ApiError::conflict("aisle_in_use", e.to_string()),
+            ReloadError::Task(_) | ReloadError::Store(_) => ApiError::unavailable(e),
         }
     }
 }
@@ -72,7 +74,7 @@ impl From<ReloadError> for ApiError {
         (status = 401, description = "No key, or an unknown key", body = ErrorBody),
         (status = 403, description = "Not an administrator's key", body = ErrorBody),
         (status = 409, description = "A key that cannot change while rackd runs (`fixed_key`, naming it and \
-where it is set), or rackd did not start from a file (`no_config_file`); nothing was applied", body = ErrorBody),
+where it is set), an aisle removed or shrunk while a box or a job uses a location it would lose (`aisle_in_use`, naming them), or rackd did not start from a file (`no_config_file`); nothing was applied", body = ErrorBody),
         (status = 422, description = "The configuration does not check (`invalid_config`: WHERE: KEY: MESSAGE, \
 as `rackd check-config` says)", body = ErrorBody),
         (status = 501, description = "Applying is not done yet: ask with `?dry_run=true`", body = ErrorBody),

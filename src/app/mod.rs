@@ -196,7 +196,7 @@ impl Application {
             }
             None => None,
         };
-        let reload = Reload::new(config.clone());
+        let reload = Reload::new(config.clone(), pool.clone(), dispatcher.queues().clone());
         let state = AppState::new(Shared {
             reload: reload.clone(),
             pool,

@@ -214,3 +214,47 @@ async fn sighup_checks_the_file_again_and_logs_the_outcome() {
     assert!(node.running(), "a SIGHUP does not end rackd");
     http.get(&health).send().await.unwrap().error_for_status().unwrap();
 }
+
+/// An aisle removed, or shrunk, is refused while a box or an unfinished job uses a
+/// location it would lose, naming them; one that nothing uses is not.
+#[tokio::test]
+async fn an_aisle_in_use_is_not_removed_and_what_holds_it_is_named() {
+    let (app, file) = spawn_from_file(&site("127.0.0.1:9", CRANE)).await;
+    let without_2 = |c: &mut Config| {
+        c.site.aisles.retain(|a| a.aisle != 2);
+        c.devices.retain(|d| d.aisles() != [2]);
+    };
+    rewrite(&file, &site("127.0.0.1:9", ""), without_2);
+    let (status, body) = reload(&app, "?dry_run=true", "key-admin").await;
+    assert_eq!((status, &body["aisles"]["removed"]), (200, &json!([2])), "{body}");
+
+    let stock = json!({"locations": [
+        {"aisle": 2, "row": 1, "bay": 4, "level": 2, "position": 1, "occupied": true, "barcode": "BOX-9"}
+    ]});
+    let put = app.client.put(app.url("/api/v1/locations")).bearer_auth("key-admin").json(&stock);
+    let (status, body) = split(put.send().await.unwrap()).await;
+    assert!(status < 300, "{status} {body}");
+    let refused = reload(&app, "?dry_run=true", "key-admin").await;
+    assert_error(&refused, 409, "aisle_in_use");
+    let message = refused.1["error"]["message"].as_str().unwrap();
+    assert!(message.contains("aisle 2 would lose locations in use: box BOX-9 at 2-1-4-2-1"), "{message}");
+
+    // A job queued on the shelf (which nothing answers for) holds bay 3 of aisle 1.
+    let job = json!({"kind": "store", "reference": "R-1", "barcode": "BOX-1", "to": loc(1, 3, 1, 1)});
+    let post = app.client.post(app.url("/api/v1/jobs")).bearer_auth("key-ops").json(&job);
+    let (status, created) = split(post.send().await.unwrap()).await;
+    assert_eq!(status, 201, "{created}");
+    let id = created["id"].as_i64().unwrap();
+    rewrite(&file, &site("127.0.0.1:9", CRANE), |c| c.site.aisles[0].bays = 2);
+    let refused = reload(&app, "?dry_run=true", "key-admin").await;
+    assert_error(&refused, 409, "aisle_in_use");
+    let message = refused.1["error"]["message"].as_str().unwrap();
+    assert!(message.contains("aisle 1") && message.contains(&format!("job {id} at ")), "{message}");
+    assert!(!message.contains("BOX-9"), "aisle 2 stays: {message}");
+    // Shrunk so that bay 3 stays: nothing it loses is in use.
+    rewrite(&file, &site("127.0.0.1:9", CRANE), |c| c.site.aisles[0].bays = 3);
+    let (status, body) = reload(&app, "?dry_run=true", "key-admin").await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(body["aisles"]["changed"], json!([{"aisle": 1, "keys": ["bays"]}]));
+    app.stop().await;
+}
