@@ -20,6 +20,8 @@
 //! - Applying is not done yet: only the dry run answers (see `api::config`), and SIGHUP
 //!   ([`on_hangups`]) runs the same check and logs its outcome. A SIGHUP no longer ends
 //!   the process (its default action), with or without a file.
+//! - Each node of a cluster reads its own sources: a reload is not forwarded to the active
+//!   node (`api::forward`), and a standby checks against its own running configuration.
 //! - Reading runs on a blocking thread: the loader reads files (the configuration, keys,
 //!   certificates) with the standard library.
 
