@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 pub mod ca;
 mod check;
 pub mod devices;
+pub mod diff;
 pub mod env;
 mod error;
 mod events;
@@ -32,6 +33,7 @@ pub mod tls;
 pub mod webhooks;
 
 pub use check::Invalid;
+pub use diff::Difference;
 pub use env::EnvError;
 pub use error::ConfigError;
 pub use events::{EventsConfig, EventsConfigError};

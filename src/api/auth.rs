@@ -1,8 +1,9 @@
 //! The API key check: who is calling, and may they?
 //!
 //! The role a request needs follows from its method: reads (`GET`, `HEAD`) need `viewer`,
-//! everything else `operator`; routes registered under [`admin_paths`] need `admin`, except
-//! pause, resume and tag writes (`/api/v1/devices/{id}/tags/{tag}`), which are operators'
+//! everything else `operator`; writes to the webhooks, the inventory (`PUT /locations`) and
+//! the configuration (`POST /config/reload`) need `admin`, as do the routes under
+//! [`admin_paths`] except pause, resume and tag writes (`/api/v1/devices/{id}/tags/{tag}`), which are operators'
 //! daily work. With no keys configured every request with a key's place taken by keyless
 //! mode's checks ([`super::keyless`]) is let through (the server then only listens on
 //! loopback, see [`crate::app`]).
@@ -36,6 +37,9 @@ pub fn required_role(method: &Method, path: &str) -> Role {
         Role::Viewer
     } else if path.starts_with("/api/v1/webhooks") {
         // Where the events go and from where: the site's integration, not its operation.
+        Role::Admin
+    } else if path.starts_with("/api/v1/config/") {
+        // The site's configuration: what runs, and where.
         Role::Admin
     } else if method == Method::PUT && path.trim_end_matches('/') == "/api/v1/locations" {
         // The inventory: what the store holds, for commissioning.
@@ -206,6 +210,7 @@ mod tests {
         assert_eq!(required_role(&Method::PATCH, "/api/v1/jobs/1"), Role::Operator);
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/registers"), Role::Admin);
         assert_eq!(required_role(&Method::PUT, "/api/v1/locations"), Role::Admin);
+        assert_eq!(required_role(&Method::POST, "/api/v1/config/reload"), Role::Admin);
         assert_eq!(required_role(&Method::POST, "/api/v1/locations/1/1/1/1/1/lock"), Role::Operator);
         for bulk in ["/api/v1/locations/unlock", "/api/v1/jobs/retry", "/api/v1/jobs/cancel"] {
             assert_eq!(required_role(&Method::POST, bulk), Role::Operator, "{bulk}");

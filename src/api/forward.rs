@@ -174,6 +174,8 @@ mod tests {
             (Method::GET, "/api/v1/ws"),
             (Method::GET, "/readyz"),
             (Method::GET, "/api/v1/devicesx"),
+            // Each node reads and checks its own file (a standby's is kept for its takeover).
+            (Method::POST, "/api/v1/config/reload"),
         ] {
             assert!(!only_active(&method, path), "{method} {path}");
         }

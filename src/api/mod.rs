@@ -10,6 +10,7 @@ pub mod alarms;
 pub mod auth;
 pub mod bulk;
 pub mod cluster;
+pub mod config;
 pub mod contract;
 pub mod control;
 pub mod dashboard;
@@ -136,6 +137,7 @@ fn protected_routes() -> OpenApiRouter<AppState> {
         .merge(control::router())
         .merge(health::router())
         .merge(cluster::router())
+        .merge(config::router())
         .merge(stats::router())
         .merge(webhooks::router())
         .merge(whoami::router())

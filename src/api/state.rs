@@ -67,6 +67,8 @@ pub struct Shared {
     pub events: Arc<crate::config::EventsConfig>,
     /// The hosts keyless mode answers for.
     pub hosts: super::keyless::Hosts,
+    /// The running configuration and where to read it again (`POST /config/reload`).
+    pub reload: crate::service::reload::Reload,
     /// Failed authentications per client address.
     pub failures: super::failures::Failures,
 }

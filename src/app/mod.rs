@@ -23,13 +23,14 @@ use crate::api::metrics::Metrics;
 use crate::api::state::Shared;
 use crate::api::{self, AppState};
 use crate::auth::KeyRing;
-use crate::config::Config;
 use crate::config::devices::DeviceConfig;
+use crate::config::{Config, Sources};
 use crate::domain::time::now_ms;
 use crate::service::dispatch::{Dispatcher, Queues, Setup};
 use crate::service::events::Hub;
 use crate::service::intake::Rules;
 use crate::service::planner::CranePlanner;
+use crate::service::reload::Reload;
 use crate::store::writer::Writer;
 use crate::store::{self, locations};
 
@@ -49,6 +50,8 @@ pub struct Application {
     tasks: drive::Tasks,
     /// This node's part in a cluster.
     cluster: Option<cluster::Clustered>,
+    /// The running configuration, and where to read it again.
+    reload: Reload,
     keep: Vec<Box<dyn std::any::Any + Send>>,
 }
 
@@ -193,7 +196,9 @@ impl Application {
             }
             None => None,
         };
+        let reload = Reload::new(config.clone(), pool.clone(), dispatcher.queues().clone());
         let state = AppState::new(Shared {
+            reload: reload.clone(),
             pool,
             writer,
             rules: Arc::new(rules(config, layout, deep)),
@@ -226,6 +231,7 @@ impl Application {
             writer_task,
             tasks,
             cluster: clustered,
+            reload,
             keep: Vec::new(),
         })
     }
@@ -233,6 +239,17 @@ impl Application {
     /// The address actually bound (useful with port 0).
     pub fn local_addr(&self) -> SocketAddr {
         self.listener.local_addr().expect("a bound listener has an address")
+    }
+
+    /// Reloads (`POST /api/v1/config/reload`) read `sources` again: those the running
+    /// configuration was loaded from. Without them, a reload is refused.
+    pub fn reload_from(&self, sources: Sources) {
+        self.reload.read_from(sources);
+    }
+
+    /// The running configuration and where to read it again.
+    pub fn reload(&self) -> Reload {
+        self.reload.clone()
     }
 
     /// Keeps `thing` (an in-process simulator, say) alive as long as the service runs.

@@ -13,7 +13,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 
 use crate::app::{Application, shutdown_signal};
-use crate::config::{Config, Sources};
+use crate::config::Sources;
 
 /// rackd: a warehouse control system.
 #[derive(Parser, Debug)]
@@ -154,15 +154,9 @@ pub struct ServeArgs {
 }
 
 impl ServeArgs {
-    /// The configuration these options and the environment select.
-    pub fn config(&self) -> anyhow::Result<Config> {
-        let sources = Sources {
-            file: self.config.clone(),
-            listen: self.listen,
-            database: self.database.clone(),
-            ..Sources::default()
-        };
-        Ok(sources.with_process_env().load()?.config)
+    /// Where these options and the environment say the configuration comes from.
+    pub fn sources(&self) -> Sources {
+        Sources::of_process(self.config.clone(), self.listen, self.database.clone())
     }
 }
 
@@ -170,7 +164,8 @@ impl ServeArgs {
 pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command.unwrap_or(Command::Serve(ServeArgs::default())) {
         Command::Serve(args) => {
-            let mut config = args.config()?;
+            let sources = args.sources();
+            let mut config = sources.load()?.config;
             // Bound first: a port in use is reported before any simulator or device starts.
             let listener = crate::app::bind(config.server.listen).await?;
             let sim = match args.config {
@@ -178,8 +173,17 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 None => Some(demo::start(&mut config).await?),
             };
             let mut app = Application::build_on(&config, listener, args.insecure).await?;
-            if let Some(sim) = sim {
-                app.keep(sim);
+            match sim {
+                Some(sim) => app.keep(sim),
+                // The demo site's devices point at its simulators: it is not reloaded.
+                None => app.reload_from(sources),
+            }
+            // Listening before the server answers: a SIGHUP from then on is a reload.
+            #[cfg(unix)]
+            {
+                use tokio::signal::unix::{SignalKind, signal};
+                let hangups = signal(SignalKind::hangup()).context("listening for SIGHUP")?;
+                tokio::spawn(crate::service::reload::on_hangups(app.reload(), hangups));
             }
             app.run_until(shutdown_signal()).await?;
         }
@@ -237,14 +241,16 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Openapi => {
             say(crate::api::openapi().to_pretty_json().context("encoding OpenAPI")?);
         }
-        Command::CheckConfig { file, explain } => match Sources::file(&file).with_process_env().load() {
-            Ok(loaded) if explain => say(loaded.explain()),
-            Ok(_) => println!("{}: ok", file.display()),
-            Err(e) => {
-                eprintln!("{e}");
-                return Ok(ExitCode::FAILURE);
+        Command::CheckConfig { file, explain } => {
+            match Sources::of_process(Some(file.clone()), None, None).load() {
+                Ok(loaded) if explain => say(loaded.explain()),
+                Ok(_) => println!("{}: ok", file.display()),
+                Err(e) => {
+                    eprintln!("{e}");
+                    return Ok(ExitCode::FAILURE);
+                }
             }
-        },
+        }
         Command::HashKey { key, generate } => {
             if key.is_some() {
                 eprintln!(

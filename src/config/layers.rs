@@ -55,6 +55,17 @@ impl Sources {
         Sources { file: Some(path.to_owned()), ..Sources::default() }
     }
 
+    /// What `rackd serve` reads: its `--config` (none: the demo site), `--listen`,
+    /// `--database` and the `RACKD_` variables of this process. `check-config` reads the
+    /// same, with its file; a reload reads the same sources again (`service::reload`).
+    pub fn of_process(
+        file: Option<PathBuf>,
+        listen: Option<SocketAddr>,
+        database: Option<PathBuf>,
+    ) -> Sources {
+        Sources { file, env: Vec::new(), listen, database }.with_process_env()
+    }
+
     /// These sources with the `RACKD_` variables of this process.
     pub fn with_process_env(mut self) -> Sources {
         self.env = env::process_vars();

@@ -8,4 +8,5 @@ pub mod events;
 pub mod intake;
 pub mod monitor;
 pub mod planner;
+pub mod reload;
 pub mod webhooks;

@@ -19,6 +19,7 @@ mod mewtocol;
 mod modbus;
 mod plc;
 mod ppi;
+mod reload;
 mod security;
 mod shelf;
 mod sim_presets;

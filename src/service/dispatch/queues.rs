@@ -242,6 +242,21 @@ impl Queues {
         self.0.lanes.get(device).and_then(|l| l.control.borrow().pause.clone())
     }
 
+    /// The unfinished jobs touching a location that `exists` says no longer exists (a
+    /// reload that removes or shrinks an aisle), as (job, location), by job.
+    pub fn touching_outside(&self, exists: impl Fn(&Location) -> bool) -> Vec<(i64, Location)> {
+        let queues = self.lock();
+        let mut found: Vec<(i64, Location)> = queues
+            .values()
+            .flat_map(|q| q.on.iter())
+            .filter(|(l, _)| !exists(l))
+            .flat_map(|(l, jobs)| jobs.iter().map(|&j| (j, *l)))
+            .collect();
+        found.sort();
+        found.dedup_by_key(|(j, _)| *j);
+        found
+    }
+
     /// The job, if it is unfinished and its device is configured.
     pub fn find(&self, id: i64) -> Option<Job> {
         let queues = self.lock();

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use rackd::app::Application;
-use rackd::config::Config;
+use rackd::config::{Config, Sources};
 use rackd::store::{Database, Engine};
 use serde_json::{Value, json};
 use tokio::sync::oneshot;
@@ -61,7 +61,33 @@ pub async fn spawn_on(db: Database, edit: impl FnOnce(&mut Config)) -> TestApp {
     config.server.listen = "127.0.0.1:0".parse().unwrap();
     use_database(&mut config, &db);
     edit(&mut config);
-    let app = Application::build(&config, false).await.expect("server starts");
+    start(&config, db, None).await
+}
+
+/// Starts a server from a configuration file made of `text` (its listen address and
+/// database set to 127.0.0.1:0 and a fresh SQLite file, and written back), as
+/// `serve --config` does: reloads read the file again. Returns the file.
+pub async fn spawn_from_file(text: &str) -> (TestApp, std::path::PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("rackd.toml");
+    let mut config = Config::parse(text, &file).expect("the test's configuration loads");
+    config.server.listen = "127.0.0.1:0".parse().unwrap();
+    let db = Database::Sqlite(dir.path().join("rackd.db"));
+    use_database(&mut config, &db);
+    std::fs::write(&file, toml::to_string(&config).unwrap()).unwrap();
+    let sources = Sources::file(&file);
+    let config = sources.load().expect("the written file loads").config;
+    let mut app = start(&config, db, Some(sources)).await;
+    app._dir = Some(dir);
+    (app, file)
+}
+
+/// Starts a server of `config` on `db`, reloading from `sources` if any.
+async fn start(config: &Config, db: Database, sources: Option<Sources>) -> TestApp {
+    let app = Application::build(config, false).await.expect("server starts");
+    if let Some(sources) = sources {
+        app.reload_from(sources);
+    }
     let scheme = if config.server.tls.is_some() { "https" } else { "http" };
     let base = format!("{scheme}://{}", app.local_addr());
     let (stop, stopped) = oneshot::channel::<()>();

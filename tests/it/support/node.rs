@@ -49,6 +49,23 @@ impl Node {
         }
     }
 
+    /// The configuration file it was started with.
+    pub fn config_file(&self) -> &Path {
+        &self.config
+    }
+
+    /// What it logged so far.
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Sends it SIGHUP (a reload).
+    pub fn hang_up(&self) {
+        let pid = self.child.as_ref().expect("the node runs").id();
+        let sent = Command::new("kill").args(["-HUP", &pid.to_string()]).status().unwrap();
+        assert!(sent.success(), "kill -HUP {pid}");
+    }
+
     pub fn running(&mut self) -> bool {
         self.child.as_mut().is_some_and(|c| matches!(c.try_wait(), Ok(None)))
     }

@@ -1,0 +1,340 @@
+//! The difference between the running configuration and a new one, as a reload sees it
+//! (issue 43): which devices are added, removed or changed (and in which keys), which
+//! aisles are added, removed or resized, which keys cannot change while rackd runs, and
+//! which other settings changed.
+//!
+//! Decisions:
+//! - Devices are matched by `id` and aisles by their number, not by their place in the
+//!   file: moving an entry, or adding one before it, is no change.
+//! - A device's keys are those of its flat form ([`RawDevice`], every key of its kind
+//!   filled in), so a key set to its default in one file and left out in the other is no
+//!   change, and a new default in the code never reads as a change of the file.
+//! - Lists (a device's `aisles`, `quirks`; `auth.keys`, `webhooks`) are compared whole and
+//!   named by their key: "which entry" says less than "this list" to the one reloading.
+//! - Fixed at run time ([`FIXED`]): the listen address, the database, and the cluster node
+//!   (and whether there is a `[cluster]` at all). The process holds them open (a socket,
+//!   a pool, a lease row), so a change is refused rather than half applied.
+//! - Only key names are reported, never values: `database.url` and the keys' hashes are
+//!   secrets, and a name is what the reader looks up in the file.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use serde::Serialize;
+use serde_json::Value;
+use utoipa::ToSchema;
+
+use super::Config;
+use super::devices::RawDevice;
+
+/// Keys (or whole sections) that cannot change while rackd runs.
+pub const FIXED: &[&str] = &["server.listen", "database", "cluster", "cluster.node"];
+
+/// What a reload would change.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, ToSchema)]
+pub struct Difference {
+    /// Devices added, removed or changed, in the running file's order (then the added
+    /// ones in the new file's order).
+    pub devices: Vec<DeviceChange>,
+    /// Aisles of `[site]`.
+    pub aisles: AisleChanges,
+    /// Other keys that changed (`events.buffer`, `auth.keys`, ...).
+    pub settings: Vec<String>,
+    /// Keys that changed but cannot change while rackd runs (see [`FIXED`]); a reload
+    /// with any is refused whole.
+    pub fixed: Vec<String>,
+}
+
+/// One device's change.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, ToSchema)]
+pub struct DeviceChange {
+    /// The device's id.
+    pub id: String,
+    /// Added, removed or changed.
+    pub change: Change,
+    /// For a changed device: its keys that changed (`address`, `timeout_ms`, ...).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub keys: Vec<String>,
+}
+
+/// What happens to a device.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Change {
+    /// In the new file only: started.
+    Added,
+    /// In the running file only: stopped.
+    Removed,
+    /// In both, with other settings: restarted.
+    Changed,
+}
+
+/// The aisles of `[site]` that change.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, ToSchema)]
+pub struct AisleChanges {
+    /// Numbers of aisles in the new file only.
+    pub added: Vec<u16>,
+    /// Numbers of aisles in the running file only.
+    pub removed: Vec<u16>,
+    /// Aisles in both, of another size or depth.
+    pub changed: Vec<AisleChange>,
+}
+
+/// One aisle's change.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, ToSchema)]
+pub struct AisleChange {
+    /// The aisle's number.
+    pub aisle: u16,
+    /// Its keys that changed (`bays`, `depth`, ...).
+    pub keys: Vec<String>,
+}
+
+impl Difference {
+    /// Whether nothing changes.
+    pub fn is_empty(&self) -> bool {
+        self == &Difference::default()
+    }
+}
+
+impl Config {
+    /// What changes from this (running) configuration to `new`.
+    pub fn difference(&self, new: &Config) -> Difference {
+        let devices = device_changes(self, new);
+        let aisles = aisle_changes(self, new);
+        let (mut old_rest, mut new_rest) = (json(self), json(new));
+        for rest in [&mut old_rest, &mut new_rest] {
+            if let Value::Object(map) = rest {
+                map.remove("devices");
+                map.remove("site");
+            }
+        }
+        let mut keys = Vec::new();
+        leaves("", &old_rest, &new_rest, &mut keys);
+        let (fixed, settings) = keys.into_iter().partition(|k| is_fixed(k));
+        Difference { devices, aisles, settings, fixed }
+    }
+}
+
+/// Whether `key` (a dotted path) is at or under one of [`FIXED`]; `cluster` itself only as
+/// a whole (added or removed), its other keys (`lease_ms`, ...) may change.
+fn is_fixed(key: &str) -> bool {
+    FIXED.iter().any(|f| key == *f || (*f != "cluster" && key.starts_with(&format!("{f}."))))
+}
+
+fn json(value: &impl Serialize) -> Value {
+    // A Config always serializes: its maps have string keys.
+    serde_json::to_value(value).unwrap_or(Value::Null)
+}
+
+/// Pushes the dotted path of every leaf that differs between `old` and `new`; a value on
+/// one side only is a leaf too.
+fn leaves(prefix: &str, old: &Value, new: &Value, out: &mut Vec<String>) {
+    match (old, new) {
+        (Value::Object(a), Value::Object(b)) => {
+            let names: BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+            for name in names {
+                let path = if prefix.is_empty() { name.clone() } else { format!("{prefix}.{name}") };
+                let (x, y) = (a.get(name).unwrap_or(&Value::Null), b.get(name).unwrap_or(&Value::Null));
+                leaves(&path, x, y, out);
+            }
+        }
+        (a, b) if a != b => out.push(prefix.to_owned()),
+        _ => {}
+    }
+}
+
+fn device_changes(old: &Config, new: &Config) -> Vec<DeviceChange> {
+    let flat = |c: &Config| -> BTreeMap<String, Value> {
+        c.devices.iter().map(|d| (d.id().to_owned(), json(&RawDevice::from(d)))).collect()
+    };
+    let (before, after) = (flat(old), flat(new));
+    let mut changes = Vec::new();
+    for d in &old.devices {
+        let id = d.id();
+        match after.get(id) {
+            None => {
+                changes.push(DeviceChange { id: id.to_owned(), change: Change::Removed, keys: Vec::new() })
+            }
+            Some(now) => {
+                let mut keys = Vec::new();
+                leaves("", &before[id], now, &mut keys);
+                if !keys.is_empty() {
+                    changes.push(DeviceChange { id: id.to_owned(), change: Change::Changed, keys });
+                }
+            }
+        }
+    }
+    for d in new.devices.iter().filter(|d| !before.contains_key(d.id())) {
+        changes.push(DeviceChange { id: d.id().to_owned(), change: Change::Added, keys: Vec::new() });
+    }
+    changes
+}
+
+fn aisle_changes(old: &Config, new: &Config) -> AisleChanges {
+    let by_number =
+        |c: &Config| -> BTreeMap<u16, Value> { c.site.aisles.iter().map(|a| (a.aisle, json(a))).collect() };
+    let (before, after) = (by_number(old), by_number(new));
+    let mut changes = AisleChanges::default();
+    for (aisle, was) in &before {
+        match after.get(aisle) {
+            None => changes.removed.push(*aisle),
+            Some(now) => {
+                let mut keys = Vec::new();
+                leaves("", was, now, &mut keys);
+                if !keys.is_empty() {
+                    changes.changed.push(AisleChange { aisle: *aisle, keys });
+                }
+            }
+        }
+    }
+    changes.added = after.keys().filter(|a| !before.contains_key(a)).copied().collect();
+    changes
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+
+    const BASE: &str = r#"
+[server]
+listen = "127.0.0.1:8080"
+
+[[site.aisles]]
+aisle = 1
+rows = 2
+bays = 10
+levels = 6
+positions = 4
+
+[[site.aisles]]
+aisle = 2
+rows = 2
+bays = 20
+levels = 8
+positions = 2
+
+[[devices]]
+id = "shelf-1"
+kind = "shelf"
+address = "127.0.0.1:5020"
+aisles = [1]
+
+[[devices]]
+id = "crane-2"
+kind = "crane"
+address = "127.0.0.1:5021"
+aisles = [2]
+"#;
+
+    fn parse(text: &str) -> Config {
+        Config::parse(text, Path::new("rackd.toml")).unwrap()
+    }
+
+    #[test]
+    fn the_same_file_is_no_difference() {
+        assert!(parse(BASE).difference(&parse(BASE)).is_empty());
+    }
+
+    #[test]
+    fn a_default_written_out_is_no_difference() {
+        let shelf = json(&RawDevice::from(&parse(BASE).devices[0]));
+        let timeout = shelf["timeout_ms"].as_u64().expect("a shelf's timeout is filled in");
+        let written = BASE
+            .replace("aisles = [1]", &format!("aisles = [1]\ntimeout_ms = {timeout}"))
+            .replace("bays = 10", "bays = 10\ndepth = 1");
+        assert!(parse(BASE).difference(&parse(&written)).is_empty());
+        let other = BASE.replace("aisles = [1]", &format!("aisles = [1]\ntimeout_ms = {}", timeout + 1));
+        assert_eq!(parse(BASE).difference(&parse(&other)).devices[0].keys, ["timeout_ms"]);
+    }
+
+    #[test]
+    fn devices_are_matched_by_id_not_by_place() {
+        let (first, second) = BASE.split_at(BASE.find("[[devices]]\nid = \"crane-2\"").unwrap());
+        let devices_at = first.find("[[devices]]").unwrap();
+        let swapped = format!("{}{second}\n{}", &first[..devices_at], &first[devices_at..]);
+        assert!(parse(BASE).difference(&parse(&swapped)).is_empty());
+    }
+
+    #[test]
+    fn added_removed_and_changed_devices_with_their_keys() {
+        let new = BASE
+            .replace("address = \"127.0.0.1:5020\"", "address = \"127.0.0.1:5030\"\ntimeout_ms = 900")
+            .replace("id = \"crane-2\"", "id = \"crane-3\"");
+        let diff = parse(BASE).difference(&parse(&new));
+        assert_eq!(
+            diff.devices,
+            [
+                DeviceChange {
+                    id: "shelf-1".into(),
+                    change: Change::Changed,
+                    keys: vec!["address".into(), "timeout_ms".into()]
+                },
+                DeviceChange { id: "crane-2".into(), change: Change::Removed, keys: vec![] },
+                DeviceChange { id: "crane-3".into(), change: Change::Added, keys: vec![] },
+            ]
+        );
+        assert!(diff.fixed.is_empty() && diff.settings.is_empty(), "{diff:?}");
+    }
+
+    #[test]
+    fn aisles_added_removed_and_resized() {
+        let third =
+            "[[site.aisles]]\naisle = 3\nrows = 1\nbays = 5\nlevels = 2\npositions = 4\n\n[[devices]]";
+        let new = BASE.replacen("[[devices]]", third, 1).replace("bays = 10", "bays = 12");
+        let diff = parse(BASE).difference(&parse(&new));
+        assert_eq!(diff.aisles.added, [3]);
+        assert_eq!(diff.aisles.changed, [AisleChange { aisle: 1, keys: vec!["bays".into()] }]);
+        let without_2 = parse(BASE);
+        let mut one = without_2.clone();
+        one.site.aisles.retain(|a| a.aisle == 1);
+        one.devices.retain(|d| d.id() == "shelf-1");
+        let diff = without_2.difference(&one);
+        assert_eq!(diff.aisles.removed, [2]);
+        assert_eq!(diff.devices[0].change, Change::Removed);
+    }
+
+    #[test]
+    fn the_listen_address_database_and_cluster_node_are_fixed() {
+        let old = parse(BASE);
+        let mut new = old.clone();
+        new.server.listen = "127.0.0.1:9090".parse().unwrap();
+        new.database.busy_timeout_ms += 1;
+        new.events.buffer += 1;
+        let diff = old.difference(&new);
+        assert_eq!(diff.fixed, ["database.busy_timeout_ms", "server.listen"]);
+        assert_eq!(diff.settings, ["events.buffer"]);
+
+        let mut clustered = old.clone();
+        clustered.cluster = Some(crate::config::ClusterConfig {
+            node: "a".into(),
+            lease_ms: 5000,
+            margin_ms: None,
+            url: None,
+            ca_file: None,
+        });
+        assert_eq!(old.difference(&clustered).fixed, ["cluster"]);
+        let mut renamed = clustered.clone();
+        let c = renamed.cluster.as_mut().unwrap();
+        c.node = "b".into();
+        c.lease_ms = 6000;
+        let diff = clustered.difference(&renamed);
+        assert_eq!(diff.fixed, ["cluster.node"]);
+        assert_eq!(diff.settings, ["cluster.lease_ms"]);
+    }
+
+    #[test]
+    fn the_difference_reads_as_json() {
+        let new = BASE.replace("id = \"crane-2\"", "id = \"crane-3\"");
+        let diff = parse(BASE).difference(&parse(&new));
+        assert_eq!(
+            serde_json::to_value(&diff).unwrap(),
+            serde_json::json!({
+                "devices": [{"id": "crane-2", "change": "removed"}, {"id": "crane-3", "change": "added"}],
+                "aisles": {"added": [], "removed": [], "changed": []},
+                "settings": [],
+                "fixed": [],
+            })
+        );
+    }
+}
