@@ -179,7 +179,8 @@ async fn keep_rollups_from(pool: &Pool, cut: i64) -> Result<(), sqlx::Error> {
 pub fn check_folder(dir: &Path) -> Result<(), ArchiveError> {
     let folder = |source| ArchiveError::Folder { path: dir.to_owned(), source };
     std::fs::create_dir_all(dir).map_err(folder)?;
-    let path = dir.join(".rackd-archive-probe");
+    // A name of its own: nodes (and tests) sharing the folder probe it at the same time.
+    let path = dir.join(format!(".rackd-archive-probe-{}-{:x}", std::process::id(), rand::random::<u64>()));
     std::fs::File::create(&path).map_err(folder)?;
     std::fs::remove_file(&path).map_err(folder)
 }
