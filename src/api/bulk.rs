@@ -182,6 +182,24 @@ fn listed<T: Eq + std::hash::Hash + std::fmt::Display + Copy>(
     }
 }
 
+/// The items an action lists (`Some`, checked by [`listed`]), or None when its filter
+/// chooses them: refused when it names both (`given`: a filter key is set) or neither
+/// (`enough`: not the keys a filter needs); `filter` says what a filter is.
+fn named<T: Eq + std::hash::Hash + std::fmt::Display + Copy>(
+    name: &str,
+    list: Option<Vec<T>>,
+    given: bool,
+    enough: bool,
+    filter: &str,
+) -> Result<Option<Vec<T>>, ApiError> {
+    match list {
+        Some(_) if given => Err(invalid(format!("name either {filter}, or `{name}`"))),
+        Some(list) => listed(name, &list).map(|()| Some(list)),
+        None if !enough => Err(invalid(format!("name {filter}, or `{name}`"))),
+        None => Ok(None),
+    }
+}
+
 /// Unlock many locations at once: those locked by the failures of the jobs a cause names,
 /// or those listed. All or nothing in one commit; each location audited (`unlock`).
 #[utoipa::path(post, path = "/locations/unlock", tag = "locations", request_body = UnlockRequest,
@@ -196,29 +214,23 @@ async fn unlock_locations(
     Json(body): Json<UnlockRequest>,
 ) -> Result<Json<BulkAnswer>, ApiError> {
     let actor = actor(by, body.reason)?;
-    let cause = body.device.is_some() || body.failure.is_some() || body.since.is_some();
-    let locations: Vec<(Location, Option<i64>)> = match body.locations {
-        Some(_) if cause => {
-            return Err(invalid("name either a cause (`device`, `failure`, `since`) or `locations`"));
-        }
-        Some(list) => {
-            listed("locations", &list)?;
-            for (i, l) in list.iter().enumerate() {
-                app.rules.layout.check(l).map_err(|e| invalid(format!("locations[{i}]: {}", e.0)))?;
+    let given = body.device.is_some() || body.failure.is_some() || body.since.is_some();
+    let enough = body.device.is_some() || body.failure.is_some();
+    let cause = "a cause: `device` and/or `failure` (optionally `since`)";
+    let locations: Vec<(Location, Option<i64>)> =
+        match named("locations", body.locations, given, enough, cause)? {
+            Some(list) => {
+                for (i, l) in list.iter().enumerate() {
+                    app.rules.layout.check(l).map_err(|e| invalid(format!("locations[{i}]: {}", e.0)))?;
+                }
+                list.into_iter().map(|l| (l, None)).collect()
             }
-            list.into_iter().map(|l| (l, None)).collect()
-        }
-        None if body.device.is_none() && body.failure.is_none() => {
-            return Err(invalid(
-                "name the cause (`device` and/or `failure`, optionally `since`) or `locations`",
-            ));
-        }
-        None => {
-            let filter =
-                FailedJobs { device: device(&app, body.device)?, kind: body.failure, since: body.since };
-            app.dispatcher.locked_by(&filter).await?.into_iter().map(|(l, job)| (l, Some(job))).collect()
-        }
-    };
+            None => {
+                let filter =
+                    FailedJobs { device: device(&app, body.device)?, kind: body.failure, since: body.since };
+                app.dispatcher.locked_by(&filter).await?.into_iter().map(|(l, job)| (l, Some(job))).collect()
+            }
+        };
     tracing::info!(locations = locations.len(), dry_run = body.dry_run, by = %actor.by, "bulk unlock through the API");
     let done = app.dispatcher.bulk_unlock(locations, body.dry_run, &actor).await?;
     Ok(Json(BulkAnswer::new(&app, done, body.dry_run)))
@@ -241,18 +253,11 @@ async fn retry_jobs(
     Json(body): Json<RetryRequest>,
 ) -> Result<Json<BulkAnswer>, ApiError> {
     let actor = actor(by, body.reason)?;
-    let filter = body.device.is_some() || body.failure.is_some() || body.since.is_some();
-    let jobs = match body.jobs {
-        Some(_) if filter => {
-            return Err(invalid("name either a filter (`device`, `failure`, `since`) or `jobs`"));
-        }
-        Some(list) => {
-            listed("jobs", &list)?;
-            list
-        }
-        None if body.device.is_none() && body.failure.is_none() => {
-            return Err(invalid("name the jobs: `device` and/or `failure` (optionally `since`), or `jobs`"));
-        }
+    let given = body.device.is_some() || body.failure.is_some() || body.since.is_some();
+    let enough = body.device.is_some() || body.failure.is_some();
+    let filter = "a filter: `device` and/or `failure` (optionally `since`)";
+    let jobs = match named("jobs", body.jobs, given, enough, filter)? {
+        Some(list) => list,
         None => {
             let filter =
                 FailedJobs { device: device(&app, body.device)?, kind: body.failure, since: body.since };
@@ -281,14 +286,9 @@ async fn cancel_jobs(
     Json(body): Json<CancelRequest>,
 ) -> Result<Json<BulkAnswer>, ApiError> {
     let actor = actor(by, body.reason)?;
-    let filter = body.device.is_some() || body.aisle.is_some();
-    let jobs = match body.jobs {
-        Some(_) if filter => return Err(invalid("name either a filter (`device`, `aisle`) or `jobs`")),
-        Some(list) => {
-            listed("jobs", &list)?;
-            list
-        }
-        None if !filter => return Err(invalid("name the jobs: `device` and/or `aisle`, or `jobs`")),
+    let given = body.device.is_some() || body.aisle.is_some();
+    let jobs = match named("jobs", body.jobs, given, given, "a filter: `device` and/or `aisle`")? {
+        Some(list) => list,
         None => {
             if let Some(a) = body.aisle
                 && !app.rules.layout.aisles().contains_key(&a)

@@ -36,10 +36,7 @@ async fn lock(app: &TestApp, aisle: u16, row: u16, bay: u16, level: u16, positio
 async fn an_operator_unlocks_retries_pauses_and_locks_from_the_page() {
     let Some(browser) = Browser::start().await else { return };
     let (app, sims) = demo_app(|_| {}).await;
-    browser.viewport(1600, 1000).await;
-    browser.open(&app.url("/")).await;
-    browser.live().await;
-    browser.wait("the role", "return window.rackd.who.can('operator')", 10).await;
+    operator_page(&browser, &app).await;
 
     // A business alarm (no load at the pick) fails the running job and locks its location.
     let (status, job) =
@@ -161,10 +158,7 @@ async fn an_operator_unlocks_retries_pauses_and_locks_from_the_page() {
 async fn a_memory_loss_is_unlocked_and_retried_from_its_alarm() {
     let Some(browser) = Browser::start().await else { return };
     let (app, sims) = demo_app(|_| {}).await;
-    browser.viewport(1600, 1000).await;
-    browser.open(&app.url("/")).await;
-    browser.live().await;
-    browser.wait("the role", "return window.rackd.who.can('operator')", 10).await;
+    operator_page(&browser, &app).await;
 
     // The stores stay in their slots (10 s a task) until the power cycle.
     sims.shelf.set_task_time(std::time::Duration::from_secs(10));
@@ -236,4 +230,12 @@ async fn a_memory_loss_is_unlocked_and_retried_from_its_alarm() {
     assert_eq!(toasts, json!([]), "no error was shown on the page");
     browser.close().await;
     app.stop().await;
+}
+
+/// The dashboard of `app` at 1600x1000, live, its operator's actions offered.
+async fn operator_page(browser: &Browser, app: &TestApp) {
+    browser.viewport(1600, 1000).await;
+    browser.open(&app.url("/")).await;
+    browser.live().await;
+    browser.wait("the role", "return window.rackd.who.can('operator')", 10).await;
 }
