@@ -124,6 +124,9 @@ async fn both_formats_parse_with_their_types_and_show_devices_alarms_and_jobs() 
             && sample(f, "rackd_alarms_active", &link_alarm) == Some(1.0)
             && sample(f, "rackd_device_online", &shelf1) == Some(1.0)
             && sample(f, "rackd_job_duration_seconds_count", &ended).is_some()
+            // Read apart from the timings in one scrape (the counts first): a commit between
+            // the two shows one without the other.
+            && sample(f, "rackd_jobs", &[("device", "shelf1"), ("state", "completed")]) == Some(1.0)
     })
     .await;
 
