@@ -36,7 +36,7 @@ pub struct Aisle {
 }
 
 fn aisle(app: &AppState, n: u16) -> Result<Aisle, ApiError> {
-    if !app.rules.layout.aisles().contains_key(&n) {
+    if !app.rules().layout.aisles().contains_key(&n) {
         return Err(ApiError::not_found(format!("aisle {n} is not in the layout")));
     }
     let pause = app.dispatcher.queues().paused_aisles().remove(&n);
@@ -53,7 +53,7 @@ fn aisle(app: &AppState, n: u16) -> Result<Aisle, ApiError> {
 #[utoipa::path(get, path = "/aisles", tag = "devices",
     responses((status = 200, description = "Every aisle", body = Vec<Aisle>)))]
 async fn list_aisles(State(app): State<AppState>) -> Result<Json<Vec<Aisle>>, ApiError> {
-    let numbers: Vec<u16> = app.rules.layout.aisles().keys().copied().collect();
+    let numbers: Vec<u16> = app.rules().layout.aisles().keys().copied().collect();
     Ok(Json(numbers.into_iter().map(|n| aisle(&app, n)).collect::<Result<_, _>>()?))
 }
 

@@ -221,7 +221,7 @@ async fn unlock_locations(
         match named("locations", body.locations, given, enough, cause)? {
             Some(list) => {
                 for (i, l) in list.iter().enumerate() {
-                    app.rules.layout.check(l).map_err(|e| invalid(format!("locations[{i}]: {}", e.0)))?;
+                    app.rules().layout.check(l).map_err(|e| invalid(format!("locations[{i}]: {}", e.0)))?;
                 }
                 list.into_iter().map(|l| (l, None)).collect()
             }
@@ -291,7 +291,7 @@ async fn cancel_jobs(
         Some(list) => list,
         None => {
             if let Some(a) = body.aisle
-                && !app.rules.layout.aisles().contains_key(&a)
+                && !app.rules().layout.aisles().contains_key(&a)
             {
                 return Err(invalid(format!("aisle {a} is not in the layout")));
             }

@@ -97,7 +97,7 @@ async fn put_inventory(
         let bad = |m: String| ApiError::invalid("invalid_inventory", format!("locations[{i}]: {m}"));
         let location =
             Location { aisle: e.aisle, row: e.row, bay: e.bay, level: e.level, position: e.position };
-        app.rules.layout.check(&location).map_err(|m| bad(m.0))?;
+        app.rules().layout.check(&location).map_err(|m| bad(m.0))?;
         if !seen.insert(location) {
             return Err(bad(format!("location {location} is listed twice")));
         }

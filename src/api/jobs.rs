@@ -48,7 +48,7 @@ async fn create_job(
     by: Caller,
     Json(req): Json<JobRequest>,
 ) -> Result<Response, ApiError> {
-    let job = app.rules.check(req).map_err(|e| ApiError::invalid("invalid_job", e.0))?;
+    let job = app.rules().check(req).map_err(|e| ApiError::invalid("invalid_job", e.0))?;
     let jobs = vec![job];
     if let Some(refused) = refused(&app, &jobs).await? {
         return Err(ApiError::conflict("near_occupied", refused.to_string()));
@@ -123,7 +123,7 @@ async fn create_batch(
         .into_iter()
         .enumerate()
         .map(|(i, r)| {
-            app.rules.check(r).map_err(|e| ApiError::invalid("invalid_job", format!("jobs[{i}]: {}", e.0)))
+            app.rules().check(r).map_err(|e| ApiError::invalid("invalid_job", format!("jobs[{i}]: {}", e.0)))
         })
         .collect::<Result<Vec<_>, _>>()?;
     if let Some(refused) = refused(&app, &jobs).await? {
@@ -427,12 +427,16 @@ async fn retry_job(
 /// The first new store of `jobs` the rack refuses (see `service::planner::refusal`); a
 /// repeated request whose reference is stored already is answered as before.
 async fn refused(app: &AppState, jobs: &[NewJob]) -> Result<Option<NearOccupied>, ApiError> {
-    if app.rules.deep.is_empty() {
+    if app.rules().deep.is_empty() {
         return Ok(None);
     }
-    let Some(refused) =
-        near_occupied(&app.pool, |l| app.dispatcher.queues().taking_from(l).is_some(), &app.rules.deep, jobs)
-            .await?
+    let Some(refused) = near_occupied(
+        &app.pool,
+        |l| app.dispatcher.queues().taking_from(l).is_some(),
+        &app.rules().deep,
+        jobs,
+    )
+    .await?
     else {
         return Ok(None);
     };

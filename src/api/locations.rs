@@ -58,7 +58,7 @@ fn location(
     (aisle, row, bay, level, position): (u16, u16, u16, u16, u16),
 ) -> Result<Location, ApiError> {
     let l = Location { aisle, row, bay, level, position };
-    app.rules.layout.check(&l).map_err(|e| ApiError::not_found(e.0))?;
+    app.rules().layout.check(&l).map_err(|e| ApiError::not_found(e.0))?;
     Ok(l)
 }
 

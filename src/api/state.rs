@@ -25,7 +25,13 @@ impl AppState {
 impl Shared {
     /// The running devices (none on a standby node).
     pub fn devices(&self) -> crate::devices::Devices {
-        self.running.get().cloned().unwrap_or_default()
+        self.reload.devices()
+    }
+
+    /// What job requests are checked against and routed by, as the running configuration
+    /// sets them.
+    pub fn rules(&self) -> Arc<Rules> {
+        self.reload.rules()
     }
 }
 
@@ -42,15 +48,10 @@ pub struct Shared {
     pub pool: Pool,
     /// The one writer of jobs.
     pub writer: Writer,
-    /// What job requests are checked against.
-    pub rules: Arc<Rules>,
     /// The API keys.
     pub keys: Arc<KeyRing>,
     /// Prometheus metrics.
     pub metrics: Arc<Metrics>,
-    /// The running devices, once this node drives them (at start, or in a cluster when
-    /// it becomes the active node).
-    pub running: Arc<std::sync::OnceLock<crate::devices::Devices>>,
     /// The webhook subscriptions' deliverers, once this node drives the machines.
     pub webhooks: Arc<std::sync::OnceLock<crate::service::webhooks::Webhooks>>,
     /// The webhook subscriptions as configured (every node lists them).
@@ -67,7 +68,9 @@ pub struct Shared {
     pub events: Arc<crate::config::EventsConfig>,
     /// The hosts keyless mode answers for.
     pub hosts: super::keyless::Hosts,
-    /// The running configuration and where to read it again (`POST /config/reload`).
+    /// The running configuration, where to read it again (`POST /config/reload`), the
+    /// rules it sets and the devices it runs (once this node drives them: at start, or in a
+    /// cluster when it becomes the active node).
     pub reload: crate::service::reload::Reload,
     /// Failed authentications per client address.
     pub failures: super::failures::Failures,

@@ -104,13 +104,13 @@ async fn get_stats(
     };
     let stats::Period { from, mut devices, mut aisles } = stats::period(&app.pool, from, until).await?;
     let runs_jobs: Vec<String> =
-        app.rules.devices.iter().filter(|(_, kinds)| !kinds.is_empty()).map(|(id, _)| id.clone()).collect();
+        app.rules().devices.iter().filter(|(_, kinds)| !kinds.is_empty()).map(|(id, _)| id.clone()).collect();
     let devices = runs_jobs
         .into_iter()
         .map(|id| DeviceStats { figures: devices.remove(&id).unwrap_or_else(Figures::default), device: id })
         .collect();
     let aisles = app
-        .rules
+        .rules()
         .layout
         .aisles()
         .keys()

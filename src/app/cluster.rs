@@ -15,13 +15,13 @@ use tokio::task::JoinHandle;
 use super::drive;
 use crate::api::metrics::Metrics;
 use crate::config::{ClusterConfig, Config};
-use crate::devices::Devices;
 use crate::domain::time::now_ms;
 use crate::domain::{AlarmClass, AlarmKind};
 use crate::service::cluster::lease::Timing;
 use crate::service::cluster::{Leadership, Node, Role, TAKEOVER_ACTION, follow, node};
 use crate::service::dispatch::Dispatcher;
 use crate::service::events::Hub;
+use crate::service::reload::Reload;
 use crate::service::webhooks::Webhooks;
 use crate::store::alarms::NewAlarm;
 use crate::store::writer::{Record, Writer};
@@ -54,7 +54,9 @@ pub(super) struct Parts {
     pub hub: Hub,
     pub metrics: Arc<Metrics>,
     pub commits: Arc<AtomicU64>,
-    pub running: Arc<OnceLock<Devices>>,
+    /// The running configuration (a standby may have reloaded it) and, once driving,
+    /// the devices.
+    pub reload: Reload,
     pub webhooks: Arc<OnceLock<Webhooks>>,
     pub tasks: drive::Tasks,
 }
@@ -154,9 +156,10 @@ async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>)
     parts.dispatcher.queues().set_drives(true);
     let fenced = parts.writer.fenced(node.gate.epoch());
     let may = Some(node.gate.may());
-    match drive::start(&parts.config, &parts.pool, &parts.dispatcher, fenced.clone(), &parts.hub, may).await {
+    let config = parts.reload.for_takeover();
+    match drive::start(&config, &parts.pool, &parts.dispatcher, fenced.clone(), &parts.hub, may).await {
         Ok(d) => {
-            let _ = parts.running.set(d.devices);
+            parts.reload.drive(d.fleet);
             let _ = parts.webhooks.set(d.webhooks);
             parts.tasks.lock().unwrap_or_else(|p| p.into_inner()).extend(d.tasks);
         }
@@ -174,6 +177,9 @@ async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>)
     let _ = role.wait_for(|r| *r == Role::Standby).await;
     let tasks = std::mem::take(&mut *parts.tasks.lock().unwrap_or_else(|p| p.into_inner()));
     drive::stop(tasks).await;
+    if let Some(fleet) = parts.reload.fleet() {
+        fleet.abort().await;
+    }
     lost.send_replace(Some("this node lost the cluster's lease; it stopped driving the machines".into()));
 }
 

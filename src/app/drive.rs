@@ -1,6 +1,6 @@
 //! What the node that drives the machines runs: the queues filled from the store, the
 //! pauses and locks restored, the devices connected (each reconciling with its own
-//! registers before it hands anything over, as after any restart), the device monitor,
+//! registers before it hands anything over, as after any restart) with their monitors,
 //! the waiting-reason watcher and the log's retention. A node of its own starts it at
 //! once; a cluster node when it becomes the active one (a takeover is a restart).
 
@@ -12,12 +12,11 @@ use tokio::task::JoinHandle;
 
 use crate::config::{ARCHIVE_ACTION, Config, RetentionConfig};
 use crate::devices::gate::MayDrive;
-use crate::devices::{self, Devices};
 use crate::domain::AlarmKind;
 use crate::domain::time::now_ms;
 use crate::service::dispatch::{Dispatcher, Queues};
 use crate::service::events::Hub;
-use crate::service::monitor;
+use crate::service::fleet::{self, Fleet};
 use crate::service::webhooks::{self, Webhooks};
 use crate::store::alarms::NewAlarm;
 use crate::store::writer::{Record, Writer};
@@ -26,7 +25,7 @@ use crate::store::{self, Pool};
 /// The driving part, running.
 pub(super) struct Drive {
     /// The devices.
-    pub devices: Devices,
+    pub fleet: Fleet,
     /// The webhook subscriptions' deliverers.
     pub webhooks: Webhooks,
     /// Their tasks and the rest: stopped before the writer drains.
@@ -47,19 +46,21 @@ pub(super) async fn start(
     let ids: Vec<String> = config.devices.iter().map(|d| d.id().to_owned()).collect();
     dispatcher.load(ids.iter().map(String::as_str)).await.context("loading the queues")?;
     dispatcher.restore().await.context("restoring pauses and location locks")?;
-    let contact_refresh = Duration::from_millis(config.events.contact_refresh_ms);
-    let port = |id: &str| queues.port(id, writer.clone());
-    let (devices, mut tasks) = devices::start(&config.devices, port, contact_refresh, gate.clone()).await?;
+    let parts = fleet::Parts {
+        queues: queues.clone(),
+        writer: writer.clone(),
+        pool: pool.clone(),
+        contact_refresh: Duration::from_millis(config.events.contact_refresh_ms),
+        gate: gate.clone(),
+    };
+    let fleet = Fleet::start(&config.devices, parts).await?;
     let parts = webhooks::Parts { pool: pool.clone(), writer: writer.clone(), hub: hub.clone(), gate };
-    let (webhooks, delivering) = Webhooks::start(&config.webhooks, parts).await?;
-    tasks.extend(delivering);
-    tasks.extend(monitor::start(&devices, queues, writer.clone(), pool).await);
-    queues.watch_devices(devices.iter().map(|(id, h)| (id.clone(), h.status.clone())).collect());
+    let (webhooks, mut tasks) = Webhooks::start(&config.webhooks, parts).await?;
     tasks.push(tokio::spawn(crate::service::dispatch::waiting::watch(queues.clone(), writer.clone())));
     tasks.push(tokio::spawn(retention(pool.clone(), writer.clone(), config.clone())));
     let folder = config.retention.folder(&config.database.path);
     tasks.push(tokio::spawn(archive(pool.clone(), writer, config.retention.clone(), folder)));
-    Ok(Drive { devices, webhooks, tasks })
+    Ok(Drive { fleet, webhooks, tasks })
 }
 
 /// Deletes events older than the retention from the log, at start and then every tenth of

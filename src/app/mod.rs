@@ -8,7 +8,6 @@ mod drive;
 mod hooks;
 mod serve;
 
-use std::collections::BTreeSet;
 use std::future::Future;
 use std::net::SocketAddr;
 use std::sync::atomic::AtomicU64;
@@ -23,13 +22,11 @@ use crate::api::metrics::Metrics;
 use crate::api::state::Shared;
 use crate::api::{self, AppState};
 use crate::auth::KeyRing;
-use crate::config::devices::DeviceConfig;
 use crate::config::{Config, Sources};
 use crate::domain::time::now_ms;
 use crate::service::dispatch::{Dispatcher, Queues, Setup};
 use crate::service::events::Hub;
 use crate::service::intake::Rules;
-use crate::service::planner::CranePlanner;
 use crate::service::reload::Reload;
 use crate::store::writer::Writer;
 use crate::store::{self, locations};
@@ -52,6 +49,8 @@ pub struct Application {
     cluster: Option<cluster::Clustered>,
     /// The running configuration, and where to read it again.
     reload: Reload,
+    /// The task that reloads on SIGHUP, if one listens.
+    hangups: Option<JoinHandle<()>>,
     keep: Vec<Box<dyn std::any::Any + Send>>,
 }
 
@@ -117,19 +116,8 @@ impl Application {
             (None, _) => None,
         };
         let commits = Arc::new(AtomicU64::new(0));
-        let deep: BTreeSet<u16> =
-            config.site.aisles.iter().filter(|a| a.depth == 2).map(|a| a.aisle).collect();
-        let queues = Queues::new(config.devices.iter().map(|d| Setup {
-            id: d.id().to_owned(),
-            window: d.dispatch_window(),
-            aisles: d.aisles().to_vec(),
-            planner: match d {
-                DeviceConfig::Crane(c) => {
-                    Some(Arc::new(CranePlanner::new(c, &deep, pool.clone(), commits.clone())))
-                }
-                _ => None,
-            },
-        }));
+        let rules = Rules::of(config);
+        let queues = Queues::new(config.devices.iter().map(|d| Setup::of(d, &rules.deep, &pool, &commits)));
         let (_, last_event) = store::events::bounds(&pool).await.context("reading the event log")?;
         let hub = Hub::new(config.events.buffer, last_event);
         let metrics = Arc::new(Metrics::default());
@@ -150,7 +138,13 @@ impl Application {
             None => writer.clone(),
         };
         let dispatcher = Dispatcher::new(queues.clone(), dispatching, pool.clone());
-        let running = Arc::new(OnceLock::new());
+        let parts = crate::service::reload::Parts {
+            pool: pool.clone(),
+            dispatcher: dispatcher.clone(),
+            writer: writer.clone(),
+            commits: commits.clone(),
+        };
+        let reload = Reload::new(config.clone(), parts);
         let webhooks = Arc::new(OnceLock::new());
         let tasks = drive::Tasks::default();
         let clustered = match leading {
@@ -165,7 +159,7 @@ impl Application {
                     hub: hub.clone(),
                     metrics: metrics.clone(),
                     commits: commits.clone(),
-                    running: running.clone(),
+                    reload: reload.clone(),
                     webhooks: webhooks.clone(),
                     tasks: tasks.clone(),
                 };
@@ -173,7 +167,7 @@ impl Application {
             }
             None => {
                 let d = drive::start(config, &pool, &dispatcher, writer.clone(), &hub, None).await?;
-                let _ = running.set(d.devices);
+                reload.drive(d.fleet);
                 let _ = webhooks.set(d.webhooks);
                 tasks.lock().unwrap_or_else(|p| p.into_inner()).extend(d.tasks);
                 None
@@ -196,15 +190,12 @@ impl Application {
             }
             None => None,
         };
-        let reload = Reload::new(config.clone(), pool.clone(), dispatcher.queues().clone());
         let state = AppState::new(Shared {
             reload: reload.clone(),
             pool,
             writer,
-            rules: Arc::new(rules(config, layout, deep)),
             keys: Arc::new(keys),
             metrics,
-            running,
             webhooks,
             subscriptions: Arc::new(config.webhooks.clone()),
             cluster: clustered.as_ref().map(|c| c.node.clone()),
@@ -232,6 +223,7 @@ impl Application {
             tasks,
             cluster: clustered,
             reload,
+            hangups: None,
             keep: Vec::new(),
         })
     }
@@ -250,6 +242,13 @@ impl Application {
     /// The running configuration and where to read it again.
     pub fn reload(&self) -> Reload {
         self.reload.clone()
+    }
+
+    /// Reloads on each SIGHUP from now on, as `POST /api/v1/config/reload` does
+    /// ([`crate::service::reload::on_hangups`]), until the service stops.
+    #[cfg(unix)]
+    pub fn reload_on(&mut self, hangups: tokio::signal::unix::Signal) {
+        self.hangups = Some(tokio::spawn(crate::service::reload::on_hangups(self.reload.clone(), hangups)));
     }
 
     /// Keeps `thing` (an in-process simulator, say) alive as long as the service runs.
@@ -277,8 +276,17 @@ impl Application {
         serve::serve(self.listener, self.router, self.limits, self.tls, stop).await;
         // A device stopped between two PLC requests is the same as a crash, which the
         // hand-over order and recovery make safe.
+        if let Some(hangups) = self.hangups {
+            hangups.abort();
+            let _ = hangups.await;
+        }
         let tasks = std::mem::take(&mut *self.tasks.lock().unwrap_or_else(|p| p.into_inner()));
         drive::stop(tasks).await;
+        if let Some(fleet) = self.reload.fleet() {
+            fleet.abort().await;
+        }
+        // The last handles to the writer (the reload's, the devices') go with it.
+        drop(self.reload);
         let mut failure = None;
         if let Some(c) = self.cluster {
             failure = c.lost.borrow().clone();
@@ -309,27 +317,6 @@ impl Application {
         drop(self.keep);
         tracing::info!("rackd stopped");
         Ok(())
-    }
-}
-
-/// What job requests are checked against and routed by.
-fn rules(config: &Config, layout: crate::domain::Layout, deep: BTreeSet<u16>) -> Rules {
-    let crane_aisles = config
-        .devices
-        .iter()
-        .filter(|d| matches!(d, DeviceConfig::Crane(_)))
-        .flat_map(|d| d.aisles().iter().copied())
-        .collect();
-    Rules {
-        layout,
-        deep,
-        crane_aisles,
-        devices: config.devices.iter().map(|d| (d.id().to_owned(), d.kind().job_kinds())).collect(),
-        routes: config
-            .devices
-            .iter()
-            .flat_map(|d| d.aisles().iter().map(|&a| (a, d.id().to_owned())))
-            .collect(),
     }
 }
 

@@ -183,7 +183,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             {
                 use tokio::signal::unix::{SignalKind, signal};
                 let hangups = signal(SignalKind::hangup()).context("listening for SIGHUP")?;
-                tokio::spawn(crate::service::reload::on_hangups(app.reload(), hangups));
+                app.reload_on(hangups);
             }
             app.run_until(shutdown_signal()).await?;
         }

@@ -1,7 +1,7 @@
 //! The difference between the running configuration and a new one, as a reload sees it
 //! (issue 43): which devices are added, removed or changed (and in which keys), which
 //! aisles are added, removed or resized, which keys cannot change while rackd runs, and
-//! which other settings changed.
+//! which other keys changed (none of which may change while rackd runs).
 //!
 //! Decisions:
 //! - Devices are matched by `id` and aisles by their number, not by their place in the
@@ -11,9 +11,12 @@
 //!   change, and a new default in the code never reads as a change of the file.
 //! - Lists (a device's `aisles`, `quirks`; `auth.keys`, `webhooks`) are compared whole and
 //!   named by their key: "which entry" says less than "this list" to the one reloading.
-//! - Fixed at run time ([`FIXED`]): the listen address, the database, and the cluster node
-//!   (and whether there is a `[cluster]` at all). The process holds them open (a socket,
-//!   a pool, a lease row), so a change is refused rather than half applied.
+//! - Only `[[devices]]` and `[site]` change at run time. Every other key that changed is
+//!   listed in `fixed`, and a reload with any is refused whole: the listen address, the
+//!   database and the cluster node because the process holds them open (a socket, a pool,
+//!   a lease row); the rest (`auth.keys`, `webhooks`, `[events]`, ...) because the parts
+//!   that read them read them once, at start. Restarting is how they change; a takeover
+//!   in a cluster is one.
 //! - Only key names are reported, never values: `database.url` and the keys' hashes are
 //!   secrets, and a name is what the reader looks up in the file.
 
@@ -26,9 +29,6 @@ use utoipa::ToSchema;
 use super::Config;
 use super::devices::RawDevice;
 
-/// Keys (or whole sections) that cannot change while rackd runs.
-pub const FIXED: &[&str] = &["server.listen", "database", "cluster", "cluster.node"];
-
 /// What a reload would change.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, ToSchema)]
 pub struct Difference {
@@ -37,10 +37,8 @@ pub struct Difference {
     pub devices: Vec<DeviceChange>,
     /// Aisles of `[site]`.
     pub aisles: AisleChanges,
-    /// Other keys that changed (`events.buffer`, `auth.keys`, ...).
-    pub settings: Vec<String>,
-    /// Keys that changed but cannot change while rackd runs (see [`FIXED`]); a reload
-    /// with any is refused whole.
+    /// Keys outside `[[devices]]` and `[site]` that changed: they cannot change while rackd
+    /// runs, and a reload with any is refused whole.
     pub fixed: Vec<String>,
 }
 
@@ -107,17 +105,27 @@ impl Config {
                 map.remove("site");
             }
         }
-        let mut keys = Vec::new();
-        leaves("", &old_rest, &new_rest, &mut keys);
-        let (fixed, settings) = keys.into_iter().partition(|k| is_fixed(k));
-        Difference { devices, aisles, settings, fixed }
+        let mut fixed = Vec::new();
+        leaves("", &old_rest, &new_rest, &mut fixed);
+        Difference { devices, aisles, fixed }
     }
-}
 
-/// Whether `key` (a dotted path) is at or under one of [`FIXED`]; `cluster` itself only as
-/// a whole (added or removed), its other keys (`lease_ms`, ...) may change.
-fn is_fixed(key: &str) -> bool {
-    FIXED.iter().any(|f| key == *f || (*f != "cluster" && key.starts_with(&format!("{f}."))))
+    /// The hash of what a reload changes, `[site]` and `[[devices]]` (each device with
+    /// every key filled in, in id order; aisles in number order): SHA-256, in hex. Two nodes
+    /// with the same hash run the same site and devices, however their files are written.
+    pub fn site_hash(&self) -> String {
+        use sha2::Digest;
+        let mut devices: Vec<(String, Value)> =
+            self.devices.iter().map(|d| (d.id().to_owned(), json(&RawDevice::from(d)))).collect();
+        devices.sort_by(|a, b| a.0.cmp(&b.0));
+        let mut aisles: Vec<Value> = self.site.aisles.iter().map(json).collect();
+        aisles.sort_by_key(|a| a["aisle"].as_u64());
+        let mut site = json(&self.site);
+        site["aisles"] = Value::Array(aisles);
+        let devices: Vec<Value> = devices.into_iter().map(|(_, d)| d).collect();
+        let canonical = serde_json::json!({ "site": site, "devices": devices }).to_string();
+        hex::encode(sha2::Sha256::digest(canonical.as_bytes()))
+    }
 }
 
 fn json(value: &impl Serialize) -> Value {
@@ -274,7 +282,7 @@ aisles = [2]
                 DeviceChange { id: "crane-3".into(), change: Change::Added, keys: vec![] },
             ]
         );
-        assert!(diff.fixed.is_empty() && diff.settings.is_empty(), "{diff:?}");
+        assert!(diff.fixed.is_empty(), "{diff:?}");
     }
 
     #[test]
@@ -295,15 +303,14 @@ aisles = [2]
     }
 
     #[test]
-    fn the_listen_address_database_and_cluster_node_are_fixed() {
+    fn keys_outside_devices_and_site_are_fixed() {
         let old = parse(BASE);
         let mut new = old.clone();
         new.server.listen = "127.0.0.1:9090".parse().unwrap();
         new.database.busy_timeout_ms += 1;
         new.events.buffer += 1;
         let diff = old.difference(&new);
-        assert_eq!(diff.fixed, ["database.busy_timeout_ms", "server.listen"]);
-        assert_eq!(diff.settings, ["events.buffer"]);
+        assert_eq!(diff.fixed, ["database.busy_timeout_ms", "events.buffer", "server.listen"]);
 
         let mut clustered = old.clone();
         clustered.cluster = Some(crate::config::ClusterConfig {
@@ -319,8 +326,22 @@ aisles = [2]
         c.node = "b".into();
         c.lease_ms = 6000;
         let diff = clustered.difference(&renamed);
-        assert_eq!(diff.fixed, ["cluster.node"]);
-        assert_eq!(diff.settings, ["cluster.lease_ms"]);
+        assert_eq!(diff.fixed, ["cluster.lease_ms", "cluster.node"]);
+    }
+
+    #[test]
+    fn the_site_hash_ignores_order_and_defaults_written_out() {
+        let base = parse(BASE);
+        let (first, second) = BASE.split_at(BASE.find("[[devices]]\nid = \"crane-2\"").unwrap());
+        let devices_at = first.find("[[devices]]").unwrap();
+        let swapped = format!("{}{second}\n{}", &first[..devices_at], &first[devices_at..]);
+        assert_eq!(parse(&swapped).site_hash(), base.site_hash());
+        assert_eq!(parse(&BASE.replace("bays = 10", "bays = 10\ndepth = 1")).site_hash(), base.site_hash());
+        let mut other = base.clone();
+        other.events.buffer += 1;
+        assert_eq!(other.site_hash(), base.site_hash(), "only [site] and [[devices]] count");
+        assert_ne!(parse(&BASE.replace("bays = 10", "bays = 11")).site_hash(), base.site_hash());
+        assert_eq!(base.site_hash().len(), 64);
     }
 
     #[test]
@@ -332,7 +353,6 @@ aisles = [2]
             serde_json::json!({
                 "devices": [{"id": "crane-2", "change": "removed"}, {"id": "crane-3", "change": "added"}],
                 "aisles": {"added": [], "removed": [], "changed": []},
-                "settings": [],
                 "fixed": [],
             })
         );

@@ -77,6 +77,23 @@ pub struct Rules {
 }
 
 impl Rules {
+    /// The rules `config` sets: its layout, and which device runs which jobs where.
+    pub fn of(config: &crate::config::Config) -> Rules {
+        use crate::config::devices::DeviceConfig;
+        let devices = &config.devices;
+        Rules {
+            layout: config.layout(),
+            deep: config.site.aisles.iter().filter(|a| a.depth == 2).map(|a| a.aisle).collect(),
+            crane_aisles: devices
+                .iter()
+                .filter(|d| matches!(d, DeviceConfig::Crane(_)))
+                .flat_map(|d| d.aisles().iter().copied())
+                .collect(),
+            devices: devices.iter().map(|d| (d.id().to_owned(), d.kind().job_kinds())).collect(),
+            routes: devices.iter().flat_map(|d| d.aisles().iter().map(|&a| (a, d.id().to_owned()))).collect(),
+        }
+    }
+
     /// Validates one request into a job to store.
     pub fn check(&self, req: JobRequest) -> Result<NewJob, Invalid> {
         let kind = req.kind;

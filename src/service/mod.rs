@@ -5,6 +5,7 @@
 pub mod cluster;
 pub mod dispatch;
 pub mod events;
+pub mod fleet;
 pub mod intake;
 pub mod monitor;
 pub mod planner;

@@ -17,11 +17,12 @@
 //!   it takes new work. An alarm is judged only on what is known: while a
 //!   device does not answer, its own alarms and its heartbeat stay as they were.
 //!
-//! Alarms still active from before a restart are picked up from the database, so a
-//! restart neither raises them twice nor forgets to clear them; those of devices no longer
-//! configured are cleared at start.
+//! Alarms still active from before a restart (or a reload that restarted the device) are
+//! picked up from the database, so a restart neither raises them twice nor forgets to clear
+//! them; those of devices no longer configured are cleared at start, and those of a device
+//! a reload removes when it stops.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 
 use crate::store::Pool;
 use tokio::sync::watch;
@@ -59,39 +60,41 @@ pub fn all_shown(devices: &Devices, queues: &Queues) -> Vec<DeviceStatus> {
     devices.iter().map(|(id, handle)| shown(id, handle, queues)).collect()
 }
 
-/// Starts watching every device; the tasks end when the writer stops.
-pub async fn start(
-    devices: &Devices,
+/// Clears the active alarms of devices other than `configured` (at start: those of
+/// devices no longer configured), or of `configured` alone when `only` (a reload removed
+/// them).
+pub async fn clear_alarms(configured: &BTreeSet<String>, only: bool, writer: &Writer, pool: &Pool) {
+    let found = match alarms::active(pool).await {
+        Ok(found) => found,
+        Err(e) => return tracing::error!(error = %e, "reading active alarms"),
+    };
+    for alarm in found.into_iter().filter(|a| configured.contains(&a.device) == only) {
+        let record = Record::AlarmCleared { device: alarm.device, key: (alarm.kind, alarm.code) };
+        if let Err(e) = writer.record(record).await {
+            tracing::warn!(error = %e, "clearing an alarm of a device no longer configured");
+        }
+    }
+}
+
+/// Starts watching one device, taking up the alarms it has active; the task ends when the
+/// device's task ends (its status goes away) or the writer stops.
+pub async fn watch(
+    id: &str,
+    handle: &DeviceHandle,
     queues: &Queues,
     writer: Writer,
     pool: &Pool,
-) -> Vec<tokio::task::JoinHandle<()>> {
-    let mut active: HashMap<String, BTreeSet<Key>> = HashMap::new();
-    match alarms::active(pool).await {
-        Ok(found) => {
-            for alarm in found {
-                if devices.contains_key(&alarm.device) {
-                    active.entry(alarm.device).or_default().insert((alarm.kind, alarm.code));
-                } else {
-                    let record = Record::AlarmCleared { device: alarm.device, key: (alarm.kind, alarm.code) };
-                    if let Err(e) = writer.record(record).await {
-                        tracing::warn!(error = %e, "clearing an alarm of a device no longer configured");
-                    }
-                }
-            }
+) -> tokio::task::JoinHandle<()> {
+    let alarms = match alarms::active(pool).await {
+        Ok(found) => found.into_iter().filter(|a| a.device == id).map(|a| (a.kind, a.code)).collect(),
+        Err(e) => {
+            tracing::error!(error = %e, "reading active alarms");
+            BTreeSet::new()
         }
-        Err(e) => tracing::error!(error = %e, "reading active alarms"),
-    }
-    let mut tasks = Vec::new();
-    for (id, handle) in devices.iter() {
-        let control = queues.control(id).unwrap_or_else(|| watch::Sender::default().subscribe());
-        let alarms = active.remove(id).unwrap_or_default();
-        let span = tracing::info_span!("device", device = %id);
-        tasks.push(tokio::spawn(
-            watch_device(handle.clone(), control, alarms, writer.clone()).instrument(span),
-        ));
-    }
-    tasks
+    };
+    let control = queues.control(id).unwrap_or_else(|| watch::Sender::default().subscribe());
+    let span = tracing::info_span!("device", device = %id);
+    tokio::spawn(watch_device(handle.clone(), control, alarms, writer).instrument(span))
 }
 
 /// Records every change of one device until its status or the writer goes away.

@@ -186,22 +186,46 @@ impl Crane {
         })
     }
 
-    /// Runs the device until the task is aborted: recover, then poll at the configured
-    /// period, hand over work when the crane is free, and answer requests.
+    /// Runs the device until the task is aborted or asked to stop: recover, then poll at
+    /// the configured period, hand over work when the crane is free, and answer requests.
+    ///
+    /// A stop ([`DeviceRequest::Stop`]) ends it between two rounds, never inside a
+    /// hand-over's handshake: while a hand-over is not known to be over ([`interrupted`]),
+    /// the task hands over nothing new and keeps polling, which carries the hand-over to
+    /// its end, and stops then. Should the crane not answer for [`Crane::stop_grace`], it
+    /// stops anyway: the registers hold the hand-over, and the next start rebuilds and
+    /// finishes it from them, as after a restart.
     pub async fn run(mut self, mut requests: mpsc::Receiver<DeviceRequest>) {
         let period = self.config.poll();
+        let mut later = Vec::new();
         while let Err(e) = self.recover().await {
             self.repeats.failed("crane recovery failed; retrying", &e);
             self.status.update(|s| s.last_error = Some(e.to_string()));
-            tokio::time::sleep(period).await;
+            if super::wait_recovering(period, &mut requests, &mut later).await {
+                return;
+            }
         }
         self.repeats.recovered();
+        let mut stopping = None;
+        for request in later {
+            self.handle(request, &mut stopping).await;
+        }
         let mut next_poll = Instant::now() + period;
         loop {
+            if let Some(deadline) = stopping {
+                if self.handing.is_none() {
+                    tracing::info!("stopped (reload)");
+                    return;
+                }
+                if Instant::now() >= deadline {
+                    tracing::warn!("stopped (reload) with a hand-over not over: the next start finishes it");
+                    return;
+                }
+            }
             let port = self.port.clone();
             let span = self.job_span();
             tokio::select! {
-                Some(request) = requests.recv() => self.handle(request).instrument(span).await,
+                Some(request) = requests.recv() => self.handle(request, &mut stopping).instrument(span).await,
                 _ = port.work_waiting() => {}
                 _ = sleep_until(next_poll) => {
                     match self.poll().instrument(span).await {
@@ -214,13 +238,21 @@ impl Crane {
                     next_poll = Instant::now() + period;
                 }
             }
-            if self.may_dispatch()
+            if stopping.is_none()
+                && self.may_dispatch()
                 && let Err(e) = self.dispatch().await
             {
                 self.repeats.failed("crane hand-over stopped", &e);
                 self.status.update(|s| s.last_error = Some(e.to_string()));
             }
         }
+    }
+
+    /// How long a stop waits for a hand-over under way to end: three handshake timeouts
+    /// (the wait for ACK = 1, the wait for ACK = 0 or the withdrawn strobe's hold) and two
+    /// polls; a crane that answers ends any hand-over within it.
+    pub fn stop_grace(&self) -> std::time::Duration {
+        3 * std::time::Duration::from_millis(self.config.handshake_timeout_ms) + 2 * self.config.poll()
     }
 
     /// The span of the job the crane holds, so that what is logged about it carries its
@@ -232,7 +264,8 @@ impl Crane {
         }
     }
 
-    async fn handle(&mut self, request: DeviceRequest) {
+    /// Answers a request; a stop sets when the task must stop at the latest.
+    async fn handle(&mut self, request: DeviceRequest, stopping: &mut Option<Instant>) {
         match request {
             DeviceRequest::Cancel { job, reply } => {
                 let _ = reply.send(self.cancel(job).await);
@@ -242,6 +275,11 @@ impl Crane {
                 let handing = self.handing.as_ref().map(|h| h.job);
                 jobs.retain(|id| current == Some(*id) || handing == Some(*id));
                 let _ = reply.send(jobs);
+            }
+            DeviceRequest::Stop => {
+                if stopping.is_none() {
+                    *stopping = Some(Instant::now() + self.stop_grace());
+                }
             }
         }
     }

@@ -93,20 +93,33 @@ impl Shelf {
         Ok(Shelf { config, plc, base, port, status, slots, repeats: Repeats::default() })
     }
 
-    /// Runs the device until the task is aborted: recover, then dispatch whenever work may
-    /// be waiting and poll at the configured period.
+    /// Runs the device until the task is aborted or asked to stop: recover, then dispatch
+    /// whenever work may be waiting and poll at the configured period. A stop
+    /// ([`DeviceRequest::Stop`]) ends it between two rounds: every task written is in its
+    /// slot with its id, and the next start reconciles from the slots as after a restart.
     pub async fn run(mut self, mut requests: mpsc::Receiver<DeviceRequest>) {
         let period = self.config.poll();
+        let mut later = Vec::new();
         while let Err(e) = self.recover().await {
             self.repeats.failed("recovery failed; retrying", &e);
-            tokio::time::sleep(period).await;
+            if super::wait_recovering(period, &mut requests, &mut later).await {
+                return;
+            }
         }
         self.repeats.recovered();
+        for request in later {
+            if self.handle(request).await {
+                return;
+            }
+        }
         let mut next_poll = Instant::now() + period;
         loop {
             let port = self.port.clone();
             tokio::select! {
-                Some(request) = requests.recv() => self.handle(request).await,
+                Some(request) = requests.recv() => if self.handle(request).await {
+                    tracing::info!("stopped (reload)");
+                    return;
+                },
                 _ = port.work_waiting() => {}
                 _ = sleep_until(next_poll) => {
                     // Polls keep their pace: time a poll spends on retries comes out of
@@ -126,7 +139,8 @@ impl Shelf {
         }
     }
 
-    async fn handle(&mut self, request: DeviceRequest) {
+    /// Answers a request; true for a stop (the task ends).
+    async fn handle(&mut self, request: DeviceRequest) -> bool {
         match request {
             DeviceRequest::Cancel { job, reply } => {
                 let _ = reply.send(self.cancel(job).await);
@@ -135,7 +149,9 @@ impl Shelf {
                 jobs.retain(|id| self.slots.iter().any(|s| matches!(s, Slot::Held { job, .. } if job == id)));
                 let _ = reply.send(jobs);
             }
+            DeviceRequest::Stop => return true,
         }
+        false
     }
 
     fn may_dispatch(&self) -> bool {

@@ -129,8 +129,8 @@ impl TagDevice {
         Ok((device, handle))
     }
 
-    /// Runs the device until the task is aborted: poll at once and then every `poll_ms`,
-    /// perform writes in between, refuse job requests.
+    /// Runs the device until the task is aborted or asked to stop: poll at once and then
+    /// every `poll_ms`, perform writes in between, refuse job requests.
     pub async fn run(mut self, mut requests: mpsc::Receiver<DeviceRequest>) {
         let period = self.config.poll();
         let mut next_poll = Instant::now();
@@ -144,6 +144,8 @@ impl TagDevice {
                     DeviceRequest::Holding { reply, .. } => {
                         let _ = reply.send(Vec::new());
                     }
+                    // A tags device holds no job: it stops between two requests.
+                    DeviceRequest::Stop => return,
                 },
                 _ = sleep_until(next_poll) => {
                     self.poll().await;

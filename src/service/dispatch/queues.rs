@@ -16,18 +16,23 @@
 //! ([`Queues::locked_hook`]).
 
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard};
+
+use super::waiting::Watched;
 
 use async_trait::async_trait;
 use tokio::sync::{Notify, watch};
 
+use std::sync::atomic::AtomicU64;
+
 use super::order::next_jobs;
 use super::report_error;
-use crate::devices::DeviceStatus;
+use crate::config::devices::DeviceConfig;
 use crate::devices::port::{Port, ReportError};
 use crate::domain::{Job, JobState, Location, LocationLock, Pause, Report, Waiting, WaitingReason};
 use crate::service::planner::CranePlanner;
 use crate::service::planner::refusal::picks_from;
+use crate::store::Pool;
 use crate::store::writer::{Committed, Locked, Writer};
 
 /// What operators set for a device, apart from what the device reports.
@@ -52,10 +57,11 @@ pub(super) struct Queue {
     pub(super) on: HashMap<Location, BTreeSet<i64>>,
 }
 
-/// A device's way to be told of work, and its control state.
+/// A device's way to be told of work, and its control state. A reload that changes the
+/// device replaces its lane, keeping its wake-up and control state (a pause holds across).
 struct Lane {
     wake: Arc<Notify>,
-    control: watch::Sender<Control>,
+    control: Arc<watch::Sender<Control>>,
     window: usize,
     aisles: Vec<u16>,
     planner: Option<Arc<CranePlanner>>,
@@ -111,10 +117,10 @@ pub struct Queues(pub(super) Arc<Inner>);
 
 pub(super) struct Inner {
     queues: Mutex<HashMap<String, Queue>>,
-    lanes: HashMap<String, Lane>,
+    lanes: RwLock<HashMap<String, Arc<Lane>>>,
     holds: Mutex<Holds>,
-    /// What each device reports, once the devices run ([`Queues::watch_devices`]).
-    pub(super) statuses: std::sync::OnceLock<HashMap<String, watch::Receiver<DeviceStatus>>>,
+    /// What each running device reports ([`Queues::watch_device`]).
+    pub(super) statuses: Mutex<HashMap<String, Watched>>,
     /// What the waiting reasons of queued jobs were last told as (see [`super::waiting`]).
     pub(super) told: Mutex<HashMap<i64, Option<Waiting>>>,
     /// Wakes the waiting watcher: something a waiting reason depends on changed.
@@ -136,6 +142,24 @@ pub struct Setup {
     pub planner: Option<Arc<CranePlanner>>,
 }
 
+impl Setup {
+    /// The device `d` as the dispatcher sees it; a crane's planner weighs the double-deep
+    /// aisles `deep`, reads the store through `pool` and counts the writer's `commits`.
+    pub fn of(d: &DeviceConfig, deep: &BTreeSet<u16>, pool: &Pool, commits: &Arc<AtomicU64>) -> Setup {
+        Setup {
+            id: d.id().to_owned(),
+            window: d.dispatch_window(),
+            aisles: d.aisles().to_vec(),
+            planner: match d {
+                DeviceConfig::Crane(c) => {
+                    Some(Arc::new(CranePlanner::new(c, deep, pool.clone(), commits.clone())))
+                }
+                _ => None,
+            },
+        }
+    }
+}
+
 impl Queues {
     /// Empty queues for these devices.
     pub fn new(devices: impl IntoIterator<Item = Setup>) -> Queues {
@@ -143,15 +167,15 @@ impl Queues {
         let mut lanes = HashMap::new();
         for Setup { id, window, aisles, planner } in devices {
             queues.insert(id.clone(), Queue::default());
-            let control = watch::Sender::default();
+            let control = Arc::new(watch::Sender::default());
             let lane = Lane { wake: Arc::new(Notify::new()), control, window, aisles, planner };
-            lanes.insert(id, lane);
+            lanes.insert(id, Arc::new(lane));
         }
         Queues(Arc::new(Inner {
             queues: Mutex::new(queues),
-            lanes,
+            lanes: RwLock::new(lanes),
             holds: Mutex::default(),
-            statuses: std::sync::OnceLock::new(),
+            statuses: Mutex::default(),
             told: Mutex::default(),
             changed: Notify::new(),
             drives: std::sync::atomic::AtomicBool::new(true),
@@ -221,25 +245,72 @@ impl Queues {
     }
 
     fn wake(&self, device: &str) {
-        if let Some(lane) = self.0.lanes.get(device) {
+        if let Some(lane) = self.lane(device) {
             lane.wake.notify_one();
         }
         self.0.changed.notify_one();
     }
 
+    fn lanes(&self) -> RwLockReadGuard<'_, HashMap<String, Arc<Lane>>> {
+        self.0.lanes.read().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn lane(&self, device: &str) -> Option<Arc<Lane>> {
+        self.lanes().get(device).cloned()
+    }
+
+    /// Adds a device (a reload added it: its unfinished jobs are then
+    /// [loaded](super::Dispatcher::load)), or sets a configured device's window, aisles
+    /// and planner anew (a reload changed it), keeping its queue and control state.
+    pub fn set_device(&self, setup: Setup) {
+        let Setup { id, window, aisles, planner } = setup;
+        self.lock().entry(id.clone()).or_default();
+        let mut lanes = self.0.lanes.write().unwrap_or_else(|p| p.into_inner());
+        let (wake, control) = match lanes.get(&id) {
+            Some(old) => (old.wake.clone(), old.control.clone()),
+            None => (Arc::new(Notify::new()), Arc::new(watch::Sender::default())),
+        };
+        let paused: Vec<u16> = self.holds().aisles.keys().copied().filter(|a| aisles.contains(a)).collect();
+        control.send_if_modified(|c| std::mem::replace(&mut c.paused_aisles, paused.clone()) != paused);
+        wake.notify_one();
+        lanes.insert(id, Arc::new(Lane { wake, control, window, aisles, planner }));
+        drop(lanes);
+        self.0.changed.notify_one();
+    }
+
+    /// Removes a device (a reload removed it): its queued jobs stay in the store and wait
+    /// as `no_device` (returned, to be told so); nothing of it is handed out any more.
+    pub fn remove_device(&self, device: &str) -> Vec<i64> {
+        self.0.lanes.write().unwrap_or_else(|p| p.into_inner()).remove(device);
+        let queue = self.lock().remove(device).unwrap_or_default();
+        self.0.told.lock().unwrap_or_else(|p| p.into_inner()).retain(|id, _| !queue.queued.contains_key(id));
+        self.0.changed.notify_one();
+        queue.queued.keys().copied().collect()
+    }
+
+    /// The configured devices' ids.
+    pub fn devices(&self) -> Vec<String> {
+        self.lanes().keys().cloned().collect()
+    }
+
+    /// The jobs handed to `device` that have not ended, by id.
+    pub fn active_on(&self, device: &str) -> Vec<i64> {
+        self.lock().get(device).map(|q| q.active.keys().copied().collect()).unwrap_or_default()
+    }
+
     /// Each device's dispatch window.
-    pub(super) fn windows(&self) -> HashMap<&str, usize> {
-        self.0.lanes.iter().map(|(id, lane)| (id.as_str(), lane.window)).collect()
+    pub(super) fn windows(&self) -> HashMap<String, usize> {
+        self.lanes().iter().map(|(id, lane)| (id.clone(), lane.window)).collect()
     }
 
     /// A crane's planner.
-    pub(super) fn planner(&self, device: &str) -> Option<&Arc<CranePlanner>> {
-        self.0.lanes.get(device)?.planner.as_ref()
+    pub(super) fn planner(&self, device: &str) -> Option<Arc<CranePlanner>> {
+        self.lanes().get(device)?.planner.clone()
     }
 
     /// The device's pause, if it is paused.
     pub(super) fn pause_of(&self, device: &str) -> Option<Pause> {
-        self.0.lanes.get(device).and_then(|l| l.control.borrow().pause.clone())
+        self.lanes().get(device).and_then(|l| l.control.borrow().pause.clone())
     }
 
     /// The unfinished jobs touching a location that `exists` says no longer exists (a
@@ -281,17 +352,17 @@ impl Queues {
 
     /// The device's control state, to watch.
     pub fn control(&self, device: &str) -> Option<watch::Receiver<Control>> {
-        self.0.lanes.get(device).map(|lane| lane.control.subscribe())
+        self.lanes().get(device).map(|lane| lane.control.subscribe())
     }
 
     /// Whether `device` is configured.
     pub fn has(&self, device: &str) -> bool {
-        self.0.lanes.contains_key(device)
+        self.lanes().contains_key(device)
     }
 
     /// Pauses (`Some`) or resumes a device; false if it is not configured.
     pub fn set_paused(&self, device: &str, pause: Option<Pause>) -> bool {
-        let Some(lane) = self.0.lanes.get(device) else { return false };
+        let Some(lane) = self.lane(device) else { return false };
         lane.control.send_if_modified(|c| {
             let changed = c.pause.is_some() != pause.is_some();
             c.pause = pause;
@@ -313,7 +384,7 @@ impl Queues {
             };
         }
         let paused: Vec<u16> = self.holds().aisles.keys().copied().collect();
-        for lane in self.0.lanes.values().filter(|l| l.aisles.contains(&aisle)) {
+        for lane in self.lanes().values().filter(|l| l.aisles.contains(&aisle)) {
             let mine: Vec<u16> = lane.aisles.iter().copied().filter(|a| paused.contains(a)).collect();
             lane.control.send_if_modified(|c| std::mem::replace(&mut c.paused_aisles, mine.clone()) != mine);
             lane.wake.notify_one();
@@ -351,7 +422,7 @@ impl Queues {
             unlocked
         };
         if unlocked {
-            for lane in self.0.lanes.values() {
+            for lane in self.lanes().values() {
                 lane.wake.notify_one();
             }
         }
@@ -443,7 +514,7 @@ impl Port for DevicePort {
     }
 
     async fn next_task(&self) -> Result<Option<Job>, ReportError> {
-        let planner = self.queues.planner(&self.device).cloned();
+        let planner = self.queues.planner(&self.device);
         match planner {
             Some(planner) => super::plan::next_task(self, &self.device, &self.writer, &planner).await,
             None => Ok(self.eligible(1, &HashSet::new()).into_iter().next()),
@@ -451,7 +522,7 @@ impl Port for DevicePort {
     }
 
     async fn work_waiting(&self) {
-        match self.queues.0.lanes.get(&self.device) {
+        match self.queues.lane(&self.device) {
             Some(lane) => lane.wake.notified().await,
             None => std::future::pending().await,
         }
@@ -470,7 +541,7 @@ impl DevicePort {
     /// The queued jobs the order rules let start now, best first, at most `free`; none
     /// while the device is paused.
     pub(super) fn eligible(&self, free: usize, holding: &HashSet<i64>) -> Vec<Job> {
-        let Some(lane) = self.queues.0.lanes.get(&self.device) else { return Vec::new() };
+        let Some(lane) = self.queues.lane(&self.device) else { return Vec::new() };
         if free == 0 || lane.control.borrow().pause.is_some() {
             return Vec::new();
         }

@@ -51,10 +51,29 @@ use crate::store::writer::{Record, Tell, WriteError, Writer};
 pub const SETTLE: Duration = Duration::from_millis(50);
 
 impl Queues {
-    /// Gives the dispatcher what each device reports (once, when the devices run), so
-    /// reasons can say a device is offline, in alarm or busy.
-    pub fn watch_devices(&self, statuses: HashMap<String, watch::Receiver<DeviceStatus>>) {
-        let _ = self.0.statuses.set(statuses);
+    /// Gives the dispatcher what a device reports, once it runs (at start, or when a reload
+    /// starts it again), so reasons can say it is offline, in alarm or busy; each change of
+    /// its status wakes the [`watch`](fn@watch)er.
+    pub fn watch_device(&self, device: &str, status: watch::Receiver<DeviceStatus>) {
+        let queues = self.clone();
+        let mut changes = status.clone();
+        let forwarder = tokio::spawn(async move {
+            while changes.changed().await.is_ok() {
+                queues.0.changed.notify_one();
+            }
+        });
+        let watched = Watched { status, forwarder };
+        self.statuses().insert(device.to_owned(), watched);
+        self.0.changed.notify_one();
+    }
+
+    /// Forgets what a device reports (a reload stopped it).
+    pub fn unwatch_device(&self, device: &str) {
+        self.statuses().remove(device);
+    }
+
+    fn statuses(&self) -> std::sync::MutexGuard<'_, HashMap<String, Watched>> {
+        self.0.statuses.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// Why `job` is not moving now; None while it moves or is about to be handed out.
@@ -70,7 +89,7 @@ impl Queues {
     }
 
     fn status(&self, device: &str) -> Option<DeviceStatus> {
-        self.0.statuses.get().and_then(|s| s.get(device)).map(|r| r.borrow().clone())
+        self.statuses().get(device).map(|w| w.status.borrow().clone())
     }
 
     /// The reason, given the job's queue, the holds and its device's status (the module doc
@@ -187,17 +206,15 @@ impl Queues {
     /// The queued jobs (of each device's dispatch window) whose reason is not the one last
     /// told; a job never told counts as told "not waiting".
     fn untold(&self) -> Vec<i64> {
-        let statuses: HashMap<String, DeviceStatus> = match self.0.statuses.get() {
-            Some(s) => s.iter().map(|(id, r)| (id.clone(), r.borrow().clone())).collect(),
-            None => HashMap::new(),
-        };
+        let statuses: HashMap<String, DeviceStatus> =
+            self.statuses().iter().map(|(id, w)| (id.clone(), w.status.borrow().clone())).collect();
         let windows = self.windows();
         let queues = self.lock();
         let holds = self.holds();
         let told = self.0.told.lock().unwrap_or_else(|p| p.into_inner());
         let mut changed = Vec::new();
         for (device, queue) in queues.iter() {
-            let window = windows.get(device.as_str()).copied().unwrap_or(usize::MAX);
+            let window = windows.get(device).copied().unwrap_or(usize::MAX);
             for job in queue.queued.values().take(window) {
                 let now = self.reason(job, Some(queue), &holds, statuses.get(device));
                 if told.get(&job.id).unwrap_or(&None) != &now {
@@ -212,18 +229,6 @@ impl Queues {
 /// Tells clients of every change of reason alone (see the module doc) until the writer
 /// stops. Device status changes wake it as well as the dispatcher's own.
 pub async fn watch(queues: Queues, writer: Writer) {
-    let mut forwarders = Vec::new();
-    for status in queues.0.statuses.get().map(|s| s.values().cloned().collect::<Vec<_>>()).unwrap_or_default()
-    {
-        let queues = queues.clone();
-        forwarders.push(tokio::spawn(async move {
-            let mut status = status;
-            while status.changed().await.is_ok() {
-                queues.0.changed.notify_one();
-            }
-        }));
-    }
-    let _stop = AbortOnDrop(forwarders);
     loop {
         queues.0.changed.notified().await;
         tokio::time::sleep(SETTLE).await;
@@ -239,13 +244,15 @@ pub async fn watch(queues: Queues, writer: Writer) {
     }
 }
 
-/// Stops the forwarding tasks with the watcher.
-struct AbortOnDrop(Vec<tokio::task::JoinHandle<()>>);
+/// A running device's status, and the task that wakes the watcher on its changes (stopped
+/// with it).
+pub(super) struct Watched {
+    status: watch::Receiver<DeviceStatus>,
+    forwarder: tokio::task::JoinHandle<()>,
+}
 
-impl Drop for AbortOnDrop {
+impl Drop for Watched {
     fn drop(&mut self) {
-        for task in &self.0 {
-            task.abort();
-        }
+        self.forwarder.abort();
     }
 }

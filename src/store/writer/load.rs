@@ -162,6 +162,7 @@ pub(super) async fn load(
                 Record::Device { .. }
                 | Record::Pause { .. }
                 | Record::Audit { .. }
+                | Record::Reloaded { .. }
                 | Record::Prune { .. }
                 | Record::Webhook { .. } => {}
             },

@@ -200,6 +200,14 @@ pub enum Record {
         /// The operator's action and its reason.
         audit: Option<(String, Option<String>)>,
     },
+    /// The configuration was reloaded (audited on `config`, with `reason`): a
+    /// `config.reloaded` event with `data` (JSON) as its data.
+    Reloaded {
+        /// The event's data.
+        data: String,
+        /// The audit entry's words: the hash and the difference.
+        reason: String,
+    },
     /// Retention: these jobs are in the archive (written and synced, `store::archive`):
     /// delete them and their history, and take them off the counts, in this commit. A job
     /// that is not ended (retried since it was read) stays; one the group's later commands

@@ -1,7 +1,10 @@
 //! `POST /api/v1/config/reload`: the server started from a file (as `serve --config`), the
 //! file rewritten, and the answer checked: the difference of a dry run, the refusals of a
 //! bad key (as `check-config` words it) and of a key that cannot change at run time, the
-//! admin role. SQLite alone: a reload reads files, not the store.
+//! admin role, and what a reload applies ([`apply`], [`handover`]). SQLite alone: a reload
+//! reads files, and the store's part is the same code on both engines.
+
+mod apply;
 
 use std::path::Path;
 use std::time::Duration;
@@ -75,6 +78,20 @@ fn rewrite(file: &Path, text: &str, edit: impl FnOnce(&mut Config)) {
     std::fs::write(file, toml::to_string(&config).unwrap()).unwrap();
 }
 
+/// The difference in a reload's answer (without the running configuration's hash and time).
+fn difference(body: &Value) -> Value {
+    let mut body = body.clone();
+    for key in ["hash", "loaded_at", "kept_for_takeover"] {
+        body.as_object_mut().map(|o| o.remove(key));
+    }
+    body
+}
+
+/// A GET with the admin's key.
+async fn get(app: &TestApp, path: &str) -> (u16, Value) {
+    split(app.client.get(app.url(path)).bearer_auth("key-admin").send().await.unwrap()).await
+}
+
 async fn reload(app: &TestApp, query: &str, key: &str) -> (u16, Value) {
     let url = app.url(&format!("/api/v1/config/reload{query}"));
     // Keyless mode takes a POST with a JSON content type only (`api::keyless`).
@@ -85,16 +102,17 @@ async fn reload(app: &TestApp, query: &str, key: &str) -> (u16, Value) {
 #[tokio::test]
 async fn a_dry_run_answers_the_difference_and_applies_nothing() {
     let (app, file) = spawn_from_file(&site("127.0.0.1:9", CRANE)).await;
+    let running = get(&app, "/api/v1/config").await.1;
+    let (status, body) = reload(&app, "?dry_run=true", "key-admin").await;
     assert_eq!(
-        reload(&app, "?dry_run=true", "key-admin").await,
+        (status, difference(&body)),
         (
             200,
-            json!({
-                "dry_run": true, "devices": [], "aisles": {"added": [], "removed": [], "changed": []},
-                "settings": [], "fixed": [],
-            })
+            json!({"dry_run": true, "devices": [], "aisles": {"added": [], "removed": [], "changed": []}, "fixed": []})
         )
     );
+    assert_eq!((&body["hash"], &body["loaded_at"]), (&running["hash"], &running["loaded_at"]));
+    assert_eq!(running["hash"].as_str().map(str::len), Some(64), "{running}");
 
     let third = r#"
 [[site.aisles]]
@@ -110,7 +128,7 @@ kind = "shelf"
 address = "127.0.0.1:9"
 aisles = [3]
 "#;
-    rewrite(&file, &site("127.0.0.1:19", third), |c| c.events.buffer += 1);
+    rewrite(&file, &site("127.0.0.1:19", third), |_| {});
     let expected = json!({
         "dry_run": true,
         "devices": [
@@ -119,18 +137,36 @@ aisles = [3]
             {"id": "shelf-3", "change": "added"},
         ],
         "aisles": {"added": [3], "removed": [], "changed": []},
-        "settings": ["events.buffer"],
         "fixed": [],
     });
-    assert_eq!(reload(&app, "?dry_run=true", "key-admin").await, (200, expected.clone()));
+    let (status, body) = reload(&app, "?dry_run=true", "key-admin").await;
+    assert_eq!((status, difference(&body)), (200, expected.clone()));
     // Nothing was applied: the same answer again, against the same running configuration.
-    assert_eq!(reload(&app, "?dry_run=true", "key-admin").await, (200, expected));
-    let applied = reload(&app, "", "key-admin").await;
-    assert_error(&applied, 501, "not_implemented");
-    assert_error(&reload(&app, "?dry_run=false", "key-admin").await, 501, "not_implemented");
+    let (status, body) = reload(&app, "?dry_run=true", "key-admin").await;
+    assert_eq!((status, difference(&body)), (200, expected.clone()));
+    assert_eq!(get(&app, "/api/v1/config").await.1, running);
     // Operators run the site; its configuration is the administrators'.
     assert_error(&reload(&app, "?dry_run=true", "key-ops").await, 403, "forbidden");
+    assert_error(&reload(&app, "", "key-ops").await, 403, "forbidden");
     assert_error(&reload(&app, "?dry_run=true", "nobody").await, 401, "unauthorized");
+
+    // Applied: the same difference, and the new configuration runs.
+    let (status, body) = reload(&app, "?dry_run=false", "key-admin").await;
+    let mut applied = expected.clone();
+    applied["dry_run"] = json!(false);
+    assert_eq!((status, difference(&body)), (200, applied));
+    let now = get(&app, "/api/v1/config").await.1;
+    assert_eq!(now["hash"], body["hash"]);
+    assert_ne!(now["hash"], running["hash"]);
+    let (_, devices) = get(&app, "/api/v1/devices").await;
+    let ids: Vec<&str> = devices.as_array().unwrap().iter().map(|d| d["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, ["shelf-1", "shelf-3"]);
+    let (_, aisles) = get(&app, "/api/v1/aisles").await;
+    assert!(aisles.to_string().contains("\"aisle\":3"), "the added aisle is there: {aisles}");
+    let (_, places) = get(&app, "/api/v1/locations?aisle=3").await;
+    assert!(places.to_string().contains("\"aisle\":3"), "with its locations: {places}");
+    let (status, body) = reload(&app, "", "key-admin").await;
+    assert_eq!((status, &body["devices"]), (200, &json!([])), "nothing left to change");
     app.stop().await;
 }
 
@@ -146,8 +182,16 @@ async fn a_bad_key_is_refused_as_check_config_words_it() {
     let refused = reload(&app, "?dry_run=true", "key-admin").await;
     assert_error(&refused, 422, "invalid_config");
     assert_eq!(refused.1["error"]["message"], checked.as_str());
-    // Whether or not it is a dry run: nothing is applied from a file that does not check.
-    assert_error(&reload(&app, "", "key-admin").await, 422, "invalid_config");
+    // Whether or not it is a dry run: nothing is applied from a file that does not check,
+    // not even the device changed beside the bad key.
+    let before = get(&app, "/api/v1/config").await.1;
+    std::fs::write(&file, text.replace("127.0.0.1:9\"", "127.0.0.1:19\"")).unwrap();
+    let refused = reload(&app, "", "key-admin").await;
+    assert_error(&refused, 422, "invalid_config");
+    assert!(refused.1["error"]["message"].as_str().unwrap().contains("server.lisen"), "{refused:?}");
+    assert_eq!(get(&app, "/api/v1/config").await.1, before);
+    let (_, shelf) = get(&app, "/api/v1/devices/shelf-1").await;
+    assert_eq!(shelf["address"], "127.0.0.1:9", "{shelf}");
     app.stop().await;
 }
 
@@ -164,6 +208,9 @@ async fn a_key_that_cannot_change_at_run_time_is_refused_by_name_and_place() {
     let place = format!("server.listen ({}:{line}:", file.display());
     assert!(message.starts_with(&place), "{message} should start with {place}");
     assert!(message.contains("nothing was applied"), "{message}");
+    assert_error(&reload(&app, "", "key-admin").await, 409, "fixed_key");
+    let (_, shelf) = get(&app, "/api/v1/devices/shelf-1").await;
+    assert_eq!(shelf["address"], "127.0.0.1:9", "the device beside it did not change: {shelf}");
     app.stop().await;
 }
 
@@ -174,10 +221,10 @@ async fn a_server_not_started_from_a_file_has_nothing_to_reload() {
     app.stop().await;
 }
 
-/// SIGHUP runs the same check in a `rackd serve --config` process, logs its outcome, and
-/// no longer ends the process.
+/// SIGHUP reloads a `rackd serve --config` process as the API does, logs its outcome, and
+/// does not end the process.
 #[tokio::test]
-async fn sighup_checks_the_file_again_and_logs_the_outcome() {
+async fn sighup_reloads_the_file_and_logs_the_outcome() {
     let dir = tempfile::tempdir().unwrap();
     let mut config = Config::demo();
     config.server.listen = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
@@ -190,14 +237,34 @@ async fn sighup_checks_the_file_again_and_logs_the_outcome() {
         http.get(&health).send().await?.error_for_status()
     })
     .await;
+    let loaded = |http: reqwest::Client, url: String| async move {
+        let body: Value =
+            http.get(format!("{url}/api/v1/config")).send().await.unwrap().json().await.unwrap();
+        body["hash"].as_str().unwrap().to_owned()
+    };
+    let before = loaded(http.clone(), node.url.clone()).await;
+
+    let mut third = config.site.aisles[0].clone();
+    third.aisle = 3;
+    config.site.aisles.push(third);
+    std::fs::write(node.config_file(), toml::to_string(&config).unwrap()).unwrap();
+    node.hang_up();
+    eventually("the reload in the log", Duration::from_secs(10), async || {
+        let log = node.log();
+        let line = log.lines().find(|l| l.contains("SIGHUP: the configuration was reloaded"));
+        line.filter(|l| l.contains(r#""added":[3]"#)).map(str::to_owned).ok_or(log)
+    })
+    .await;
+    assert_eq!(loaded(http.clone(), node.url.clone()).await, config.site_hash());
+    assert_ne!(config.site_hash(), before);
 
     config.events.buffer += 1;
     std::fs::write(node.config_file(), toml::to_string(&config).unwrap()).unwrap();
     node.hang_up();
-    eventually("the checked difference in the log", Duration::from_secs(10), async || {
+    eventually("the refusal of a fixed key in the log", Duration::from_secs(10), async || {
         let log = node.log();
-        let line = log.lines().find(|l| l.contains("SIGHUP: the configuration was read again and checks"));
-        line.filter(|l| l.contains("events.buffer")).map(str::to_owned).ok_or(log)
+        let refused = log.lines().any(|l| l.contains("is refused") && l.contains("events.buffer"));
+        if refused { Ok(()) } else { Err(log) }
     })
     .await;
 

@@ -125,6 +125,11 @@ impl Group {
                 let by = who.map_or("rackd", |w| w.name.as_str());
                 self.audit(by, client, action, target, reason.as_deref());
             }
+            Record::Reloaded { data, reason } => {
+                let by = who.map_or("rackd", |w| w.name.as_str());
+                self.audit(by, client, "reload", "config", Some(reason));
+                self.append("config.reloaded", data.clone());
+            }
             Record::Prune { before_ms, through, hard_ms } => {
                 self.prune = Some((*before_ms, *through, *hard_ms))
             }

@@ -14,6 +14,7 @@
 mod alarms;
 mod handshake;
 mod heartbeat;
+mod reload;
 
 use std::collections::{BTreeMap, HashSet};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -165,8 +166,8 @@ pub struct Rig {
     pub memory: Arc<Memory>,
     pub port: Arc<TestPort>,
     pub status: watch::Receiver<DeviceStatus>,
-    /// Kept so the device task's request inbox stays open.
-    _requests: mpsc::Sender<DeviceRequest>,
+    /// The device task's request inbox (kept open).
+    pub requests: mpsc::Sender<DeviceRequest>,
     device: JoinHandle<()>,
     ticker: JoinHandle<()>,
 }
@@ -209,7 +210,7 @@ impl Rig {
         let crane = Crane::new(config, memory.clone(), port.clone(), status).unwrap();
         let (requests, inbox) = mpsc::channel(4);
         let device = tokio::spawn(crane.run(inbox));
-        Rig { memory, port, status: receiver, _requests: requests, device, ticker }
+        Rig { memory, port, status: receiver, requests, device, ticker }
     }
 
     /// The crane's D register `n`.
@@ -314,6 +315,16 @@ impl Rig {
             if job.state == state { Ok(Instant::now()) } else { Err(job) }
         })
         .await
+    }
+
+    /// Waits until the device task has ended (a stop), for at most `limit`; returns the
+    /// instant.
+    pub async fn until_stopped(&mut self, limit: Duration) -> Instant {
+        eventually_every(Duration::from_millis(1), "the device task to end", limit, async || {
+            self.device.is_finished()
+        })
+        .await;
+        Instant::now()
     }
 
     /// Waits until rackd has made `more` further requests of the crane (bounded by 60 s of

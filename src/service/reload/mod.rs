@@ -1,0 +1,383 @@
+//! Reloading the configuration (issue 43): read it again from the sources the process
+//! started with, check it as `rackd check-config` does, and apply the difference to the
+//! running site ([`apply`]): devices started, stopped or restarted one by one, aisles and
+//! locations added or removed, every other device untouched.
+//!
+//! Decisions:
+//! - One code path: [`Sources::load`] reads, merges and checks, for `serve`, for
+//!   `check-config` and here; a file that `check-config` refuses is refused by a reload
+//!   with the same `WHERE: KEY: MESSAGE`.
+//! - The [`Sources`] are the ones the process started with (`--config`, `--listen`,
+//!   `--database`, the `RACKD_` environment of its start), kept by the application: a
+//!   reload reads the same file and the same environment, so a `--listen` given at the
+//!   start is not taken for a change of the listen address.
+//! - The demo site (no file), and an application built from a configuration in code,
+//!   have no sources: there is nothing to read again, and a reload says so (409).
+//! - Only `[[devices]]` and `[site]` change at run time; any other key that changed
+//!   refuses the whole reload, naming the key and where it is set: all or nothing.
+//! - An aisle removed or shrunk while something uses one of the locations it loses is
+//!   refused (409 naming what holds them): a box (`occupied`), a job's reservation, or an
+//!   unfinished job the dispatcher holds that touches the location. A standby keeps no
+//!   queues: it sees the boxes and reservations of the store alone.
+//! - A device removed while it holds jobs on the machine (handed over, not ended) is
+//!   refused the same way (409 naming them): nobody would follow them. Its queued jobs do
+//!   not hold it: they stay queued and wait as `no_device` until a device with its id is
+//!   configured again.
+//! - One reload at a time: a second waits for the first to end, then reads the file again.
+//! - SIGHUP ([`on_hangups`]) applies as the API does, audited as `rackd`; its outcome is
+//!   logged. It no longer ends the process (its default action), with or without a file.
+//! - Each node of a cluster reads its own sources: a reload is not forwarded to the active
+//!   node (`api::forward`). A standby checks against its own running configuration and
+//!   keeps the new one for when it takes over (it runs no device to change).
+//! - Reading runs on a blocking thread: the loader reads files (the configuration, keys,
+//!   certificates) with the standard library.
+
+mod apply;
+
+use std::sync::atomic::AtomicU64;
+use std::sync::{Arc, Mutex, OnceLock, RwLock};
+
+use serde::Serialize;
+use utoipa::ToSchema;
+
+use crate::config::{Change, Config, ConfigError, Difference, Origin, Sources};
+use crate::domain::Location;
+use crate::service::dispatch::Dispatcher;
+use crate::service::fleet::Fleet;
+use crate::service::intake::Rules;
+use crate::store::writer::Writer;
+use crate::store::{Pool, locations};
+
+pub use apply::Applied;
+
+/// At most this many holders are named in a refusal; the rest are counted.
+const NAMED: usize = 5;
+
+/// The running configuration and where it came from, and what a reload changes; cloned
+/// into the API's state.
+#[derive(Clone)]
+pub struct Reload(Arc<Inner>);
+
+struct Inner {
+    sources: OnceLock<Sources>,
+    running: Mutex<Running>,
+    rules: RwLock<Arc<Rules>>,
+    fleet: OnceLock<Fleet>,
+    parts: Parts,
+    /// One reload at a time.
+    one: tokio::sync::Mutex<()>,
+}
+
+/// What a reload needs of the rest of rackd.
+pub struct Parts {
+    /// The store: locations in use, locations to add, the queued jobs of an added device.
+    pub pool: Pool,
+    /// The dispatcher: its queues change with the devices.
+    pub dispatcher: Dispatcher,
+    /// This node's writer (not fenced: the audit entry is this node's own).
+    pub writer: Writer,
+    /// The writer's commits, for the cranes' planners.
+    pub commits: Arc<AtomicU64>,
+}
+
+/// The configuration running, as loaded.
+#[derive(Clone)]
+struct Running {
+    config: Config,
+    loaded: Loaded,
+}
+
+/// Which configuration runs: the hash of its `[site]` and `[[devices]]`
+/// ([`Config::site_hash`]) and when it was loaded (the start, or the last reload).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, ToSchema)]
+pub struct Loaded {
+    /// SHA-256 of `[site]` and `[[devices]]`, in hex.
+    #[schema(example = "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2")]
+    pub hash: String,
+    /// When it was loaded.
+    #[serde(with = "time::serde::rfc3339")]
+    #[schema(value_type = String, format = DateTime)]
+    pub loaded_at: time::OffsetDateTime,
+}
+
+impl Loaded {
+    fn now(config: &Config) -> Loaded {
+        let now = crate::domain::time::from_ms(crate::domain::time::now_ms());
+        Loaded { hash: config.site_hash(), loaded_at: now }
+    }
+}
+
+/// A configuration read again and checked, and what it changes.
+#[derive(Debug)]
+pub struct Plan {
+    /// The new configuration.
+    pub config: Config,
+    /// What changes from the running one.
+    pub difference: Difference,
+}
+
+/// Why a reload is refused.
+#[derive(Debug, thiserror::Error)]
+pub enum ReloadError {
+    /// The process did not start from a file.
+    #[error(
+        "rackd was not started from a configuration file (the demo site, or built in code): nothing to reload"
+    )]
+    NoSources,
+    /// The configuration does not load or does not check.
+    #[error(transparent)]
+    Invalid(#[from] ConfigError),
+    /// Keys that cannot change while rackd runs.
+    #[error("{}: cannot change while rackd runs (restart rackd to change them); nothing was applied", list(.0))]
+    Fixed(Vec<(String, Origin)>),
+    /// Locations an aisle would lose are in use.
+    #[error("site.aisles: {}; nothing was applied", held(.0))]
+    InUse(Vec<Held>),
+    /// Devices removed while they hold jobs on the machine: (device, jobs).
+    #[error("{}; nothing was applied", busy(.0))]
+    Busy(Vec<(String, Vec<i64>)>),
+    /// A device could not be built (its link's settings).
+    #[error("device {0:?}: {1}; nothing was applied")]
+    Device(String, String),
+    /// The store could not be read.
+    #[error("reading the locations: {0}")]
+    Store(#[from] sqlx::Error),
+    /// The blocking read failed to run.
+    #[error("reading the configuration did not finish: {0}")]
+    Task(String),
+}
+
+/// What holds a location that a reload would remove.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Held {
+    /// A box is there.
+    Box(Location, Option<String>),
+    /// A job reserved it, or an unfinished job touches it.
+    Job(Location, i64),
+}
+
+impl std::fmt::Display for Held {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Held::Box(l, Some(barcode)) => write!(f, "box {barcode} at {l}"),
+            Held::Box(l, None) => write!(f, "a box at {l}"),
+            Held::Job(l, job) => write!(f, "job {job} at {l}"),
+        }
+    }
+}
+
+fn held(all: &[Held]) -> String {
+    let aisles: std::collections::BTreeSet<u16> = all
+        .iter()
+        .map(|h| match h {
+            Held::Box(l, _) | Held::Job(l, _) => l.aisle,
+        })
+        .collect();
+    let aisles: Vec<String> = aisles.iter().map(|a| format!("aisle {a}")).collect();
+    let named: Vec<String> = all.iter().take(NAMED).map(Held::to_string).collect();
+    let more = match all.len().saturating_sub(NAMED) {
+        0 => String::new(),
+        n => format!(" and {n} more"),
+    };
+    format!("{} would lose locations in use: {}{more}", aisles.join(", "), named.join(", "))
+}
+
+fn busy(all: &[(String, Vec<i64>)]) -> String {
+    let each: Vec<String> = all
+        .iter()
+        .map(|(device, jobs)| {
+            let jobs: Vec<String> = jobs.iter().take(NAMED).map(i64::to_string).collect();
+            format!("devices: {device} is removed but holds jobs on the machine ({})", jobs.join(", "))
+        })
+        .collect();
+    each.join("; ")
+}
+
+fn list(keys: &[(String, Origin)]) -> String {
+    let each: Vec<String> = keys.iter().map(|(key, origin)| format!("{key} ({origin})")).collect();
+    each.join(", ")
+}
+
+impl Reload {
+    /// `running`, with no sources yet ([`Reload::read_from`]) and no devices running yet
+    /// ([`Reload::drive`]).
+    pub fn new(running: Config, parts: Parts) -> Reload {
+        let loaded = Loaded::now(&running);
+        let rules = RwLock::new(Arc::new(Rules::of(&running)));
+        Reload(Arc::new(Inner {
+            sources: OnceLock::new(),
+            running: Mutex::new(Running { config: running, loaded }),
+            rules,
+            fleet: OnceLock::new(),
+            parts,
+            one: tokio::sync::Mutex::new(()),
+        }))
+    }
+
+    /// Reload from `sources` (those the running configuration was loaded from); set once.
+    pub fn read_from(&self, sources: Sources) {
+        let _ = self.0.sources.set(sources);
+    }
+
+    /// This node drives `fleet` from now on (at start, or when it takes over).
+    pub fn drive(&self, fleet: Fleet) {
+        let _ = self.0.fleet.set(fleet);
+    }
+
+    /// The devices this node drives, if it drives any.
+    pub fn fleet(&self) -> Option<&Fleet> {
+        self.0.fleet.get()
+    }
+
+    /// The running devices (none on a standby node).
+    pub fn devices(&self) -> crate::devices::Devices {
+        self.fleet().map(Fleet::devices).unwrap_or_default()
+    }
+
+    fn running_now(&self) -> Running {
+        self.0.running.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    /// The running configuration.
+    pub fn running(&self) -> Config {
+        self.running_now().config
+    }
+
+    /// Which configuration runs, and since when.
+    pub fn loaded(&self) -> Loaded {
+        self.running_now().loaded
+    }
+
+    /// What job requests are checked against and routed by, as the running configuration
+    /// sets them.
+    pub fn rules(&self) -> Arc<Rules> {
+        self.0.rules.read().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    /// The running configuration for a node that takes over: the dispatcher's devices set
+    /// as it says (a standby may have reloaded since it started).
+    pub fn for_takeover(&self) -> Config {
+        let config = self.running();
+        let queues = self.0.parts.dispatcher.queues();
+        let deep = &self.rules().deep;
+        for d in &config.devices {
+            let p = &self.0.parts;
+            queues.set_device(crate::service::dispatch::Setup::of(d, deep, &p.pool, &p.commits));
+        }
+        for id in queues.devices() {
+            if !config.devices.iter().any(|d| d.id() == id) {
+                queues.remove_device(&id);
+            }
+        }
+        config
+    }
+
+    /// Reads the sources again, checks the configuration, and says what changes; refused
+    /// whole if a fixed key changes, or if what it removes is in use.
+    pub async fn check(&self) -> Result<Plan, ReloadError> {
+        let _one = self.0.one.lock().await;
+        self.plan().await
+    }
+
+    async fn plan(&self) -> Result<Plan, ReloadError> {
+        let sources = self.0.sources.get().cloned().ok_or(ReloadError::NoSources)?;
+        let loaded = tokio::task::spawn_blocking(move || sources.load())
+            .await
+            .map_err(|e| ReloadError::Task(e.to_string()))??;
+        let difference = self.running().difference(&loaded.config);
+        if !difference.fixed.is_empty() {
+            let keys = difference.fixed.iter().map(|k| (k.clone(), loaded.locate(k))).collect();
+            return Err(ReloadError::Fixed(keys));
+        }
+        let in_use = self.in_use(&difference, &loaded.config).await?;
+        if !in_use.is_empty() {
+            return Err(ReloadError::InUse(in_use));
+        }
+        let queues = self.0.parts.dispatcher.queues();
+        let busy: Vec<(String, Vec<i64>)> = removed(&difference)
+            .map(|id| (id.to_owned(), queues.active_on(id)))
+            .filter(|(_, jobs)| !jobs.is_empty())
+            .collect();
+        if !busy.is_empty() {
+            return Err(ReloadError::Busy(busy));
+        }
+        Ok(Plan { config: loaded.config, difference })
+    }
+
+    /// What holds the locations that the aisles removed or changed would lose: boxes and
+    /// reservations first (by place), then the dispatcher's unfinished jobs.
+    async fn in_use(&self, difference: &Difference, new: &Config) -> Result<Vec<Held>, ReloadError> {
+        let layout = new.layout();
+        let exists = |l: &Location| layout.check(l).is_ok();
+        let aisles = difference
+            .aisles
+            .removed
+            .iter()
+            .copied()
+            .chain(difference.aisles.changed.iter().map(|c| c.aisle));
+        let mut held = Vec::new();
+        for aisle in aisles {
+            for l in locations::list(&self.0.parts.pool, Some(aisle)).await? {
+                let place = l.location();
+                if exists(&place) {
+                    continue;
+                }
+                if l.occupied {
+                    held.push(Held::Box(place, l.barcode.clone()));
+                }
+                if let Some(job) = l.reserved_by {
+                    held.push(Held::Job(place, job));
+                }
+            }
+        }
+        for (job, place) in self.0.parts.dispatcher.queues().touching_outside(exists) {
+            if !held.contains(&Held::Job(place, job)) {
+                held.push(Held::Job(place, job));
+            }
+        }
+        Ok(held)
+    }
+}
+
+/// The ids of the devices a difference removes.
+fn removed(difference: &Difference) -> impl Iterator<Item = &str> {
+    difference.devices.iter().filter(|d| d.change == Change::Removed).map(|d| d.id.as_str())
+}
+
+/// On each SIGHUP, the reload of `POST /config/reload`, audited as `rackd`; its outcome
+/// logged: what changed, or why the configuration is refused.
+#[cfg(unix)]
+pub async fn on_hangups(reload: Reload, mut hangups: tokio::signal::unix::Signal) {
+    while hangups.recv().await.is_some() {
+        let who = crate::domain::Who { name: "rackd".into(), client: None };
+        match reload.apply(who, Some("SIGHUP".into())).await {
+            Ok(applied) => {
+                let difference = serde_json::to_string(&applied.difference).unwrap_or_default();
+                tracing::info!(%difference, hash = %applied.loaded.hash, "SIGHUP: the configuration was reloaded");
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "SIGHUP: the configuration was read again and is refused; nothing was applied")
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(aisle: u16, bay: u16) -> Location {
+        Location { aisle, row: 1, bay, level: 1, position: 1 }
+    }
+
+    #[test]
+    fn a_refusal_names_the_aisles_and_the_first_holders_and_counts_the_rest() {
+        let mut all = vec![Held::Box(at(2, 1), Some("BOX-1".into())), Held::Box(at(2, 2), None)];
+        all.extend((3..8).map(|bay| Held::Job(at(1, bay), i64::from(bay))));
+        assert_eq!(
+            ReloadError::InUse(all).to_string(),
+            "site.aisles: aisle 1, aisle 2 would lose locations in use: box BOX-1 at 2-1-1-1-1, a box at 2-1-2-1-1, \
+             job 3 at 1-1-3-1-1, job 4 at 1-1-4-1-1, job 5 at 1-1-5-1-1 and 2 more; nothing was applied"
+        );
+    }
+}
