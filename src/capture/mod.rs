@@ -1,5 +1,5 @@
 //! Captures: a link's frames, as rackd sent and read them, written as a pcapng file that
-//! Wireshark and tshark open. The flight recorder keeps [`Frame`]s; [`write`] turns them into
+//! Wireshark and tshark open. The flight recorder keeps [`Frame`]s; [`write()`] turns them into
 //! a file. See `docs/commissioning/capture.md` for opening one.
 //!
 //! # What a capture holds
