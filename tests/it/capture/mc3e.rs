@@ -153,3 +153,48 @@ fn mc4e_over_udp_is_found_on_any_port() {
     assert_clean(&packets, &[]);
     assert_comments(&packets, &frames);
 }
+
+/// A recorder keeps what each read returned: a frame cut over two reads, or two frames in
+/// one. Over TCP the dissector reassembles them as Wireshark does for its own protocols.
+#[test]
+fn mc3e_frames_cut_or_joined_in_tcp_segments_are_reassembled() {
+    let link = Link::Ip {
+        transport: Transport::Tcp,
+        local: "10.0.0.1:40001".parse().unwrap(),
+        remote: "10.0.0.9:8000".parse().unwrap(),
+    };
+    let read = request(Some(1), Command::ReadWords { device: Device::D, start: 0, count: 2 });
+    let (head, tail) = read.split_at(5);
+    let mut both = response(Some(1), Outcome::Ok(words(&[11, 12])));
+    both.extend(response(Some(2), Outcome::Ok(words(&[21, 22]))));
+    let mut frames = Frames::default();
+    frames
+        .sent(head.to_vec(), Annotations::default())
+        .sent(tail.to_vec(), Annotations::default())
+        .sent(
+            request(Some(2), Command::ReadWords { device: Device::D, start: 21, count: 2 }),
+            Annotations::default(),
+        )
+        .received(
+            both,
+            Annotations {
+                verdict: Some(Verdict::StaleReply),
+                note: "serial 1 was late".into(),
+                ..Annotations::default()
+            },
+        );
+    let packets = decode(&link, &frames, &[], &FIELDS);
+    assert_eq!(packets[0].get("mc3e.frame"), "", "half a frame waits for the rest");
+    assert_eq!(
+        [packets[1].get("mc3e.serial"), packets[1].get("mc3e.head"), packets[1].get("mc3e.points")],
+        ["1", "0", "2"]
+    );
+    assert_eq!(packets[3].all("mc3e.serial"), ["1", "2"]);
+    assert_eq!(packets[3].all("mc3e.word"), ["11", "12", "21", "22"]);
+    assert_eq!(
+        packets[3].all("mc3e.register"),
+        ["D0 heartbeat", "D1 reserved", "D21 STB", "D22 task completion acknowledged"]
+    );
+    assert_clean(&packets, &[]);
+    assert_comments(&packets, &frames);
+}

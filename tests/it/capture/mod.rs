@@ -25,15 +25,20 @@ const SEVERITY_ERROR: &str = "8388608";
 /// Fields every run prints besides the test's own.
 const ALWAYS: [&str; 3] = ["frame.comment", "_ws.expert.severity", "_ws.expert.message"];
 
+/// tshark: `$TSHARK`, or the first on the PATH; a test without it fails with what to do.
 fn tshark() -> PathBuf {
-    if let Some(path) = std::env::var_os("TSHARK") {
-        return PathBuf::from(path);
-    }
-    let path = std::env::var_os("PATH").unwrap_or_default();
-    std::env::split_paths(&path).map(|d| d.join("tshark")).find(|p| p.is_file()).unwrap_or_else(|| {
+    let found = match std::env::var_os("TSHARK") {
+        Some(path) => Some(PathBuf::from(path)).filter(|p| p.is_file()),
+        None => {
+            let path = std::env::var_os("PATH").unwrap_or_default();
+            std::env::split_paths(&path).map(|d| d.join("tshark")).find(|p| p.is_file())
+        }
+    };
+    found.unwrap_or_else(|| {
         panic!(
-            "the capture tests need tshark: install it with `apt-get install tshark` (Debian/Ubuntu; \
-             answer no to non-root capture), or run `cargo xtask test`, which does; or set $TSHARK"
+            "the capture tests need tshark: run `cargo xtask test` (or `cargo xtask setup`), which installs \
+             it, or `apt-get install tshark` (Debian/Ubuntu; answer no to capturing as non-root), or set \
+             $TSHARK to one"
         )
     })
 }
