@@ -20,8 +20,9 @@
 //!   made again when that file changes; Debian's `python3-venv` where Python lacks it.
 //! - tshark (the capture tests, `tests/it/capture`, decode rackd's pcapng files with
 //!   Wireshark's dissectors and the project's own in `contrib/wireshark`): Debian's
-//!   `tshark`. Its package asks whether non-root users may capture; the answer is preseeded
-//!   (no: the tests only read files), so the install never waits on a question.
+//!   `tshark`, unless `$TSHARK` names another. Its package asks whether non-root users may
+//!   capture; the answer is preseeded (no: the tests only read files), so the install never
+//!   waits on a question.
 //! - Node.js and npm, for `eslint` alone: Debian's `nodejs` and `npm`.
 //!
 //! Debian packages are installed with `apt-get` as root, or through `sudo` when it needs no
@@ -78,7 +79,7 @@ impl Need {
             }
             Need::Postgres => std::env::var_os("RACKD_PG_BIN").is_some() || postgres_installed(),
             Need::PythonVenv => succeeds(Command::new("python3").args(["-c", "import ensurepip, venv"])),
-            Need::Tshark => on_path("tshark"),
+            Need::Tshark => std::env::var_os("TSHARK").is_some() || on_path("tshark"),
             Need::Node => on_path("npm"),
         }
     }
