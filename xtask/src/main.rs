@@ -18,6 +18,11 @@
 //!   metrics' parsers, a webhook receiver built on the specification's own library): a
 //!   virtualenv of the project's own, `.ci/venv`, from `.ci/requirements.txt` (pinned),
 //!   made again when that file changes; Debian's `python3-venv` where Python lacks it.
+//! - tshark (the capture tests, `tests/it/capture`, decode rackd's pcapng files with
+//!   Wireshark's dissectors and the project's own in `contrib/wireshark`): Debian's
+//!   `tshark`, unless `$TSHARK` names another. Its package asks whether non-root users may
+//!   capture; the answer is preseeded (no: the tests only read files), so the install never
+//!   waits on a question.
 //! - Node.js and npm, for `eslint` alone: Debian's `nodejs` and `npm`.
 //!
 //! Debian packages are installed with `apt-get` as root, or through `sudo` when it needs no
@@ -58,10 +63,11 @@ enum Need {
     Chromium,
     Postgres,
     PythonVenv,
+    Tshark,
     Node,
 }
 
-const TEST_NEEDS: [Need; 3] = [Need::Chromium, Need::Postgres, Need::PythonVenv];
+const TEST_NEEDS: [Need; 4] = [Need::Chromium, Need::Postgres, Need::PythonVenv, Need::Tshark];
 
 impl Need {
     /// Whether this machine already has it.
@@ -73,6 +79,7 @@ impl Need {
             }
             Need::Postgres => std::env::var_os("RACKD_PG_BIN").is_some() || postgres_installed(),
             Need::PythonVenv => succeeds(Command::new("python3").args(["-c", "import ensurepip, venv"])),
+            Need::Tshark => std::env::var_os("TSHARK").is_some() || on_path("tshark"),
             Need::Node => on_path("npm"),
         }
     }
@@ -83,6 +90,7 @@ impl Need {
             Need::Chromium => &["chromium", "chromium-driver", "fonts-dejavu-core"],
             Need::Postgres => &["postgresql"],
             Need::PythonVenv => &["python3-venv"],
+            Need::Tshark => &["tshark"],
             Need::Node => &["nodejs", "npm"],
         }
     }
@@ -129,10 +137,38 @@ fn apt_install(packages: &[&str]) -> Result<(), String> {
         command.args(args).env("DEBIAN_FRONTEND", "noninteractive");
         run(&mut command)
     };
+    if packages.contains(&"tshark") {
+        preseed(sudo, WIRESHARK_NO_SETUID)?;
+    }
     apt(&["update", "-q"])?;
     let mut install = vec!["install", "-y", "-q"];
     install.extend_from_slice(packages);
     apt(&install).map_err(|e| format!("{e}; the command was: {line}"))
+}
+
+/// The answer to `wireshark-common`'s question (may non-root users capture?): no, so the
+/// install asks nothing; the tests only read capture files.
+const WIRESHARK_NO_SETUID: &str = "wireshark-common wireshark-common/install-setuid boolean false\n";
+
+/// Gives debconf an answer before the package that asks it is installed.
+fn preseed(sudo: Option<&str>, answer: &str) -> Result<(), String> {
+    use std::io::Write;
+    let mut command = match sudo {
+        Some(sudo) => {
+            let mut c = Command::new(sudo);
+            c.arg("debconf-set-selections");
+            c
+        }
+        None => Command::new("debconf-set-selections"),
+    };
+    let mut child = command
+        .stdin(std::process::Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("debconf-set-selections could not start: {e}"))?;
+    let written = child.stdin.take().expect("piped stdin").write_all(answer.as_bytes());
+    let status = child.wait().map_err(|e| format!("debconf-set-selections: {e}"))?;
+    written.map_err(|e| format!("debconf-set-selections: {e}"))?;
+    if status.success() { Ok(()) } else { Err(format!("debconf-set-selections failed ({status})")) }
 }
 
 /// `.ci/venv` with exactly `.ci/requirements.txt`, made again when that file changes (a
