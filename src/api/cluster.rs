@@ -21,9 +21,10 @@ pub fn router() -> OpenApiRouter<AppState> {
 #[schema(example = json!({"node": "b", "role": "active", "epoch": 4, "takeovers": 1,
     "lease": {"holder": "b", "epoch": 4, "age_ms": 640, "released": false, "lease_ms": 5000, "margin_ms": 1000},
     "nodes": [{"name": "a", "url": "http://10.0.0.11:8080", "role": "standby", "seen_ms_ago": 900,
-        "started_at": "2026-11-24T07:00:00Z"},
+        "started_at": "2026-11-24T07:00:00Z", "config_hash": "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2"},
         {"name": "b", "url": "http://10.0.0.12:8080", "role": "active", "seen_ms_ago": 300,
-        "started_at": "2026-11-20T07:00:00Z"}]}))]
+        "started_at": "2026-11-20T07:00:00Z", "config_hash": "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2"}],
+    "config_hash": "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2", "config_drift": false}))]
 pub struct ClusterView {
     /// The answering node.
     pub node: String,
@@ -37,6 +38,11 @@ pub struct ClusterView {
     pub lease: Option<LeaseView>,
     /// Every node that ever told of itself, by name.
     pub nodes: Vec<NodeView>,
+    /// The hash of the `[site]` and `[[devices]]` the answering node runs.
+    pub config_hash: String,
+    /// Whether a node seen within two leases runs another configuration (the active node
+    /// raises `config_drift` then).
+    pub config_drift: bool,
 }
 
 /// The lease.
@@ -71,6 +77,9 @@ pub struct NodeView {
     #[serde(with = "time::serde::rfc3339")]
     #[schema(value_type = String, format = DateTime)]
     pub started_at: time::OffsetDateTime,
+    /// The hash of the `[site]` and `[[devices]]` it runs, as it last told (empty: not
+    /// told).
+    pub config_hash: String,
 }
 
 /// The cluster's nodes, roles, epoch and lease age.
@@ -86,6 +95,7 @@ async fn cluster(State(app): State<AppState>) -> Result<Json<ClusterView>, ApiEr
         return Err(ApiError::not_found("this node is not in a cluster ([cluster] is not configured)"));
     };
     let view = node.view().await.map_err(ApiError::unavailable)?;
+    let config_drift = !node.drift(&view).is_empty();
     let lease = view.lease.map(|l| LeaseView {
         holder: l.holder,
         epoch: l.epoch,
@@ -103,6 +113,7 @@ async fn cluster(State(app): State<AppState>) -> Result<Json<ClusterView>, ApiEr
             role: n.role,
             seen_ms_ago: (view.now - n.seen_at).max(0),
             started_at: from_ms(n.started_at),
+            config_hash: n.config_hash,
         })
         .collect();
     Ok(Json(ClusterView {
@@ -112,5 +123,7 @@ async fn cluster(State(app): State<AppState>) -> Result<Json<ClusterView>, ApiEr
         takeovers: node.takeovers(),
         lease,
         nodes,
+        config_hash: node.config.loaded().hash,
+        config_drift,
     }))
 }

@@ -76,15 +76,16 @@ detail; acknowledge; export as CSV"),
 `seq` order with no gap and no duplicate. Event types and their `data`: `job.updated` (a `Job`), \
 `device.updated` (a `DeviceStatus`), `alarm.raised`, `alarm.cleared` and `alarm.updated` (an `Alarm`; \
 updated when acknowledged), `location.updated` (a `LocationState`, with its lock), `audit.recorded` (an \
-`AuditEntry`: every audited change but a submission, whose jobs' `job.updated` tell of it). A `job.updated` also comes when only a \
+`AuditEntry`: every audited change but a submission, whose jobs' `job.updated` tell of it), `config.reloaded` (an `Applied`: \
+who reloaded, the configuration's hash and load time, what changed). A `job.updated` also comes when only a \
 queued job's `waiting` reason changed. A subscriber that falls behind gets a `Resync` and the connection closes with code \
-4000: reconnect with `?since=` its `seq`. `?topics=jobs,devices,alarms,locations,audit` filters both the \
+4000: reconnect with `?since=` its `seq`. `?topics=jobs,devices,alarms,locations,audit,config` filters both the \
 snapshot and the events. Browsers pass the key as `?token=`."),
         (name = "webhooks", description = "Events pushed to the WMS: signed (Standard Webhooks), at least once, \
 in order; each subscription's state, its delivery log, pause, resume and replay (administrators)"),
         (name = "operations", description = "Health, readiness, metrics and the audit log of operator actions"),
     ),
-    components(schemas(ws::Snapshot, ws::SnapshotData, ws::Resync)),
+    components(schemas(ws::Snapshot, ws::SnapshotData, ws::Resync, crate::service::reload::Applied)),
     modifiers(&Security),
 )]
 struct ApiDoc;

@@ -17,6 +17,7 @@ use crate::api::metrics::Metrics;
 use crate::config::{ClusterConfig, Config};
 use crate::domain::time::now_ms;
 use crate::domain::{AlarmClass, AlarmKind};
+use crate::service::cluster::DRIFT_ACTION;
 use crate::service::cluster::lease::Timing;
 use crate::service::cluster::{Leadership, Node, Role, TAKEOVER_ACTION, follow, node};
 use crate::service::dispatch::Dispatcher;
@@ -84,6 +85,7 @@ pub(super) async fn start(
         timing,
         takeovers: Arc::new(AtomicU64::new(0)),
         started_at: now_ms(),
+        config: parts.reload.clone(),
     };
     let (_, from) = events::bounds(&parts.pool).await?;
     let (adopt, wanted) = mpsc::unbounded_channel();
@@ -170,6 +172,8 @@ async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>)
         }
     }
     tracing::info!(node = node.name, epoch, "cluster: this node drives the machines");
+    let drift = tokio::spawn(watch_drift(node.clone(), fenced.clone()));
+    parts.tasks.lock().unwrap_or_else(|p| p.into_inner()).push(drift);
     if epoch > 1 {
         let alarms = tokio::spawn(tell_takeover(node.clone(), fenced, epoch));
         parts.tasks.lock().unwrap_or_else(|p| p.into_inner()).push(alarms);
@@ -181,6 +185,68 @@ async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>)
         fleet.abort().await;
     }
     lost.send_replace(Some("this node lost the cluster's lease; it stopped driving the machines".into()));
+}
+
+/// While this node drives: raises `config_drift` while a node seen runs another
+/// configuration than this one's, and clears it once none does (checked three times a
+/// lease; the nodes tell their hash as often).
+async fn watch_drift(node: Node, writer: Writer) {
+    let mut raised: Option<Vec<(String, String)>> = None;
+    loop {
+        if let Ok(view) = node.view().await {
+            let drift = node.drift(&view);
+            let record = match (&raised, drift.is_empty()) {
+                (Some(was), false) if *was == drift => None,
+                (_, false) => {
+                    let own = node.config.loaded().hash;
+                    let others: Vec<String> = drift
+                        .iter()
+                        .map(|(name, hash)| format!("node {name:?} runs {}", short(hash)))
+                        .collect();
+                    let text = format!(
+                        "the cluster's nodes run different sites: node {:?} (active) runs {}, {}",
+                        node.name,
+                        short(&own),
+                        others.join(", ")
+                    );
+                    // A new text for a drift that changed: cleared, then raised again.
+                    if raised.is_some() {
+                        let key = (AlarmKind::ConfigDrift, 0);
+                        let _ =
+                            writer.record(Record::AlarmCleared { device: CLUSTER_DEVICE.into(), key }).await;
+                    }
+                    Some(Record::AlarmRaised(NewAlarm {
+                        device: CLUSTER_DEVICE.into(),
+                        kind: AlarmKind::ConfigDrift,
+                        code: 0,
+                        class: AlarmKind::ConfigDrift.class(),
+                        text,
+                        detail: Some("the hash of [site] and [[devices]] (GET /api/v1/cluster)".into()),
+                        action: Some(DRIFT_ACTION.into()),
+                    }))
+                }
+                (Some(_), true) => Some(Record::AlarmCleared {
+                    device: CLUSTER_DEVICE.into(),
+                    key: (AlarmKind::ConfigDrift, 0),
+                }),
+                (None, true) => None,
+            };
+            if let Some(record) = record {
+                match writer.record(record).await {
+                    Ok(()) => raised = (!drift.is_empty()).then_some(drift),
+                    Err(e) => {
+                        tracing::warn!(error = %e, "cluster: the config_drift alarm could not be recorded")
+                    }
+                }
+            }
+        }
+        tokio::time::sleep(node.timing.renew_every()).await;
+    }
+}
+
+/// The first characters of a configuration's hash, as people compare them.
+fn short(hash: &str) -> &str {
+    &hash[..hash.len().min(8)]
 }
 
 /// Raises the `takeover` alarm, and clears it once another node stands by again.

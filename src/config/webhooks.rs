@@ -25,7 +25,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 /// The event types a subscription may name (a `*` family is a prefix before the dot).
-pub const EVENT_TYPES: [&str; 7] = [
+pub const EVENT_TYPES: [&str; 8] = [
     "job.updated",
     "device.updated",
     "alarm.raised",
@@ -33,6 +33,7 @@ pub const EVENT_TYPES: [&str; 7] = [
     "alarm.cleared",
     "location.updated",
     "audit.recorded",
+    "config.reloaded",
 ];
 
 /// One `[[webhooks]]` entry.

@@ -66,11 +66,15 @@ pub enum AlarmKind {
     /// device `webhook:NAME`. Cleared by the next success (code 0), or once it has caught
     /// up (code 1).
     Webhook,
+    /// Nodes of the cluster run different `[site]` or `[[devices]]` (device `cluster`, a
+    /// warning raised by the active node): a takeover would change the site. Cleared once
+    /// every node seen runs the active node's.
+    ConfigDrift,
 }
 
 impl AlarmKind {
     /// Every kind.
-    pub const ALL: [AlarmKind; 8] = [
+    pub const ALL: [AlarmKind; 9] = [
         AlarmKind::Device,
         AlarmKind::Link,
         AlarmKind::Heartbeat,
@@ -79,6 +83,7 @@ impl AlarmKind {
         AlarmKind::Takeover,
         AlarmKind::Archive,
         AlarmKind::Webhook,
+        AlarmKind::ConfigDrift,
     ];
 
     /// The kind's name as the API writes it.
@@ -92,6 +97,7 @@ impl AlarmKind {
             AlarmKind::Takeover => "takeover",
             AlarmKind::Archive => "archive",
             AlarmKind::Webhook => "webhook",
+            AlarmKind::ConfigDrift => "config_drift",
         }
     }
 
@@ -103,9 +109,11 @@ impl AlarmKind {
     /// Who resolves an alarm of this kind that is not the device's own code.
     pub fn class(self) -> AlarmClass {
         match self {
-            AlarmKind::Link | AlarmKind::Degraded | AlarmKind::Takeover | AlarmKind::Webhook => {
-                AlarmClass::Link
-            }
+            AlarmKind::Link
+            | AlarmKind::Degraded
+            | AlarmKind::Takeover
+            | AlarmKind::Webhook
+            | AlarmKind::ConfigDrift => AlarmClass::Link,
             AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost | AlarmKind::Archive => {
                 AlarmClass::Hardware
             }

@@ -36,11 +36,15 @@ pub enum Topic {
     /// `audit.recorded`: every audited change but a submission (whose jobs' `job.updated`
     /// tell of it); no snapshot part: the log is `GET /api/v1/audit`.
     Audit,
+    /// `config.reloaded`: the configuration was reloaded; no snapshot part: the running
+    /// one is `GET /api/v1/config`.
+    Config,
 }
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 5] = [Topic::Jobs, Topic::Devices, Topic::Alarms, Topic::Locations, Topic::Audit];
+    pub const ALL: [Topic; 6] =
+        [Topic::Jobs, Topic::Devices, Topic::Alarms, Topic::Locations, Topic::Audit, Topic::Config];
 
     /// The topic of an event type.
     pub fn of(kind: &str) -> Option<Topic> {
@@ -50,6 +54,7 @@ impl Topic {
             "alarm" => Some(Topic::Alarms),
             "location" => Some(Topic::Locations),
             "audit" => Some(Topic::Audit),
+            "config" => Some(Topic::Config),
             _ => None,
         }
     }
@@ -62,6 +67,7 @@ impl Topic {
             Topic::Alarms => "alarms",
             Topic::Locations => "locations",
             Topic::Audit => "audit",
+            Topic::Config => "config",
         }
     }
 

@@ -161,6 +161,7 @@ fn action(device: &str, kind: AlarmKind, code: u16) -> String {
         AlarmKind::Takeover => crate::service::cluster::TAKEOVER_ACTION.to_owned(),
         AlarmKind::Archive => crate::config::ARCHIVE_ACTION.to_owned(),
         AlarmKind::Webhook => crate::service::webhooks::ACTION.to_owned(),
+        AlarmKind::ConfigDrift => crate::service::cluster::DRIFT_ACTION.to_owned(),
         AlarmKind::MemoryLost => {
             "Check the locked locations of the lost tasks, correct the inventory, unlock them and retry \
              the failed jobs."

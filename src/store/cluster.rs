@@ -104,25 +104,31 @@ pub struct NodeRow {
     pub started_at: i64,
     /// When it last told, ms since 1970 by the server's clock.
     pub seen_at: i64,
+    /// The hash of the `[site]` and `[[devices]]` it runs (empty: not told).
+    pub config_hash: String,
 }
 
-/// Tells the cluster that `node` is alive at `url` in `role` (started at `started_at`).
+/// Tells the cluster that `node` is alive at `url` in `role` (started at `started_at`),
+/// running the configuration `config_hash`.
 pub async fn tell(
     pool: &PgPool,
     node: &str,
     url: &str,
     role: &str,
     started_at: i64,
+    config_hash: &str,
 ) -> Result<(), sqlx::Error> {
     let sql = format!(
-        "INSERT INTO cluster_nodes (name, url, role, started_at, seen_at) VALUES ($1, $2, $3, $4, {NOW_MS}) \
-         ON CONFLICT (name) DO UPDATE SET url = $2, role = $3, started_at = $4, seen_at = {NOW_MS}"
+        "INSERT INTO cluster_nodes (name, url, role, started_at, seen_at, config_hash) \
+         VALUES ($1, $2, $3, $4, {NOW_MS}, $5) \
+         ON CONFLICT (name) DO UPDATE SET url = $2, role = $3, started_at = $4, seen_at = {NOW_MS}, config_hash = $5"
     );
     sqlx::query(sqlx::AssertSqlSafe(sql))
         .bind(node)
         .bind(url)
         .bind(role)
         .bind(started_at)
+        .bind(config_hash)
         .execute(pool)
         .await?;
     Ok(())
@@ -130,9 +136,11 @@ pub async fn tell(
 
 /// Every node that ever told, by name, and the server's clock now (ms).
 pub async fn nodes(pool: &PgPool) -> Result<(Vec<NodeRow>, i64), sqlx::Error> {
-    let rows = sqlx::query_as("SELECT name, url, role, started_at, seen_at FROM cluster_nodes ORDER BY name")
-        .fetch_all(pool)
-        .await?;
+    let rows = sqlx::query_as(
+        "SELECT name, url, role, started_at, seen_at, config_hash FROM cluster_nodes ORDER BY name",
+    )
+    .fetch_all(pool)
+    .await?;
     let now = sqlx::query_scalar(sqlx::AssertSqlSafe(format!("SELECT {NOW_MS}"))).fetch_one(pool).await?;
     Ok((rows, now))
 }

@@ -127,6 +127,31 @@ pub async fn seed(db: &Pool, layout: &Layout, now: i64) -> Result<(), sqlx::Erro
     Ok(())
 }
 
+/// Deletes the rows of aisle `aisle` that `layout` no longer has (a reload removed or
+/// shrank the aisle, after checking that nothing uses them). Answers how many went.
+pub async fn drop_outside(db: &Pool, layout: &Layout, aisle: u16) -> Result<u64, sqlx::Error> {
+    let gone: Vec<Location> = list(db, Some(aisle))
+        .await?
+        .iter()
+        .map(|l| l.location())
+        .filter(|l| layout.check(l).is_err())
+        .collect();
+    let mut dropped = 0;
+    for l in gone {
+        let sql = "DELETE FROM locations WHERE aisle = $1 AND row = $2 AND bay = $3 AND level = $4 AND position = $5";
+        dropped += read!(Reader::from(db), p => sqlx::query(sql)
+            .bind(l.aisle as i64)
+            .bind(l.row as i64)
+            .bind(l.bay as i64)
+            .bind(l.level as i64)
+            .bind(l.position as i64)
+            .execute(p)
+            .await
+            .map(|r| r.rows_affected()))?;
+    }
+    Ok(dropped)
+}
+
 /// Every location, optionally of one aisle, in order.
 pub async fn list(db: impl Into<Reader<'_>>, aisle: Option<u16>) -> Result<Vec<LocationState>, sqlx::Error> {
     let sql = sqlx::AssertSqlSafe(format!(

@@ -8,6 +8,7 @@ import { api, getKey, onUnauthorized, setKey, takeTokenFromUrl, whoIs } from './
 import { Alarms } from './dashboard/alarms.js';
 import { Attention } from './dashboard/attention.js';
 import { ClusterBadge } from './dashboard/cluster.js';
+import { ConfigBadge } from './dashboard/config.js';
 import { Counters } from './dashboard/counters.js';
 import { Devices } from './dashboard/devices.js';
 import { clock, el, throttle } from './dashboard/dom.js';
@@ -80,9 +81,11 @@ const mark = (...parts) => {
  */
 let asked = false;
 const node = new ClusterBadge($('node'));
+const config = new ConfigBadge($('config'));
 function askServer() {
   asked = true;
   node.start();
+  config.load();
   who.load();
   kpi.load();
   webhooks.start();
@@ -112,10 +115,39 @@ model.subscribe((kind, item) => {
       racks.update(item);
       mark('cranes');
       break;
+    case 'config':
+      config.show(item);
+      loadAisles(item.aisles);
+      mark('devices', 'cranes');
+      break;
     default:
       break;
   }
 });
+
+/**
+ * After a reload: the locations of the aisles it added or resized, read over HTTP (new
+ * locations send no event), and those of removed aisles dropped; the racks drawn again.
+ */
+async function loadAisles(aisles) {
+  if (!aisles) return;
+  for (const [key, location] of model.locations) {
+    if (aisles.removed.includes(location.aisle)) model.locations.delete(key);
+  }
+  const changed = [...aisles.added, ...aisles.changed.map((c) => c.aisle)];
+  for (const aisle of changed) {
+    try {
+      const locations = await api('GET', `/api/v1/locations?aisle=${aisle}`);
+      for (const [key, location] of model.locations) {
+        if (location.aisle === aisle) model.locations.delete(key);
+      }
+      for (const location of locations) model.applyLocation(location);
+    } catch (e) {
+      notify(`The locations of aisle ${aisle} could not be read: ${e.message}`);
+    }
+  }
+  racks.rebuild();
+}
 
 /**
  * Reads what the snapshot leaves out: jobs that ended recently (the newest window of the

@@ -12,7 +12,7 @@
 //! `devices.js`, `racks.js` (with `crane.js`, where a crane is
 //! drawn, and `locations.js`, a location's dialog), `kpi.js` (the KPIs, as SVG charts drawn by the page), `jobs.js` (with
 //! `actions.js`, the job buttons), `webhooks.js` (the webhook subscriptions, their lag,
-//! last error and delivery log); `reasons.js` says why a job waits, `cluster.js` which node
+//! last error and delivery log); `reasons.js` says why a job waits, `config.js` which configuration runs, `cluster.js` which node
 //! of a cluster the page talks to, and `roles.js` which
 //! buttons the key may use. The style is `dashboard.css` (the page, its header and panels)
 //! with `racks.css` and `jobs.css` (the job table, its cards on a tablet, the KPIs).
@@ -57,6 +57,7 @@ const FILES: &[(&str, &str, &str)] = &[
     ("/dashboard/reasons.js", JS, include_str!("reasons.js")),
     ("/dashboard/roles.js", JS, include_str!("roles.js")),
     ("/dashboard/cluster.js", JS, include_str!("cluster.js")),
+    ("/dashboard/config.js", JS, include_str!("config.js")),
     ("/dashboard/webhooks.js", JS, include_str!("webhooks.js")),
     // Browsers ask for /favicon.ico whatever the page says; an SVG answers both.
     ("/favicon.svg", SVG, include_str!("favicon.svg")),

@@ -91,6 +91,14 @@ export class Model {
       case 'location.updated':
         this.applyLocation(data);
         break;
+      case 'config.reloaded':
+        // A removed device sends no more updates: it leaves the page with the reload.
+        for (const change of data.devices || []) {
+          if (change.change === 'removed') this.devices.delete(change.id);
+        }
+        this.emit('config', data);
+        this.emit('device');
+        break;
       default:
         break;
     }

@@ -54,6 +54,11 @@ use lease::{Holding, Timing, Watch};
 pub use crate::store::cluster::LEASE;
 pub use node::Node;
 
+/// What an operator should do about a `config_drift` alarm.
+pub const DRIFT_ACTION: &str = "Make the nodes' [site] and [[devices]] the same (one file for all, or the \
+same edits on each), then reload each node (POST /api/v1/config/reload or SIGHUP); a standby keeps its reloaded \
+configuration for when it takes over.";
+
 /// What an operator should do after a takeover (the `takeover` alarm's action).
 pub const TAKEOVER_ACTION: &str = "Find out why the node that was active stopped (its log, its host, its \
      network to the database) and start it again: it comes back as a standby, and the alarm clears once a \

@@ -1,7 +1,8 @@
 //! This node in its cluster, as the API and `/metrics` see it: its name, where its API is
 //! reached, its role as the leadership loop changes it, and how often it took over.
 //! [`tell`] keeps the node's row in `cluster_nodes` fresh, for `GET /api/v1/cluster` and
-//! for a standby looking for the active node's API.
+//! for a standby looking for the active node's API; the row carries the hash of the
+//! configuration the node runs ([`Node::drift`]: which nodes run another one).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -33,6 +34,8 @@ pub struct Node {
     pub takeovers: Arc<AtomicU64>,
     /// When this process started, ms since 1970.
     pub started_at: i64,
+    /// The configuration it runs (its hash is told with its row).
+    pub config: crate::service::reload::Reload,
 }
 
 /// The cluster as one node sees it.
@@ -72,6 +75,19 @@ impl Node {
         Ok(View { lease, nodes, now })
     }
 
+    /// The nodes seen within two leases whose configuration differs from this node's, as
+    /// (name, hash); nodes that told no hash are left out.
+    pub fn drift(&self, view: &View) -> Vec<(String, String)> {
+        let own = self.config.loaded().hash;
+        let fresh = (self.timing.lease * 2).as_millis() as i64;
+        view.nodes
+            .iter()
+            .filter(|n| n.name != self.name && view.now - n.seen_at < fresh)
+            .filter(|n| !n.config_hash.is_empty() && n.config_hash != own)
+            .map(|n| (n.name.clone(), n.config_hash.clone()))
+            .collect()
+    }
+
     /// The node that holds the lease, if it is another one and tells where its API is.
     pub async fn active(&self) -> Result<Option<NodeRow>, sqlx::Error> {
         let view = self.view().await?;
@@ -87,7 +103,8 @@ pub async fn tell(node: Node) {
     let mut role = node.role.clone();
     loop {
         let said = node.role_name();
-        if let Err(e) = cluster::tell(&node.pool, &node.name, &node.url, said, node.started_at).await {
+        let hash = node.config.loaded().hash;
+        if let Err(e) = cluster::tell(&node.pool, &node.name, &node.url, said, node.started_at, &hash).await {
             tracing::warn!(error = %e, "cluster: cannot tell the other nodes of this one");
         }
         tokio::select! {

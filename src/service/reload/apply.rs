@@ -13,6 +13,8 @@
 //!    changed ones' settings (window, aisles, a crane's planner); cranes get new planners
 //!    when the double-deep aisles change. The intake's rules change next, so a job routed
 //!    to an added device finds its queue.
+//!    The locations that removed or shrunk aisles lose go from the store (nothing uses
+//!    them: the check said so, and no job can name them now).
 //! 4. Removed and changed devices stop, all at once, each at its own safe point
 //!    ([`Fleet::stop`]); removed ones leave the queues, and their queued jobs are told
 //!    again: they wait as `no_device`.
@@ -147,7 +149,15 @@ impl Reload {
                 queues.load(c.id(), std::mem::take(unfinished));
             }
         }
+        let layout = rules.layout.clone();
         *self.0.rules.write().unwrap_or_else(|e| e.into_inner()) = std::sync::Arc::new(rules);
+        // Nothing uses them (checked), and no job can name them any more.
+        let shrunk = difference.aisles.changed.iter().map(|c| c.aisle);
+        for aisle in difference.aisles.removed.iter().copied().chain(shrunk) {
+            if let Err(e) = locations::drop_outside(&p.pool, &layout, aisle).await {
+                tracing::warn!(aisle, error = %e, "the locations a reload removed could not be deleted");
+            }
+        }
 
         let stopping = difference.devices.iter().filter(|c| c.change != Change::Added);
         futures::future::join_all(stopping.map(|c| fleet.stop(&c.id, c.change == Change::Removed))).await;

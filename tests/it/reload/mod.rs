@@ -323,5 +323,14 @@ async fn an_aisle_in_use_is_not_removed_and_what_holds_it_is_named() {
     let (status, body) = reload(&app, "?dry_run=true", "key-admin").await;
     assert_eq!(status, 200, "{body}");
     assert_eq!(body["aisles"]["changed"], json!([{"aisle": 1, "keys": ["bays"]}]));
+    // Applied: the bays it loses leave the store; the job's bay stays, and the job with it.
+    let (status, body) = reload(&app, "", "key-admin").await;
+    assert_eq!(status, 200, "{body}");
+    let (_, places) = get(&app, "/api/v1/locations?aisle=1").await;
+    let bays: std::collections::BTreeSet<u64> =
+        places.as_array().unwrap().iter().map(|l| l["bay"].as_u64().unwrap()).collect();
+    assert_eq!(bays, [1, 2, 3].into(), "{places}");
+    let (_, job) = get(&app, &format!("/api/v1/jobs/{id}")).await;
+    assert_eq!(job["state"], "queued", "{job}");
     app.stop().await;
 }

@@ -69,10 +69,20 @@ pub async fn spawn_on(db: Database, edit: impl FnOnce(&mut Config)) -> TestApp {
 /// `serve --config` does: reloads read the file again. Returns the file.
 pub async fn spawn_from_file(text: &str) -> (TestApp, std::path::PathBuf) {
     let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("rackd.toml");
-    let mut config = Config::parse(text, &file).expect("the test's configuration loads");
-    config.server.listen = "127.0.0.1:0".parse().unwrap();
+    let config = Config::parse(text, &dir.path().join("rackd.toml")).expect("the test's configuration loads");
     let db = Database::Sqlite(dir.path().join("rackd.db"));
+    spawn_from_file_on(db, config, dir).await
+}
+
+/// As [`spawn_from_file`], with `config` on `db`, the file written in `dir` (kept as long
+/// as the server).
+pub async fn spawn_from_file_on(
+    db: Database,
+    mut config: Config,
+    dir: tempfile::TempDir,
+) -> (TestApp, std::path::PathBuf) {
+    let file = dir.path().join("rackd.toml");
+    config.server.listen = "127.0.0.1:0".parse().unwrap();
     use_database(&mut config, &db);
     std::fs::write(&file, toml::to_string(&config).unwrap()).unwrap();
     let sources = Sources::file(&file);

@@ -36,9 +36,12 @@ fn stop_at(rig: &Rig, when: impl Fn(&Write) -> bool + Send + 'static) -> Arc<Mut
     asked
 }
 
+/// Which of rackd's writes a step is.
+type Step = fn(&Write) -> bool;
+
 #[tokio::test(start_paused = true)]
 async fn a_stop_during_a_hand_over_waits_for_its_end_at_each_step() {
-    let steps: [(&str, fn(&Write) -> bool); 3] = [
+    let steps: [(&str, Step); 3] = [
         ("the task words written", |w| w.start == WORDS),
         ("the strobe up", |w| w.start == STB && w.words == [1]),
         ("the strobe lowered", |w| w.start == STB && w.words == [0]),
