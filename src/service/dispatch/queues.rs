@@ -18,8 +18,6 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard};
 
-use super::waiting::Watched;
-
 use async_trait::async_trait;
 use tokio::sync::{Notify, watch};
 
@@ -28,6 +26,7 @@ use std::sync::atomic::AtomicU64;
 use super::order::next_jobs;
 use super::report_error;
 use crate::config::devices::DeviceConfig;
+use crate::devices::DeviceStatus;
 use crate::devices::port::{Port, ReportError};
 use crate::domain::{Job, JobState, Location, LocationLock, Pause, Report, Waiting, WaitingReason};
 use crate::service::planner::CranePlanner;
@@ -557,5 +556,18 @@ impl DevicePort {
             }
         }
         next_jobs(window, &held, free).into_iter().cloned().collect()
+    }
+}
+
+/// A running device's status, and the task that wakes the watcher on its changes (stopped
+/// with it).
+pub(super) struct Watched {
+    pub(super) status: watch::Receiver<DeviceStatus>,
+    pub(super) forwarder: tokio::task::JoinHandle<()>,
+}
+
+impl Drop for Watched {
+    fn drop(&mut self) {
+        self.forwarder.abort();
     }
 }

@@ -41,7 +41,7 @@ use std::time::Duration;
 
 use tokio::sync::watch;
 
-use super::queues::{Holds, Queue, Queues, because, slashed};
+use super::queues::{Holds, Queue, Queues, Watched, because, slashed};
 use crate::devices::DeviceStatus;
 use crate::domain::{Job, JobState, Waiting, WaitingReason};
 use crate::service::planner::Wait;
@@ -241,18 +241,5 @@ pub async fn watch(queues: Queues, writer: Writer) {
             Err(WriteError::Closed) => return,
             Err(e) => tracing::warn!(error = %e, "telling why jobs wait"),
         }
-    }
-}
-
-/// A running device's status, and the task that wakes the watcher on its changes (stopped
-/// with it).
-pub(super) struct Watched {
-    status: watch::Receiver<DeviceStatus>,
-    forwarder: tokio::task::JoinHandle<()>,
-}
-
-impl Drop for Watched {
-    fn drop(&mut self) {
-        self.forwarder.abort();
     }
 }

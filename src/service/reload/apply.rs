@@ -77,6 +77,7 @@ impl Reload {
         let loaded = Loaded::now(&new);
         *self.0.running.lock().unwrap_or_else(|e| e.into_inner()) =
             Running { config: new, loaded: loaded.clone() };
+        self.0.hash.send_replace(loaded.hash.clone());
         let applied = Applied { by: who.name.clone(), loaded, difference, kept_for_takeover };
         let summary = match &reason {
             Some(r) => format!("{} ({r})", summary(&applied)),

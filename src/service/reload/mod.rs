@@ -61,6 +61,8 @@ pub struct Reload(Arc<Inner>);
 struct Inner {
     sources: OnceLock<Sources>,
     running: Mutex<Running>,
+    /// The running configuration's hash, for whoever tells it (a cluster node's row).
+    hash: tokio::sync::watch::Sender<String>,
     rules: RwLock<Arc<Rules>>,
     fleet: OnceLock<Fleet>,
     parts: Parts,
@@ -206,6 +208,7 @@ impl Reload {
         let rules = RwLock::new(Arc::new(Rules::of(&running)));
         Reload(Arc::new(Inner {
             sources: OnceLock::new(),
+            hash: tokio::sync::watch::Sender::new(loaded.hash.clone()),
             running: Mutex::new(Running { config: running, loaded }),
             rules,
             fleet: OnceLock::new(),
@@ -246,6 +249,11 @@ impl Reload {
     /// Which configuration runs, and since when.
     pub fn loaded(&self) -> Loaded {
         self.running_now().loaded
+    }
+
+    /// The running configuration's hash, as it changes.
+    pub fn hashes(&self) -> tokio::sync::watch::Receiver<String> {
+        self.0.hash.subscribe()
     }
 
     /// What job requests are checked against and routed by, as the running configuration
