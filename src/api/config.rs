@@ -121,7 +121,12 @@ async fn reload(
             difference: plan.difference,
         }));
     }
-    let applied = app.reload.apply(caller.who(), None).await?;
+    // Applied on a task of its own: a client that gives up (or the request's timeout) must
+    // not cut a reload between stopping a device and starting it again.
+    let reload = app.reload.clone();
+    let applied = tokio::spawn(async move { reload.apply(caller.who(), None).await })
+        .await
+        .map_err(|e| ReloadError::Task(e.to_string()))??;
     Ok(Json(ReloadView {
         dry_run: false,
         kept_for_takeover: applied.kept_for_takeover,

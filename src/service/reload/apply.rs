@@ -49,6 +49,7 @@ pub struct Applied {
     #[serde(flatten)]
     pub loaded: Loaded,
     /// What changed.
+    #[serde(flatten)]
     pub difference: Difference,
     /// A standby runs no device: it keeps the configuration for when it takes over.
     pub kept_for_takeover: bool,

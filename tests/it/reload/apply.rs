@@ -256,3 +256,47 @@ async fn devices_change_one_at_a_time_while_the_others_run_jobs() {
     assert_eq!(now["hash"], json!(Config::load(&file).unwrap().site_hash()));
     app.stop().await;
 }
+
+/// A device that holds a job on the machine is not removed (409 naming the job, nothing
+/// applied, the job runs on); once the job has ended it is, and the reload is told on the
+/// event stream.
+#[tokio::test]
+async fn a_device_holding_a_job_is_not_removed_until_it_ends() {
+    let shelf1 = ShelfSim::start("127.0.0.1:0", sim(100)).await.unwrap();
+    let shelf3 = ShelfSim::start("127.0.0.1:0", sim(1500)).await.unwrap();
+    let options = CraneSimOptions { step: Duration::from_millis(10), ..Default::default() };
+    let crane = CraneSim::start("127.0.0.1:0", options).await.unwrap();
+    let mut config = site(&shelf1, &shelf3, &crane);
+    let (app, file) = spawn_from_file(&toml::to_string(&config).unwrap()).await;
+    let mut ws = crate::support::ws::Ws::connect(&app.base, "?topics=config").await;
+    let _snapshot = ws.json().await;
+    let id = post(&app, job(3, 1)).await;
+    eventually("the job on the machine", Duration::from_secs(10), async || {
+        let (_, j) = app.get(&format!("/api/v1/jobs/{id}")).await;
+        if j["state"] == "dispatched" || j["state"] == "running" { Ok(()) } else { Err(j) }
+    })
+    .await;
+    let before = app.get("/api/v1/config").await.1;
+    config.devices.retain(|d| d.id() != "shelf-3");
+    write(&file, config.clone());
+    let post = app.client.post(app.url("/api/v1/config/reload")).header("content-type", "application/json");
+    let refused = split(post.send().await.unwrap()).await;
+    assert_error(&refused, 409, "device_busy");
+    let message = refused.1["error"]["message"].as_str().unwrap();
+    assert!(message.contains("shelf-3") && message.contains(&id.to_string()), "{message}");
+    assert_eq!(app.get("/api/v1/config").await.1, before, "nothing was applied");
+    let (status, _) = app.get("/api/v1/devices/shelf-3").await;
+    assert_eq!(status, 200);
+
+    let ended = wait_ended(&app, 1, 20).await;
+    assert_eq!(ended[0]["state"], "completed", "{:?}", ended);
+    assert_eq!(shelf3.received(task_id_for(id)), 1);
+    let body = reload(&app).await;
+    assert_eq!(body["devices"], json!([{"id": "shelf-3", "change": "removed"}]));
+    let told = ws.events(1).await;
+    assert_eq!(told[0]["type"], "config.reloaded", "{told:?}");
+    assert_eq!(told[0]["data"]["hash"], body["hash"]);
+    assert_eq!(told[0]["data"]["devices"], body["devices"]);
+    assert_eq!(shelf3.violations(), 0);
+    app.stop().await;
+}
