@@ -16,6 +16,7 @@ mod actions;
 mod control;
 mod keys;
 mod layout;
+mod reload;
 mod store;
 mod webhooks;
 
