@@ -289,7 +289,12 @@ mod tests {
         let comments: Vec<String> = r.frames(None).iter().map(|f| f.annotations.comment()).collect();
         assert_eq!(
             comments,
-            ["", "job 17, task 4, retry 1, verdict: retry, after a timeout", "job 17, task 4, verdict: ok", ""]
+            [
+                "",
+                "job 17, task 4, retry 1, verdict: retry, after a timeout",
+                "job 17, task 4, verdict: ok",
+                ""
+            ]
         );
         assert_eq!(r.stats().timeouts, 1);
         assert_eq!(r.serving(), None);
