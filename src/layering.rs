@@ -16,7 +16,8 @@
 //! store              the database
 //! sim                simulated machines, on the protocol servers
 //! wire               the machines' interfaces word by word, in the protocols' notations
-//! protocols          how to talk to PLCs (leaf)
+//! protocols          how to talk to PLCs
+//! capture            frames as the flight recorder keeps them, and pcapng files (leaf)
 //! domain             the words of the warehouse (leaf)
 //! ```
 //!
@@ -41,18 +42,20 @@ use scan::{Edge, Edges, Module};
 /// What each top-level module may use, besides itself.
 const ALLOWED: &[(&str, &[&str])] = &[
     ("domain", &[]),
-    ("protocols", &[]),
+    ("capture", &[]),
+    // Every client's transport feeds a flight recorder.
+    ("protocols", &["capture"]),
     ("wire", &["protocols", "domain"]),
-    ("sim", &["wire", "protocols", "domain"]),
+    ("sim", &["wire", "protocols", "capture", "domain"]),
     ("store", &["domain"]),
     ("auth", &[]),
     // config checks a database URL as the store reads it (its TLS mode, its CA), and
     // prints it as the store does, without the password.
-    ("config", &["auth", "store", "wire", "protocols", "domain"]),
-    ("devices", &["config", "wire", "protocols", "domain"]),
-    ("service", &["devices", "config", "store", "wire", "protocols", "domain"]),
-    ("api", &["service", "devices", "config", "auth", "store", "wire", "protocols", "domain"]),
-    ("app", &["api", "service", "devices", "config", "auth", "store", "protocols", "domain"]),
+    ("config", &["auth", "store", "wire", "protocols", "capture", "domain"]),
+    ("devices", &["config", "wire", "protocols", "capture", "domain"]),
+    ("service", &["devices", "config", "store", "wire", "protocols", "capture", "domain"]),
+    ("api", &["service", "devices", "config", "auth", "store", "wire", "protocols", "capture", "domain"]),
+    ("app", &["api", "service", "devices", "config", "auth", "store", "protocols", "capture", "domain"]),
     (
         "cli",
         &[
@@ -66,6 +69,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "sim",
             "wire",
             "protocols",
+            "capture",
             "domain",
         ],
     ),

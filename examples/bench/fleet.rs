@@ -23,6 +23,9 @@
 //! - Figures are rates and ratios: CPU per 1000 tag reads, the changing phase against the
 //!   static one, and rackd's CPU against the simulator's for the same requests (a yardstick
 //!   from the same run, since the machine is shared and noisy).
+//! - `--capture on` (the default, as in service) keeps every device's flight recorder;
+//!   `off` sets `capture_bytes = 0`; `both` compares them in one invocation
+//!   (`fleet_capture.rs`).
 
 use std::fmt::Write as _;
 use std::sync::Arc;
@@ -52,23 +55,41 @@ pub struct FleetArgs {
     /// Share of each device's tags that change on every poll in the second phase.
     #[arg(long, default_value_t = 0.1)]
     pub changing: f64,
+    /// The devices' flight recorders: on (the default), off, or both compared in
+    /// alternating rounds of the static phase.
+    #[arg(long, value_enum, default_value_t = Capture::On)]
+    pub capture: Capture,
+    /// Rounds of each setting with `--capture both`.
+    #[arg(long, default_value_t = 3)]
+    pub rounds: u32,
+}
+
+/// Whether the devices record their frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Capture {
+    /// `capture_bytes = 0`.
+    Off,
+    /// The default bounds (4 MiB or 10 minutes per device).
+    On,
+    /// Off and on in alternating rounds, compared.
+    Both,
 }
 
 /// What one phase measured.
-struct Phase {
-    name: String,
-    wall: Duration,
-    requests: u64,
-    rackd_cpu: f64,
-    sim_cpu: f64,
-    changes: u64,
-    changes_wall: Duration,
-    not_good: usize,
+pub(crate) struct Phase {
+    pub name: String,
+    pub wall: Duration,
+    pub requests: u64,
+    pub rackd_cpu: f64,
+    pub sim_cpu: f64,
+    pub changes: u64,
+    pub changes_wall: Duration,
+    pub not_good: usize,
 }
 
 /// Runs the benchmark and prints its figures.
 pub async fn run(args: FleetArgs) -> anyhow::Result<()> {
-    let FleetArgs { devices, tags, poll_ms, seconds, changing } = args;
+    let FleetArgs { devices, tags, poll_ms, seconds, changing, capture, .. } = args;
     ensure!(
         devices >= 1 && (1..=120).contains(&tags),
         "--devices at least 1, --tags 1..=120 (one read each)"
@@ -76,20 +97,16 @@ pub async fn run(args: FleetArgs) -> anyhow::Result<()> {
     ensure!(devices * tags as usize <= 65_536, "devices x tags must fit in 65536 holding registers");
     ensure!((0.0..=1.0).contains(&changing), "--changing is a share between 0 and 1");
     ensure!(poll_ms >= 2 && seconds >= 1, "--poll-ms at least 2, --seconds at least 1");
-    let bank = Bank::new();
-    for d in 0..devices {
-        let values: Vec<u16> = (0..tags).map(|t| (d as u16).wrapping_mul(tags).wrapping_add(t)).collect();
-        bank.set_holding(base(d, tags), &values);
-    }
-    let server = ModbusServer::new(Arc::new(bank.clone()), ServerOptions::default())
-        .serve_tcp("127.0.0.1:0")
-        .await
-        .context("starting the Modbus simulator")?;
+    let (bank, server) = simulator(devices, tags).await?;
     let plc = server.local_addr().context("a TCP server has an address")?;
+    if capture == Capture::Both {
+        return crate::fleet_capture::compare(args, &server, &plc.to_string()).await;
+    }
 
     let dir = tempfile::tempdir()?;
     let config = dir.path().join("fleet.toml");
-    std::fs::write(&config, config_text(devices, tags, poll_ms, &plc.to_string()))?;
+    let text = config_text(devices, tags, poll_ms, &plc.to_string(), capture == Capture::On);
+    std::fs::write(&config, text)?;
     let rackd = Server::start(&config, dir.path()).await?;
     let client = reqwest::Client::new();
     let devices_url = format!("http://{}/api/v1/devices", rackd.addr);
@@ -98,7 +115,7 @@ pub async fn run(args: FleetArgs) -> anyhow::Result<()> {
     let changing_tags = (changing * tags as f64).round() as u16;
     println!(
         "bench fleet: {devices} tag devices x {tags} u16 tags every {poll_ms} ms over Modbus TCP \
-         (target {:.0} tag reads/s), {seconds} s per phase, {} cores",
+         (target {:.0} tag reads/s), {seconds} s per phase, {} cores, capture {capture:?}",
         target(args),
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
@@ -125,24 +142,40 @@ pub async fn run(args: FleetArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The Modbus TCP simulator, its bank holding every device's tags.
+pub(crate) async fn simulator(devices: usize, tags: u16) -> anyhow::Result<(Bank, ServerHandle)> {
+    let bank = Bank::new();
+    for d in 0..devices {
+        let values: Vec<u16> = (0..tags).map(|t| (d as u16).wrapping_mul(tags).wrapping_add(t)).collect();
+        bank.set_holding(base(d, tags), &values);
+    }
+    let server = ModbusServer::new(Arc::new(bank.clone()), ServerOptions::default())
+        .serve_tcp("127.0.0.1:0")
+        .await
+        .context("starting the Modbus simulator")?;
+    Ok((bank, server))
+}
+
 /// The first holding register of device `d`'s tags.
 fn base(d: usize, tags: u16) -> u16 {
     (d * tags as usize) as u16
 }
 
 /// Tag reads per second the workload asks for.
-fn target(args: FleetArgs) -> f64 {
+pub(crate) fn target(args: FleetArgs) -> f64 {
     args.devices as f64 * args.tags as f64 * 1000.0 / args.poll_ms as f64
 }
 
-/// rackd's configuration: `devices` tags devices on the simulator at `plc`.
-fn config_text(devices: usize, tags: u16, poll_ms: u64, plc: &str) -> String {
+/// rackd's configuration: `devices` tags devices on the simulator at `plc`, recording
+/// their frames or not.
+pub(crate) fn config_text(devices: usize, tags: u16, poll_ms: u64, plc: &str, capture: bool) -> String {
+    let capture = if capture { "" } else { "capture_bytes = 0\n" };
     let mut text = String::from("# bench fleet: generated\n");
     for d in 0..devices {
         let _ = write!(
             text,
             "\n[[devices]]\nid = \"fleet{d:04}\"\nkind = \"tags\"\nprotocol = \"modbus-tcp\"\n\
-             address = \"{plc}\"\npoll_ms = {poll_ms}\n\n[devices.tags]\n"
+             address = \"{plc}\"\npoll_ms = {poll_ms}\n{capture}\n[devices.tags]\n"
         );
         for t in 0..tags {
             let _ = writeln!(text, "\"tag.t{t:03}\" = \"4x{}\"", base(d, tags) + t);
@@ -169,7 +202,7 @@ async fn change_values(bank: Bank, devices: usize, tags: u16, changing: u16, pol
 }
 
 /// Waits until rackd has read every one of `total` tags successfully.
-async fn wait_all_good(client: &reqwest::Client, url: &str, total: usize) -> anyhow::Result<()> {
+pub(crate) async fn wait_all_good(client: &reqwest::Client, url: &str, total: usize) -> anyhow::Result<()> {
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
         let census = tag_census(client, url).await?;
@@ -210,7 +243,7 @@ async fn tag_census(client: &reqwest::Client, url: &str) -> anyhow::Result<Censu
 
 /// One steady-state window: rackd's and this process's CPU, the simulator's requests, and
 /// rackd's view of the tags (taken just outside the window, so its cost is not counted).
-async fn phase(
+pub(crate) async fn phase(
     name: String,
     client: &reqwest::Client,
     url: &str,

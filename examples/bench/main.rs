@@ -7,6 +7,7 @@
 //!                                                [--min-timeout-ms 20]]
 //! cargo run --release --example bench -- ws     [--subscribers 1000] [--events 500] [--rate 50]
 //! cargo run --release --example bench -- fleet  [--devices 500] [--tags 30] [--poll-ms 500] [--seconds 20] [--changing 0.1]
+//!                                               [--capture on|off|both [--rounds 3]]
 //! cargo run --release --example bench -- crane  [--jobs 200] [--backlog 30] [--fill 0.5] [--time-scale 200] [--seed 7]
 //! cargo run --release --example bench -- history [--jobs 10000000] [--days 365] [--database sqlite|postgres|URL]
 //! cargo run --release --example bench -- webhooks [--rate 200] [--seconds 5] [--backlog 20000] [--round-trips 10000]
@@ -28,6 +29,7 @@
 mod child;
 mod crane;
 mod fleet;
+mod fleet_capture;
 mod history;
 mod intake;
 // The tests' PostgreSQL; its TLS-only cluster (and the certificates it needs, `tls`) is the

@@ -1,5 +1,6 @@
 //! Captures: a link's frames, as rackd sent and read them, written as a pcapng file that
-//! Wireshark and tshark open. The flight recorder keeps [`Frame`]s; [`write()`] turns them into
+//! Wireshark and tshark open. The flight recorder ([`Recorder`], one per device, fed by the
+//! transport under every protocol client) keeps [`Frame`]s; [`write()`] turns them into
 //! a file. See `docs/commissioning/capture.md` for opening one.
 //!
 //! # What a capture holds
@@ -12,7 +13,8 @@
 //!   under 200 lines with tests). The maintained crate, `pcap-file`, writes blocks one
 //!   builds oneself (its 2.0 is from 2022, 3.0 still a release candidate); the part that
 //!   takes work, making Ethernet, IP, UDP and TCP headers around each frame ([`packet`]), is
-//!   in no pcapng crate, and this module stays on `std` and `bytes` alone.
+//!   in no pcapng crate, and the writer stays on `std` and `bytes` alone (the recorder
+//!   adds tokio's clock).
 //! - IP links are written as Ethernet (link type 1) with made-up headers around the real
 //!   addresses and ports, so Wireshark's own UDP/TCP analysis, its Modbus/TCP and Modbus/UDP
 //!   dissectors and the `tcp.port`/`udp.port` Decode As rules work as on a real capture.
@@ -28,11 +30,13 @@ mod frame;
 mod link;
 pub mod packet;
 pub mod pcapng;
+mod recorder;
 
 use std::io::{self, Write};
 
 pub use frame::{Annotations, Direction, Frame, Verdict};
 pub use link::{LINKTYPE_ETHERNET, LINKTYPE_UPPER_PDU, Link, SerialProtocol, Transport};
+pub use recorder::{Limits, Recorder, Stats};
 
 /// Writes `frames`, in order, as a pcapng file of one interface, `link`.
 pub fn write(mut out: impl Write, link: &Link, frames: &[Frame]) -> io::Result<()> {

@@ -70,4 +70,12 @@ impl PlcMemory for Gated {
     fn link_stats(&self) -> LinkStats {
         self.plc.link_stats()
     }
+
+    fn recorder(&self) -> Option<std::sync::Arc<crate::capture::Recorder>> {
+        self.plc.recorder()
+    }
+
+    fn serving(&self, job: Option<(i64, u16)>) {
+        self.plc.serving(job)
+    }
 }

@@ -26,6 +26,9 @@
 //!   Messaging on TCP/IP Implementation Guide's value) or 0, and unit 0 is answered like
 //!   any other, never a broadcast. Checked before connecting, so `rackd check-config`
 //!   reports them.
+//! - **Capture**: every link has a flight recorder ([`crate::capture::Recorder`]) unless
+//!   `capture.bytes` is 0; at most [`MAX_CAPTURE_BYTES`] (256 MiB, a bound on what one
+//!   device may hold in memory) and [`MAX_CAPTURE_SECONDS`] (a day), at least a second.
 
 use std::collections::BTreeSet;
 use std::sync::Arc;
@@ -40,11 +43,17 @@ use super::protocol::{Family, Protocol, Quirk, names};
 use super::serial::SerialSettings;
 use super::transport::LinkTuning;
 use super::{PlcError, PlcMemory};
+use crate::capture::Limits;
 
 /// Reply timeout per attempt when none is configured.
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(300);
 /// Resends after a timeout when none is configured.
 pub const DEFAULT_RETRIES: u32 = 2;
+
+/// The most bytes a link's flight recorder may keep.
+pub const MAX_CAPTURE_BYTES: usize = 256 * 1024 * 1024;
+/// The most seconds a link's flight recorder may keep.
+pub const MAX_CAPTURE_SECONDS: u64 = 86_400;
 
 /// How to reach one PLC.
 #[derive(Clone, Debug, PartialEq)]
@@ -67,6 +76,9 @@ pub struct LinkConfig {
     /// The adaptive timeout's floor (`timeout` is its ceiling) and when the link counts as
     /// degraded.
     pub tuning: LinkTuning,
+    /// The flight recorder's bounds (`capture_bytes`, `capture_seconds`); 0 bytes turns it
+    /// off.
+    pub capture: Limits,
 }
 
 /// Why a link configuration cannot be used.
@@ -93,6 +105,14 @@ pub enum LinkError {
     /// Adaptive timeout or degraded settings that make no sense.
     #[error("{0}")]
     Tuning(&'static str),
+    /// Flight recorder bounds out of range.
+    #[error("{key} must be {range}")]
+    Capture {
+        /// The key (`capture_bytes`, `capture_seconds`).
+        key: &'static str,
+        /// The valid range, in words.
+        range: &'static str,
+    },
     /// A protocol of another family than the request needs.
     #[error("{protocol} is not {wanted}")]
     Family {
@@ -115,7 +135,8 @@ fn known_quirks(protocol: Protocol) -> String {
 
 impl LinkConfig {
     /// A link to `address` with the protocol's default unit, [`DEFAULT_TIMEOUT`],
-    /// [`DEFAULT_RETRIES`], the protocol's serial settings and no quirks.
+    /// [`DEFAULT_RETRIES`], the protocol's serial settings, no quirks and the flight
+    /// recorder's default bounds (4 MiB, 10 minutes).
     pub fn new(protocol: Protocol, address: impl Into<String>) -> LinkConfig {
         LinkConfig {
             protocol,
@@ -126,7 +147,13 @@ impl LinkConfig {
             retries: DEFAULT_RETRIES,
             quirks: BTreeSet::new(),
             tuning: LinkTuning::for_protocol(protocol),
+            capture: Limits::default(),
         }
+    }
+
+    /// The flight recorder's bounds, or `None` when capture is off.
+    pub fn capture_limits(&self) -> Option<Limits> {
+        (self.capture.bytes > 0).then_some(self.capture)
     }
 
     /// Whether the link has `quirk`.
@@ -148,6 +175,12 @@ impl LinkConfig {
         }
         if t.degraded_window == 0 {
             return Err(LinkError::Tuning("degraded_window must be at least 1"));
+        }
+        if self.capture.bytes > MAX_CAPTURE_BYTES {
+            return Err(LinkError::Capture { key: "capture_bytes", range: "0 (off) to 268435456 (256 MiB)" });
+        }
+        if !(1..=MAX_CAPTURE_SECONDS).contains(&self.capture.seconds) {
+            return Err(LinkError::Capture { key: "capture_seconds", range: "1 to 86400 (a day)" });
         }
         let unit = |range| Err(LinkError::Unit { unit: self.unit, protocol: self.protocol, range });
         match self.protocol.family() {
@@ -182,6 +215,7 @@ impl LinkConfig {
         config.link.timeout = self.timeout;
         config.link.retries = self.retries;
         config.link.tuning = self.tuning;
+        config.link.capture = self.capture_limits();
         config.monitor_timer = self.mc3e_monitor_timer();
         config
     }
@@ -195,6 +229,7 @@ impl LinkConfig {
         config.timeout = self.timeout;
         config.retries = self.retries;
         config.tuning = self.tuning;
+        config.capture = self.capture_limits();
         config.bcc = !self.has(Quirk::NoBcc);
         config.long_frames = self.has(Quirk::LongFrames);
         config
@@ -208,6 +243,7 @@ impl LinkConfig {
         config.timeout = self.timeout;
         config.retries = self.retries;
         config.tuning = self.tuning;
+        config.capture = self.capture_limits();
         config.match_pdu_ref = !self.has(Quirk::NoPduRef);
         config
     }
@@ -225,6 +261,7 @@ impl LinkConfig {
         config.retries = self.retries;
         config.tuning = self.tuning;
         config.serial = self.serial.unwrap_or(config.serial);
+        config.capture = self.capture_limits();
         config.quirks = Quirks {
             length0: self.has(Quirk::Length0),
             ignore_transaction_id: self.has(Quirk::NoTransactionId),

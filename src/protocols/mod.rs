@@ -110,6 +110,21 @@ pub trait PlcMemory: Send + Sync {
     fn link_stats(&self) -> transport::LinkStats {
         transport::LinkStats::default()
     }
+
+    /// The link's flight recorder: every frame sent and read lately (see
+    /// [`crate::capture::Recorder`]). None for memories without a link, or when capture is
+    /// off for the device.
+    fn recorder(&self) -> Option<std::sync::Arc<crate::capture::Recorder>> {
+        None
+    }
+
+    /// The job and task the next requests serve (a hand-over), or `None` once it is done;
+    /// frames recorded meanwhile carry them.
+    fn serving(&self, job: Option<(i64, u16)>) {
+        if let Some(recorder) = self.recorder() {
+            recorder.set_serving(job);
+        }
+    }
 }
 
 /// A device's own error code, typed by the protocol that carried it.

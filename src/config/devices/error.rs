@@ -81,6 +81,7 @@ impl Problem {
             Problem::Address(_) | Problem::Link(LinkError::Plc(_)) => "address".into(),
             Problem::Link(LinkError::Quirk { .. }) => "quirks".into(),
             Problem::Link(LinkError::Family { .. }) => "protocol".into(),
+            Problem::Link(LinkError::Capture { key, .. }) => (*key).into(),
             Problem::Link(LinkError::Tuning(text)) => {
                 let keys = ["degraded_window", "degraded_below", "degraded_above"];
                 keys.into_iter().find(|k| text.starts_with(k)).unwrap_or("degraded_above").into()

@@ -14,6 +14,7 @@ use super::shelf::{ShelfConfig, default_shelf_quirks};
 use super::tags::TagsConfig;
 use super::unit::Unit;
 use super::{DeviceConfig, DeviceKind};
+use crate::capture::Limits;
 use crate::protocols::link::{DEFAULT_RETRIES, DEFAULT_TIMEOUT, LinkConfig};
 use crate::protocols::mewtocol::frame::GLOBAL_STATION;
 use crate::protocols::protocol::Family;
@@ -54,6 +55,10 @@ pub struct RawDevice {
     degraded_below: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     quirks: Option<BTreeSet<Quirk>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    capture_bytes: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    capture_seconds: Option<u64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     poll_ms: Option<u64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -182,6 +187,10 @@ impl RawDevice {
                 degraded_above: self.degraded_above.unwrap_or(d.degraded_above),
                 degraded_below: self.degraded_below.unwrap_or(d.degraded_below),
             },
+            capture: Limits {
+                bytes: self.capture_bytes.unwrap_or(Limits::default().bytes),
+                seconds: self.capture_seconds.unwrap_or(Limits::default().seconds),
+            },
         })
     }
 }
@@ -259,6 +268,8 @@ impl RawDevice {
             degraded_above: Some(link.tuning.degraded_above),
             degraded_below: Some(link.tuning.degraded_below),
             quirks: Some(link.quirks.clone()),
+            capture_bytes: Some(link.capture.bytes),
+            capture_seconds: Some(link.capture.seconds),
             poll_ms: None,
             offline_after: None,
             aisles: None,

@@ -73,3 +73,23 @@ fn shared_checks() {
     tcp.link_mut().unit = 0;
     tcp.check().unwrap();
 }
+
+#[test]
+fn capture_keys_default_turn_off_and_are_bounded() {
+    let shelf = entry("shelf", "").unwrap();
+    assert_eq!(shelf.link().capture, crate::capture::Limits { bytes: 4 << 20, seconds: 600 });
+    assert!(shelf.link().capture_limits().is_some(), "on by default");
+    let off = entry("crane", "capture_bytes = 0").unwrap();
+    assert_eq!(off.link().capture_limits(), None);
+    off.check().unwrap();
+    let set = entry("tags", "capture_bytes = 1024\ncapture_seconds = 60\n[tags]\nx = \"4x1\"\n").unwrap();
+    assert_eq!(set.link().capture_limits(), Some(crate::capture::Limits { bytes: 1024, seconds: 60 }));
+    let err = checked("shelf", "capture_bytes = 268435457").unwrap_err();
+    assert_eq!(err.problem.key(), "capture_bytes", "{err}");
+    assert!(err.to_string().contains("256 MiB"), "{err}");
+    for seconds in [0, 86_401] {
+        let err = checked("shelf", &format!("capture_seconds = {seconds}")).unwrap_err();
+        assert_eq!(err.problem.key(), "capture_seconds", "{err}");
+    }
+    checked("shelf", "capture_bytes = 268435456\ncapture_seconds = 86400").unwrap();
+}

@@ -41,7 +41,16 @@ impl Crane {
     /// Should a step fail, the hand-over stays pending (the strobe is NOT lowered here:
     /// lowering it tells a crane that latched the task to start it) and each poll carries
     /// it on ([`Crane::advance_handing`]).
+    /// The frames are marked in the link's flight recorder as serving `job` and the task.
     pub(super) async fn hand_over(&mut self, job: i64, task: &Task) -> Result<(), CraneError> {
+        self.plc.serving(Some((job, task.number)));
+        let result = self.handshake(job, task).await;
+        self.plc.serving(None);
+        result
+    }
+
+    /// The steps of [`Crane::hand_over`].
+    async fn handshake(&mut self, job: i64, task: &Task) -> Result<(), CraneError> {
         if let Some(h) = &self.handing {
             return Err(HandshakeError::Pending { task: h.task.number }.into());
         }

@@ -57,9 +57,18 @@ impl Shelf {
         failed.map_or(Ok(()), |e| Err(e.into()))
     }
 
+    /// Writes `job` into slot `k` (see [`Shelf::write_slot`]), its frames marked in the
+    /// link's flight recorder as serving the job and its task.
+    async fn hand_over(&mut self, k: usize, job: &Job) -> Result<Option<Report>, PlcError> {
+        self.plc.serving(Some((job.id, task_id_for(job.id))));
+        let result = self.write_slot(k, job).await;
+        self.plc.serving(None);
+        result
+    }
+
     /// Writes `job` into slot `k` in the safe order (see the module doc); returns what to
     /// record for it.
-    async fn hand_over(&mut self, k: usize, job: &Job) -> Result<Option<Report>, PlcError> {
+    async fn write_slot(&mut self, k: usize, job: &Job) -> Result<Option<Report>, PlcError> {
         let Some(spec) = job.spec() else { return Ok(None) };
         let body = match slot::encode_body(&spec, job.priority, job.barcode.as_deref()) {
             Ok(body) => body,

@@ -39,8 +39,8 @@ pub struct Mc3eConfig {
 
 impl Mc3eConfig {
     /// Defaults for `HOST:PORT` over `transport`: route 00/FF/03FF/00, monitoring timer 4
-    /// (1 s), timeout 1.5 s, 2 retries, reconnect backoff 100 ms doubling to 5 s, and an
-    /// ephemeral local UDP port.
+    /// (1 s), timeout 1.5 s, 2 retries, reconnect backoff 100 ms doubling to 5 s, an
+    /// ephemeral local UDP port, and no recorder.
     pub fn new(address: impl Into<String>, transport: TransportKind) -> Mc3eConfig {
         Mc3eConfig {
             link: LinkConfig {
@@ -51,6 +51,7 @@ impl Mc3eConfig {
                 tuning: crate::protocols::transport::LinkTuning::default(),
                 backoff: Backoff::default(),
                 udp_local: None,
+                capture: None,
             },
             route: Route::default(),
             monitor_timer: 4,
@@ -243,6 +244,10 @@ impl PlcMemory for Mc3eClient {
 
     fn link_stats(&self) -> crate::protocols::transport::LinkStats {
         self.health.stats()
+    }
+
+    fn recorder(&self) -> Option<std::sync::Arc<crate::capture::Recorder>> {
+        self.health.recorder().cloned()
     }
 }
 

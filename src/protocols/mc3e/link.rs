@@ -35,9 +35,10 @@ use tokio_util::codec::Decoder;
 use super::end_code::EndCode;
 use super::frame::{self, Direction, MAX_WORD_POINTS, Route};
 use super::response::{ErrorInfo, Outcome, Response};
+use crate::capture::{Limits, Verdict};
 use crate::protocols::transport::{
     Attempt, AttemptError, Backoff, DatagramLink, Endpoint, LinkHealth, LinkTuning, Retry, RetryPolicy,
-    StreamLink,
+    StreamLink, recorder_for,
 };
 use crate::protocols::{DeviceCode, DropReason, PlcError};
 
@@ -68,6 +69,8 @@ pub struct LinkConfig {
     pub backoff: Backoff,
     /// Fixed local UDP address (None: a fresh ephemeral port after each failed exchange).
     pub udp_local: Option<SocketAddr>,
+    /// The flight recorder's bounds; `None` records nothing.
+    pub capture: Option<Limits>,
 }
 
 /// What a valid reply looks like.
@@ -122,6 +125,17 @@ enum Mismatch {
     Other(&'static str),
 }
 
+impl Mismatch {
+    /// What a capture shows for a TCP reply that does not fit: a serial number's mismatch
+    /// is a stale reply, anything else fails the attempt as malformed.
+    fn verdict_on_tcp(&self) -> Verdict {
+        match self {
+            Mismatch::Serial => Verdict::StaleReply,
+            Mismatch::Other(_) => Verdict::Malformed,
+        }
+    }
+}
+
 /// The carrier of a link.
 enum Carrier {
     Tcp(StreamLink),
@@ -136,16 +150,25 @@ pub(crate) struct Link {
 
 impl Link {
     pub fn new(config: LinkConfig) -> Link {
+        let described = match config.transport {
+            TransportKind::Tcp => Endpoint::Tcp(config.address.clone()),
+            TransportKind::Udp => Endpoint::Udp { peer: config.address.clone(), local: config.udp_local },
+        };
+        let recorder = recorder_for(config.capture, &described, None);
         let carrier = match config.transport {
             TransportKind::Tcp => {
-                Carrier::Tcp(StreamLink::new(Endpoint::Tcp(config.address), config.backoff))
+                let mut link = StreamLink::new(described, config.backoff);
+                link.set_recorder(recorder.clone());
+                Carrier::Tcp(link)
             }
             TransportKind::Udp => {
-                Carrier::Udp(DatagramLink::new(config.address, config.udp_local, config.backoff))
+                let mut link = DatagramLink::new(config.address, config.udp_local, config.backoff);
+                link.set_recorder(recorder.clone());
+                Carrier::Udp(link)
             }
         };
         let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
-        Link { carrier, health: Arc::new(LinkHealth::new(policy)) }
+        Link { carrier, health: Arc::new(LinkHealth::new(policy).recording(recorder)) }
     }
 
     /// The link's health, shared with the client (read without the link's lock).
@@ -195,7 +218,9 @@ async fn tcp_attempt(
         let Some(bytes) = link.read_frame(&mut responses, attempt.deadline).await? else {
             return Err(AttemptError::Timeout);
         };
-        match check(&bytes, expect) {
+        let checked = check(&bytes, expect);
+        link.judged(checked.as_ref().map_or_else(Mismatch::verdict_on_tcp, |_| Verdict::Ok));
+        match checked {
             Ok(outcome) => {
                 link.finished();
                 return Ok(outcome);
@@ -225,7 +250,9 @@ async fn udp_attempt(
     link.send(frame, attempt.timeout).await?;
     loop {
         let Some(datagram) = link.recv(attempt.deadline).await? else { return Err(AttemptError::Timeout) };
-        match check(datagram, expect) {
+        let checked = check(datagram, expect);
+        link.judged(checked.as_ref().map_or(Verdict::StaleReply, |_| Verdict::Ok));
+        match checked {
             Ok(outcome) => {
                 link.finished();
                 return Ok(outcome);

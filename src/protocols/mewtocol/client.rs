@@ -8,10 +8,11 @@ use tokio::sync::Mutex;
 use super::command::{Request, Response};
 use super::error_code::{self, ErrorCode};
 use super::frame::{self, Bcc, GLOBAL_STATION, Kind, MAX_LONG, MAX_SHORT};
+use crate::capture::{Limits, Recorder, SerialProtocol, Verdict};
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
     Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, Retry,
-    RetryPolicy, Scanner, StreamLink,
+    RetryPolicy, Scanner, StreamLink, recorder_for,
 };
 use crate::protocols::{DeviceCode, DropReason, PlcError};
 
@@ -48,10 +49,13 @@ pub struct MewtocolConfig {
     pub bcc: bool,
     /// Use `<` long frames (2048 characters) instead of `%` frames (118).
     pub long_frames: bool,
+    /// The flight recorder's bounds; `None` records nothing.
+    pub capture: Option<Limits>,
 }
 
 impl MewtocolConfig {
-    /// Defaults: station 1, 1 s timeout, 2 retries, BCC on, `%` frames, 9600,8O1.
+    /// Defaults: station 1, 1 s timeout, 2 retries, BCC on, `%` frames, 9600,8O1, no
+    /// recorder.
     pub fn new(transport: MewtocolTransport, address: impl Into<String>) -> Self {
         let serial = SerialSettings { parity: tokio_serial::Parity::Odd, ..SerialSettings::default() };
         MewtocolConfig {
@@ -64,6 +68,7 @@ impl MewtocolConfig {
             tuning: LinkTuning::default(),
             bcc: true,
             long_frames: false,
+            capture: None,
         }
     }
 
@@ -118,8 +123,16 @@ impl MewtocolClient {
     fn with(config: MewtocolConfig, endpoint: Endpoint) -> Result<Self, PlcError> {
         check_station(config.station)?;
         let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
-        let health = LinkHealth::new(policy);
-        Ok(MewtocolClient { config, health, link: Mutex::new(StreamLink::new(endpoint, Backoff::default())) })
+        let recorder = recorder_for(config.capture, &endpoint, Some(SerialProtocol::Mewtocol));
+        let health = LinkHealth::new(policy).recording(recorder.clone());
+        let mut link = StreamLink::new(endpoint, Backoff::default());
+        link.set_recorder(recorder);
+        Ok(MewtocolClient { config, health, link: Mutex::new(link) })
+    }
+
+    /// The link's flight recorder, when the configuration asked for one.
+    pub fn recorder(&self) -> Option<std::sync::Arc<Recorder>> {
+        self.health.recorder().cloned()
     }
 
     /// The link's health (adaptive timeout, degraded flag, counters).
@@ -180,27 +193,32 @@ impl MewtocolClient {
                 return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed));
             };
             let Ok(frame) = scanned else {
+                link.judged(Verdict::Malformed);
                 self.health.dropped(DropReason::Malformed);
                 reason = Some("reply is not a MEWTOCOL frame");
                 continue;
             };
             // Our own command echoed by a 2-wire RS-485 adapter.
             if frame.kind == Kind::Command {
+                link.judged(Verdict::Dropped);
                 continue;
             }
             // Addressed to EE, the one PLC on the line answers; FP-X signs the reply EE,
             // another model may sign it with its own number, so any station is taken.
             if frame.station != self.config.station && self.config.station != GLOBAL_STATION {
+                link.judged(Verdict::WrongUnit);
                 self.health.dropped(DropReason::Unit);
                 continue;
             }
             match frame.bcc {
                 Bcc::Wrong { .. } => {
+                    link.judged(Verdict::CrcError);
                     self.health.dropped(DropReason::Malformed);
                     reason = Some("BCC error in the reply");
                     continue;
                 }
                 Bcc::Skipped if self.config.bcc => {
+                    link.judged(Verdict::Malformed);
                     self.health.dropped(DropReason::Malformed);
                     reason = Some("reply without a BCC (`**`) while BCC is required");
                     continue;
@@ -208,13 +226,16 @@ impl MewtocolClient {
                 _ => {}
             }
             if frame.kind == Kind::Error {
+                link.judged(Verdict::Ok);
                 link.answered();
                 return Err(match error_code::parse(&frame.body) {
                     Some(code) => AttemptError::Device(DeviceCode::Mewtocol(ErrorCode(code))),
                     None => AttemptError::Malformed("error reply without a 2-digit code"),
                 });
             }
-            match request.decode_response(&frame.body) {
+            let decoded = request.decode_response(&frame.body);
+            link.judged(if decoded.is_ok() { Verdict::Ok } else { Verdict::StaleReply });
+            match decoded {
                 Ok(response) => {
                     link.answered();
                     return Ok(response);

@@ -10,9 +10,11 @@ use super::device_id::{DeviceIdPage, DeviceObject, ReadDeviceIdCode};
 use super::link::{Counters, Exchange, Link, RtuLink, TcpLink, UdpLink};
 use super::pdu::{self, Request, Response};
 use super::rtu;
+use crate::capture::{Recorder, SerialProtocol};
 use crate::protocols::PlcError;
 use crate::protocols::transport::{
     Attempt, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, Retry, RetryPolicy, StreamLink,
+    recorder_for,
 };
 
 /// Counters of a client's traffic, for diagnostics and tests.
@@ -34,6 +36,13 @@ pub struct ModbusClient {
     policy: RetryPolicy,
     link: Mutex<Link>,
     counters: Arc<Counters>,
+    recorder: Option<Arc<Recorder>>,
+}
+
+/// The flight recorder for `config`'s link, if it has capture limits.
+fn recorder(config: &ModbusConfig, endpoint: &Endpoint) -> Option<Arc<Recorder>> {
+    let line = (!config.transport.is_mbap()).then_some(SerialProtocol::ModbusRtu);
+    recorder_for(config.capture, endpoint, line)
 }
 
 impl ModbusClient {
@@ -43,10 +52,19 @@ impl ModbusClient {
     pub async fn connect(config: ModbusConfig) -> Result<Self, PlcError> {
         config.transport.check_unit(config.unit).map_err(PlcError::OutOfRange)?;
         let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
-        let counters = Arc::new(Counters::new(LinkHealth::new(policy)));
-        let link = match config.transport {
+        let described = match config.transport {
+            Transport::Udp => Endpoint::Udp { peer: config.address.clone(), local: None },
+            Transport::Tcp | Transport::RtuOverTcp => Endpoint::Tcp(config.address.clone()),
+            Transport::RtuSerial => {
+                Endpoint::Serial { path: config.address.clone(), settings: config.serial }
+            }
+        };
+        let recorder = recorder(&config, &described);
+        let counters = Arc::new(Counters::new(LinkHealth::new(policy).recording(recorder.clone())));
+        let mut link = match config.transport {
             Transport::Udp => {
                 let mut udp = UdpLink::new(config.address.clone(), config.quirks, counters.clone());
+                udp.set_recorder(recorder.clone());
                 udp.open(config.timeout).await.map_err(|e| e.once(&policy))?;
                 Link::Udp(udp)
             }
@@ -63,7 +81,8 @@ impl ModbusClient {
                 Link::Rtu(RtuLink::new(link, rtu::silence(config.serial.baud), counters.clone()))
             }
         };
-        Ok(ModbusClient { config, policy, link: Mutex::new(link), counters })
+        link.set_recorder(recorder.clone());
+        Ok(ModbusClient { config, policy, link: Mutex::new(link), counters, recorder })
     }
 
     /// An RTU client over a stream the caller already opened (a pty in tests, a port
@@ -78,10 +97,13 @@ impl ModbusClient {
         }
         config.transport.check_unit(config.unit).map_err(PlcError::OutOfRange)?;
         let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
-        let counters = Arc::new(Counters::new(LinkHealth::new(policy)));
-        let link = StreamLink::new(Endpoint::given(stream), Backoff::default());
+        let endpoint = Endpoint::given(stream);
+        let recorder = recorder(&config, &endpoint);
+        let counters = Arc::new(Counters::new(LinkHealth::new(policy).recording(recorder.clone())));
+        let mut link = StreamLink::new(endpoint, Backoff::default());
+        link.set_recorder(recorder.clone());
         let link = Link::Rtu(RtuLink::new(link, rtu::silence(config.serial.baud), counters.clone()));
-        Ok(ModbusClient { config, policy, link: Mutex::new(link), counters })
+        Ok(ModbusClient { config, policy, link: Mutex::new(link), counters, recorder })
     }
 
     /// The configuration this client was built with.
@@ -101,6 +123,11 @@ impl ModbusClient {
     /// The link's health (adaptive timeout, degraded flag, counters).
     pub fn link_stats(&self) -> LinkStats {
         self.counters.health.stats()
+    }
+
+    /// The link's flight recorder, when the configuration asked for one.
+    pub fn recorder(&self) -> Option<Arc<Recorder>> {
+        self.recorder.clone()
     }
 
     /// Sends one request (within the per-function limits) to the configured unit under the

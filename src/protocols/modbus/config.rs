@@ -2,6 +2,7 @@
 
 use std::time::Duration;
 
+use crate::capture::Limits;
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::LinkTuning;
 
@@ -69,11 +70,13 @@ pub struct ModbusConfig {
     pub tuning: LinkTuning,
     /// Quirks of this device.
     pub quirks: Quirks,
+    /// The flight recorder's bounds; `None` records nothing.
+    pub capture: Option<Limits>,
 }
 
 impl ModbusConfig {
     /// A configuration with the usual defaults: unit 1, 1 s timeout, 2 retries (as the
-    /// S7-1200's Modbus_Master), serial 9600,8E1, no quirks.
+    /// S7-1200's Modbus_Master), serial 9600,8E1, no quirks, no recorder.
     pub fn new(transport: Transport, address: impl Into<String>) -> Self {
         ModbusConfig {
             transport,
@@ -84,6 +87,7 @@ impl ModbusConfig {
             retries: 2,
             tuning: LinkTuning::default(),
             quirks: Quirks::default(),
+            capture: None,
         }
     }
 

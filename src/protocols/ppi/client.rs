@@ -9,10 +9,11 @@ use tokio::sync::Mutex;
 use super::frame::{self, FC_POLL, FC_RESPONSE, Frame, FrameError};
 use super::pdu::{Item, Reply, Request};
 use super::return_code::ReturnCode;
+use crate::capture::{Limits, Recorder, SerialProtocol, Verdict};
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
     Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, Retry,
-    RetryPolicy, Scanner, StreamLink,
+    RetryPolicy, Scanner, StreamLink, recorder_for,
 };
 use crate::protocols::{DeviceCode, DropReason, PlcError};
 
@@ -47,10 +48,13 @@ pub struct PpiConfig {
     /// Take only responses carrying the PDU reference of this request's attempts. Turn off
     /// for a device that answers with reference 0 whatever it was sent.
     pub match_pdu_ref: bool,
+    /// The flight recorder's bounds; `None` records nothing.
+    pub capture: Option<Limits>,
 }
 
 impl PpiConfig {
-    /// Defaults: PLC 2, master 0, 9600,8E1, 1 s, 2 retries, PDU references matched.
+    /// Defaults: PLC 2, master 0, 9600,8E1, 1 s, 2 retries, PDU references matched, no
+    /// recorder.
     pub fn new(transport: PpiTransport, address: impl Into<String>) -> Self {
         PpiConfig {
             transport,
@@ -62,6 +66,7 @@ impl PpiConfig {
             retries: 2,
             tuning: LinkTuning::default(),
             match_pdu_ref: true,
+            capture: None,
         }
     }
 }
@@ -101,16 +106,25 @@ impl PpiClient {
 
     fn with(config: PpiConfig, endpoint: Endpoint) -> Result<Self, PlcError> {
         check(&config)?;
+        let recorder = recorder_for(config.capture, &endpoint, Some(SerialProtocol::Ppi));
+        let mut link = StreamLink::new(endpoint, Backoff::default());
+        link.set_recorder(recorder.clone());
         Ok(PpiClient {
             health: LinkHealth::new(RetryPolicy {
                 timeout: config.timeout,
                 retries: config.retries,
                 tuning: config.tuning,
-            }),
+            })
+            .recording(recorder),
             config,
-            link: Mutex::new(StreamLink::new(endpoint, Backoff::default())),
+            link: Mutex::new(link),
             next_ref: AtomicU16::new(rand::random()),
         })
+    }
+
+    /// The link's flight recorder, when the configuration asked for one.
+    pub fn recorder(&self) -> Option<std::sync::Arc<Recorder>> {
+        self.health.recorder().cloned()
     }
 
     /// The configuration.
@@ -195,8 +209,12 @@ impl PpiClient {
         loop {
             match link.read_frame(&mut frames, attempt.deadline).await? {
                 None => return Err(AttemptError::Timeout),
-                Some(Ok(Frame::Ack(_))) => break,
+                Some(Ok(Frame::Ack(_))) => {
+                    link.judged(Verdict::Ok);
+                    break;
+                }
                 Some(_) => {
+                    link.judged(Verdict::StaleReply);
                     self.health.dropped(DropReason::Stale);
                     link.unsettle();
                 }
@@ -212,15 +230,18 @@ impl PpiClient {
                 None => return Err(reason.map_or(AttemptError::Timeout, AttemptError::Malformed)),
                 Some(Ok(Frame::Long { da, sa, fc: FC_RESPONSE, payload })) => {
                     if da != c.master || sa != c.plc {
+                        link.judged(Verdict::WrongUnit);
                         self.health.dropped(DropReason::Unit);
                         continue;
                     }
                     match Reply::decode(&payload, request) {
                         Ok((r, reply)) if !c.match_pdu_ref || refs.contains(&r) => {
+                            link.judged(Verdict::Ok);
                             link.answered();
                             return Ok(reply);
                         }
                         Ok(_) => {
+                            link.judged(Verdict::ForeignReply);
                             self.health.dropped(DropReason::PduReference);
                             reason = Some("stale reply (PDU reference of an earlier request)");
                         }
@@ -231,17 +252,21 @@ impl PpiClient {
                             } else {
                                 DropReason::Malformed
                             };
+                            link.judged(crate::protocols::transport::verdict_of(why));
                             self.health.dropped(why);
                             reason = Some(pdu_message(e));
                         }
                     }
                 }
-                Some(Ok(_)) => {}
+                // Another frame (an acknowledgement) or a broken one: nobody waited for it.
+                Some(Ok(_) | Err(FrameError::BadHeader | FrameError::BadEnd)) => {
+                    link.judged(Verdict::Dropped);
+                }
                 Some(Err(FrameError::BadFcs)) => {
+                    link.judged(Verdict::CrcError);
                     self.health.dropped(DropReason::Malformed);
                     reason = Some("FCS error in the response");
                 }
-                Some(Err(_)) => {}
             }
         }
     }

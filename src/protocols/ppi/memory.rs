@@ -52,6 +52,10 @@ impl PlcMemory for PpiClient {
         self.link_stats()
     }
 
+    fn recorder(&self) -> Option<std::sync::Arc<crate::capture::Recorder>> {
+        self.recorder()
+    }
+
     fn parse_address(&self, text: &str) -> Result<Address, PlcError> {
         address::parse(text)
     }

@@ -9,6 +9,7 @@ use tokio::time::Instant;
 
 use super::endpoint::{ByteStream, Carrier, Endpoint};
 use super::retry::AttemptError;
+use super::tap::Tap;
 
 /// How long to wait before reopening after failed opens: `first` after one failure, doubling
 /// after each further one up to `max`, back to `first` after a success. A device that is off
@@ -40,6 +41,8 @@ pub(crate) struct Connection {
     last_error: Option<(io::ErrorKind, String)>,
     /// An exchange began on the carrier and has not been marked finished.
     unfinished: bool,
+    /// The flight recorder of the link, told of each new socket pair.
+    pub tap: Tap,
 }
 
 impl Connection {
@@ -53,6 +56,7 @@ impl Connection {
             retry_at: None,
             last_error: None,
             unfinished: false,
+            tap: Tap::default(),
         }
     }
 
@@ -95,7 +99,10 @@ impl Connection {
                 tokio::time::sleep_until(at).await;
             }
             match tokio::time::timeout(timeout, self.endpoint.open()).await {
-                Ok(Ok(carrier)) => {
+                Ok(Ok((carrier, pair))) => {
+                    if let Some((transport, local, remote)) = pair {
+                        self.tap.opened(transport, local, remote);
+                    }
                     self.carrier = Some(carrier);
                     self.next_wait = self.backoff.first;
                     self.retry_at = None;

@@ -1,7 +1,12 @@
 //! A link over UDP: one request per datagram, one reply per datagram, on a socket connected
 //! to the device (so datagrams from anyone else never reach it).
+//!
+//! With a flight recorder ([`DatagramLink::set_recorder`]) every datagram sent and read is
+//! recorded (see `tap.rs`): a datagram read waits for its protocol's verdict
+//! ([`DatagramLink::judged`]); one flushed before a request is a stale reply.
 
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::time::Instant;
@@ -9,6 +14,7 @@ use tokio::time::Instant;
 use super::connection::{Backoff, Connection};
 use super::endpoint::Endpoint;
 use super::retry::AttemptError;
+use crate::capture::{Recorder, Verdict};
 
 /// Largest datagram read; longer ones are cut (no reply of these protocols comes close).
 const MAX_DATAGRAM: usize = 8192;
@@ -26,6 +32,16 @@ impl DatagramLink {
             conn: Connection::new(Endpoint::Udp { peer, local }, backoff),
             rx: vec![0; MAX_DATAGRAM].into(),
         }
+    }
+
+    /// Records every datagram into `recorder` from now on.
+    pub fn set_recorder(&mut self, recorder: Option<Arc<Recorder>>) {
+        self.conn.tap = super::tap::Tap::new(recorder);
+    }
+
+    /// The protocol's verdict on the datagram read last, for the recorder.
+    pub fn judged(&mut self, verdict: Verdict) {
+        self.conn.tap.judged(verdict);
     }
 
     /// Starts an exchange that must have the socket to itself: after an unfinished one the
@@ -47,18 +63,24 @@ impl DatagramLink {
     /// Drops every datagram already queued (late replies to earlier requests); returns how
     /// many there were.
     pub async fn flush_stale(&mut self, timeout: Duration) -> Result<u64, AttemptError> {
-        let socket = self.conn.datagram(timeout).await?;
         let mut stale = 0;
-        while socket.try_recv(&mut self.rx).is_ok() {
+        loop {
+            let socket = self.conn.datagram(timeout).await?;
+            let Ok(n) = socket.try_recv(&mut self.rx) else { return Ok(stale) };
             stale += 1;
+            if self.conn.tap.on() {
+                let time_us = self.conn.tap.now_us();
+                let bytes = self.rx[..n].to_vec().into();
+                self.conn.tap.discarded(time_us, bytes, Verdict::StaleReply);
+            }
         }
-        Ok(stale)
     }
 
     /// Sends one datagram.
     pub async fn send(&mut self, bytes: &[u8], timeout: Duration) -> Result<(), AttemptError> {
         let socket = self.conn.datagram(timeout).await?;
         socket.send(bytes).await?;
+        self.conn.tap.sent(bytes);
         Ok(())
     }
 
@@ -68,7 +90,10 @@ impl DatagramLink {
         let socket = self.conn.datagram(Duration::ZERO).await?;
         match tokio::time::timeout_at(deadline, socket.recv(&mut self.rx)).await {
             Err(_) => Ok(None),
-            Ok(Ok(n)) => Ok(Some(&self.rx[..n])),
+            Ok(Ok(n)) => {
+                self.conn.tap.read(&self.rx[..n]);
+                Ok(Some(&self.rx[..n]))
+            }
             Ok(Err(e)) => Err(AttemptError::Io(e)),
         }
     }

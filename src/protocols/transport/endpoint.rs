@@ -10,7 +10,11 @@ use std::net::SocketAddr;
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::net::{TcpStream, UdpSocket};
 
+use crate::capture::Transport;
 use crate::protocols::serial::SerialSettings;
+
+/// The two ends of an IP connection: its transport, rackd's end, the device's end.
+pub(crate) type SocketPair = (Transport, SocketAddr, SocketAddr);
 
 /// Any byte stream a link can run over (TCP socket, serial port, pty).
 pub trait ByteStream: AsyncRead + AsyncWrite + Unpin + Send {}
@@ -65,14 +69,27 @@ impl Endpoint {
         Endpoint::Given(Some(Box::new(stream)))
     }
 
-    /// Opens the endpoint.
-    pub(crate) async fn open(&mut self) -> io::Result<Carrier> {
+    /// Opens the endpoint; with the carrier, the socket pair of an IP one (rackd's end
+    /// first), for the flight recorder.
+    pub(crate) async fn open(&mut self) -> io::Result<(Carrier, Option<SocketPair>)> {
+        if let Endpoint::Tcp(address) = self {
+            let stream = TcpStream::connect(address.as_str()).await?;
+            stream.set_nodelay(true)?;
+            let pair = (Transport::Tcp, stream.local_addr()?, stream.peer_addr()?);
+            return Ok((Carrier::Stream(Box::new(stream)), Some(pair)));
+        }
+        let carrier = self.open_other().await?;
+        let pair = match &carrier {
+            Carrier::Datagram(socket) => Some((Transport::Udp, socket.local_addr()?, socket.peer_addr()?)),
+            Carrier::Stream(_) => None,
+        };
+        Ok((carrier, pair))
+    }
+
+    /// Opens an endpoint other than TCP.
+    async fn open_other(&mut self) -> io::Result<Carrier> {
         match self {
-            Endpoint::Tcp(address) => {
-                let stream = TcpStream::connect(address.as_str()).await?;
-                stream.set_nodelay(true)?;
-                Ok(Carrier::Stream(Box::new(stream)))
-            }
+            Endpoint::Tcp(_) => Err(io::Error::other("TCP is opened by `open`")),
             Endpoint::Udp { peer, local } => {
                 let peer = tokio::net::lookup_host(peer.as_str())
                     .await?

@@ -19,7 +19,7 @@
 //! - A request abandoned by its caller (its future dropped) counts as a request, but its
 //!   outcome is unknown, so it does not enter the degraded window.
 
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 use serde::Serialize;
@@ -28,6 +28,7 @@ use utoipa::ToSchema;
 use super::policy::RetryPolicy;
 use super::round_trips::RoundTrips;
 use super::rtt::{LossWindow, RttEstimator};
+use crate::capture::Recorder;
 use crate::protocols::{DropReason, Dropped};
 
 /// A link's health as the device status shows it.
@@ -90,6 +91,8 @@ pub(crate) struct Settled {
 pub(crate) struct LinkHealth {
     policy: RetryPolicy,
     state: Mutex<State>,
+    /// The link's flight recorder: the retry loop marks attempts and counts timeouts there.
+    recorder: Option<Arc<Recorder>>,
 }
 
 const REASONS: [DropReason; 6] = [
@@ -120,7 +123,19 @@ impl LinkHealth {
                 this_request: [0; 6],
                 held: Duration::ZERO,
             }),
+            recorder: None,
         }
+    }
+
+    /// The same health, with the link's flight recorder.
+    pub fn recording(mut self, recorder: Option<Arc<Recorder>>) -> Self {
+        self.recorder = recorder;
+        self
+    }
+
+    /// The link's flight recorder, if any.
+    pub fn recorder(&self) -> Option<&Arc<Recorder>> {
+        self.recorder.as_ref()
     }
 
     /// The policy.
@@ -189,6 +204,9 @@ impl LinkHealth {
     }
 
     pub(super) fn timed_out(&self) {
+        if let Some(r) = &self.recorder {
+            r.timed_out();
+        }
         let mut s = self.state();
         s.timeouts += 1;
         s.rtt.backed_off();

@@ -55,6 +55,11 @@
 //! retransmission timer between `min_timeout_ms` and `timeout_ms`, a degraded flag with
 //! hysteresis over recent requests, and counters ([`LinkStats`]) that the device status
 //! shows. The retry loop feeds it; links report the replies they drop and why.
+//!
+//! # The flight recorder
+//! A client given a [`crate::capture::Recorder`] hands it to its link and its health: the
+//! links record every frame they write and read (`tap.rs`), the protocol gives each read
+//! frame its verdict, and the retry loop marks retries and counts timeouts.
 
 mod connection;
 mod datagram;
@@ -67,6 +72,7 @@ mod rtt;
 mod scan;
 mod server;
 mod stream;
+mod tap;
 
 pub use connection::Backoff;
 pub(crate) use datagram::DatagramLink;
@@ -81,3 +87,4 @@ pub(crate) use scan::Scanner;
 pub use server::StreamServer;
 pub(crate) use server::spawn_tcp;
 pub(crate) use stream::StreamLink;
+pub(crate) use tap::{recorder_for, verdict_of};

@@ -61,6 +61,17 @@ impl AttemptError {
         !matches!(self, AttemptError::Device(_))
     }
 
+    /// What an attempt ended with, as a retry's note in a capture says it (`after a
+    /// timeout`).
+    fn as_cause(&self) -> &'static str {
+        match self {
+            AttemptError::Timeout => "a timeout",
+            AttemptError::Io(_) => "a lost connection",
+            AttemptError::Malformed(_) => "a malformed reply",
+            AttemptError::Device(_) => "a device error",
+        }
+    }
+
     /// The error a request reports when this was its last failure after `attempts` tries.
     fn into_plc_error(self, attempts: u32, timeout: Duration, dropped: Option<Dropped>) -> PlcError {
         match self {
@@ -170,6 +181,9 @@ impl<'a> Retry<'a> {
             timeout: policy.timeout,
             reply_window: window,
         };
+        if let Some(r) = self.health.recorder() {
+            r.set_attempt(self.made, self.last.as_ref().map(AttemptError::as_cause));
+        }
         self.sent.push(now);
         self.last_window = window;
         self.made += 1;
@@ -180,6 +194,7 @@ impl<'a> Retry<'a> {
     /// attributed to one transmission (no transaction id): by Karn's rule it gives a round
     /// trip only when there was no earlier attempt.
     pub fn succeeded(self) {
+        self.done();
         let clean = self.made == 1;
         if clean {
             self.sample(0);
@@ -190,8 +205,16 @@ impl<'a> Retry<'a> {
     /// The request was answered by a reply matched by id to attempt `number`: an
     /// unambiguous round trip from that attempt's transmission, retried or not.
     pub fn succeeded_by(self, number: u32) {
+        self.done();
         self.sample(number);
         self.health.finished(self.made > 1);
+    }
+
+    /// The request is over: frames sent after it (a broadcast) are no attempt's.
+    fn done(&self) {
+        if let Some(r) = self.health.recorder() {
+            r.set_attempt(0, None);
+        }
     }
 
     fn sample(&self, number: u32) {
@@ -208,6 +231,7 @@ impl<'a> Retry<'a> {
     /// [`Retry::succeeded`] does) is returned as the request's error at once.
     pub fn failed(&mut self, e: AttemptError) -> Result<(), PlcError> {
         if !e.is_retryable() {
+            self.done();
             let clean = self.made == 1;
             if clean {
                 self.sample(0);
@@ -228,6 +252,7 @@ impl<'a> Retry<'a> {
     /// The request's error once every attempt failed: the last failure, with the replies
     /// dropped meanwhile when it is a timeout.
     pub fn spent(self) -> PlcError {
+        self.done();
         self.health.finished(true);
         let dropped = self.health.dropped_this_request();
         self.last.unwrap_or(AttemptError::Timeout).into_plc_error(self.made, self.last_window, dropped)

@@ -15,20 +15,31 @@
 //! within [`BURST_GAP`] of each other are one reply. A line that never falls silent is held
 //! at most [`MAX_HOLD`] timeouts, then used anyway (the flush and the reply checks
 //! still apply).
+//!
+//! With a flight recorder ([`StreamLink::set_recorder`]) the link records what it writes
+//! and reads (see `tap.rs`): each frame a decoder finds, with the noise it skipped before
+//! it, waits for the protocol's verdict ([`StreamLink::judged`]); input thrown away by a
+//! flush is one stale reply, input dropped while the line is held one stale reply per
+//! burst (as the counters count them); noise a decoder drops while waiting, input cut
+//! past [`MAX_BUFFER`] and input left when the stream closes are recorded as dropped.
+//! Input a decoder refuses (an error) is recorded as malformed and thrown away with the
+//! buffer: nothing after it can be trusted, and every caller resets or reopens anyway.
 
 use std::io;
+use std::sync::Arc;
 use std::time::Duration;
 
 use futures::FutureExt;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::time::Instant;
-use tokio_util::bytes::{Buf, BytesMut};
+use tokio_util::bytes::{Buf, Bytes, BytesMut};
 use tokio_util::codec::Decoder;
 
 use super::connection::{Backoff, Connection};
 use super::endpoint::Endpoint;
 use super::health::Settled;
 use super::retry::{Attempt, AttemptError};
+use crate::capture::{Recorder, Verdict};
 
 /// Input kept while no frame is found; past it, the oldest half is noise and is cut, so a
 /// babbling line cannot grow the buffer without bound.
@@ -70,6 +81,25 @@ impl StreamLink {
         }
     }
 
+    /// Records every frame into `recorder` from now on.
+    pub fn set_recorder(&mut self, recorder: Option<Arc<Recorder>>) {
+        self.conn.tap = super::tap::Tap::new(recorder);
+    }
+
+    /// The protocol's verdict on the frame read last, for the recorder.
+    pub fn judged(&mut self, verdict: Verdict) {
+        self.conn.tap.judged(verdict);
+    }
+
+    /// Records the buffered input as thrown away with `verdict`, and forgets it.
+    fn drop_input(&mut self, verdict: Verdict) {
+        if !self.rx.is_empty() && self.conn.tap.on() {
+            let time_us = self.conn.tap.now_us();
+            self.conn.tap.discarded(time_us, self.rx.split().freeze(), verdict);
+        }
+        self.rx.clear();
+    }
+
     /// Marks the line as possibly carrying a late reply (a reply was dropped as stale):
     /// the next request holds it first ([`StreamLink::settle`]).
     pub fn unsettle(&mut self) {
@@ -106,12 +136,30 @@ impl StreamLink {
         let window = attempt.timeout;
         let give_up = Instant::now() + window * MAX_HOLD;
         let mut replies = u64::from(!self.rx.is_empty());
+        let mut burst = Burst::default();
+        if self.conn.tap.on() && !self.rx.is_empty() {
+            burst.start(self.conn.tap.now_us(), &self.rx);
+        }
         self.rx.clear();
-        self.conn.stream(attempt.timeout).await?;
+        let held = self.hold_quiet(window, give_up, &mut replies, &mut burst).await;
+        burst.record(&mut self.conn.tap);
+        held.map(|()| replies)
+    }
+
+    /// The loop of [`StreamLink::hold`]: reads until the line is quiet for `window` (or
+    /// `give_up`), counting bursts in `replies` and keeping them in `burst` for the recorder.
+    async fn hold_quiet(
+        &mut self,
+        window: Duration,
+        give_up: Instant,
+        replies: &mut u64,
+        burst: &mut Burst,
+    ) -> Result<(), AttemptError> {
+        self.conn.stream(window).await?;
         loop {
             let quiet = (self.last_io + window).min(give_up);
             if Instant::now() >= quiet {
-                return Ok(replies);
+                return Ok(());
             }
             let stream = self.conn.stream(Duration::ZERO).await?;
             match tokio::time::timeout_at(quiet, stream.read_buf(&mut self.rx)).await {
@@ -119,8 +167,17 @@ impl StreamLink {
                 Ok(Ok(0)) => return Err(self.lost(io::ErrorKind::UnexpectedEof.into())),
                 Ok(Ok(_)) => {
                     let now = Instant::now();
-                    if replies == 0 || now - self.last_io >= BURST_GAP {
-                        replies += 1;
+                    let new_burst = *replies == 0 || now - self.last_io >= BURST_GAP;
+                    if new_burst {
+                        *replies += 1;
+                    }
+                    if self.conn.tap.on() {
+                        if new_burst {
+                            burst.record(&mut self.conn.tap);
+                            burst.start(self.conn.tap.now_us(), &self.rx);
+                        } else {
+                            burst.bytes.extend_from_slice(&self.rx);
+                        }
                     }
                     self.rx.clear();
                     self.last_io = now;
@@ -134,7 +191,7 @@ impl StreamLink {
     /// stream is closed and its buffered input forgotten ([`Connection::begin_exclusive`]).
     pub fn begin_exclusive(&mut self) {
         if self.conn.begin_exclusive() {
-            self.rx.clear();
+            self.drop_input(Verdict::Dropped);
         }
     }
 
@@ -156,13 +213,33 @@ impl StreamLink {
     /// Throws away input already waiting (late replies to earlier requests, noise) and
     /// anything buffered; true if there was any. Opens the stream if needed.
     pub async fn flush_stale(&mut self, timeout: Duration) -> Result<bool, AttemptError> {
-        let mut stale = !self.rx.is_empty();
+        let stale = !self.rx.is_empty();
+        let mut burst = Burst::default();
+        if stale && self.conn.tap.on() {
+            burst.start(self.conn.tap.now_us(), &self.rx);
+        }
         self.rx.clear();
+        let flushed = self.flush_input(timeout, &mut burst).await;
+        burst.record(&mut self.conn.tap);
+        flushed.map(|more| stale || more)
+    }
+
+    /// The reads of [`StreamLink::flush_stale`]: true if any input was waiting, kept in
+    /// `burst` for the recorder.
+    async fn flush_input(&mut self, timeout: Duration, burst: &mut Burst) -> Result<bool, AttemptError> {
+        let mut stale = false;
+        let recorder = self.conn.tap.recorder().cloned();
         let stream = self.conn.stream(timeout).await?;
         loop {
             match stream.read_buf(&mut self.rx).now_or_never() {
                 Some(Ok(n)) if n > 0 => {
                     stale = true;
+                    if let Some(r) = &recorder {
+                        if burst.bytes.is_empty() {
+                            burst.time_us = r.now_us();
+                        }
+                        burst.bytes.extend_from_slice(&self.rx);
+                    }
                     self.rx.clear();
                     self.last_io = Instant::now();
                 }
@@ -183,6 +260,7 @@ impl StreamLink {
         };
         match tokio::time::timeout(timeout, written).await {
             Ok(Ok(())) => {
+                self.conn.tap.sent(bytes);
                 self.last_io = Instant::now();
                 self.ceiling = self.last_io + timeout;
                 self.replying = false;
@@ -208,12 +286,22 @@ impl StreamLink {
         D: Decoder<Error = AttemptError>,
     {
         loop {
-            if let Some(item) = decoder.decode(&mut self.rx)? {
+            let seen = self.conn.tap.on().then(|| Bytes::copy_from_slice(&self.rx));
+            let decoded = decoder.decode(&mut self.rx);
+            if let Some(seen) = seen {
+                self.tap_decoded(seen, decoded.as_ref().map(Option::is_some));
+            }
+            if let Some(item) = decoded? {
                 return Ok(Some(item));
             }
             if self.rx.len() > MAX_BUFFER {
                 let cut = self.rx.len() - MAX_BUFFER / 2;
-                self.rx.advance(cut);
+                if self.conn.tap.on() {
+                    let time_us = self.conn.tap.now_us();
+                    self.conn.tap.discarded(time_us, self.rx.split_to(cut).freeze(), Verdict::Dropped);
+                } else {
+                    self.rx.advance(cut);
+                }
             }
             let stream = self.conn.stream(Duration::ZERO).await?;
             let until = if self.replying { deadline.max(self.ceiling) } else { deadline };
@@ -232,10 +320,30 @@ impl StreamLink {
         }
     }
 
+    /// Records what a decode made of the input it `seen`: a frame (`Ok(true)`, the bytes
+    /// it consumed, judged later), noise dropped (`Ok(false)` with bytes consumed), or a
+    /// refusal (`Err`: everything buffered is malformed and is thrown away).
+    fn tap_decoded(&mut self, seen: Bytes, outcome: Result<bool, &AttemptError>) {
+        let consumed = seen.len().saturating_sub(self.rx.len());
+        match outcome {
+            Ok(true) => self.conn.tap.read_bytes(seen.slice(..consumed)),
+            Ok(false) if consumed > 0 => {
+                let time_us = self.conn.tap.now_us();
+                self.conn.tap.discarded(time_us, seen.slice(..consumed), Verdict::Dropped);
+            }
+            Ok(false) => {}
+            Err(_) => {
+                let time_us = self.conn.tap.now_us();
+                self.conn.tap.discarded(time_us, seen, Verdict::Malformed);
+                self.rx.clear();
+            }
+        }
+    }
+
     /// Closes the stream and forgets buffered input; the next use reopens it.
     pub fn reset(&mut self) {
         self.conn.reset();
-        self.rx.clear();
+        self.drop_input(Verdict::Dropped);
         // A new connection carries nothing late.
         self.unsettled = false;
         self.pending = false;
@@ -245,6 +353,28 @@ impl StreamLink {
     fn lost(&mut self, e: io::Error) -> AttemptError {
         self.reset();
         AttemptError::Io(e)
+    }
+}
+
+/// Input thrown away in one go, kept for the recorder (empty when nothing records).
+#[derive(Default)]
+struct Burst {
+    time_us: u64,
+    bytes: Vec<u8>,
+}
+
+impl Burst {
+    fn start(&mut self, time_us: u64, bytes: &[u8]) {
+        self.time_us = time_us;
+        self.bytes.clear();
+        self.bytes.extend_from_slice(bytes);
+    }
+
+    /// Records the burst, if any, as a stale reply, and empties it.
+    fn record(&mut self, tap: &mut super::tap::Tap) {
+        if !self.bytes.is_empty() {
+            tap.discarded(self.time_us, std::mem::take(&mut self.bytes).into(), Verdict::StaleReply);
+        }
     }
 }
 

@@ -12,6 +12,7 @@ mod mc3e;
 mod mewtocol;
 mod modbus;
 mod ppi;
+mod recorded;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

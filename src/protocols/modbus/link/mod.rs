@@ -14,6 +14,7 @@ mod rtu;
 mod tcp;
 mod udp;
 
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 pub(crate) use rtu::RtuLink;
@@ -24,7 +25,8 @@ use super::decode::{DecodeError, decode_response};
 use super::exception::Exception;
 use super::frame::MbapHeader;
 use super::pdu::{Request, Response};
-use crate::protocols::transport::{Attempt, AttemptError, LinkHealth};
+use crate::capture::Recorder;
+use crate::protocols::transport::{Attempt, AttemptError, LinkHealth, verdict_of};
 use crate::protocols::{DeviceCode, DropReason};
 
 /// A decoded reply: data, or the device's exception.
@@ -79,6 +81,15 @@ pub(crate) enum Link {
 }
 
 impl Link {
+    /// Records the link's frames into `recorder` (a stream link's is set on it directly).
+    pub fn set_recorder(&mut self, recorder: Option<Arc<Recorder>>) {
+        match self {
+            Link::Udp(l) => l.set_recorder(recorder),
+            Link::Tcp(l) => l.set_recorder(recorder),
+            Link::Rtu(_) => {}
+        }
+    }
+
     /// Sends the request and waits until the attempt's deadline for its reply. With the
     /// reply, the number of the attempt it answers when its transaction id says so (for an
     /// unambiguous round trip), `None` when it cannot be told.
@@ -113,6 +124,17 @@ pub(crate) enum Verdict {
     Drop(DropReason, Option<&'static str>),
     /// It claims to answer the request but is wrong.
     Fail(&'static str),
+}
+
+impl Verdict {
+    /// What a capture shows for the frame so judged.
+    pub fn capture(&self) -> crate::capture::Verdict {
+        match self {
+            Verdict::Take(_) => crate::capture::Verdict::Ok,
+            Verdict::Drop(why, _) => verdict_of(*why),
+            Verdict::Fail(_) => crate::capture::Verdict::Malformed,
+        }
+    }
 }
 
 /// Judges an MBAP frame against the request and the transaction ids of its attempts.

@@ -97,7 +97,9 @@ impl RtuLink {
                 }
                 return Err(timed_out(reason));
             };
-            match judge(unit, &pdu, ex, true) {
+            let verdict = judge(unit, &pdu, ex, true);
+            self.link.judged(verdict.capture());
+            match verdict {
                 Verdict::Take(reply) => {
                     self.link.answered();
                     return taken(reply);

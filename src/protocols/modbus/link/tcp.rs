@@ -73,6 +73,11 @@ impl TcpLink {
         }
     }
 
+    /// Records the link's frames into `recorder`.
+    pub fn set_recorder(&mut self, recorder: Option<Arc<crate::capture::Recorder>>) {
+        self.link.set_recorder(recorder);
+    }
+
     /// Sends the request with a new transaction id.
     pub async fn send(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<(), AttemptError> {
         if attempt.is_first() {
@@ -116,7 +121,9 @@ impl TcpLink {
                     return Err(e);
                 }
             };
-            match judge_mbap(&header, &pdu, ex, &self.tids, self.quirks.ignore_transaction_id) {
+            let verdict = judge_mbap(&header, &pdu, ex, &self.tids, self.quirks.ignore_transaction_id);
+            self.link.judged(verdict.capture());
+            match verdict {
                 Verdict::Take(reply) => {
                     self.link.finished();
                     let answered = match self.quirks.ignore_transaction_id {

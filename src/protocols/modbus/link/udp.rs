@@ -44,6 +44,11 @@ impl UdpLink {
         self.link.open(timeout).await
     }
 
+    /// Records the link's frames into `recorder`.
+    pub fn set_recorder(&mut self, recorder: Option<Arc<crate::capture::Recorder>>) {
+        self.link.set_recorder(recorder);
+    }
+
     /// Sends the request in a datagram with a new transaction id.
     pub async fn send(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<(), AttemptError> {
         if attempt.is_first() {
@@ -88,6 +93,7 @@ impl UdpLink {
                 // Datagrams are independent: a broken one is dropped, the right one may follow.
                 Err(e) => Verdict::Drop(DropReason::Malformed, Some(e.message())),
             };
+            self.link.judged(verdict.capture());
             match verdict {
                 Verdict::Take(reply) => {
                     let answered = match self.quirks.ignore_transaction_id {
