@@ -14,7 +14,8 @@
 //! config             the configuration: file, environment, layers, checks, every device's settings
 //! auth               keys and roles (leaf)
 //! store              the database
-//! sim                simulated machines, on the protocol servers
+//! sim                simulated machines, on the protocol servers; the replay of captures
+//! capture            frames as pcapng files, written and read (leaf)
 //! wire               the machines' interfaces word by word, in the protocols' notations
 //! protocols          how to talk to PLCs (leaf)
 //! domain             the words of the warehouse (leaf)
@@ -43,7 +44,9 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("domain", &[]),
     ("protocols", &[]),
     ("wire", &["protocols", "domain"]),
-    ("sim", &["wire", "protocols", "domain"]),
+    ("capture", &[]),
+    // The replay reads captures.
+    ("sim", &["capture", "wire", "protocols", "domain"]),
     ("store", &["domain"]),
     ("auth", &[]),
     // config checks a database URL as the store reads it (its TLS mode, its CA), and
@@ -64,6 +67,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "auth",
             "store",
             "sim",
+            "capture",
             "wire",
             "protocols",
             "domain",
