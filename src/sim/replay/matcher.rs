@@ -11,7 +11,8 @@ use super::script::Recorded;
 pub enum Taken {
     /// In order: a write that was due (or owed), a read answered as of the replay clock.
     Matched,
-    /// A write made a little ahead of a write still due, within the reorder tolerance.
+    /// Made a little ahead of a write still due (within the reorder tolerance of it in
+    /// the recording): a write, taken out of order; a read, answered as recorded there.
     Reordered,
     /// Sent again (a retry), or sent after the recording ran out: the last answer to the
     /// same request.
@@ -157,13 +158,16 @@ impl Matcher {
             let taken = if self.exhausted(now) { Taken::Repeated } else { Taken::Matched };
             return (Some(i), taken);
         }
-        match (end..self.requests.len()).find(|&i| self.same(i, key)) {
-            Some(i) => {
-                self.move_anchor(i, now);
-                (Some(i), Taken::Skipped)
-            }
-            None => (None, Taken::Unanswered),
+        let Some(i) = (end..self.requests.len()).find(|&i| self.same(i, key)) else {
+            return (None, Taken::Unanswered);
+        };
+        // `end` is the write due: a read made a little before it, as in the recording a
+        // little after, is answered and leaves the clock where it is.
+        if self.requests[i].at.saturating_sub(self.requests[end].at) <= self.reorder {
+            return (Some(i), Taken::Reordered);
         }
+        self.move_anchor(i, now);
+        (Some(i), Taken::Skipped)
     }
 
     /// A write: the one due; a retry of the last; one owed from before; one a little

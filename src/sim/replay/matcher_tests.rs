@@ -126,6 +126,25 @@ fn a_write_far_ahead_is_skipped_to_and_counted() {
 }
 
 #[test]
+fn a_read_a_little_ahead_of_the_write_due_is_answered_and_the_clock_stays() {
+    let mut m = Matcher::new(crane(), ms(10));
+    ask(&mut m, "poll", true, 0);
+    ask(&mut m, "D0=1", false, 2);
+    ask(&mut m, "poll", true, 40);
+    // rackd checks ACK before it answers the heartbeat: 28 ms after D0=0 in the
+    // recording, within a 30 ms tolerance.
+    let mut m30 = Matcher::new(crane(), ms(30));
+    for (key, read, at) in [("poll", true, 0), ("D0=1", false, 2), ("poll", true, 40)] {
+        ask(&mut m30, key, read, at);
+    }
+    assert_eq!(ask(&mut m30, "ack?", true, 41), ("0".into(), Taken::Reordered));
+    assert_eq!(m30.due(), Some(4), "D0=0 still due");
+    assert_eq!(ask(&mut m30, "D0=0", false, 42).1, Taken::Matched);
+    // Past the tolerance it is a divergence.
+    assert_eq!(ask(&mut m, "ack?", true, 41), ("0".into(), Taken::Skipped));
+}
+
+#[test]
 fn a_read_found_only_after_the_write_due_skips_there() {
     let mut m = Matcher::new(crane(), ms(10));
     ask(&mut m, "poll", true, 0);

@@ -34,7 +34,10 @@
 //!   strobe, rackd reads ACK = 0 for as long after its strobe as the crane took in the
 //!   recording; extra or missing polls only read the same state more or fewer times; and
 //!   a rackd slower to send its task sees the idle crane until it does. A read found only
-//!   after the write due is skipped to (a divergence), moving the anchor there.
+//!   after the write due, within the reorder tolerance of it, is answered as recorded
+//!   there and leaves the clock alone (rackd checked the crane's ACK before it answered
+//!   the heartbeat, this time); further on, it is skipped to (a divergence), moving the
+//!   anchor there.
 //! - **Ids.** Bytes that legitimately differ between runs are left out of the comparison
 //!   and copied into the answer: the Modbus transaction id (MBAP, TCP and UDP) and the MC
 //!   4E serial number; a stale reply carries the live id of the request its recorded id
