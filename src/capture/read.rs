@@ -203,7 +203,7 @@ impl Blocks<'_> {
         let kind = self.u32(at);
         let length = self.u32(at + 4);
         let len = length as usize;
-        if len < 12 || len % 4 != 0 || len > self.bytes.len() - at {
+        if len < 12 || !len.is_multiple_of(4) || len > self.bytes.len() - at {
             return Err(ReadError::BlockLength { at, length });
         }
         if self.u32(at + len - 4) != length {
