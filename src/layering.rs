@@ -14,10 +14,10 @@
 //! config             the configuration: file, environment, layers, checks, every device's settings
 //! auth               keys and roles (leaf)
 //! store              the database
-//! sim                simulated machines, on the protocol servers
+//! sim                simulated machines, on the protocol servers; the replay of captures
 //! wire               the machines' interfaces word by word, in the protocols' notations
 //! protocols          how to talk to PLCs
-//! capture            frames as the flight recorder keeps them, and pcapng files (leaf)
+//! capture            frames as the flight recorder keeps them; pcapng files, written and read (leaf)
 //! domain             the words of the warehouse (leaf)
 //! ```
 //!
@@ -46,7 +46,8 @@ const ALLOWED: &[(&str, &[&str])] = &[
     // Every client's transport feeds a flight recorder.
     ("protocols", &["capture"]),
     ("wire", &["protocols", "domain"]),
-    ("sim", &["wire", "protocols", "capture", "domain"]),
+    // The replay reads captures.
+    ("sim", &["capture", "wire", "protocols", "domain"]),
     ("store", &["domain"]),
     ("auth", &[]),
     // config checks a database URL as the store reads it (its TLS mode, its CA), and

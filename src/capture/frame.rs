@@ -50,6 +50,26 @@ impl Verdict {
     }
 }
 
+impl Verdict {
+    /// The verdict of a plain name, as [`Verdict::name`] gives it.
+    pub fn from_name(name: &str) -> Option<Verdict> {
+        ALL_VERDICTS.into_iter().find(|v| v.name() == name)
+    }
+}
+
+/// Every verdict.
+const ALL_VERDICTS: [Verdict; 9] = [
+    Verdict::Ok,
+    Verdict::Retry,
+    Verdict::Timeout,
+    Verdict::Dropped,
+    Verdict::StaleReply,
+    Verdict::ForeignReply,
+    Verdict::WrongUnit,
+    Verdict::CrcError,
+    Verdict::Malformed,
+];
+
 impl std::fmt::Display for Verdict {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
@@ -93,6 +113,38 @@ impl Annotations {
             parts.push(self.note.clone());
         }
         parts.join(", ")
+    }
+
+    /// Reads a [`comment`](Annotations::comment) back: its leading `job`, `task`, `retry`
+    /// and `verdict:` parts in their order, the rest as the note. A comment that is not
+    /// rackd's (a person's, in Wireshark) is all note.
+    pub fn parse(comment: &str) -> Annotations {
+        let mut a = Annotations::default();
+        let mut rest = comment;
+        let mut stage = 0;
+        while !rest.is_empty() {
+            let (part, tail) = rest.split_once(", ").unwrap_or((rest, ""));
+            let number = |prefix: &str| part.strip_prefix(prefix).and_then(|n| n.parse::<u64>().ok());
+            let verdict = part.strip_prefix("verdict: ").and_then(Verdict::from_name);
+            match () {
+                _ if stage < 1 && number("job ").is_some() => {
+                    (a.job, stage) = (part[4..].parse().ok(), 1);
+                }
+                _ if stage < 2 && number("task ").is_some_and(|n| n <= u64::from(u32::MAX)) => {
+                    (a.task, stage) = (part[5..].parse().ok(), 2);
+                }
+                _ if stage < 3
+                    && number("retry ").is_some_and(|n| (1..=u64::from(u32::MAX)).contains(&n)) =>
+                {
+                    (a.retry, stage) = (part[6..].parse().unwrap_or(0), 3);
+                }
+                _ if stage < 4 && verdict.is_some() => (a.verdict, stage) = (verdict, 4),
+                _ => break,
+            }
+            rest = tail;
+        }
+        a.note = rest.to_owned();
+        a
     }
 }
 
@@ -139,6 +191,26 @@ mod tests {
         assert_eq!(a.comment(), "job 17, task 4, retry 1, verdict: stale reply, transaction 9 expected");
         let b = Annotations { retry: 0, verdict: Some(Verdict::CrcError), ..Annotations::default() };
         assert_eq!(b.comment(), "verdict: CRC error");
+    }
+
+    #[test]
+    fn a_comment_reads_back_as_its_annotations() {
+        let a = Annotations {
+            job: Some(17),
+            task: Some(4),
+            retry: 1,
+            verdict: Some(Verdict::StaleReply),
+            note: "transaction 9 expected, then 10".into(),
+        };
+        assert_eq!(Annotations::parse(&a.comment()), a);
+        for v in ALL_VERDICTS {
+            let b = Annotations { verdict: Some(v), ..Annotations::default() };
+            assert_eq!(Annotations::parse(&b.comment()), b);
+        }
+        assert_eq!(Annotations::parse(""), Annotations::default());
+        let person = Annotations::parse("retry 0 looks odd, job x");
+        assert_eq!(person, Annotations { note: "retry 0 looks odd, job x".into(), ..Annotations::default() });
+        assert_eq!(Annotations::parse("task 3, job 2").note, "job 2", "out of order: the rest is the note");
     }
 
     #[test]

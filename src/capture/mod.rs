@@ -1,7 +1,8 @@
 //! Captures: a link's frames, as rackd sent and read them, written as a pcapng file that
 //! Wireshark and tshark open. The flight recorder ([`Recorder`], one per device, fed by the
 //! transport under every protocol client) keeps [`Frame`]s; [`write()`] turns them into
-//! a file. See `docs/commissioning/capture.md` for opening one.
+//! a file, and [`read_file`] reads one back ([`read`], for `rackd sim replay`). See
+//! `docs/commissioning/capture.md` for opening one.
 //!
 //! # What a capture holds
 //! One section, one interface (the [`Link`]), one packet per frame: the frame's bytes, its
@@ -30,12 +31,14 @@ mod frame;
 mod link;
 pub mod packet;
 pub mod pcapng;
+pub mod read;
 mod recorder;
 
 use std::io::{self, Write};
 
 pub use frame::{Annotations, Direction, Frame, Verdict};
 pub use link::{LINKTYPE_ETHERNET, LINKTYPE_UPPER_PDU, Link, SerialProtocol, Transport};
+pub use read::{Capture, ReadError, read_file};
 pub use recorder::{Limits, Recorder, Stats};
 
 /// Writes `frames`, in order, as a pcapng file of one interface, `link`.

@@ -14,6 +14,7 @@ pub mod faults;
 pub mod line;
 pub mod mc3e;
 pub mod modbus;
+pub mod replay;
 
 use std::time::Duration;
 
@@ -41,6 +42,9 @@ pub enum SimCommand {
     Mewtocol(line::SimLineArgs),
     /// A Siemens S7-200 answering PPI (V, I, Q, M, SM, S, AI, AQ, T, C) on TCP or a serial port.
     Ppi(line::SimLineArgs),
+    /// The device side of a capture (pcapng, UDP or TCP) played back to a live rackd: each
+    /// request answered with the recorded reply, divergence reported.
+    Replay(replay::SimReplayArgs),
 }
 
 /// Options of `rackd sim shelf`.
@@ -132,6 +136,7 @@ pub async fn run(cmd: SimCommand) -> anyhow::Result<()> {
             standalone::line::run(running, "PPI", &args.listen).await
         }
         SimCommand::Shelf(args) => standalone::shelf::run(&args.listen()?, args.options()?).await,
+        SimCommand::Replay(args) => standalone::replay::run(args.options()).await.map(drop),
     }
 }
 
@@ -156,6 +161,7 @@ mod tests {
             SimCommand::Mc3e(a) => a.faults,
             SimCommand::Crane(a) => a.faults,
             SimCommand::Mewtocol(a) | SimCommand::Ppi(a) => a.faults,
+            SimCommand::Replay(_) => unreachable!("the replay takes no faults"),
         }
     }
 
@@ -177,6 +183,20 @@ mod tests {
             let args = faults_of(&format!("sim {sim} {flags}"));
             assert_eq!(args.faults_with(|_| unreachable!()).unwrap(), expected, "{sim}");
         }
+    }
+
+    #[test]
+    fn replay_takes_a_file_and_its_own_flags() {
+        let cli =
+            Cli::try_parse_from("sim replay site.pcapng --listen 127.0.0.1:9000 --idle-secs 2".split(' '));
+        let SimCommand::Replay(args) = cli.unwrap().sim else { panic!("not the replay") };
+        let o = args.options();
+        assert_eq!(o.file, std::path::PathBuf::from("site.pcapng"));
+        assert_eq!(
+            (o.listen, o.idle, o.reorder),
+            (Some("127.0.0.1:9000".parse().unwrap()), Duration::from_secs(2), Duration::from_millis(100))
+        );
+        assert!(Cli::try_parse_from(["sim", "replay"]).is_err(), "the file is needed");
     }
 
     #[test]

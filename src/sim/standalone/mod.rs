@@ -1,8 +1,8 @@
 //! The simulators `rackd sim` runs alone, for commissioning and tests, each started from
 //! plain options and run until Ctrl-C: a Modbus server over a whole register bank
 //! ([`modbus`]), an MC 3E/4E PLC ([`mc3e`]), a MEWTOCOL or PPI PLC on TCP or a serial port
-//! ([`line`](mod@line)), the shelf PLC ([`shelf`]) and the stacker crane driven from stdin
-//! ([`crane`]).
+//! ([`line`](mod@line)), the shelf PLC ([`shelf`]), the stacker crane driven from stdin
+//! ([`crane`]) and the replay of a capture ([`replay`]).
 //!
 //! The memory simulators (Modbus, MC, MEWTOCOL, PPI) also take a [`Bench`]: a preset to
 //! start from ([`crate::sim::preset`]) and a control surface to serve beside the protocol
@@ -12,6 +12,7 @@ pub mod crane;
 pub mod line;
 pub mod mc3e;
 pub mod modbus;
+pub mod replay;
 pub mod shelf;
 
 use std::net::SocketAddr;

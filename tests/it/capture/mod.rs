@@ -7,12 +7,16 @@
 //! `$TSHARK`; without it the tests fail and say how to install it. tshark runs with a
 //! temporary `HOME`, so that neither a developer's Wireshark preferences nor dissectors they
 //! installed from `contrib/wireshark` change what the tests see.
+//!
+//! [`replay`] records a real conversation between rackd and the crane simulator and plays
+//! it back to a fresh rackd (`rackd sim replay`); it needs no tshark.
 
 mod mc3e;
 mod mewtocol;
 mod modbus;
 mod ppi;
 mod recorded;
+mod replay;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -40,7 +40,16 @@ pub fn device_for(
     transport: TransportKind,
     edit: impl FnOnce(&mut CraneConfig),
 ) -> CraneConfig {
-    let mut d = CraneConfig::new("crane1", &sim.local_addr().to_string(), vec![2]);
+    device_at(&sim.local_addr().to_string(), transport, edit)
+}
+
+/// As [`device_for`], for a crane at `address` (a proxy in front of one, a replay).
+pub fn device_at(
+    address: &str,
+    transport: TransportKind,
+    edit: impl FnOnce(&mut CraneConfig),
+) -> CraneConfig {
+    let mut d = CraneConfig::new("crane1", address, vec![2]);
     if transport == TransportKind::Udp {
         d.link.protocol = Protocol::Mc3eUdp;
     }
