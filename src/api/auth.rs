@@ -33,7 +33,10 @@ pub fn admin_paths() -> &'static [&'static str] {
 
 /// The role a request needs.
 pub fn required_role(method: &Method, path: &str) -> Role {
-    if method == Method::GET || method == Method::HEAD {
+    if path.ends_with("/capture") && path.starts_with("/api/v1/") {
+        // A device's bytes: every value it holds and rackd writes (a device's, an alarm's).
+        Role::Operator
+    } else if method == Method::GET || method == Method::HEAD {
         Role::Viewer
     } else if path.starts_with("/api/v1/webhooks") {
         // Where the events go and from where: the site's integration, not its operation.
@@ -211,6 +214,10 @@ mod tests {
         assert_eq!(required_role(&Method::POST, "/api/v1/devices/shelf1/registers"), Role::Admin);
         assert_eq!(required_role(&Method::PUT, "/api/v1/locations"), Role::Admin);
         assert_eq!(required_role(&Method::POST, "/api/v1/config/reload"), Role::Admin);
+        // A capture shows every value a machine holds: operators, though it is a GET.
+        assert_eq!(required_role(&Method::GET, "/api/v1/devices/shelf1/capture"), Role::Operator);
+        assert_eq!(required_role(&Method::GET, "/api/v1/alarms/7/capture"), Role::Operator);
+        assert_eq!(required_role(&Method::GET, "/api/v1/devices/shelf1"), Role::Viewer);
         assert_eq!(required_role(&Method::POST, "/api/v1/locations/1/1/1/1/1/lock"), Role::Operator);
         for bulk in ["/api/v1/locations/unlock", "/api/v1/jobs/retry", "/api/v1/jobs/cancel"] {
             assert_eq!(required_role(&Method::POST, bulk), Role::Operator, "{bulk}");

@@ -1,5 +1,7 @@
-//! `/api/v1/devices`: device status, pause and resume; tags devices' values ([`tags`]).
+//! `/api/v1/devices`: device status, pause and resume; tags devices' values ([`tags`]); the
+//! flight recorder's capture ([`capture`]).
 
+pub mod capture;
 mod tags;
 
 use axum::extract::State;
@@ -20,6 +22,8 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(get_device))
         .routes(routes!(pause_device))
         .routes(routes!(resume_device))
+        .routes(routes!(capture::device_capture))
+        .routes(routes!(capture::alarm_capture))
         .merge(tags::router())
 }
 

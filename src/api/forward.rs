@@ -59,6 +59,7 @@ pub fn only_active(method: &Method, path: &str) -> bool {
     let Some(p) = path.strip_prefix("/api/v1/") else { return false };
     let under = |prefix: &str| p == prefix || p.starts_with(&format!("{prefix}/"));
     under("devices")
+        || (p.starts_with("alarms/") && p.ends_with("/capture"))
         || under("aisles")
         || p == "health"
         || (method != Method::GET && p.starts_with("jobs/") && p != "jobs/batch")

@@ -72,6 +72,8 @@ pub struct Shared {
     /// rules it sets and the devices it runs (once this node drives them: at start, or in a
     /// cluster when it becomes the active node).
     pub reload: crate::service::reload::Reload,
+    /// Where alarm captures are (`retention.captures_dir`).
+    pub captures: std::path::PathBuf,
     /// Failed authentications per client address.
     pub failures: super::failures::Failures,
 }

@@ -14,6 +14,7 @@ use crate::config::{ARCHIVE_ACTION, Config, RetentionConfig};
 use crate::devices::gate::MayDrive;
 use crate::domain::AlarmKind;
 use crate::domain::time::now_ms;
+use crate::service::captures::{self, Freeze};
 use crate::service::dispatch::{Dispatcher, Queues};
 use crate::service::events::Hub;
 use crate::service::fleet::{self, Fleet};
@@ -52,6 +53,11 @@ pub(super) async fn start(
         pool: pool.clone(),
         contact_refresh: Duration::from_millis(config.events.contact_refresh_ms),
         gate: gate.clone(),
+        freeze: Some(Freeze {
+            folder: config.retention.captures(&config.database.path),
+            seconds: config.retention.alarm_capture_seconds,
+            pool: pool.clone(),
+        }),
     };
     let fleet = Fleet::start(&config.devices, parts).await?;
     let parts = webhooks::Parts { pool: pool.clone(), writer: writer.clone(), hub: hub.clone(), gate };
@@ -82,6 +88,13 @@ async fn retention(pool: Pool, writer: Writer, config: Config) {
                 continue;
             }
         };
+        let folder = config.retention.captures(&config.database.path);
+        match tokio::task::spawn_blocking(move || captures::prune(&folder, keep)).await {
+            Ok(Ok(0)) => {}
+            Ok(Ok(n)) => tracing::info!(files = n, "retention: alarm captures deleted"),
+            Ok(Err(e)) => tracing::warn!(error = %e, "retention: the alarm captures could not be pruned"),
+            Err(e) => tracing::warn!(error = %e, "retention: pruning the alarm captures did not finish"),
+        }
         match writer.record(Record::Prune { before_ms, through, hard_ms }).await {
             Ok(()) => {}
             Err(store::writer::WriteError::Closed) => return,

@@ -207,6 +207,7 @@ impl Application {
                 listener.local_addr().context("the bound address")?,
                 &config.server.allowed_hosts,
             ),
+            captures: config.retention.captures(&config.database.path),
             failures: api::failures::Failures::new(
                 config.auth.max_failures,
                 Duration::from_secs(config.auth.failure_window_secs),

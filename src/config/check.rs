@@ -73,6 +73,9 @@ pub enum Invalid {
     /// An intake bound of 0.
     #[error("intake.max_group and intake.queue must be at least 1")]
     Intake,
+    /// Alarm captures longer than a day.
+    #[error("retention.alarm_capture_seconds: at most 86400 (0: none)")]
+    AlarmCapture,
     /// A retention shorter than a day.
     #[error("retention.jobs_days must be at least 1 (there is no \"off\": keep a long time, 36500)")]
     Retention,
@@ -214,6 +217,9 @@ impl Config {
                 "auth.failure_window_secs".into(),
                 Invalid::FailureLimit { most: crate::auth::MOST_FAILURES },
             ));
+        }
+        if self.retention.alarm_capture_seconds > 86_400 {
+            return Err(("retention.alarm_capture_seconds".into(), Invalid::AlarmCapture));
         }
         if self.retention.jobs_days == 0 {
             return Err(("retention.jobs_days".into(), Invalid::Retention));

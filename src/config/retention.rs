@@ -13,6 +13,11 @@
 //!   the jobs that ended before midnight UTC `jobs_days` days ago. A run that fails (a full
 //!   disk) deletes nothing, raises an `archive` alarm on device `store`, and is tried again
 //!   at the next hour; the next run that works clears the alarm.
+//! - **Alarm captures** (issue 42): when a device raises a `hardware` or `link` alarm, its
+//!   last `alarm_capture_seconds` (default 60; 0: none) of traffic are frozen into
+//!   `captures_dir` (by default `captures` beside the archive's default, in the folder of
+//!   `database.path`), one pcapng file per alarm, kept `events.retention_hours` like the
+//!   event log, and served by `GET /api/v1/alarms/{id}/capture`.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -32,6 +37,12 @@ pub struct RetentionConfig {
     /// Where archived jobs go (a file per day); beside the SQLite file when not set.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub archive_dir: Option<PathBuf>,
+    /// Where alarm captures go; `captures` beside the SQLite file when not set.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub captures_dir: Option<PathBuf>,
+    /// Seconds of a device's traffic frozen when it raises a `hardware` or `link` alarm
+    /// (0: none).
+    pub alarm_capture_seconds: u64,
     /// How often the archive runs. Not a key of the file (hourly is right for any site);
     /// the tests shorten it.
     #[serde(skip, default = "hourly")]
@@ -44,7 +55,13 @@ fn hourly() -> Duration {
 
 impl Default for RetentionConfig {
     fn default() -> Self {
-        RetentionConfig { jobs_days: 90, archive_dir: None, every: hourly() }
+        RetentionConfig {
+            jobs_days: 90,
+            archive_dir: None,
+            captures_dir: None,
+            alarm_capture_seconds: 60,
+            every: hourly(),
+        }
     }
 }
 
@@ -54,6 +71,14 @@ impl RetentionConfig {
         match &self.archive_dir {
             Some(dir) => dir.clone(),
             None => database_path.parent().unwrap_or(Path::new(".")).join("archive"),
+        }
+    }
+
+    /// The alarm captures' folder, when `database.path` is `database_path`.
+    pub fn captures(&self, database_path: &Path) -> PathBuf {
+        match &self.captures_dir {
+            Some(dir) => dir.clone(),
+            None => database_path.parent().unwrap_or(Path::new(".")).join("captures"),
         }
     }
 }

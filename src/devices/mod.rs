@@ -63,6 +63,8 @@ pub struct DeviceHandle {
     pub requests: mpsc::Sender<DeviceRequest>,
     /// Tag values and writes (tags devices only).
     pub tags: Option<tags::TagsHandle>,
+    /// The flight recorder of its link (none when `capture_bytes` is 0).
+    pub recorder: Option<Arc<crate::capture::Recorder>>,
 }
 
 impl DeviceHandle {
@@ -128,6 +130,7 @@ pub async fn prepare(
     use anyhow::Context;
     let id = c.id();
     let plc = crate::protocols::link::connect(c.link()).await.with_context(|| format!("device {id:?}"))?;
+    let recorder = plc.recorder();
     let plc = match gate {
         Some(may) => Arc::new(gate::Gated::new(plc, may)),
         None => plc,
@@ -162,7 +165,7 @@ pub async fn prepare(
             Box::pin(device.run(inbox).instrument(span))
         }
     };
-    let handle = DeviceHandle { status: receiver, requests, tags };
+    let handle = DeviceHandle { status: receiver, requests, tags, recorder };
     Ok(Prepared { id: id.to_owned(), handle, run })
 }
 

@@ -44,6 +44,8 @@ pub struct Parts {
     pub contact_refresh: Duration,
     /// The cluster's check before every request to a machine.
     pub gate: Option<MayDrive>,
+    /// Where a device's last seconds go when it raises a `hardware` or `link` alarm.
+    pub freeze: Option<super::captures::Freeze>,
 }
 
 /// The running devices.
@@ -92,7 +94,8 @@ impl Fleet {
     pub async fn run(&self, prepared: Prepared) {
         let p = &self.0.parts;
         let (id, handle, device) = prepared.spawn();
-        let monitor = monitor::watch(&id, &handle, &p.queues, p.writer.clone(), &p.pool).await;
+        let monitor =
+            monitor::watch(&id, &handle, &p.queues, p.writer.clone(), &p.pool, p.freeze.clone()).await;
         p.queues.watch_device(&id, handle.status.clone());
         self.edit(|d| drop(d.insert(id.clone(), handle)));
         self.tasks().insert(id, Tasks { device, monitor });

@@ -2,6 +2,7 @@
 //! control state), the crane planner, the device monitor (device events and alarms) and the
 //! event hub.
 
+pub mod captures;
 pub mod cluster;
 pub mod dispatch;
 pub mod events;

@@ -28,7 +28,11 @@ use crate::store::Pool;
 use tokio::sync::watch;
 use tracing::Instrument;
 
+use std::sync::Arc;
+
+use super::captures::Freeze;
 use super::dispatch::{Control, Queues};
+use crate::capture::Recorder;
 use crate::devices::{DeviceHandle, DeviceStatus, Devices};
 use crate::domain::{AlarmClass, AlarmKind};
 use crate::store::alarms::{self, NewAlarm};
@@ -84,6 +88,7 @@ pub async fn watch(
     queues: &Queues,
     writer: Writer,
     pool: &Pool,
+    freeze: Option<Freeze>,
 ) -> tokio::task::JoinHandle<()> {
     let alarms = match alarms::active(pool).await {
         Ok(found) => found.into_iter().filter(|a| a.device == id).map(|a| (a.kind, a.code)).collect(),
@@ -94,7 +99,7 @@ pub async fn watch(
     };
     let control = queues.control(id).unwrap_or_else(|| watch::Sender::default().subscribe());
     let span = tracing::info_span!("device", device = %id);
-    tokio::spawn(watch_device(handle.clone(), control, alarms, writer).instrument(span))
+    tokio::spawn(watch_device(handle.clone(), control, alarms, writer, freeze).instrument(span))
 }
 
 /// Records every change of one device until its status or the writer goes away.
@@ -103,11 +108,13 @@ async fn watch_device(
     mut control: watch::Receiver<Control>,
     mut alarms: BTreeSet<Key>,
     writer: Writer,
+    freeze: Option<Freeze>,
 ) {
     let mut status = handle.status;
+    let kept = freeze.zip(handle.recorder);
     loop {
         let device = view(&status.borrow_and_update(), &control.borrow_and_update());
-        match record(&device, &mut alarms, &writer).await {
+        match record(&device, &mut alarms, &writer, kept.as_ref()).await {
             Ok(()) => {}
             Err(WriteError::Closed) => return,
             Err(e) => tracing::warn!(error = %e, "recording device status"),
@@ -124,6 +131,7 @@ async fn record(
     status: &DeviceStatus,
     active: &mut BTreeSet<Key>,
     writer: &Writer,
+    kept: Option<&(Freeze, Arc<Recorder>)>,
 ) -> Result<(), WriteError> {
     let (raise, clear) = alarm_changes(status, active);
     for key in clear {
@@ -132,8 +140,15 @@ async fn record(
     }
     for alarm in raise {
         let key = alarm.key();
+        // The moment before the fault, taken before the ring moves on.
+        let frozen = kept
+            .filter(|(freeze, _)| freeze.wants(alarm.class))
+            .map(|(freeze, recorder)| (freeze, recorder.link(), recorder.frames(Some(freeze.span()))));
         writer.record(Record::AlarmRaised(alarm)).await?;
         active.insert(key);
+        if let Some((freeze, link, frames)) = frozen {
+            freeze.keep(&status.id, key, link, frames).await;
+        }
     }
     let json = serde_json::to_string(status).unwrap_or_default();
     writer.record(Record::Device { status: json }).await

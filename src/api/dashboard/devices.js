@@ -4,7 +4,7 @@
 // second click. While the live connection is down every tile says "as of" when it was
 // last current (the stylesheet greys it out).
 
-import { api } from './api.js';
+import { api, getKey } from './api.js';
 import { ago, confirmButton, el, setText } from './dom.js';
 
 const KINDS = { shelf: 'shelf PLC', crane: 'stacker crane', tags: 'tag I/O' };
@@ -88,6 +88,13 @@ export class Devices {
     t.asOf = el('span', { class: 'as-of', text: this.asOf });
     t.pause = confirmButton('Pause', 'Confirm pause', 'pause op', (b) => this.toggle(id, true, b));
     t.resume = confirmButton('Resume', 'Confirm resume', 'resume op', (b) => this.toggle(id, false, b));
+    t.capture = el('button', {
+      type: 'button',
+      class: 'capture op',
+      text: 'Capture',
+      title: "The last 10 minutes of this device's traffic as a pcapng file, for Wireshark",
+    });
+    t.capture.addEventListener('click', () => this.download(id, t.capture));
     t.root = el(
       'article',
       { class: 'device', dataset: { device: id } },
@@ -107,7 +114,7 @@ export class Devices {
       t.tags,
       t.alarms,
       t.error,
-      el('div', { class: 'actions' }, t.pause, t.resume),
+      el('div', { class: 'actions' }, t.pause, t.resume, t.capture),
     );
     return t;
   }
@@ -193,6 +200,28 @@ export class Devices {
         );
       }),
     );
+  }
+
+  /** Downloads the device's capture (`GET /api/v1/devices/{id}/capture`, operators). */
+  async download(id, button) {
+    button.disabled = true;
+    try {
+      const key = getKey();
+      const headers = key ? { Authorization: `Bearer ${key}` } : {};
+      const response = await fetch(`/api/v1/devices/${encodeURIComponent(id)}/capture?seconds=600`, { headers });
+      if (!response.ok) {
+        const body = await response.json().catch(() => null);
+        throw new Error(body && body.error ? body.error.message : response.statusText);
+      }
+      const url = URL.createObjectURL(await response.blob());
+      const link = el('a', { href: url, download: `${id}.pcapng` });
+      link.click();
+      setTimeout(() => URL.revokeObjectURL(url), 1000);
+    } catch (e) {
+      this.notify(`Capture of ${id}: ${e.message}`);
+    } finally {
+      button.disabled = false;
+    }
   }
 
   async toggle(id, pause, button) {

@@ -1,0 +1,118 @@
+//! `GET /api/v1/devices/{id}/capture?seconds=N` (operators): the device's flight recorder
+//! as a pcapng file, for Wireshark (`docs/commissioning/capture.md`); and
+//! `GET /api/v1/alarms/{id}/capture`: the one frozen when the alarm was raised
+//! (`service::captures`).
+//!
+//! Decisions:
+//! - Operators, not viewers: the bytes show every value the machine holds and rackd writes,
+//!   more than the dashboard does. Each download is audited (`capture` on `device:ID`,
+//!   with the seconds and the frame count).
+//! - Without `seconds`, everything the recorder holds (its `capture_seconds`, at most
+//!   `capture_bytes`); with it, the last N seconds (1 to 86,400).
+//! - A device whose recorder is off (`capture_bytes = 0`) answers 409 `capture_off`.
+//! - The file holds frames and rackd's notes on them only (`crate::capture`): no key, no
+//!   secret, no setting.
+
+use std::time::Duration;
+
+use axum::extract::State;
+use axum::http::header;
+use axum::response::IntoResponse;
+use serde::Deserialize;
+use utoipa::IntoParams;
+
+use super::device;
+use crate::api::error::{ApiError, ErrorBody};
+use crate::api::extract::{Caller, Path, Query};
+use crate::api::state::AppState;
+use crate::store::writer::Record;
+
+/// `?seconds=`.
+#[derive(Deserialize, IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct CaptureParams {
+    /// Only the last N seconds (1 to 86,400); everything the recorder holds without it.
+    seconds: Option<u64>,
+}
+
+/// The pcapng file type (Wireshark's own).
+pub const PCAPNG: &str = "application/x-pcapng";
+
+/// The device's recent traffic as a pcapng file: every frame rackd sent and read, with
+/// microsecond times, the link's real endpoints, and per packet a comment with the job,
+/// the retry and rackd's verdict. Audited.
+#[utoipa::path(get, path = "/devices/{id}/capture", tag = "devices",
+    params(("id" = String, Path, description = "Device id"), CaptureParams),
+    responses(
+        (status = 200, description = "The capture", content_type = "application/x-pcapng", body = Vec<u8>),
+        (status = 403, description = "Not an operator's key", body = ErrorBody),
+        (status = 404, description = "No such device", body = ErrorBody),
+        (status = 409, description = "The device's recorder is off (`capture_off`: `capture_bytes = 0`)", body = ErrorBody),
+        (status = 422, description = "`seconds` out of 1..=86400 (`invalid_seconds`)", body = ErrorBody),
+    ))]
+pub async fn device_capture(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    Query(p): Query<CaptureParams>,
+) -> Result<impl IntoResponse, ApiError> {
+    if p.seconds.is_some_and(|s| !(1..=86_400).contains(&s)) {
+        return Err(ApiError::invalid("invalid_seconds", "seconds: from 1 to 86400"));
+    }
+    let handle = device(&app, &id)?;
+    let Some(recorder) = handle.recorder else {
+        return Err(ApiError::conflict(
+            "capture_off",
+            format!("device {id:?} records nothing (capture_bytes = 0)"),
+        ));
+    };
+    let frames = recorder.frames(p.seconds.map(Duration::from_secs));
+    let mut file = Vec::new();
+    crate::capture::write(&mut file, &recorder.link(), &frames).map_err(ApiError::unavailable)?;
+    let span = p.seconds.map_or("all it holds".to_owned(), |s| format!("the last {s} s"));
+    let audit = Record::Audit {
+        action: "capture".into(),
+        target: format!("device:{id}"),
+        reason: Some(format!("{span}: {} frames", frames.len())),
+    };
+    app.writer.record_as(audit, caller.who()).await?;
+    let name = format!("attachment; filename=\"{id}-{}.pcapng\"", stamp());
+    Ok(([(header::CONTENT_TYPE, PCAPNG.to_owned()), (header::CONTENT_DISPOSITION, name)], file))
+}
+
+/// The capture frozen when alarm `id` was raised (a device's `hardware` or `link` alarm:
+/// its last `retention.alarm_capture_seconds` of traffic). Audited.
+#[utoipa::path(get, path = "/alarms/{id}/capture", tag = "alarms",
+    params(("id" = i64, Path, description = "Alarm id")),
+    responses(
+        (status = 200, description = "The capture", content_type = "application/x-pcapng", body = Vec<u8>),
+        (status = 403, description = "Not an operator's key", body = ErrorBody),
+        (status = 404, description = "No capture for this alarm (none was kept: another class, a device \
+without a recorder, or older than the retention)", body = ErrorBody),
+    ))]
+pub async fn alarm_capture(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<i64>,
+) -> Result<impl IntoResponse, ApiError> {
+    let file = crate::service::captures::file_of(&app.captures, id);
+    let bytes = match tokio::fs::read(&file).await {
+        Ok(bytes) => bytes,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(ApiError::not_found(format!("alarm {id} has no capture")));
+        }
+        Err(e) => return Err(ApiError::unavailable(e)),
+    };
+    let audit = Record::Audit { action: "capture".into(), target: format!("alarm:{id}"), reason: None };
+    app.writer.record_as(audit, caller.who()).await?;
+    let name = format!("attachment; filename=\"alarm-{id}.pcapng\"");
+    Ok(([(header::CONTENT_TYPE, PCAPNG.to_owned()), (header::CONTENT_DISPOSITION, name)], bytes))
+}
+
+/// Now as `20261127T081500Z`, for file names.
+pub fn stamp() -> String {
+    let now = time::OffsetDateTime::now_utc();
+    let format = time::macros::format_description!("[year][month][day]T[hour][minute][second]Z");
+    now.format(&format).unwrap_or_default()
+}
