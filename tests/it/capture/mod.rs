@@ -16,6 +16,7 @@ mod mewtocol;
 mod modbus;
 mod ppi;
 mod recorded;
+mod recorded_serial;
 mod replay;
 
 use std::collections::BTreeMap;
