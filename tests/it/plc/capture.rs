@@ -1,5 +1,6 @@
 //! `rackd plc --capture FILE`: the file holds the command's frames after a read, after a
-//! failed read, and after Ctrl-C ends a poll; tshark decodes the read's request and reply.
+//! failed read, and after Ctrl-C ends a poll (none is left when no link opened); tshark
+//! decodes the read's request and reply.
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -69,6 +70,12 @@ fn a_failed_read_still_writes_its_capture() {
     let capture = read_file(&file).unwrap();
     assert!(capture.frames.iter().all(|f| f.direction == Direction::Sent && f.bytes.starts_with(b"%05#RD")));
     assert_eq!(capture.frames[1].annotations.retry, 1);
+
+    // No port for MC: refused before a link opens, and no file is left behind.
+    let (success, _, err) = plc("mc3e", "127.0.0.1", &["read", "D0", "--capture", &name]);
+    assert!(!success);
+    assert!(err.contains(&format!("capture: no link was opened, nothing written to {name}")), "{err}");
+    assert!(!file.exists());
 }
 
 #[test]
