@@ -5,12 +5,13 @@
 
 use anyhow::{Context, anyhow, bail};
 
+use super::capture::Capture;
 use super::hints;
 use crate::protocols::link::{self, LinkConfig, LinkError};
 use crate::protocols::modbus::address::Table;
 use crate::protocols::modbus::{Request, Response};
 use crate::protocols::protocol::Family;
-use crate::protocols::{PlcError, mc3e, modbus};
+use crate::protocols::{PlcError, PlcMemory, mc3e, modbus};
 
 /// The request, as the command line names it.
 #[derive(Debug)]
@@ -38,7 +39,12 @@ pub enum Extra<'a> {
 }
 
 /// Runs the request and returns `(name, value)` pairs in order.
-pub async fn run(link: &LinkConfig, extra: Extra<'_>) -> anyhow::Result<Vec<(String, String)>> {
+/// With `capture`, the link's recorder is handed to it.
+pub async fn run(
+    link: &LinkConfig,
+    extra: Extra<'_>,
+    capture: Option<&Capture>,
+) -> anyhow::Result<Vec<(String, String)>> {
     let protocol = link.protocol;
     let device = |e: PlcError| anyhow!(hints::explain(&e, protocol));
     let setup = |e: LinkError| match e {
@@ -47,7 +53,7 @@ pub async fn run(link: &LinkConfig, extra: Extra<'_>) -> anyhow::Result<Vec<(Str
     };
     match extra {
         Extra::Random { words, dwords } => {
-            let client = mc_only(link).map_err(setup)?;
+            let client = mc_only(link, capture).map_err(setup)?;
             let w = parse_all(words, mc3e::address::parse_address).map_err(device)?;
             let d = parse_all(dwords, mc3e::address::parse_address).map_err(device)?;
             let (wv, dv) = client.read_random(&w, &d).await.map_err(device).context("random read (0403)")?;
@@ -57,7 +63,7 @@ pub async fn run(link: &LinkConfig, extra: Extra<'_>) -> anyhow::Result<Vec<(Str
             Ok(out)
         }
         Extra::Blocks(specs) => {
-            let client = mc_only(link).map_err(setup)?;
+            let client = mc_only(link, capture).map_err(setup)?;
             let mut blocks = Vec::with_capacity(specs.len());
             for spec in specs {
                 let (at, count) = spec
@@ -76,7 +82,7 @@ pub async fn run(link: &LinkConfig, extra: Extra<'_>) -> anyhow::Result<Vec<(Str
             Ok(out)
         }
         Extra::Fifo(at) => {
-            let client = modbus_only(link).await.map_err(setup)?;
+            let client = modbus_only(link, capture).await.map_err(setup)?;
             let address = modbus::address::parse(at).map_err(device)?;
             let pointer = u16::try_from(address.index).context("FIFO pointer address past 65535")?;
             let words =
@@ -86,14 +92,14 @@ pub async fn run(link: &LinkConfig, extra: Extra<'_>) -> anyhow::Result<Vec<(Str
             Ok(out)
         }
         Extra::Diagnostics(sub) => {
-            let client = modbus_only(link).await.map_err(setup)?;
+            let client = modbus_only(link, capture).await.map_err(setup)?;
             let code = u16::from_str_radix(sub.trim_start_matches("0x"), 16)
                 .with_context(|| format!("sub-function {sub:?}: four hex digits, e.g. 000B"))?;
             let value = client.diagnostic(code).await.map_err(device).context("diagnostics (8)")?;
             Ok(vec![(format!("{code:04X}"), value.to_string())])
         }
         Extra::Unchecked { address, count } => {
-            let client = modbus_only(link).await.map_err(setup)?;
+            let client = modbus_only(link, capture).await.map_err(setup)?;
             let start = modbus::address::parse(address).map_err(device)?;
             let at = u16::try_from(start.index).context("address past 65535")?;
             let request = match Table::from_area(&start.area) {
@@ -131,15 +137,26 @@ fn parse_all(
     texts.iter().map(|t| parse(t)).collect()
 }
 
-fn mc_only(link: &LinkConfig) -> Result<mc3e::Mc3eClient, LinkError> {
-    match link.protocol.family() {
-        Family::Mc3e => link::connect_mc3e(link),
-        _ => Err(LinkError::Family { protocol: link.protocol, wanted: "MC protocol (mc3e, mc4e)" }),
+fn mc_only(link: &LinkConfig, capture: Option<&Capture>) -> Result<mc3e::Mc3eClient, LinkError> {
+    let client = match link.protocol.family() {
+        Family::Mc3e => link::connect_mc3e(link)?,
+        _ => return Err(LinkError::Family { protocol: link.protocol, wanted: "MC protocol (mc3e, mc4e)" }),
+    };
+    if let Some(c) = capture {
+        c.keep(client.recorder());
     }
+    Ok(client)
 }
 
-async fn modbus_only(link: &LinkConfig) -> Result<modbus::ModbusClient, LinkError> {
-    link::connect_modbus(link).await
+async fn modbus_only(
+    link: &LinkConfig,
+    capture: Option<&Capture>,
+) -> Result<modbus::ModbusClient, LinkError> {
+    let client = link::connect_modbus(link).await?;
+    if let Some(c) = capture {
+        c.keep(client.recorder());
+    }
+    Ok(client)
 }
 
 /// `NAME VALUE` lines; with `json`, one object of them (`keyed`) or an array of

@@ -9,7 +9,9 @@
 
 use anyhow::{Context, anyhow, bail};
 
+use super::capture::Capture;
 use super::hints;
+use crate::protocols::PlcMemory;
 use crate::protocols::link::{self, LinkConfig, LinkError};
 use crate::protocols::modbus::{DeviceObject, ObjectId, ReadDeviceIdCode};
 use crate::protocols::protocol::Family;
@@ -35,12 +37,19 @@ impl From<Category> for ReadDeviceIdCode {
     }
 }
 
-/// What the PLC says it is, as `(name, value)` pairs in the order it answered them.
+/// What the PLC says it is, as `(name, value)` pairs in the order it answered them. With
+/// `capture`, the link's recorder is handed to it.
 pub async fn identify(
     link: &LinkConfig,
     category: Category,
     object: Option<u8>,
+    capture: Option<&Capture>,
 ) -> anyhow::Result<Vec<(String, String)>> {
+    let keep = |recorder| {
+        if let Some(c) = capture {
+            c.keep(recorder);
+        }
+    };
     let explain = |e: LinkError| match e {
         LinkError::Plc(e) => anyhow!(hints::explain(&e, link.protocol)),
         other => anyhow!(other),
@@ -48,6 +57,7 @@ pub async fn identify(
     match link.protocol.family() {
         Family::Modbus => {
             let client = link::connect_modbus(link).await.map_err(explain)?;
+            keep(client.recorder());
             let objects = match object {
                 Some(id) => client.read_device_object(id).await.map(|o| vec![o]),
                 None => client.read_device_identification(category.into()).await,
@@ -60,6 +70,7 @@ pub async fn identify(
         }
         Family::Mc3e => {
             let client = link::connect_mc3e(link).map_err(explain)?;
+            keep(client.recorder());
             let name = client
                 .read_type_name()
                 .await

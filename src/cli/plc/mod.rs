@@ -20,6 +20,7 @@
 //! `--address`, which clap cannot make both required and global. A new operation (say
 //! `identify`) is one more [`PlcOp`] variant and one more arm in [`run`].
 
+pub mod capture;
 pub mod extra;
 pub mod flags;
 pub mod format;
@@ -28,11 +29,13 @@ pub mod identify;
 pub mod item;
 pub mod poll;
 
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{Context, anyhow, bail};
 
+use self::capture::Capture;
 use self::format::{Format, Order};
 use self::item::Target;
 use self::poll::Output;
@@ -122,6 +125,10 @@ pub struct PlcArgs {
     /// Stop after N polls [default: forever with --interval; --interval defaults to 1000].
     #[arg(long = "count", global = true, value_name = "N")]
     pub polls: Option<u64>,
+    /// Write every frame sent and received to FILE (pcapng, for Wireshark) when the command
+    /// ends, also after an error or Ctrl-C.
+    #[arg(long, global = true, value_name = "FILE")]
+    pub capture: Option<PathBuf>,
     /// What to do.
     #[command(subcommand)]
     pub op: PlcOp,
@@ -209,6 +216,9 @@ impl PlcArgs {
         };
         // A one-off request has no round trips to learn from; the floor only has to fit.
         link.tuning.min_timeout = link.tuning.min_timeout.min(link.timeout);
+        if self.capture.is_some() {
+            link.capture = Capture::limits();
+        }
         Ok(link)
     }
 
@@ -221,18 +231,46 @@ impl PlcArgs {
     }
 }
 
-/// Opens the PLC the arguments describe.
-pub async fn connect(args: &PlcArgs) -> anyhow::Result<Arc<dyn PlcMemory>> {
+/// Opens the PLC the arguments describe; with `capture`, its recorder is handed to it.
+pub async fn connect(args: &PlcArgs, capture: Option<&Capture>) -> anyhow::Result<Arc<dyn PlcMemory>> {
     let link = args.link()?;
-    link::connect(&link).await.map_err(|e| match e {
+    let plc = link::connect(&link).await.map_err(|e| match e {
         LinkError::Plc(e) => anyhow!(hints::explain(&e, args.protocol)),
         other => anyhow!(other),
-    })
+    })?;
+    if let Some(c) = capture {
+        c.keep(plc.recorder());
+    }
+    Ok(plc)
 }
 
 /// Runs `rackd plc`: prints one `ADDRESS VALUE` line per item (or JSON), once or per
-/// poll, and fails with a message that says what to check otherwise.
+/// poll, and fails with a message that says what to check otherwise. With `--capture`,
+/// the frames go to the file when the command ends, however it ends.
 pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
+    let Some(path) = &args.capture else { return run_op(&args, None).await };
+    let capture = Capture::create(path)?;
+    let result = if args.polling().is_some() {
+        // The poll loop stops on Ctrl-C itself, and reports its polls.
+        run_op(&args, Some(&capture)).await
+    } else {
+        tokio::select! {
+            result = run_op(&args, Some(&capture)) => result,
+            _ = tokio::signal::ctrl_c() => Err(anyhow!("interrupted (Ctrl-C)")),
+        }
+    };
+    match (result, capture.finish()) {
+        (Ok(()), written) => written.map(|_| ()),
+        (Err(e), Ok(_)) => Err(e),
+        (Err(e), Err(unwritten)) => {
+            eprintln!("error: {unwritten:#}");
+            Err(e)
+        }
+    }
+}
+
+/// The operation the arguments ask for.
+async fn run_op(args: &PlcArgs, capture: Option<&Capture>) -> anyhow::Result<()> {
     let order = args.word_order.unwrap_or_else(|| Order::of(native_order(args.protocol)));
     let out = Output::new(args.json);
     let at = flags::address(args.protocol, &args.address).unwrap_or_else(|_| args.address.clone());
@@ -241,12 +279,13 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
         PlcOp::Read { address, count, unchecked: true } => {
             extra::once(args.polling().is_some(), "an unchecked read")?;
             let request = extra::Extra::Unchecked { address, count: *count };
-            let pairs = extra::run(&args.link()?, request).await.with_context(|| format!("on {peer}"))?;
+            let pairs =
+                extra::run(&args.link()?, request, capture).await.with_context(|| format!("on {peer}"))?;
             extra::say(args.json, pairs, false);
         }
         PlcOp::Read { address, count, .. } => {
             let target = Target::new(args.protocol, address, args.format, order)?;
-            let plc = connect(&args).await?;
+            let plc = connect(args, capture).await?;
             match args.polling() {
                 None => {
                     let items = target
@@ -263,14 +302,14 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
                 bail!("--interval and --count repeat reads; a write is done once");
             }
             let target = Target::new(args.protocol, address, args.format, order)?;
-            let plc = connect(&args).await?;
+            let plc = connect(args, capture).await?;
             let items =
                 target.write(&*plc, values).await.with_context(|| format!("write {address} on {peer}"))?;
             out.once(&items);
         }
         PlcOp::Identify { category, object } => {
             extra::once(args.polling().is_some(), "identify")?;
-            let pairs = identify::identify(&args.link()?, *category, *object)
+            let pairs = identify::identify(&args.link()?, *category, *object, capture)
                 .await
                 .with_context(|| format!("identify {peer}"))?;
             extra::say(args.json, pairs, true);
@@ -284,7 +323,8 @@ pub async fn run(args: PlcArgs) -> anyhow::Result<()> {
                 _ => unreachable!("read, write and identify are handled above"),
             };
             extra::once(args.polling().is_some(), "this request")?;
-            let pairs = extra::run(&args.link()?, request).await.with_context(|| format!("on {peer}"))?;
+            let pairs =
+                extra::run(&args.link()?, request, capture).await.with_context(|| format!("on {peer}"))?;
             extra::say(args.json, pairs, false);
         }
     }
@@ -325,7 +365,7 @@ mod tests {
     #[tokio::test]
     async fn a_quirk_of_another_protocol_is_refused_before_connecting() {
         let args = parse(&["--protocol", "mc3e", "--address", "127.0.0.1:9", "--length0", "read", "D0"]);
-        let err = connect(&args.unwrap()).await.err().unwrap();
+        let err = connect(&args.unwrap(), None).await.err().unwrap();
         let quirk = err.downcast_ref::<LinkError>();
         assert!(
             matches!(quirk, Some(LinkError::Quirk { quirk: Quirk::Length0, protocol: Protocol::Mc3e })),

@@ -258,9 +258,17 @@ impl PpiClient {
                         }
                     }
                 }
-                // Another frame (an acknowledgement) or a broken one: nobody waited for it.
-                Some(Ok(_) | Err(FrameError::BadHeader | FrameError::BadEnd)) => {
-                    link.judged(Verdict::Dropped);
+                // An acknowledgement to the poll (the PLC has no response for it: lost) or
+                // another frame nobody waited for: counted stale, so that a capture and the
+                // counters agree. The attempt goes on waiting, and times out.
+                Some(Ok(_)) => {
+                    link.judged(Verdict::StaleReply);
+                    self.health.dropped(DropReason::Stale);
+                }
+                Some(Err(FrameError::BadHeader | FrameError::BadEnd)) => {
+                    link.judged(Verdict::Malformed);
+                    self.health.dropped(DropReason::Malformed);
+                    reason = reason.or(Some("broken frame instead of the response"));
                 }
                 Some(Err(FrameError::BadFcs)) => {
                     link.judged(Verdict::CrcError);

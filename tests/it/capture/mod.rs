@@ -17,6 +17,7 @@ mod mewtocol;
 mod modbus;
 mod ppi;
 mod recorded;
+mod recorded_serial;
 mod replay;
 
 use std::collections::BTreeMap;
@@ -32,7 +33,7 @@ const SEVERITY_ERROR: &str = "8388608";
 const ALWAYS: [&str; 3] = ["frame.comment", "_ws.expert.severity", "_ws.expert.message"];
 
 /// tshark: `$TSHARK`, or the first on the PATH; a test without it fails with what to do.
-fn tshark() -> PathBuf {
+pub fn tshark() -> PathBuf {
     let found = match std::env::var_os("TSHARK") {
         Some(path) => Some(PathBuf::from(path)).filter(|p| p.is_file()),
         None => {

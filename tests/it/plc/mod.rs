@@ -2,6 +2,7 @@
 //! child processes talking over 127.0.0.1: formats, notations, S7 double words, the poll
 //! loop and the hints in its errors.
 
+mod capture;
 mod formats;
 mod identify;
 mod polls;
