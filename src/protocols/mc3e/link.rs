@@ -211,6 +211,7 @@ async fn tcp_attempt(
     // A reply already waiting (a device that answered twice) is not this request's.
     if link.flush_stale(attempt.timeout).await? {
         tracing::debug!("mc3e tcp: discarded stale input");
+        health.dropped(DropReason::Stale);
     }
     link.send(frame, attempt.timeout).await?;
     let mut responses = Responses { max_len: 2 + expect.data_len.max(ErrorInfo::LEN) };
