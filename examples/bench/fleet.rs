@@ -62,6 +62,11 @@ pub struct FleetArgs {
     /// Rounds of each setting with `--capture both`.
     #[arg(long, default_value_t = 3)]
     pub rounds: u32,
+    /// With the recorders on: each device's `capture_seconds` (the default, 600, when not
+    /// given). A short bound fills the rings before the measurement, so the figure is a
+    /// frame's cost in the steady state, not the rings' first filling.
+    #[arg(long)]
+    pub capture_seconds: Option<u64>,
 }
 
 /// Whether the devices record their frames.
@@ -105,7 +110,8 @@ pub async fn run(args: FleetArgs) -> anyhow::Result<()> {
 
     let dir = tempfile::tempdir()?;
     let config = dir.path().join("fleet.toml");
-    let text = config_text(devices, tags, poll_ms, &plc.to_string(), capture == Capture::On);
+    let on = (capture == Capture::On).then_some(args.capture_seconds);
+    let text = config_text(devices, tags, poll_ms, &plc.to_string(), on);
     std::fs::write(&config, text)?;
     let rackd = Server::start(&config, dir.path()).await?;
     let client = reqwest::Client::new();
@@ -167,9 +173,19 @@ pub(crate) fn target(args: FleetArgs) -> f64 {
 }
 
 /// rackd's configuration: `devices` tags devices on the simulator at `plc`, recording
-/// their frames or not.
-pub(crate) fn config_text(devices: usize, tags: u16, poll_ms: u64, plc: &str, capture: bool) -> String {
-    let capture = if capture { "" } else { "capture_bytes = 0\n" };
+/// their frames (`Some`, with their `capture_seconds` if given) or not.
+pub(crate) fn config_text(
+    devices: usize,
+    tags: u16,
+    poll_ms: u64,
+    plc: &str,
+    capture: Option<Option<u64>>,
+) -> String {
+    let capture = match capture {
+        None => "capture_bytes = 0\n".to_owned(),
+        Some(None) => String::new(),
+        Some(Some(seconds)) => format!("capture_seconds = {seconds}\n"),
+    };
     let mut text = String::from("# bench fleet: generated\n");
     for d in 0..devices {
         let _ = write!(

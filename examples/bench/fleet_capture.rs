@@ -71,7 +71,8 @@ pub async fn compare(args: FleetArgs, server: &ServerHandle, plc: &str) -> anyho
 async fn measure(args: FleetArgs, server: &ServerHandle, plc: &str, on: bool) -> anyhow::Result<Phase> {
     let dir = tempfile::tempdir()?;
     let config = dir.path().join("fleet.toml");
-    std::fs::write(&config, config_text(args.devices, args.tags, args.poll_ms, plc, on))?;
+    let capture = on.then_some(args.capture_seconds);
+    std::fs::write(&config, config_text(args.devices, args.tags, args.poll_ms, plc, capture))?;
     let rackd = Server::start(&config, dir.path()).await?;
     let client = reqwest::Client::new();
     let url = format!("http://{}/api/v1/devices", rackd.addr);
