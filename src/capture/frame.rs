@@ -215,18 +215,7 @@ mod tests {
 
     #[test]
     fn every_verdict_has_a_plain_name() {
-        let all = [
-            Verdict::Ok,
-            Verdict::Retry,
-            Verdict::Timeout,
-            Verdict::Dropped,
-            Verdict::StaleReply,
-            Verdict::ForeignReply,
-            Verdict::WrongUnit,
-            Verdict::CrcError,
-            Verdict::Malformed,
-        ];
-        let names: Vec<&str> = all.iter().map(|v| v.name()).collect();
+        let names: Vec<&str> = ALL_VERDICTS.iter().map(|v| v.name()).collect();
         assert_eq!(
             names,
             [
