@@ -62,8 +62,18 @@ async fn the_first_screen_shows_what_needs_attention() {
         json!({"kind": "store", "barcode": "PAL-1", "reference": "WMS-PAL-1", "to": cloc(1, 5, 3, 1)}),
     )
     .await;
-    wait_state(&browser, held, "running", 20).await;
+    // Stopped as soon as the crane moves (its transfer lasts 640 ms: waiting for the page
+    // first let a loaded machine finish the job before the alarm).
+    crate::support::eventually(
+        "the crane to start the job",
+        std::time::Duration::from_secs(20),
+        async || {
+            if sims.crane.action() != 0 { Ok(()) } else { Err("idle") }
+        },
+    )
+    .await;
     sims.crane.raise_alarm(7001);
+    wait_state(&browser, held, "running", 20).await;
     browser
         .wait(
             "the held job among those that need attention",
@@ -166,8 +176,18 @@ async fn the_first_screen_shows_what_needs_attention() {
     // the jobs are cards with their reference, and nothing scrolls sideways. Again a crane
     // job held by an emergency stop.
     let held = submit(&app, json!({"kind": "store", "barcode": "PAL-2", "to": cloc(2, 16, 3, 1)})).await;
-    wait_state(&browser, held, "running", 20).await;
+    // Stopped as soon as the crane moves (its transfer lasts 640 ms: waiting for the page
+    // first let a loaded machine finish the job before the alarm).
+    crate::support::eventually(
+        "the crane to start the job",
+        std::time::Duration::from_secs(20),
+        async || {
+            if sims.crane.action() != 0 { Ok(()) } else { Err("idle") }
+        },
+    )
+    .await;
     sims.crane.raise_alarm(7001);
+    wait_state(&browser, held, "running", 20).await;
     browser.viewport(800, 1200).await;
     browser
         .wait("the active alarm", "return document.querySelector('#alarms .alarm-item.active') !== null", 10)
