@@ -11,6 +11,8 @@
 //!   alarms). A failure to write is logged and changes nothing else: the alarm stands.
 //! - Only `hardware` and `link` classes: a `business` alarm is the crane's own decision
 //!   about a load, which the job's history already tells.
+//! - A file is written under another name and renamed once complete, so a download never
+//!   reads half of one.
 //! - On the node that drives the machines, in its own folder: a standby forwards the
 //!   request for an alarm's capture to the active node.
 
@@ -53,8 +55,12 @@ impl Freeze {
             if let Some(dir) = file.parent() {
                 std::fs::create_dir_all(dir)?;
             }
-            let mut out = std::io::BufWriter::new(std::fs::File::create(&file)?);
+            // Written beside, then renamed: a download never sees half a file.
+            let part = file.with_extension("pcapng.part");
+            let mut out = std::io::BufWriter::new(std::fs::File::create(&part)?);
             crate::capture::write(&mut out, &link, &frames)?;
+            out.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+            std::fs::rename(&part, &file)?;
             Ok(file)
         })
         .await;
