@@ -68,12 +68,16 @@ impl Fleet {
     /// Starts every device of `configs`, after clearing the alarms of devices no longer
     /// configured.
     pub async fn start(configs: &[DeviceConfig], parts: Parts) -> anyhow::Result<Fleet> {
-        let ids: BTreeSet<String> = configs.iter().map(|c| c.id().to_owned()).collect();
-        monitor::clear_alarms(&ids, false, &parts.writer, &parts.pool).await;
+        let ids: BTreeSet<&str> = configs.iter().map(|c| c.id()).collect();
+        let mut active = monitor::active(&parts.pool).await;
+        for (device, keys) in active.iter().filter(|(device, _)| !ids.contains(device.as_str())) {
+            monitor::clear(device, keys, &parts.writer).await;
+        }
         let fleet = Fleet(Arc::new(Inner { devices: RwLock::default(), tasks: Mutex::default(), parts }));
         for c in configs {
             let prepared = fleet.prepare(c).await?;
-            fleet.run(prepared).await;
+            let alarms = active.remove(c.id()).unwrap_or_default();
+            fleet.run(prepared, Some(alarms)).await;
         }
         Ok(fleet)
     }
@@ -90,12 +94,16 @@ impl Fleet {
         devices::prepare(c, port, p.contact_refresh, p.gate.clone()).await
     }
 
-    /// Starts a prepared device, its monitor, and the dispatcher's watch on its status.
-    pub async fn run(&self, prepared: Prepared) {
+    /// Starts a prepared device, its monitor (taking up `alarms`, its active alarms; read
+    /// from the store when `None`), and the dispatcher's watch on its status.
+    pub async fn run(&self, prepared: Prepared, alarms: Option<BTreeSet<monitor::Key>>) {
         let p = &self.0.parts;
+        let alarms = match alarms {
+            Some(alarms) => alarms,
+            None => monitor::active(&p.pool).await.remove(&prepared.id).unwrap_or_default(),
+        };
         let (id, handle, device) = prepared.spawn();
-        let monitor =
-            monitor::watch(&id, &handle, &p.queues, p.writer.clone(), &p.pool, p.freeze.clone()).await;
+        let monitor = monitor::watch(&id, &handle, &p.queues, p.writer.clone(), alarms, p.freeze.clone());
         p.queues.watch_device(&id, handle.status.clone());
         self.edit(|d| drop(d.insert(id.clone(), handle)));
         self.tasks().insert(id, Tasks { device, monitor });
@@ -116,8 +124,8 @@ impl Fleet {
         let p = &self.0.parts;
         p.queues.unwatch_device(id);
         self.edit(|d| drop(d.remove(id)));
-        if removed {
-            monitor::clear_alarms(&BTreeSet::from([id.to_owned()]), true, &p.writer, &p.pool).await;
+        if removed && let Some(keys) = monitor::active(&p.pool).await.get(id) {
+            monitor::clear(id, keys, &p.writer).await;
         }
     }
 

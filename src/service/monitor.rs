@@ -22,7 +22,7 @@
 //! them; those of devices no longer configured are cleared at start, and those of a device
 //! a reload removes when it stops.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use crate::store::Pool;
 use tokio::sync::watch;
@@ -64,39 +64,41 @@ pub fn all_shown(devices: &Devices, queues: &Queues) -> Vec<DeviceStatus> {
     devices.iter().map(|(id, handle)| shown(id, handle, queues)).collect()
 }
 
-/// Clears the active alarms of devices other than `configured` (at start: those of
-/// devices no longer configured), or of `configured` alone when `only` (a reload removed
-/// them).
-pub async fn clear_alarms(configured: &BTreeSet<String>, only: bool, writer: &Writer, pool: &Pool) {
-    let found = match alarms::active(pool).await {
-        Ok(found) => found,
-        Err(e) => return tracing::error!(error = %e, "reading active alarms"),
-    };
-    for alarm in found.into_iter().filter(|a| configured.contains(&a.device) == only) {
-        let record = Record::AlarmCleared { device: alarm.device, key: (alarm.kind, alarm.code) };
+/// The active alarms in the store, by device (none if the store cannot be read: logged).
+pub async fn active(pool: &Pool) -> HashMap<String, BTreeSet<Key>> {
+    let mut by_device: HashMap<String, BTreeSet<Key>> = HashMap::new();
+    match alarms::active(pool).await {
+        Ok(found) => {
+            for a in found {
+                by_device.entry(a.device).or_default().insert((a.kind, a.code));
+            }
+        }
+        Err(e) => tracing::error!(error = %e, "reading active alarms"),
+    }
+    by_device
+}
+
+/// Clears `keys`, active alarms of `device`, which is no longer configured (at start, or a
+/// reload removed it).
+pub async fn clear(device: &str, keys: &BTreeSet<Key>, writer: &Writer) {
+    for key in keys {
+        let record = Record::AlarmCleared { device: device.to_owned(), key: *key };
         if let Err(e) = writer.record(record).await {
             tracing::warn!(error = %e, "clearing an alarm of a device no longer configured");
         }
     }
 }
 
-/// Starts watching one device, taking up the alarms it has active; the task ends when the
-/// device's task ends (its status goes away) or the writer stops.
-pub async fn watch(
+/// Starts watching one device, taking up `alarms`, those it has active; the task ends when
+/// the device's task ends (its status goes away) or the writer stops.
+pub fn watch(
     id: &str,
     handle: &DeviceHandle,
     queues: &Queues,
     writer: Writer,
-    pool: &Pool,
+    alarms: BTreeSet<Key>,
     freeze: Option<Freeze>,
 ) -> tokio::task::JoinHandle<()> {
-    let alarms = match alarms::active(pool).await {
-        Ok(found) => found.into_iter().filter(|a| a.device == id).map(|a| (a.kind, a.code)).collect(),
-        Err(e) => {
-            tracing::error!(error = %e, "reading active alarms");
-            BTreeSet::new()
-        }
-    };
     let control = queues.control(id).unwrap_or_else(|| watch::Sender::default().subscribe());
     let span = tracing::info_span!("device", device = %id);
     tokio::spawn(watch_device(handle.clone(), control, alarms, writer, freeze).instrument(span))
@@ -186,7 +188,7 @@ fn action(device: &str, kind: AlarmKind, code: u16) -> String {
 }
 
 /// An active alarm's identity on its device.
-type Key = (AlarmKind, u16);
+pub type Key = (AlarmKind, u16);
 
 /// The alarms to raise and the keys to clear, given those active.
 ///

@@ -168,7 +168,7 @@ impl Reload {
             waiting.extend(queues.remove_device(id));
         }
         for (_, prepared, _) in starting {
-            fleet.run(prepared).await;
+            fleet.run(prepared, None).await;
         }
         if !waiting.is_empty()
             && let Err(e) = p.writer.record(Record::Retell { jobs: waiting }).await
