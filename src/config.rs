@@ -33,7 +33,7 @@ pub mod tls;
 pub mod webhooks;
 
 pub use check::Invalid;
-pub use diff::{Change, Difference};
+pub use diff::{Change, Difference, RunningConfig};
 pub use env::EnvError;
 pub use error::ConfigError;
 pub use events::{EventsConfig, EventsConfigError};

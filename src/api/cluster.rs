@@ -123,7 +123,7 @@ async fn cluster(State(app): State<AppState>) -> Result<Json<ClusterView>, ApiEr
         takeovers: node.takeovers(),
         lease,
         nodes,
-        config_hash: node.config_hash.borrow().clone(),
+        config_hash: node.config.borrow().hash.clone(),
         config_drift,
     }))
 }

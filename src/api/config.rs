@@ -20,7 +20,7 @@ use super::error::{ApiError, ErrorBody};
 use super::extract::{Caller, Json, Query};
 use super::state::AppState;
 use crate::config::Difference;
-use crate::service::reload::{Loaded, ReloadError};
+use crate::service::reload::{ReloadError, RunningConfig};
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
@@ -53,7 +53,7 @@ pub struct ReloadView {
     /// The configuration running now: after the reload, or for a dry run the one that
     /// still runs.
     #[serde(flatten)]
-    pub loaded: Loaded,
+    pub loaded: RunningConfig,
     /// The difference between the configuration that ran and the file's.
     #[serde(flatten)]
     pub difference: Difference,
@@ -78,10 +78,10 @@ impl From<ReloadError> for ApiError {
 /// loaded (the start, or the last reload). Each node of a cluster answers for itself.
 #[utoipa::path(get, path = "/config", tag = "operations",
     responses(
-        (status = 200, description = "The running configuration's hash and load time", body = Loaded),
+        (status = 200, description = "The running configuration's hash and load time", body = RunningConfig),
         (status = 401, description = "No key, or an unknown key", body = ErrorBody),
     ))]
-async fn loaded(State(app): State<AppState>) -> Json<Loaded> {
+async fn loaded(State(app): State<AppState>) -> Json<RunningConfig> {
     Json(app.reload.loaded())
 }
 

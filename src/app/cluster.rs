@@ -85,7 +85,7 @@ pub(super) async fn start(
         timing,
         takeovers: Arc::new(AtomicU64::new(0)),
         started_at: now_ms(),
-        config_hash: parts.reload.hashes(),
+        config: parts.reload.watch_loaded(),
     };
     let (_, from) = events::bounds(&parts.pool).await?;
     let (adopt, wanted) = mpsc::unbounded_channel();
@@ -198,7 +198,7 @@ async fn watch_drift(node: Node, writer: Writer) {
             let record = match (&raised, drift.is_empty()) {
                 (Some(was), false) if *was == drift => None,
                 (_, false) => {
-                    let own = node.config_hash.borrow().clone();
+                    let own = node.config.borrow().hash.clone();
                     let others: Vec<String> = drift
                         .iter()
                         .map(|(name, hash)| format!("node {name:?} runs {}", short(hash)))

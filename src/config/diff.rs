@@ -86,6 +86,27 @@ pub struct AisleChange {
     pub keys: Vec<String>,
 }
 
+/// Which configuration runs: the hash of its `[site]` and `[[devices]]`
+/// ([`Config::site_hash`]) and when it was loaded (the start, or the last reload).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, ToSchema)]
+pub struct RunningConfig {
+    /// SHA-256 of `[site]` and `[[devices]]`, in hex.
+    #[schema(example = "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2")]
+    pub hash: String,
+    /// When it was loaded.
+    #[serde(with = "time::serde::rfc3339")]
+    #[schema(value_type = String, format = DateTime)]
+    pub loaded_at: time::OffsetDateTime,
+}
+
+impl RunningConfig {
+    /// `config`, loaded now.
+    pub fn now(config: &Config) -> RunningConfig {
+        let now = crate::domain::time::from_ms(crate::domain::time::now_ms());
+        RunningConfig { hash: config.site_hash(), loaded_at: now }
+    }
+}
+
 impl Difference {
     /// Whether nothing changes.
     pub fn is_empty(&self) -> bool {

@@ -34,8 +34,8 @@ pub struct Node {
     pub takeovers: Arc<AtomicU64>,
     /// When this process started, ms since 1970.
     pub started_at: i64,
-    /// The hash of the configuration it runs (told with its row; a reload changes it).
-    pub config_hash: watch::Receiver<String>,
+    /// The configuration it runs (its hash told with its row; a reload changes it).
+    pub config: watch::Receiver<crate::config::RunningConfig>,
 }
 
 /// The cluster as one node sees it.
@@ -78,7 +78,7 @@ impl Node {
     /// The nodes seen within two leases whose configuration differs from this node's, as
     /// (name, hash); nodes that told no hash are left out.
     pub fn drift(&self, view: &View) -> Vec<(String, String)> {
-        let own = self.config_hash.borrow().clone();
+        let own = self.config.borrow().hash.clone();
         let fresh = (self.timing.lease * 2).as_millis() as i64;
         view.nodes
             .iter()
@@ -103,7 +103,7 @@ pub async fn tell(node: Node) {
     let mut role = node.role.clone();
     loop {
         let said = node.role_name();
-        let hash = node.config_hash.borrow().clone();
+        let hash = node.config.borrow().hash.clone();
         if let Err(e) = cluster::tell(&node.pool, &node.name, &node.url, said, node.started_at, &hash).await {
             tracing::warn!(error = %e, "cluster: cannot tell the other nodes of this one");
         }

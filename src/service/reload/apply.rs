@@ -29,7 +29,7 @@
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use super::{Loaded, Reload, ReloadError, Running, removed};
+use super::{Reload, ReloadError, RunningConfig, removed};
 use crate::config::devices::DeviceConfig;
 use crate::config::{Change, Config, Difference};
 use crate::domain::Who;
@@ -47,7 +47,7 @@ pub struct Applied {
     pub by: String,
     /// The configuration now running.
     #[serde(flatten)]
-    pub loaded: Loaded,
+    pub loaded: RunningConfig,
     /// What changed.
     #[serde(flatten)]
     pub difference: Difference,
@@ -75,10 +75,9 @@ impl Reload {
                 true
             }
         };
-        let loaded = Loaded::now(&new);
-        *self.0.running.lock().unwrap_or_else(|e| e.into_inner()) =
-            Running { config: new, loaded: loaded.clone() };
-        self.0.hash.send_replace(loaded.hash.clone());
+        let loaded = RunningConfig::now(&new);
+        *self.0.running.lock().unwrap_or_else(|e| e.into_inner()) = new;
+        self.0.loaded.send_replace(loaded.clone());
         let applied = Applied { by: who.name.clone(), loaded, difference, kept_for_takeover };
         let summary = match &reason {
             Some(r) => format!("{} ({r})", summary(&applied)),

@@ -37,9 +37,7 @@ mod apply;
 use std::sync::atomic::AtomicU64;
 use std::sync::{Arc, Mutex, OnceLock, RwLock};
 
-use serde::Serialize;
-use utoipa::ToSchema;
-
+pub use crate::config::RunningConfig;
 use crate::config::{Change, Config, ConfigError, Difference, Origin, Sources};
 use crate::domain::Location;
 use crate::service::dispatch::Dispatcher;
@@ -60,9 +58,9 @@ pub struct Reload(Arc<Inner>);
 
 struct Inner {
     sources: OnceLock<Sources>,
-    running: Mutex<Running>,
-    /// The running configuration's hash, for whoever tells it (a cluster node's row).
-    hash: tokio::sync::watch::Sender<String>,
+    running: Mutex<Config>,
+    /// Which configuration runs, for whoever tells it (a cluster node's row).
+    loaded: tokio::sync::watch::Sender<RunningConfig>,
     rules: RwLock<Arc<Rules>>,
     fleet: OnceLock<Fleet>,
     parts: Parts,
@@ -80,33 +78,6 @@ pub struct Parts {
     pub writer: Writer,
     /// The writer's commits, for the cranes' planners.
     pub commits: Arc<AtomicU64>,
-}
-
-/// The configuration running, as loaded.
-#[derive(Clone)]
-struct Running {
-    config: Config,
-    loaded: Loaded,
-}
-
-/// Which configuration runs: the hash of its `[site]` and `[[devices]]`
-/// ([`Config::site_hash`]) and when it was loaded (the start, or the last reload).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, ToSchema)]
-pub struct Loaded {
-    /// SHA-256 of `[site]` and `[[devices]]`, in hex.
-    #[schema(example = "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2")]
-    pub hash: String,
-    /// When it was loaded.
-    #[serde(with = "time::serde::rfc3339")]
-    #[schema(value_type = String, format = DateTime)]
-    pub loaded_at: time::OffsetDateTime,
-}
-
-impl Loaded {
-    fn now(config: &Config) -> Loaded {
-        let now = crate::domain::time::from_ms(crate::domain::time::now_ms());
-        Loaded { hash: config.site_hash(), loaded_at: now }
-    }
 }
 
 /// A configuration read again and checked, and what it changes.
@@ -204,12 +175,12 @@ impl Reload {
     /// `running`, with no sources yet ([`Reload::read_from`]) and no devices running yet
     /// ([`Reload::drive`]).
     pub fn new(running: Config, parts: Parts) -> Reload {
-        let loaded = Loaded::now(&running);
+        let loaded = RunningConfig::now(&running);
         let rules = RwLock::new(Arc::new(Rules::of(&running)));
         Reload(Arc::new(Inner {
             sources: OnceLock::new(),
-            hash: tokio::sync::watch::Sender::new(loaded.hash.clone()),
-            running: Mutex::new(Running { config: running, loaded }),
+            loaded: tokio::sync::watch::Sender::new(loaded),
+            running: Mutex::new(running),
             rules,
             fleet: OnceLock::new(),
             parts,
@@ -237,23 +208,19 @@ impl Reload {
         self.fleet().map(Fleet::devices).unwrap_or_default()
     }
 
-    fn running_now(&self) -> Running {
+    /// The running configuration.
+    pub fn running(&self) -> Config {
         self.0.running.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
-    /// The running configuration.
-    pub fn running(&self) -> Config {
-        self.running_now().config
-    }
-
     /// Which configuration runs, and since when.
-    pub fn loaded(&self) -> Loaded {
-        self.running_now().loaded
+    pub fn loaded(&self) -> RunningConfig {
+        self.0.loaded.borrow().clone()
     }
 
-    /// The running configuration's hash, as it changes.
-    pub fn hashes(&self) -> tokio::sync::watch::Receiver<String> {
-        self.0.hash.subscribe()
+    /// Which configuration runs, as reloads change it.
+    pub fn watch_loaded(&self) -> tokio::sync::watch::Receiver<RunningConfig> {
+        self.0.loaded.subscribe()
     }
 
     /// What job requests are checked against and routed by, as the running configuration
