@@ -10,6 +10,11 @@
 //!   id at 0..2; length at 4..6; function code at 7.
 //! - Anything else: compared byte for byte, never reframed (a TCP read is one frame), and
 //!   every request counts as a write (matched strictly in order).
+//!
+//! A write that names one place and then its data (MC batch write 1401; Modbus functions
+//! 5, 6, 15, 16) is split there ([`Dialect::data_at`]): the replay then knows what the
+//! device holds after it, so that a recorded write of what the device already holds is
+//! not waited for (the matcher's "Writes already in place").
 
 /// The protocol of a recording, as far as the replay cares.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -94,6 +99,27 @@ impl Dialect {
             out[r].copy_from_slice(&id);
         }
         out
+    }
+
+    /// Where a write's data begins, for a write that names one place before its data (the
+    /// bytes before it, ids zeroed, name the place): MC batch write (1401: head, device
+    /// code and count, then the data); Modbus write single coil or register (5, 6: unit,
+    /// function, address, then the value) and multiple (15, 16: after the byte count).
+    /// `None` for reads, other writes and frames too short to hold data.
+    pub fn data_at(self, request: &[u8]) -> Option<usize> {
+        let at = match self {
+            Dialect::Mc3e | Dialect::Mc4e => {
+                let command = if self == Dialect::Mc3e { 11 } else { 15 };
+                (request.get(command..command + 2)? == [0x01, 0x14]).then_some(command + 10)?
+            }
+            Dialect::Mbap => match request.get(7)? {
+                5 | 6 => 10,
+                15 | 16 => 13,
+                _ => return None,
+            },
+            Dialect::Other => return None,
+        };
+        (request.len() > at).then_some(at)
     }
 
     /// Whether the request only reads (its answer may change while it stays the same).
@@ -187,5 +213,25 @@ mod tests {
         assert!(!Dialect::Mbap.is_read(&write));
         assert!(!Dialect::Other.is_read(b"%01#RCSX0000**\r"));
         assert!(!Dialect::Mc3e.is_read(&READ_3E[..11]), "cut short: strict order");
+    }
+
+    #[test]
+    fn writes_that_name_one_place_are_split_before_their_data() {
+        // Batch write D0, one word: 1.
+        let mut write = READ_3E.to_vec();
+        write[11..13].copy_from_slice(&[1, 0x14]);
+        write[19..21].copy_from_slice(&[1, 0]);
+        write.extend_from_slice(&[1, 0]);
+        assert_eq!(Dialect::Mc3e.data_at(&write), Some(21));
+        assert_eq!(Dialect::Mc3e.data_at(&READ_3E), None, "a read");
+        assert_eq!(Dialect::Mc3e.data_at(&write[..21]), None, "no data");
+        let write_4e = [&[0x54, 0, 7, 0, 0, 0][..], &write[2..]].concat();
+        assert_eq!(Dialect::Mc4e.data_at(&write_4e), Some(25));
+        // Write single register 1 := 3; write multiple registers 0..2 := 1, 2.
+        assert_eq!(Dialect::Mbap.data_at(&[0, 1, 0, 0, 0, 6, 1, 6, 0, 1, 0, 3]), Some(10));
+        let multiple = [0, 1, 0, 0, 0, 11, 1, 16, 0, 0, 0, 2, 4, 0, 1, 0, 2];
+        assert_eq!(Dialect::Mbap.data_at(&multiple), Some(13));
+        assert_eq!(Dialect::Mbap.data_at(&read_mbap(1)), None);
+        assert_eq!(Dialect::Other.data_at(b"%01#WDD0000000000**\r"), None);
     }
 }

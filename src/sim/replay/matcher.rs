@@ -2,6 +2,7 @@
 //! replay began, so every rule is tested without sockets. The rules are the module doc's
 //! of [`super`] ("Matching").
 
+use std::collections::HashMap;
 use std::time::Duration;
 
 use super::script::Recorded;
@@ -23,6 +24,18 @@ pub enum Taken {
     Unanswered,
 }
 
+/// A live request as compared: its bytes with ids zeroed, whether it only reads, and where
+/// a write's data begins ([`super::dialect::Dialect::data_at`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Request<'a> {
+    /// The bytes as compared.
+    pub key: &'a [u8],
+    /// It only reads.
+    pub read: bool,
+    /// A write naming one place: where its data begins.
+    pub data_at: Option<usize>,
+}
+
 /// How many live requests were taken each way.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Counters {
@@ -36,6 +49,9 @@ pub struct Counters {
     pub skipped: u64,
     /// [`Taken::Unanswered`].
     pub unanswered: u64,
+    /// Recorded writes no live one made, because the device already held their data when
+    /// the replay clock reached them (not live requests: not among the divergences).
+    pub in_place: u64,
 }
 
 impl Counters {
@@ -75,6 +91,9 @@ pub struct Matcher {
     anchor: Option<Anchor>,
     /// The last write taken, for retries.
     last_write: Option<usize>,
+    /// What the device holds as rackd last wrote it live: a write's place (its key up to
+    /// its data) to its data.
+    memory: HashMap<Vec<u8>, Vec<u8>>,
     reorder: Duration,
     counters: Counters,
 }
@@ -84,7 +103,15 @@ impl Matcher {
     /// of order without counting as divergence.
     pub fn new(requests: Vec<Recorded>, reorder: Duration) -> Matcher {
         let made = vec![false; requests.len()];
-        Matcher { requests, made, anchor: None, last_write: None, reorder, counters: Counters::default() }
+        Matcher {
+            requests,
+            made,
+            anchor: None,
+            last_write: None,
+            memory: HashMap::new(),
+            reorder,
+            counters: Counters::default(),
+        }
     }
 
     /// The recorded requests.
@@ -115,7 +142,8 @@ impl Matcher {
     }
 
     /// Every write is made and the clock has passed the last request.
-    pub fn exhausted(&self, now: Duration) -> bool {
+    pub fn exhausted(&mut self, now: Duration) -> bool {
+        self.settle(now);
         self.due().is_none() && self.requests.last().is_none_or(|r| self.clock(now) > r.at)
     }
 
@@ -129,14 +157,43 @@ impl Matcher {
 
     /// Takes a live request (`key`: its bytes as compared) arriving at `now`: the recorded
     /// request whose replies answer it, if any, and how it was taken.
-    pub fn take(&mut self, key: &[u8], read: bool, now: Duration) -> (Option<usize>, Taken) {
+    pub fn take(&mut self, request: Request<'_>, now: Duration) -> (Option<usize>, Taken) {
         if self.anchor.is_none() {
             let recorded = self.requests.first().map_or(Duration::ZERO, |r| r.at);
             self.anchor = Some(Anchor { index: None, recorded, live: now });
         }
-        let (index, taken) = if read { self.take_read(key, now) } else { self.take_write(key, now) };
+        self.settle(now);
+        let key = request.key;
+        let (index, taken) = if request.read { self.take_read(key, now) } else { self.take_write(key, now) };
         self.counters.count(taken);
+        if let (false, Some(at), Some(_)) = (request.read, request.data_at, index) {
+            self.memory.insert(key[..at].to_vec(), key[at..].to_vec());
+        }
         (index, taken)
+    }
+
+    /// Recorded write `i` would leave the device as it is: rackd last wrote the same data
+    /// to the same place.
+    fn in_place(&self, i: usize) -> bool {
+        let r = &self.requests[i];
+        r.data_at.is_some_and(|at| self.memory.get(&r.key[..at]).is_some_and(|held| *held == r.key[at..]))
+    }
+
+    /// Takes as made each write due that the device already holds, once the clock (run on
+    /// past it) reaches it: rackd has nothing to write there, and the device cannot tell.
+    /// The anchor moves to it at the live time the clock reached it, so the clock runs on
+    /// without a jump.
+    fn settle(&mut self, now: Duration) {
+        while let (Some(d), Some(a)) = (self.due(), self.anchor) {
+            let at = self.requests[d].at;
+            let reached = a.live + at.saturating_sub(a.recorded);
+            if !self.in_place(d) || reached > now {
+                return;
+            }
+            self.made[d] = true;
+            self.counters.in_place += 1;
+            self.anchor = Some(Anchor { index: Some(d), recorded: at, live: reached });
+        }
     }
 
     fn same(&self, i: usize, key: &[u8]) -> bool {

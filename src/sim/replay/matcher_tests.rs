@@ -4,6 +4,11 @@ fn ms(n: u64) -> Duration {
     Duration::from_millis(n)
 }
 
+/// Where a write's data begins in these keys: after its `=` ("D0=1": place "D0=", data 1).
+fn data_at(key: &str, read: bool) -> Option<usize> {
+    key.find('=').filter(|_| !read).map(|i| i + 1)
+}
+
 /// A recorded request at `at` ms: `key` names it, `read` says what it is; its reply is
 /// `answer` (kept in the reply's bytes, to tell which occurrence was taken).
 fn req(at: u64, key: &str, read: bool, answer: &str) -> Recorded {
@@ -12,6 +17,7 @@ fn req(at: u64, key: &str, read: bool, answer: &str) -> Recorded {
         bytes: key.as_bytes().to_vec(),
         key: key.as_bytes().to_vec(),
         read,
+        data_at: data_at(key, read),
         replies: vec![super::super::script::Reply { after: ms(1), bytes: answer.as_bytes().to_vec() }],
     }
 }
@@ -26,7 +32,8 @@ fn write(at: u64, key: &str) -> Recorded {
 
 /// The answer a live request gets, and how it was taken.
 fn ask(m: &mut Matcher, key: &str, is_read: bool, now: u64) -> (String, Taken) {
-    let (i, taken) = m.take(key.as_bytes(), is_read, ms(now));
+    let request = Request { key: key.as_bytes(), read: is_read, data_at: data_at(key, is_read) };
+    let (i, taken) = m.take(request, ms(now));
     let answer =
         i.map_or("-".into(), |i| String::from_utf8(m.requests()[i].replies[0].bytes.clone()).unwrap());
     (answer, taken)
@@ -190,4 +197,67 @@ fn an_empty_script_answers_nothing() {
     assert_eq!(ask(&mut m, "poll", true, 0), ("-".into(), Taken::Unanswered));
     assert_eq!(ask(&mut m, "w", false, 0), ("-".into(), Taken::Unanswered));
     assert!(m.exhausted(ms(0)));
+}
+
+/// The site: rackd answered the crane's heartbeat 0 (D0=1) and its 1 (D0=0), then handed a
+/// task over, whose ACK came 400 ms late; then answered the heartbeat again (D0=1, D0=0).
+fn late_ack_with_heartbeat() -> Vec<Recorded> {
+    vec![
+        read(0, "poll", "hb0"),
+        write(2, "D0=1"),
+        read(20, "poll", "hb1"),
+        write(22, "D0=0"),
+        write(44, "task"),
+        write(45, "STB=1"),
+        read(50, "ack?", "0"),
+        read(450, "ack?", "1"),
+        write(452, "STB=0"),
+        read(458, "poll", "hb0 running"),
+        write(459, "D0=1"),
+        read(484, "poll", "hb1 running"),
+        write(485, "D0=0"),
+        read(508, "poll", "hb0 done"),
+    ]
+}
+
+#[test]
+fn a_write_the_device_already_holds_does_not_stop_the_clock() {
+    let mut m = Matcher::new(late_ack_with_heartbeat(), ms(50));
+    ask(&mut m, "poll", true, 0);
+    assert_eq!(ask(&mut m, "D0=1", false, 2).1, Taken::Matched);
+    // In the lab rackd hands the task over a poll earlier: it never reads the crane's 1,
+    // so it never writes D0=0, and D0 still holds the 1 it wrote.
+    assert_eq!(ask(&mut m, "task", false, 30).1, Taken::Reordered);
+    assert_eq!(ask(&mut m, "STB=1", false, 31).1, Taken::Matched);
+    assert_eq!(ask(&mut m, "ack?", true, 100).0, "0");
+    assert_eq!(ask(&mut m, "ack?", true, 440).0, "1", "as late as recorded");
+    assert_eq!(ask(&mut m, "STB=0", false, 441).1, Taken::Matched);
+    // The crane's word is 0 and D0 holds 1: rackd has nothing to write. The recorded
+    // D0=1 is not waited for once the clock reaches it (448 live).
+    assert_eq!(ask(&mut m, "poll", true, 447).0, "hb0 running");
+    assert_eq!(m.counters().in_place, 0, "not reached yet");
+    assert_eq!(ask(&mut m, "poll", true, 470).0, "hb0 running");
+    assert_eq!(m.counters().in_place, 1);
+    assert_eq!(ask(&mut m, "poll", true, 480).0, "hb1 running", "the heartbeat moves on");
+    assert_eq!(ask(&mut m, "D0=0", false, 481).1, Taken::Matched);
+    assert_eq!(ask(&mut m, "poll", true, 510).0, "hb0 done");
+    assert_eq!(m.counters().diverged(), 0);
+    assert_eq!(m.writes_not_made(), (1, 0), "the D0=0 rackd had no reason to make");
+}
+
+#[test]
+fn a_write_of_other_data_to_the_same_place_is_still_waited_for() {
+    let mut m = Matcher::new(late_ack_with_heartbeat(), ms(50));
+    ask(&mut m, "poll", true, 0);
+    ask(&mut m, "D0=1", false, 2);
+    ask(&mut m, "poll", true, 20);
+    ask(&mut m, "D0=0", false, 22);
+    ask(&mut m, "task", false, 44);
+    ask(&mut m, "STB=1", false, 45);
+    ask(&mut m, "ack?", true, 450);
+    ask(&mut m, "STB=0", false, 452);
+    // D0 holds 0 now: the recorded D0=1 is rackd's to make, and the clock waits for it.
+    assert_eq!(ask(&mut m, "poll", true, 5_000).0, "hb0 running");
+    assert_eq!(m.counters().in_place, 0);
+    assert_eq!(ask(&mut m, "D0=1", false, 5_001).1, Taken::Matched);
 }

@@ -38,6 +38,15 @@
 //!   there and leaves the clock alone (rackd checked the crane's ACK before it answered
 //!   the heartbeat, this time); further on, it is skipped to (a divergence), moving the
 //!   anchor there.
+//! - **Writes already in place.** The replay keeps what rackd wrote live to each place (for
+//!   writes that name one place and then data: MC batch writes, Modbus 5, 6, 15, 16). A
+//!   recorded write due whose data the device already holds is taken as made once the
+//!   clock reaches it, counted as `in_place`: rackd has nothing to write there and the
+//!   device could not tell. So a heartbeat whose step rackd missed (it answered the
+//!   crane's 0 with 1, then started a hand-over a poll earlier than at the site and never
+//!   read the crane's 1) does not stop the clock at a D0 := 1 rackd already made: the
+//!   crane's word moves on, and so does rackd. The decision: the device is taken to act on
+//!   what it holds, not on being written the same value again.
 //! - **Ids.** Bytes that legitimately differ between runs are left out of the comparison
 //!   and copied into the answer: the Modbus transaction id (MBAP, TCP and UDP) and the MC
 //!   4E serial number; a stale reply carries the live id of the request its recorded id
@@ -67,7 +76,7 @@ pub mod server;
 use std::fmt;
 use std::time::Duration;
 
-pub use matcher::{Counters, Taken};
+pub use matcher::{Counters, Request, Taken};
 pub use script::{Script, ScriptError};
 pub use server::ReplayServer;
 
@@ -122,8 +131,8 @@ impl fmt::Display for Report {
         )?;
         write!(
             f,
-            "recorded writes not made: {} passed over, {} not reached",
-            self.passed_over, self.not_reached
+            "recorded writes not made: {} passed over, {} not reached; {} already held by the device",
+            self.passed_over, self.not_reached, c.in_place
         )?;
         for d in &self.divergences {
             let expected = d.expected.as_deref().map_or("nothing".into(), hex_bytes);
@@ -152,7 +161,14 @@ mod tests {
     fn the_report_names_counts_and_divergences() {
         let report = Report {
             recorded: 10,
-            counters: Counters { matched: 7, reordered: 1, repeated: 2, skipped: 1, unanswered: 1 },
+            counters: Counters {
+                matched: 7,
+                reordered: 1,
+                repeated: 2,
+                skipped: 1,
+                unanswered: 1,
+                in_place: 1,
+            },
             passed_over: 1,
             not_reached: 0,
             divergences: vec![Divergence {
@@ -165,7 +181,7 @@ mod tests {
         assert_eq!(
             report.to_string(),
             "replay of 10 recorded requests: 7 matched, 1 reordered, 2 repeated, 1 skipped, 1 unanswered (2 diverged)\n\
-             recorded writes not made: 1 passed over, 0 not reached\n\
+             recorded writes not made: 1 passed over, 0 not reached; 1 already held by the device\n\
              divergence at 1.500 s (not answered): got 50 00, expected nothing"
         );
     }

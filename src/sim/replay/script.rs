@@ -33,6 +33,8 @@ pub struct Recorded {
     pub key: Vec<u8>,
     /// The request only reads.
     pub read: bool,
+    /// A write naming one place: where its data begins ([`Dialect::data_at`]).
+    pub data_at: Option<usize>,
     /// What the device sent until rackd's next request; empty: no answer.
     pub replies: Vec<Reply>,
 }
@@ -95,6 +97,7 @@ impl Script {
                         at,
                         key: dialect.key(&bytes),
                         read: dialect.is_read(&bytes),
+                        data_at: dialect.data_at(&bytes),
                         bytes,
                         replies: Vec::new(),
                     }),

@@ -17,7 +17,7 @@ use tokio::task::JoinHandle;
 use tokio::time::{Instant, sleep_until};
 
 use super::dialect::Dialect;
-use super::matcher::{Matcher, Taken};
+use super::matcher::{Matcher, Request, Taken};
 use super::script::Script;
 use super::{Divergence, KEPT_DIVERGENCES, Report, hex_bytes};
 use crate::capture::Transport;
@@ -43,7 +43,9 @@ impl Shared {
         let d = self.dialect;
         let mut m = lock(&self.matcher);
         let expected = m.due().map(|i| m.requests()[i].bytes.clone());
-        let (index, taken) = m.take(&d.key(request), d.is_read(request), now);
+        let key = d.key(request);
+        let asked = Request { key: &key, read: d.is_read(request), data_at: d.data_at(request) };
+        let (index, taken) = m.take(asked, now);
         if matches!(taken, Taken::Skipped | Taken::Unanswered) {
             let got = hex_bytes(request);
             let want = expected.as_deref().map_or("nothing".into(), hex_bytes);
@@ -115,7 +117,7 @@ impl ReplayServer {
     /// Whether the recording is played out: some request came, every recorded write is
     /// made and the clock has passed the last request.
     pub fn exhausted(&self) -> bool {
-        let m = lock(&self.shared.matcher);
+        let mut m = lock(&self.shared.matcher);
         let c = m.counters();
         c.matched + c.reordered + c.repeated + c.skipped + c.unanswered > 0
             && m.exhausted(self.shared.start.elapsed())

@@ -109,17 +109,21 @@ fn travel() -> Value {
 }
 
 /// rackd with the crane at `address`, its job posted at once (before the crane is online,
-/// so that the conversation alone decides when the hand-over starts).
+/// so that the conversation alone decides when the hand-over starts). rackd reads only the
+/// ACK while it waits for it, so the heartbeat's loss timeout is well over the late ACK.
 async fn rackd_with_job(address: SocketAddr) -> (TestApp, i64) {
-    let device = device_at(&address.to_string(), TransportKind::Tcp, |d| d.handshake_timeout_ms = 3000);
+    let device = device_at(&address.to_string(), TransportKind::Tcp, |d| {
+        d.handshake_timeout_ms = 3000;
+        d.heartbeat_timeout_ms = 2000;
+    });
     let app = spawn_with(Engine::Sqlite, |c| with_crane(c, device)).await;
     let id = submit(&app, travel(), "replayed").await;
     (app, id)
 }
 
 /// Completed, and its states in order.
-async fn completed(app: &TestApp, id: i64) -> Vec<String> {
-    let job = wait_job(app, id, &["completed", "failed", "cancelled"], 8).await;
+async fn completed(app: &TestApp, id: i64, secs: u64) -> Vec<String> {
+    let job = wait_job(app, id, &["completed", "failed", "cancelled"], secs).await;
     assert_eq!(job["state"], "completed", "{job}");
     history(app, id).await.into_iter().map(|(state, _)| state).collect()
 }
@@ -139,7 +143,7 @@ async fn a_late_ack_recorded_at_a_site_replays_into_a_fresh_rackd_with_the_same_
     .await;
     tokio::time::sleep(LATE).await;
     sim.hold(None);
-    let states = completed(&app, id).await;
+    let states = completed(&app, id, 8).await;
     app.stop().await;
     drop(sim);
     let (link, frames) = recorder.capture();
@@ -157,7 +161,10 @@ async fn a_late_ack_recorded_at_a_site_replays_into_a_fresh_rackd_with_the_same_
     let lab = Recorder::to(replay.local_addr()).await;
     let (app, replayed_id) = rackd_with_job(lab.addr).await;
     assert_eq!(replayed_id, id, "the same job id, so the same task number");
-    let replayed_states = completed(&app, replayed_id).await;
+    let ended = tokio::time::timeout(Duration::from_secs(8), completed(&app, replayed_id, 60)).await;
+    let Ok(replayed_states) = ended else {
+        panic!("the replayed job did not end within 8 s; the replay:\n{}", replay.stop());
+    };
     app.stop().await;
     let report = replay.stop();
     eprintln!("{report}");
