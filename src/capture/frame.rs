@@ -57,8 +57,8 @@ impl Verdict {
     }
 }
 
-/// Every verdict.
-const ALL_VERDICTS: [Verdict; 9] = [
+/// Every verdict. The flight recorder keeps a verdict as its place here: append only.
+pub(super) const ALL_VERDICTS: [Verdict; 9] = [
     Verdict::Ok,
     Verdict::Retry,
     Verdict::Timeout,

@@ -33,6 +33,7 @@ pub mod packet;
 pub mod pcapng;
 pub mod read;
 mod recorder;
+mod ring;
 
 use std::io::{self, Write};
 

@@ -2,14 +2,15 @@
 //! bounded by bytes and by age, always on.
 //!
 //! # Decisions
-//! - **Cheap on the hot path.** [`Recorder::record`] copies the bytes once (into
-//!   [`bytes::Bytes`], outside the lock), reads the clock once (`Instant::now()`, no
-//!   syscall beyond it: the wall clock is read once, when the recorder is made, and every
-//!   time is that reading plus the monotonic time since), and holds the one mutex for a
-//!   push and the evictions. Annotations with nothing set allocate nothing.
-//! - **Bounds.** The bytes bound counts the frames' own bytes (not the ring's bookkeeping);
-//!   the age bound is checked on every record and every read, so a quiet link's old frames
-//!   are gone when asked for even if nothing was recorded since. A frame larger than the
+//! - **Cheap on the hot path.** [`Recorder::record`] reads the clock once
+//!   (`Instant::now()`, no syscall beyond it: the wall clock is read once, when the
+//!   recorder is made, and every time is that reading plus the monotonic time since), and
+//!   holds the one mutex for the evictions and one copy of the frame into the device's
+//!   byte ring ([`super::ring`]): no allocation per frame.
+//! - **Bounds.** The bytes bound counts the ring's records whole (a frame's bytes plus an
+//!   18-byte head and its annotations), so it is the recorder's memory; the age bound is
+//!   checked on every record and every read, so a quiet link's old frames are gone when
+//!   asked for even if nothing was recorded since. A frame whose record is larger than the
 //!   bytes bound alone is counted and evicted at once.
 //! - **Context.** Two things annotate frames without the caller passing them: the job and
 //!   task being served ([`Recorder::set_serving`], set by device adapters around a
@@ -25,20 +26,19 @@
 //!   a capture is one interface, and the device's end does not change.
 //! - **Time** is tokio's clock, so tests on paused time see the age bound work.
 
-use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use bytes::Bytes;
 use tokio::time::Instant;
 
 use super::frame::{Annotations, Direction, Frame, Verdict};
 use super::link::Link;
+use super::ring::Ring;
 
 /// How much a recorder keeps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Limits {
-    /// Bytes of frames kept at most (the frames' own bytes).
+    /// Bytes of records kept at most (a frame's bytes, an 18-byte head, its annotations).
     pub bytes: usize,
     /// Seconds of frames kept at most.
     pub seconds: u64,
@@ -62,7 +62,7 @@ pub struct Stats {
     pub timeouts: u64,
     /// Frames kept now.
     pub frames: usize,
-    /// Bytes kept now.
+    /// Bytes kept now (whole records).
     pub bytes: usize,
 }
 
@@ -76,8 +76,7 @@ struct AttemptContext {
 
 #[derive(Debug)]
 struct State {
-    frames: VecDeque<Frame>,
-    bytes: usize,
+    ring: Ring,
     link: Link,
     serving: Option<(i64, u16)>,
     attempt: AttemptContext,
@@ -106,8 +105,7 @@ impl Recorder {
             base: Instant::now(),
             epoch_us,
             state: Mutex::new(State {
-                frames: VecDeque::new(),
-                bytes: 0,
+                ring: Ring::default(),
                 link,
                 serving: None,
                 attempt: AttemptContext::default(),
@@ -135,13 +133,12 @@ impl Recorder {
 
     /// Records a frame now, with the serving and attempt context added (see the module doc).
     pub fn record(&self, direction: Direction, bytes: &[u8], annotations: Annotations) {
-        self.record_at(self.now_us(), direction, Bytes::copy_from_slice(bytes), annotations);
+        self.record_at(self.now_us(), direction, bytes, annotations);
     }
 
     /// Records a frame seen at `time_us` ([`Recorder::now_us`]), for a caller that learns
     /// what to make of a frame only after reading it.
-    pub fn record_at(&self, time_us: u64, direction: Direction, bytes: Bytes, mut annotations: Annotations) {
-        let len = bytes.len();
+    pub fn record_at(&self, time_us: u64, direction: Direction, bytes: &[u8], mut annotations: Annotations) {
         let mut s = self.state();
         if let (None, None, Some((job, task))) = (annotations.job, annotations.task, s.serving) {
             annotations.job = Some(job);
@@ -157,21 +154,27 @@ impl Recorder {
                 }
             }
         }
-        s.frames.push_back(Frame { direction, time_us, bytes, annotations });
-        s.bytes += len;
         s.recorded += 1;
-        self.evict(&mut s, time_us);
+        let need = Ring::record_len(bytes.len(), &annotations);
+        if need > self.limits.bytes {
+            s.evicted += 1;
+            self.evict(&mut s, time_us, 0);
+            return;
+        }
+        self.evict(&mut s, time_us, need);
+        s.ring.reserve(need, self.limits.bytes);
+        s.ring.push(time_us, direction, bytes, &annotations);
     }
 
-    /// Drops the oldest frames past either bound.
-    fn evict(&self, s: &mut State, now_us: u64) {
+    /// Drops the oldest frames past the age bound, and as many more as leave `need` bytes
+    /// within the bytes bound.
+    fn evict(&self, s: &mut State, now_us: u64, need: usize) {
         let oldest = now_us.saturating_sub(self.limits.seconds.saturating_mul(1_000_000));
-        while let Some(front) = s.frames.front() {
-            if s.bytes <= self.limits.bytes && front.time_us >= oldest {
+        while let Some(time_us) = s.ring.oldest_us() {
+            if s.ring.len() + need <= self.limits.bytes && time_us >= oldest {
                 break;
             }
-            s.bytes -= front.bytes.len();
-            s.frames.pop_front();
+            s.ring.pop();
             s.evicted += 1;
         }
     }
@@ -180,10 +183,9 @@ impl Recorder {
     pub fn frames(&self, last: Option<Duration>) -> Vec<Frame> {
         let now = self.now_us();
         let mut s = self.state();
-        self.evict(&mut s, now);
+        self.evict(&mut s, now, 0);
         let from = last.map_or(0, |d| now.saturating_sub(d.as_micros() as u64));
-        let skip = s.frames.partition_point(|f| f.time_us < from);
-        s.frames.iter().skip(skip).cloned().collect()
+        s.ring.read(from)
     }
 
     /// The link the frames travel on, with its newest endpoints.
@@ -224,8 +226,8 @@ impl Recorder {
             recorded: s.recorded,
             evicted: s.evicted,
             timeouts: s.timeouts,
-            frames: s.frames.len(),
-            bytes: s.bytes,
+            frames: s.ring.frames(),
+            bytes: s.ring.len(),
         }
     }
 }
@@ -245,17 +247,23 @@ mod tests {
 
     #[test]
     fn the_oldest_frames_go_past_the_bytes_bound() {
-        let r = recorder(Limits { bytes: 10, seconds: 600 });
+        // Three records of plain frames: 18 bytes of head each, and 10 bytes of frames.
+        let r = recorder(Limits { bytes: 3 * 18 + 10, seconds: 600 });
         for n in [4, 3, 2, 5] {
             r.record(Direction::Sent, &vec![0; n], Annotations::default());
         }
-        assert_eq!(sizes(&r.frames(None)), [3, 2, 5], "4 evicted: 3 + 2 + 5 is 10, the bound");
-        r.record(Direction::Received, &[0; 11], Annotations::default());
-        assert!(r.frames(None).is_empty(), "a frame over the bound alone is not kept");
+        assert_eq!(sizes(&r.frames(None)), [3, 2, 5], "4 evicted: 3 + 2 + 5 and three heads is the bound");
+        r.record(Direction::Received, &[0; 47], Annotations::default());
+        assert_eq!(
+            sizes(&r.frames(None)),
+            [3, 2, 5],
+            "a frame over the bound alone is not kept, nor makes room"
+        );
         let stats = r.stats();
-        assert_eq!((stats.recorded, stats.evicted, stats.frames, stats.bytes), (5, 5, 0, 0));
-        r.record(Direction::Sent, &[0; 10], Annotations::default());
-        assert_eq!(sizes(&r.frames(None)), [10], "exactly the bound is kept");
+        assert_eq!((stats.recorded, stats.evicted, stats.frames, stats.bytes), (5, 2, 3, 64));
+        r.record(Direction::Sent, &[0; 46], Annotations::default());
+        assert_eq!(sizes(&r.frames(None)), [46], "exactly the bound is kept");
+        assert_eq!(r.stats().bytes, 64);
     }
 
     #[tokio::test(start_paused = true)]

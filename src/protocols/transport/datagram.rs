@@ -70,8 +70,7 @@ impl DatagramLink {
             stale += 1;
             if self.conn.tap.on() {
                 let time_us = self.conn.tap.now_us();
-                let bytes = self.rx[..n].to_vec().into();
-                self.conn.tap.discarded(time_us, bytes, Verdict::StaleReply);
+                self.conn.tap.discarded(time_us, &self.rx[..n], Verdict::StaleReply);
             }
         }
     }

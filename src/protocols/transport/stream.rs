@@ -32,7 +32,7 @@ use std::time::Duration;
 use futures::FutureExt;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::time::Instant;
-use tokio_util::bytes::{Buf, Bytes, BytesMut};
+use tokio_util::bytes::{Buf, BytesMut};
 use tokio_util::codec::Decoder;
 
 use super::connection::{Backoff, Connection};
@@ -95,7 +95,7 @@ impl StreamLink {
     fn drop_input(&mut self, verdict: Verdict) {
         if !self.rx.is_empty() && self.conn.tap.on() {
             let time_us = self.conn.tap.now_us();
-            self.conn.tap.discarded(time_us, self.rx.split().freeze(), verdict);
+            self.conn.tap.discarded(time_us, &self.rx, verdict);
         }
         self.rx.clear();
     }
@@ -286,10 +286,11 @@ impl StreamLink {
         D: Decoder<Error = AttemptError>,
     {
         loop {
-            let seen = self.conn.tap.on().then(|| Bytes::copy_from_slice(&self.rx));
+            let before = self.rx.len();
+            self.conn.tap.look(&self.rx);
             let decoded = decoder.decode(&mut self.rx);
-            if let Some(seen) = seen {
-                self.tap_decoded(seen, decoded.as_ref().map(Option::is_some));
+            if self.conn.tap.on() {
+                self.tap_decoded(before, decoded.as_ref().map(Option::is_some));
             }
             if let Some(item) = decoded? {
                 return Ok(Some(item));
@@ -298,10 +299,9 @@ impl StreamLink {
                 let cut = self.rx.len() - MAX_BUFFER / 2;
                 if self.conn.tap.on() {
                     let time_us = self.conn.tap.now_us();
-                    self.conn.tap.discarded(time_us, self.rx.split_to(cut).freeze(), Verdict::Dropped);
-                } else {
-                    self.rx.advance(cut);
+                    self.conn.tap.discarded(time_us, &self.rx[..cut], Verdict::Dropped);
                 }
+                self.rx.advance(cut);
             }
             let stream = self.conn.stream(Duration::ZERO).await?;
             let until = if self.replying { deadline.max(self.ceiling) } else { deadline };
@@ -320,21 +320,17 @@ impl StreamLink {
         }
     }
 
-    /// Records what a decode made of the input it `seen`: a frame (`Ok(true)`, the bytes
-    /// it consumed, judged later), noise dropped (`Ok(false)` with bytes consumed), or a
-    /// refusal (`Err`: everything buffered is malformed and is thrown away).
-    fn tap_decoded(&mut self, seen: Bytes, outcome: Result<bool, &AttemptError>) {
-        let consumed = seen.len().saturating_sub(self.rx.len());
+    /// Records what a decode made of the `before` bytes it looked at: a frame (`Ok(true)`,
+    /// the bytes it consumed, judged later), noise dropped (`Ok(false)` with bytes
+    /// consumed), or a refusal (`Err`: everything buffered is malformed and is thrown away).
+    fn tap_decoded(&mut self, before: usize, outcome: Result<bool, &AttemptError>) {
+        let consumed = before.saturating_sub(self.rx.len());
         match outcome {
-            Ok(true) => self.conn.tap.read_bytes(seen.slice(..consumed)),
-            Ok(false) if consumed > 0 => {
-                let time_us = self.conn.tap.now_us();
-                self.conn.tap.discarded(time_us, seen.slice(..consumed), Verdict::Dropped);
-            }
+            Ok(true) => self.conn.tap.seen_frame(consumed),
+            Ok(false) if consumed > 0 => self.conn.tap.seen_discarded(consumed, Verdict::Dropped),
             Ok(false) => {}
             Err(_) => {
-                let time_us = self.conn.tap.now_us();
-                self.conn.tap.discarded(time_us, seen, Verdict::Malformed);
+                self.conn.tap.seen_discarded(before, Verdict::Malformed);
                 self.rx.clear();
             }
         }
@@ -373,7 +369,8 @@ impl Burst {
     /// Records the burst, if any, as a stale reply, and empties it.
     fn record(&mut self, tap: &mut super::tap::Tap) {
         if !self.bytes.is_empty() {
-            tap.discarded(self.time_us, std::mem::take(&mut self.bytes).into(), Verdict::StaleReply);
+            tap.discarded(self.time_us, &self.bytes, Verdict::StaleReply);
+            self.bytes.clear();
         }
     }
 }

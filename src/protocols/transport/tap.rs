@@ -24,8 +24,6 @@
 use std::net::SocketAddr;
 use std::sync::Arc;
 
-use tokio_util::bytes::Bytes;
-
 use crate::capture::{Annotations, Direction, Limits, Link, Recorder, SerialProtocol, Transport, Verdict};
 use crate::protocols::DropReason;
 
@@ -74,23 +72,23 @@ pub(crate) fn verdict_of(reason: DropReason) -> Verdict {
     }
 }
 
-/// A frame read and not yet judged.
-struct Unjudged {
-    time_us: u64,
-    bytes: Bytes,
-}
-
-/// A link's recorder, if it has one, and the frame it read last.
+/// A link's recorder, if it has one, and the frame it read last. The tap's buffers are
+/// kept from frame to frame: recording allocates nothing once they have grown.
 #[derive(Default)]
 pub(crate) struct Tap {
     recorder: Option<Arc<Recorder>>,
-    unjudged: Option<Unjudged>,
+    /// When the frame read last and not yet judged came, if there is one.
+    unjudged_at: Option<u64>,
+    /// Its bytes.
+    unjudged: Vec<u8>,
+    /// The input a decoder is looking at ([`Tap::look`]).
+    seen: Vec<u8>,
 }
 
 impl Tap {
     /// A tap into `recorder` (none: nothing is recorded, at the cost of a branch).
     pub fn new(recorder: Option<Arc<Recorder>>) -> Tap {
-        Tap { recorder, unjudged: None }
+        Tap { recorder, ..Tap::default() }
     }
 
     /// The recorder, if any.
@@ -123,30 +121,53 @@ impl Tap {
 
     /// A frame was read; it is recorded once judged ([`Tap::judged`]).
     pub fn read(&mut self, bytes: &[u8]) {
-        if self.on() {
-            self.read_bytes(Bytes::copy_from_slice(bytes));
+        if let Some(time_us) = self.recorder.as_ref().map(|r| r.now_us()) {
+            self.settle_unjudged();
+            self.unjudged.clear();
+            self.unjudged.extend_from_slice(bytes);
+            self.unjudged_at = Some(time_us);
         }
     }
 
-    /// Like [`Tap::read`], for bytes already copied.
-    pub fn read_bytes(&mut self, bytes: Bytes) {
+    /// Keeps a copy of the input a decoder is about to consume, so that what it takes is
+    /// recorded afterwards ([`Tap::seen_frame`], [`Tap::seen_discarded`]).
+    pub fn look(&mut self, input: &[u8]) {
+        if self.on() {
+            self.seen.clear();
+            self.seen.extend_from_slice(input);
+        }
+    }
+
+    /// The first `n` bytes looked at were a frame: recorded once judged, as [`Tap::read`].
+    pub fn seen_frame(&mut self, n: usize) {
         if let Some(time_us) = self.recorder.as_ref().map(|r| r.now_us()) {
             self.settle_unjudged();
-            self.unjudged = Some(Unjudged { time_us, bytes });
+            std::mem::swap(&mut self.unjudged, &mut self.seen);
+            self.unjudged.truncate(n);
+            self.unjudged_at = Some(time_us);
+        }
+    }
+
+    /// The first `n` bytes looked at (all of them, at most) were thrown away as `verdict`.
+    pub fn seen_discarded(&mut self, n: usize, verdict: Verdict) {
+        self.settle_unjudged();
+        if let Some(r) = &self.recorder {
+            let annotations = Annotations { verdict: Some(verdict), ..Annotations::default() };
+            r.record(Direction::Received, &self.seen[..n.min(self.seen.len())], annotations);
         }
     }
 
     /// The protocol judged the frame read last.
     pub fn judged(&mut self, verdict: Verdict) {
-        if let (Some(r), Some(u)) = (&self.recorder, self.unjudged.take()) {
+        if let (Some(r), Some(time_us)) = (&self.recorder, self.unjudged_at.take()) {
             let annotations = Annotations { verdict: Some(verdict), ..Annotations::default() };
-            r.record_at(u.time_us, Direction::Received, u.bytes, annotations);
+            r.record_at(time_us, Direction::Received, &self.unjudged, annotations);
         }
     }
 
     /// Bytes read and thrown away by the link itself, recorded at once with `verdict`;
     /// `time_us` is when the first of them came.
-    pub fn discarded(&mut self, time_us: u64, bytes: Bytes, verdict: Verdict) {
+    pub fn discarded(&mut self, time_us: u64, bytes: &[u8], verdict: Verdict) {
         self.settle_unjudged();
         if let Some(r) = &self.recorder {
             let annotations = Annotations { verdict: Some(verdict), ..Annotations::default() };
@@ -161,8 +182,8 @@ impl Tap {
 
     /// Records a frame read and never judged, without a verdict.
     fn settle_unjudged(&mut self) {
-        if let (Some(r), Some(u)) = (&self.recorder, self.unjudged.take()) {
-            r.record_at(u.time_us, Direction::Received, u.bytes, Annotations::default());
+        if let (Some(r), Some(time_us)) = (&self.recorder, self.unjudged_at.take()) {
+            r.record_at(time_us, Direction::Received, &self.unjudged, Annotations::default());
         }
     }
 }
