@@ -127,7 +127,7 @@ pub async fn run(args: FleetArgs) -> anyhow::Result<()> {
     );
     println!(
         "tag reads counted at the simulator (requests x {tags} tags: one read per device poll); \
-         rackd's CPU from /proc/{}/stat",
+         rackd's CPU from the CPU clock of process {}",
         rackd.pid
     );
     // Settle after the start-up burst (every device coming online at once) before measuring.

@@ -9,9 +9,12 @@
 //!   byte ring ([`super::ring`]): no allocation per frame.
 //! - **Bounds.** The bytes bound counts the ring's records whole (a frame's bytes plus an
 //!   18-byte head and its annotations), so it is the recorder's memory; the age bound is
-//!   checked on every record and every read, so a quiet link's old frames are gone when
-//!   asked for even if nothing was recorded since. A frame whose record is larger than the
-//!   bytes bound alone is counted and evicted at once.
+//!   applied exactly on every read, so a quiet link's old frames are gone when asked for
+//!   even if nothing was recorded since. Recording evicts in batches (once the oldest
+//!   frame is a second past the age bound, or the ring is full, down to the age bound and
+//!   a 32nd of the bytes bound free): the ring's start is memory last touched minutes ago,
+//!   and one walk over it a second costs less than a cache miss per frame. A frame whose
+//!   record is larger than the bytes bound alone is counted and evicted at once.
 //! - **Context.** Two things annotate frames without the caller passing them: the job and
 //!   task being served ([`Recorder::set_serving`], set by device adapters around a
 //!   hand-over), on every frame recorded while set; and the attempt under way
@@ -34,6 +37,10 @@ use tokio::time::Instant;
 use super::frame::{Annotations, Direction, Frame, Verdict};
 use super::link::Link;
 use super::ring::Ring;
+
+/// How far past the age bound the oldest frame may get before recording evicts (a read
+/// never returns it): 1 s.
+const AGE_SLACK_US: u64 = 1_000_000;
 
 /// How much a recorder keeps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -158,20 +165,32 @@ impl Recorder {
         let need = Ring::record_len(bytes.len(), &annotations);
         if need > self.limits.bytes {
             s.evicted += 1;
-            self.evict(&mut s, time_us, 0);
+            self.evict(&mut s, time_us, 0, false);
             return;
         }
-        self.evict(&mut s, time_us, need);
+        self.evict(&mut s, time_us, need, false);
         s.ring.reserve(need, self.limits.bytes);
         s.ring.push(time_us, direction, bytes, &annotations);
     }
 
     /// Drops the oldest frames past the age bound, and as many more as leave `need` bytes
-    /// within the bytes bound.
-    fn evict(&self, s: &mut State, now_us: u64, need: usize) {
+    /// within the bytes bound. Recording evicts in batches: only once the oldest frame is
+    /// [`AGE_SLACK_US`] past the age bound, or the bytes bound is reached, and then down to
+    /// the age bound and a 32nd of the bytes bound free. One walk over the ring's start
+    /// every second or so, instead of a cache miss at each record on memory untouched
+    /// since it was written. A read (`exact`) drops everything past the bounds first.
+    fn evict(&self, s: &mut State, now_us: u64, need: usize, exact: bool) {
+        let bound = self.limits.bytes;
         let oldest = now_us.saturating_sub(self.limits.seconds.saturating_mul(1_000_000));
+        let slack = if exact { 0 } else { AGE_SLACK_US };
+        let aged = s.ring.oldest_us().is_some_and(|t| t < oldest.saturating_sub(slack));
+        let full = s.ring.len() + need > bound;
+        if !aged && !full {
+            return;
+        }
+        let room = if full && !exact { (need + bound / 32).min(bound) } else { need };
         while let Some(time_us) = s.ring.oldest_us() {
-            if s.ring.len() + need <= self.limits.bytes && time_us >= oldest {
+            if s.ring.len() + room <= bound && time_us >= oldest {
                 break;
             }
             s.ring.pop();
@@ -183,7 +202,7 @@ impl Recorder {
     pub fn frames(&self, last: Option<Duration>) -> Vec<Frame> {
         let now = self.now_us();
         let mut s = self.state();
-        self.evict(&mut s, now, 0);
+        self.evict(&mut s, now, 0, true);
         let from = last.map_or(0, |d| now.saturating_sub(d.as_micros() as u64));
         s.ring.read(from)
     }
@@ -252,15 +271,17 @@ mod tests {
         for n in [4, 3, 2, 5] {
             r.record(Direction::Sent, &vec![0; n], Annotations::default());
         }
-        assert_eq!(sizes(&r.frames(None)), [3, 2, 5], "4 evicted: 3 + 2 + 5 and three heads is the bound");
+        // 63 bytes kept, and the fourth frame's record needs 23: the oldest go until it fits
+        // with a 32nd of the bound (2 bytes) to spare.
+        assert_eq!(sizes(&r.frames(None)), [2, 5], "4 and 3 evicted");
         r.record(Direction::Received, &[0; 47], Annotations::default());
         assert_eq!(
             sizes(&r.frames(None)),
-            [3, 2, 5],
+            [2, 5],
             "a frame over the bound alone is not kept, nor makes room"
         );
         let stats = r.stats();
-        assert_eq!((stats.recorded, stats.evicted, stats.frames, stats.bytes), (5, 2, 3, 64));
+        assert_eq!((stats.recorded, stats.evicted, stats.frames, stats.bytes), (5, 3, 2, 43));
         r.record(Direction::Sent, &[0; 46], Annotations::default());
         assert_eq!(sizes(&r.frames(None)), [46], "exactly the bound is kept");
         assert_eq!(r.stats().bytes, 64);
@@ -280,6 +301,22 @@ mod tests {
         tokio::time::advance(Duration::from_secs(10)).await;
         assert!(r.frames(None).is_empty());
         assert_eq!(r.stats().evicted, 2);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn recording_evicts_by_age_once_a_second_past_the_bound_and_a_read_at_once() {
+        let r = recorder(Limits { bytes: 1 << 20, seconds: 10 });
+        r.record(Direction::Sent, b"a", Annotations::default());
+        tokio::time::advance(Duration::from_millis(10_500)).await;
+        r.record(Direction::Sent, b"b", Annotations::default());
+        assert_eq!(r.stats().frames, 2, "a is 0.5 s past the bound: kept until the next batch");
+        tokio::time::advance(Duration::from_secs(1)).await;
+        r.record(Direction::Sent, b"c", Annotations::default());
+        assert_eq!((r.stats().frames, r.stats().evicted), (2, 1), "1.5 s past: evicted by recording");
+        tokio::time::advance(Duration::from_millis(9_500)).await;
+        assert_eq!(r.stats().frames, 2, "b is 0.5 s past the bound");
+        assert_eq!(sizes(&r.frames(None)), [1], "a read never returns it");
+        assert_eq!(r.stats().frames, 1);
     }
 
     #[test]

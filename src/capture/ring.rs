@@ -39,6 +39,9 @@ const NOTE: u8 = 16;
 pub(super) struct Ring {
     bytes: VecDeque<u8>,
     frames: usize,
+    /// The oldest record's time, kept apart: the age bound is checked on every record, and
+    /// the ring's start is memory nobody touched for minutes (a cache miss each time).
+    oldest_us: Option<u64>,
 }
 
 impl Ring {
@@ -101,11 +104,12 @@ impl Ring {
         }
         self.bytes.extend(frame);
         self.frames += 1;
+        self.oldest_us.get_or_insert(time_us);
     }
 
     /// The oldest record's time, if any.
     pub fn oldest_us(&self) -> Option<u64> {
-        (!self.bytes.is_empty()).then(|| u64::from_le_bytes(self.head_bytes::<8>(0)))
+        self.oldest_us
     }
 
     /// Drops the oldest record.
@@ -116,13 +120,16 @@ impl Ring {
         let len = u32::from_le_bytes(self.head_bytes::<4>(8)) as usize;
         self.bytes.drain(..len.min(self.bytes.len()));
         self.frames -= 1;
+        self.oldest_us = (!self.bytes.is_empty()).then(|| u64::from_le_bytes(self.head_bytes::<8>(0)));
     }
 
     /// `N` bytes of the oldest record's head from `at`.
     fn head_bytes<const N: usize>(&self, at: usize) -> [u8; N] {
         let mut out = [0u8; N];
-        for (o, b) in out.iter_mut().zip(self.bytes.range(at..at + N)) {
-            *o = *b;
+        match self.bytes.as_slices().0.get(at..at + N) {
+            Some(part) => out.copy_from_slice(part),
+            // Across the ring's wrap.
+            None => out.iter_mut().zip(self.bytes.range(at..at + N)).for_each(|(o, b)| *o = *b),
         }
         out
     }
