@@ -181,7 +181,9 @@ impl<'a> Retry<'a> {
             timeout: policy.timeout,
             reply_window: window,
         };
-        if let Some(r) = self.health.recorder() {
+        // A first attempt finds the recorder's context clear: a request that retried clears
+        // it when it ends (`Drop`), so the common path takes no lock on the recorder.
+        if let (Some(r), true) = (self.health.recorder(), self.made > 0) {
             r.set_attempt(self.made, self.last.as_ref().map(AttemptError::as_cause));
         }
         self.sent.push(now);
@@ -194,7 +196,6 @@ impl<'a> Retry<'a> {
     /// attributed to one transmission (no transaction id): by Karn's rule it gives a round
     /// trip only when there was no earlier attempt.
     pub fn succeeded(self) {
-        self.done();
         let clean = self.made == 1;
         if clean {
             self.sample(0);
@@ -205,16 +206,8 @@ impl<'a> Retry<'a> {
     /// The request was answered by a reply matched by id to attempt `number`: an
     /// unambiguous round trip from that attempt's transmission, retried or not.
     pub fn succeeded_by(self, number: u32) {
-        self.done();
         self.sample(number);
         self.health.finished(self.made > 1);
-    }
-
-    /// The request is over: frames sent after it (a broadcast) are no attempt's.
-    fn done(&self) {
-        if let Some(r) = self.health.recorder() {
-            r.set_attempt(0, None);
-        }
     }
 
     fn sample(&self, number: u32) {
@@ -231,7 +224,6 @@ impl<'a> Retry<'a> {
     /// [`Retry::succeeded`] does) is returned as the request's error at once.
     pub fn failed(&mut self, e: AttemptError) -> Result<(), PlcError> {
         if !e.is_retryable() {
-            self.done();
             let clean = self.made == 1;
             if clean {
                 self.sample(0);
@@ -251,11 +243,20 @@ impl<'a> Retry<'a> {
 
     /// The request's error once every attempt failed: the last failure, with the replies
     /// dropped meanwhile when it is a timeout.
-    pub fn spent(self) -> PlcError {
-        self.done();
+    pub fn spent(mut self) -> PlcError {
         self.health.finished(true);
         let dropped = self.health.dropped_this_request();
-        self.last.unwrap_or(AttemptError::Timeout).into_plc_error(self.made, self.last_window, dropped)
+        self.last.take().unwrap_or(AttemptError::Timeout).into_plc_error(self.made, self.last_window, dropped)
+    }
+}
+
+impl Drop for Retry<'_> {
+    /// The request is over (answered, failed, or given up by a cancelled caller): frames
+    /// sent after it (a broadcast) are no attempt's.
+    fn drop(&mut self) {
+        if let (Some(r), true) = (self.health.recorder(), self.made > 1) {
+            r.set_attempt(0, None);
+        }
     }
 }
 
