@@ -39,7 +39,7 @@ use super::mewtocol::frame::GLOBAL_STATION;
 use super::mewtocol::{MewtocolClient, MewtocolConfig, MewtocolTransport};
 use super::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use super::ppi::{PpiClient, PpiConfig, PpiTransport};
-use super::protocol::{Family, Protocol, Quirk, names};
+use super::protocol::{Family, Protocol, Quirk, Replies, names};
 use super::serial::SerialSettings;
 use super::transport::LinkTuning;
 use super::{PlcError, PlcMemory};
@@ -146,7 +146,7 @@ impl LinkConfig {
             timeout: DEFAULT_TIMEOUT,
             retries: DEFAULT_RETRIES,
             quirks: BTreeSet::new(),
-            tuning: LinkTuning::for_protocol(protocol),
+            tuning: LinkTuning::for_replies(protocol.replies(&BTreeSet::new())),
             capture: Limits::default(),
         }
     }
@@ -154,6 +154,11 @@ impl LinkConfig {
     /// The flight recorder's bounds, or `None` when capture is off.
     pub fn capture_limits(&self) -> Option<Limits> {
         (self.capture.bytes > 0).then_some(self.capture)
+    }
+
+    /// Whether the link's replies name their request ([`Protocol::replies`]).
+    pub fn replies(&self) -> Replies {
+        self.protocol.replies(&self.quirks)
     }
 
     /// Whether the link has `quirk`.

@@ -32,7 +32,7 @@ use async_trait::async_trait;
 use protocol::Family;
 
 pub use error::{DropReason, Dropped, PlcError};
-pub use protocol::{Protocol, Quirk};
+pub use protocol::{Protocol, Quirk, Replies};
 
 /// A named memory area of a PLC in the protocol's own notation, upper-cased
 /// (`"4X"` holding registers, `"D"` data registers, `"DT"`, `"V"`, ...).

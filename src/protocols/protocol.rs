@@ -11,6 +11,7 @@
 //! decides how replies are matched, as the transport does, and a protocol name is what
 //! `rackd plc` and the configuration already take.
 
+use std::collections::BTreeSet;
 use std::fmt;
 use std::str::FromStr;
 
@@ -71,6 +72,19 @@ pub enum Protocol {
     PpiTcp,
 }
 
+/// Whether a link's replies name the request they answer ([`Protocol::replies`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Replies {
+    /// Every reply carries an id its request chose (a transaction id, a serial number): a
+    /// late reply is told apart by its id, and a retry costs only the request itself.
+    Named,
+    /// Nothing in a reply names its request: a reply is taken only when the current
+    /// request is the only one that could have caused it, which the transport makes sure
+    /// of before each send (its module documentation: "Links whose replies name no
+    /// request").
+    Unnamed,
+}
+
 /// The protocol families: one frame format, one address notation, one client each.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Family {
@@ -119,11 +133,31 @@ impl Protocol {
         }
     }
 
-    /// Whether a reply names the request it answers (Modbus TCP and UDP: the transaction
-    /// id; MC 4E: the serial number), so that a late reply can never pass for another
-    /// request's answer and a resend costs only the request itself.
-    pub fn matches_replies(self) -> bool {
-        matches!(self, Protocol::ModbusUdp | Protocol::ModbusTcp | Protocol::Mc4e | Protocol::Mc4eUdp)
+    /// Whether a link's replies name the request they answer: decided by the protocol
+    /// *and* the link's quirks, here and nowhere else. Modbus TCP and UDP name it by the
+    /// transaction id unless the PLC does not echo it (`no-transaction-id`); MC 4E by the
+    /// serial number. Modbus RTU (on a line or over TCP), MC 3E, MEWTOCOL and PPI cannot:
+    /// PPI's PDU reference is checked when the PLC echoes it, but its two-step exchange on
+    /// a half-duplex line is held like the other lines' (`ppi.rs`'s module documentation).
+    ///
+    /// Everything that depends on it asks this: the adaptive timeout's floor
+    /// ([`crate::protocols::transport::LinkTuning::for_replies`]), the rule against late
+    /// replies (the transport's module documentation), Karn's rule on round trips, and
+    /// whether a dropped reply is counted stale or foreign.
+    pub fn replies(self, quirks: &BTreeSet<Quirk>) -> Replies {
+        let named = match self {
+            Protocol::ModbusUdp | Protocol::ModbusTcp => !quirks.contains(&Quirk::NoTransactionId),
+            Protocol::Mc4e | Protocol::Mc4eUdp => true,
+            Protocol::ModbusRtu
+            | Protocol::ModbusRtuTcp
+            | Protocol::Mc3e
+            | Protocol::Mc3eUdp
+            | Protocol::Mewtocol
+            | Protocol::MewtocolTcp
+            | Protocol::Ppi
+            | Protocol::PpiTcp => false,
+        };
+        if named { Replies::Named } else { Replies::Unnamed }
     }
 
     /// The family: which frames, notation and client.
@@ -264,7 +298,6 @@ mod tests {
         assert_eq!("mc4e-tcp".parse::<Protocol>(), Ok(Protocol::Mc4e));
         assert_eq!(<Protocol as clap::ValueEnum>::from_str("mc4e-tcp", false), Ok(Protocol::Mc4e));
         assert_eq!(Protocol::Mc4eUdp.family(), Family::Mc3e);
-        assert!(Protocol::Mc4eUdp.matches_replies() && !Protocol::Mc3eUdp.matches_replies());
         let err = "mc9".parse::<Protocol>().unwrap_err().to_string();
         assert!(err.contains("mc9") && err.contains("modbus-rtu-tcp"), "{err}");
     }
@@ -277,6 +310,19 @@ mod tests {
         let serial: Vec<_> = Protocol::ALL.into_iter().filter(|p| p.is_serial()).collect();
         assert_eq!(serial, [Protocol::ModbusRtu, Protocol::Mewtocol, Protocol::Ppi]);
         assert_eq!(Protocol::ModbusRtuTcp.family(), Family::Modbus);
+    }
+
+    #[test]
+    fn whether_replies_name_their_request_is_the_protocols_and_the_quirks() {
+        let none = BTreeSet::new();
+        let no_tid = BTreeSet::from([Quirk::NoTransactionId, Quirk::Length0]);
+        let named: Vec<_> =
+            Protocol::ALL.into_iter().filter(|p| p.replies(&none) == Replies::Named).collect();
+        assert_eq!(named, [Protocol::ModbusUdp, Protocol::ModbusTcp, Protocol::Mc4e, Protocol::Mc4eUdp]);
+        assert_eq!(Protocol::ModbusUdp.replies(&no_tid), Replies::Unnamed, "the seed's shelf PLC");
+        assert_eq!(Protocol::ModbusTcp.replies(&no_tid), Replies::Unnamed);
+        assert_eq!(Protocol::ModbusUdp.replies(&BTreeSet::from([Quirk::Length0])), Replies::Named);
+        assert_eq!(Protocol::Ppi.replies(&none), Replies::Unnamed, "a half-duplex line");
     }
 
     #[test]

@@ -219,7 +219,7 @@ async fn responses_with_a_wrong_fcs_are_rejected() {
     let mut c = config(PpiTransport::Tcp, &fake(hex(seed)).await);
     c.retries = 0;
     let err = PpiClient::new(c).unwrap().read(read).await.unwrap_err();
-    assert!(matches!(err, PlcError::Malformed(m) if m.contains("stale")), "{err:?}");
+    assert!(matches!(err, PlcError::Malformed(m) if m.contains("foreign")), "{err:?}");
     // The same response with its FCS changed: rejected on every attempt.
     let mut c = config(PpiTransport::Tcp, &fake(hex(&seed.replace("8B 16", "8C 16"))).await);
     c.match_pdu_ref = false;

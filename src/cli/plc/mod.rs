@@ -41,6 +41,7 @@ use self::item::Target;
 use self::poll::Output;
 use crate::protocols::link::{self, LinkConfig, LinkError};
 use crate::protocols::serial::SerialSettings;
+use crate::protocols::transport::LinkTuning;
 use crate::protocols::{PlcMemory, Protocol, Quirk};
 use crate::wire::tags::spec::native_order;
 
@@ -214,7 +215,9 @@ impl PlcArgs {
             quirks: flags.into_iter().filter(|(on, _)| *on).map(|(_, q)| q).collect(),
             ..LinkConfig::new(self.protocol, flags::address(self.protocol, &self.address)?)
         };
-        // A one-off request has no round trips to learn from; the floor only has to fit.
+        // The floor follows the quirks (a PLC without transaction ids gets the longer one);
+        // a one-off request has no round trips to learn from, so it only has to fit.
+        link.tuning = LinkTuning::for_replies(link.replies());
         link.tuning.min_timeout = link.tuning.min_timeout.min(link.timeout);
         if self.capture.is_some() {
             link.capture = Capture::limits();

@@ -172,7 +172,8 @@ impl RawDevice {
             Some(Unit::Global) => return Err(AddressError::GlobalStation(protocol).into()),
             None => protocol.default_unit(),
         };
-        let d = LinkTuning::for_protocol(protocol);
+        let quirks = self.quirks.clone().unwrap_or(quirks);
+        let d = LinkTuning::for_replies(protocol.replies(&quirks));
         Ok(LinkConfig {
             protocol,
             address: self.address.clone(),
@@ -180,7 +181,7 @@ impl RawDevice {
             serial,
             timeout: self.timeout_ms.map_or(timeout, Duration::from_millis),
             retries: self.retries.unwrap_or(DEFAULT_RETRIES),
-            quirks: self.quirks.clone().unwrap_or(quirks),
+            quirks,
             tuning: LinkTuning {
                 min_timeout: self.min_timeout_ms.map_or(d.min_timeout, Duration::from_millis),
                 degraded_window: self.degraded_window.unwrap_or(d.degraded_window),

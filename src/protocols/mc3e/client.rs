@@ -21,7 +21,7 @@ use super::frame::{self, FrameKind, MAX_BIT_POINTS, MAX_WORD_POINTS, Route};
 use super::link::{Expect, Link, LinkConfig, TransportKind};
 use super::request::{Command, Request};
 use crate::protocols::transport::Backoff;
-use crate::protocols::{Address, PlcError, PlcMemory};
+use crate::protocols::{Address, PlcError, PlcMemory, Protocol, Replies};
 
 /// Everything configurable about one PLC connection.
 #[derive(Clone, Debug)]
@@ -38,6 +38,21 @@ pub struct Mc3eConfig {
 }
 
 impl Mc3eConfig {
+    /// The protocol this configuration speaks.
+    pub fn protocol(&self) -> Protocol {
+        match (self.frame, self.link.transport) {
+            (FrameKind::E3, TransportKind::Tcp) => Protocol::Mc3e,
+            (FrameKind::E3, TransportKind::Udp) => Protocol::Mc3eUdp,
+            (FrameKind::E4, TransportKind::Tcp) => Protocol::Mc4e,
+            (FrameKind::E4, TransportKind::Udp) => Protocol::Mc4eUdp,
+        }
+    }
+
+    /// Whether the replies name their request ([`Protocol::replies`]: 4E frames do).
+    pub fn replies(&self) -> Replies {
+        self.protocol().replies(&std::collections::BTreeSet::new())
+    }
+
     /// Defaults for `HOST:PORT` over `transport`: route 00/FF/03FF/00, monitoring timer 4
     /// (1 s), timeout 1.5 s, 2 retries, reconnect backoff 100 ms doubling to 5 s, an
     /// ephemeral local UDP port, and no recorder.
@@ -73,7 +88,20 @@ pub struct Mc3eClient {
 impl Mc3eClient {
     /// A client for `config`; it connects on the first request.
     pub fn new(config: Mc3eConfig) -> Mc3eClient {
-        let link = Link::new(config.link);
+        let replies = config.replies();
+        Self::with(&config, Link::new(config.link.clone(), replies))
+    }
+
+    /// A client over carriers the caller dials (the seeded wire simulation of the tests).
+    pub fn over(
+        config: Mc3eConfig,
+        dial: std::sync::Arc<dyn crate::protocols::transport::Dial>,
+    ) -> Mc3eClient {
+        let link = Link::over(&config.link, config.replies(), dial);
+        Self::with(&config, link)
+    }
+
+    fn with(config: &Mc3eConfig, link: Link) -> Mc3eClient {
         Mc3eClient {
             route: config.route,
             monitor_timer: config.monitor_timer,

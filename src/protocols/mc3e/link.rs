@@ -3,23 +3,21 @@
 //!
 //! 4E frames carry a serial number the reply echoes: a reply with another serial (a late
 //! answer to an earlier request) is dropped and counted as a stale reply, over UDP and TCP
-//! alike, and the wait goes on for the right one. Plain 3E frames carry no serial number, so
-//! a reply cannot be matched to its request by content alone. The defences (both frames):
-//! - one request in flight per link (the client holds the link's lock for the exchange);
-//! - every exchange is exclusive: after one that did not finish (a timeout, a malformed
-//!   reply, a caller that gave up), the TCP connection is closed, or the UDP socket
-//!   dropped and the next attempt binds a new ephemeral port, so a late reply to the old
-//!   request lands on a closed socket and can never be read as the next request's answer;
-//! - UDP: before each send, datagrams already waiting are drained and discarded; every
-//!   datagram is checked for shape (subheader, route echo, data length for the points
-//!   requested, command in the error information) and discarded if it does not fit;
-//! - TCP: input already waiting before a request (a duplicated reply) is thrown away, and
-//!   the reply's length field is never trusted past the longest valid reply.
+//! alike, and the wait goes on for the right one. Plain 3E frames carry no serial number:
+//! their replies name no request ([`crate::protocols::Protocol::replies`]), and the link
+//! keeps the transport's rule for such links before each send (`StreamLink::settle`,
+//! `DatagramLink::settle`): after an exchange that was not answered (a timeout, a
+//! malformed reply, a caller that gave up), the TCP connection is replaced, or the UDP
+//! socket moves to a new ephemeral port (the old one kept bound until its replies are
+//! past), so a late reply to the old request can never be read as the next request's
+//! answer; then input already waiting is thrown away. Every reply is also checked for
+//! shape (subheader, route echo, data length for the points requested, command in the
+//! error information), and on TCP the reply's length field is never trusted past the
+//! longest valid reply.
 //!
-//! Limitation (UDP with a fixed local port, `udp_local`, as some Ethernet-module open
-//! settings require): a late reply that arrives after the drain and has the same shape as
-//! the new request's reply (same command and point count) cannot be told apart and will be
-//! taken. Use ephemeral ports, TCP, or 4E frames where this matters.
+//! With a fixed local UDP port (`udp_local`, as some Ethernet-module open settings
+//! require) the port cannot be replaced: the link holds the socket until nothing has
+//! arrived for the configured timeout instead, before the request after an unanswered one.
 //!
 //! An error reply (nonzero end code) may carry any number of bytes after the end code (see
 //! [`super::response`]): on TCP its length field is allowed up to the longest reply any
@@ -37,10 +35,10 @@ use super::frame::{self, Direction, MAX_WORD_POINTS, Route};
 use super::response::{ErrorInfo, Outcome, Response};
 use crate::capture::{Limits, Verdict};
 use crate::protocols::transport::{
-    Attempt, AttemptError, Backoff, DatagramLink, Endpoint, LinkHealth, LinkTuning, Retry, RetryPolicy,
-    StreamLink, recorder_for,
+    Attempt, AttemptError, Backoff, DatagramLink, Endpoint, Guard, LinkHealth, LinkTuning, Retry,
+    RetryPolicy, StreamLink, recorder_for,
 };
-use crate::protocols::{DeviceCode, DropReason, PlcError};
+use crate::protocols::{DeviceCode, DropReason, PlcError, Replies};
 
 /// TCP or UDP.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -67,7 +65,8 @@ pub struct LinkConfig {
     pub tuning: LinkTuning,
     /// Waits between failed TCP connects.
     pub backoff: Backoff,
-    /// Fixed local UDP address (None: a fresh ephemeral port after each failed exchange).
+    /// Fixed local UDP address (None: a fresh ephemeral port after an exchange that was not
+    /// answered).
     pub udp_local: Option<SocketAddr>,
     /// The flight recorder's bounds; `None` records nothing.
     pub capture: Option<Limits>,
@@ -149,26 +148,46 @@ pub(crate) struct Link {
 }
 
 impl Link {
-    pub fn new(config: LinkConfig) -> Link {
+    /// A link for `config`, whose replies name their request (4E frames) or not (3E).
+    pub fn new(config: LinkConfig, replies: Replies) -> Link {
         let described = match config.transport {
             TransportKind::Tcp => Endpoint::Tcp(config.address.clone()),
             TransportKind::Udp => Endpoint::Udp { peer: config.address.clone(), local: config.udp_local },
         };
         let recorder = recorder_for(config.capture, &described, None);
+        let named = replies == Replies::Named;
         let carrier = match config.transport {
             TransportKind::Tcp => {
-                let mut link = StreamLink::new(described, config.backoff);
+                // The module ends the connection itself: a new one carries nothing of the old.
+                let mut link = StreamLink::new(described, config.backoff, Guard::of(replies, true));
                 link.set_recorder(recorder.clone());
                 Carrier::Tcp(link)
             }
             TransportKind::Udp => {
-                let mut link = DatagramLink::new(config.address, config.udp_local, config.backoff);
+                let mut link = DatagramLink::new(config.address, config.udp_local, config.backoff, named);
                 link.set_recorder(recorder.clone());
                 Carrier::Udp(link)
             }
         };
         let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
         Link { carrier, health: Arc::new(LinkHealth::new(policy).recording(recorder)) }
+    }
+
+    /// A link over carriers the caller dials (the seeded wire simulation of the tests):
+    /// connections over `TransportKind::Tcp`, datagram ports over `TransportKind::Udp`.
+    pub fn over(
+        config: &LinkConfig,
+        replies: Replies,
+        dial: Arc<dyn crate::protocols::transport::Dial>,
+    ) -> Link {
+        let endpoint = Endpoint::Dial(dial);
+        let guard = Guard::of(replies, true);
+        let carrier = match config.transport {
+            TransportKind::Tcp => Carrier::Tcp(StreamLink::new(endpoint, config.backoff, guard)),
+            TransportKind::Udp => Carrier::Udp(DatagramLink::over(endpoint, config.backoff, guard)),
+        };
+        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
+        Link { carrier, health: Arc::new(LinkHealth::new(policy)) }
     }
 
     /// The link's health, shared with the client (read without the link's lock).
@@ -207,13 +226,9 @@ async fn tcp_attempt(
     health: &LinkHealth,
     attempt: &Attempt,
 ) -> Result<Outcome, AttemptError> {
-    link.begin_exclusive();
-    // A reply already waiting (a device that answered twice) is not this request's.
-    if link.flush_stale(attempt.timeout).await? {
-        tracing::debug!("mc3e tcp: discarded stale input");
-        health.dropped(DropReason::Stale);
-    }
+    health.settled(link.settle(attempt).await?);
     link.send(frame, attempt.timeout).await?;
+    let attempt = &attempt.restarted();
     let mut responses = Responses { max_len: 2 + expect.data_len.max(ErrorInfo::LEN) };
     loop {
         let Some(bytes) = link.read_frame(&mut responses, attempt.deadline).await? else {
@@ -223,14 +238,17 @@ async fn tcp_attempt(
         link.judged(checked.as_ref().map_or_else(Mismatch::verdict_on_tcp, |_| Verdict::Ok));
         match checked {
             Ok(outcome) => {
-                link.finished();
+                link.answered();
                 return Ok(outcome);
             }
             Err(Mismatch::Serial) => {
                 tracing::debug!("mc4e tcp: dropped a reply with another serial number");
                 health.dropped(DropReason::Stale);
             }
-            Err(Mismatch::Other(why)) => return Err(AttemptError::Malformed(why)),
+            Err(Mismatch::Other(why)) => {
+                link.unsettle();
+                return Err(AttemptError::Malformed(why));
+            }
         }
     }
 }
@@ -242,20 +260,16 @@ async fn udp_attempt(
     health: &LinkHealth,
     attempt: &Attempt,
 ) -> Result<Outcome, AttemptError> {
-    link.begin_exclusive();
-    let stale = link.flush_stale(attempt.timeout).await?;
-    if stale > 0 {
-        tracing::debug!(stale, "mc3e udp: discarded stale datagrams");
-        health.dropped_n(DropReason::Stale, stale);
-    }
+    health.settled(link.settle(attempt).await?);
     link.send(frame, attempt.timeout).await?;
+    let attempt = &attempt.restarted();
     loop {
         let Some(datagram) = link.recv(attempt.deadline).await? else { return Err(AttemptError::Timeout) };
         let checked = check(datagram, expect);
         link.judged(checked.as_ref().map_or(Verdict::StaleReply, |_| Verdict::Ok));
         match checked {
             Ok(outcome) => {
-                link.finished();
+                link.answered();
                 return Ok(outcome);
             }
             Err(Mismatch::Serial) => {
@@ -265,6 +279,7 @@ async fn udp_attempt(
             Err(Mismatch::Other(why)) => {
                 tracing::debug!(why, "mc3e udp: discarded a datagram that is not this reply");
                 health.dropped(DropReason::Stale);
+                link.unsettle();
             }
         }
     }

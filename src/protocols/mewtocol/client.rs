@@ -11,8 +11,8 @@ use super::frame::{self, Bcc, GLOBAL_STATION, Kind, MAX_LONG, MAX_SHORT};
 use crate::capture::{Limits, Recorder, SerialProtocol, Verdict};
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
-    Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, Retry,
-    RetryPolicy, Scanner, StreamLink, recorder_for,
+    Attempt, AttemptError, Backoff, ByteStream, Dial, Endpoint, Guard, LinkHealth, LinkStats, LinkTuning,
+    Retry, RetryPolicy, Scanner, StreamLink, recorder_for,
 };
 use crate::protocols::{DeviceCode, DropReason, PlcError};
 
@@ -120,12 +120,17 @@ impl MewtocolClient {
         Self::with(config, Endpoint::given(stream))
     }
 
+    /// A client over a line the caller dials (the seeded wire simulation of the tests).
+    pub fn over(config: MewtocolConfig, dial: std::sync::Arc<dyn Dial>) -> Result<Self, PlcError> {
+        Self::with(config, Endpoint::Dial(dial))
+    }
+
     fn with(config: MewtocolConfig, endpoint: Endpoint) -> Result<Self, PlcError> {
         check_station(config.station)?;
         let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
         let recorder = recorder_for(config.capture, &endpoint, Some(SerialProtocol::Mewtocol));
         let health = LinkHealth::new(policy).recording(recorder.clone());
-        let mut link = StreamLink::new(endpoint, Backoff::default());
+        let mut link = StreamLink::new(endpoint, Backoff::default(), Guard::Wait);
         link.set_recorder(recorder);
         Ok(MewtocolClient { config, health, link: Mutex::new(link) })
     }
@@ -171,8 +176,8 @@ impl MewtocolClient {
         Err(retry.spent())
     }
 
-    /// One attempt: hold the line after a timeout or retry, flush stale input, send, and
-    /// wait for this station's reply.
+    /// One attempt: keep the transport's rule for a line (hold it while a reply may be
+    /// owed, flush stale input), send, and wait for this station's reply.
     async fn attempt(
         &self,
         link: &mut StreamLink,
@@ -181,9 +186,6 @@ impl MewtocolClient {
         attempt: &Attempt,
     ) -> Result<Response, AttemptError> {
         self.health.settled(link.settle(attempt).await?);
-        if link.flush_stale(attempt.timeout).await? {
-            self.health.dropped(DropReason::Stale);
-        }
         link.send(tx, attempt.timeout).await?;
         let attempt = &attempt.restarted();
         let mut reason = None;

@@ -13,7 +13,7 @@ use super::rtu;
 use crate::capture::{Recorder, SerialProtocol};
 use crate::protocols::PlcError;
 use crate::protocols::transport::{
-    Attempt, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, Retry, RetryPolicy, StreamLink,
+    Attempt, Backoff, ByteStream, Endpoint, Guard, LinkHealth, LinkStats, Retry, RetryPolicy, StreamLink,
     recorder_for,
 };
 
@@ -61,23 +61,26 @@ impl ModbusClient {
         };
         let recorder = recorder(&config, &described);
         let counters = Arc::new(Counters::new(LinkHealth::new(policy).recording(recorder.clone())));
+        let replies = config.replies();
         let mut link = match config.transport {
             Transport::Udp => {
-                let mut udp = UdpLink::new(config.address.clone(), config.quirks, counters.clone());
+                let mut udp = UdpLink::new(config.address.clone(), config.quirks, replies, counters.clone());
                 udp.set_recorder(recorder.clone());
                 udp.open(config.timeout).await.map_err(|e| e.once(&policy))?;
                 Link::Udp(udp)
             }
             Transport::Tcp => {
-                Link::Tcp(TcpLink::new(config.address.clone(), config.quirks, counters.clone()))
+                Link::Tcp(TcpLink::new(config.address.clone(), config.quirks, replies, counters.clone()))
             }
+            // A serial gateway hands a late reply to whichever connection is open: a line.
             Transport::RtuOverTcp => {
-                let link = StreamLink::new(Endpoint::Tcp(config.address.clone()), Backoff::default());
+                let link =
+                    StreamLink::new(Endpoint::Tcp(config.address.clone()), Backoff::default(), Guard::Wait);
                 Link::Rtu(RtuLink::new(link, rtu::silence(0), counters.clone()))
             }
             Transport::RtuSerial => {
                 let endpoint = Endpoint::Serial { path: config.address.clone(), settings: config.serial };
-                let link = StreamLink::new(endpoint, Backoff::default());
+                let link = StreamLink::new(endpoint, Backoff::default(), Guard::Wait);
                 Link::Rtu(RtuLink::new(link, rtu::silence(config.serial.baud), counters.clone()))
             }
         };
@@ -100,10 +103,38 @@ impl ModbusClient {
         let endpoint = Endpoint::given(stream);
         let recorder = recorder(&config, &endpoint);
         let counters = Arc::new(Counters::new(LinkHealth::new(policy).recording(recorder.clone())));
-        let mut link = StreamLink::new(endpoint, Backoff::default());
+        let mut link = StreamLink::new(endpoint, Backoff::default(), Guard::Wait);
         link.set_recorder(recorder.clone());
         let link = Link::Rtu(RtuLink::new(link, rtu::silence(config.serial.baud), counters.clone()));
         Ok(ModbusClient { config, policy, link: Mutex::new(link), counters, recorder })
+    }
+
+    /// A client over carriers the caller dials (the seeded wire simulation of the tests),
+    /// framed as `config.transport` says: datagrams for UDP, connections for TCP (each
+    /// dial a new one), a line for RTU (each dial the same line again).
+    pub fn over(
+        config: ModbusConfig,
+        dial: Arc<dyn crate::protocols::transport::Dial>,
+    ) -> Result<Self, PlcError> {
+        config.transport.check_unit(config.unit).map_err(PlcError::OutOfRange)?;
+        let policy = RetryPolicy { timeout: config.timeout, retries: config.retries, tuning: config.tuning };
+        let counters = Arc::new(Counters::new(LinkHealth::new(policy)));
+        let replies = config.replies();
+        let endpoint = Endpoint::Dial(dial);
+        let link = match config.transport {
+            Transport::Udp => {
+                let guard = Guard::of(replies, true);
+                let link =
+                    crate::protocols::transport::DatagramLink::over(endpoint, Backoff::default(), guard);
+                Link::Udp(UdpLink::over(link, config.quirks, replies, counters.clone()))
+            }
+            Transport::Tcp => Link::Tcp(TcpLink::over(endpoint, config.quirks, replies, counters.clone())),
+            Transport::RtuSerial | Transport::RtuOverTcp => {
+                let link = StreamLink::new(endpoint, Backoff::default(), Guard::Wait);
+                Link::Rtu(RtuLink::new(link, rtu::silence(config.serial.baud), counters.clone()))
+            }
+        };
+        Ok(ModbusClient { config, policy, link: Mutex::new(link), counters, recorder: None })
     }
 
     /// The configuration this client was built with.

@@ -1,10 +1,12 @@
 //! How to reach one Modbus device: transport, address, unit, timing and quirks.
 
+use std::collections::BTreeSet;
 use std::time::Duration;
 
 use crate::capture::Limits;
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::LinkTuning;
+use crate::protocols::{Protocol, Quirk, Replies};
 
 /// The framing and carrier of a Modbus link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -42,10 +44,10 @@ pub struct Quirks {
     /// The device answers with an MBAP length field of 0 (the shelf PLC): take the PDU
     /// length from the datagram (UDP) or from the PDU itself (TCP). Requests stay standard.
     pub length0: bool,
-    /// The device does not echo the transaction id: match replies by unit, function and
-    /// write echo only. Over UDP stale datagrams are flushed before each request; over TCP
-    /// the connection is closed after an exchange that did not finish, so a late reply
-    /// cannot be mistaken.
+    /// The device does not echo the transaction id: its replies name no request
+    /// ([`Protocol::replies`]), so they are matched by unit, function and write echo only,
+    /// under the transport's rule against late replies (a new UDP port or TCP connection
+    /// after an exchange that was not answered).
     pub ignore_transaction_id: bool,
 }
 
@@ -91,10 +93,34 @@ impl ModbusConfig {
         }
     }
 
-    /// The shelf PLC of the seed: Modbus UDP, unit 1, length-0 replies.
+    /// The shelf PLC of the seed: Modbus UDP, unit 1, length-0 replies with transaction id
+    /// 0 whatever was sent.
     pub fn shelf_plc(address: impl Into<String>) -> Self {
         let mut config = ModbusConfig::new(Transport::Udp, address);
-        config.quirks.length0 = true;
+        config.quirks = Quirks { length0: true, ignore_transaction_id: true };
         config
+    }
+
+    /// The protocol this configuration speaks.
+    pub fn protocol(&self) -> Protocol {
+        match self.transport {
+            Transport::Tcp => Protocol::ModbusTcp,
+            Transport::Udp => Protocol::ModbusUdp,
+            Transport::RtuSerial => Protocol::ModbusRtu,
+            Transport::RtuOverTcp => Protocol::ModbusRtuTcp,
+        }
+    }
+
+    /// Whether the replies name their request ([`Protocol::replies`]).
+    pub fn replies(&self) -> Replies {
+        self.protocol().replies(&self.quirks.set())
+    }
+}
+
+impl Quirks {
+    /// The quirks as the configuration names them.
+    pub fn set(&self) -> BTreeSet<Quirk> {
+        let on = [(self.length0, Quirk::Length0), (self.ignore_transaction_id, Quirk::NoTransactionId)];
+        on.into_iter().filter(|(on, _)| *on).map(|(_, q)| q).collect()
     }
 }

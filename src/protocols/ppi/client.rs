@@ -1,7 +1,6 @@
 //! The PPI master: one S7-200 over a serial line (9600/19200/187500 baud, 8E1) or raw TCP
 //! through a gateway, with the two-step exchange, timeouts and retries in one place.
 
-use std::sync::atomic::{AtomicU16, Ordering};
 use std::time::Duration;
 
 use tokio::sync::Mutex;
@@ -12,8 +11,8 @@ use super::return_code::ReturnCode;
 use crate::capture::{Limits, Recorder, SerialProtocol, Verdict};
 use crate::protocols::serial::SerialSettings;
 use crate::protocols::transport::{
-    Attempt, AttemptError, Backoff, ByteStream, Endpoint, LinkHealth, LinkStats, LinkTuning, Retry,
-    RetryPolicy, Scanner, StreamLink, recorder_for,
+    Attempt, AttemptError, Backoff, ByteStream, Dial, Endpoint, Guard, LinkHealth, LinkStats, LinkTuning,
+    RecentIds, Retry, RetryPolicy, Scanner, StreamLink, recorder_for,
 };
 use crate::protocols::{DeviceCode, DropReason, PlcError};
 
@@ -76,8 +75,13 @@ impl PpiConfig {
 pub struct PpiClient {
     config: PpiConfig,
     health: LinkHealth,
-    link: Mutex<StreamLink>,
-    next_ref: AtomicU16,
+    link: Mutex<PpiLink>,
+}
+
+/// The line and the PDU references given on it (see the transport's `ids.rs`).
+struct PpiLink {
+    line: StreamLink,
+    refs: RecentIds,
 }
 
 fn check(config: &PpiConfig) -> Result<(), PlcError> {
@@ -104,10 +108,15 @@ impl PpiClient {
         Self::with(config, Endpoint::given(stream))
     }
 
+    /// A client over a line the caller dials (the seeded wire simulation of the tests).
+    pub fn over(config: PpiConfig, dial: std::sync::Arc<dyn Dial>) -> Result<Self, PlcError> {
+        Self::with(config, Endpoint::Dial(dial))
+    }
+
     fn with(config: PpiConfig, endpoint: Endpoint) -> Result<Self, PlcError> {
         check(&config)?;
         let recorder = recorder_for(config.capture, &endpoint, Some(SerialProtocol::Ppi));
-        let mut link = StreamLink::new(endpoint, Backoff::default());
+        let mut link = StreamLink::new(endpoint, Backoff::default(), Guard::Wait);
         link.set_recorder(recorder.clone());
         Ok(PpiClient {
             health: LinkHealth::new(RetryPolicy {
@@ -117,8 +126,7 @@ impl PpiClient {
             })
             .recording(recorder),
             config,
-            link: Mutex::new(link),
-            next_ref: AtomicU16::new(rand::random()),
+            link: Mutex::new(PpiLink { line: link, refs: RecentIds::new() }),
         })
     }
 
@@ -165,11 +173,12 @@ impl PpiClient {
     pub async fn call(&self, request: &Request) -> Result<Reply, PlcError> {
         request.check().map_err(PlcError::OutOfRange)?;
         let mut link = self.link.lock().await;
+        let link = &mut *link;
         let mut refs = Vec::with_capacity(self.health.policy().attempts().min(8) as usize);
         let mut retry = Retry::start(&self.health, "ppi");
         while let Some(attempt) = retry.next_attempt() {
-            refs.push(self.next_ref.fetch_add(1, Ordering::Relaxed));
-            match self.attempt(&mut link, request, &refs, &attempt).await {
+            refs.push(link.refs.next());
+            match self.attempt(&mut link.line, &link.refs, request, &refs, &attempt).await {
                 Ok(Reply::ItemError(code)) => retry.failed(device(ReturnCode::Item(code)))?,
                 Ok(Reply::Refused { class, code }) => {
                     retry.failed(device(ReturnCode::Refused { class, code }))?
@@ -189,6 +198,7 @@ impl PpiClient {
     async fn attempt(
         &self,
         link: &mut StreamLink,
+        given: &RecentIds,
         request: &Request,
         refs: &[u16],
         attempt: &Attempt,
@@ -199,9 +209,6 @@ impl PpiClient {
         let mut tx = Vec::with_capacity(pdu.len() + 9);
         frame::encode_long(&mut tx, c.plc, c.master, request.fc(), &pdu);
         self.health.settled(link.settle(attempt).await?);
-        if link.flush_stale(attempt.timeout).await? {
-            self.health.dropped(DropReason::Stale);
-        }
         link.send(&tx, attempt.timeout).await?;
         let attempt = &attempt.restarted();
         let mut frames = Scanner::new(frame::scan);
@@ -240,10 +247,20 @@ impl PpiClient {
                             link.answered();
                             return Ok(reply);
                         }
-                        Ok(_) => {
-                            link.judged(Verdict::ForeignReply);
-                            self.health.dropped(DropReason::PduReference);
-                            reason = Some("stale reply (PDU reference of an earlier request)");
+                        // A reference this link gave an earlier request: a late reply, stale;
+                        // one it never gave: foreign (another master, a previous rackd).
+                        Ok((r, _)) => {
+                            let why = match given.ours(r) {
+                                true => DropReason::Stale,
+                                false => DropReason::PduReference,
+                            };
+                            link.judged(crate::protocols::transport::verdict_of(why));
+                            self.health.dropped(why);
+                            link.unsettle();
+                            reason = Some(match why {
+                                DropReason::Stale => "stale reply (PDU reference of an earlier request)",
+                                _ => "foreign reply (a PDU reference this master never sent)",
+                            });
                         }
                         Err(e) => {
                             let why = if matches!(e, super::pdu::PduError::Mismatch) {

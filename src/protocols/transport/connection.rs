@@ -4,10 +4,9 @@
 use std::io;
 use std::time::Duration;
 
-use tokio::net::UdpSocket;
 use tokio::time::Instant;
 
-use super::endpoint::{ByteStream, Carrier, Endpoint};
+use super::endpoint::{ByteStream, Carrier, DatagramPort, Endpoint};
 use super::retry::AttemptError;
 use super::tap::Tap;
 
@@ -39,8 +38,6 @@ pub(crate) struct Connection {
     /// No open before this instant (after a failed one).
     retry_at: Option<Instant>,
     last_error: Option<(io::ErrorKind, String)>,
-    /// An exchange began on the carrier and has not been marked finished.
-    unfinished: bool,
     /// The flight recorder of the link, told of each new socket pair.
     pub tap: Tap,
 }
@@ -55,7 +52,6 @@ impl Connection {
             next_wait: backoff.first,
             retry_at: None,
             last_error: None,
-            unfinished: false,
             tap: Tap::default(),
         }
     }
@@ -68,18 +64,12 @@ impl Connection {
         }
     }
 
-    /// The open UDP socket, opening it first if needed (see [`Connection::open`]).
-    pub async fn datagram(&mut self, timeout: Duration) -> Result<&UdpSocket, AttemptError> {
+    /// The open datagram port, opening it first if needed (see [`Connection::open`]).
+    pub async fn datagram(&mut self, timeout: Duration) -> Result<&dyn DatagramPort, AttemptError> {
         match self.open(timeout).await? {
-            Carrier::Datagram(socket) => Ok(socket),
+            Carrier::Datagram(socket) => Ok(&**socket),
             Carrier::Stream(_) => Err(not_a("datagram socket")),
         }
-    }
-
-    /// The open carrier, if any, without opening it.
-    #[cfg(test)]
-    pub fn carrier(&mut self) -> Option<&mut Carrier> {
-        self.carrier.as_mut()
     }
 
     /// The carrier, opened first if needed. A reopen waits out the backoff unless that wait
@@ -121,23 +111,10 @@ impl Connection {
         self.carrier = None;
     }
 
-    /// Starts an exchange that must have the carrier to itself: if the previous exclusive
-    /// exchange never finished (it failed, timed out or its caller gave up), the carrier is
-    /// closed first, so a reply still in flight to it lands on a closed socket and can never
-    /// be read as this exchange's answer. For protocols without a transaction id on
-    /// carriers that can be reopened (TCP, UDP). True if the carrier was closed.
-    pub fn begin_exclusive(&mut self) -> bool {
-        let close = self.unfinished && self.carrier.is_some();
-        if close {
-            self.reset();
-        }
-        self.unfinished = true;
-        close
-    }
-
-    /// Marks the exchange begun with [`Connection::begin_exclusive`] as answered.
-    pub fn finished(&mut self) {
-        self.unfinished = false;
+    /// Takes the open carrier away, if any, without closing it (a datagram port kept
+    /// bound while replies to it may still come); the next use opens a new one.
+    pub fn take(&mut self) -> Option<Carrier> {
+        self.carrier.take()
     }
 
     fn failed(&mut self, e: io::Error) -> AttemptError {
@@ -183,29 +160,5 @@ mod tests {
         assert!(conn.stream(Duration::from_secs(1)).await.is_ok());
         assert_eq!(conn.next_wait, backoff.first, "a success resets the wait");
         drop(listener);
-    }
-
-    #[tokio::test]
-    async fn an_unfinished_exclusive_exchange_closes_the_carrier() {
-        let socket = UdpSocket::bind("127.0.0.1:0").await.unwrap();
-        let endpoint = Endpoint::Udp { peer: socket.local_addr().unwrap().to_string(), local: None };
-        let mut conn = Connection::new(endpoint, Backoff::default());
-        let timeout = Duration::from_secs(1);
-        let port = |conn: &mut Connection| match conn.carrier() {
-            Some(Carrier::Datagram(s)) => s.local_addr().unwrap().port(),
-            _ => 0,
-        };
-        conn.begin_exclusive();
-        conn.datagram(timeout).await.unwrap();
-        let first = port(&mut conn);
-        conn.finished();
-        conn.begin_exclusive();
-        conn.datagram(timeout).await.unwrap();
-        assert_eq!(port(&mut conn), first, "a finished exchange keeps the socket");
-        // This exchange is never finished (timed out, or its caller gave up).
-        conn.begin_exclusive();
-        assert!(conn.carrier().is_none(), "closed before the next exchange");
-        conn.datagram(timeout).await.unwrap();
-        assert_ne!(port(&mut conn), first, "a fresh ephemeral port");
     }
 }

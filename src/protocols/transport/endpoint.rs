@@ -3,11 +3,20 @@
 //!
 //! RTU over TCP (a serial-to-Ethernet gateway) is [`Endpoint::Tcp`]: the carrier is a plain
 //! TCP stream, and only the framing on top of it differs.
+//!
+//! A datagram carrier is a [`DatagramPort`] (a UDP socket, or a simulated one), so the links
+//! run over a caller's carriers as they do over the operating system's: [`Endpoint::Dial`]
+//! opens one each time the link asks (the seeded wire simulation of the tests dials its own
+//! streams and datagram ports this way).
 
+use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
+use std::pin::Pin;
+use std::sync::Arc;
+use std::task::{Context, Poll};
 
-use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::{TcpStream, UdpSocket};
 
 use crate::capture::Transport;
@@ -20,6 +29,51 @@ pub(crate) type SocketPair = (Transport, SocketAddr, SocketAddr);
 pub trait ByteStream: AsyncRead + AsyncWrite + Unpin + Send {}
 
 impl<T: AsyncRead + AsyncWrite + Unpin + Send> ByteStream for T {}
+
+/// A datagram socket connected to one peer: a UDP socket, or a simulated one.
+pub trait DatagramPort: Send + Sync {
+    /// Sends one datagram to the peer.
+    fn poll_send(&self, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>>;
+    /// Receives one datagram from the peer into `buf` (cut to its room).
+    fn poll_recv(&self, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>>;
+    /// Receives a datagram already waiting, or fails with [`io::ErrorKind::WouldBlock`].
+    fn try_recv(&self, buf: &mut [u8]) -> io::Result<usize>;
+    /// This end's address.
+    fn local_addr(&self) -> io::Result<SocketAddr>;
+    /// The peer's address.
+    fn peer_addr(&self) -> io::Result<SocketAddr>;
+}
+
+impl DatagramPort for UdpSocket {
+    fn poll_send(&self, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
+        UdpSocket::poll_send(self, cx, buf)
+    }
+
+    fn poll_recv(&self, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
+        UdpSocket::poll_recv(self, cx, buf)
+    }
+
+    fn try_recv(&self, buf: &mut [u8]) -> io::Result<usize> {
+        UdpSocket::try_recv(self, buf)
+    }
+
+    fn local_addr(&self) -> io::Result<SocketAddr> {
+        UdpSocket::local_addr(self)
+    }
+
+    fn peer_addr(&self) -> io::Result<SocketAddr> {
+        UdpSocket::peer_addr(self)
+    }
+}
+
+/// A carrier being opened by a [`Dial`].
+pub type Dialing = Pin<Box<dyn Future<Output = io::Result<Carrier>> + Send>>;
+
+/// Opens carriers on demand, for [`Endpoint::Dial`].
+pub trait Dial: Send + Sync {
+    /// Opens a new carrier: a new connection or datagram port, or the same line again.
+    fn dial(&self) -> Dialing;
+}
 
 /// Where a connection goes.
 pub enum Endpoint {
@@ -42,6 +96,8 @@ pub enum Endpoint {
     },
     /// A stream handed over by the caller (a pty in tests); it cannot be reopened once lost.
     Given(Option<Box<dyn ByteStream>>),
+    /// Carriers the caller opens, as often as the link asks (a simulated wire).
+    Dial(Arc<dyn Dial>),
 }
 
 impl std::fmt::Debug for Endpoint {
@@ -51,16 +107,17 @@ impl std::fmt::Debug for Endpoint {
             Endpoint::Udp { peer, .. } => write!(f, "udp {peer}"),
             Endpoint::Serial { path, settings } => write!(f, "serial {path} {settings}"),
             Endpoint::Given(_) => f.write_str("given stream"),
+            Endpoint::Dial(_) => f.write_str("dialled carrier"),
         }
     }
 }
 
-/// An open connection: a byte stream, or a UDP socket connected to its peer.
-pub(crate) enum Carrier {
+/// An open connection: a byte stream, or a datagram port connected to its peer.
+pub enum Carrier {
     /// TCP, a serial port or a given stream.
     Stream(Box<dyn ByteStream>),
-    /// A UDP socket that only exchanges datagrams with the device.
-    Datagram(UdpSocket),
+    /// A UDP socket (or a simulated one) that only exchanges datagrams with the device.
+    Datagram(Box<dyn DatagramPort>),
 }
 
 impl Endpoint {
@@ -102,7 +159,7 @@ impl Endpoint {
                 let socket = UdpSocket::bind(local).await?;
                 // A connected socket: the kernel drops datagrams from anyone but the device.
                 socket.connect(peer).await?;
-                Ok(Carrier::Datagram(socket))
+                Ok(Carrier::Datagram(Box::new(socket)))
             }
             Endpoint::Serial { path, settings } => Ok(Carrier::Stream(Box::new(settings.open(path)?))),
             Endpoint::Given(stream) => stream.take().map(Carrier::Stream).ok_or_else(|| {
@@ -111,6 +168,7 @@ impl Endpoint {
                     "the given stream was closed and cannot be reopened",
                 )
             }),
+            Endpoint::Dial(dial) => dial.dial().await,
         }
     }
 }

@@ -25,30 +25,72 @@
 //!
 //! # Why a late reply cannot be mistaken for the next answer
 //! A reply that arrives after its request timed out (or after the caller gave up on it)
-//! must never be read as the answer to a later request. Each protocol uses the strongest
-//! defence its frames allow:
-//! - **Ids.** Modbus TCP and UDP give every attempt a new transaction id, PPI a new PDU
-//!   reference; a reply is taken only if it carries the id of an attempt of the current
-//!   request (a retry's answer and a slow first answer are equally good), anything else is
-//!   dropped and counted.
-//! - **A fresh carrier.** MC 3E (no serial number in 3E frames) and Modbus TCP with the
-//!   `no-transaction-id` quirk run *exclusive* exchanges: after an exchange that did not
-//!   finish (timed out, malformed, or abandoned by its caller), the TCP connection is
-//!   closed, or the UDP socket rebound on a new port, before the next request, so the late
-//!   reply lands on a closed socket.
-//! - **Flushing and holding.** On the half-duplex lines (Modbus RTU on serial or over TCP,
-//!   MEWTOCOL, PPI) a carrier cannot be reopened at will, so input already waiting is thrown
-//!   away before each request, and a reply must match the request's station, command and
-//!   length (a mismatch is dropped as stale, never taken as data). After an attempt timed
-//!   out, and after a request that needed a retry, the line is also *held*: the next request
-//!   goes out only once nothing has arrived for the configured timeout (not the adaptive
-//!   one: the silence must cover every reply the configuration allows, so on these lines
-//!   a retry waits as long as before the adaptive timer); whatever arrives meanwhile is
-//!   read, dropped and counted as stale
-//!   ([`StreamLink::settle`]). A late reply, and the duplicate answer to the retry it
-//!   provoked, are so drained before the next request. What is left is a device whose reply
-//!   comes later than `timeout_ms` of silence after everything else: no protocol
-//!   without ids can tell that apart, and such a device needs a longer `timeout_ms`.
+//! must never be read as the answer to a later request. Whether a link's replies name their
+//! request is decided in one place, [`crate::protocols::Protocol::replies`], from the
+//! protocol *and* the quirks; every defence below, the adaptive timeout's floor
+//! ([`LinkTuning::for_replies`]), Karn's rule on round trips and whether a dropped reply is
+//! counted stale or foreign ask it.
+//!
+//! **Links whose replies name their request** (Modbus TCP and UDP with transaction ids,
+//! MC 4E with serial numbers): every attempt gets a new id; a reply is taken only if it
+//! carries the id of an attempt of the current request (a retry's answer and a slow first
+//! answer are equally good). A reply with the id of an earlier request of this link is
+//! dropped as *stale*; one with an id this link never sent as *foreign* (another master, or
+//! a rackd before a restart).
+//!
+//! **Links whose replies name no request** (Modbus RTU on a line or over TCP, Modbus TCP
+//! and UDP with `no-transaction-id`, MC 3E, MEWTOCOL, PPI) keep one rule, in the links
+//! ([`StreamLink::settle`], [`DatagramLink::settle`], bookkeeping in `owed.rs`):
+//!
+//! > A request goes out only on a carrier on which no earlier request can still be
+//! > answered. Until then the link either replaces the carrier by one that carries nothing
+//! > of the old, or holds it until nothing has arrived for the reply lifetime `L`.
+//!
+//! The model it is proved under, and which every site must meet:
+//! 1. *Lifetime.* A device answers a request, if at all, within `L` = the link's configured
+//!    `timeout_ms` of its sending (the adaptive timeout only decides when to retry; it
+//!    never shortens `L`). A reply later than that is one no protocol without ids can tell
+//!    from the next answer: such a device needs a longer `timeout_ms`.
+//! 2. *Copies travel together.* A frame the network or a device duplicates arrives with its
+//!    original (back to back: a flooding switch, a loop, a device answering twice), not
+//!    an arbitrary time later. A network that holds copies back needs ids.
+//! 3. A request is answered at most once per copy of it that reaches the device.
+//!
+//! The bookkeeping: a link *owes* a reply while a request it sent has not been answered (it
+//! timed out, failed, or its caller gave up on it), after a retry, after a reply that was
+//! not the request's, and from the start on a carrier that may bring another process's
+//! frames (a line; a UDP port, which a rackd before a restart may have used). Before each
+//! send, while it owes:
+//! - **Replace** (a TCP connection the device itself ends: Modbus TCP, MC 3E; a UDP socket
+//!   on an ephemeral port): a new connection never receives the old one's bytes; a new UDP
+//!   port receives nothing sent to the old, which stays bound ("retired", drained and
+//!   counted stale) until `L` after its last send, so no one else is given its number.
+//! - **Wait** (a serial line; a TCP connection to a serial gateway, which hands whatever the
+//!   line brings to whichever connection is open; a UDP socket on a fixed port; the first
+//!   request of any such link): the carrier is read and everything arriving dropped until
+//!   it has been quiet for `L` since the last thing sent or received.
+//!
+//! Then input already waiting is thrown away (copies that came with their originals), and
+//! on the half-duplex lines the replies are also checked for station, command and length.
+//!
+//! The argument. Let `R` be a request sent at time `t`. (a) Before `t` the link owed
+//! nothing, or it replaced the carrier, or it held it quiet for `L`. If it owed nothing,
+//! every earlier request was answered one for one, and by 2 and 3 no further copy of an
+//! earlier reply exists beyond the ones that arrived with their originals, which the flush
+//! threw away. If it replaced the carrier, nothing sent for an earlier request can reach
+//! the new one. If it held, the last earlier send was at least `L` before `t`, so by 1
+//! every earlier reply has arrived (and been dropped) or never will. (b) So any reply that
+//! arrives on the carrier after `t` answers an attempt of `R`, and all of `R`'s attempts
+//! ask the same thing: taking it is right. (c) The next request finds `R` answered one for
+//! one, or owing, and (a) applies again. Retries keep to the rule too: an attempt that was
+//! not answered is owed, so a retry replaces the carrier or waits (on a half-duplex line
+//! the wait also keeps the retry from talking over a late reply).
+//!
+//! What it costs: nothing while requests are answered; a new connection or socket, or one
+//! `L` of silence, after a timeout. That is why such links get a 20 ms floor under their
+//! adaptive timeout (a spurious timeout is not cheap there) and named ones 2 ms. A line
+//! that never falls silent is held at most four `L`, then used anyway (the flush and the
+//! reply checks still apply): another master on the line is outside the model.
 //!
 //! # Adaptive timeouts and link health
 //! Each client keeps one [`LinkHealth`] (see `health.rs` and `rtt.rs`): an RFC 6298
@@ -65,6 +107,8 @@ mod connection;
 mod datagram;
 mod endpoint;
 mod health;
+mod ids;
+mod owed;
 mod policy;
 mod retry;
 mod round_trips;
@@ -76,9 +120,11 @@ mod tap;
 
 pub use connection::Backoff;
 pub(crate) use datagram::DatagramLink;
-pub use endpoint::{ByteStream, Endpoint};
-pub(crate) use health::LinkHealth;
+pub use endpoint::{ByteStream, Carrier, DatagramPort, Dial, Dialing, Endpoint};
 pub use health::LinkStats;
+pub(crate) use health::{LinkHealth, Settled};
+pub(crate) use ids::RecentIds;
+pub(crate) use owed::Guard;
 pub use policy::{LinkTuning, RetryPolicy};
 pub(crate) use retry::{Attempt, AttemptError, Retry};
 pub use round_trips::{BOUNDS as ROUND_TRIP_BOUNDS, RoundTrips};

@@ -5,7 +5,7 @@
 
 use std::time::Duration;
 
-use crate::protocols::Protocol;
+use crate::protocols::Replies;
 
 /// How hard a client tries: `retries + 1` attempts, each waiting for its reply up to
 /// `timeout` (less once round trips are known: [`LinkTuning`]).
@@ -47,12 +47,16 @@ pub struct LinkTuning {
 }
 
 impl LinkTuning {
-    /// The tuning a protocol gets by default: the floor is 2 ms where replies name their
-    /// request (Modbus TCP and UDP), since a resend there costs one request and a late
-    /// reply is dropped by its transaction id; 20 ms elsewhere, where a timeout costs a
-    /// `timeout_ms` of silence on the line (or, on MC 3E, a new connection).
-    pub fn for_protocol(protocol: Protocol) -> LinkTuning {
-        let floor = if protocol.matches_replies() { 2 } else { 20 };
+    /// The tuning a link gets by default: the floor is 2 ms where replies name their
+    /// request ([`Replies::Named`]), since a resend there costs one request and a late
+    /// reply is dropped by its id; 20 ms where they do not, since there every attempt that
+    /// times out leaves a reply owed, which costs a new carrier or a `timeout_ms` of
+    /// silence before the next request (the transport's module documentation).
+    pub fn for_replies(replies: Replies) -> LinkTuning {
+        let floor = match replies {
+            Replies::Named => 2,
+            Replies::Unnamed => 20,
+        };
         LinkTuning { min_timeout: Duration::from_millis(floor), ..LinkTuning::default() }
     }
 }

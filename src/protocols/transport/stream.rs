@@ -6,15 +6,16 @@
 //! deadline, and the flush of stale input that the half-duplex lines (and Modbus without
 //! transaction ids) rely on.
 //!
-//! After an attempt timed out or a request was retried, the link is *unsettled*: before
-//! the next request [`StreamLink::settle`] holds the line until it has been silent for the
-//! configured timeout (the adaptive timer's ceiling, not its current value: on a line
-//! without ids the silence is the only defence, and it must cover every reply the
-//! configuration allows), reading and dropping whatever arrives (late replies, and the duplicate
-//! answers to retries they provoke). Dropped input is counted in bursts: bytes that arrive
-//! within [`BURST_GAP`] of each other are one reply. A line that never falls silent is held
-//! at most [`MAX_HOLD`] timeouts, then used anyway (the flush and the reply checks
-//! still apply).
+//! On a link whose replies name no request, [`StreamLink::settle`] keeps the transport's
+//! rule before each send ([`super::owed`]): while a reply may still be owed, it opens a new
+//! connection (under [`Guard::Replace`]) or holds the line until it has been silent for the
+//! configured timeout (under [`Guard::Wait`]: the adaptive timer's ceiling, not its
+//! current value, since the silence must cover every reply the configuration allows),
+//! reading and dropping whatever arrives (late replies, and the duplicate answers to
+//! retries they provoke); then it flushes input already waiting. Dropped input is counted
+//! in bursts: bytes that arrive within [`BURST_GAP`] of each other are one reply. A line
+//! that never falls silent is held at most [`MAX_HOLD`] timeouts, then used anyway (the
+//! flush and the reply checks still apply).
 //!
 //! With a flight recorder ([`StreamLink::set_recorder`]) the link records what it writes
 //! and reads (see `tap.rs`): each frame a decoder finds, with the noise it skipped before
@@ -38,6 +39,7 @@ use tokio_util::codec::Decoder;
 use super::connection::{Backoff, Connection};
 use super::endpoint::Endpoint;
 use super::health::Settled;
+use super::owed::{Clear, Guard, Owed};
 use super::retry::{Attempt, AttemptError};
 use crate::capture::{Recorder, Verdict};
 
@@ -55,12 +57,10 @@ const MAX_HOLD: u32 = 4;
 pub(crate) struct StreamLink {
     conn: Connection,
     rx: BytesMut,
-    last_io: Instant,
-    /// A timeout or a retry happened since the line was last held silent.
-    unsettled: bool,
-    /// A request went out and its answer was not taken ([`StreamLink::answered`]): it
-    /// timed out, failed, or its caller gave up on it, so its reply may still come.
-    pending: bool,
+    /// The replies the link may still receive ([`super::owed`]).
+    owed: Owed,
+    /// The sends after the last [`StreamLink::settle`] are a retry's.
+    retrying: bool,
     /// The configured timeout from the last send: how long a reply under way may take.
     ceiling: Instant,
     /// A byte arrived since the last send.
@@ -68,14 +68,15 @@ pub(crate) struct StreamLink {
 }
 
 impl StreamLink {
-    /// A link over `endpoint` (any but [`Endpoint::Udp`]).
-    pub fn new(endpoint: Endpoint, backoff: Backoff) -> Self {
+    /// A link over `endpoint` (any but [`Endpoint::Udp`]) under `guard`. A line
+    /// ([`Guard::Wait`]) starts held: it may bring the reply to a request of a process
+    /// before this one; a new connection ([`Guard::Replace`]) cannot.
+    pub fn new(endpoint: Endpoint, backoff: Backoff, guard: Guard) -> Self {
         StreamLink {
             conn: Connection::new(endpoint, backoff),
             rx: BytesMut::with_capacity(512),
-            last_io: Instant::now(),
-            unsettled: false,
-            pending: false,
+            owed: Owed::new(guard, guard == Guard::Wait),
+            retrying: false,
             ceiling: Instant::now(),
             replying: false,
         }
@@ -103,33 +104,49 @@ impl StreamLink {
     /// Marks the line as possibly carrying a late reply (a reply was dropped as stale):
     /// the next request holds it first ([`StreamLink::settle`]).
     pub fn unsettle(&mut self) {
-        self.unsettled = true;
+        self.owed.unsettle();
     }
 
     /// The reply to the last request sent was taken: nothing more is due.
     pub fn answered(&mut self) {
-        self.pending = false;
+        self.owed.answered();
     }
 
-    /// Before sending `attempt`: when the line is unsettled (a timeout, a stale reply, or
-    /// a request whose answer was never taken, as when its caller gave up) or `attempt` is
-    /// a retry, waits until nothing has arrived for the configured timeout (counted from
-    /// the last byte sent or received), dropping whatever arrives. Returns the replies dropped and how
-    /// long the line was held (not part of the attempt's round trip; the caller starts the
-    /// attempt's reply window after its send, [`Attempt::restarted`]). A retry leaves the
-    /// line unsettled, so the request after it is held too.
+    /// Before sending `attempt`, the transport's rule for links whose replies name no
+    /// request ([`super::owed`]; nothing under [`Guard::Ids`]): while a reply may still be
+    /// owed (an attempt not answered, a timeout, a reply that was not the request's, a
+    /// line that may bring another process's reply), a new connection is opened
+    /// ([`Guard::Replace`]) or the line is held until nothing has arrived for the
+    /// configured timeout, counted from the last byte sent or received ([`Guard::Wait`]),
+    /// dropping whatever arrives; then input already waiting is flushed. Returns the
+    /// replies dropped and how long the line was held (not part of the attempt's round
+    /// trip: the caller starts the attempt's reply window after its send,
+    /// [`Attempt::restarted`]).
     pub async fn settle(&mut self, attempt: &Attempt) -> Result<Settled, AttemptError> {
+        self.retrying = !attempt.is_first();
+        if self.owed.guard() == Guard::Ids {
+            return Ok(Settled::default());
+        }
         let started = Instant::now();
-        let replies = self.hold(attempt).await?;
+        let mut replies = match self.owed.before_send() {
+            Clear::Nothing => 0,
+            Clear::Replace => {
+                self.reset();
+                0
+            }
+            Clear::Wait => {
+                let replies = self.hold(attempt).await?;
+                self.owed.cleared();
+                replies
+            }
+        };
+        replies += u64::from(self.flush_stale(attempt.timeout).await?);
         Ok(Settled { replies, held: started.elapsed() })
     }
 
+    /// Reads and drops input until the line has been quiet for the configured timeout (or
+    /// [`MAX_HOLD`] of them); returns the bursts dropped.
     async fn hold(&mut self, attempt: &Attempt) -> Result<u64, AttemptError> {
-        let hold = self.unsettled || self.pending || !attempt.is_first();
-        self.unsettled = !attempt.is_first();
-        if !hold {
-            return Ok(0);
-        }
         // The configured timeout, not the adaptive one: a reply is only late beyond what
         // the configuration allows, and the adaptive timer must not shrink the silence that
         // drains it (a 20 ms window would let a reply 30 ms late through).
@@ -157,7 +174,7 @@ impl StreamLink {
     ) -> Result<(), AttemptError> {
         self.conn.stream(window).await?;
         loop {
-            let quiet = (self.last_io + window).min(give_up);
+            let quiet = self.owed.quiet_at(window).min(give_up);
             if Instant::now() >= quiet {
                 return Ok(());
             }
@@ -167,7 +184,7 @@ impl StreamLink {
                 Ok(Ok(0)) => return Err(self.lost(io::ErrorKind::UnexpectedEof.into())),
                 Ok(Ok(_)) => {
                     let now = Instant::now();
-                    let new_burst = *replies == 0 || now - self.last_io >= BURST_GAP;
+                    let new_burst = *replies == 0 || now - self.owed.last_io() >= BURST_GAP;
                     if new_burst {
                         *replies += 1;
                     }
@@ -180,29 +197,16 @@ impl StreamLink {
                         }
                     }
                     self.rx.clear();
-                    self.last_io = now;
+                    self.owed.received();
                 }
                 Ok(Err(e)) => return Err(self.lost(e)),
             }
         }
     }
 
-    /// Starts an exchange that must have the stream to itself: after an unfinished one the
-    /// stream is closed and its buffered input forgotten ([`Connection::begin_exclusive`]).
-    pub fn begin_exclusive(&mut self) {
-        if self.conn.begin_exclusive() {
-            self.drop_input(Verdict::Dropped);
-        }
-    }
-
-    /// Marks the exclusive exchange as answered.
-    pub fn finished(&mut self) {
-        self.conn.finished();
-    }
-
     /// When a byte was last sent or received (for line silence between frames).
     pub fn last_io(&self) -> Instant {
-        self.last_io
+        self.owed.last_io()
     }
 
     /// Bytes received and not yet taken by a decoder.
@@ -241,7 +245,7 @@ impl StreamLink {
                         burst.bytes.extend_from_slice(&self.rx);
                     }
                     self.rx.clear();
-                    self.last_io = Instant::now();
+                    self.owed.received();
                 }
                 Some(Ok(_)) => return Err(self.lost(io::ErrorKind::UnexpectedEof.into())),
                 Some(Err(e)) => return Err(self.lost(e)),
@@ -261,10 +265,9 @@ impl StreamLink {
         match tokio::time::timeout(timeout, written).await {
             Ok(Ok(())) => {
                 self.conn.tap.sent(bytes);
-                self.last_io = Instant::now();
-                self.ceiling = self.last_io + timeout;
+                self.owed.sent(self.retrying);
+                self.ceiling = self.owed.last_io() + timeout;
                 self.replying = false;
-                self.pending = true;
                 Ok(())
             }
             Ok(Err(e)) => Err(self.lost(e)),
@@ -307,12 +310,12 @@ impl StreamLink {
             let until = if self.replying { deadline.max(self.ceiling) } else { deadline };
             match tokio::time::timeout_at(until, stream.read_buf(&mut self.rx)).await {
                 Err(_) => {
-                    self.unsettled = true;
+                    self.owed.unsettle();
                     return Ok(None);
                 }
                 Ok(Ok(0)) => return Err(self.lost(io::ErrorKind::UnexpectedEof.into())),
                 Ok(Ok(_)) => {
-                    self.last_io = Instant::now();
+                    self.owed.received();
                     self.replying = true;
                 }
                 Ok(Err(e)) => return Err(self.lost(e)),
@@ -336,13 +339,13 @@ impl StreamLink {
         }
     }
 
-    /// Closes the stream and forgets buffered input; the next use reopens it.
+    /// Closes the stream and forgets buffered input; the next use reopens it. A new
+    /// connection under [`Guard::Replace`] carries nothing late; a reopened line (or a
+    /// gateway's connection to it) may, so what it owes stays owed.
     pub fn reset(&mut self) {
         self.conn.reset();
         self.drop_input(Verdict::Dropped);
-        // A new connection carries nothing late.
-        self.unsettled = false;
-        self.pending = false;
+        self.owed.reopened();
     }
 
     /// Resets the link after a carrier error and returns it as the attempt's failure.
@@ -401,7 +404,7 @@ mod tests {
     #[tokio::test]
     async fn stale_input_is_flushed_and_frames_are_found_across_reads() {
         let (near, mut far) = tokio::io::duplex(64);
-        let mut link = StreamLink::new(Endpoint::given(near), Backoff::default());
+        let mut link = StreamLink::new(Endpoint::given(near), Backoff::default(), Guard::Ids);
         let timeout = Duration::from_millis(200);
         assert!(!link.flush_stale(timeout).await.unwrap(), "nothing waiting");
         far.write_all(b"late reply\n").await.unwrap();

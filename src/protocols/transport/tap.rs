@@ -48,13 +48,16 @@ pub(crate) fn recorder_for(
     let link = match (endpoint, line) {
         (Endpoint::Tcp(address), Some(protocol)) => Link::Serial { protocol, port: format!("tcp {address}") },
         (Endpoint::Serial { path, .. }, Some(protocol)) => Link::Serial { protocol, port: path.clone() },
-        (Endpoint::Given(_), Some(protocol)) => Link::Serial { protocol, port: "stream".into() },
+        (Endpoint::Given(_) | Endpoint::Dial(_), Some(protocol)) => {
+            Link::Serial { protocol, port: "stream".into() }
+        }
         (Endpoint::Tcp(address), None) => ip(Transport::Tcp, address),
         (Endpoint::Udp { peer, .. }, _) => ip(Transport::Udp, peer),
         // No IP-native protocol runs on a serial port or a given stream.
         (Endpoint::Serial { path, .. }, None) => {
             Link::Serial { protocol: SerialProtocol::ModbusRtu, port: path.clone() }
         }
+        (Endpoint::Dial(_), None) => ip(Transport::Udp, "0.0.0.0:0"),
         (Endpoint::Given(_), None) => {
             Link::Serial { protocol: SerialProtocol::ModbusRtu, port: "stream".into() }
         }

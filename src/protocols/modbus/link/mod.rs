@@ -6,9 +6,10 @@
 //! why not. Datagrams or frames that do not answer this request (stale transaction id, other
 //! unit) are dropped and counted, in the client's counters and in the link's health with a
 //! [`DropReason`]. Without a transaction id to go by (RTU, and MBAP with the
-//! `no-transaction-id` quirk), a reply that does not match the request (another function,
-//! a byte count other than the request's, a write echo of another address or quantity) is
-//! taken for a late reply to an earlier request: dropped and counted as stale, never data.
+//! `no-transaction-id` quirk), the transport's rule keeps late replies off the link before
+//! each send (`StreamLink::settle`, `DatagramLink::settle`), and a reply that does not match
+//! the request anyway (another function, a byte count other than the request's, a write
+//! echo of another address or quantity) is dropped and counted as stale, never data.
 
 mod rtu;
 mod tcp;
@@ -27,6 +28,7 @@ use super::frame::MbapHeader;
 use super::pdu::{Request, Response};
 use crate::capture::Recorder;
 use crate::protocols::transport::{Attempt, AttemptError, LinkHealth, verdict_of};
+pub(crate) use crate::protocols::transport::{RecentIds, Settled};
 use crate::protocols::{DeviceCode, DropReason};
 
 /// A decoded reply: data, or the device's exception.
@@ -71,6 +73,13 @@ impl Counters {
         self.dropped.fetch_add(n, Ordering::Relaxed);
         self.health.dropped_n(reason, n);
     }
+
+    /// What the link did before a send ([`crate::protocols::transport::StreamLink::settle`]):
+    /// the replies it dropped are stale, and the time it held the line is no round trip.
+    pub fn settled(&self, settled: Settled) {
+        self.dropped.fetch_add(settled.replies, Ordering::Relaxed);
+        self.health.settled(settled);
+    }
 }
 
 /// The link a client owns.
@@ -110,7 +119,8 @@ impl Link {
         match self {
             Link::Udp(l) => l.send(ex, attempt).await,
             Link::Tcp(l) => l.send(ex, attempt).await,
-            Link::Rtu(l) => l.send(ex, attempt).await,
+            // A broadcast is never answered: nothing is owed for it.
+            Link::Rtu(l) => l.send(ex, attempt).await.map(|()| l.answered()),
         }
     }
 }
@@ -138,17 +148,24 @@ impl Verdict {
 }
 
 /// Judges an MBAP frame against the request and the transaction ids of its attempts.
+/// `ids` is the link's ids when its replies carry them: an id of an earlier request of the
+/// link is a stale reply, any other id not the request's a foreign one. Without them
+/// (`None`, the `no-transaction-id` quirk) the id is not looked at.
 pub(crate) fn judge_mbap(
     header: &MbapHeader,
     pdu: &[u8],
     ex: &Exchange<'_>,
     tids: &[u16],
-    ignore_tid: bool,
+    ids: Option<&RecentIds>,
 ) -> Verdict {
-    if !ignore_tid && !tids.contains(&header.transaction) {
-        return Verdict::Drop(DropReason::TransactionId, None);
+    match ids {
+        Some(ids) if !tids.contains(&header.transaction) => {
+            let why =
+                if ids.ours(header.transaction) { DropReason::Stale } else { DropReason::TransactionId };
+            Verdict::Drop(why, None)
+        }
+        _ => judge(header.unit, pdu, ex, ids.is_none()),
     }
-    judge(header.unit, pdu, ex, ignore_tid)
 }
 
 /// Judges a frame's unit and PDU against the request. Without a transaction id to go by

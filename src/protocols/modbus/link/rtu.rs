@@ -6,12 +6,15 @@
 //! scanned for the first frame with a valid CRC ([`RtuDecoder`]), so garbage before a reply
 //! is skipped. RTU has no transaction id: a reply is matched by unit, function, byte count
 //! and write echo, and one that does not match is dropped as stale (never taken as data).
-//! After a timeout or a retry the line is held silent for the configured timeout before the
-//! next request ([`StreamLink::settle`]), so a late reply and the duplicate answer to the
-//! retry it provoked are drained, not read as the next request's answer (tokio-modbus
-//! #324). A reply later than a whole silent timeout still cannot be told from the next
-//! answer when function and size agree: RTU has no way to, so keep the timeout above the
-//! device's worst reply time on such links.
+//! While a reply may be owed (a timeout, a retry, a caller that gave up) the line is held
+//! silent for the configured timeout before the next request, the transport's rule for
+//! links whose replies name no request ([`StreamLink::settle`]), so a late reply and the
+//! duplicate answer to the retry it provoked are drained, not read as the next request's
+//! answer (tokio-modbus #324). RTU over TCP is a line too: a serial gateway hands the late
+//! reply to whichever connection is open, so a new connection does not clear it. A reply
+//! later than the configured timeout still cannot be told from the next answer when
+//! function and size agree: RTU has no way to, so keep the timeout above the device's
+//! worst reply time on such links.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -20,7 +23,6 @@ use tokio_util::bytes::{Buf, BytesMut};
 use tokio_util::codec::Decoder;
 
 use super::{Counters, Exchange, Verdict, judge, taken, timed_out};
-use crate::protocols::DropReason;
 use crate::protocols::modbus::pdu::Response;
 use crate::protocols::modbus::rtu::{self, Direction};
 use crate::protocols::transport::{Attempt, AttemptError, StreamLink};
@@ -66,20 +68,20 @@ impl RtuLink {
         RtuLink { link, silence, counters, tx: Vec::new() }
     }
 
-    /// Holds the line after a timeout or retry, flushes stale input, waits for the
-    /// inter-frame silence and sends the request.
+    /// Keeps the transport's rule (holds the line while a reply may be owed, flushes stale
+    /// input), waits for the inter-frame silence and sends the request.
     pub async fn send(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<(), AttemptError> {
         self.tx.clear();
         rtu::encode(&mut self.tx, ex.unit, ex.pdu);
-        let settled = self.link.settle(attempt).await?;
-        self.counters.dropped.fetch_add(settled.replies, std::sync::atomic::Ordering::Relaxed);
-        self.counters.health.settled(settled);
-        if self.link.flush_stale(attempt.timeout).await? {
-            self.counters.dropped(DropReason::Stale);
-        }
+        self.counters.settled(self.link.settle(attempt).await?);
         tokio::time::sleep_until(self.link.last_io() + self.silence).await;
         Counters::bump(&self.counters.sends);
         self.link.send(&self.tx, attempt.timeout).await
+    }
+
+    /// Nothing is owed for the request sent last (a broadcast, which is never answered).
+    pub fn answered(&mut self) {
+        self.link.answered();
     }
 
     /// Sends the request and waits for a valid frame that answers it.

@@ -3,20 +3,23 @@
 //! Replies are matched by transaction id like UDP ([`super::udp`]): frames with the id of an
 //! earlier request (late replies after a timeout) are read and skipped. A frame that breaks
 //! the stream (bad protocol id or length) drops the connection, since nothing after it can
-//! be trusted. Without transaction ids (the `ignore_transaction_id` quirk) every exchange is
-//! exclusive: one that did not finish closes the connection before the next request.
+//! be trusted. Without transaction ids (the `no-transaction-id` quirk: replies name no
+//! request) the link keeps the transport's rule ([`StreamLink::settle`]): after an attempt
+//! that was not answered the next one goes out on a new connection, which never receives
+//! the old one's bytes.
 
 use std::sync::Arc;
 
 use tokio_util::bytes::{Buf, BytesMut};
 use tokio_util::codec::Decoder;
 
-use super::{Counters, Exchange, Verdict, judge_mbap, taken, timed_out};
+use super::{Counters, Exchange, RecentIds, Verdict, judge_mbap, taken, timed_out};
+use crate::protocols::Replies;
 use crate::protocols::modbus::config::Quirks;
 use crate::protocols::modbus::decode::response_pdu_len;
 use crate::protocols::modbus::frame::{self, FrameError, LengthField, MBAP_LEN, MbapHeader};
 use crate::protocols::modbus::pdu::Response;
-use crate::protocols::transport::{Attempt, AttemptError, Backoff, Endpoint, StreamLink};
+use crate::protocols::transport::{Attempt, AttemptError, Backoff, Endpoint, Guard, StreamLink};
 
 /// Finds MBAP frames in a byte stream; with `length0`, a length field of 0 is read as "as
 /// long as the PDU says" (the shelf PLC's habit).
@@ -55,19 +58,28 @@ pub(crate) struct TcpLink {
     link: StreamLink,
     quirks: Quirks,
     counters: Arc<Counters>,
-    next_tid: u16,
+    /// Whether replies carry the transaction id ([`Replies::Named`]).
+    named: bool,
+    ids: RecentIds,
     tids: Vec<u16>,
     tx: Vec<u8>,
 }
 
 impl TcpLink {
     /// A link to `address` that connects on first use.
-    pub fn new(address: String, quirks: Quirks, counters: Arc<Counters>) -> Self {
+    pub fn new(address: String, quirks: Quirks, replies: Replies, counters: Arc<Counters>) -> Self {
+        Self::over(Endpoint::Tcp(address), quirks, replies, counters)
+    }
+
+    /// A link over connections to `endpoint` (TCP, or dialled streams).
+    pub fn over(endpoint: Endpoint, quirks: Quirks, replies: Replies, counters: Arc<Counters>) -> Self {
         TcpLink {
-            link: StreamLink::new(Endpoint::Tcp(address), Backoff::default()),
+            // The device ends the connection itself: a new one carries nothing of the old.
+            link: StreamLink::new(endpoint, Backoff::default(), Guard::of(replies, true)),
             quirks,
             counters,
-            next_tid: rand::random(),
+            named: replies == Replies::Named,
+            ids: RecentIds::new(),
             tids: Vec::new(),
             tx: Vec::new(),
         }
@@ -83,14 +95,11 @@ impl TcpLink {
         if attempt.is_first() {
             self.tids.clear();
         }
-        let tid = self.next_tid;
-        self.next_tid = self.next_tid.wrapping_add(1);
+        self.counters.settled(self.link.settle(attempt).await?);
+        let tid = self.ids.next();
         self.tids.push(tid);
         self.tx.clear();
         frame::encode(&mut self.tx, tid, ex.unit, ex.pdu, LengthField::Standard);
-        if self.quirks.ignore_transaction_id {
-            self.link.begin_exclusive();
-        }
         Counters::bump(&self.counters.sends);
         match self.link.send(&self.tx, attempt.timeout).await {
             // Half a frame on the stream: nothing after it could be trusted.
@@ -110,6 +119,7 @@ impl TcpLink {
         attempt: &Attempt,
     ) -> Result<(Response, Option<u32>), AttemptError> {
         self.send(ex, attempt).await?;
+        let attempt = &attempt.restarted();
         let mut decoder = MbapDecoder { length0: self.quirks.length0 };
         let mut reason = None;
         loop {
@@ -121,20 +131,21 @@ impl TcpLink {
                     return Err(e);
                 }
             };
-            let verdict = judge_mbap(&header, &pdu, ex, &self.tids, self.quirks.ignore_transaction_id);
+            let verdict = judge_mbap(&header, &pdu, ex, &self.tids, self.named.then_some(&self.ids));
             self.link.judged(verdict.capture());
             match verdict {
                 Verdict::Take(reply) => {
-                    self.link.finished();
-                    let answered = match self.quirks.ignore_transaction_id {
-                        true => None,
-                        false => self.tids.iter().position(|&t| t == header.transaction).map(|i| i as u32),
+                    self.link.answered();
+                    let answered = match self.named {
+                        false => None,
+                        true => self.tids.iter().position(|&t| t == header.transaction).map(|i| i as u32),
                     };
                     return taken(reply).map(|r| (r, answered));
                 }
                 Verdict::Fail(msg) => return Err(AttemptError::Malformed(msg)),
                 Verdict::Drop(why, msg) => {
                     self.counters.dropped(why);
+                    self.link.unsettle();
                     reason = msg.or(reason);
                 }
             }

@@ -3,37 +3,49 @@
 //!
 //! Every attempt gets a fresh transaction id; a reply carrying the id of *any* attempt of
 //! the current request is taken (a retry's answer and a slow first answer are equally
-//! good), while ids of earlier requests are stale and dropped. So a late reply after a
-//! timeout is never taken for the answer to a newer request. Without ids (the
-//! `ignore_transaction_id` quirk) datagrams already queued are flushed before each request.
+//! good), while ids of earlier requests are stale and dropped ([`RecentIds`] tells them
+//! from ids this link never sent, which are foreign). So a late reply after a timeout is
+//! never taken for the answer to a newer request. Without ids (the `no-transaction-id`
+//! quirk: the replies name no request) the link keeps the transport's rule before each
+//! send ([`DatagramLink::settle`]): after an attempt that was not answered the request goes
+//! out from a new port, the old one kept bound until its replies are past.
 
 use std::sync::Arc;
 
-use super::{Counters, Exchange, Verdict, judge_mbap, taken, timed_out};
-use crate::protocols::DropReason;
+use super::{Counters, Exchange, RecentIds, Verdict, judge_mbap, taken, timed_out};
 use crate::protocols::modbus::config::Quirks;
 use crate::protocols::modbus::frame::{self, FrameError, LengthField};
 use crate::protocols::modbus::pdu::Response;
 use crate::protocols::transport::{Attempt, AttemptError, Backoff, DatagramLink};
+use crate::protocols::{DropReason, Replies};
 
 /// A UDP link to one device.
 pub(crate) struct UdpLink {
     link: DatagramLink,
     quirks: Quirks,
     counters: Arc<Counters>,
-    next_tid: u16,
+    /// Whether replies carry the transaction id ([`Replies::Named`]).
+    named: bool,
+    ids: RecentIds,
     tids: Vec<u16>,
     tx: Vec<u8>,
 }
 
 impl UdpLink {
     /// A link to `address` from an ephemeral local port, bound on first use.
-    pub fn new(address: String, quirks: Quirks, counters: Arc<Counters>) -> Self {
+    pub fn new(address: String, quirks: Quirks, replies: Replies, counters: Arc<Counters>) -> Self {
+        let named = replies == Replies::Named;
+        Self::over(DatagramLink::new(address, None, Backoff::default(), named), quirks, replies, counters)
+    }
+
+    /// A link over `link` (a UDP socket or a simulated one).
+    pub fn over(link: DatagramLink, quirks: Quirks, replies: Replies, counters: Arc<Counters>) -> Self {
         UdpLink {
-            link: DatagramLink::new(address, None, Backoff::default()),
+            link,
             quirks,
             counters,
-            next_tid: rand::random(),
+            named: replies == Replies::Named,
+            ids: RecentIds::new(),
             tids: Vec::new(),
             tx: Vec::with_capacity(300),
         }
@@ -53,13 +65,9 @@ impl UdpLink {
     pub async fn send(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<(), AttemptError> {
         if attempt.is_first() {
             self.tids.clear();
-            if self.quirks.ignore_transaction_id {
-                let stale = self.link.flush_stale(attempt.timeout).await?;
-                self.counters.dropped_n(DropReason::Stale, stale);
-            }
         }
-        let tid = self.next_tid;
-        self.next_tid = self.next_tid.wrapping_add(1);
+        self.counters.settled(self.link.settle(attempt).await?);
+        let tid = self.ids.next();
         self.tids.push(tid);
         self.tx.clear();
         frame::encode(&mut self.tx, tid, ex.unit, ex.pdu, LengthField::Standard);
@@ -75,6 +83,7 @@ impl UdpLink {
         attempt: &Attempt,
     ) -> Result<(Response, Option<u32>), AttemptError> {
         self.send(ex, attempt).await?;
+        let attempt = &attempt.restarted();
         let mut reason = None;
         loop {
             let Some(datagram) = self.link.recv(attempt.deadline).await? else {
@@ -84,7 +93,7 @@ impl UdpLink {
             let verdict = match frame::split_datagram(datagram, self.quirks.length0) {
                 Ok((header, pdu)) => {
                     tid = Some(header.transaction);
-                    judge_mbap(&header, pdu, ex, &self.tids, self.quirks.ignore_transaction_id)
+                    judge_mbap(&header, pdu, ex, &self.tids, self.named.then_some(&self.ids))
                 }
                 // A standard length field of 0: what the `length0` quirk takes.
                 Err(FrameError::BadLength) if datagram.get(4..6) == Some(&[0, 0]) => {
@@ -96,15 +105,17 @@ impl UdpLink {
             self.link.judged(verdict.capture());
             match verdict {
                 Verdict::Take(reply) => {
-                    let answered = match self.quirks.ignore_transaction_id {
-                        true => None,
-                        false => tid.and_then(|t| self.tids.iter().position(|&x| x == t)).map(|i| i as u32),
+                    self.link.answered();
+                    let answered = match self.named {
+                        false => None,
+                        true => tid.and_then(|t| self.tids.iter().position(|&x| x == t)).map(|i| i as u32),
                     };
                     return taken(reply).map(|r| (r, answered));
                 }
                 Verdict::Fail(msg) => return Err(AttemptError::Malformed(msg)),
                 Verdict::Drop(why, msg) => {
                     self.counters.dropped(why);
+                    self.link.unsettle();
                     reason = msg.or(reason);
                 }
             }
