@@ -21,7 +21,7 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpListener, TcpStream, UdpSocket};
+use tokio::net::{TcpListener, UdpSocket};
 use tokio::task::{JoinHandle, JoinSet};
 
 use super::bank::SharedBank;
@@ -29,6 +29,7 @@ use super::frame::{self, Direction};
 use super::handler::{self, WriteHook};
 use super::type_name::TypeName;
 use crate::protocols::faults::{Plan, SharedFaults};
+use crate::protocols::transport::{ByteStream, DatagramServerPort, recv_from, send_to};
 
 /// What a server serves: memory, faults and an optional write hook.
 #[derive(Clone)]
@@ -108,10 +109,30 @@ impl Mc3eServer {
 
     /// Serves UDP datagrams on `addr` (port 0 picks a free port).
     pub async fn bind_udp(addr: SocketAddr, state: ServerState) -> std::io::Result<Mc3eServer> {
-        let socket = Arc::new(UdpSocket::bind(addr).await?);
+        let socket = UdpSocket::bind(addr).await?;
         let local_addr = socket.local_addr()?;
-        let task = tokio::spawn(serve_udp(socket, state.clone()));
+        let task = tokio::spawn(serve_udp(Arc::new(socket), state.clone()));
         Ok(Mc3eServer { local_addr, state, task })
+    }
+
+    /// Serves datagrams on a serving `port` the caller bound (a simulated one, in the
+    /// seeded wire simulation of the tests); `local_addr` names it.
+    pub fn serve_datagrams(
+        port: impl DatagramServerPort,
+        local_addr: SocketAddr,
+        state: ServerState,
+    ) -> Mc3eServer {
+        let task = tokio::spawn(serve_udp(Arc::new(port), state.clone()));
+        Mc3eServer { local_addr, state, task }
+    }
+
+    /// Serves one connection the caller opened; the task ends when it closes.
+    pub fn serve_stream(
+        stream: impl ByteStream + 'static,
+        peer: SocketAddr,
+        state: ServerState,
+    ) -> JoinHandle<()> {
+        tokio::spawn(serve_connection(Box::new(stream), peer, state))
     }
 
     /// The address the server listens on.
@@ -155,7 +176,7 @@ async fn serve_tcp(listener: TcpListener, state: ServerState) {
             accepted = listener.accept() => match accepted {
                 Ok((stream, peer)) => {
                     let _ = stream.set_nodelay(true);
-                    connections.spawn(serve_connection(stream, peer, state.clone()));
+                    connections.spawn(serve_connection(Box::new(stream), peer, state.clone()));
                 }
                 Err(e) => tracing::warn!(error = %e, "mc3e server: accept failed"),
             },
@@ -167,7 +188,7 @@ async fn serve_tcp(listener: TcpListener, state: ServerState) {
 /// Serves one connection, one request at a time, like a PLC's Ethernet port; 3E and 4E
 /// frames may alternate. Bytes that are not a 3E or 4E request leave the stream impossible
 /// to resynchronise, so the connection closes.
-async fn serve_connection(mut stream: TcpStream, peer: SocketAddr, state: ServerState) {
+async fn serve_connection(mut stream: Box<dyn ByteStream>, peer: SocketAddr, state: ServerState) {
     let mut frame_bytes = Vec::new();
     loop {
         let mut header = [0u8; frame::HEADER_LEN_4E];
@@ -207,13 +228,13 @@ async fn serve_connection(mut stream: TcpStream, peer: SocketAddr, state: Server
     }
 }
 
-async fn serve_udp(socket: Arc<UdpSocket>, state: ServerState) {
+async fn serve_udp<S: DatagramServerPort>(socket: Arc<S>, state: ServerState) {
     let mut buf = vec![0u8; 65_536];
     // Delayed replies live in the set, so stopping the server cancels them too.
     let mut delayed = JoinSet::new();
     loop {
         let received = tokio::select! {
-            received = socket.recv_from(&mut buf) => received,
+            received = recv_from(socket.as_ref(), &mut buf) => received,
             Some(_) = delayed.join_next(), if !delayed.is_empty() => continue,
         };
         let (len, peer) = match received {
@@ -233,7 +254,7 @@ async fn serve_udp(socket: Arc<UdpSocket>, state: ServerState) {
         }
         if plan.delay.is_zero() {
             for datagram in &datagrams {
-                let _ = socket.send_to(datagram, peer).await;
+                let _ = send_to(socket.as_ref(), datagram, peer).await;
             }
             continue;
         }
@@ -241,7 +262,7 @@ async fn serve_udp(socket: Arc<UdpSocket>, state: ServerState) {
         delayed.spawn(async move {
             tokio::time::sleep(plan.delay).await;
             for datagram in &datagrams {
-                let _ = socket.send_to(datagram, peer).await;
+                let _ = send_to(socket.as_ref(), datagram, peer).await;
             }
         });
     }

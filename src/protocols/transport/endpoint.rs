@@ -66,6 +66,37 @@ impl DatagramPort for UdpSocket {
     }
 }
 
+/// The serving end of datagrams: a UDP socket bound to the server's address, or a
+/// simulated one; requests come from any peer, answers go to the peer named.
+pub trait DatagramServerPort: Send + Sync + 'static {
+    /// Receives one datagram into `buf` and says whom it came from.
+    fn poll_recv_from(&self, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<SocketAddr>>;
+    /// Sends one datagram to `target`.
+    fn poll_send_to(&self, cx: &mut Context<'_>, buf: &[u8], target: SocketAddr) -> Poll<io::Result<usize>>;
+}
+
+impl DatagramServerPort for UdpSocket {
+    fn poll_recv_from(&self, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<SocketAddr>> {
+        UdpSocket::poll_recv_from(self, cx, buf)
+    }
+
+    fn poll_send_to(&self, cx: &mut Context<'_>, buf: &[u8], target: SocketAddr) -> Poll<io::Result<usize>> {
+        UdpSocket::poll_send_to(self, cx, buf, target)
+    }
+}
+
+/// Receives one datagram on a serving `port`: its length and sender.
+pub async fn recv_from(port: &dyn DatagramServerPort, buf: &mut [u8]) -> io::Result<(usize, SocketAddr)> {
+    let mut read = ReadBuf::new(buf);
+    let from = std::future::poll_fn(|cx| port.poll_recv_from(cx, &mut read)).await?;
+    Ok((read.filled().len(), from))
+}
+
+/// Sends one datagram from a serving `port` to `target`.
+pub async fn send_to(port: &dyn DatagramServerPort, buf: &[u8], target: SocketAddr) -> io::Result<usize> {
+    std::future::poll_fn(|cx| port.poll_send_to(cx, buf, target)).await
+}
+
 /// A carrier being opened by a [`Dial`].
 pub type Dialing = Pin<Box<dyn Future<Output = io::Result<Carrier>> + Send>>;
 

@@ -120,7 +120,9 @@ mod tap;
 
 pub use connection::Backoff;
 pub(crate) use datagram::DatagramLink;
-pub use endpoint::{ByteStream, Carrier, DatagramPort, Dial, Dialing, Endpoint};
+pub use endpoint::{
+    ByteStream, Carrier, DatagramPort, DatagramServerPort, Dial, Dialing, Endpoint, recv_from, send_to,
+};
 pub use health::LinkStats;
 pub(crate) use health::{LinkHealth, Settled};
 pub(crate) use ids::RecentIds;

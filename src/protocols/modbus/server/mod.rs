@@ -50,7 +50,7 @@ use super::device_id::DeviceIdentification;
 use super::exception::Exception;
 use super::pdu::{Request, Response, encode_exception};
 use crate::protocols::faults::{Faults, Plan, SharedFaults};
-use crate::protocols::transport::ByteStream;
+use crate::protocols::transport::{ByteStream, DatagramServerPort};
 
 /// How a server presents itself.
 #[derive(Clone, Debug, PartialEq)]
@@ -221,8 +221,21 @@ impl ModbusServer {
     pub async fn serve_udp(self, address: &str) -> std::io::Result<ServerHandle> {
         let socket = tokio::net::UdpSocket::bind(address).await?;
         let local = socket.local_addr()?;
-        let task = tokio::spawn(udp::serve(socket, self.shared.clone()));
+        let task = tokio::spawn(udp::serve(Box::new(socket), self.shared.clone()));
         Ok(ServerHandle { local_addr: Some(local), shared: self.shared, task })
+    }
+
+    /// Serves Modbus UDP frames on a serving datagram `port` the caller bound (a simulated
+    /// one, in the seeded wire simulation of the tests).
+    pub fn serve_datagrams(&self, port: impl DatagramServerPort) -> ServerHandle {
+        let task = tokio::spawn(udp::serve(Box::new(port), self.shared.clone()));
+        ServerHandle { local_addr: None, shared: self.shared.clone(), task }
+    }
+
+    /// Serves Modbus TCP (MBAP) frames on one connection the caller opened.
+    pub fn serve_mbap_stream(&self, stream: impl ByteStream + 'static) -> ServerHandle {
+        let task = tokio::spawn(tcp::serve_mbap(Box::new(stream), self.shared.clone()));
+        ServerHandle { local_addr: None, shared: self.shared.clone(), task }
     }
 
     /// Serves Modbus TCP on `address`.
@@ -243,9 +256,9 @@ impl ModbusServer {
 
     /// Serves Modbus RTU on a stream already open (a serial port, one end of a pty pair);
     /// `baud` sets the inter-frame silence (0 for the 1.75 ms floor).
-    pub fn serve_rtu_stream(self, stream: impl ByteStream + 'static, baud: u32) -> ServerHandle {
+    pub fn serve_rtu_stream(&self, stream: impl ByteStream + 'static, baud: u32) -> ServerHandle {
         let task = tokio::spawn(rtu::serve(Box::new(stream), self.shared.clone(), baud));
-        ServerHandle { local_addr: None, shared: self.shared, task }
+        ServerHandle { local_addr: None, shared: self.shared.clone(), task }
     }
 }
 

@@ -7,12 +7,13 @@
 use std::sync::Arc;
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpListener, TcpStream};
+use tokio::net::TcpListener;
 use tokio::task::JoinSet;
 
 use super::{Addressing, Outcome, Shared};
 use crate::protocols::modbus::decode::request_pdu_len;
 use crate::protocols::modbus::frame::{self, LengthField, MAX_PDU_LEN, MBAP_LEN};
+use crate::protocols::transport::ByteStream;
 
 /// What runs over the TCP connections.
 #[derive(Clone, Copy, Debug)]
@@ -31,7 +32,7 @@ pub(crate) async fn serve(listener: TcpListener, shared: Arc<Shared>, framing: F
                 let _ = stream.set_nodelay(true);
                 let shared = shared.clone();
                 match framing {
-                    Framing::Mbap => connections.spawn(serve_mbap(stream, shared)),
+                    Framing::Mbap => connections.spawn(serve_mbap(Box::new(stream), shared)),
                     Framing::Rtu => connections.spawn(super::rtu::serve(Box::new(stream), shared, 0)),
                 };
             }
@@ -56,7 +57,8 @@ fn request_len(buf: &[u8]) -> Result<Option<usize>, ()> {
     }
 }
 
-async fn serve_mbap(mut stream: TcpStream, shared: Arc<Shared>) {
+/// Serves MBAP frames on one connection until it closes.
+pub(crate) async fn serve_mbap(mut stream: Box<dyn ByteStream>, shared: Arc<Shared>) {
     let mut rx = Vec::with_capacity(1024);
     let mut tx = Vec::with_capacity(300);
     loop {

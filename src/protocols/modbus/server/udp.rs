@@ -6,16 +6,16 @@
 
 use std::sync::Arc;
 
-use tokio::net::UdpSocket;
-
 use super::{Addressing, Outcome, Shared};
 use crate::protocols::modbus::frame::{self, LengthField, MBAP_LEN};
+use crate::protocols::transport::{DatagramServerPort, recv_from, send_to};
 
-pub(crate) async fn serve(socket: UdpSocket, shared: Arc<Shared>) {
+pub(crate) async fn serve(socket: Box<dyn DatagramServerPort>, shared: Arc<Shared>) {
+    let socket = socket.as_ref();
     let mut rx = vec![0u8; 1024];
     let mut tx = Vec::with_capacity(300);
     loop {
-        let (n, peer) = match socket.recv_from(&mut rx).await {
+        let (n, peer) = match recv_from(socket, &mut rx).await {
             Ok(got) => got,
             // ICMP errors from earlier replies surface here; they concern no one now.
             Err(_) => continue,
@@ -33,18 +33,18 @@ pub(crate) async fn serve(socket: UdpSocket, shared: Arc<Shared>) {
             tokio::time::sleep(plan.delay).await;
         }
         if let Some(garbage) = &plan.garbage {
-            let _ = socket.send_to(garbage, peer).await;
+            let _ = send_to(socket, garbage, peer).await;
         }
         let tid = if shared.options.zero_transaction_id { 0 } else { header.transaction };
         let tid = if plan.wrong_id { !tid } else { tid };
         let length = if shared.options.length0 { LengthField::Zero } else { LengthField::Standard };
         tx.clear();
         frame::encode(&mut tx, tid, unit, &pdu, length);
-        if socket.send_to(&tx, peer).await.is_ok() {
+        if send_to(socket, &tx, peer).await.is_ok() {
             shared.replied();
         }
         if plan.duplicate {
-            let _ = socket.send_to(&tx, peer).await;
+            let _ = send_to(socket, &tx, peer).await;
         }
     }
 }
