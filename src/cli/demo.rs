@@ -70,7 +70,9 @@ pub async fn start(config: &mut Config) -> anyhow::Result<(ShelfSim, CraneSim, T
 
 /// [`start`] at another pace (tests run the demo site faster).
 pub async fn start_with(config: &mut Config, pace: Pace) -> anyhow::Result<(ShelfSim, CraneSim, TowerSim)> {
-    let options = ShelfSimOptions { task_time: pace.task_time, ..ShelfSimOptions::default() };
+    // The seed's PLC: MBAP length 0 and transaction id 0 in every reply.
+    let options =
+        ShelfSimOptions { task_time: pace.task_time, no_transaction_id: true, ..ShelfSimOptions::default() };
     let sim = ShelfSim::start("127.0.0.1:0", options).await?;
     let plc = sim.local_addr().context("a UDP simulator has an address")?;
     let mut device = shelf_device(&sim, "shelf1", &plc.to_string(), vec![1]);

@@ -18,6 +18,10 @@
 //!   byte), an MC end code, a MEWTOCOL error code (below 100), a PPI item return code below
 //!   0x100 or a refusal as error class x 256 + code (0x8500).
 //! - [`Fault::DropAck`] is PPI's lost short acknowledgement; elsewhere it is a drop.
+//! - `jitter`: each reply waits `delay` plus a draw from an exponential distribution of
+//!   mean `jitter`, cut at [`JITTER_CUT`] times the mean: the long tail of a busy PLC's
+//!   turnaround, bounded, so that a client whose timeout is above `delay + 10 × jitter`
+//!   gets every reply in time and one whose timeout is below it meets late replies.
 //! - `late`: the first request after the setting is made is answered this much later than
 //!   `delay`, once; every later one after `delay` alone. A PLC that was busy once and then
 //!   keeps its usual turnaround: with `late` beyond the client's timeout, the client's
@@ -37,6 +41,10 @@ pub struct Faults {
     pub drop_rate: f64,
     /// Wait before each reply; longer than the client's timeout, every reply is late.
     pub delay: Duration,
+    /// Mean of a random wait added to `delay` for each reply: exponentially distributed
+    /// (most replies quick, a few slow), cut at [`JITTER_CUT`] times the mean so that a
+    /// client's timeout can cover the slowest (see the module documentation).
+    pub jitter: Duration,
     /// Extra wait before the first reply only (zero: none); see the module docs.
     pub late: Duration,
     /// Fraction (0..=1) of replies preceded by random bytes (a separate datagram on UDP).
@@ -51,6 +59,19 @@ pub struct Faults {
     pub wrong_unit: Option<u8>,
     /// Answer every request with this device error code instead of carrying it out.
     pub device_error: Option<u16>,
+}
+
+/// The slowest jitter, in means: an exponential draw is cut here (P > 10 means is 1 in
+/// 22,000).
+pub const JITTER_CUT: u32 = 10;
+
+/// A draw of the jitter of mean `mean` (see [`Faults::jitter`]).
+fn jitter(mean: Duration, rng: &mut impl Rng) -> Duration {
+    if mean.is_zero() {
+        return Duration::ZERO;
+    }
+    let u: f64 = rng.random_range(f64::EPSILON..1.0);
+    mean.mul_f64((-u.ln()).min(f64::from(JITTER_CUT)))
 }
 
 /// Why fault settings cannot be used.
@@ -97,7 +118,7 @@ impl Faults {
             drop,
             drop_ack: false,
             close,
-            delay: self.delay,
+            delay: self.delay + jitter(self.jitter, &mut rand::rng()),
             garbage,
             duplicate,
             wrong_id,
@@ -290,6 +311,21 @@ mod tests {
         faults.update(|f| f.late = ms(500));
         assert_eq!(faults.plan().delay, ms(530), "a new lateness fires again");
         assert_eq!(faults.plan().delay, ms(30));
+    }
+
+    #[test]
+    fn jitter_is_a_bounded_long_tail_around_its_mean() {
+        let faults =
+            Faults { delay: Duration::from_millis(5), jitter: Duration::from_millis(2), ..Faults::default() };
+        let delays: Vec<Duration> = (0..20_000).map(|_| faults.roll().delay).collect();
+        let min = delays.iter().min().unwrap();
+        let max = delays.iter().max().unwrap();
+        let mean = delays.iter().sum::<Duration>() / delays.len() as u32;
+        assert!(*min >= Duration::from_millis(5), "never below the delay: {min:?}");
+        assert!(*max <= Duration::from_millis(5 + 20), "cut at ten means: {max:?}");
+        assert!(*max > Duration::from_millis(5 + 8), "a long tail: {max:?}");
+        let ms = mean.as_secs_f64() * 1000.0;
+        assert!((6.8..7.2).contains(&ms), "mean about delay + jitter: {ms}");
     }
 
     #[test]

@@ -18,6 +18,11 @@ pub struct FaultArgs {
     /// Milliseconds before each reply (more than the client's timeout: every reply is late).
     #[arg(long, default_value_t = 0)]
     pub delay_ms: u64,
+    /// Mean milliseconds of a random wait added to each reply (exponential, cut at ten
+    /// means): jitter with a long tail; a client's timeout above delay + 10 x jitter gets
+    /// every reply in time.
+    #[arg(long, default_value_t = 0.0)]
+    pub jitter_ms: f64,
     /// Milliseconds added to the first reply only: a PLC late once, then answering after
     /// `--delay-ms` again (the late reply and a retry's answer both arrive).
     #[arg(long, default_value_t = 0)]
@@ -70,6 +75,8 @@ impl FaultArgs {
         let faults = Faults {
             drop_rate: self.drop,
             delay: Duration::from_millis(self.delay_ms),
+            jitter: Duration::try_from_secs_f64(self.jitter_ms / 1000.0)
+                .map_err(|_| anyhow::anyhow!("--jitter-ms must be a positive number of milliseconds"))?,
             late: Duration::from_millis(self.late_ms),
             garbage_rate: self.garbage,
             close_rate: self.close,

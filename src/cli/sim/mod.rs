@@ -82,6 +82,10 @@ pub struct SimShelfArgs {
     /// Fraction (0..1) of tasks failing with kind 1 (PLC fault).
     #[arg(long, default_value_t = 0.0)]
     pub fail: f64,
+    /// Modbus UDP/TCP: answer with transaction id 0 whatever the request carried, as the
+    /// seed's PLC does (a device entry for it needs the `no-transaction-id` quirk).
+    #[arg(long)]
+    pub no_transaction_id: bool,
     /// Link faults.
     #[command(flatten)]
     pub faults: FaultArgs,
@@ -96,6 +100,10 @@ impl SimShelfArgs {
             self.fail
         );
         let faults = self.faults.faults_with(|text| DeviceCode::parse(self.protocol, text))?;
+        anyhow::ensure!(
+            !self.no_transaction_id || matches!(self.protocol, Protocol::ModbusUdp | Protocol::ModbusTcp),
+            "--no-transaction-id is for modbus-udp and modbus-tcp (other frames carry no transaction id)"
+        );
         Ok(ShelfSimOptions {
             protocol: ShelfProtocol::try_from(self.protocol)?,
             slots: self.slots,
@@ -106,6 +114,7 @@ impl SimShelfArgs {
             task_time: Duration::from_millis(self.task_ms),
             fail_rate: self.fail,
             faults,
+            no_transaction_id: self.no_transaction_id,
         })
     }
 
@@ -167,10 +176,11 @@ mod tests {
 
     #[test]
     fn every_simulator_takes_the_same_fault_flags() {
-        let flags = "--drop 0.5 --delay-ms 7 --late-ms 90 --garbage 0.1 --close 0.2 --duplicate 0.3 --wrong-id 0.4 --wrong-unit 9";
+        let flags = "--drop 0.5 --delay-ms 7 --jitter-ms 2.5 --late-ms 90 --garbage 0.1 --close 0.2 --duplicate 0.3 --wrong-id 0.4 --wrong-unit 9";
         let expected = Faults {
             drop_rate: 0.5,
             delay: Duration::from_millis(7),
+            jitter: Duration::from_micros(2500),
             late: Duration::from_millis(90),
             garbage_rate: 0.1,
             close_rate: 0.2,

@@ -59,11 +59,15 @@ pub enum ShelfConfigError {
     Area(#[from] WordsError),
 }
 
-/// The quirks a shelf has unless `quirks` is set: `length0` over Modbus UDP, the seed's
-/// PLC's habit (see the module documentation of [`super`]), none elsewhere.
+/// The quirks a shelf has unless `quirks` is set: over Modbus UDP `length0` and
+/// `no-transaction-id`, the seed's PLC's habits (it answers MBAP length 0 and transaction id
+/// 0 whatever it was sent; see the module documentation of [`super`]), none elsewhere. A
+/// PLC that does echo transaction ids works under them too (its replies are then matched
+/// as if it did not, which costs a new port after a lost reply); setting `quirks =
+/// ["length0"]` for it lets the ids do the work.
 pub fn default_shelf_quirks(protocol: Protocol) -> BTreeSet<Quirk> {
     match protocol {
-        Protocol::ModbusUdp => BTreeSet::from([Quirk::Length0]),
+        Protocol::ModbusUdp => BTreeSet::from([Quirk::Length0, Quirk::NoTransactionId]),
         _ => BTreeSet::new(),
     }
 }
@@ -73,6 +77,7 @@ impl ShelfConfig {
     pub fn new(id: &str, address: &str, aisles: Vec<u16>) -> ShelfConfig {
         let mut link = LinkConfig::new(Protocol::ModbusUdp, address);
         link.quirks = default_shelf_quirks(Protocol::ModbusUdp);
+        link.tuning = crate::protocols::transport::LinkTuning::for_replies(link.replies());
         ShelfConfig::on(id, link, aisles)
     }
 
@@ -159,7 +164,7 @@ mod tests {
         assert!(mew.check().is_ok(), "{:?}", mew.check());
         let udp = shelf_over("modbus-udp", "");
         assert_eq!(udp, ShelfConfig::new("s", "/dev/ttyS0", vec![]), "the seed's PLC");
-        assert_eq!(udp.link.quirks, BTreeSet::from([Quirk::Length0]));
+        assert_eq!(udp.link.quirks, BTreeSet::from([Quirk::Length0, Quirk::NoTransactionId]));
         assert!(shelf_over("modbus-udp", "quirks = []\n").link.quirks.is_empty());
     }
 

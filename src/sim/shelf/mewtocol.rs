@@ -84,6 +84,7 @@ pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io:
     let server: StreamServer = match endpoint {
         Endpoint::Listen(at) => mewtocol::server::serve_tcp(at, state).await?,
         Endpoint::Stream(stream) => mewtocol::server::serve_stream(stream, state),
+        Endpoint::Datagrams(_) => return Err(super::invalid("mewtocol is not served on datagrams")),
     };
     let memory: Arc<dyn SlotMemory> = Arc::new(DtMemory { bank, base });
     Ok(Started { memory, server: super::Server::Line(server), faults: shared_faults })

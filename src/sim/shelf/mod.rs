@@ -51,7 +51,7 @@ use crate::domain::Location;
 use crate::protocols::faults::{Faults, SharedFaults};
 use crate::protocols::link::LinkConfig;
 use crate::protocols::modbus::server::ServerHandle;
-use crate::protocols::transport::{ByteStream, StreamServer};
+use crate::protocols::transport::{ByteStream, DatagramServerPort, StreamServer};
 use crate::protocols::{Protocol, Quirk};
 use crate::wire::slot::SLOT_WORDS;
 
@@ -61,6 +61,8 @@ enum Endpoint<'a> {
     Listen(&'a str),
     /// A serial line already open.
     Stream(Box<dyn ByteStream>),
+    /// A serving datagram port already bound (a simulated one).
+    Datagrams(Box<dyn DatagramServerPort>),
 }
 
 /// What every transport adapter is started with.
@@ -74,6 +76,8 @@ struct Setup<'a> {
     baud: u32,
     core: &'a Core,
     faults: &'a Faults,
+    /// Modbus TCP and UDP: answer with transaction id 0, as the seed's PLC does.
+    zero_transaction_id: bool,
 }
 
 /// A transport adapter, serving: the slot area over its bank, its server, and the
@@ -130,6 +134,18 @@ impl ShelfSim {
         ShelfSim::launch(Endpoint::Stream(Box::new(stream)), options).await
     }
 
+    /// Starts a Modbus UDP simulator on a serving datagram port already bound (the
+    /// simulated wire of the tests, `protocols::simwire`).
+    pub async fn serve_datagrams(
+        port: impl DatagramServerPort,
+        options: ShelfSimOptions,
+    ) -> std::io::Result<ShelfSim> {
+        if options.protocol != ShelfProtocol::ModbusUdp {
+            return Err(invalid("only modbus-udp is served on datagrams"));
+        }
+        ShelfSim::launch(Endpoint::Datagrams(Box::new(port)), options).await
+    }
+
     async fn launch(endpoint: Endpoint<'_>, options: ShelfSimOptions) -> std::io::Result<ShelfSim> {
         let stride = options.stride_or_default();
         if options.slots == 0 || (stride as usize) < SLOT_WORDS {
@@ -142,7 +158,15 @@ impl ShelfSim {
         let core = Core::new(Layout { slots: options.slots, stride });
         let (protocol, base, unit) = (options.protocol, options.base_text(), options.unit_or_default());
         let baud = options.serial_or_default().baud;
-        let setup = Setup { protocol, base: &base, unit, baud, core: &core, faults: &options.faults };
+        let setup = Setup {
+            protocol,
+            base: &base,
+            unit,
+            baud,
+            core: &core,
+            faults: &options.faults,
+            zero_transaction_id: options.no_transaction_id,
+        };
         let Started { memory, server, faults } = match protocol.family() {
             Family::Modbus => modbus::start(endpoint, &setup).await?,
             Family::Ppi => ppi::start(endpoint, &setup).await?,
@@ -184,7 +208,8 @@ impl ShelfSim {
 
     /// The link that reaches this simulator at `address` (its [`ShelfSim::local_addr`], or
     /// the serial device at the other end of its line): its protocol, unit, serial settings
-    /// and, over Modbus UDP, the `length0` quirk (MBAP length 0 is the UDP PLC's own habit).
+    /// and, over Modbus UDP, the `length0` quirk (MBAP length 0 is the UDP PLC's own habit),
+    /// with `no-transaction-id` when it answers without them.
     pub fn link(&self, address: &str) -> LinkConfig {
         let protocol = self.protocol.protocol();
         let mut link = LinkConfig::new(protocol, address);
@@ -193,6 +218,10 @@ impl ShelfSim {
         if protocol == Protocol::ModbusUdp {
             link.quirks.insert(Quirk::Length0);
         }
+        if self.options.no_transaction_id {
+            link.quirks.insert(Quirk::NoTransactionId);
+        }
+        link.tuning = crate::protocols::transport::LinkTuning::for_replies(link.replies());
         link
     }
 

@@ -90,7 +90,7 @@ fn invalid(message: String) -> std::io::Error {
 /// Serves the shelf over a Modbus protocol at `endpoint`, slot 1's task id at a `4x`
 /// address.
 pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io::Result<Started> {
-    let Setup { protocol, base, unit, baud, core, faults } = *setup;
+    let Setup { protocol, base, unit, baud, core, faults, zero_transaction_id } = *setup;
     let address = crate::protocols::modbus::address::parse(base).map_err(|e| invalid(e.to_string()))?;
     if address.area.name() != "4X" {
         return Err(invalid(format!("the Modbus slots must be holding registers (4x...), not {base}")));
@@ -113,6 +113,7 @@ pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io:
     let options = ServerOptions {
         unit,
         length0: protocol == ShelfProtocol::ModbusUdp,
+        zero_transaction_id,
         faults: faults.clone(),
         // An S7-1200's Modbus_Slave has no device identification (exception 01).
         identification: if s7.is_some() { None } else { ServerOptions::default().identification },
@@ -126,6 +127,7 @@ pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io:
         (ShelfProtocol::ModbusTcp, Endpoint::Listen(at)) => server.serve_tcp(at).await?,
         (ShelfProtocol::ModbusRtuTcp, Endpoint::Listen(at)) => server.serve_rtu_over_tcp(at).await?,
         (ShelfProtocol::ModbusRtu, Endpoint::Stream(stream)) => server.serve_rtu_stream(stream, baud),
+        (ShelfProtocol::ModbusUdp, Endpoint::Datagrams(port)) => server.serve_boxed_datagrams(port),
         (p, _) => return Err(invalid(format!("{p} is not served on that kind of endpoint"))),
     };
     let memory: Arc<dyn SlotMemory> = Arc::new(Holding { bank, base });

@@ -200,6 +200,9 @@ pub struct ShelfSimOptions {
     pub fail_rate: f64,
     /// Link faults (loss, delay, noise, ...), as every simulator takes them.
     pub faults: Faults,
+    /// Modbus UDP and TCP: answer with transaction id 0 whatever the request carried, as
+    /// the seed's PLC does (its replies name no request).
+    pub no_transaction_id: bool,
 }
 
 impl Default for ShelfSimOptions {
@@ -214,6 +217,7 @@ impl Default for ShelfSimOptions {
             task_time: Duration::from_millis(500),
             fail_rate: 0.0,
             faults: Faults::default(),
+            no_transaction_id: false,
         }
     }
 }

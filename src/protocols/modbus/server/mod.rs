@@ -228,7 +228,12 @@ impl ModbusServer {
     /// Serves Modbus UDP frames on a serving datagram `port` the caller bound (a simulated
     /// one, in the seeded wire simulation of the tests).
     pub fn serve_datagrams(&self, port: impl DatagramServerPort) -> ServerHandle {
-        let task = tokio::spawn(udp::serve(Box::new(port), self.shared.clone()));
+        self.serve_boxed_datagrams(Box::new(port))
+    }
+
+    /// As [`ModbusServer::serve_datagrams`], for a port already boxed.
+    pub fn serve_boxed_datagrams(&self, port: Box<dyn DatagramServerPort>) -> ServerHandle {
+        let task = tokio::spawn(udp::serve(port, self.shared.clone()));
         ServerHandle { local_addr: None, shared: self.shared.clone(), task }
     }
 
