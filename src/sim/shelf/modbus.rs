@@ -119,7 +119,6 @@ pub(super) async fn start(endpoint: Endpoint<'_>, setup: &Setup<'_>) -> std::io:
         identification: if s7.is_some() { None } else { ServerOptions::default().identification },
         // Its diagnostics are Modbus_Slave's own (0000 and 000A only, see s7_1200.rs).
         diagnostic_counters: s7.is_none(),
-        ..ServerOptions::default()
     };
     let server = ModbusServer::new(Arc::new(handler), options);
     let handle = match (protocol, endpoint) {
