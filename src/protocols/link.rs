@@ -41,7 +41,7 @@ use super::modbus::{ModbusClient, ModbusConfig, Quirks, Transport};
 use super::ppi::{PpiClient, PpiConfig, PpiTransport};
 use super::protocol::{Family, Protocol, Quirk, Replies, names};
 use super::serial::SerialSettings;
-use super::transport::LinkTuning;
+use super::transport::{Dial, LinkTuning};
 use super::{PlcError, PlcMemory};
 use crate::capture::Limits;
 
@@ -285,6 +285,19 @@ pub async fn connect(config: &LinkConfig) -> Result<Arc<dyn PlcMemory>, LinkErro
         Family::Mewtocol => Arc::new(MewtocolClient::new(config.mewtocol())?),
         Family::Ppi => Arc::new(PpiClient::new(config.ppi())?),
         Family::Modbus => Arc::new(ModbusClient::connect(config.modbus()).await?),
+    })
+}
+
+/// The client a configuration describes, over carriers the caller dials instead of the
+/// address (the simulated wire of the tests, `protocols::simwire`), after
+/// [`LinkConfig::check`]: the same settings a device gets, on another carrier.
+pub fn connect_over(config: &LinkConfig, dial: Arc<dyn Dial>) -> Result<Arc<dyn PlcMemory>, LinkError> {
+    config.check()?;
+    Ok(match config.protocol.family() {
+        Family::Mc3e => Arc::new(Mc3eClient::over(config.mc3e(), dial)),
+        Family::Mewtocol => Arc::new(MewtocolClient::over(config.mewtocol(), dial)?),
+        Family::Ppi => Arc::new(PpiClient::over(config.ppi(), dial)?),
+        Family::Modbus => Arc::new(ModbusClient::over(config.modbus(), dial)?),
     })
 }
 

@@ -25,8 +25,7 @@ pub mod ppi;
 pub mod protocol;
 pub mod read_only;
 pub mod serial;
-#[cfg(test)]
-pub(crate) mod simwire;
+pub mod simwire;
 pub mod transport;
 
 use async_trait::async_trait;

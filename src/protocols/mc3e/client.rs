@@ -127,6 +127,7 @@ impl Mc3eClient {
             route: self.route,
             command: command.numbers(),
             data_len: command.reply_data_len(),
+            write: command.is_write(),
         };
         let frame =
             Request { serial, route: self.route, monitor_timer: self.monitor_timer, command }.encode();

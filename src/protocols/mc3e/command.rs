@@ -89,6 +89,11 @@ pub enum Command {
 }
 
 impl Command {
+    /// Whether the command changes the PLC's memory (a write), rather than reads it.
+    pub fn is_write(&self) -> bool {
+        matches!(self, Command::WriteWords { .. } | Command::WriteBits { .. })
+    }
+
     /// The command and subcommand numbers.
     pub fn numbers(&self) -> (u16, u16) {
         match self {

@@ -80,6 +80,8 @@ pub(crate) struct Expect {
     pub route: Route,
     pub command: (u16, u16),
     pub data_len: usize,
+    /// The request changes the PLC's memory.
+    pub write: bool,
 }
 
 /// The longest data an error reply may declare: end code plus the longest reply data of any
@@ -226,7 +228,7 @@ async fn tcp_attempt(
     health: &LinkHealth,
     attempt: &Attempt,
 ) -> Result<Outcome, AttemptError> {
-    health.settled(link.settle(attempt).await?);
+    health.settled(link.settle(attempt, expect.write).await?);
     link.send(frame, attempt.timeout).await?;
     let attempt = &attempt.restarted();
     let mut responses = Responses { max_len: 2 + expect.data_len.max(ErrorInfo::LEN) };
@@ -260,7 +262,7 @@ async fn udp_attempt(
     health: &LinkHealth,
     attempt: &Attempt,
 ) -> Result<Outcome, AttemptError> {
-    health.settled(link.settle(attempt).await?);
+    health.settled(link.settle(attempt, expect.write).await?);
     link.send(frame, attempt.timeout).await?;
     let attempt = &attempt.restarted();
     loop {

@@ -185,7 +185,7 @@ impl MewtocolClient {
         request: &Request,
         attempt: &Attempt,
     ) -> Result<Response, AttemptError> {
-        self.health.settled(link.settle(attempt).await?);
+        self.health.settled(link.settle(attempt, request.is_write()).await?);
         link.send(tx, attempt.timeout).await?;
         let attempt = &attempt.restarted();
         let mut reason = None;

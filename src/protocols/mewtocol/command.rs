@@ -68,6 +68,17 @@ pub enum Response {
 }
 
 impl Request {
+    /// Whether the command changes the PLC's memory (a write), rather than reads it.
+    pub fn is_write(&self) -> bool {
+        matches!(
+            self,
+            Request::WriteContact(..)
+                | Request::WriteContacts(_)
+                | Request::WriteContactWords { .. }
+                | Request::WriteData { .. }
+        )
+    }
+
     /// The two letters of a normal response to this command.
     pub fn reply_code(&self) -> &'static [u8; 2] {
         match self {

@@ -208,7 +208,7 @@ impl PpiClient {
         request.encode(*refs.last().unwrap_or(&0), &mut pdu);
         let mut tx = Vec::with_capacity(pdu.len() + 9);
         frame::encode_long(&mut tx, c.plc, c.master, request.fc(), &pdu);
-        self.health.settled(link.settle(attempt).await?);
+        self.health.settled(link.settle(attempt, request.is_write()).await?);
         link.send(&tx, attempt.timeout).await?;
         let attempt = &attempt.restarted();
         let mut frames = Scanner::new(frame::scan);

@@ -146,6 +146,11 @@ fn header(out: &mut Vec<u8>, rosctr: u8, pdu_ref: u16, params: usize, data: usiz
 }
 
 impl Request {
+    /// Whether the request changes the PLC (a write, RUN, STOP, a setup), rather than reads.
+    pub fn is_write(&self) -> bool {
+        !matches!(self, Request::Read(_))
+    }
+
     /// The frame function code the seed uses for this request.
     pub fn fc(&self) -> u8 {
         match self {

@@ -13,7 +13,7 @@ use super::{DEVICE, To, Wire};
 use crate::protocols::transport::{Carrier, DatagramPort, DatagramServerPort, Dial, Dialing};
 
 /// What the device does with a new connection (spawns a server on it).
-pub(crate) type Accept = Arc<dyn Fn(SimStream) + Send + Sync>;
+pub type Accept = Arc<dyn Fn(SimStream) + Send + Sync>;
 
 fn client_addr(port: u16) -> SocketAddr {
     SocketAddr::from(([10, 0, 0, 1], port))
@@ -85,7 +85,7 @@ impl Drop for SimPort {
 }
 
 /// The device's datagram port: requests from every client port, answers to any.
-pub(crate) struct SimServerPort(pub Wire);
+pub struct SimServerPort(pub Wire);
 
 impl DatagramServerPort for SimServerPort {
     fn poll_recv_from(&self, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<SocketAddr>> {
@@ -139,7 +139,7 @@ impl Dial for LineDial {
 
 /// One end of a simulated stream. A connection's end closes when dropped; a line's never
 /// does (the next dial reaches it again).
-pub(crate) struct SimStream {
+pub struct SimStream {
     wire: Wire,
     conn: usize,
     end: usize,

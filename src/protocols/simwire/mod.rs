@@ -1,4 +1,6 @@
-//! A seeded simulation of the wire, as FoundationDB and TigerBeetle test their I/O: the real
+//! A seeded simulation of the wire, as FoundationDB and TigerBeetle test their I/O (the
+//! tests' tool, in the library so the integration tests drive the device adapters over it
+//! too, and so a field fault can be replayed in one process): the real
 //! protocol clients and servers run over simulated carriers on paused tokio time, and every
 //! frame they exchange goes through one scheduler that delays it by a long-tailed
 //! distribution, loses it, or delivers it twice, all drawn from one seeded generator. A run
@@ -33,6 +35,7 @@
 //! ([`Weather::copies_requests`]) on the links whose replies carry ids.
 
 mod carriers;
+#[cfg(test)]
 mod checks;
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -47,12 +50,12 @@ use tokio::sync::Notify;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-pub(crate) use carriers::{Accept, SimServerPort};
+pub use carriers::{Accept, SimServerPort, SimStream};
 
 use crate::protocols::transport::Dial;
 
 /// The address of the simulated device.
-pub(crate) const DEVICE: SocketAddr =
+pub const DEVICE: SocketAddr =
     SocketAddr::new(std::net::IpAddr::V4(std::net::Ipv4Addr::new(10, 0, 0, 2)), 502);
 
 /// The first port a client binds.
@@ -60,7 +63,7 @@ const FIRST_PORT: u16 = 40_000;
 
 /// What happens to frames on the wire.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Weather {
+pub struct Weather {
     /// Share of frames lost.
     pub drop: f64,
     /// Share of frames delivered twice, the copy right behind the original.
@@ -159,14 +162,14 @@ struct Net {
 
 /// A simulated network between clients and one device.
 #[derive(Clone)]
-pub(crate) struct Wire {
+pub struct Wire {
     net: Arc<Mutex<Net>>,
     notify: Arc<Notify>,
     _deliverer: Arc<AbortOnDrop>,
 }
 
 /// Aborts a task when dropped.
-pub(crate) struct AbortOnDrop(pub JoinHandle<()>);
+pub struct AbortOnDrop(pub JoinHandle<()>);
 
 impl Drop for AbortOnDrop {
     fn drop(&mut self) {

@@ -55,6 +55,8 @@ pub(crate) struct DatagramLink {
     owed: Owed,
     /// The sends after the last [`DatagramLink::settle`] are a retry's.
     retrying: bool,
+    /// ... and a write's.
+    writing: bool,
     retired: Vec<Retired>,
 }
 
@@ -78,6 +80,7 @@ impl DatagramLink {
             rx: vec![0; MAX_DATAGRAM].into(),
             owed: Owed::new(guard, true),
             retrying: false,
+            writing: false,
             retired: Vec::new(),
         }
     }
@@ -108,33 +111,35 @@ impl DatagramLink {
     }
 
     /// Before sending `attempt`, the transport's rule for links whose replies name no
-    /// request (nothing under [`Guard::Ids`]): while a reply may still be owed, the port is
-    /// retired and a new one bound ([`Guard::Replace`]), or the socket is held until
-    /// nothing has arrived for the configured timeout ([`Guard::Wait`], and the first
-    /// request); then datagrams already waiting, on the port and on retired ones, are
-    /// dropped. Returns the replies dropped and how long the socket was held.
-    pub async fn settle(&mut self, attempt: &Attempt) -> Result<Settled, AttemptError> {
+    /// request: while a reply may still be owed, the port is retired and a new one bound
+    /// ([`Guard::Replace`]), or the socket is held until nothing has arrived for the
+    /// configured timeout ([`Guard::Wait`], and the first request); then datagrams already
+    /// waiting, on the port and on retired ones, are dropped. On every datagram link, ids
+    /// or not, a write never answered is waited out before the next request, since
+    /// datagrams may overtake each other ([`super::owed::Owed::before_send`]); `write` if
+    /// this request writes. Returns the replies dropped and how long the socket was held.
+    pub async fn settle(&mut self, attempt: &Attempt, write: bool) -> Result<Settled, AttemptError> {
         self.retrying = !attempt.is_first();
-        if self.owed.guard() == Guard::Ids {
-            return Ok(Settled::default());
-        }
+        self.writing = write;
         let started = Instant::now();
         let mut replies = 0;
-        match self.owed.before_send() {
+        match self.owed.before_send(attempt.is_first()) {
             Clear::Nothing => {}
             Clear::Replace if self.retired.len() < MAX_RETIRED => {
                 if let Some(Carrier::Datagram(port)) = self.conn.take() {
                     let until = self.owed.past_at(attempt.timeout);
                     self.retired.push(Retired { port, until });
                 }
-                self.owed.cleared();
+                self.owed.replaced();
             }
             Clear::Replace | Clear::Wait => {
                 replies += self.hold(attempt.timeout).await?;
                 self.owed.cleared();
             }
         }
-        replies += self.flush_stale(attempt.timeout).await?;
+        if self.owed.guard() != Guard::Ids {
+            replies += self.flush_stale(attempt.timeout).await?;
+        }
         Ok(Settled { replies, held: started.elapsed() })
     }
 
@@ -209,7 +214,7 @@ impl DatagramLink {
     pub async fn send(&mut self, bytes: &[u8], timeout: Duration) -> Result<(), AttemptError> {
         let port = self.conn.datagram(timeout).await?;
         poll_fn(|cx| port.poll_send(cx, bytes)).await?;
-        self.owed.sent(self.retrying);
+        self.owed.sent(self.retrying, self.writing);
         self.conn.tap.sent(bytes);
         Ok(())
     }
@@ -254,14 +259,14 @@ mod tests {
         let policy = RetryPolicy::new(Duration::from_millis(100), 1);
         let attempt = Attempt::single(&policy);
         // The first request holds the fresh port for the timeout (it could be an old one).
-        let settled = link.settle(&attempt).await.unwrap();
+        let settled = link.settle(&attempt, false).await.unwrap();
         assert!(settled.held >= Duration::from_millis(100), "{:?}", settled.held);
         link.send(b"first", policy.timeout).await.unwrap();
         let mut buf = [0u8; 16];
         let (_, first_port) = device.recv_from(&mut buf).await.unwrap();
         assert!(link.recv(Instant::now() + Duration::from_millis(5)).await.unwrap().is_none());
         // Unanswered: the next send goes from another port, at once.
-        let settled = link.settle(&attempt.restarted()).await.unwrap();
+        let settled = link.settle(&attempt.restarted(), false).await.unwrap();
         assert!(settled.held < Duration::from_millis(50), "replaced, not held: {:?}", settled.held);
         link.send(b"second", policy.timeout).await.unwrap();
         let (_, second_port) = device.recv_from(&mut buf).await.unwrap();
@@ -273,11 +278,11 @@ mod tests {
         assert_eq!(got.as_deref(), Some(&b"answer"[..]));
         link.answered();
         tokio::time::sleep(Duration::from_millis(20)).await;
-        let settled = link.settle(&attempt.restarted()).await.unwrap();
+        let settled = link.settle(&attempt.restarted(), false).await.unwrap();
         assert_eq!(settled.replies, 1, "the late reply, drained from the retired port");
         assert_eq!(link.retired.len(), 1, "still within its reply lifetime");
         tokio::time::sleep(Duration::from_millis(120)).await;
-        link.settle(&attempt.restarted()).await.unwrap();
+        link.settle(&attempt.restarted(), false).await.unwrap();
         assert!(link.retired.is_empty(), "past its lifetime: let go");
     }
 }

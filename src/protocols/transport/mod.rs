@@ -58,8 +58,7 @@
 //!
 //! The bookkeeping: a link *owes* a reply while a request it sent has not been answered (it
 //! timed out, failed, or its caller gave up on it), after a retry, after a reply that was
-//! not the request's, and from the start on a carrier that may bring another process's
-//! frames (a line; a UDP port, which a rackd before a restart may have used). Before each
+//! not the request's, and from the start (see "Requests under way" below). Before each
 //! send, while it owes:
 //! - **Replace** (a TCP connection the device itself ends: Modbus TCP, MC 3E; a UDP socket
 //!   on an ephemeral port): a new connection never receives the old one's bytes; a new UDP
@@ -67,14 +66,15 @@
 //!   counted stale) until `L` after its last send, so no one else is given its number.
 //! - **Wait** (a serial line; a TCP connection to a serial gateway, which hands whatever the
 //!   line brings to whichever connection is open; a UDP socket on a fixed port; the first
-//!   request of any such link): the carrier is read and everything arriving dropped until
-//!   it has been quiet for `L` since the last thing sent or received.
+//!   request of any link): the carrier is read and everything arriving dropped until it
+//!   has been quiet for `L` since the last thing sent or received.
 //!
 //! Then input already waiting is thrown away (copies that came with their originals), and
 //! on the half-duplex lines the replies are also checked for station, command and length.
 //!
-//! The argument. Let `R` be a request sent at time `t`. (a) Before `t` the link owed
-//! nothing, or it replaced the carrier, or it held it quiet for `L`. If it owed nothing,
+//! The argument (for replies; the same holds for late writes reaching the device, with
+//! "the device" for "the carrier"). Let `R` be a request sent at time `t`. (a) Before `t`
+//! the link owed nothing, or it replaced the carrier, or it held it quiet for `L`. If it owed nothing,
 //! every earlier request was answered one for one, and by 2 and 3 no further copy of an
 //! earlier reply exists beyond the ones that arrived with their originals, which the flush
 //! threw away. If it replaced the carrier, nothing sent for an earlier request can reach
@@ -86,8 +86,22 @@
 //! not answered is owed, so a retry replaces the carrier or waits (on a half-duplex line
 //! the wait also keeps the retry from talking over a late reply).
 //!
+//! **Requests under way.** The rule above is about replies; a *request* can be late too.
+//! A write whose attempt was never answered may still reach the device after a later
+//! request, and undo it (a late "state 0" into a slot the PLC has started; a late "task
+//! id 4" into a slot rackd has since cleared, which the PLC runs again). On a carrier that
+//! keeps its order (a line, one TCP connection) it cannot overtake; across a new
+//! connection or a new UDP port, and on datagrams at all, it can. So on every link,
+//! whether its replies name their request or not, such a write is waited out (`L` of
+//! quiet) before the next request; the write's own retries go at once, since they write
+//! the same. A process before this one (rackd killed mid-write and started again, a
+//! standby that took over) may have left writes under way too: every link, ids or not,
+//! starts *cold*, and its first request waits `L` of quiet. A read that is never answered
+//! needs nothing of this: a late read changes nothing.
+//!
 //! What it costs: nothing while requests are answered; a new connection or socket, or one
-//! `L` of silence, after a timeout. That is why such links get a 20 ms floor under their
+//! `L` of silence, after a timeout (after a timed-out write always the silence); one `L`
+//! when a link starts. That is why such links get a 20 ms floor under their
 //! adaptive timeout (a spurious timeout is not cheap there) and named ones 2 ms. A line
 //! that never falls silent is held at most four `L`, then used anyway (the flush and the
 //! reply checks still apply): another master on the line is outside the model.

@@ -5,8 +5,9 @@
 //!
 //! [`Owed`] is plain bookkeeping, kept by both link kinds ([`super::StreamLink`],
 //! [`super::DatagramLink`]): a request sent and not answered, a timeout, a retry or a reply
-//! that was not the request's leave a reply owed; [`Owed::before_send`] says whether the
-//! link may send at once, must replace its carrier, or must wait for silence.
+//! that was not the request's leave a reply owed, and a write never answered may still be
+//! on its way to the device; [`Owed::before_send`] says whether the link may send at once,
+//! must replace its carrier, or must wait for silence.
 
 use std::time::Duration;
 
@@ -52,12 +53,15 @@ pub(crate) enum Clear {
     Wait,
 }
 
-/// The replies a link may still receive.
+/// The replies a link may still receive, and the writes that may still reach the device.
 #[derive(Debug)]
 pub(crate) struct Owed {
     guard: Guard,
-    /// The carrier may bring frames that another process (a rackd before a restart, on a
-    /// serial line, a gateway or a reused UDP port) asked for: only silence clears that.
+    /// Datagrams: frames may overtake each other on the way.
+    reorders: bool,
+    /// Nothing was sent yet: a process before this one (a rackd killed and started again,
+    /// a `rackd plc` stopped mid-write) may have requests and replies under way, which only
+    /// time clears (see [`Owed::new`]).
     cold: bool,
     /// An attempt timed out, a retry went out, or a reply that was not the request's came:
     /// another may follow.
@@ -65,6 +69,11 @@ pub(crate) struct Owed {
     /// A request went out and its answer was not taken (it timed out, failed, or its
     /// caller gave up on it).
     pending: bool,
+    /// The attempt sent last is a write's.
+    writing: bool,
+    /// A write attempt went out and was never answered: it may still reach the device (see
+    /// [`Owed::before_send`]).
+    write_owed: bool,
     /// When anything was last sent or received.
     last_io: Instant,
     /// When the last request went out.
@@ -72,16 +81,24 @@ pub(crate) struct Owed {
 }
 
 impl Owed {
-    /// Nothing sent yet. A link starts `cold` when its carrier can bring another process's
-    /// frames (every link under [`Guard::Wait`], and datagram links: a new ephemeral port
-    /// may be one a rackd before a restart used); a new TCP connection cannot.
-    pub fn new(guard: Guard, cold: bool) -> Owed {
+    /// Nothing sent yet: the link starts *cold*, and its first request waits until the
+    /// carrier has been quiet for the lifetime. A process before this one may have left
+    /// requests under way to the device (rackd killed mid-write and started again): one
+    /// that lands after this process read the device would undo what it then decides (a
+    /// slot read empty, a task handed over again while the old write of it is still on
+    /// its way). Its replies may also reach this one, on a line, through a gateway or on a
+    /// reused UDP port. Whatever the guard and the carrier, one lifetime at start clears
+    /// both. `reorders` for datagrams, whose frames may overtake each other.
+    pub fn new(guard: Guard, reorders: bool) -> Owed {
         let now = Instant::now();
         Owed {
             guard,
-            cold: cold && guard != Guard::Ids,
+            reorders,
+            cold: true,
             unsettled: false,
             pending: false,
+            writing: false,
+            write_owed: false,
             last_io: now,
             last_send: now,
         }
@@ -92,14 +109,17 @@ impl Owed {
         self.guard
     }
 
-    /// An attempt went out now; `retry` if it is not its request's first. On a carrier
-    /// that only silence clears, a retry leaves the link unsettled even once answered: the
-    /// answer taken may be the first attempt's, come late, and the retry's own may follow.
-    /// Holding once more before the next request drains it, so a reply up to about twice
-    /// the lifetime late is still not taken for another request's answer.
-    pub fn sent(&mut self, retry: bool) {
+    /// An attempt went out now; `retry` if it is not its request's first, `write` if the
+    /// request writes. On a carrier that only silence clears, a retry leaves the link
+    /// unsettled even once answered: the answer taken may be the first attempt's, come
+    /// late, and the retry's own may follow. Holding once more before the next request
+    /// drains it, so a reply up to about twice the lifetime late is still not taken for
+    /// another request's answer.
+    pub fn sent(&mut self, retry: bool, write: bool) {
         let now = Instant::now();
         self.unsettled |= retry && self.guard == Guard::Wait;
+        self.write_owed |= self.pending && self.writing;
+        self.writing = write;
         self.pending = true;
         self.last_io = now;
         self.last_send = now;
@@ -125,28 +145,51 @@ impl Owed {
         self.cold || self.unsettled || self.pending
     }
 
-    /// What must happen before the next send.
-    pub fn before_send(&self) -> Clear {
+    /// What must happen before the next send: the `first` attempt of its request, or a
+    /// retry.
+    ///
+    /// Besides the replies, a write that was never answered may still be on its way to
+    /// the device: applied after a later request, it would put back what that request
+    /// changed, or what the device changed meanwhile (a late "state 0" into a slot the PLC
+    /// has started). On a carrier that keeps its order (a line, one TCP connection) it
+    /// cannot come after a later request; across a new connection or a new UDP port, and
+    /// on datagrams at all, it can. So before the next *request* (a retry of the same write
+    /// may go at once: it writes the same), such a link holds the line until the write's
+    /// lifetime is past, instead of replacing the carrier; a link whose replies carry ids
+    /// does the same on datagrams.
+    pub fn before_send(&self, first: bool) -> Clear {
+        let late_write = first && (self.write_owed || (self.pending && self.writing));
         match self.guard {
+            Guard::Ids if self.cold || (late_write && self.reorders) => Clear::Wait,
             Guard::Ids => Clear::Nothing,
-            _ if !self.owes() => Clear::Nothing,
-            Guard::Replace if !self.cold => Clear::Replace,
+            _ if !self.owes() && !late_write => Clear::Nothing,
+            Guard::Replace if !self.cold && !late_write => Clear::Replace,
             Guard::Replace | Guard::Wait => Clear::Wait,
         }
     }
 
-    /// The carrier was replaced, or the line held quiet: nothing earlier can arrive.
-    pub fn cleared(&mut self) {
-        self.cold = false;
+    /// The carrier was replaced: no reply sent to the old one can arrive; a write sent on
+    /// it may still reach the device.
+    pub fn replaced(&mut self) {
+        self.write_owed |= self.pending && self.writing;
         self.unsettled = false;
         self.pending = false;
     }
 
+    /// The line was held quiet for the lifetime: nothing earlier can arrive, either way.
+    pub fn cleared(&mut self) {
+        self.cold = false;
+        self.unsettled = false;
+        self.pending = false;
+        self.write_owed = false;
+    }
+
     /// The carrier was lost and will be reopened: a new connection under
-    /// [`Guard::Replace`] carries nothing late; a reopened line or gateway connection may.
+    /// [`Guard::Replace`] carries no reply of the old; a reopened line (or a gateway's
+    /// connection to it) may.
     pub fn reopened(&mut self) {
         if self.guard == Guard::Replace {
-            self.cleared();
+            self.replaced();
         }
     }
 
@@ -173,39 +216,83 @@ mod tests {
     #[test]
     fn a_clean_exchange_owes_nothing_and_a_troubled_one_clears_by_its_guard() {
         let mut owed = Owed::new(Guard::Replace, false);
-        assert_eq!(owed.before_send(), Clear::Nothing, "a new TCP connection");
-        owed.sent(false);
-        owed.answered();
-        assert_eq!(owed.before_send(), Clear::Nothing, "one request, one reply");
-        owed.sent(false);
-        assert_eq!(owed.before_send(), Clear::Replace, "not answered: its reply may come");
+        assert_eq!(
+            owed.before_send(true),
+            Clear::Wait,
+            "a process before this one may have left a write under way"
+        );
         owed.cleared();
-        owed.sent(true);
+        owed.sent(false, false);
         owed.answered();
-        assert_eq!(owed.before_send(), Clear::Nothing, "a retry on a new carrier owes nothing once answered");
-        owed.sent(false);
+        assert_eq!(owed.before_send(true), Clear::Nothing, "one request, one reply");
+        owed.sent(false, false);
+        assert_eq!(owed.before_send(false), Clear::Replace, "not answered: its reply may come");
+        owed.replaced();
+        owed.sent(true, false);
+        owed.answered();
+        assert_eq!(
+            owed.before_send(true),
+            Clear::Nothing,
+            "a retry on a new carrier owes nothing once answered"
+        );
+        owed.sent(false, false);
         owed.answered();
         owed.unsettle();
-        assert_eq!(owed.before_send(), Clear::Replace, "a reply that was not the request's");
+        assert_eq!(owed.before_send(true), Clear::Replace, "a reply that was not the request's");
         owed.reopened();
-        assert_eq!(owed.before_send(), Clear::Nothing, "a new connection carries nothing late");
+        assert_eq!(owed.before_send(true), Clear::Nothing, "a new connection carries nothing late");
 
-        let mut line = Owed::new(Guard::Wait, true);
-        assert_eq!(line.before_send(), Clear::Wait, "a line may bring a previous process's reply");
+        let mut line = Owed::new(Guard::Wait, false);
+        assert_eq!(line.before_send(true), Clear::Wait, "a line may bring a previous process's reply");
         line.cleared();
-        line.sent(true);
+        line.sent(true, false);
         line.answered();
-        assert_eq!(line.before_send(), Clear::Wait, "a retry answered: the other answer may follow");
+        assert_eq!(line.before_send(true), Clear::Wait, "a retry answered: the other answer may follow");
         line.cleared();
-        line.sent(false);
+        line.sent(false, false);
         line.reopened();
-        assert_eq!(line.before_send(), Clear::Wait, "a reopened line may bring the late reply");
+        assert_eq!(line.before_send(true), Clear::Wait, "a reopened line may bring the late reply");
 
         let udp = Owed::new(Guard::Replace, true);
-        assert_eq!(udp.before_send(), Clear::Wait, "a fresh port may be a previous process's");
-        let mut ids = Owed::new(Guard::Ids, true);
-        ids.sent(true);
+        assert_eq!(udp.before_send(true), Clear::Wait, "a fresh port may be a previous process's");
+        let mut ids = Owed::new(Guard::Ids, false);
+        assert_eq!(ids.before_send(true), Clear::Wait, "ids or not, the start waits");
+        ids.cleared();
+        ids.sent(true, false);
         ids.unsettle();
-        assert_eq!(ids.before_send(), Clear::Nothing, "ids tell replies apart");
+        assert_eq!(ids.before_send(true), Clear::Nothing, "ids tell replies apart");
+    }
+
+    #[test]
+    fn a_write_never_answered_is_waited_out_before_the_next_request_where_it_could_overtake() {
+        // A write's first attempt is lost (or slow); its retry goes at once on a new port.
+        let mut udp = Owed::new(Guard::Replace, true);
+        udp.cleared();
+        udp.sent(false, true);
+        assert_eq!(udp.before_send(false), Clear::Replace, "the retry writes the same: at once");
+        udp.replaced();
+        udp.sent(true, true);
+        udp.answered();
+        assert_eq!(udp.before_send(true), Clear::Wait, "the first attempt may still land after the next");
+        udp.cleared();
+        assert_eq!(udp.before_send(true), Clear::Nothing, "its lifetime is past");
+        // A read never answered is harmless once its reply cannot be taken.
+        udp.sent(false, false);
+        assert_eq!(udp.before_send(true), Clear::Replace);
+        // With ids the replies are told apart, but a late write on datagrams is the same.
+        let mut ids = Owed::new(Guard::Ids, true);
+        ids.cleared();
+        ids.sent(false, true);
+        assert_eq!(ids.before_send(false), Clear::Nothing, "a retry of the write");
+        ids.sent(true, true);
+        ids.answered();
+        assert_eq!(ids.before_send(true), Clear::Wait, "the next request waits the first attempt out");
+        // One TCP connection keeps its order: nothing to wait for.
+        let mut tcp = Owed::new(Guard::Ids, false);
+        tcp.cleared();
+        tcp.sent(false, true);
+        tcp.sent(true, true);
+        tcp.answered();
+        assert_eq!(tcp.before_send(true), Clear::Nothing);
     }
 }

@@ -61,6 +61,8 @@ pub(crate) struct StreamLink {
     owed: Owed,
     /// The sends after the last [`StreamLink::settle`] are a retry's.
     retrying: bool,
+    /// ... and a write's.
+    writing: bool,
     /// The configured timeout from the last send: how long a reply under way may take.
     ceiling: Instant,
     /// A byte arrived since the last send.
@@ -75,8 +77,9 @@ impl StreamLink {
         StreamLink {
             conn: Connection::new(endpoint, backoff),
             rx: BytesMut::with_capacity(512),
-            owed: Owed::new(guard, guard == Guard::Wait),
+            owed: Owed::new(guard, false),
             retrying: false,
+            writing: false,
             ceiling: Instant::now(),
             replying: false,
         }
@@ -118,17 +121,17 @@ impl StreamLink {
     /// line that may bring another process's reply), a new connection is opened
     /// ([`Guard::Replace`]) or the line is held until nothing has arrived for the
     /// configured timeout, counted from the last byte sent or received ([`Guard::Wait`]),
-    /// dropping whatever arrives; then input already waiting is flushed. Returns the
-    /// replies dropped and how long the line was held (not part of the attempt's round
+    /// dropping whatever arrives; then input already waiting is flushed. A write never
+    /// answered is waited out before the next request rather than left behind on a closed
+    /// connection ([`super::owed::Owed::before_send`]); `write` if this request writes.
+    /// Returns the replies dropped and how long the line was held (not part of the attempt's round
     /// trip: the caller starts the attempt's reply window after its send,
     /// [`Attempt::restarted`]).
-    pub async fn settle(&mut self, attempt: &Attempt) -> Result<Settled, AttemptError> {
+    pub async fn settle(&mut self, attempt: &Attempt, write: bool) -> Result<Settled, AttemptError> {
         self.retrying = !attempt.is_first();
-        if self.owed.guard() == Guard::Ids {
-            return Ok(Settled::default());
-        }
+        self.writing = write;
         let started = Instant::now();
-        let mut replies = match self.owed.before_send() {
+        let mut replies = match self.owed.before_send(attempt.is_first()) {
             Clear::Nothing => 0,
             Clear::Replace => {
                 self.reset();
@@ -140,7 +143,9 @@ impl StreamLink {
                 replies
             }
         };
-        replies += u64::from(self.flush_stale(attempt.timeout).await?);
+        if self.owed.guard() != Guard::Ids {
+            replies += u64::from(self.flush_stale(attempt.timeout).await?);
+        }
         Ok(Settled { replies, held: started.elapsed() })
     }
 
@@ -265,7 +270,7 @@ impl StreamLink {
         match tokio::time::timeout(timeout, written).await {
             Ok(Ok(())) => {
                 self.conn.tap.sent(bytes);
-                self.owed.sent(self.retrying);
+                self.owed.sent(self.retrying, self.writing);
                 self.ceiling = self.owed.last_io() + timeout;
                 self.replying = false;
                 Ok(())

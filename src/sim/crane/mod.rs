@@ -48,6 +48,7 @@ use tokio::task::JoinHandle;
 
 use crate::protocols::faults::SharedFaults;
 use crate::protocols::mc3e::{Bank, Device, Mc3eServer, ServerState, SharedBank, TransportKind, WriteEvent};
+use crate::protocols::transport::DatagramServerPort;
 use crate::wire::motion::Motion;
 pub use commands::CommandError;
 use engine::Engine;
@@ -111,6 +112,30 @@ impl CraneSim {
     pub async fn start(addr: &str, options: CraneSimOptions) -> std::io::Result<CraneSim> {
         let invalid = |e: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, e);
         let addr: SocketAddr = addr.parse().map_err(|e| invalid(format!("{e}")))?;
+        let transport = options.transport;
+        let (state, mut sim) = CraneSim::build(options)?;
+        sim.server = Some(match transport {
+            TransportKind::Tcp => Mc3eServer::bind_tcp(addr, state).await?,
+            TransportKind::Udp => Mc3eServer::bind_udp(addr, state).await?,
+        });
+        Ok(sim)
+    }
+
+    /// Starts a crane answering MC 3E/4E datagrams on a serving port already bound (the
+    /// simulated wire of the tests, `protocols::simwire`), known as `addr`.
+    pub fn serve_datagrams(
+        port: impl DatagramServerPort,
+        addr: SocketAddr,
+        options: CraneSimOptions,
+    ) -> std::io::Result<CraneSim> {
+        let (state, mut sim) = CraneSim::build(options)?;
+        sim.server = Some(Mc3eServer::serve_datagrams(port, addr, state));
+        Ok(sim)
+    }
+
+    /// The crane without its server: the state a server serves, and the rest.
+    fn build(options: CraneSimOptions) -> std::io::Result<(ServerState, CraneSim)> {
+        let invalid = |e: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, e);
         if !(options.time_scale.is_finite() && options.time_scale > 0.0) {
             return Err(invalid(format!("time scale {} is not a positive number", options.time_scale)));
         }
@@ -147,10 +172,6 @@ impl CraneSim {
             }
         };
         let state = ServerState::new(bank.clone()).with_faults(faults).on_write(Arc::new(hook));
-        let server = match options.transport {
-            TransportKind::Tcp => Mc3eServer::bind_tcp(addr, state).await?,
-            TransportKind::Udp => Mc3eServer::bind_udp(addr, state).await?,
-        };
         // Fine enough for the axes to move smoothly and for a scaled cycle to end on time.
         let tick = match options.motion {
             Some(_) => Duration::from_millis(20).div_f64(options.time_scale.max(1.0)),
@@ -158,7 +179,8 @@ impl CraneSim {
         }
         .clamp(Duration::from_millis(1), Duration::from_millis(20));
         let ticker = tokio::spawn(run_ticks(bank.clone(), engine.clone(), kick, tick));
-        Ok(CraneSim { server: Some(server), bank, engine, ticker, drop_rate: Mutex::new(0.0), cut })
+        let sim = CraneSim { server: None, bank, engine, ticker, drop_rate: Mutex::new(0.0), cut };
+        Ok((state, sim))
     }
 
     /// The address it listens on.

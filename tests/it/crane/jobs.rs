@@ -56,7 +56,11 @@ async fn every_job_kind_completes_over_udp() {
 async fn tasks_carry_the_mapped_coordinates_and_run_one_at_a_time() {
     // Stations come from the configuration.
     let (app, sim) = crane_app(TransportKind::Tcp, 40, |d| d.outbound_station = [1, 0, 2, 2].into()).await;
+    // The second job is posted once the first is the crane's: posted together, the
+    // planner would order them for travel (the link's first request waits a timeout, so a
+    // job posted at start is not taken at once).
     let a = submit(&app, json!({"kind": "retrieve", "from": cloc(2, 9, 6, 2)}), "one").await;
+    wait_job(&app, a, &["dispatched", "running"], 5).await;
     let b = submit(&app, json!({"kind": "store", "barcode": "P", "to": cloc(1, 3, 2, 1)}), "two").await;
     wait_job(&app, a, &["running"], 5).await;
     // The crane shows the retrieve's words: from the rack to the outbound station.

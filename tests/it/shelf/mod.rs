@@ -9,6 +9,7 @@ mod protocols;
 mod reservations;
 mod restart;
 mod safety;
+mod wire;
 mod workload;
 
 use rackd::config::devices::ShelfConfig;

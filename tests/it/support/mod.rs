@@ -7,6 +7,7 @@
 pub mod app;
 pub mod machines;
 pub mod node;
+pub mod port;
 pub mod postgres;
 pub mod proxy;
 pub mod python;

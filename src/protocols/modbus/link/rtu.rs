@@ -73,7 +73,7 @@ impl RtuLink {
     pub async fn send(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<(), AttemptError> {
         self.tx.clear();
         rtu::encode(&mut self.tx, ex.unit, ex.pdu);
-        self.counters.settled(self.link.settle(attempt).await?);
+        self.counters.settled(self.link.settle(attempt, ex.request.is_write()).await?);
         tokio::time::sleep_until(self.link.last_io() + self.silence).await;
         Counters::bump(&self.counters.sends);
         self.link.send(&self.tx, attempt.timeout).await

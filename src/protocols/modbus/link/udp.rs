@@ -66,7 +66,7 @@ impl UdpLink {
         if attempt.is_first() {
             self.tids.clear();
         }
-        self.counters.settled(self.link.settle(attempt).await?);
+        self.counters.settled(self.link.settle(attempt, ex.request.is_write()).await?);
         let tid = self.ids.next();
         self.tids.push(tid);
         self.tx.clear();

@@ -16,23 +16,21 @@ mod handshake;
 mod heartbeat;
 mod reload;
 
-use std::collections::{BTreeMap, HashSet};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use crate::support::eventually_every;
+pub use crate::support::port::TestPort;
 use async_trait::async_trait;
 use rackd::config::devices::{CraneConfig, DeviceKind};
 use rackd::devices::crane::Crane;
-use rackd::devices::port::{Port, ReportError};
 use rackd::devices::{DeviceRequest, DeviceStatus, StatusCell};
-use rackd::domain::report::path;
-use rackd::domain::{Job, JobSpec, JobState, Location, NewJob, Priority, Report, Reported};
+use rackd::domain::{Job, JobSpec, JobState, Location, Reported};
 use rackd::protocols::mc3e::{Bank, Device, SharedBank, address};
 use rackd::protocols::{Address, PlcError, PlcMemory};
 use rackd::sim::crane::engine::Engine;
-use tokio::sync::{Notify, mpsc, watch};
+use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
@@ -107,57 +105,6 @@ impl PlcMemory for Memory {
 
     async fn write_bits(&self, _: &Address, _: &[bool]) -> Result<(), PlcError> {
         Err(PlcError::OutOfRange("the crane interface has no bits"))
-    }
-}
-
-/// The dispatcher's side of the port, in memory: jobs by id, reports recorded in order.
-#[derive(Default)]
-pub struct TestPort {
-    jobs: Mutex<BTreeMap<i64, Job>>,
-    paused: AtomicBool,
-    wake: Notify,
-    reports: Mutex<Vec<(Instant, Report)>>,
-}
-
-#[async_trait]
-impl Port for TestPort {
-    fn unfinished(&self) -> Vec<Job> {
-        self.jobs.lock().unwrap().values().filter(|j| !j.state.is_terminal()).cloned().collect()
-    }
-
-    fn job(&self, id: i64) -> Option<Job> {
-        self.jobs.lock().unwrap().get(&id).filter(|j| !j.state.is_terminal()).cloned()
-    }
-
-    fn next(&self, free: usize, holding: &HashSet<i64>) -> Vec<Job> {
-        if self.paused.load(Ordering::SeqCst) {
-            return Vec::new();
-        }
-        let jobs = self.jobs.lock().unwrap();
-        let queued = jobs.values().filter(|j| j.state == JobState::Queued && !holding.contains(&j.id));
-        queued.take(free).cloned().collect()
-    }
-
-    async fn work_waiting(&self) {
-        self.wake.notified().await
-    }
-
-    async fn report(&self, reports: Vec<Report>) -> Result<Vec<Job>, ReportError> {
-        let mut jobs = self.jobs.lock().unwrap();
-        let mut answers = Vec::new();
-        for report in reports {
-            let job = jobs.get_mut(&report.job).ok_or(ReportError::NotFound(report.job))?;
-            for t in path(job.state, &report.to) {
-                job.state = job.state.apply(t).unwrap_or_else(|e| panic!("{report:?}: {e}"));
-            }
-            if let Some(failure) = report.to.failure() {
-                job.failure = Some(failure.clone());
-            }
-            job.forced |= report.to.forced();
-            answers.push(job.clone());
-            self.reports.lock().unwrap().push((Instant::now(), report));
-        }
-        Ok(answers)
     }
 }
 
@@ -252,39 +199,22 @@ impl Rig {
 
     /// Queues a job for the crane (as the writer hands a committed job to the dispatcher).
     pub fn queue(&self, spec: JobSpec) -> i64 {
-        let mut jobs = self.port.jobs.lock().unwrap();
-        let id = jobs.keys().last().map_or(1, |k| k + 1);
-        let new = NewJob {
-            spec,
-            reference: None,
-            priority: Priority::DEFAULT,
-            barcode: None,
-            device: None,
-            serves: None,
-        };
-        jobs.insert(id, new.accepted(id, rackd::domain::time::now_ms()));
-        drop(jobs);
-        self.port.wake.notify_one();
-        id
+        self.port.queue(spec)
     }
 
     /// Pauses or resumes the device, as the dispatcher's control state does.
     pub fn set_paused(&self, paused: bool) {
-        self.port.paused.store(paused, Ordering::SeqCst);
-        if !paused {
-            self.port.wake.notify_one();
-        }
+        self.port.set_paused(paused);
     }
 
     /// Job `id` as the port holds it.
     pub fn job(&self, id: i64) -> Job {
-        self.port.jobs.lock().unwrap()[&id].clone()
+        self.port.job_as_held(id)
     }
 
     /// The reports of job `id`, in order.
     pub fn reports(&self, id: i64) -> Vec<Reported> {
-        let reports = self.port.reports.lock().unwrap();
-        reports.iter().filter(|(_, r)| r.job == id).map(|(_, r)| r.to.clone()).collect()
+        self.port.reports_of(id)
     }
 
     /// Waits until the status satisfies `pred`, for at most `limit` of (virtual) time;
