@@ -42,7 +42,7 @@ fn light(n: i64) -> JobSpec {
     let n = n as u16;
     let location =
         Location { aisle: 1, row: 1 + n % 2, bay: 1 + n / 2 % 10, level: 1 + n / 20 % 6, position: 1 };
-    JobSpec::Light { location, color: LightColor::Green, on: n % 3 != 0 }
+    JobSpec::Light { location, color: LightColor::Green, on: !n.is_multiple_of(3) }
 }
 
 /// A rackd's shelf adapter for `sim` over `wire`, with a fresh link (a new process).
