@@ -5,6 +5,7 @@
 use rackd::store::Engine;
 mod control;
 mod faults;
+mod kills;
 mod protocols;
 mod reservations;
 mod restart;

@@ -1,6 +1,10 @@
 //! A `rackd serve` child process for tests that kill it (SIGKILL, no goodbye) and start it
 //! again: the failover of `standby::failover`, the webhooks' deliveries of
-//! `webhooks::kills`.
+//! `webhooks::kills`, the shelf's jobs of `shelf::kills`.
+//!
+//! A node configured to listen on port 0 binds whatever port is free each time it starts,
+//! and [`Node::start`] reads the address from its own "rackd listening" log line, so no
+//! port is picked before the child binds it (another process could take it in between).
 
 use std::fs::OpenOptions;
 use std::io::Write;
@@ -17,6 +21,8 @@ pub struct Node {
     config: PathBuf,
     log: PathBuf,
     child: Option<Child>,
+    /// Listens on port 0: the address is read from the log at each start.
+    any_port: bool,
 }
 
 impl Node {
@@ -25,7 +31,8 @@ impl Node {
         let path = dir.join(format!("{name}.toml"));
         std::fs::write(&path, toml::to_string(config).unwrap()).unwrap();
         let url = format!("http://{}", config.server.listen);
-        Node { log: dir.join(format!("{name}.log")), config: path, url, name, child: None }
+        let any_port = config.server.listen.port() == 0;
+        Node { log: dir.join(format!("{name}.log")), config: path, url, name, child: None, any_port }
     }
 
     pub fn start(&mut self) {
@@ -38,7 +45,33 @@ impl Node {
         }
         command.args(["serve", "--config"]).arg(&self.config).env("RACKD_LOG", "info");
         command.current_dir(self.config.parent().unwrap()).stdout(log.try_clone().unwrap()).stderr(log);
+        let starts = self.log().matches("===== test: starting node").count();
         self.child = Some(command.spawn().unwrap());
+        if self.any_port {
+            self.url = format!("http://{}", self.listening(starts));
+        }
+    }
+
+    /// The address the `start`-th start (counted from 1) says it listens on, read from its
+    /// log (at most 30 s).
+    fn listening(&mut self, start: usize) -> String {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+        loop {
+            let log = self.log();
+            let this = log.split("===== test: starting node").nth(start).unwrap_or("");
+            if let Some(at) =
+                this.lines().find_map(|l| l.contains("rackd listening").then(|| address(l)).flatten())
+            {
+                return at;
+            }
+            assert!(self.running(), "node {} stopped before listening:\n{this}", self.name);
+            assert!(
+                std::time::Instant::now() < deadline,
+                "node {} not listening after 30 s:\n{this}",
+                self.name
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
     }
 
     /// SIGKILL: the process ends without a word, its lease left to run out.
@@ -69,6 +102,12 @@ impl Node {
     pub fn running(&mut self) -> bool {
         self.child.as_mut().is_some_and(|c| matches!(c.try_wait(), Ok(None)))
     }
+}
+
+/// The `addr=HOST:PORT` of a log line.
+fn address(line: &str) -> Option<String> {
+    let at = line.split_whitespace().find_map(|w| w.strip_prefix("addr="))?;
+    Some(at.trim_matches('"').to_owned())
 }
 
 impl Drop for Node {
