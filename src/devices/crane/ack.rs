@@ -7,18 +7,25 @@
 //! reading: rackd writes D223's value back into D22 and follows it to 0. In both, rackd
 //! writes the acknowledgement only after the outcome is stored, so a crash in between
 //! records the outcome again (a no-op) instead of losing it.
+//!
+//! A write of D22 whose reply never came may have landed or not. rackd then takes D22 as
+//! unknown: it writes the word wanted again at the next poll, and hands no task over
+//! until a write of 0 was answered; a 1 left standing would acknowledge the next task's
+//! completion before rackd saw it, which rackd would take for a lost task (found by the
+//! seeded wire simulation, `crane::wire`).
 
 use crate::config::devices::Ack;
 
 impl Ack {
     /// What to write to D22, if anything, given the crane's D223 and the D22 rackd last
-    /// wrote. Only call it once any completion shown has been recorded.
-    pub fn next_word(self, completion: u16, written: u16) -> Option<u16> {
+    /// wrote (`None`: a write of it went unanswered, so it is not known: the word wanted is
+    /// written again). Only call it once any completion shown has been recorded.
+    pub fn next_word(self, completion: u16, written: Option<u16>) -> Option<u16> {
         let want = match self {
             Ack::Handshake => u16::from(completion != 0),
             Ack::Echo => completion,
         };
-        (want != written).then_some(want)
+        (Some(want) != written).then_some(want)
     }
 }
 
@@ -53,18 +60,19 @@ mod tests {
     #[test]
     fn handshake_sets_then_clears() {
         let r = Ack::Handshake;
-        assert_eq!(r.next_word(20, 0), Some(1));
-        assert_eq!(r.next_word(20, 1), None);
-        assert_eq!(r.next_word(0, 1), Some(0));
-        assert_eq!(r.next_word(0, 0), None);
+        assert_eq!(r.next_word(20, Some(0)), Some(1));
+        assert_eq!(r.next_word(20, Some(1)), None);
+        assert_eq!(r.next_word(0, Some(1)), Some(0));
+        assert_eq!(r.next_word(0, Some(0)), None);
+        assert_eq!(r.next_word(0, None), Some(0), "a write of it went unanswered: written again");
     }
 
     #[test]
     fn echo_mirrors_the_completion_word() {
         let r = Ack::Echo;
-        assert_eq!(r.next_word(30, 0), Some(30));
-        assert_eq!(r.next_word(30, 30), None);
-        assert_eq!(r.next_word(0, 30), Some(0));
+        assert_eq!(r.next_word(30, Some(0)), Some(30));
+        assert_eq!(r.next_word(30, Some(30)), None);
+        assert_eq!(r.next_word(0, Some(30)), Some(0));
     }
 
     #[test]

@@ -29,8 +29,10 @@ impl Crane {
         self.advance_handing(&view).await?;
         self.follow(&view).await?;
         if let Some(word) = self.ack.next_word(view.completion, self.ack_written) {
+            // Unknown until answered: a write that times out may still have landed.
+            self.ack_written = None;
             self.write(&self.wcs_word(wcs::ACK), &[word]).await?;
-            self.ack_written = word;
+            self.ack_written = Some(word);
         }
         self.on_alarm(&view).await
     }
@@ -129,7 +131,7 @@ impl Crane {
         let view = CraneView::parse(&words).ok_or(PlcError::Malformed("short crane block"))?;
         let word = |k: u32| mine.get(k as usize).copied().unwrap_or(0);
         self.heartbeat.found(word(wcs::HEARTBEAT));
-        self.ack_written = word(wcs::ACK);
+        self.ack_written = Some(word(wcs::ACK));
         self.current = None;
         self.handing = None;
         self.blocked = None;

@@ -134,7 +134,11 @@ pub struct Crane {
     ack: Ack,
     heartbeat: Heartbeat,
     current: Option<Current>,
-    ack_written: u16,
+    /// What D22 holds as rackd last wrote it; `None` while a write of it is unanswered
+    /// (it may have landed or not: the next poll writes the word wanted again, and no task
+    /// is handed over meanwhile, since a 1 left standing would acknowledge the next task's
+    /// completion for rackd).
+    ack_written: Option<u16>,
     link_ok: bool,
     view: Option<CraneView>,
     /// A hand-over not known to be over (see [`interrupted`]): no other until it is.
@@ -176,7 +180,7 @@ impl Crane {
             ack,
             heartbeat,
             current: None,
-            ack_written: 0,
+            ack_written: None,
             link_ok: false,
             view: None,
             handing: None,
@@ -290,7 +294,7 @@ impl Crane {
     /// dispatcher offers none while the crane is paused).
     fn may_dispatch(&self) -> bool {
         let idle = self.view.is_some_and(|v| v.is_idle());
-        let clear = self.handing.is_none() && self.blocked.is_none() && self.ack_written == 0;
+        let clear = self.handing.is_none() && self.blocked.is_none() && self.ack_written == Some(0);
         self.status.get().online && self.current.is_none() && idle && clear
     }
 

@@ -158,6 +158,8 @@ struct Net {
     ports: BTreeMap<u16, Inbox<Vec<u8>>>,
     server: Inbox<(u16, Vec<u8>)>,
     streams: Vec<[End; 2]>,
+    /// `RACKD_WIRE_TRACE` is set: every frame landing is printed.
+    trace: bool,
 }
 
 /// A simulated network between clients and one device.
@@ -189,6 +191,7 @@ impl Wire {
             ports: BTreeMap::new(),
             server: Inbox::default(),
             streams: Vec::new(),
+            trace: std::env::var_os("RACKD_WIRE_TRACE").is_some(),
         };
         let net = Arc::new(Mutex::new(net));
         let notify = Arc::new(Notify::new());
@@ -294,6 +297,10 @@ impl Net {
 
     /// Hands one frame to whoever holds its destination now; a frame for no one is lost.
     fn land(&mut self, to: To, bytes: Vec<u8>) {
+        if self.trace {
+            let hex: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+            eprintln!("wire {:?} lands {to:?} {hex}", Instant::now());
+        }
         match to {
             To::Port(port) => {
                 if let Some(inbox) = self.ports.get_mut(&port) {

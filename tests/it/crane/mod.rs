@@ -10,6 +10,7 @@ mod pause_restart;
 mod paused;
 mod planner;
 mod restart;
+mod wire;
 
 use std::time::Duration;
 

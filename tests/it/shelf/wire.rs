@@ -125,7 +125,11 @@ async fn run(seed: u64, ids: bool) -> u32 {
             .reports_of(id)
             .iter()
             .any(|r| matches!(r, Reported::Failed(f) if f.kind == FailureKind::Lost));
-        assert!(!lost, "seed {seed}: job {id} failed as lost, though the PLC never lost it: {job:?}");
+        let reports = port.reports_of(id);
+        assert!(
+            !lost,
+            "seed {seed}: job {id} failed as lost, though the PLC never lost it: {job:?}, {reports:?}"
+        );
         assert_eq!(job.state, JobState::Completed, "seed {seed}: job {id}: {job:?}");
         assert_eq!(sim.received(task_id_for(id)), 1, "seed {seed}: job {id}'s task reached the PLC once");
     }
