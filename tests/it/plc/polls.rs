@@ -110,3 +110,28 @@ async fn silence_on_a_serial_line_names_unit_baud_parity_and_wiring() {
         "{err}"
     );
 }
+
+/// The replies a late PLC still sends to the attempts of an earlier poll are late answers
+/// to rackd's own requests: a capture marks them `stale`, never `foreign` (which would send
+/// an engineer looking for another master on the network).
+#[test]
+fn late_replies_to_an_earlier_poll_are_stale_not_foreign() {
+    use rackd::capture::{Direction, Verdict, read_file};
+
+    let late = sim(&["modbus", "--transport", "udp", "--late-ms", "250"]);
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("late.pcapng");
+    let name = file.to_str().unwrap();
+    let args = ["read", "4x0", "--count", "3", "--interval", "100", "--timeout-ms", "100", "--capture", name];
+    let (ok, _, err) = plc("modbus-udp", &late.address, &args);
+    assert!(ok, "{err}");
+    let capture = read_file(&file).unwrap();
+    let verdicts: Vec<Option<Verdict>> = capture
+        .frames
+        .iter()
+        .filter(|f| f.direction == Direction::Received)
+        .map(|f| f.annotations.verdict)
+        .collect();
+    assert!(verdicts.contains(&Some(Verdict::StaleReply)), "{verdicts:?}");
+    assert!(!verdicts.contains(&Some(Verdict::ForeignReply)), "{verdicts:?}");
+}
