@@ -4,7 +4,7 @@
 //! cargo run --release --example bench -- intake [--clients 64] [--seconds 5] [--batch 1000] [--database sqlite|postgres|URL] [--tls]
 //! cargo run --release --example bench -- shelf  [--latency-jobs 1000] [--batch-jobs 20000] [--poll-ms 10]
 //!                                               [--drop 0.2 [--lossy-jobs 1000] [--fixed-timeout]
-//!                                                [--min-timeout-ms 20]]
+//!                                                [--min-timeout-ms 20] [--no-transaction-id]]
 //! cargo run --release --example bench -- ws     [--subscribers 1000] [--events 500] [--rate 50]
 //! cargo run --release --example bench -- fleet  [--devices 500] [--tags 30] [--poll-ms 500] [--seconds 20] [--changing 0.1]
 //!                                               [--capture on|off|both [--rounds 3]]
@@ -102,9 +102,14 @@ enum Bench {
         /// issue 12, for comparison.
         #[arg(long)]
         fixed_timeout: bool,
-        /// The adaptive timeout's floor for the device (`min_timeout_ms`; default 2 on Modbus UDP).
+        /// The adaptive timeout's floor for the device (`min_timeout_ms`; default 2 on Modbus
+        /// UDP with transaction ids, 20 without).
         #[arg(long)]
         min_timeout_ms: Option<u64>,
+        /// The simulator answers with transaction id 0, as the seed's PLC does, and the
+        /// device has the `no-transaction-id` quirk (issue 50: its replies name no request).
+        #[arg(long)]
+        no_transaction_id: bool,
     },
     /// Live events: fan-out latency and the server's CPU with 1 and with N WebSocket subscribers.
     Ws {
@@ -156,9 +161,15 @@ fn main() -> ExitCode {
                 lossy_jobs,
                 fixed_timeout,
                 min_timeout_ms,
+                no_transaction_id,
             } => {
-                let lossy =
-                    drop.map(|rate| shelf::Lossy { rate, jobs: lossy_jobs, fixed_timeout, min_timeout_ms });
+                let lossy = drop.map(|rate| shelf::Lossy {
+                    rate,
+                    jobs: lossy_jobs,
+                    fixed_timeout,
+                    min_timeout_ms,
+                    no_transaction_id,
+                });
                 let poll_ms = poll_ms.unwrap_or(if lossy.is_some() { 200 } else { 10 });
                 shelf::run(latency_jobs, batch_jobs, poll_ms, lossy).await
             }

@@ -15,7 +15,9 @@
 //! requests, and both completed-jobs rates are printed with their ratio (the goal: at least
 //! half the clean rate under 20% loss), with the device's link health after the lossy run.
 //! `--fixed-timeout` pins the reply timeout at `timeout_ms` (the floor raised to the
-//! ceiling), which is how rackd behaved before the adaptive timer.
+//! ceiling), which is how rackd behaved before the adaptive timer. `--no-transaction-id`
+//! runs both on the seed's PLC's habit (replies without transaction ids): what the rule
+//! for such links costs under loss (issue 50).
 
 use std::time::{Duration, Instant};
 
@@ -42,6 +44,8 @@ pub struct Lossy {
     pub fixed_timeout: bool,
     /// The adaptive timer's floor, if not the default.
     pub min_timeout_ms: Option<u64>,
+    /// The PLC answers without transaction ids (the seed's), and the device knows it.
+    pub no_transaction_id: bool,
 }
 
 /// Runs the shelf benchmark: `latency_jobs` single jobs, then `batch_jobs` in batches; or,
@@ -71,8 +75,9 @@ pub async fn run(
         (false, Some(ms)) => format!("adaptive timeout, floor {ms} ms"),
         (false, None) => "adaptive timeout, default floor".to_owned(),
     };
+    let ids = if lossy.no_transaction_id { "replies without transaction ids" } else { "transaction ids" };
     println!(
-        "bench shelf --drop {}: {} jobs per run, poll every {poll_ms} ms, {timer}",
+        "bench shelf --drop {}: {} jobs per run, poll every {poll_ms} ms, {timer}, {ids}",
         lossy.rate, lossy.jobs
     );
     println!("clean link:          {clean:.1} completed jobs/s");
@@ -91,9 +96,9 @@ async fn start(
     lossy: Option<&Lossy>,
     webhooks: Vec<WebhookConfig>,
 ) -> anyhow::Result<(ShelfSim, Served, tempfile::TempDir)> {
-    let sim =
-        ShelfSim::start("127.0.0.1:0", ShelfSimOptions { task_time: Duration::ZERO, ..Default::default() })
-            .await?;
+    let no_transaction_id = lossy.is_some_and(|l| l.no_transaction_id);
+    let options = ShelfSimOptions { task_time: Duration::ZERO, no_transaction_id, ..Default::default() };
+    let sim = ShelfSim::start("127.0.0.1:0", options).await?;
     let dir = tempfile::tempdir()?;
     let mut config = Config::demo();
     config.server.listen = "127.0.0.1:0".parse()?;
