@@ -110,6 +110,10 @@ enum Bench {
         /// device has the `no-transaction-id` quirk (issue 50: its replies name no request).
         #[arg(long)]
         no_transaction_id: bool,
+        /// The device's `timeout_ms` (default 300): the reply lifetime the rule against late
+        /// replies and writes waits out after a lost request.
+        #[arg(long)]
+        timeout_ms: Option<u64>,
     },
     /// Live events: fan-out latency and the server's CPU with 1 and with N WebSocket subscribers.
     Ws {
@@ -162,6 +166,7 @@ fn main() -> ExitCode {
                 fixed_timeout,
                 min_timeout_ms,
                 no_transaction_id,
+                timeout_ms,
             } => {
                 let lossy = drop.map(|rate| shelf::Lossy {
                     rate,
@@ -169,6 +174,7 @@ fn main() -> ExitCode {
                     fixed_timeout,
                     min_timeout_ms,
                     no_transaction_id,
+                    timeout_ms,
                 });
                 let poll_ms = poll_ms.unwrap_or(if lossy.is_some() { 200 } else { 10 });
                 shelf::run(latency_jobs, batch_jobs, poll_ms, lossy).await

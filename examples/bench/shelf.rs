@@ -46,6 +46,8 @@ pub struct Lossy {
     pub min_timeout_ms: Option<u64>,
     /// The PLC answers without transaction ids (the seed's), and the device knows it.
     pub no_transaction_id: bool,
+    /// The device's `timeout_ms`, if not the default.
+    pub timeout_ms: Option<u64>,
 }
 
 /// Runs the shelf benchmark: `latency_jobs` single jobs, then `batch_jobs` in batches; or,
@@ -76,6 +78,7 @@ pub async fn run(
         (false, None) => "adaptive timeout, default floor".to_owned(),
     };
     let ids = if lossy.no_transaction_id { "replies without transaction ids" } else { "transaction ids" };
+    let ids = format!("{ids}, timeout_ms {}", lossy.timeout_ms.unwrap_or(300));
     println!(
         "bench shelf --drop {}: {} jobs per run, poll every {poll_ms} ms, {timer}, {ids}",
         lossy.rate, lossy.jobs
@@ -107,6 +110,9 @@ async fn start(
     let plc_addr = sim.local_addr().context("a UDP simulator has an address")?.to_string();
     let mut device = shelf_device(&sim, "shelf1", &plc_addr, vec![1]);
     device.poll_ms = poll_ms;
+    if let Some(ms) = lossy.and_then(|l| l.timeout_ms) {
+        device.link.timeout = Duration::from_millis(ms);
+    }
     if let Some(ms) = lossy.and_then(|l| l.min_timeout_ms) {
         device.link.tuning.min_timeout = Duration::from_millis(ms);
     }
