@@ -12,6 +12,9 @@
 //! their p50/p99. A webhook subscription delivers every `job.*` event throughout, to a
 //! receiver that fails a fifth of calls and is slow around each kill: each event reaches it
 //! at least once, in order, and the stored cursor never passes one it did not acknowledge.
+//! The subscription is new, and a new one starts from the newest event when its deliverer
+//! first runs (on the first active node, once it drives): the first job is posted only
+//! after that, so that every `job.*` event is the subscription's to deliver.
 
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
@@ -66,6 +69,7 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
         cluster::read(&db, LEASE).await.unwrap().ok_or("none")
     })
     .await;
+    let start = subscribed(&db).await;
 
     let (mut mix, mut posted) = (Mix::default(), Vec::new());
     for i in 0..24 {
@@ -113,6 +117,7 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
         .fetch_all(&db)
         .await
         .unwrap();
+    assert!(wanted.iter().all(|seq| *seq > start), "job events before the subscription began at {start}");
     crate::webhooks::every_event_acked(&receiver, &wanted).await;
     cursor_is_acknowledged(&db, &receiver).await;
     receiver.check("wms", "job.");
@@ -145,6 +150,20 @@ async fn machines() -> (ShelfSim, CraneSim) {
     let crane = CraneSimOptions { step: Duration::from_millis(50), ..Default::default() };
     let shelf = ShelfSim::start("127.0.0.1:0", shelf).await.unwrap();
     (shelf, CraneSim::start("127.0.0.1:0", crane).await.unwrap())
+}
+
+/// Waits until the subscription has begun: its deliverer, on the node that won the lease,
+/// stored its row with its first cursor (the newest event then), which it returns. The lease
+/// row alone is too early: the winner writes it, then starts driving (the queues, the
+/// devices, then the deliverers), and a job posted meanwhile (any node takes jobs in) comes
+/// before the subscription's first cursor, never to be delivered, as a new subscription's
+/// rule says (`service::webhooks`).
+async fn subscribed(db: &PgPool) -> i64 {
+    let sql = "SELECT cursor FROM webhooks WHERE name = 'wms'";
+    eventually("the subscription to begin", Duration::from_secs(30), async || {
+        sqlx::query_scalar::<_, i64>(sql).fetch_optional(db).await.unwrap().ok_or("no row yet")
+    })
+    .await
 }
 
 /// The stored cursor passes no `job.*` event the receiver has not acknowledged.
