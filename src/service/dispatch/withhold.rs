@@ -42,12 +42,8 @@ impl Queues {
         Withheld { queues: self.clone(), jobs }
     }
 
-    /// Whether some cancel withholds job `id`.
-    pub fn is_withheld(&self, id: i64) -> bool {
-        self.withheld().contains_key(&id)
-    }
-
-    /// How many cancels hold each withheld job.
+    /// How many cancels hold each withheld job. Taken alone, or inside the queues' lock
+    /// (a dispatch round), never around it.
     pub(super) fn withheld(&self) -> MutexGuard<'_, HashMap<i64, usize>> {
         self.0.withheld.lock().unwrap_or_else(|p| p.into_inner())
     }
