@@ -11,6 +11,7 @@
 mod api;
 mod browser;
 mod bulk;
+mod cancels;
 mod capture;
 mod crane;
 mod docs;

@@ -30,7 +30,10 @@
 //!   rounds, so a hand-over begun before is recorded by then). A job a device holds, or one
 //!   the writer finds no longer queued, refuses the action: a bulk cancel only cancels
 //!   queued jobs (one on a machine is cancelled on its own, `POST /api/v1/jobs/{id}/cancel`).
-//!   A dry run does not ask the devices.
+//!   A dry run does not ask the devices. The hold is the action's own
+//!   ([`super::withhold`]), let go when it ends however it ends (answered, refused, failed,
+//!   or dropped with its request): another cancel of the same jobs under way keeps them
+//!   withheld until it ends too.
 //! - **Bounded.** At most [`MAX_BULK`] items an action; a selection of more is refused
 //!   ([`BulkError::TooMany`]) rather than cut, since a partial action is not what was asked.
 //!   The failed jobs are read on the state index (`store::jobs::failed`): the failed jobs
@@ -220,7 +223,8 @@ impl Dispatcher {
                 by_device.entry(device).or_default().push(*id);
             }
         }
-        let _withheld = Withheld::new(self, &by_device);
+        let pairs = by_device.iter().flat_map(|(d, ids)| ids.iter().map(|id| (d.clone(), *id)));
+        let _withheld = self.queues.withhold(pairs.collect());
         let mut held = Vec::new();
         for (device, ids) in &by_device {
             let Some(handle) = devices.get(device) else { continue };
@@ -256,30 +260,4 @@ fn bounded<T>(items: Vec<T>, what: &'static str) -> Result<Vec<T>, BulkError> {
         return Err(BulkError::TooMany { what });
     }
     Ok(items)
-}
-
-/// Jobs withheld from their devices while a bulk cancel decides on them; let go when
-/// dropped, however the request ends (answered, failed, or dropped by its timeout).
-struct Withheld<'a> {
-    dispatcher: &'a Dispatcher,
-    jobs: Vec<(String, i64)>,
-}
-
-impl<'a> Withheld<'a> {
-    fn new(dispatcher: &'a Dispatcher, by_device: &BTreeMap<String, Vec<i64>>) -> Withheld<'a> {
-        let jobs: Vec<(String, i64)> =
-            by_device.iter().flat_map(|(d, ids)| ids.iter().map(|id| (d.clone(), *id))).collect();
-        for (device, id) in &jobs {
-            dispatcher.queues.withhold(device, *id, true);
-        }
-        Withheld { dispatcher, jobs }
-    }
-}
-
-impl Drop for Withheld<'_> {
-    fn drop(&mut self) {
-        for (device, id) in &self.jobs {
-            self.dispatcher.queues.withhold(device, *id, false);
-        }
-    }
 }

@@ -11,6 +11,12 @@
 //! - the job's device is not configured (any more): a queued job is cancelled, one past
 //!   queued cannot be withdrawn (409).
 //!
+//! The hold is this cancel's own ([`super::withhold`]): a guard taken before the device is
+//! asked and dropped when the cancel ends, however it ends (its request dropped by a
+//! client's timeout included). Another cancel of the same job that ends meanwhile (a bulk
+//! cancel refused, a first attempt its client gave up on) does not let the job go, so the
+//! device's "not held" stays true until this cancel's commit.
+//!
 //! No database or driver text reaches the caller: store failures are [`CancelError::Store`]
 //! (500, logged by the API), a link failure is only named.
 
@@ -73,9 +79,9 @@ impl Dispatcher {
         let Some(job) = self.queues.find(id) else { return self.cancel_unqueued(id, who).await };
         let device = job.device.clone().unwrap_or_default();
         let Some(handle) = devices.get(&device) else { return self.cancel_unqueued(id, who).await };
-        self.queues.withhold(&device, id, true);
+        let _withheld = self.queues.withhold(vec![(device.clone(), id)]);
         let answer = handle.cancel(id).await;
-        let result = match answer {
+        match answer {
             None => Err(CancelError::Unavailable { device: device.clone() }),
             Some(Ok(Withdrawal::NotHeld)) => self.cancel_queued(id, who).await,
             Some(Ok(Withdrawal::Done)) => match self.stored(id).await {
@@ -100,9 +106,7 @@ impl Dispatcher {
             Some(Err(CancelRefusal::NotTaken)) => Err(CancelError::Unavailable { device: device.clone() }),
             Some(Err(CancelRefusal::Report(e))) => Err(CancelError::Store(Box::new(e))),
             Some(Err(reason)) => Err(CancelError::Refused { id, reason }),
-        };
-        self.queues.withhold(&device, id, false);
-        result
+        }
     }
 
     /// A job no configured device has: cancelled if still queued.

@@ -7,7 +7,9 @@
 //! job on the same location) and reports what became of them through the same port, one
 //! commit per report round. Pausing is control state kept here, apart from what devices
 //! report: a paused device is simply offered no work. Why each queued job waits is
-//! worked out beside those decisions, never instead of them ([`waiting`]).
+//! worked out beside those decisions, never instead of them ([`waiting`]). A cancel
+//! withholds the jobs it decides on from their devices, each cancel its own hold
+//! ([`withhold`]).
 
 pub mod bulk;
 pub mod cancel;
@@ -16,6 +18,7 @@ pub mod order;
 mod plan;
 pub mod queues;
 pub mod waiting;
+pub mod withhold;
 
 use crate::store::Pool;
 
@@ -23,6 +26,7 @@ pub use bulk::{BulkError, FailedJobs, MAX_BULK, QueuedJobs};
 pub use cancel::CancelError;
 pub use control::{Actor, ControlError};
 pub use queues::{Control, Queues, Setup};
+pub use withhold::Withheld;
 
 use crate::devices::port::ReportError;
 use crate::domain::Target;
@@ -95,3 +99,6 @@ impl Dispatcher {
         &self.queues
     }
 }
+
+#[cfg(test)]
+mod withhold_tests;

@@ -50,8 +50,6 @@ pub(super) struct Queue {
     pub(super) active: BTreeMap<i64, Job>,
     /// Jobs waiting for the device, by id (= acceptance order).
     pub(super) queued: BTreeMap<i64, Job>,
-    /// Queued jobs a cancel is deciding on: not handed out meanwhile.
-    withheld: HashSet<i64>,
     /// The unfinished jobs touching each location, by id: which job is ahead of which.
     pub(super) on: HashMap<Location, BTreeSet<i64>>,
 }
@@ -124,6 +122,8 @@ pub(super) struct Inner {
     pub(super) told: Mutex<HashMap<i64, Option<Waiting>>>,
     /// Wakes the waiting watcher: something a waiting reason depends on changed.
     pub(super) changed: Notify,
+    /// How many cancels withhold each job ([`super::withhold`]).
+    pub(super) withheld: Mutex<HashMap<i64, usize>>,
     /// Whether this node drives the machines (always, but on a standby of a cluster).
     drives: std::sync::atomic::AtomicBool,
 }
@@ -177,6 +177,7 @@ impl Queues {
             statuses: Mutex::default(),
             told: Mutex::default(),
             changed: Notify::new(),
+            withheld: Mutex::default(),
             drives: std::sync::atomic::AtomicBool::new(true),
         }))
     }
@@ -243,7 +244,8 @@ impl Queues {
         }
     }
 
-    fn wake(&self, device: &str) {
+    /// Wakes `device`'s task, and the waiting watcher.
+    pub(super) fn wake(&self, device: &str) {
         if let Some(lane) = self.lane(device) {
             lane.wake.notify_one();
         }
@@ -331,22 +333,6 @@ impl Queues {
     pub fn find(&self, id: i64) -> Option<Job> {
         let queues = self.lock();
         queues.values().find_map(|q| q.get(id).cloned())
-    }
-
-    /// Keeps a queued job from being handed out while a cancel decides on it (`withhold`),
-    /// or lets it go again and wakes the device.
-    pub fn withhold(&self, device: &str, id: i64, withhold: bool) {
-        let mut queues = self.lock();
-        if let Some(queue) = queues.get_mut(device) {
-            match withhold {
-                true => queue.withheld.insert(id),
-                false => queue.withheld.remove(&id),
-            };
-        }
-        drop(queues);
-        if !withhold {
-            self.wake(device);
-        }
     }
 
     /// The device's control state, to watch.
@@ -453,7 +439,6 @@ impl Queue {
         if job.state.is_terminal() {
             self.active.remove(&job.id);
             self.queued.remove(&job.id);
-            self.withheld.remove(&job.id);
             for l in locations {
                 if let Some(ids) = self.on.get_mut(&l) {
                     ids.remove(&job.id);
@@ -472,7 +457,6 @@ impl Queue {
             self.queued.insert(job.id, job.clone());
         } else {
             self.queued.remove(&job.id);
-            self.withheld.remove(&job.id);
             self.active.insert(job.id, job.clone());
         }
     }
@@ -547,7 +531,8 @@ impl DevicePort {
         let queues = self.queues.lock();
         let Some(queue) = queues.get(&self.device) else { return Vec::new() };
         let window = queue.window(lane.window);
-        let mut held: HashSet<i64> = queue.withheld.union(holding).copied().collect();
+        let mut held: HashSet<i64> = holding.clone();
+        held.extend(self.queues.withheld().keys());
         {
             let holds = self.queues.holds();
             if !holds.locks.is_empty() || !holds.aisles.is_empty() {

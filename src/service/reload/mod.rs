@@ -208,6 +208,11 @@ impl Reload {
         self.fleet().map(Fleet::devices).unwrap_or_default()
     }
 
+    /// The dispatcher (its queues follow the devices a reload changes).
+    pub fn dispatcher(&self) -> &crate::service::dispatch::Dispatcher {
+        &self.0.parts.dispatcher
+    }
+
     /// The running configuration.
     pub fn running(&self) -> Config {
         self.0.running.lock().unwrap_or_else(|p| p.into_inner()).clone()

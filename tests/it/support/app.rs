@@ -5,6 +5,7 @@ use std::time::Duration;
 
 use rackd::app::Application;
 use rackd::config::{Config, Sources};
+use rackd::service::reload::Reload;
 use rackd::store::{Database, Engine};
 use serde_json::{Value, json};
 use tokio::sync::oneshot;
@@ -17,6 +18,9 @@ pub struct TestApp {
     pub base: String,
     pub client: reqwest::Client,
     pub db: Database,
+    /// Let go before the server stops: it holds a handle to the writer, which drains only
+    /// once every handle is gone.
+    reload: Option<Reload>,
     stop: Option<oneshot::Sender<()>>,
     task: Option<JoinHandle<anyhow::Result<()>>>,
     _dir: Option<tempfile::TempDir>,
@@ -100,16 +104,19 @@ async fn start(config: &Config, db: Database, sources: Option<Sources>) -> TestA
     }
     let scheme = if config.server.tls.is_some() { "https" } else { "http" };
     let base = format!("{scheme}://{}", app.local_addr());
+    let reload = app.reload();
     let (stop, stopped) = oneshot::channel::<()>();
     let task = tokio::spawn(app.run_until(async {
         let _ = stopped.await;
     }));
-    TestApp { base, client: reqwest::Client::new(), db, stop: Some(stop), task: Some(task), _dir: None }
+    let client = reqwest::Client::new();
+    TestApp { base, client, db, reload: Some(reload), stop: Some(stop), task: Some(task), _dir: None }
 }
 
 impl TestApp {
     /// Stops the server gracefully and waits until it has finished; keeps the database.
     pub async fn stop(mut self) -> (Database, Option<tempfile::TempDir>) {
+        self.reload = None;
         let _ = self.stop.take().unwrap().send(());
         self.task.take().unwrap().await.unwrap().unwrap();
         (self.db.clone(), self._dir.take())
@@ -117,8 +124,16 @@ impl TestApp {
 
     /// Waits (at most `within`) for the server to stop on its own, with what it ended with.
     pub async fn ended(mut self, within: std::time::Duration) -> anyhow::Result<()> {
+        self.reload = None;
         let task = self.task.take().unwrap();
         tokio::time::timeout(within, task).await.expect("the server stops on its own").unwrap()
+    }
+
+    /// The running configuration, the devices and the dispatcher, for a test that drives the
+    /// service in-process beside the HTTP API. A clone of what it hands out (a dispatcher,
+    /// the devices) holds the writer too: let go of it before [`TestApp::stop`].
+    pub fn reload(&self) -> &Reload {
+        self.reload.as_ref().expect("the server runs")
     }
 
     pub fn url(&self, path: &str) -> String {
