@@ -339,6 +339,12 @@ pub async fn connect(
     match database {
         Database::Sqlite(path) => {
             prepare_folder(path)?;
+            // A new database is rackd's user's alone; SQLite gives its WAL and shared
+            // memory files the database file's permissions.
+            match crate::files::create(path) {
+                Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => return Err(e.into()),
+                _ => {}
+            }
             let options = sqlite_options(path, busy_timeout)?;
             Ok(Pool::Sqlite(SqlitePoolOptions::new().max_connections(max).connect_with(options).await?))
         }
