@@ -11,6 +11,7 @@ mod files;
 mod forwarding;
 mod keyless;
 mod metrics_labels;
+mod query;
 mod secrets;
 mod tls;
 mod tls_config;
