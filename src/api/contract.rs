@@ -6,7 +6,7 @@
 //! - a path parameter that is not of its type (`/jobs/9223372036854775808`): 400 `bad_path`;
 //! - a query that does not parse: 400 `bad_query`; a `token` query parameter anywhere but
 //!   `GET /api/v1/ws`: 400 `token_in_query`; a query parameter the operation does not take,
-//!   on every operation: 400 `unknown_query` ([`super::query`]); on an operation with a dry
+//!   on every operation: 400 `bad_query` too ([`super::query`]); on an operation with a dry
 //!   run, `dry_run` in the query and the body disagreeing: 400 `conflicting_dry_run`
 //!   ([`super::dry_run`]);
 //! - a request body that is not JSON: 400 `malformed_json`; one without
@@ -19,8 +19,8 @@
 //! - a request that runs past `server.request_timeout_secs`: 503 `timeout`.
 //!
 //! An operation that documents one of these statuses itself keeps its own description;
-//! the new ones of issues 41 and 51 (`token_in_query`, `origin_not_allowed`,
-//! `unknown_query`) are added to it.
+//! the new ones of issues 41 and 51 (`token_in_query`, `origin_not_allowed`, an unknown
+//! query parameter, `conflicting_dry_run`) are added to it.
 
 use utoipa::openapi::header::HeaderBuilder;
 use utoipa::openapi::path::{Operation, ParameterIn};

@@ -9,8 +9,8 @@
 //!   them, and what matters is that no form is ignored.
 //! - **Disagreeing is refused** (400 `conflicting_dry_run`), not settled: a request that
 //!   says both "try" and "do it" says neither, and nothing is done.
-//! - A parameter of another name (`?dryrun=`) is refused by [`super::query`], a body field
-//!   of another name by the body's own `deny_unknown_fields`.
+//! - A parameter of another name (`?dryrun=`) is refused by [`super::query`] (400
+//!   `bad_query`), a body field of another name by the body's own `deny_unknown_fields`.
 
 use serde::Deserialize;
 use utoipa::IntoParams;

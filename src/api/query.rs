@@ -1,6 +1,6 @@
 //! The API refuses what it would ignore (issue 51): a query parameter an operation does not
-//! take is answered 400 `unknown_query`, naming it and those the operation takes, before
-//! the handler runs, so that a typo (`?dryrun=true`, `?stat=failed`) or a parameter of
+//! take is answered 400 `bad_query`, naming it and those the operation takes, before the
+//! handler runs, so that a typo (`?dryrun=true`, `?stat=failed`) or a parameter of
 //! another route (`?dry_run=true` where `dry_run` was a body field) never runs a request
 //! that ignores it.
 //!
@@ -12,6 +12,9 @@
 //! - **Every operation of the document**, `/healthz` and `/readyz` included; not the
 //!   dashboard's files, `/docs` or `/openapi.json`, which are files, not operations, and
 //!   where a query (a cache buster) changes nothing.
+//! - **`bad_query`, the code of before**: the lists whose parameters were read into a
+//!   struct refusing unknown fields already answered an unknown parameter so; now every
+//!   operation does, and the message names the parameter.
 //! - Checked after the key (a caller without one learns nothing of the parameters) and
 //!   after `token` is taken out of the WebSocket's query ([`super::auth`]).
 //! - A repeated parameter the operation takes is left to its extractor, as before.
@@ -68,8 +71,8 @@ impl Known {
     }
 }
 
-/// Middleware on every routed request: 400 `unknown_query` for a query parameter the
-/// operation does not take.
+/// Middleware on every routed request: 400 `bad_query` for a query parameter the operation
+/// does not take.
 pub async fn refuse_unknown(
     State(known): State<Arc<Known>>,
     req: Request,
@@ -86,7 +89,7 @@ pub async fn refuse_unknown(
                 false => takes.iter().map(|t| format!("`{t}`")).collect::<Vec<_>>().join(", "),
             };
             return Err(ApiError::bad_request(
-                "unknown_query",
+                "bad_query",
                 format!(
                     "{} {} takes no query parameter `{name}` (it takes {takes}): it is refused rather than \
                      ignored",
@@ -102,7 +105,7 @@ pub async fn refuse_unknown(
 /// What every operation's 400 answer says of it in the OpenAPI document
 /// ([`super::contract`]).
 pub const UNKNOWN_QUERY: &str =
-    "`unknown_query`: a query parameter the operation does not take (named in the message)";
+    "`bad_query`: a query parameter the operation does not take (named in the message)";
 
 #[cfg(test)]
 mod tests {
