@@ -62,8 +62,8 @@ pub enum Invalid {
     #[error("{0}")]
     Tls(String),
     /// `database.url_file` that cannot be read, is empty, or comes with `database.url`.
-    #[error("{0}")]
-    UrlFile(String),
+    #[error(transparent)]
+    UrlFile(super::UrlFileError),
     /// A `[server]` timeout or cap of 0.
     #[error("{0} must be at least 1")]
     ServerZero(&'static str),
