@@ -30,6 +30,7 @@ pub mod layers;
 pub mod origin;
 mod retention;
 pub mod tls;
+mod warnings;
 pub mod webhooks;
 
 pub use check::Invalid;
@@ -42,6 +43,7 @@ pub use layers::{Loaded, Sources};
 pub use origin::Origin;
 pub use retention::{ARCHIVE_ACTION, RetentionConfig};
 pub use tls::{TlsConfig, TlsError};
+pub use warnings::{Warning, in_clear};
 pub use webhooks::WebhookConfig;
 
 pub use crate::auth::{AuthConfig, KeyConfig};

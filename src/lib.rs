@@ -10,8 +10,8 @@
 //! the service), [`sim`] (simulated machines, built on the protocol servers), [`wire`] (the
 //! machines' interfaces word by word, in the protocols' notations), [`protocols`] (how to
 //! talk to PLCs, over one transport layer) and [`domain`] (the validated words every layer
-//! shares). [`auth`], [`protocols`] and [`domain`] use no other layer, nor does [`files`] (how
-//! rackd creates a file of its own).
+//! shares). [`auth`], [`protocols`] and [`domain`] use no other layer, nor do [`files`] (how
+//! rackd creates a file of its own) and [`redact`] (secrets out of the URLs it prints).
 
 pub mod api;
 pub mod app;
@@ -23,6 +23,7 @@ pub mod devices;
 pub mod domain;
 pub mod files;
 pub mod protocols;
+pub mod redact;
 pub mod service;
 pub mod sim;
 pub mod store;

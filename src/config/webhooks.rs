@@ -290,7 +290,7 @@ impl WebhookConfig {
             return Some(WebhookProblem::Name);
         }
         if let Err(why) = http_url(&self.url) {
-            return Some(WebhookProblem::Url { key: "url", url: crate::store::redact(&self.url), why });
+            return Some(WebhookProblem::Url { key: "url", url: crate::redact::url(&self.url), why });
         }
         if self.events.is_empty() {
             return Some(WebhookProblem::NoEvents);
@@ -319,7 +319,7 @@ impl WebhookConfig {
         if let Some(proxy) = &self.proxy
             && let Err(why) = http_url(proxy)
         {
-            return Some(WebhookProblem::Url { key: "proxy", url: crate::store::redact(proxy), why });
+            return Some(WebhookProblem::Url { key: "proxy", url: crate::redact::url(proxy), why });
         }
         None
     }

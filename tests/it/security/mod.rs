@@ -16,3 +16,4 @@ mod secrets;
 mod tls;
 mod tls_config;
 mod token_query;
+mod urls;
