@@ -86,10 +86,12 @@ impl Draft {
                     return Ok(name);
                 }
                 Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
-                Err(e) => {
+                // EPERM from link(2): the filesystem makes no hard links (FAT).
+                Err(e) if e.raw_os_error() == Some(1) || e.kind() == io::ErrorKind::Unsupported => {
                     let why = format!("{e} (rackd names its files with hard links: is the folder on FAT?)");
                     return Err(io::Error::new(e.kind(), why));
                 }
+                Err(e) => return Err(e),
             }
         }
         Err(io::Error::new(io::ErrorKind::AlreadyExists, "every name is taken"))
