@@ -30,6 +30,7 @@ pub mod layers;
 pub mod origin;
 mod retention;
 pub mod tls;
+mod warnings;
 pub mod webhooks;
 
 pub use check::Invalid;
@@ -42,6 +43,7 @@ pub use layers::{Loaded, Sources};
 pub use origin::Origin;
 pub use retention::{ARCHIVE_ACTION, RetentionConfig};
 pub use tls::{TlsConfig, TlsError};
+pub use warnings::{Warning, in_clear};
 pub use webhooks::WebhookConfig;
 
 pub use crate::auth::{AuthConfig, KeyConfig};
@@ -306,12 +308,32 @@ impl Default for SiteConfig {
 }
 
 /// The database URL in the file at `path` (`database.url_file`): its content, trimmed.
-pub fn read_url_file(path: &Path) -> Result<String, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+pub fn read_url_file(path: &Path) -> Result<String, UrlFileError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|source| UrlFileError::Read { path: path.to_owned(), source })?;
     match text.trim() {
-        "" => Err(format!("{} is empty (expected the URL: postgres://...)", path.display())),
+        "" => Err(UrlFileError::Empty(path.to_owned())),
         url => Ok(url.to_owned()),
     }
+}
+
+/// Why `database.url_file` gives no URL. No variant holds the file's content.
+#[derive(Debug, thiserror::Error)]
+pub enum UrlFileError {
+    /// The file cannot be read.
+    #[error("cannot read {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file holds nothing but white space.
+    #[error("{} is empty (expected the URL: postgres://...)", .0.display())]
+    Empty(PathBuf),
+    /// `database.url` is set as well, at this place.
+    #[error("database.url is set too (at {0}): keep one of the two")]
+    AlsoUrl(Origin),
 }
 
 #[cfg(test)]

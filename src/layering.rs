@@ -19,6 +19,7 @@
 //! protocols          how to talk to PLCs
 //! capture            frames as the flight recorder keeps them; pcapng files, written and read (leaf)
 //! domain             the words of the warehouse (leaf)
+//! files, redact      how rackd creates a file of its own; secrets out of printed URLs (leaves)
 //! ```
 //!
 //! What a file names is read by [`scan`]: `use` trees, paths in the code, and the names a
@@ -43,20 +44,39 @@ use scan::{Edge, Edges, Module};
 const ALLOWED: &[(&str, &[&str])] = &[
     ("domain", &[]),
     ("capture", &[]),
+    ("files", &[]),
+    ("redact", &[]),
     // Every client's transport feeds a flight recorder.
     ("protocols", &["capture"]),
     ("wire", &["protocols", "domain"]),
     // The replay reads captures.
     ("sim", &["capture", "wire", "protocols", "domain"]),
-    ("store", &["domain"]),
+    ("store", &["files", "redact", "domain"]),
     ("auth", &[]),
     // config checks a database URL as the store reads it (its TLS mode, its CA), and
     // prints it as the store does, without the password.
-    ("config", &["auth", "store", "wire", "protocols", "capture", "domain"]),
+    ("config", &["auth", "store", "wire", "protocols", "capture", "redact", "domain"]),
     ("devices", &["config", "wire", "protocols", "capture", "domain"]),
-    ("service", &["devices", "config", "store", "wire", "protocols", "capture", "domain"]),
-    ("api", &["service", "devices", "config", "auth", "store", "wire", "protocols", "capture", "domain"]),
-    ("app", &["api", "service", "devices", "config", "auth", "store", "protocols", "capture", "domain"]),
+    ("service", &["devices", "config", "store", "wire", "protocols", "capture", "files", "redact", "domain"]),
+    (
+        "api",
+        &[
+            "service",
+            "devices",
+            "config",
+            "auth",
+            "store",
+            "wire",
+            "protocols",
+            "capture",
+            "redact",
+            "domain",
+        ],
+    ),
+    (
+        "app",
+        &["api", "service", "devices", "config", "auth", "store", "protocols", "capture", "redact", "domain"],
+    ),
     (
         "cli",
         &[
@@ -71,6 +91,8 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "wire",
             "protocols",
             "capture",
+            "files",
+            "redact",
             "domain",
         ],
     ),

@@ -10,7 +10,8 @@
 //! the service), [`sim`] (simulated machines, built on the protocol servers), [`wire`] (the
 //! machines' interfaces word by word, in the protocols' notations), [`protocols`] (how to
 //! talk to PLCs, over one transport layer) and [`domain`] (the validated words every layer
-//! shares). [`auth`], [`protocols`] and [`domain`] use no other layer.
+//! shares). [`auth`], [`protocols`] and [`domain`] use no other layer, nor do [`files`] (how
+//! rackd creates a file of its own) and [`redact`] (secrets out of the URLs it prints).
 
 pub mod api;
 pub mod app;
@@ -20,7 +21,9 @@ pub mod cli;
 pub mod config;
 pub mod devices;
 pub mod domain;
+pub mod files;
 pub mod protocols;
+pub mod redact;
 pub mod service;
 pub mod sim;
 pub mod store;

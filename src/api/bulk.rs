@@ -3,7 +3,8 @@
 //!
 //! Each takes its items from a filter (the failed jobs of a device or of a failure kind,
 //! since a time; the queued jobs of a device or an aisle) or as a list (`jobs`,
-//! `locations`: what a dry run answered), with `dry_run` and an optional `reason`. Each is
+//! `locations`: what a dry run answered), with `dry_run` (in the body or the query:
+//! [`super::dry_run`]) and an optional `reason`. Each is
 //! all or nothing in one commit, audited item by item, and answers with what it did (or,
 //! as a dry run, would do): a [`BulkAnswer`]. The rules, and why unlock and retry is one
 //! action, are in [`crate::service::dispatch::bulk`].
@@ -23,8 +24,9 @@ use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::control::actor;
+use super::dry_run::{DryRunParams, dry_run};
 use super::error::{ApiError, ErrorBody};
-use super::extract::{Caller, Json};
+use super::extract::{Caller, Json, Query};
 use super::state::AppState;
 use crate::domain::{FailureKind, Location, LocationLock};
 use crate::service::dispatch::{FailedJobs, MAX_BULK, QueuedJobs};
@@ -57,9 +59,9 @@ pub struct UnlockRequest {
     /// These locations instead of a cause (1..=10000, each once), each of which must be
     /// locked.
     pub locations: Option<Vec<Location>>,
-    /// Only tell what would be done.
-    #[serde(default)]
-    pub dry_run: bool,
+    /// Only tell what would be done (as `?dry_run=`; the two may not disagree).
+    #[schema(nullable = false)]
+    pub dry_run: Option<bool>,
     /// Why (up to 500 characters), audited with each location.
     pub reason: Option<String>,
 }
@@ -86,9 +88,9 @@ pub struct RetryRequest {
     /// before the later jobs on their locations (the order they were accepted in).
     #[serde(default)]
     pub unlock: bool,
-    /// Only tell what would be done.
-    #[serde(default)]
-    pub dry_run: bool,
+    /// Only tell what would be done (as `?dry_run=`; the two may not disagree).
+    #[schema(nullable = false)]
+    pub dry_run: Option<bool>,
     /// Why (up to 500 characters), audited with each job.
     pub reason: Option<String>,
 }
@@ -105,9 +107,9 @@ pub struct CancelRequest {
     /// These jobs instead of a filter (1..=10000 ids, each once), each of which must be
     /// queued.
     pub jobs: Option<Vec<i64>>,
-    /// Only tell what would be done.
-    #[serde(default)]
-    pub dry_run: bool,
+    /// Only tell what would be done (as `?dry_run=`; the two may not disagree).
+    #[schema(nullable = false)]
+    pub dry_run: Option<bool>,
     /// Why (up to 500 characters), audited with each job.
     pub reason: Option<String>,
 }
@@ -202,7 +204,7 @@ fn named<T: Eq + std::hash::Hash + std::fmt::Display + Copy>(
 
 /// Unlock many locations at once: those locked by the failures of the jobs a cause names,
 /// or those listed. All or nothing in one commit; each location audited (`unlock`).
-#[utoipa::path(post, path = "/locations/unlock", tag = "locations", request_body = UnlockRequest,
+#[utoipa::path(post, path = "/locations/unlock", tag = "locations", request_body = UnlockRequest, params(DryRunParams),
     responses(
         (status = 200, description = "Unlocked (or, with `dry_run`, to be unlocked), in location order", body = BulkAnswer),
         (status = 409, description = "`bulk_refused`: a location is not locked (any more), or is locked by another cause than the job named; each is named, and nothing is unlocked", body = ErrorBody),
@@ -211,8 +213,10 @@ fn named<T: Eq + std::hash::Hash + std::fmt::Display + Copy>(
 async fn unlock_locations(
     State(app): State<AppState>,
     by: Caller,
+    Query(query): Query<DryRunParams>,
     Json(body): Json<UnlockRequest>,
 ) -> Result<Json<BulkAnswer>, ApiError> {
+    let dry = dry_run(&query, body.dry_run)?;
     let actor = actor(by, body.reason)?;
     let given = body.device.is_some() || body.failure.is_some() || body.since.is_some();
     let enough = body.device.is_some() || body.failure.is_some();
@@ -231,9 +235,9 @@ async fn unlock_locations(
                 app.dispatcher.locked_by(&filter).await?.into_iter().map(|(l, job)| (l, Some(job))).collect()
             }
         };
-    tracing::info!(locations = locations.len(), dry_run = body.dry_run, by = %actor.by, "bulk unlock through the API");
-    let done = app.dispatcher.bulk_unlock(locations, body.dry_run, &actor).await?;
-    Ok(Json(BulkAnswer::new(&app, done, body.dry_run)))
+    tracing::info!(locations = locations.len(), dry_run = dry, by = %actor.by, "bulk unlock through the API");
+    let done = app.dispatcher.bulk_unlock(locations, dry, &actor).await?;
+    Ok(Json(BulkAnswer::new(&app, done, dry)))
 }
 
 /// Retry many failed jobs at once, in the order they were accepted: those of a device
@@ -241,7 +245,7 @@ async fn unlock_locations(
 /// the locks their failures set in the same commit (after a PLC lost its memory: unlock
 /// and retry once the aisle is checked). All or nothing in one commit; each job audited
 /// (`retry`), each location too (`unlock`).
-#[utoipa::path(post, path = "/jobs/retry", tag = "jobs", request_body = RetryRequest,
+#[utoipa::path(post, path = "/jobs/retry", tag = "jobs", request_body = RetryRequest, params(DryRunParams),
     responses(
         (status = 200, description = "Queued again (or, with `dry_run`, to be), in id order, with the locations unlocked", body = BulkAnswer),
         (status = 409, description = "`bulk_refused`: a job does not exist or has not failed (any more); each is named, and nothing is done", body = ErrorBody),
@@ -250,8 +254,10 @@ async fn unlock_locations(
 async fn retry_jobs(
     State(app): State<AppState>,
     by: Caller,
+    Query(query): Query<DryRunParams>,
     Json(body): Json<RetryRequest>,
 ) -> Result<Json<BulkAnswer>, ApiError> {
+    let dry = dry_run(&query, body.dry_run)?;
     let actor = actor(by, body.reason)?;
     let given = body.device.is_some() || body.failure.is_some() || body.since.is_some();
     let enough = body.device.is_some() || body.failure.is_some();
@@ -264,16 +270,16 @@ async fn retry_jobs(
             app.dispatcher.failed_jobs(&filter).await?
         }
     };
-    tracing::info!(jobs = jobs.len(), unlock = body.unlock, dry_run = body.dry_run, by = %actor.by, "bulk retry through the API");
-    let done = app.dispatcher.bulk_retry(jobs, body.unlock, body.dry_run, &actor).await?;
-    Ok(Json(BulkAnswer::new(&app, done, body.dry_run)))
+    tracing::info!(jobs = jobs.len(), unlock = body.unlock, dry_run = dry, by = %actor.by, "bulk retry through the API");
+    let done = app.dispatcher.bulk_retry(jobs, body.unlock, dry, &actor).await?;
+    Ok(Json(BulkAnswer::new(&app, done, dry)))
 }
 
 /// Cancel many queued jobs at once: those of a device and/or touching an aisle, or those
 /// listed. Only queued jobs: one a device holds (written into a slot, being handed over)
 /// refuses the action, and is cancelled on its own. All or nothing in one commit; each job
 /// audited (`cancel`).
-#[utoipa::path(post, path = "/jobs/cancel", tag = "jobs", request_body = CancelRequest,
+#[utoipa::path(post, path = "/jobs/cancel", tag = "jobs", request_body = CancelRequest, params(DryRunParams),
     responses(
         (status = 200, description = "Cancelled (or, with `dry_run`, to be), in id order", body = BulkAnswer),
         (status = 409, description = "`bulk_refused`: a job does not exist, is no longer queued, or a device holds it; each is named, and nothing is cancelled", body = ErrorBody),
@@ -283,8 +289,10 @@ async fn retry_jobs(
 async fn cancel_jobs(
     State(app): State<AppState>,
     by: Caller,
+    Query(query): Query<DryRunParams>,
     Json(body): Json<CancelRequest>,
 ) -> Result<Json<BulkAnswer>, ApiError> {
+    let dry = dry_run(&query, body.dry_run)?;
     let actor = actor(by, body.reason)?;
     let given = body.device.is_some() || body.aisle.is_some();
     let jobs = match named("jobs", body.jobs, given, given, "a filter: `device` and/or `aisle`")? {
@@ -299,7 +307,7 @@ async fn cancel_jobs(
             app.dispatcher.queued_jobs(&filter).await?
         }
     };
-    tracing::info!(jobs = jobs.len(), dry_run = body.dry_run, by = %actor.by, "bulk cancel through the API");
-    let done = app.dispatcher.bulk_cancel(jobs, &app.devices(), body.dry_run, &actor).await?;
-    Ok(Json(BulkAnswer::new(&app, done, body.dry_run)))
+    tracing::info!(jobs = jobs.len(), dry_run = dry, by = %actor.by, "bulk cancel through the API");
+    let done = app.dispatcher.bulk_cancel(jobs, &app.devices(), dry, &actor).await?;
+    Ok(Json(BulkAnswer::new(&app, done, dry)))
 }

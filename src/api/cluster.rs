@@ -109,7 +109,7 @@ async fn cluster(State(app): State<AppState>) -> Result<Json<ClusterView>, ApiEr
         .into_iter()
         .map(|n| NodeView {
             name: n.name,
-            url: n.url,
+            url: crate::redact::url(&n.url),
             role: n.role,
             seen_ms_ago: (view.now - n.seen_at).max(0),
             started_at: from_ms(n.started_at),

@@ -1,7 +1,8 @@
 //! `GET /api/v1/config` (which configuration runs) and `POST /api/v1/config/reload`
 //! (admins): read the configuration again from the file and environment rackd started
 //! with, check it as `rackd check-config` does, and apply what changed, or with
-//! `?dry_run=true` only answer it (`service::reload` has the decisions).
+//! `?dry_run=true` (or a body `{"dry_run": true}`, as the bulk actions take it:
+//! [`super::dry_run`]) only answer it (`service::reload` has the decisions).
 //!
 //! Refusals, each with nothing applied: 422 `invalid_config` for a file that
 //! `check-config` refuses (the same `WHERE: KEY: MESSAGE`), or a device that cannot be
@@ -13,11 +14,12 @@
 
 use axum::extract::State;
 use serde::{Deserialize, Serialize};
-use utoipa::{IntoParams, ToSchema};
+use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
+use super::dry_run::{DryRunParams, dry_run};
 use super::error::{ApiError, ErrorBody};
-use super::extract::{Caller, Json, Query};
+use super::extract::{Caller, Json, OptionalJson, Query};
 use super::state::AppState;
 use crate::config::Difference;
 use crate::service::reload::{ReloadError, RunningConfig};
@@ -27,13 +29,14 @@ pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new().routes(routes!(loaded)).routes(routes!(reload))
 }
 
-/// `?dry_run=`.
-#[derive(Deserialize, IntoParams)]
+/// A reload's body, which may be left out.
+#[derive(Debug, Default, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-#[into_params(parameter_in = Query)]
-pub struct ReloadParams {
-    /// Answer what would change without applying it.
-    dry_run: Option<bool>,
+#[schema(example = json!({"dry_run": true}))]
+pub struct ReloadRequest {
+    /// Answer what would change, applying nothing (as `?dry_run=`; they may not disagree).
+    #[schema(nullable = false)]
+    pub dry_run: Option<bool>,
 }
 
 /// What a reload changes, or changed.
@@ -93,7 +96,8 @@ async fn loaded(State(app): State<AppState>) -> Json<RunningConfig> {
 /// started, stopped or restarted, each at a safe point (never inside a hand-over); the
 /// others run on untouched. Queued jobs of a removed device wait (`no_device`). Audited,
 /// and told as a `config.reloaded` event. All or nothing: a refusal applies nothing.
-#[utoipa::path(post, path = "/config/reload", tag = "operations", params(ReloadParams),
+#[utoipa::path(post, path = "/config/reload", tag = "operations", params(DryRunParams),
+    request_body(content = Option<ReloadRequest>),
     responses(
         (status = 200, description = "What changed (or, for a dry run, would change)", body = ReloadView),
         (status = 401, description = "No key, or an unknown key", body = ErrorBody),
@@ -108,9 +112,10 @@ as `rackd check-config` says); nothing was applied", body = ErrorBody),
 async fn reload(
     State(app): State<AppState>,
     caller: Caller,
-    Query(p): Query<ReloadParams>,
+    Query(query): Query<DryRunParams>,
+    OptionalJson(body): OptionalJson<ReloadRequest>,
 ) -> Result<Json<ReloadView>, ApiError> {
-    if p.dry_run == Some(true) {
+    if dry_run(&query, body.dry_run)? {
         let plan = app.reload.check().await?;
         let kept_for_takeover = app.reload.fleet().is_none();
         let loaded = app.reload.loaded();

@@ -5,7 +5,10 @@
 //! They come from layers and extractors every route shares, not from the handlers:
 //! - a path parameter that is not of its type (`/jobs/9223372036854775808`): 400 `bad_path`;
 //! - a query that does not parse: 400 `bad_query`; a `token` query parameter anywhere but
-//!   `GET /api/v1/ws`: 400 `token_in_query`;
+//!   `GET /api/v1/ws`: 400 `token_in_query`; a query parameter the operation does not take,
+//!   on every operation: 400 `bad_query` too ([`super::query`]); on an operation with a dry
+//!   run, `dry_run` in the query and the body disagreeing: 400 `conflicting_dry_run`
+//!   ([`super::dry_run`]);
 //! - a request body that is not JSON: 400 `malformed_json`; one without
 //!   `Content-Type: application/json`: 415; one over `server.body_limit_bytes`: 413;
 //! - a key missing or unknown (once keys are configured): 401; a key whose role may not do
@@ -16,7 +19,8 @@
 //! - a request that runs past `server.request_timeout_secs`: 503 `timeout`.
 //!
 //! An operation that documents one of these statuses itself keeps its own description;
-//! the new ones of issue 41 (`token_in_query`, `origin_not_allowed`) are added to it.
+//! the new ones of issues 41 and 51 (`token_in_query`, `origin_not_allowed`, an unknown
+//! query parameter, `conflicting_dry_run`) are added to it.
 
 use utoipa::openapi::header::HeaderBuilder;
 use utoipa::openapi::path::{Operation, ParameterIn};
@@ -46,6 +50,11 @@ fn complete_operation(operation: &mut Operation, changes: bool, websocket: bool)
         operation.parameters.iter().flatten().any(|p| matches!(p, RefOr::T(p) if p.parameter_in == place))
     };
     let (path, query) = (within(ParameterIn::Path), within(ParameterIn::Query));
+    let dry_run = operation
+        .parameters
+        .iter()
+        .flatten()
+        .any(|p| matches!(p, RefOr::T(p) if p.parameter_in == ParameterIn::Query && p.name == "dry_run"));
     // An empty requirement list (`security(())`) marks a public operation.
     let keyed = operation.security.as_ref().is_none_or(|s| !s.is_empty() && !is_public(s));
     let body = operation.request_body.is_some();
@@ -105,6 +114,10 @@ fn complete_operation(operation: &mut Operation, changes: bool, websocket: bool)
         Some(_) => {}
         None => drop(responses.insert(status.to_owned(), RefOr::T(error(text)))),
     };
+    also("400", super::query::UNKNOWN_QUERY);
+    if dry_run {
+        also("400", super::dry_run::CONFLICTING);
+    }
     if keyed {
         if !websocket {
             also(

@@ -104,7 +104,7 @@ pub async fn forward(State(app): State<AppState>, req: Request, next: Next) -> R
     match send(&forwarder.client, &active.url, &node.name, parts, body).await {
         Ok(response) => response,
         Err(e) => {
-            tracing::warn!(error = %e, active = %active.name, url = %active.url, "cluster: forwarding failed");
+            tracing::warn!(error = %e, active = %active.name, url = crate::redact::url(&active.url), "cluster: forwarding failed");
             unavailable(&format!("the active node {:?} cannot be reached; try again", active.name))
         }
     }

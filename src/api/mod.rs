@@ -15,6 +15,7 @@ pub mod contract;
 pub mod control;
 pub mod dashboard;
 pub mod devices;
+pub mod dry_run;
 pub mod error;
 pub mod extract;
 pub mod failures;
@@ -27,6 +28,7 @@ pub mod locations;
 pub mod metrics;
 pub mod ops;
 pub mod peer;
+pub mod query;
 pub mod state;
 pub mod stats;
 pub mod webhooks;
@@ -165,14 +167,19 @@ pub fn router(state: AppState, body_limit: usize, timeout: Duration) -> Router {
     let (public, public_doc) = public_routes().split_for_parts();
     doc.merge(public_doc);
     contract::complete(&mut doc);
+    // Each operation's query parameters, as the document has them (`query`).
+    let known = std::sync::Arc::new(query::Known::of(&doc));
     // The 405 fallback is set before the key check is layered on, so that a wrong method
     // on a protected route is refused for a missing key first.
     // Without keys, the checks that stand in for one (`keyless`) are made there too.
-    // A standby forwards what only the active node does, once the key is checked.
+    // A standby forwards what only the active node does, once the key is checked; an
+    // unknown query parameter is refused after both.
     let protected = protected
         .method_not_allowed_fallback(ops::method_not_allowed)
+        .layer(middleware::from_fn_with_state(known.clone(), query::refuse_unknown))
         .layer(middleware::from_fn_with_state(state.clone(), forward::forward))
         .layer(middleware::from_fn_with_state(state.clone(), auth::require_key));
+    let public = public.layer(middleware::from_fn_with_state(known, query::refuse_unknown));
     Router::new()
         .merge(protected)
         .merge(public)

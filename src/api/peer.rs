@@ -41,35 +41,20 @@ impl Forwarder {
 pub fn warn_if_clear(url: &str, keyed: bool, what: &str) {
     if keyed && in_clear(url) {
         tracing::warn!(
-            url,
+            url = crate::redact::url(url),
             "{what} is plain http to another machine: forwarded requests carry API keys there in clear \
              (serve https with [server.tls] and say https:// in cluster.url)"
         );
     }
 }
 
-/// Whether `url` is `http://` to a host that is not this machine.
-pub(super) fn in_clear(url: &str) -> bool {
-    let Ok(url) = reqwest::Url::parse(url) else { return false };
-    let host = url.host_str().unwrap_or_default().trim_start_matches('[').trim_end_matches(']');
-    let local = host.is_empty()
-        || host.eq_ignore_ascii_case("localhost")
-        || host.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback());
-    url.scheme() == "http" && !local
-}
+/// Whether `url` is `http://` to a host that is not this machine (the configuration's
+/// own test, which `check-config` warns of for webhooks).
+pub(super) use crate::config::in_clear;
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn plain_http_is_in_clear_only_to_another_machine() {
-        assert!(in_clear("http://10.0.0.11:8080"));
-        assert!(in_clear("http://rackd-2.plant:8080"));
-        assert!(!in_clear("https://10.0.0.11:8080"));
-        assert!(!in_clear("http://127.0.0.1:8080") && !in_clear("http://localhost:8080"));
-        assert!(!in_clear("http://[::1]:8080"));
-    }
 
     #[test]
     fn the_client_trusts_the_cluster_ca_file_and_refuses_one_that_is_not() {

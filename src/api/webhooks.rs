@@ -16,8 +16,8 @@ use super::state::AppState;
 use crate::config::WebhookConfig;
 use crate::domain::time::{from_ms, now_ms};
 use crate::service::webhooks::{Action, ActionError};
+use crate::store::events;
 use crate::store::webhooks::{self, Row};
-use crate::store::{events, redact};
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
@@ -34,7 +34,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 pub struct Webhook {
     /// Its name.
     pub name: String,
-    /// Where events go (a password in it shown as `***`).
+    /// Where events go (a password and secret query parameters in it shown as `***`).
     pub url: String,
     /// The event types it takes (`job.*`, `alarm.raised`, `*`).
     pub events: Vec<String>,
@@ -114,7 +114,7 @@ async fn view(app: &AppState, config: &WebhookConfig, stored: Option<Row>) -> Re
     };
     Ok(Webhook {
         name: config.name.clone(),
-        url: redact(&config.url),
+        url: crate::redact::url(&config.url),
         events: config.events.clone(),
         state: state.into(),
         cursor: row.cursor,

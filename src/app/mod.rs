@@ -92,7 +92,7 @@ impl Application {
         // The loader has read url_file into url; a configuration built in code may not have.
         let url = match (&db.url, &db.url_file) {
             (Some(url), _) => Some(url.clone()),
-            (None, Some(file)) => Some(crate::config::read_url_file(file).map_err(anyhow::Error::msg)?),
+            (None, Some(file)) => Some(crate::config::read_url_file(file).context("database.url_file")?),
             (None, None) => None,
         };
         let database = match url {

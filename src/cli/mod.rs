@@ -44,7 +44,9 @@ pub enum Command {
     /// Print the OpenAPI document.
     Openapi,
     /// Check a configuration file (with the RACKD_SECTION__KEY environment) and report
-    /// the first error as FILE:LINE:COL: KEY: MESSAGE (or env VAR: KEY: MESSAGE).
+    /// the first error as FILE:LINE:COL: KEY: MESSAGE (or env VAR: KEY: MESSAGE), and what
+    /// it warns of (a webhook in plain http to another machine) as FILE:LINE:COL: KEY:
+    /// warning: MESSAGE, on stderr.
     CheckConfig {
         /// The file.
         file: PathBuf,
@@ -92,22 +94,22 @@ pub enum Command {
 #[derive(clap::Subcommand, Debug)]
 pub enum DbCommand {
     /// Copy a site's store to an empty database, with every id and event number (stop
-    /// rackd first). Example: rackd db copy --from sqlite:data/rackd.db --to postgres://rackd@db/rackd
+    /// rackd first). Example: rackd db copy --from data/rackd.db --to postgres://rackd@db/rackd
     Copy {
-        /// The store to copy: sqlite:PATH or postgres://...
-        #[arg(long, value_parser = crate::store::Database::parse)]
-        from: crate::store::Database,
-        /// The empty database to copy it to: sqlite:PATH or postgres://...
-        #[arg(long, value_parser = crate::store::Database::parse)]
-        to: crate::store::Database,
+        /// The store to copy: a SQLite file's PATH (or sqlite:PATH), or postgres://...
+        #[arg(long, value_name = "PATH|URL")]
+        from: String,
+        /// The empty database to copy it to: PATH (or sqlite:PATH), or postgres://...
+        #[arg(long, value_name = "PATH|URL")]
+        to: String,
     },
     /// Move the jobs that ended before a date, with their history, to a gzip'd JSON Lines
-    /// file per day (rackd may run). Example: rackd db archive --database sqlite:data/rackd.db
+    /// file per day (rackd may run). Example: rackd db archive --database data/rackd.db
     /// --before 2026-08-01 --to /var/lib/rackd/archive
     Archive {
-        /// The store: sqlite:PATH or postgres://...
-        #[arg(long, value_parser = crate::store::Database::parse)]
-        database: crate::store::Database,
+        /// The store: a SQLite file's PATH (or sqlite:PATH), or postgres://...
+        #[arg(long, value_name = "PATH|URL")]
+        database: String,
         /// Jobs that ended before this day (YYYY-MM-DD, from midnight UTC) leave the store.
         #[arg(long, value_parser = parse_date)]
         before: time::Date,
@@ -117,16 +119,22 @@ pub enum DbCommand {
     },
     /// Recompute the KPIs' rollups from the job history, after a restore, an import or
     /// rows written by another tool (rackd may run). Example: rackd db rollups --rebuild
-    /// --database sqlite:data/rackd.db
+    /// --database data/rackd.db
     Rollups {
-        /// The store: sqlite:PATH or postgres://...
-        #[arg(long, value_parser = crate::store::Database::parse)]
-        database: crate::store::Database,
+        /// The store: a SQLite file's PATH (or sqlite:PATH), or postgres://...
+        #[arg(long, value_name = "PATH|URL")]
+        database: String,
         /// Rebuild them (the one thing this command does; said so that it is not run by
         /// mistake).
         #[arg(long, required = true)]
         rebuild: bool,
     },
+}
+
+/// A store named on the command line, by `flag`. Read here rather than by clap, whose
+/// error would quote the text whole, a password in it included.
+fn database(flag: &str, text: &str) -> anyhow::Result<crate::store::Database> {
+    crate::store::Database::parse(text).with_context(|| flag.to_owned())
 }
 
 /// A day written `YYYY-MM-DD`.
@@ -165,7 +173,11 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command.unwrap_or(Command::Serve(ServeArgs::default())) {
         Command::Serve(args) => {
             let sources = args.sources();
-            let mut config = sources.load()?.config;
+            let loaded = sources.load()?;
+            for warning in loaded.warnings() {
+                tracing::warn!("{warning}");
+            }
+            let mut config = loaded.config;
             // Bound first: a port in use is reported before any simulator or device starts.
             let listener = crate::app::bind(config.server.listen).await?;
             let sim = match args.config {
@@ -188,6 +200,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             app.run_until(shutdown_signal()).await?;
         }
         Command::Db(DbCommand::Copy { from, to }) => {
+            let (from, to) = (database("--from", &from)?, database("--to", &to)?);
             let copied = crate::store::copy::copy(&from, &to)
                 .await
                 .with_context(|| format!("copying {} to {}", from.display(), to.display()))?;
@@ -196,7 +209,8 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             }
             println!("copied {} to {}", from.display(), to.display());
         }
-        Command::Db(DbCommand::Archive { database, before, to }) => {
+        Command::Db(DbCommand::Archive { database: text, before, to }) => {
+            let database = database("--database", &text)?;
             let pool = crate::store::open(&database, std::time::Duration::from_secs(30))
                 .await
                 .with_context(|| format!("opening {}", database.display()))?;
@@ -216,7 +230,8 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 done.kept
             );
         }
-        Command::Db(DbCommand::Rollups { database, rebuild: _ }) => {
+        Command::Db(DbCommand::Rollups { database: text, rebuild: _ }) => {
+            let database = database("--database", &text)?;
             let pool = crate::store::open(&database, std::time::Duration::from_secs(30))
                 .await
                 .with_context(|| format!("opening {}", database.display()))?;
@@ -243,8 +258,16 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::CheckConfig { file, explain } => {
             match Sources::of_process(Some(file.clone()), None, None).load() {
-                Ok(loaded) if explain => say(loaded.explain()),
-                Ok(_) => println!("{}: ok", file.display()),
+                Ok(loaded) => {
+                    // On stderr: `--explain`'s output stays the configuration alone.
+                    for warning in loaded.warnings() {
+                        eprintln!("{warning}");
+                    }
+                    match explain {
+                        true => say(loaded.explain()),
+                        false => println!("{}: ok", file.display()),
+                    }
+                }
                 Err(e) => {
                     eprintln!("{e}");
                     return Ok(ExitCode::FAILURE);
@@ -278,14 +301,16 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Healthcheck { url, ca_file, server_name } => {
             let url = health_url(&url);
             let (client, target) = health_client(&url, ca_file.as_deref(), server_name.as_deref())?;
+            // The URL as printed: a password or a token in it as `***`.
+            let shown = crate::redact::url(&url);
             match client.get(target).send().await {
-                Ok(r) if r.status().is_success() => println!("{url}: ok"),
+                Ok(r) if r.status().is_success() => println!("{shown}: ok"),
                 Ok(r) => {
-                    eprintln!("{url}: {}", r.status());
+                    eprintln!("{shown}: {}", r.status());
                     return Ok(ExitCode::FAILURE);
                 }
                 Err(e) => {
-                    eprintln!("{url}: {}", describe(&e.into()));
+                    eprintln!("{shown}: {}", describe(&e.without_url().into()));
                     return Ok(ExitCode::FAILURE);
                 }
             }
@@ -341,7 +366,8 @@ fn health_client(
     ca_file: Option<&std::path::Path>,
     server_name: Option<&str>,
 ) -> anyhow::Result<(reqwest::Client, reqwest::Url)> {
-    let mut url = reqwest::Url::parse(url).with_context(|| format!("{url} is not a URL"))?;
+    let shown = crate::redact::url(url);
+    let mut url = reqwest::Url::parse(url).with_context(|| format!("{shown} is not a URL"))?;
     // Nothing between a health check and its server: no proxy from the environment.
     let mut client = reqwest::Client::builder()
         .timeout(std::time::Duration::from_secs(3))
@@ -357,7 +383,7 @@ fn health_client(
         }
     }
     if let Some(name) = server_name {
-        let addrs = url.socket_addrs(|| None).with_context(|| format!("resolving {url}"))?;
+        let addrs = url.socket_addrs(|| None).with_context(|| format!("resolving {shown}"))?;
         client = client.resolve_to_addrs(name, &addrs);
         url.set_host(Some(name)).with_context(|| format!("--server-name {name:?}"))?;
     }

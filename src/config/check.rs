@@ -8,7 +8,8 @@ use super::ca::read_ca;
 use super::devices::{DeviceConfigError, DeviceKind};
 use super::webhooks::WebhookConfigError;
 use super::{Config, EventsConfigError, Origin};
-use crate::store::{PgTls, redact};
+use crate::redact;
+use crate::store::PgTls;
 
 /// A configuration that parses but cannot be run.
 #[derive(Debug, thiserror::Error)]
@@ -62,8 +63,8 @@ pub enum Invalid {
     #[error("{0}")]
     Tls(String),
     /// `database.url_file` that cannot be read, is empty, or comes with `database.url`.
-    #[error("{0}")]
-    UrlFile(String),
+    #[error(transparent)]
+    UrlFile(super::UrlFileError),
     /// A `[server]` timeout or cap of 0.
     #[error("{0} must be at least 1")]
     ServerZero(&'static str),
@@ -184,7 +185,7 @@ impl Config {
             if let Some(url) = &c.url
                 && !(url.starts_with("http://") || url.starts_with("https://"))
             {
-                let why = format!("{:?} is not an http:// or https:// URL", redact(url));
+                let why = format!("{:?} is not an http:// or https:// URL", redact::url(url));
                 return Err(("cluster.url".into(), Invalid::Tls(why)));
             }
             if let Some(ca) = &c.ca_file {
@@ -277,10 +278,10 @@ impl Config {
             return Err(url_flaw(why.into()));
         }
         if !(url.starts_with("postgres://") || url.starts_with("postgresql://")) {
-            return Err(url_flaw(format!("{:?} is not a postgres:// URL", redact(url))));
+            return Err(url_flaw(format!("{:?} is not a postgres:// URL", redact::url(url))));
         }
         let tls = PgTls::of(url);
-        tls.check().map_err(url_flaw)?;
+        tls.check().map_err(|e| url_flaw(e.to_string()))?;
         if let Err(e) = <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url) {
             return Err(url_flaw(format!("not a PostgreSQL URL: {e}")));
         }

@@ -8,8 +8,9 @@
 //! (`serial` on a network protocol, `auth.keys_file` when unset) is left out.
 //!
 //! Secrets are not printed: the password of a database URL (and of any URL with one, such
-//! as `cluster.url`, a webhook's `url` and `proxy`) is shown as `***`, and so is a webhook's
-//! whole `secret` (`secret_file`, a path, is shown). Keys are only ever configured as their
+//! as `cluster.url`, a webhook's `url` and `proxy`) is shown as `***`, as are the values of
+//! a URL's secret query parameters (`?token=`, `?code=`, `?sig=`: [`crate::redact`]), and a
+//! webhook's whole `secret` (`secret_file`, a path, is shown). Keys are only ever configured as their
 //! hashes, which are not secrets (a key cannot be found from its hash), and are shown. So an
 //! output with a webhook's inline `secret` reads back only once the secret is put back.
 
@@ -25,12 +26,12 @@ impl Loaded {
         config.database.url_file = None;
         let urls = [config.database.url.as_mut(), config.cluster.as_mut().and_then(|c| c.url.as_mut())];
         for url in urls.into_iter().flatten() {
-            *url = crate::store::redact(url);
+            *url = crate::redact::url(url);
         }
         for webhook in &mut config.webhooks {
-            webhook.url = crate::store::redact(&webhook.url);
+            webhook.url = crate::redact::url(&webhook.url);
             if let Some(proxy) = &mut webhook.proxy {
-                *proxy = crate::store::redact(proxy);
+                *proxy = crate::redact::url(proxy);
             }
             if let Some(secret) = &mut webhook.secret {
                 *secret = "***".into();

@@ -17,7 +17,7 @@ use figment::{Figment, Metadata, Profile, Provider, Source};
 use super::devices::DeviceConfig;
 use super::env::{self, EnvLayer};
 use super::origin::{Lines, join};
-use super::{Config, ConfigError, Invalid, Origin};
+use super::{Config, ConfigError, Invalid, Origin, UrlFileError};
 use crate::auth::{KeysFile, repeated_key};
 use crate::config::devices::RawDevice;
 
@@ -214,14 +214,13 @@ impl Loaded {
     fn add_url_file(&mut self, config: &mut Config) -> Result<(), ConfigError> {
         let Some(path) = config.database.url_file.clone() else { return Ok(()) };
         let key = "database.url_file".to_owned();
-        let invalid = |why: String, loaded: &Loaded| ConfigError::Invalid {
+        let invalid = |why: UrlFileError, loaded: &Loaded| ConfigError::Invalid {
             origin: Box::new(loaded.locate(&key)),
             key: key.clone(),
             source: Invalid::UrlFile(why),
         };
         if config.database.url.is_some() {
-            let set = self.locate("database.url");
-            return Err(invalid(format!("database.url is set too (at {set}): keep one of the two"), self));
+            return Err(invalid(UrlFileError::AlsoUrl(self.locate("database.url")), self));
         }
         let url = super::read_url_file(&path).map_err(|why| invalid(why, self))?;
         config.database.url = Some(url);

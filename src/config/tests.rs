@@ -162,3 +162,66 @@ fn a_cluster_needs_postgresql_and_an_address_the_others_reach() {
     assert_eq!(c.url(ok.server.listen, false), "http://127.0.0.1:8080");
     assert_eq!(c.url(ok.server.listen, true), "https://127.0.0.1:8080", "with [server.tls]");
 }
+
+/// Issue 51: the configuration's errors are typed (thiserror), like the rest of the
+/// crate's: no `Result` in `src/config.rs` or `src/config/` (their tests aside) has a
+/// `String` for its error.
+#[test]
+fn no_result_in_the_configuration_has_a_string_error() {
+    fn sources(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                sources(&path, out);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                out.push(path);
+            }
+        }
+    }
+    /// The last type argument of each `Result<...>` in `text`.
+    fn errors(text: &str) -> Vec<String> {
+        let mut found = Vec::new();
+        for (at, _) in text.match_indices("Result<") {
+            let (mut depth, mut start, mut last) = (0, at + 7, None);
+            for (i, c) in text[at + 6..].char_indices().map(|(i, c)| (i + at + 6, c)) {
+                match c {
+                    '<' | '(' | '[' => depth += 1,
+                    '>' | ')' | ']' => {
+                        depth -= 1;
+                        if depth == 0 {
+                            last = Some(text[start..i].trim().to_owned());
+                            break;
+                        }
+                    }
+                    ',' if depth == 1 => start = i + 1,
+                    _ => {}
+                }
+            }
+            found.extend(last);
+        }
+        found
+    }
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = vec![src.join("config.rs")];
+    sources(&src.join("config"), &mut files);
+    let mut stringly = Vec::new();
+    for file in files {
+        let name = file.file_name().unwrap().to_string_lossy();
+        if name == "tests.rs" || name.ends_with("_tests.rs") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&file).unwrap();
+        let code = text.split("#[cfg(test)]\nmod tests").next().unwrap_or_default();
+        for (line, text) in code.lines().enumerate() {
+            if errors(text).iter().any(|e| e == "String") {
+                stringly.push(format!(
+                    "{}:{}: {}",
+                    file.strip_prefix(&src).unwrap().display(),
+                    line + 1,
+                    text.trim()
+                ));
+            }
+        }
+    }
+    assert!(stringly.is_empty(), "Result<_, String> in the configuration:\n{}", stringly.join("\n"));
+}

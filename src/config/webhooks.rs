@@ -114,13 +114,13 @@ impl WebhookConfig {
 
     /// The signing key: the secret (or `secret_file`'s first line) decoded. The error says
     /// what is wrong, without the secret.
-    pub fn key(&self) -> Result<Vec<u8>, String> {
+    pub fn key(&self) -> Result<Vec<u8>, SecretError> {
         let text = match (&self.secret, &self.secret_file) {
-            (Some(_), Some(_)) => return Err("set secret or secret_file, not both".into()),
-            (None, None) => return Err("a subscription needs secret or secret_file".into()),
+            (Some(_), Some(_)) => return Err(SecretError::Both),
+            (None, None) => return Err(SecretError::Neither),
             (Some(secret), None) => secret.clone(),
             (None, Some(file)) => std::fs::read_to_string(file)
-                .map_err(|e| format!("{} cannot be read: {e}", file.display()))?,
+                .map_err(|source| SecretError::Read { path: file.clone(), source })?,
         };
         decode_secret(text.trim())
     }
@@ -145,16 +145,53 @@ pub fn known(pattern: &str) -> bool {
 }
 
 /// A Standard Webhooks secret, `whsec_` prefix optional, decoded: 16 to 64 bytes.
-pub fn decode_secret(text: &str) -> Result<Vec<u8>, String> {
+pub fn decode_secret(text: &str) -> Result<Vec<u8>, SecretError> {
     use base64::Engine;
     let b64 = text.strip_prefix("whsec_").unwrap_or(text);
-    let key = base64::engine::general_purpose::STANDARD
-        .decode(b64)
-        .map_err(|_| "the secret is not base64 (as `whsec_` followed by base64)".to_owned())?;
+    let key = base64::engine::general_purpose::STANDARD.decode(b64).map_err(|_| SecretError::NotBase64)?;
     if !(16..=64).contains(&key.len()) {
-        return Err(format!("the secret decodes to {} bytes: 16 to 64 are needed", key.len()));
+        return Err(SecretError::Length(key.len()));
     }
     Ok(key)
+}
+
+/// Why a subscription has no signing key. No variant holds the secret.
+#[derive(Debug, thiserror::Error)]
+pub enum SecretError {
+    /// Both `secret` and `secret_file`.
+    #[error("set secret or secret_file, not both")]
+    Both,
+    /// Neither.
+    #[error("a subscription needs secret or secret_file")]
+    Neither,
+    /// `secret_file` cannot be read.
+    #[error("{} cannot be read: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// Not base64.
+    #[error("the secret is not base64 (as `whsec_` followed by base64)")]
+    NotBase64,
+    /// Too short or too long once decoded.
+    #[error("the secret decodes to {0} bytes: 16 to 64 are needed")]
+    Length(usize),
+}
+
+/// Why a `url` or `proxy` is not one a subscription takes.
+#[derive(Debug, thiserror::Error)]
+pub enum UrlProblem {
+    /// Not a URL at all, in the URL parser's words.
+    #[error(transparent)]
+    Parse(<reqwest::Url as std::str::FromStr>::Err),
+    /// Another scheme than `http` or `https`.
+    #[error("the scheme is {0}")]
+    Scheme(String),
+    /// No host written after `//`.
+    #[error("no host")]
+    NoHost,
 }
 
 /// A `[[webhooks]]` entry that cannot be used: which one, and why.
@@ -182,7 +219,7 @@ pub enum WebhookProblem {
         /// The URL, redacted.
         url: String,
         /// What is wrong.
-        why: String,
+        why: UrlProblem,
     },
     /// No event type at all: the subscription would deliver nothing.
     #[error("events is empty: name event types (job.updated), families (job.*) or \"*\"")]
@@ -191,8 +228,8 @@ pub enum WebhookProblem {
     #[error("{0:?} is not an event type: {types}", types = known_patterns())]
     UnknownEvent(String),
     /// The secret cannot be read or decoded (`secret_file`'s path is named, the secret never).
-    #[error("{0}")]
-    Secret(String),
+    #[error(transparent)]
+    Secret(SecretError),
     /// A time that must be above 0.
     #[error("{0} must be at least 1")]
     Zero(&'static str),
@@ -253,7 +290,7 @@ impl WebhookConfig {
             return Some(WebhookProblem::Name);
         }
         if let Err(why) = http_url(&self.url) {
-            return Some(WebhookProblem::Url { key: "url", url: crate::store::redact(&self.url), why });
+            return Some(WebhookProblem::Url { key: "url", url: crate::redact::url(&self.url), why });
         }
         if self.events.is_empty() {
             return Some(WebhookProblem::NoEvents);
@@ -282,7 +319,7 @@ impl WebhookConfig {
         if let Some(proxy) = &self.proxy
             && let Err(why) = http_url(proxy)
         {
-            return Some(WebhookProblem::Url { key: "proxy", url: crate::store::redact(proxy), why });
+            return Some(WebhookProblem::Url { key: "proxy", url: crate::redact::url(proxy), why });
         }
         None
     }
@@ -291,15 +328,15 @@ impl WebhookConfig {
 /// Whether `text` is an `http://` or `https://` URL with a host. The URL standard reads
 /// `http:///x` and `http:x` as `http://x/`; a missing host is a mistake here, so the text
 /// itself must have one after `//`.
-fn http_url(text: &str) -> Result<(), String> {
-    let url = reqwest::Url::parse(text).map_err(|e| e.to_string())?;
+fn http_url(text: &str) -> Result<(), UrlProblem> {
+    let url = reqwest::Url::parse(text).map_err(UrlProblem::Parse)?;
     if !matches!(url.scheme(), "http" | "https") {
-        return Err(format!("the scheme is {}", url.scheme()));
+        return Err(UrlProblem::Scheme(url.scheme().to_owned()));
     }
     let authority = text.split_once("://").map(|(_, rest)| rest);
     let written = authority.is_some_and(|a| !a.starts_with('/'));
     if !written || url.host_str().is_none_or(str::is_empty) {
-        return Err("no host".into());
+        return Err(UrlProblem::NoHost);
     }
     Ok(())
 }
@@ -322,7 +359,8 @@ mod tests {
         let key = decode_secret("whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw").unwrap();
         assert_eq!(key.len(), 24);
         assert_eq!(decode_secret("MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw").unwrap(), key);
-        assert!(decode_secret("whsec_not base64!").unwrap_err().contains("not base64"));
-        assert!(decode_secret("whsec_c2hvcnQ=").unwrap_err().contains("5 bytes"));
+        assert!(matches!(decode_secret("whsec_not base64!"), Err(SecretError::NotBase64)));
+        assert!(matches!(decode_secret("whsec_c2hvcnQ="), Err(SecretError::Length(5))));
+        assert!(decode_secret("whsec_c2hvcnQ=").unwrap_err().to_string().contains("5 bytes"));
     }
 }

@@ -11,8 +11,9 @@
 //!   alarms). A failure to write is logged and changes nothing else: the alarm stands.
 //! - Only `hardware` and `link` classes: a `business` alarm is the crane's own decision
 //!   about a load, which the job's history already tells.
-//! - A file is written under another name and renamed once complete, so a download never
-//!   reads half of one.
+//! - A file is written under another name and named once complete, so a download never
+//!   reads half of one; never over a file, readable by rackd's user alone
+//!   ([`crate::files`]).
 //! - On the node that drives the machines, in its own folder: a standby forwards the
 //!   request for an alarm's capture to the active node.
 
@@ -55,13 +56,13 @@ impl Freeze {
             if let Some(dir) = file.parent() {
                 std::fs::create_dir_all(dir)?;
             }
-            // Written beside, then renamed: a download never sees half a file.
-            let part = file.with_extension("pcapng.part");
-            let mut out = std::io::BufWriter::new(std::fs::File::create(&part)?);
+            // Written beside, then named (never over a file): a download never sees half a
+            // file; the file is rackd's user's alone (`crate::files`).
+            let draft = crate::files::Draft::beside(&file)?;
+            let mut out = std::io::BufWriter::new(draft.file());
             crate::capture::write(&mut out, &link, &frames)?;
-            out.into_inner().map_err(|e| e.into_error())?.sync_all()?;
-            std::fs::rename(&part, &file)?;
-            Ok(file)
+            out.into_inner().map_err(|e| e.into_error())?;
+            draft.publish([file])
         })
         .await;
         match written {

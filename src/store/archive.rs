@@ -14,10 +14,14 @@
 //!   tool (`zcat | jq`). A day archived again (a job held by a lock then, free now) gets
 //!   `jobs-YYYY-MM-DD.2.jsonl.gz`, and so on: a file, once written, is never changed.
 //! - **Written before anything is deleted, and atomically**: each file is written to a
-//!   temporary name, synced, renamed and its folder synced; only then are its jobs deleted,
-//!   in batches of [`BATCH`] jobs, a transaction each (on a running rackd, a group of its
-//!   writer each: [`Delete`]), so that new jobs wait for one batch at most. A crash between the rename and the last batch leaves jobs in the store that
-//!   are in the archive too: the next run archives them again under the next name, and a
+//!   temporary name of its own, synced, given the day's next free name without ever
+//!   replacing a file ([`crate::files::Draft`]: the hourly retention and `rackd db archive`
+//!   into one folder each take a name of their own) and its folder synced, readable by
+//!   rackd's user alone (`0600`), a link planted in the folder never followed; only then
+//!   are its jobs deleted, in batches of [`BATCH`] jobs, a transaction each (on a running
+//!   rackd, a group of its writer each: [`Delete`]), so that new jobs wait for one batch at
+//!   most. A crash between the naming and the last batch leaves jobs in the store that are
+//!   in the archive too: the next run archives them again under the next name, and a
 //!   reader de-duplicates by job id. Nothing is ever deleted that is not in a synced file.
 //! - **rackd may run meanwhile**: by hand the jobs are deleted straight in the database
 //!   (with `job_counts`, which `/metrics` shows from rackd's next start); the retention
@@ -52,6 +56,7 @@ use super::writer::{Record, WriteError, Writer};
 use super::{Pool, Tx, on};
 use crate::domain::JobState;
 use crate::domain::time::to_ms;
+use crate::files;
 
 /// Jobs deleted per transaction.
 pub const BATCH: usize = 500;
@@ -181,7 +186,7 @@ pub fn check_folder(dir: &Path) -> Result<(), ArchiveError> {
     std::fs::create_dir_all(dir).map_err(folder)?;
     // A name of its own: nodes (and tests) sharing the folder probe it at the same time.
     let path = dir.join(format!(".rackd-archive-probe-{}-{:x}", std::process::id(), rand::random::<u64>()));
-    std::fs::File::create(&path).map_err(folder)?;
+    files::create(&path).map_err(folder)?;
     std::fs::remove_file(&path).map_err(folder)
 }
 
@@ -258,33 +263,26 @@ async fn histories(
     Ok(by_job)
 }
 
-/// Writes `lines` to the day's next free file name, synced and renamed into place.
+/// Writes `lines` to the day's next free file name: a draft synced and published under
+/// the first name no file has (never over one: another archiver may have just taken it).
 fn write_day(dir: &Path, day: i64, lines: &[String]) -> Result<PathBuf, ArchiveError> {
     let date = OffsetDateTime::from_unix_timestamp(day / 1000).map(|t| t.date()).unwrap_or(Date::MIN);
     let name = |n: u32| match n {
         1 => format!("jobs-{date}.jsonl.gz"),
         n => format!("jobs-{date}.{n}.jsonl.gz"),
     };
-    let path = (1..).map(|n| dir.join(name(n))).find(|p| !p.exists()).unwrap_or_default();
-    let temp = path.with_extension("gz.tmp");
-    let failed = |source| ArchiveError::File { path: path.clone(), source };
-    let write = || -> std::io::Result<()> {
-        let file = std::fs::File::create(&temp)?;
-        let mut gz = GzEncoder::new(std::io::BufWriter::new(file), Compression::default());
+    let first = dir.join(name(1));
+    let write = || -> std::io::Result<PathBuf> {
+        let draft = files::Draft::beside(&first)?;
+        let mut gz = GzEncoder::new(std::io::BufWriter::new(draft.file()), Compression::default());
         for line in lines {
             gz.write_all(line.as_bytes())?;
             gz.write_all(b"\n")?;
         }
-        let file = gz.finish()?.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        std::fs::rename(&temp, &path)?;
-        std::fs::File::open(dir)?.sync_all()
+        gz.finish()?.into_inner().map_err(|e| e.into_error())?;
+        draft.publish((1..=u32::MAX).map(|n| dir.join(name(n))))
     };
-    write().map_err(|e| {
-        let _ = std::fs::remove_file(&temp);
-        failed(e)
-    })?;
-    Ok(path)
+    write().map_err(|source| ArchiveError::File { path: first, source })
 }
 
 /// Deletes `ids` (those still ended) and their history, and takes them off the counts, in

@@ -44,20 +44,27 @@ pub enum Database {
 }
 
 impl Database {
-    /// `sqlite:PATH` or a `postgres://` / `postgresql://` URL.
-    pub fn parse(text: &str) -> Result<Database, String> {
+    /// A SQLite file's path, as `PATH` or `sqlite:PATH`, or a `postgres://` /
+    /// `postgresql://` URL: what `rackd db` takes for a store (`rackd serve --database`
+    /// takes a path too). Any other URL (`mysql://`, `postgres//` that lost its colon) is
+    /// refused, shown without its password.
+    pub fn parse(text: &str) -> Result<Database, DatabaseError> {
         if text.starts_with("postgres://") || text.starts_with("postgresql://") {
             PgTls::of(text).check()?;
-            PgConnectOptions::from_str(text).map_err(|e| format!("not a PostgreSQL URL: {e}"))?;
+            PgConnectOptions::from_str(text).map_err(|e| DatabaseError::Postgres(e.to_string()))?;
             Ok(Database::Postgres(text.to_owned()))
         } else if let Some(path) = text.strip_prefix("sqlite:") {
             let path = path.strip_prefix("//").unwrap_or(path);
             if path.is_empty() {
-                return Err("sqlite: needs a file's path (sqlite:data/rackd.db)".into());
+                return Err(DatabaseError::NoPath);
             }
             Ok(Database::Sqlite(PathBuf::from(path)))
+        } else if has_scheme(text) || text.starts_with("postgres//") || text.starts_with("postgresql//") {
+            Err(DatabaseError::Neither(crate::redact::url(text)))
+        } else if text.is_empty() {
+            Err(DatabaseError::NoPath)
         } else {
-            Err(format!("{:?} is neither sqlite:PATH nor a postgres:// URL", redact(text)))
+            Ok(Database::Sqlite(PathBuf::from(text)))
         }
     }
 
@@ -73,41 +80,51 @@ impl Database {
     pub fn display(&self) -> String {
         match self {
             Database::Sqlite(path) => path.display().to_string(),
-            Database::Postgres(url) => redact(url),
+            Database::Postgres(url) => crate::redact::url(url),
         }
     }
 }
 
-/// `url` with its password, if any, replaced by `***`: the one in the user part
-/// (`postgres://rackd:***@db/rackd`, whatever characters it holds, up to the last `@`
-/// before the query) and a `password=` in the query. For every message and log line that
-/// shows a database URL, and `check-config --explain`.
-pub fn redact(url: &str) -> String {
-    let Some((scheme, rest)) = url.split_once("://") else { return url.to_owned() };
-    let (before_query, query) = match rest.split_once('?') {
-        Some((b, q)) => (b, Some(q)),
-        None => (rest, None),
-    };
-    let mut out = format!("{scheme}://");
-    match before_query.rsplit_once('@') {
-        Some((user, host)) if user.contains(':') => {
-            let name = user.split(':').next().unwrap_or_default();
-            out.push_str(&format!("{name}:***@{host}"));
+/// Whether `text` starts with a URL's scheme (`mysql:`, `postgres:`), which a path does not.
+fn has_scheme(text: &str) -> bool {
+    match text.split_once(':') {
+        Some((scheme, _)) => {
+            scheme.starts_with(|c: char| c.is_ascii_alphabetic())
+                && scheme.chars().all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
         }
-        _ => out.push_str(before_query),
+        None => false,
     }
-    if let Some(query) = query {
-        let pairs: Vec<String> = query
-            .split('&')
-            .map(|pair| match pair.split_once('=') {
-                Some((k, _)) if k.eq_ignore_ascii_case("password") => format!("{k}=***"),
-                _ => pair.to_owned(),
-            })
-            .collect();
-        out.push('?');
-        out.push_str(&pairs.join("&"));
-    }
-    out
+}
+
+/// Why a text is not a store [`Database::parse`] takes. No variant holds a password.
+#[derive(Debug, thiserror::Error)]
+pub enum DatabaseError {
+    /// Another URL than PostgreSQL's (shown without its password).
+    #[error("{0:?} is neither a SQLite file's path (PATH or sqlite:PATH) nor a postgres:// URL")]
+    Neither(String),
+    /// `sqlite:` (or nothing) without a path.
+    #[error("a SQLite store needs a file's path (data/rackd.db, or sqlite:data/rackd.db)")]
+    NoPath,
+    /// A `postgres://` URL the driver does not read, in its words.
+    #[error("not a PostgreSQL URL: {0}")]
+    Postgres(String),
+    /// A `sslmode` rackd does not take.
+    #[error(transparent)]
+    SslMode(#[from] SslModeError),
+}
+
+/// A `sslmode` rackd does not take.
+#[derive(Debug, thiserror::Error)]
+pub enum SslModeError {
+    /// `allow`, which the driver takes but never uses TLS with.
+    #[error(
+        "sslmode=allow is not supported: the driver would never use TLS with it; say prefer, require, \
+         verify-ca or verify-full (or disable)"
+    )]
+    Allow,
+    /// A mode libpq does not have.
+    #[error("sslmode={0} is not one of {modes}", modes = SSL_MODES.join(", "))]
+    Unknown(String),
 }
 
 /// What a PostgreSQL URL says about TLS, as written (`sslmode`, `sslrootcert`; sqlx's
@@ -146,14 +163,10 @@ impl PgTls {
     }
 
     /// Refuses a `sslmode` rackd does not support, in words for `check-config`.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), SslModeError> {
         match self.mode.as_deref() {
-            Some("allow") => Err("sslmode=allow is not supported: the driver would never use TLS with it; \
-                                 say prefer, require, verify-ca or verify-full (or disable)"
-                .into()),
-            Some(mode) if !SSL_MODES.contains(&mode) => {
-                Err(format!("sslmode={mode} is not one of {}", SSL_MODES.join(", ")))
-            }
+            Some("allow") => Err(SslModeError::Allow),
+            Some(mode) if !SSL_MODES.contains(&mode) => Err(SslModeError::Unknown(mode.to_owned())),
             _ => Ok(()),
         }
     }
@@ -339,6 +352,12 @@ pub async fn connect(
     match database {
         Database::Sqlite(path) => {
             prepare_folder(path)?;
+            // A new database is rackd's user's alone; SQLite gives its WAL and shared
+            // memory files the database file's permissions.
+            match crate::files::create(path) {
+                Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => return Err(e.into()),
+                _ => {}
+            }
             let options = sqlite_options(path, busy_timeout)?;
             Ok(Pool::Sqlite(SqlitePoolOptions::new().max_connections(max).connect_with(options).await?))
         }
@@ -515,11 +534,18 @@ mod tests {
 
     #[test]
     fn databases_parse_from_the_command_line() {
-        assert_eq!(Database::parse("sqlite:data/x.db"), Ok(Database::Sqlite("data/x.db".into())));
-        assert_eq!(Database::parse("sqlite:///tmp/x.db"), Ok(Database::Sqlite("/tmp/x.db".into())));
+        let sqlite = |text: &str| Database::parse(text).unwrap();
+        assert_eq!(sqlite("sqlite:data/x.db"), Database::Sqlite("data/x.db".into()));
+        assert_eq!(sqlite("sqlite:///tmp/x.db"), Database::Sqlite("/tmp/x.db".into()));
+        // A plain path, as `rackd serve --database` takes it.
+        assert_eq!(sqlite("data/x.db"), Database::Sqlite("data/x.db".into()));
+        assert_eq!(sqlite("/var/lib/rackd/rackd.db"), Database::Sqlite("/var/lib/rackd/rackd.db".into()));
+        assert_eq!(sqlite("./a:b.db"), Database::Sqlite("./a:b.db".into()));
         assert!(matches!(Database::parse("postgres://u:p@h/db"), Ok(Database::Postgres(_))));
-        assert!(Database::parse("mysql://h/db").is_err());
-        assert!(Database::parse("sqlite:").is_err());
+        for other in ["mysql://u:p@h/db", "postgres//u:p@h/db", "postgres:u:p@h/db", "sqlite:", ""] {
+            let e = Database::parse(other).unwrap_err().to_string();
+            assert!(!e.contains(":p@"), "{other}: {e}");
+        }
     }
 
     #[test]
@@ -537,14 +563,6 @@ mod tests {
     fn passwords_stay_out_of_messages() {
         let db = Database::Postgres("postgres://rackd:s3cret@db.plant:5432/rackd?sslmode=require".into());
         assert_eq!(db.display(), "postgres://rackd:***@db.plant:5432/rackd?sslmode=require");
-        assert_eq!(redact("postgres://h/db"), "postgres://h/db");
-        assert_eq!(redact("postgres://u@h/db"), "postgres://u@h/db");
-        // Characters a password should have escaped, and a password in the query.
-        assert_eq!(redact("postgres://u:p/a@ss@h/db?x=1"), "postgres://u:***@h/db?x=1");
-        assert_eq!(
-            redact("postgres://u@h/db?password=s3&sslmode=require"),
-            "postgres://u@h/db?password=***&sslmode=require"
-        );
     }
 
     #[test]
@@ -567,7 +585,7 @@ mod tests {
         assert_eq!(mode("postgres://u@127.0.0.1/rackd?ssl-mode=VERIFY-FULL", true), "verify-full");
         let tls = PgTls::of("postgres://u@h/db?sslmode=verify-ca&sslrootcert=%2Fetc%2Fca.pem");
         assert_eq!(tls.root_cert.as_deref(), Some(Path::new("/etc/ca.pem")));
-        assert!(PgTls::of("postgres://u@h/db?sslmode=allow").check().unwrap_err().contains("allow"));
+        assert!(matches!(PgTls::of("postgres://u@h/db?sslmode=allow").check(), Err(SslModeError::Allow)));
         assert!(PgTls::of("postgres://u@h/db?sslmode=verify-full").check().is_ok());
     }
 

@@ -45,7 +45,7 @@ use std::time::Duration;
 
 use sqlx::{PgPool, SqlitePool};
 
-pub use engine::{Database, Engine, OpenError, PgTls, SQLITE_PAGE_SIZE, redact};
+pub use engine::{Database, DatabaseError, Engine, OpenError, PgTls, SQLITE_PAGE_SIZE, SslModeError};
 pub use jobs::{Job, JobEvent, JobFilter};
 
 /// The migrations of each engine, embedded in the binary.

@@ -6,7 +6,9 @@
 //!   bounds a link takes ([`MAX_CAPTURE_BYTES`], [`MAX_CAPTURE_SECONDS`]): a long poll keeps
 //!   everything up to 256 MiB or a day, the oldest frames going first past that.
 //! - **The file is created before the PLC is asked anything**, so a path that cannot be
-//!   written fails at once instead of after a long poll; it is filled when the command
+//!   written fails at once instead of after a long poll; as a new file, never over one
+//!   nor through a link there, readable by its owner alone ([`crate::files`]: a capture
+//!   holds every value the PLC was sent and answered); it is filled when the command
 //!   ends, whatever the outcome: after an error (the timeouts one captures for) and after
 //!   Ctrl-C ([`super::run`] stops a single request on Ctrl-C too when capturing; a poll
 //!   stops itself).
@@ -33,9 +35,17 @@ pub struct Capture {
 }
 
 impl Capture {
-    /// Creates (or truncates) `path`, to be filled by [`Capture::finish`].
+    /// Creates `path`, a new file of rackd's own ([`crate::files::create`]), to be filled
+    /// by [`Capture::finish`]; refused when anything is there.
     pub fn create(path: &Path) -> anyhow::Result<Capture> {
-        let file = File::create(path).with_context(|| format!("--capture {}", path.display()))?;
+        let file = crate::files::create(path).map_err(|e| match e.kind() {
+            std::io::ErrorKind::AlreadyExists => anyhow::anyhow!(
+                "--capture {}: a file (or a link) exists there, and rackd never writes over one: remove it \
+                 or name another file",
+                path.display()
+            ),
+            _ => anyhow::Error::new(e).context(format!("--capture {}", path.display())),
+        })?;
         Ok(Capture { path: path.to_owned(), file: Mutex::new(Some(file)), recorder: Mutex::new(None) })
     }
 

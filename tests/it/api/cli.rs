@@ -389,3 +389,49 @@ fn db_rollups_rebuilds_only_when_told_to() {
         "{out}"
     );
 }
+
+#[test]
+fn the_db_commands_take_a_plain_path_as_serve_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("rackd.db");
+    let path = db.to_str().unwrap();
+    let (ok, out, err) = rackd(&["db", "rollups", "--rebuild", "--database", path]);
+    assert!(ok, "a plain path: {err}");
+    assert!(out.contains(&format!("rebuilt the rollups of {path}")), "{out}");
+    let archive = dir.path().join("archive");
+    let args =
+        ["db", "archive", "--before", "2026-01-01", "--to", archive.to_str().unwrap(), "--database", path];
+    let (ok, out, err) = rackd(&args);
+    assert!(ok && out.contains("archived 0 jobs"), "{out}{err}");
+    let copy = dir.path().join("copy.db");
+    let (ok, out, err) = rackd(&["db", "copy", "--from", path, "--to", copy.to_str().unwrap()]);
+    assert!(ok && out.contains(&format!("copied {path} to {}", copy.display())), "{out}{err}");
+    // The forms of before still work; a URL of another database is still refused.
+    let (ok, _, err) = rackd(&["db", "rollups", "--rebuild", "--database", &format!("sqlite:{path}")]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = rackd(&["db", "rollups", "--rebuild", "--database", "mysql://db.plant/rackd"]);
+    assert!(!ok && err.contains("postgres://"), "{err}");
+}
+
+#[test]
+fn check_config_warns_of_a_webhook_in_clear_to_another_machine() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("site.toml");
+    let entry = |url: &str| {
+        BAD_WEBHOOK.replace("job.created", "job.*").replace("https://wms.plant.local/events", url)
+    };
+    std::fs::write(&file, entry("http://wms.plant.local/events")).unwrap();
+    let (ok, out, err) = rackd(&["check-config", file.to_str().unwrap()]);
+    assert!(ok && out.contains("ok"), "a warning, not an error: {err}");
+    assert!(err.contains("site.toml:3:1: webhooks[0].url: warning: ") && err.contains("https://"), "{err}");
+    for quiet in [
+        "https://wms.plant.local/events",
+        "http://127.0.0.1:9000/events",
+        "http://localhost/x",
+        "http://[::1]:80/",
+    ] {
+        std::fs::write(&file, entry(quiet)).unwrap();
+        let (ok, _, err) = rackd(&["check-config", file.to_str().unwrap()]);
+        assert!(ok && !err.contains("warning"), "{quiet}: {err}");
+    }
+}

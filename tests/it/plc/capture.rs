@@ -71,7 +71,9 @@ fn a_failed_read_still_writes_its_capture() {
     assert!(capture.frames.iter().all(|f| f.direction == Direction::Sent && f.bytes.starts_with(b"%05#RD")));
     assert_eq!(capture.frames[1].annotations.retry, 1);
 
-    // No port for MC: refused before a link opens, and no file is left behind.
+    // No port for MC: refused before a link opens, and no file is left behind (a new
+    // name: rackd never writes over a file).
+    let (file, name) = (dir.path().join("mc.pcapng"), dir.path().join("mc.pcapng").display().to_string());
     let (success, _, err) = plc("mc3e", "127.0.0.1", &["read", "D0", "--capture", &name]);
     assert!(!success);
     assert!(err.contains(&format!("capture: no link was opened, nothing written to {name}")), "{err}");
