@@ -66,6 +66,11 @@ impl RtuLink {
         RtuLink { link, silence, counters, tx: Vec::new() }
     }
 
+    /// Records the link's frames into `recorder`.
+    pub fn set_recorder(&mut self, recorder: Option<Arc<crate::capture::Recorder>>) {
+        self.link.set_recorder(recorder);
+    }
+
     /// Holds the line after a timeout or retry, flushes stale input, waits for the
     /// inter-frame silence and sends the request.
     pub async fn send(&mut self, ex: &Exchange<'_>, attempt: &Attempt) -> Result<(), AttemptError> {
