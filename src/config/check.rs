@@ -196,6 +196,7 @@ impl Config {
             ("server.header_timeout_ms", server.header_timeout_ms == 0),
             ("server.idle_timeout_ms", server.idle_timeout_ms == 0),
             ("server.max_connections", server.max_connections == 0),
+            ("server.capture_downloads", server.capture_downloads == 0),
         ];
         if let Some((key, _)) = zero.into_iter().find(|(_, zero)| *zero) {
             return Err((key.into(), Invalid::ServerZero(key)));

@@ -16,10 +16,11 @@
 //! - On the node that drives the machines, in its own folder: a standby forwards the
 //!   request for an alarm's capture to the active node.
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime};
 
-use crate::capture::{Frame, Link};
+use crate::capture::Reader;
 use crate::domain::AlarmKind;
 use crate::store::{Pool, alarms};
 
@@ -40,9 +41,9 @@ pub fn file_of(folder: &Path, id: i64) -> PathBuf {
 }
 
 impl Freeze {
-    /// Writes `frames` (taken as the alarm was raised) as the capture of the active alarm
-    /// `(device, kind, code)`.
-    pub async fn keep(&self, device: &str, key: (AlarmKind, u16), link: Link, frames: Vec<Frame>) {
+    /// Writes the frames `frames` reads (its span fixed as the alarm was raised) as the
+    /// capture of the active alarm `(device, kind, code)`.
+    pub async fn keep(&self, device: &str, key: (AlarmKind, u16), mut frames: Reader) {
         let active = match alarms::active(&self.pool).await {
             Ok(active) => active,
             Err(e) => return tracing::warn!(error = %e, "alarm capture: the alarm's id could not be read"),
@@ -50,22 +51,21 @@ impl Freeze {
         let found = active.iter().find(|a| a.device == device && a.kind == key.0 && a.code == key.1);
         let Some(alarm) = found else { return };
         let file = file_of(&self.folder, alarm.id);
-        let count = frames.len();
-        let written = tokio::task::spawn_blocking(move || -> std::io::Result<PathBuf> {
+        let written = tokio::task::spawn_blocking(move || -> std::io::Result<(PathBuf, usize)> {
             if let Some(dir) = file.parent() {
                 std::fs::create_dir_all(dir)?;
             }
             // Written beside, then renamed: a download never sees half a file.
             let part = file.with_extension("pcapng.part");
             let mut out = std::io::BufWriter::new(std::fs::File::create(&part)?);
-            crate::capture::write(&mut out, &link, &frames)?;
+            let count = crate::capture::write_from(&mut frames, |bytes| out.write_all(&bytes))?;
             out.into_inner().map_err(|e| e.into_error())?.sync_all()?;
             std::fs::rename(&part, &file)?;
-            Ok(file)
+            Ok((file, count))
         })
         .await;
         match written {
-            Ok(Ok(file)) => {
+            Ok(Ok((file, count))) => {
                 tracing::info!(alarm = alarm.id, frames = count, file = %file.display(), "alarm capture kept")
             }
             Ok(Err(e)) => {

@@ -6,12 +6,26 @@
 //! Decisions:
 //! - Operators, not viewers: the bytes show every value the machine holds and rackd writes,
 //!   more than the dashboard does. Each download is audited (`capture` on `device:ID`,
-//!   with the seconds and the frame count).
+//!   with the span and the frames the recorder held) before its first byte.
 //! - Without `seconds`, everything the recorder holds (its `capture_seconds`, at most
 //!   `capture_bytes`); with it, the last N seconds (1 to 86,400).
 //! - A device whose recorder is off (`capture_bytes = 0`) answers 409 `capture_off`.
 //! - The file holds frames and rackd's notes on them only (`crate::capture`): no key, no
 //!   secret, no setting.
+//! - **A download cannot take rackd down** (issue 51). The file is built part by part
+//!   ([`body`]): 256 KiB of the ring's records copied under the recorder's lock, decoded
+//!   and written on a thread of the download's own, handed to the response's body, then
+//!   the next part, no sooner than the client takes the one before. So a build holds about
+//!   a megabyte whatever the ring's size, and the device's own requests wait on the
+//!   recorder for one copy at most. At most `server.capture_downloads` (2) are built at
+//!   once, so builds take at most that many cores' time; one more is answered 429
+//!   `capture_busy` with `Retry-After`. A client that stops reading keeps its place until
+//!   `server.idle_timeout_ms` closes its connection. Tried and dropped: the build's thread
+//!   at a lower priority (nice 10), which starved downloads on a machine busy with other
+//!   work (a test's 20 MB took minutes beside a CPU hog) for no gain the benchmark saw.
+//! - An alarm's file is streamed from the disk as it is read, 64 KiB at a time.
+
+mod body;
 
 use std::time::Duration;
 
@@ -41,7 +55,8 @@ pub const PCAPNG: &str = "application/x-pcapng";
 
 /// The device's recent traffic as a pcapng file: every frame rackd sent and read, with
 /// microsecond times, the link's real endpoints, and per packet a comment with the job,
-/// the retry and rackd's verdict. Audited.
+/// the retry and rackd's verdict. Streamed as it is built; at most
+/// `server.capture_downloads` are built at once. Audited.
 #[utoipa::path(get, path = "/devices/{id}/capture", tag = "devices",
     params(("id" = String, Path, description = "Device id"), CaptureParams),
     responses(
@@ -50,6 +65,8 @@ pub const PCAPNG: &str = "application/x-pcapng";
         (status = 404, description = "No such device", body = ErrorBody),
         (status = 409, description = "The device's recorder is off (`capture_off`: `capture_bytes = 0`)", body = ErrorBody),
         (status = 422, description = "`seconds` out of 1..=86400 (`invalid_seconds`)", body = ErrorBody),
+        (status = 429, description = "`capture_busy`: `server.capture_downloads` captures are being built; \
+try again in `Retry-After` seconds", body = ErrorBody),
     ))]
 pub async fn device_capture(
     State(app): State<AppState>,
@@ -67,22 +84,22 @@ pub async fn device_capture(
             format!("device {id:?} records nothing (capture_bytes = 0)"),
         ));
     };
-    let frames = recorder.frames(p.seconds.map(Duration::from_secs));
-    let mut file = Vec::new();
-    crate::capture::write(&mut file, &recorder.link(), &frames).map_err(ApiError::unavailable)?;
+    let place = body::take(&app.capture_builds)?;
+    let reader = recorder.reader(p.seconds.map(Duration::from_secs));
     let span = p.seconds.map_or("all it holds".to_owned(), |s| format!("the last {s} s"));
     let audit = Record::Audit {
         action: "capture".into(),
         target: format!("device:{id}"),
-        reason: Some(format!("{span}: {} frames", frames.len())),
+        reason: Some(format!("{span}, of {} frames held", reader.held())),
     };
     app.writer.record_as(audit, caller.who()).await?;
+    let body = body::build(reader, place).map_err(ApiError::unavailable)?;
     let name = format!("attachment; filename=\"{id}-{}.pcapng\"", stamp());
-    Ok(([(header::CONTENT_TYPE, PCAPNG.to_owned()), (header::CONTENT_DISPOSITION, name)], file))
+    Ok(([(header::CONTENT_TYPE, PCAPNG.to_owned()), (header::CONTENT_DISPOSITION, name)], body))
 }
 
 /// The capture frozen when alarm `id` was raised (a device's `hardware` or `link` alarm:
-/// its last `retention.alarm_capture_seconds` of traffic). Audited.
+/// its last `retention.alarm_capture_seconds` of traffic), streamed from the disk. Audited.
 #[utoipa::path(get, path = "/alarms/{id}/capture", tag = "alarms",
     params(("id" = i64, Path, description = "Alarm id")),
     responses(
@@ -97,8 +114,8 @@ pub async fn alarm_capture(
     Path(id): Path<i64>,
 ) -> Result<impl IntoResponse, ApiError> {
     let file = crate::service::captures::file_of(&app.captures, id);
-    let bytes = match tokio::fs::read(&file).await {
-        Ok(bytes) => bytes,
+    let opened = match tokio::fs::File::open(&file).await {
+        Ok(opened) => opened,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             return Err(ApiError::not_found(format!("alarm {id} has no capture")));
         }
@@ -107,7 +124,7 @@ pub async fn alarm_capture(
     let audit = Record::Audit { action: "capture".into(), target: format!("alarm:{id}"), reason: None };
     app.writer.record_as(audit, caller.who()).await?;
     let name = format!("attachment; filename=\"alarm-{id}.pcapng\"");
-    Ok(([(header::CONTENT_TYPE, PCAPNG.to_owned()), (header::CONTENT_DISPOSITION, name)], bytes))
+    Ok(([(header::CONTENT_TYPE, PCAPNG.to_owned()), (header::CONTENT_DISPOSITION, name)], body::file(opened)))
 }
 
 /// Now as `20261127T081500Z`, for file names.

@@ -17,6 +17,9 @@ pub struct TestApp {
     pub base: String,
     pub client: reqwest::Client,
     pub db: Database,
+    /// The running configuration and its devices, until the server is stopped (a clone
+    /// kept would keep the devices' handles, and the stop would wait on them).
+    reload: Option<rackd::service::reload::Reload>,
     stop: Option<oneshot::Sender<()>>,
     task: Option<JoinHandle<anyhow::Result<()>>>,
     _dir: Option<tempfile::TempDir>,
@@ -100,16 +103,26 @@ async fn start(config: &Config, db: Database, sources: Option<Sources>) -> TestA
     }
     let scheme = if config.server.tls.is_some() { "https" } else { "http" };
     let base = format!("{scheme}://{}", app.local_addr());
+    let reload = Some(app.reload());
     let (stop, stopped) = oneshot::channel::<()>();
     let task = tokio::spawn(app.run_until(async {
         let _ = stopped.await;
     }));
-    TestApp { base, client: reqwest::Client::new(), db, stop: Some(stop), task: Some(task), _dir: None }
+    TestApp {
+        base,
+        client: reqwest::Client::new(),
+        db,
+        reload,
+        stop: Some(stop),
+        task: Some(task),
+        _dir: None,
+    }
 }
 
 impl TestApp {
     /// Stops the server gracefully and waits until it has finished; keeps the database.
     pub async fn stop(mut self) -> (Database, Option<tempfile::TempDir>) {
+        self.reload = None;
         let _ = self.stop.take().unwrap().send(());
         self.task.take().unwrap().await.unwrap().unwrap();
         (self.db.clone(), self._dir.take())
@@ -117,8 +130,14 @@ impl TestApp {
 
     /// Waits (at most `within`) for the server to stop on its own, with what it ended with.
     pub async fn ended(mut self, within: std::time::Duration) -> anyhow::Result<()> {
+        self.reload = None;
         let task = self.task.take().unwrap();
         tokio::time::timeout(within, task).await.expect("the server stops on its own").unwrap()
+    }
+
+    /// The flight recorder of a running device.
+    pub fn recorder(&self, device: &str) -> Option<std::sync::Arc<rackd::capture::Recorder>> {
+        self.reload.as_ref()?.devices().get(device)?.recorder.clone()
     }
 
     pub fn url(&self, path: &str) -> String {
