@@ -144,7 +144,7 @@ async fn record(
         let key = alarm.key();
         // The moment before the fault, taken before the ring moves on.
         let frozen = kept
-            .filter(|(freeze, _)| freeze.wants(alarm.class))
+            .filter(|(freeze, _)| freeze.admit(&status.id, key, alarm.class))
             .map(|(freeze, recorder)| (freeze, recorder.reader(Some(freeze.span()))));
         writer.record(Record::AlarmRaised(alarm)).await?;
         active.insert(key);

@@ -23,7 +23,10 @@
 //!   `server.idle_timeout_ms` closes its connection. Tried and dropped: the build's thread
 //!   at a lower priority (nice 10), which starved downloads on a machine busy with other
 //!   work (a test's 20 MB took minutes beside a CPU hog) for no gain the benchmark saw.
-//! - An alarm's file is streamed from the disk as it is read, 64 KiB at a time.
+//! - An alarm's file is streamed from the disk as it is read, 64 KiB at a time. It is the
+//!   file of that incident, named after the alarm's raise as well as its id
+//!   (`service::captures`): the alarm is read first, and a file of an alarm that had the
+//!   same id in another database is never served.
 
 mod body;
 
@@ -105,15 +108,21 @@ pub async fn device_capture(
     responses(
         (status = 200, description = "The capture", content_type = "application/x-pcapng", body = Vec<u8>),
         (status = 403, description = "Not an operator's key", body = ErrorBody),
-        (status = 404, description = "No capture for this alarm (none was kept: another class, a device \
-without a recorder, or older than the retention)", body = ErrorBody),
+        (status = 404, description = "No such alarm, or no capture for it (none was kept: another class, a \
+device without a recorder, one kept for the same alarm of the device within \
+`retention.alarm_capture_interval_secs`; or deleted: older than the retention, or the oldest past \
+`retention.captures_max_bytes`)", body = ErrorBody),
     ))]
 pub async fn alarm_capture(
     State(app): State<AppState>,
     caller: Caller,
     Path(id): Path<i64>,
 ) -> Result<impl IntoResponse, ApiError> {
-    let file = crate::service::captures::file_of(&app.captures, id);
+    let alarm = crate::store::alarms::get(&app.pool, id).await?;
+    let Some(alarm) = alarm else { return Err(ApiError::not_found(format!("alarm {id} does not exist"))) };
+    // The file of this incident: named after the alarm's raise as well as its id.
+    let raised_ms = crate::domain::time::to_ms(alarm.raised_at);
+    let file = crate::service::captures::file_of(&app.captures, id, raised_ms);
     let opened = match tokio::fs::File::open(&file).await {
         Ok(opened) => opened,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
