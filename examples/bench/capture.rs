@@ -35,6 +35,9 @@ pub struct CaptureArgs {
     /// `server.capture_downloads`: captures built at once.
     #[arg(long, default_value_t = 2)]
     pub builds: usize,
+    /// The device's `min_timeout_ms` (its protocol's default, 2 ms on Modbus TCP, if not given).
+    #[arg(long)]
+    pub min_timeout_ms: Option<u64>,
 }
 
 /// Registers a poll reads (ten reads of 120).
@@ -71,6 +74,9 @@ pub async fn run(args: CaptureArgs) -> anyhow::Result<()> {
          poll_ms = 1\ncapture_bytes = {ring}\ncapture_seconds = 86400\n[devices.tags]\n"
     );
     text.insert_str(0, &format!("[server]\ncapture_downloads = {}\n\n", args.builds));
+    if let Some(ms) = args.min_timeout_ms {
+        text = text.replace("poll_ms = 1\n", &format!("poll_ms = 1\nmin_timeout_ms = {ms}\n"));
+    }
     for t in 0..TAGS {
         let _ = writeln!(text, "\"t{t:04}\" = \"4x{t}\"");
     }

@@ -28,10 +28,10 @@
 //!   reconnect). Frames recorded before a change are written with the newest endpoints;
 //!   a capture is one interface, and the device's end does not change.
 //! - **Time** is tokio's clock, so tests on paused time see the age bound work.
-//! - **Reads hold the lock for copies only** (issue 51): a [`Reader`] copies a part of the
-//!   ring's bytes under the lock and decodes it after ([`super::reader`]: `Recorder::reader`
-//!   and `Recorder::frames` are there), so a capture of
-//!   a full 256 MiB ring, decoded and written for a download, never keeps the device's
+//! - **Reads hold the lock for copies only** (issue 51): a [`Reader`](super::Reader)
+//!   copies a part of the ring's bytes under the lock and decodes it after
+//!   ([`super::reader`], where `Recorder::reader` and `Recorder::frames` are), so a capture
+//!   of a full 256 MiB ring, decoded and written for a download, never keeps the device's
 //!   own requests waiting on the recorder for longer than a copy of a part (256 KiB).
 
 use std::sync::{Arc, Mutex, MutexGuard};

@@ -20,9 +20,12 @@
 //!   recorder for one copy at most. At most `server.capture_downloads` (2) are built at
 //!   once, so builds take at most that many cores' time; one more is answered 429
 //!   `capture_busy` with `Retry-After`. A client that stops reading keeps its place until
-//!   `server.idle_timeout_ms` closes its connection. Tried and dropped: the build's thread
-//!   at a lower priority (nice 10), which starved downloads on a machine busy with other
-//!   work (a test's 20 MB took minutes beside a CPU hog) for no gain the benchmark saw.
+//!   `server.idle_timeout_ms` closes its connection.
+//! - **The build's thread runs at nice 10**: on a busy machine the devices' tasks and the
+//!   API come first. `bench capture` (50 downloads of a 64 MiB ring on 2 cores, the device
+//!   on Modbus TCP's 2 ms timeout floor): 58 timeouts at nice 0, 12 at nice 10, none with a
+//!   20 ms floor (docs/development/benchmarks/capture.md). The price: beside a CPU hog a
+//!   download is slow (a debug build's 20 MB took minutes beside `stress-ng`).
 //! - An alarm's file is streamed from the disk as it is read, 64 KiB at a time. It is the
 //!   file of that incident, named after the alarm's raise as well as its id
 //!   (`service::captures`): the alarm is read first, and a file of an alarm that had the

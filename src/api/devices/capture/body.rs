@@ -55,6 +55,7 @@ pub fn build(mut reader: Reader, place: Place) -> std::io::Result<Body> {
     let (parts, received) = mpsc::channel::<Part>(1);
     std::thread::Builder::new().name("rackd-capture".into()).spawn(move || {
         let _place = place;
+        lower_priority();
         let sent = crate::capture::write_from(&mut reader, |part| {
             parts
                 .blocking_send(Part::Bytes(Bytes::from(part)))
@@ -81,6 +82,15 @@ fn stream(received: mpsc::Receiver<Part>) -> impl Stream<Item = std::io::Result<
             None => Some((Err(std::io::Error::other("the capture's build stopped before its end")), None)),
         }
     })
+}
+
+/// Lowers the calling thread's priority (nice 10): a build takes the CPU the devices and
+/// the API leave. Nothing happens where the system refuses (never for one's own thread).
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    if let Err(e) = rustix::process::setpriority_process(Some(rustix::thread::gettid()), 10) {
+        tracing::debug!(error = %e, "capture build: the thread's priority stays");
+    }
 }
 
 /// The body of an alarm's capture file, read [`FILE_PART`] bytes at a time as it goes out.
