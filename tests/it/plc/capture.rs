@@ -97,16 +97,12 @@ fn ctrl_c_ends_a_poll_and_the_capture_is_written() {
     drop(lines);
     let capture = read_file(&file).unwrap();
     let n = capture.frames.len();
-    // A request and its reply per poll; Ctrl-C may land while a request waits for its
-    // reply (a busy machine makes that likely): that request is the last frame.
+    // A request and its reply for each of the three polls seen at least. Not exactly pairs:
+    // Ctrl-C may land while a request waits for its reply, and on a busy machine a reply
+    // later than Modbus TCP's 2 ms timeout floor is retried (a second request, a stale reply).
     let sent = capture.frames.iter().filter(|f| f.direction == Direction::Sent).count();
-    let pairs = capture.frames.chunks(2).all(|p| {
-        p[0].direction == Direction::Sent && p.get(1).is_none_or(|r| r.direction == Direction::Received)
-    });
-    assert!(
-        n >= 6 && pairs && (n - sent == sent || n - sent + 1 == sent),
-        "a request and a reply per poll: {n}, {sent} sent"
-    );
+    assert!(n >= 6 && sent >= 3 && n - sent >= 3, "requests and replies of three polls: {n}, {sent} sent");
+    assert_eq!(capture.frames[0].direction, Direction::Sent);
     assert!(err.contains(&format!("capture: {n} frames written to {name}")), "{err}");
 }
 
