@@ -61,14 +61,14 @@ pub(crate) struct RtuLink {
 }
 
 impl RtuLink {
-    /// A link over `link` that keeps `silence` between frames.
-    pub fn new(link: StreamLink, silence: Duration, counters: Arc<Counters>) -> Self {
-        RtuLink { link, silence, counters, tx: Vec::new() }
-    }
-
     /// Records the link's frames into `recorder`.
     pub fn set_recorder(&mut self, recorder: Option<Arc<crate::capture::Recorder>>) {
         self.link.set_recorder(recorder);
+    }
+
+    /// A link over `link` that keeps `silence` between frames.
+    pub fn new(link: StreamLink, silence: Duration, counters: Arc<Counters>) -> Self {
+        RtuLink { link, silence, counters, tx: Vec::new() }
     }
 
     /// Holds the line after a timeout or retry, flushes stale input, waits for the
