@@ -111,6 +111,9 @@ pub struct ServerConfig {
     /// takes the place of the one that has waited longest without being served
     /// (`app::serve` says why).
     pub max_connections: usize,
+    /// Device captures (`GET /api/v1/devices/{id}/capture`) built at once; one more is
+    /// answered 429 `capture_busy` with `Retry-After` (`api::devices::capture`).
+    pub capture_downloads: usize,
     /// HTTPS and WSS instead of HTTP and WS on `listen`; plain HTTP when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tls: Option<TlsConfig>,
@@ -276,6 +279,7 @@ impl Default for ServerConfig {
             header_timeout_ms: 10_000,
             idle_timeout_ms: 60_000,
             max_connections: 1024,
+            capture_downloads: 2,
             tls: None,
         }
     }

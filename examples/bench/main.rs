@@ -11,6 +11,7 @@
 //! cargo run --release --example bench -- crane  [--jobs 200] [--backlog 30] [--fill 0.5] [--time-scale 200] [--seed 7]
 //! cargo run --release --example bench -- history [--jobs 10000000] [--days 365] [--database sqlite|postgres|URL]
 //! cargo run --release --example bench -- webhooks [--rate 200] [--seconds 5] [--backlog 20000] [--round-trips 10000]
+//! cargo run --release --example bench -- capture [--downloads 50] [--ring-mib 64]
 //! cargo run --release --example bench -- webhooks --neighbours [--rounds 3] [--intake-seconds 2]
 //!                                               [--shelf-latency-jobs 500] [--shelf-batch-jobs 5000]
 //! ```
@@ -26,6 +27,7 @@
 //! the `rackd` binary does: `cargo run --example` does not rebuild the `rackd` binary, and
 //! a stale one beside it would silently measure old code.
 
+mod capture;
 mod child;
 mod crane;
 mod fleet;
@@ -140,6 +142,9 @@ enum Bench {
     /// Webhooks: delivery lag and events/s to one receiver; with `--neighbours`, what a
     /// slow or dead receiver costs `intake` and `shelf`.
     Webhooks(webhooks::WebhooksArgs),
+    /// Capture downloads: rackd's memory and the device's link while N clients download
+    /// the capture of a device with a full ring at once.
+    Capture(capture::CaptureArgs),
 }
 
 fn main() -> ExitCode {
@@ -185,6 +190,7 @@ fn main() -> ExitCode {
             Bench::History(args) => history::run(args).await,
             Bench::Retention(args) => retention::run(args).await,
             Bench::Webhooks(args) => webhooks::run(args).await,
+            Bench::Capture(args) => capture::run(args).await,
         }
     });
     match result {

@@ -20,7 +20,8 @@
 //!
 //! An operation that documents one of these statuses itself keeps its own description;
 //! the new ones of issues 41 and 51 (`token_in_query`, `origin_not_allowed`, an unknown
-//! query parameter, `conflicting_dry_run`) are added to it.
+//! query parameter, `conflicting_dry_run`) are added to it, and so is `too_many_failures`
+//! to an operation's own 429 (`capture_busy`).
 
 use utoipa::openapi::header::HeaderBuilder;
 use utoipa::openapi::path::{Operation, ParameterIn};
@@ -106,6 +107,15 @@ fn complete_operation(operation: &mut Operation, changes: bool, websocket: bool)
         add("429", too_many());
     }
     add("503", error("`timeout`: the request took longer than `server.request_timeout_secs`"));
+    // An operation's own 429 (`capture_busy`) says the shared one too.
+    if let (true, Some(RefOr::T(own))) = (keyed, responses.get_mut("429")) {
+        let shared = too_many();
+        if !own.description.contains(&shared.description) {
+            own.description = format!("{}; {}", own.description, shared.description);
+            let seconds = retry_after("Seconds to wait before asking again");
+            own.headers.insert("Retry-After".to_owned(), RefOr::T(seconds));
+        }
+    }
     // Added to what the operation says of these statuses, if it says anything.
     let mut also = |status: &str, text: &str| match responses.get_mut(status) {
         Some(RefOr::T(r)) if !r.description.contains(text) => {
@@ -138,12 +148,16 @@ fn too_many() -> Response {
         "`too_many_failures`: this client address sent `auth.max_failures` unknown keys within \
          `auth.failure_window_secs`; every request is refused until the window ends, in `Retry-After` seconds",
     );
-    let seconds = HeaderBuilder::new()
-        .schema(Some(utoipa::openapi::ObjectBuilder::new().schema_type(Type::Integer).minimum(Some(1))))
-        .description(Some("Seconds until the window ends"))
-        .build();
-    response.headers.insert("Retry-After".to_owned(), RefOr::T(seconds));
+    response.headers.insert("Retry-After".to_owned(), RefOr::T(retry_after("Seconds until the window ends")));
     response
+}
+
+/// A `Retry-After` header: whole seconds, at least 1.
+fn retry_after(description: &str) -> utoipa::openapi::header::Header {
+    HeaderBuilder::new()
+        .schema(Some(utoipa::openapi::ObjectBuilder::new().schema_type(Type::Integer).minimum(Some(1))))
+        .description(Some(description))
+        .build()
 }
 
 /// Whether a security list is the `security(())` of a public operation: one empty requirement.

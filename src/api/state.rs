@@ -74,6 +74,9 @@ pub struct Shared {
     pub reload: crate::service::reload::Reload,
     /// Where alarm captures are (`retention.captures_dir`).
     pub captures: std::path::PathBuf,
+    /// The places for device capture builds, `server.capture_downloads` of them
+    /// (`api::devices::capture`).
+    pub capture_builds: Arc<tokio::sync::Semaphore>,
     /// Failed authentications per client address.
     pub failures: super::failures::Failures,
 }

@@ -53,11 +53,12 @@ pub(super) async fn start(
         pool: pool.clone(),
         contact_refresh: Duration::from_millis(config.events.contact_refresh_ms),
         gate: gate.clone(),
-        freeze: Some(Freeze {
-            folder: config.retention.captures(&config.database.path),
-            seconds: config.retention.alarm_capture_seconds,
-            pool: pool.clone(),
-        }),
+        freeze: Some(Freeze::new(
+            config.retention.captures(&config.database.path),
+            &config.retention,
+            pool.clone(),
+            Duration::from_secs(config.events.retention_hours.saturating_mul(3600)),
+        )),
     };
     let fleet = Fleet::start(&config.devices, parts).await?;
     let parts = webhooks::Parts { pool: pool.clone(), writer: writer.clone(), hub: hub.clone(), gate };
@@ -89,9 +90,9 @@ async fn retention(pool: Pool, writer: Writer, config: Config) {
             }
         };
         let folder = config.retention.captures(&config.database.path);
-        match tokio::task::spawn_blocking(move || captures::prune(&folder, keep)).await {
-            Ok(Ok(0)) => {}
-            Ok(Ok(n)) => tracing::info!(files = n, "retention: alarm captures deleted"),
+        let max_bytes = config.retention.captures_max_bytes;
+        match tokio::task::spawn_blocking(move || captures::prune(&folder, keep, max_bytes)).await {
+            Ok(Ok(pruned)) => pruned.log(),
             Ok(Err(e)) => tracing::warn!(error = %e, "retention: the alarm captures could not be pruned"),
             Err(e) => tracing::warn!(error = %e, "retention: pruning the alarm captures did not finish"),
         }

@@ -208,6 +208,7 @@ impl Application {
                 &config.server.allowed_hosts,
             ),
             captures: config.retention.captures(&config.database.path),
+            capture_builds: Arc::new(tokio::sync::Semaphore::new(config.server.capture_downloads)),
             failures: api::failures::Failures::new(
                 config.auth.max_failures,
                 Duration::from_secs(config.auth.failure_window_secs),

@@ -26,12 +26,17 @@
 //!   settings; it needs the Lua dissectors installed (`contrib/wireshark`).
 //! - The direction decides the source: a sent frame goes from rackd's end (`local`) to the
 //!   device's, a received one back.
+//! - A recorder's capture is written part by part ([`write_from`], from a [`Reader`]): a
+//!   part of the ring's records copied under the recorder's lock, decoded and written
+//!   outside it, handed on (to a file, to an HTTP body) before the next is read; a capture
+//!   of a full ring is never whole in memory.
 
 mod frame;
 mod link;
 pub mod packet;
 pub mod pcapng;
 pub mod read;
+pub mod reader;
 mod recorder;
 mod ring;
 
@@ -40,18 +45,68 @@ use std::io::{self, Write};
 pub use frame::{Annotations, Direction, Frame, Verdict};
 pub use link::{LINKTYPE_ETHERNET, LINKTYPE_UPPER_PDU, Link, SerialProtocol, Transport};
 pub use read::{Capture, ReadError, read_file};
+pub use reader::Reader;
 pub use recorder::{Limits, Recorder, Stats};
+
+/// A pcapng file being written: its header, then one packet per frame, each appended to
+/// a buffer the caller hands on.
+pub struct FileWriter {
+    wrapper: packet::Wrapper,
+}
+
+impl FileWriter {
+    /// A file of one interface, `link`: its header (section and interface) goes to `out`.
+    pub fn start(link: &Link, out: &mut Vec<u8>) -> FileWriter {
+        out.extend_from_slice(&pcapng::section_header());
+        out.extend_from_slice(&pcapng::interface(link.link_type(), &link.interface_name()));
+        FileWriter { wrapper: packet::Wrapper::new(link) }
+    }
+
+    /// Appends `frame`'s packet (frames in order: TCP sequence numbers run on).
+    pub fn frame(&mut self, frame: &Frame, out: &mut Vec<u8>) {
+        let data = self.wrapper.wrap(frame);
+        out.extend_from_slice(&pcapng::packet(frame.time_us, &data, &frame.annotations.comment()));
+    }
+}
 
 /// Writes `frames`, in order, as a pcapng file of one interface, `link`.
 pub fn write(mut out: impl Write, link: &Link, frames: &[Frame]) -> io::Result<()> {
-    out.write_all(&pcapng::section_header())?;
-    out.write_all(&pcapng::interface(link.link_type(), &link.interface_name()))?;
-    let mut wrapper = packet::Wrapper::new(link);
+    let mut buf = Vec::new();
+    let mut file = FileWriter::start(link, &mut buf);
     for frame in frames {
-        let data = wrapper.wrap(frame);
-        out.write_all(&pcapng::packet(frame.time_us, &data, &frame.annotations.comment()))?;
+        file.frame(frame, &mut buf);
+        if buf.len() >= reader::PART {
+            out.write_all(&buf)?;
+            buf.clear();
+        }
     }
+    out.write_all(&buf)?;
     out.flush()
+}
+
+/// Writes what `reader` reads as a pcapng file of one interface (the reader's link), part
+/// by part: the packets of each part the reader reads ([`reader::PART`] bytes of records)
+/// go to `out` in one buffer (the first with the file's header) before the next part is
+/// read. The number of frames written.
+pub fn write_from(reader: &mut Reader, mut out: impl FnMut(Vec<u8>) -> io::Result<()>) -> io::Result<usize> {
+    let mut buf = Vec::new();
+    let mut file = FileWriter::start(reader.link(), &mut buf);
+    let mut written = 0;
+    loop {
+        let frames = reader.next(reader::PART);
+        if frames.is_empty() {
+            break;
+        }
+        for frame in &frames {
+            file.frame(frame, &mut buf);
+        }
+        written += frames.len();
+        out(std::mem::take(&mut buf))?;
+    }
+    if written == 0 {
+        out(buf)?;
+    }
+    Ok(written)
 }
 
 #[cfg(test)]
@@ -80,5 +135,46 @@ mod tests {
         assert_eq!(blocks, [pcapng::SHB, pcapng::IDB, pcapng::EPB, pcapng::EPB]);
         let text = String::from_utf8_lossy(&out);
         assert!(text.contains("job 3") && text.contains("ttyS0 mewtocol"), "{text}");
+    }
+
+    #[test]
+    fn a_recorders_file_written_part_by_part_is_the_file_of_its_frames() {
+        let link = Link::Ip {
+            transport: Transport::Tcp,
+            local: "127.0.0.1:4000".parse().unwrap(),
+            remote: "127.0.0.1:502".parse().unwrap(),
+        };
+        let recorder = Recorder::new(link.clone(), Limits::default());
+        for i in 0..3000u32 {
+            let direction = if i % 2 == 0 { Direction::Sent } else { Direction::Received };
+            recorder.record(
+                direction,
+                &[i as u8; 200],
+                Annotations { job: Some(i.into()), ..Annotations::default() },
+            );
+        }
+        let mut parts = Vec::new();
+        let written = write_from(&mut recorder.reader(None), |part| {
+            parts.push(part);
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(written, 3000);
+        assert!(parts.len() > 2, "{} parts", parts.len());
+        let mut whole = Vec::new();
+        write(&mut whole, &link, &recorder.frames(None)).unwrap();
+        assert_eq!(parts.concat(), whole);
+
+        let empty = Recorder::new(link.clone(), Limits::default());
+        let mut parts = Vec::new();
+        write_from(&mut empty.reader(None), |part| {
+            parts.push(part);
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(
+            parts.concat(),
+            [pcapng::section_header(), pcapng::interface(1, &link.interface_name())].concat()
+        );
     }
 }

@@ -28,13 +28,18 @@
 //!   reconnect). Frames recorded before a change are written with the newest endpoints;
 //!   a capture is one interface, and the device's end does not change.
 //! - **Time** is tokio's clock, so tests on paused time see the age bound work.
+//! - **Reads hold the lock for copies only** (issue 51): a [`Reader`](super::Reader)
+//!   copies a part of the ring's bytes under the lock and decodes it after
+//!   ([`super::reader`], where `Recorder::reader` and `Recorder::frames` are), so a capture
+//!   of a full 256 MiB ring, decoded and written for a download, never keeps the device's
+//!   own requests waiting on the recorder for longer than a copy of a part (256 KiB).
 
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::{SystemTime, UNIX_EPOCH};
 
 use tokio::time::Instant;
 
-use super::frame::{Annotations, Direction, Frame, Verdict};
+use super::frame::{Annotations, Direction, Verdict};
 use super::link::Link;
 use super::ring::Ring;
 
@@ -198,13 +203,23 @@ impl Recorder {
         }
     }
 
-    /// The frames kept, oldest first: all of them, or those of the `last` span.
-    pub fn frames(&self, last: Option<Duration>) -> Vec<Frame> {
+    /// Under the lock: the records kept now (past the bounds evicted first), as offsets,
+    /// how many frames they are, the link, and now.
+    pub(super) fn kept(&self) -> (std::ops::Range<u64>, usize, Link, u64) {
         let now = self.now_us();
         let mut s = self.state();
         self.evict(&mut s, now, 0, true);
-        let from = last.map_or(0, |d| now.saturating_sub(d.as_micros() as u64));
-        s.ring.read(from)
+        (s.ring.start()..s.ring.end(), s.ring.frames(), s.link.clone(), now)
+    }
+
+    /// Under the lock: appends to `out` the records' bytes from offset `at` (past the ring's
+    /// start if those were evicted) up to `end`, about `max` of them (`Ring::copy`); the
+    /// offset copied from.
+    pub(super) fn copy(&self, at: u64, end: u64, max: usize, out: &mut Vec<u8>) -> u64 {
+        let s = self.state();
+        let from = at.max(s.ring.start());
+        s.ring.copy(from, end, max, out);
+        from
     }
 
     /// The link the frames travel on, with its newest endpoints.
@@ -253,8 +268,10 @@ impl Recorder {
 
 #[cfg(test)]
 mod tests {
+    use std::time::Duration;
+
     use super::*;
-    use crate::capture::SerialProtocol;
+    use crate::capture::{Frame, SerialProtocol};
 
     fn recorder(limits: Limits) -> Arc<Recorder> {
         Recorder::new(Link::Serial { protocol: SerialProtocol::Ppi, port: "ttyS0".into() }, limits)

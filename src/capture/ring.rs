@@ -16,6 +16,12 @@
 //!   therefore kept);
 //!   then the job (8) and the task (4) when set, the note (2 bytes of length, at most
 //!   65,535 bytes, then UTF-8) when set; then the frame's bytes to the record's end.
+//! - **Read by copying bytes, decoded elsewhere.** A reader copies whole records' bytes out
+//!   ([`Ring::copy`], two `memcpy`s at most) by their offsets in the stream of every byte
+//!   ever pushed, and decodes them ([`decode_records`]) once the recorder's lock is let go:
+//!   a read never moves the ring (`make_contiguous`) nor decodes under the lock. An
+//!   offset stays valid until its record is evicted, which the reader sees
+//!   ([`Ring::start`] past it).
 
 use std::collections::VecDeque;
 
@@ -42,6 +48,8 @@ pub(super) struct Ring {
     /// The oldest record's time, kept apart: the age bound is checked on every record, and
     /// the ring's start is memory nobody touched for minutes (a cache miss each time).
     oldest_us: Option<u64>,
+    /// The offset of the oldest record's first byte in the stream of every byte ever pushed.
+    start: u64,
 }
 
 impl Ring {
@@ -53,6 +61,16 @@ impl Ring {
     /// Bytes kept: the records, heads and annotations included.
     pub fn len(&self) -> usize {
         self.bytes.len()
+    }
+
+    /// The offset of the oldest record kept, in the stream of every byte ever pushed.
+    pub fn start(&self) -> u64 {
+        self.start
+    }
+
+    /// The offset just past the newest record kept.
+    pub fn end(&self) -> u64 {
+        self.start + self.bytes.len() as u64
     }
 
     /// The bytes a frame of `len` bytes with `annotations` takes as a record.
@@ -118,12 +136,14 @@ impl Ring {
             return;
         }
         let len = u32::from_le_bytes(self.head_bytes::<4>(8)) as usize;
-        self.bytes.drain(..len.min(self.bytes.len()));
+        let len = len.min(self.bytes.len());
+        self.bytes.drain(..len);
+        self.start += len as u64;
         self.frames -= 1;
         self.oldest_us = (!self.bytes.is_empty()).then(|| u64::from_le_bytes(self.head_bytes::<8>(0)));
     }
 
-    /// `N` bytes of the oldest record's head from `at`.
+    /// `N` bytes from `at` (0: the oldest record's first byte).
     fn head_bytes<const N: usize>(&self, at: usize) -> [u8; N] {
         let mut out = [0u8; N];
         match self.bytes.as_slices().0.get(at..at + N) {
@@ -134,22 +154,46 @@ impl Ring {
         out
     }
 
-    /// The frames kept from `from_us` on, oldest first.
-    pub fn read(&mut self, from_us: u64) -> Vec<Frame> {
-        let all = self.bytes.make_contiguous();
-        let mut frames = Vec::new();
-        let mut at = 0;
-        while at + HEAD <= all.len() {
-            let record = &all[at..];
-            let len = u32::from_le_bytes(record[8..12].try_into().unwrap_or_default()) as usize;
-            let time_us = u64::from_le_bytes(record[0..8].try_into().unwrap_or_default());
-            if time_us >= from_us {
-                frames.push(decode(&record[..len.min(record.len())], time_us));
-            }
-            at += len.max(HEAD);
+    /// Appends to `out` the bytes from offset `at` (a record's start, at or past
+    /// [`Ring::start`]) up to `end` (at most [`Ring::end`]), `max` of them at most but the
+    /// whole first record whatever its size; the bytes appended. The last record may be
+    /// cut: [`decode_records`] leaves it for the next copy.
+    pub fn copy(&self, at: u64, end: u64, max: usize, out: &mut Vec<u8>) -> usize {
+        let (from, to) = ((at.max(self.start) - self.start) as usize, end.min(self.end()));
+        let to = (to.saturating_sub(self.start) as usize).max(from);
+        let first =
+            if to - from >= HEAD { u32::from_le_bytes(self.head_bytes::<4>(from + 8)) as usize } else { 0 };
+        let to = to.min(from + max.max(first));
+        let (a, b) = self.bytes.as_slices();
+        let split = a.len();
+        if from < split {
+            out.extend_from_slice(&a[from..to.min(split)]);
         }
-        frames
+        if to > split {
+            out.extend_from_slice(&b[from.max(split) - split..to - split]);
+        }
+        to - from
     }
+}
+
+/// Decodes the whole records at the start of `bytes` (as [`Ring::copy`] copied them),
+/// pushing those from `from_us` on to `frames`; the bytes of whole records read (a record
+/// cut at the end is left).
+pub(super) fn decode_records(bytes: &[u8], from_us: u64, frames: &mut Vec<Frame>) -> usize {
+    let mut at = 0;
+    while at + HEAD <= bytes.len() {
+        let record = &bytes[at..];
+        let len = (u32::from_le_bytes(record[8..12].try_into().unwrap_or_default()) as usize).max(HEAD);
+        if len > record.len() {
+            break;
+        }
+        let time_us = u64::from_le_bytes(record[0..8].try_into().unwrap_or_default());
+        if time_us >= from_us {
+            frames.push(decode(&record[..len], time_us));
+        }
+        at += len;
+    }
+    at
 }
 
 /// The note as kept: at most 65,535 bytes, cut at a character's boundary.
@@ -191,6 +235,21 @@ mod tests {
     use super::*;
     use crate::capture::Verdict;
 
+    impl Ring {
+        /// The frames kept from `from_us` on, copied `max` bytes at a time.
+        fn read(&self, from_us: u64, max: usize) -> Vec<Frame> {
+            let (mut at, mut frames, mut buf) = (self.start(), Vec::new(), Vec::new());
+            while at < self.end() {
+                buf.clear();
+                self.copy(at, self.end(), max, &mut buf);
+                let read = decode_records(&buf, from_us, &mut frames);
+                assert!(read > 0, "a copy holds a whole record at least");
+                at += read as u64;
+            }
+            frames
+        }
+    }
+
     #[test]
     fn records_read_back_as_the_frames_they_were() {
         let mut ring = Ring::default();
@@ -207,7 +266,7 @@ mod tests {
         ring.push(9, Direction::Received, b"", &full);
         assert_eq!(ring.len(), Ring::record_len(2, &plain) + Ring::record_len(0, &full));
         assert_eq!(Ring::record_len(0, &full), HEAD + 8 + 4 + 2 + 15);
-        let frames = ring.read(0);
+        let frames = ring.read(0, 1);
         assert_eq!(
             frames,
             [
@@ -215,7 +274,7 @@ mod tests {
                 Frame { direction: Direction::Received, time_us: 9, bytes: Bytes::new(), annotations: full }
             ]
         );
-        assert_eq!(ring.read(6).len(), 1, "from a time on");
+        assert_eq!(ring.read(6, 1 << 20).len(), 1, "from a time on");
     }
 
     #[test]
@@ -232,7 +291,8 @@ mod tests {
         assert_eq!(ring.frames(), 4096 / (HEAD + 3));
         assert!(ring.bytes.capacity() <= 4096, "grown to the bound, no further");
         assert_eq!(ring.oldest_us(), Some(2000 - 4096 / (HEAD + 3) as u64));
-        let frames = ring.read(0);
+        assert_eq!(ring.read(0, 1000), ring.read(0, 1 << 20), "copied in parts or whole, across the wrap");
+        let frames = ring.read(0, 100);
         assert_eq!(
             frames.last().map(|f| (f.time_us, f.bytes.to_vec())),
             Some((1999, vec![1999u64 as u8; 3]))
@@ -251,7 +311,7 @@ mod tests {
             ring.reserve(Ring::record_len(1, &a), 1 << 20);
             ring.push(1, Direction::Received, &[1], &a);
         }
-        let frames = ring.read(0);
+        let frames = ring.read(0, 10);
         let verdicts: Vec<Option<Verdict>> = frames.iter().map(|f| f.annotations.verdict).collect();
         assert_eq!(verdicts, VERDICTS.map(Some));
         assert_eq!(frames[0].annotations.note.len(), 65_534, "cut at a character within 65,535 bytes");

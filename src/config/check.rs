@@ -77,6 +77,12 @@ pub enum Invalid {
     /// Alarm captures longer than a day.
     #[error("retention.alarm_capture_seconds: at most 86400 (0: none)")]
     AlarmCapture,
+    /// An interval between alarm captures longer than a week.
+    #[error("retention.alarm_capture_interval_secs: at most 604800, a week (0: a capture at every raise)")]
+    AlarmCaptureInterval,
+    /// A cap on the alarm captures' folder under 1 MiB.
+    #[error("retention.captures_max_bytes: at least 1048576 (1 MiB)")]
+    CapturesMax,
     /// A retention shorter than a day.
     #[error("retention.jobs_days must be at least 1 (there is no \"off\": keep a long time, 36500)")]
     Retention,
@@ -197,6 +203,7 @@ impl Config {
             ("server.header_timeout_ms", server.header_timeout_ms == 0),
             ("server.idle_timeout_ms", server.idle_timeout_ms == 0),
             ("server.max_connections", server.max_connections == 0),
+            ("server.capture_downloads", server.capture_downloads == 0),
         ];
         if let Some((key, _)) = zero.into_iter().find(|(_, zero)| *zero) {
             return Err((key.into(), Invalid::ServerZero(key)));
@@ -221,6 +228,12 @@ impl Config {
         }
         if self.retention.alarm_capture_seconds > 86_400 {
             return Err(("retention.alarm_capture_seconds".into(), Invalid::AlarmCapture));
+        }
+        if self.retention.alarm_capture_interval_secs > 604_800 {
+            return Err(("retention.alarm_capture_interval_secs".into(), Invalid::AlarmCaptureInterval));
+        }
+        if self.retention.captures_max_bytes < 1024 * 1024 {
+            return Err(("retention.captures_max_bytes".into(), Invalid::CapturesMax));
         }
         if self.retention.jobs_days == 0 {
             return Err(("retention.jobs_days".into(), Invalid::Retention));

@@ -238,6 +238,23 @@ fn allowed_hosts_from_the_file_or_the_environment_and_the_failure_limit_are_chec
 }
 
 #[test]
+fn capture_bounds_are_checked() {
+    let err = error("[server]\ncapture_downloads = 0\n");
+    assert!(err.starts_with("x.toml:2:1: server.capture_downloads: "), "{err}");
+    let err = error("[retention]\ncaptures_max_bytes = 1048575\n");
+    assert!(err.starts_with("x.toml:2:1: retention.captures_max_bytes: ") && err.contains("1 MiB"), "{err}");
+    let err = error("[retention]\nalarm_capture_interval_secs = 604801\n");
+    assert!(err.starts_with("x.toml:2:1: retention.alarm_capture_interval_secs: "), "{err}");
+    let text = "[server]\ncapture_downloads = 8\n[retention]\ncaptures_max_bytes = 1048576\nalarm_capture_interval_secs = 0\n";
+    let config = load(text, &[]).unwrap().config;
+    assert_eq!(config.server.capture_downloads, 8);
+    assert_eq!(
+        (config.retention.captures_max_bytes, config.retention.alarm_capture_interval_secs),
+        (1 << 20, 0)
+    );
+}
+
+#[test]
 fn server_timers_cap_and_tls_files_come_from_the_environment_and_are_checked() {
     let err = load(FILE, &[("RACKD_SERVER__HEADER_TIMEOUT_MS", "0")]).unwrap_err().to_string();
     assert!(err.starts_with("env RACKD_SERVER__HEADER_TIMEOUT_MS: server.header_timeout_ms: "), "{err}");

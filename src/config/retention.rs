@@ -18,6 +18,11 @@
 //!   `captures_dir` (by default `captures` beside the archive's default, in the folder of
 //!   `database.path`), one pcapng file per alarm, kept `events.retention_hours` like the
 //!   event log, and served by `GET /api/v1/alarms/{id}/capture`.
+//! - **Bounded on disk** (issue 51): one capture per device and alarm (kind and code) every
+//!   `alarm_capture_interval_secs` (default 600, ten minutes: a flapping link keeps the
+//!   first of its raises, not one a minute; 0: every raise; at most a week), and at most
+//!   `captures_max_bytes` in the folder (default 1 GiB, at least 1 MiB), the oldest
+//!   deleted first (`service::captures`).
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -43,6 +48,11 @@ pub struct RetentionConfig {
     /// Seconds of a device's traffic frozen when it raises a `hardware` or `link` alarm
     /// (0: none).
     pub alarm_capture_seconds: u64,
+    /// Seconds after a capture is frozen before the same alarm (kind and code) of the same
+    /// device freezes another (0: every raise does).
+    pub alarm_capture_interval_secs: u64,
+    /// The most bytes of alarm captures the folder keeps; past it the oldest are deleted.
+    pub captures_max_bytes: u64,
     /// How often the archive runs. Not a key of the file (hourly is right for any site);
     /// the tests shorten it.
     #[serde(skip, default = "hourly")]
@@ -60,6 +70,8 @@ impl Default for RetentionConfig {
             archive_dir: None,
             captures_dir: None,
             alarm_capture_seconds: 60,
+            alarm_capture_interval_secs: 600,
+            captures_max_bytes: 1024 * 1024 * 1024,
             every: hourly(),
         }
     }

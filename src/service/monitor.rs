@@ -144,12 +144,12 @@ async fn record(
         let key = alarm.key();
         // The moment before the fault, taken before the ring moves on.
         let frozen = kept
-            .filter(|(freeze, _)| freeze.wants(alarm.class))
-            .map(|(freeze, recorder)| (freeze, recorder.link(), recorder.frames(Some(freeze.span()))));
+            .filter(|(freeze, _)| freeze.admit(&status.id, key, alarm.class))
+            .map(|(freeze, recorder)| (freeze, recorder.reader(Some(freeze.span()))));
         writer.record(Record::AlarmRaised(alarm)).await?;
         active.insert(key);
-        if let Some((freeze, link, frames)) = frozen {
-            freeze.keep(&status.id, key, link, frames).await;
+        if let Some((freeze, frames)) = frozen {
+            freeze.keep(&status.id, key, frames).await;
         }
     }
     let json = serde_json::to_string(status).unwrap_or_default();

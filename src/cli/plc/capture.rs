@@ -73,12 +73,11 @@ impl Capture {
             eprintln!("capture: no link was opened, nothing written to {}", self.path.display());
             return Ok(0);
         };
-        let frames = recorder.frames(None);
         let mut out = BufWriter::new(file);
-        crate::capture::write(&mut out, &recorder.link(), &frames)
-            .and_then(|()| out.flush())
+        let frames = crate::capture::write_from(&mut recorder.reader(None), |part| out.write_all(&part))
+            .and_then(|frames| out.flush().map(|()| frames))
             .with_context(|| format!("writing the capture to {}", self.path.display()))?;
-        eprintln!("capture: {} frames written to {}", frames.len(), self.path.display());
-        Ok(frames.len())
+        eprintln!("capture: {frames} frames written to {}", self.path.display());
+        Ok(frames)
     }
 }

@@ -11,6 +11,8 @@
 //! [`replay`] records a real conversation between rackd and the crane simulator and plays
 //! it back to a fresh rackd (`rackd sim replay`); it needs no tshark.
 
+mod alarms;
+mod downloads;
 mod endpoint;
 mod mc3e;
 mod mewtocol;

@@ -136,6 +136,11 @@ impl TestApp {
         self.reload.as_ref().expect("the server runs")
     }
 
+    /// The flight recorder of a running device.
+    pub fn recorder(&self, device: &str) -> Option<std::sync::Arc<rackd::capture::Recorder>> {
+        self.reload.as_ref()?.devices().get(device)?.recorder.clone()
+    }
+
     pub fn url(&self, path: &str) -> String {
         format!("{}{path}", self.base)
     }

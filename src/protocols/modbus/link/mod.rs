@@ -90,12 +90,12 @@ pub(crate) enum Link {
 }
 
 impl Link {
-    /// Records the link's frames into `recorder` (a stream link's is set on it directly).
+    /// Records the link's frames into `recorder`.
     pub fn set_recorder(&mut self, recorder: Option<Arc<Recorder>>) {
         match self {
             Link::Udp(l) => l.set_recorder(recorder),
             Link::Tcp(l) => l.set_recorder(recorder),
-            Link::Rtu(_) => {}
+            Link::Rtu(l) => l.set_recorder(recorder),
         }
     }
 

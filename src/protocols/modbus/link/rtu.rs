@@ -63,6 +63,11 @@ pub(crate) struct RtuLink {
 }
 
 impl RtuLink {
+    /// Records the link's frames into `recorder`.
+    pub fn set_recorder(&mut self, recorder: Option<Arc<crate::capture::Recorder>>) {
+        self.link.set_recorder(recorder);
+    }
+
     /// A link over `link` that keeps `silence` between frames.
     pub fn new(link: StreamLink, silence: Duration, counters: Arc<Counters>) -> Self {
         RtuLink { link, silence, counters, tx: Vec::new() }
