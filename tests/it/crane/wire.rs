@@ -17,27 +17,23 @@ use std::time::Duration;
 use rackd::config::devices::{CraneConfig, DeviceKind};
 use rackd::devices::crane::Crane;
 use rackd::devices::{DeviceStatus, StatusCell};
-use rackd::domain::{FailureKind, JobSpec, JobState, Location, Reported};
+use rackd::domain::{JobSpec, Location};
 use rackd::protocols::Protocol;
 use rackd::protocols::link::connect_over;
 use rackd::protocols::mc3e::TransportKind;
-use rackd::protocols::simwire::{DEVICE, Weather, Wire};
+use rackd::protocols::simwire::{DEVICE, Wire};
 use rackd::sim::crane::{CraneSim, CraneSimOptions};
 use rackd::wire::task_id_for;
 use tokio::task::JoinHandle;
-use tokio::time::Instant;
 
 use crate::support::port::TestPort;
+use crate::support::wire::{assert_each_completed_once, each_seed, until_ended, weather};
 
 /// Seeds in `cargo test`.
 const SEEDS: u64 = 25;
 
 /// Jobs per seed.
 const JOBS: i64 = 12;
-
-fn env(name: &str) -> Option<u64> {
-    std::env::var(name).ok().and_then(|v| v.parse().ok())
-}
 
 /// Job `n`: stores, retrievals and travels to places of their own.
 fn job(n: i64) -> JobSpec {
@@ -85,69 +81,15 @@ async fn run(seed: u64) -> u32 {
     let sim = CraneSim::serve_datagrams(wire.server_port(), DEVICE, options).unwrap();
     let port = Arc::new(TestPort::default());
     let jobs: Vec<i64> = (0..JOBS).map(|n| port.queue(job(n))).collect();
-    let drop = [0.0, 0.05, 0.2][wire.roll(3) as usize];
-    let tail = Duration::from_micros([200, 1000, 3000][wire.roll(3) as usize]);
-    wire.set_weather(Weather {
-        drop,
-        duplicate: 0.02,
-        copies_requests: false,
-        base: Duration::from_micros(200),
-        tail,
-        longest: Duration::from_millis(45),
-    });
-    let mut device = start(&wire, &port);
-    let deadline = Instant::now() + Duration::from_secs(900);
-    let mut kills = 0;
-    loop {
-        tokio::time::sleep(Duration::from_millis(10 + wire.roll(500))).await;
-        if jobs.iter().all(|&id| port.job_as_held(id).state.is_terminal()) {
-            break;
-        }
-        assert!(Instant::now() < deadline, "seed {seed}: jobs not ended in 15 minutes: {:?}", port.jobs());
-        if wire.roll(100) < 15 {
-            // kill -9: the task stops wherever it is, its link with it.
-            if std::env::var_os("RACKD_WIRE_TRACE").is_some() {
-                eprintln!("--- kill");
-            }
-            device.abort();
-            let _ = device.await;
-            device = start(&wire, &port);
-            kills += 1;
-        }
-    }
-    device.abort();
+    wire.set_weather(weather(&wire, false));
+    let kills =
+        until_ended(seed, &wire, &port, &jobs, Duration::from_secs(900), || start(&wire, &port)).await;
     assert_eq!(sim.violations(), 0, "seed {seed}: {:?}", sim.violation_log());
-    for &id in &jobs {
-        let job = port.job_as_held(id);
-        let lost = port
-            .reports_of(id)
-            .iter()
-            .any(|r| matches!(r, Reported::Failed(f) if f.kind == FailureKind::Lost));
-        let reports = port.reports_of(id);
-        assert!(
-            !lost,
-            "seed {seed}: job {id} failed as lost, though the crane never lost it: {job:?}, {reports:?}"
-        );
-        assert_eq!(job.state, JobState::Completed, "seed {seed}: job {id}: {job:?}");
-        assert_eq!(sim.received(task_id_for(id)), 1, "seed {seed}: job {id}'s task reached the crane once");
-    }
+    assert_each_completed_once(seed, &port, &jobs, |id| sim.received(task_id_for(id)));
     kills
 }
 
 #[test]
 fn the_crane_over_a_faulty_wire_completes_every_job_once_through_kills() {
-    let (first, count) = match env("RACKD_WIRE_SEED") {
-        Some(seed) => (seed, 1),
-        None => (env("RACKD_WIRE_FIRST").unwrap_or(0), env("RACKD_WIRE_SEEDS").unwrap_or(SEEDS)),
-    };
-    if std::env::var_os("RACKD_WIRE_TRACE").is_some() {
-        let _ = tracing_subscriber::fmt().with_env_filter("rackd=debug").with_test_writer().try_init();
-    }
-    let mut kills = 0;
-    for seed in first..first + count {
-        let runtime =
-            tokio::runtime::Builder::new_current_thread().enable_all().start_paused(true).build().unwrap();
-        kills += runtime.block_on(run(seed));
-    }
-    assert!(count < 10 || u64::from(kills) > count, "the adapter was killed often enough to matter: {kills}");
+    each_seed(SEEDS, run);
 }

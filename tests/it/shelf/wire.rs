@@ -17,25 +17,21 @@ use std::time::Duration;
 use rackd::config::devices::{DeviceKind, ShelfConfig};
 use rackd::devices::shelf::Shelf;
 use rackd::devices::{DeviceStatus, StatusCell};
-use rackd::domain::{FailureKind, JobSpec, JobState, LightColor, Location, Reported};
+use rackd::domain::{JobSpec, LightColor, Location};
 use rackd::protocols::link::connect_over;
-use rackd::protocols::simwire::{Weather, Wire};
+use rackd::protocols::simwire::Wire;
 use rackd::sim::shelf::{ShelfSim, ShelfSimOptions};
 use rackd::wire::task_id_for;
 use tokio::task::JoinHandle;
-use tokio::time::Instant;
 
 use crate::support::port::TestPort;
+use crate::support::wire::{assert_each_completed_once, each_seed, until_ended, weather};
 
 /// Seeds in `cargo test`.
 const SEEDS: u64 = 40;
 
 /// Jobs per seed.
 const JOBS: i64 = 24;
-
-fn env(name: &str) -> Option<u64> {
-    std::env::var(name).ok().and_then(|v| v.parse().ok())
-}
 
 /// A light of its own for job `n`, so that every job is different work for the PLC.
 fn light(n: i64) -> JobSpec {
@@ -82,84 +78,20 @@ async fn run(seed: u64, ids: bool) -> u32 {
     let sim = ShelfSim::serve_datagrams(wire.server_port(), options).await.unwrap();
     let port = Arc::new(TestPort::default());
     let jobs: Vec<i64> = (0..JOBS).map(|n| port.queue(light(n))).collect();
-    let drop = [0.0, 0.05, 0.2][wire.roll(3) as usize];
-    let tail = Duration::from_micros([200, 1000, 3000][wire.roll(3) as usize]);
-    wire.set_weather(Weather {
-        drop,
-        duplicate: 0.02,
-        copies_requests: ids,
-        base: Duration::from_micros(200),
-        tail,
-        longest: Duration::from_millis(45),
-    });
-    let mut device = start(&wire, &sim, &port);
-    let deadline = Instant::now() + Duration::from_secs(600);
-    let mut kills = 0;
-    loop {
-        tokio::time::sleep(Duration::from_millis(10 + wire.roll(400))).await;
-        if jobs.iter().all(|&id| port.job_as_held(id).state.is_terminal()) {
-            break;
-        }
-        assert!(Instant::now() < deadline, "seed {seed}: jobs not ended in 10 minutes: {:?}", port.jobs());
-        if wire.roll(100) < 15 {
-            // kill -9: the task stops wherever it is, its link with it.
-            if std::env::var_os("RACKD_WIRE_TRACE").is_some() {
-                eprintln!("--- kill at {:?}", Instant::now() - (deadline - Duration::from_secs(600)));
-            }
-            device.abort();
-            let _ = device.await;
-            device = start(&wire, &sim, &port);
-            kills += 1;
-        }
-    }
-    device.abort();
-    eprintln!(
-        "seed {seed}: {kills} kills, {:?} virtual, {:?} finished",
-        Instant::now() - (deadline - Duration::from_secs(600)),
-        sim.finished()
-    );
+    wire.set_weather(weather(&wire, ids));
+    let kills =
+        until_ended(seed, &wire, &port, &jobs, Duration::from_secs(600), || start(&wire, &sim, &port)).await;
     assert_eq!(sim.violations(), 0, "seed {seed}: a write into a busy slot");
-    for &id in &jobs {
-        let job = port.job_as_held(id);
-        let lost = port
-            .reports_of(id)
-            .iter()
-            .any(|r| matches!(r, Reported::Failed(f) if f.kind == FailureKind::Lost));
-        let reports = port.reports_of(id);
-        assert!(
-            !lost,
-            "seed {seed}: job {id} failed as lost, though the PLC never lost it: {job:?}, {reports:?}"
-        );
-        assert_eq!(job.state, JobState::Completed, "seed {seed}: job {id}: {job:?}");
-        assert_eq!(sim.received(task_id_for(id)), 1, "seed {seed}: job {id}'s task reached the PLC once");
-    }
+    assert_each_completed_once(seed, &port, &jobs, |id| sim.received(task_id_for(id)));
     kills
-}
-
-/// Runs the environment's seeds (or the suite's) with or without transaction ids.
-fn seeds(ids: bool) {
-    let (first, count) = match env("RACKD_WIRE_SEED") {
-        Some(seed) => (seed, 1),
-        None => (env("RACKD_WIRE_FIRST").unwrap_or(0), env("RACKD_WIRE_SEEDS").unwrap_or(SEEDS)),
-    };
-    if std::env::var_os("RACKD_WIRE_TRACE").is_some() {
-        let _ = tracing_subscriber::fmt().with_env_filter("rackd=debug").with_test_writer().try_init();
-    }
-    let mut kills = 0;
-    for seed in first..first + count {
-        let runtime =
-            tokio::runtime::Builder::new_current_thread().enable_all().start_paused(true).build().unwrap();
-        kills += runtime.block_on(run(seed, ids));
-    }
-    assert!(count < 10 || u64::from(kills) > count, "the adapter was killed often enough to matter: {kills}");
 }
 
 #[test]
 fn the_shelf_over_a_faulty_wire_without_transaction_ids_completes_every_job_once() {
-    seeds(false);
+    each_seed(SEEDS, |seed| run(seed, false));
 }
 
 #[test]
 fn the_shelf_over_a_faulty_wire_with_transaction_ids_completes_every_job_once() {
-    seeds(true);
+    each_seed(SEEDS, |seed| run(seed, true));
 }

@@ -14,6 +14,7 @@ pub mod python;
 pub mod receiver;
 pub mod tls;
 pub mod wait;
+pub mod wire;
 pub mod ws;
 
 pub use app::*;
