@@ -49,13 +49,12 @@ async fn after_a_power_cycle_one_bulk_action_unlocks_and_retries_sixty_lost_task
         let j = job(&app, *id).await;
         assert_eq!(j["failure"]["kind"], "lost", "{j}");
     }
-    for id in retrieve_ids {
-        let j = job(&app, *id).await;
-        assert_eq!(
-            (j["state"].clone(), j["waiting"]["reason"].clone()),
-            (json!("queued"), json!("location_locked"))
-        );
-    }
+    // Each retrieve waited behind its store; once the store is lost, behind its lock (the
+    // dispatcher says so at its next round after the failure's commit).
+    wait_jobs(&app, retrieve_ids, 10, "the retrieves behind the locks", |j| {
+        j["state"] == "queued" && j["waiting"]["reason"] == "location_locked"
+    })
+    .await;
     let audited = audit(&app, 100).await;
 
     // The dry run: what would be done, and nothing done.

@@ -144,6 +144,13 @@ async fn a_late_ack_recorded_at_a_site_replays_into_a_fresh_rackd_with_the_same_
     tokio::time::sleep(LATE).await;
     sim.hold(None);
     let states = completed(&app, id, 8).await;
+    // rackd acknowledges the completion once it is stored (D22 := 1, the crane clears
+    // D223, D22 := 0): the recording holds the whole acknowledgement before rackd stops,
+    // or the lab's rackd would make writes the site's never made.
+    eventually("the acknowledgement", Duration::from_secs(5), async || {
+        if sim.word(223) == 0 && sim.word(22) == 0 { Ok(()) } else { Err((sim.word(223), sim.word(22))) }
+    })
+    .await;
     app.stop().await;
     drop(sim);
     let (link, frames) = recorder.capture();
