@@ -4,6 +4,40 @@
 //! Each statement is one compare-and-set on the lease row, so two nodes racing for it
 //! cannot both win: a renewal names the holder and epoch it believes in, a takeover the
 //! exact `(epoch, beat)` it watched stand still.
+//!
+//! # The fence and its row locks
+//!
+//! The promise: **a node that lost the lease never commits a dispatch write.** Every fenced
+//! write transaction first runs [`fence`], which reads the lease row `FOR KEY SHARE` and
+//! checks its epoch; the lock is held until the transaction ends. A takeover ([`take`])
+//! locks the row `FOR UPDATE` before it changes it, and `FOR UPDATE` is the one row lock
+//! that conflicts with `FOR KEY SHARE` (PostgreSQL's row-level lock table). So a takeover
+//! waits for every fenced transaction that read the row before it, and a fence that reads
+//! the row after the takeover committed sees the new epoch and refuses: a write made under
+//! the fence is committed before the new node starts, or not at all. (The new node's
+//! reconciliation then reads it, as after a restart.) A fenced transaction cut off
+//! mid-way is ended by the server (`store::engine::connect`), so it cannot hold a takeover
+//! for ever.
+//!
+//! A renewal ([`renew`]) and a release ([`release`]) change neither `name` (the only key
+//! column: the primary key, and no other unique index) nor take any explicit lock, so
+//! PostgreSQL takes `FOR NO KEY UPDATE` for them, which does not conflict with `FOR KEY
+//! SHARE`: **a renewal is never queued behind an open write transaction**. It once was:
+//! the fence read the row `FOR SHARE`, which conflicts with every `UPDATE`, and a writer
+//! transaction waiting on the other node's writer (their advisory lock) held the active
+//! node's renewal back for up to a second, past its lease, under a loaded failover test.
+//! The lease's timing argument (`service::cluster`) assumes a renewal takes a round trip,
+//! not the length of somebody's transaction.
+//!
+//! Neither of those changes can let a stale write through. A renewal keeps the epoch, so a
+//! fence that passed still names the holder. A release lets a standby take over at once,
+//! but that takeover still waits, `FOR UPDATE`, for the fenced transactions in flight. When
+//! a renewal or a release makes a new version of a row a fenced transaction holds `FOR KEY
+//! SHARE`, PostgreSQL carries that lock to the new version (so that a foreign key stays
+//! valid across non-key updates), which is the version a later takeover locks: it still
+//! waits. `tests/it/standby/cluster.rs` checks each of these against a real server: a
+//! renewal and a release pass an open fenced transaction, a takeover after them waits for
+//! it, and a fence after the takeover refuses the old epoch.
 
 use sqlx::{PgConnection, PgPool};
 
@@ -51,9 +85,16 @@ pub async fn take(
         );
         return sqlx::query_scalar(sqlx::AssertSqlSafe(sql)).bind(name).bind(node).fetch_optional(pool).await;
     };
+    // `FOR UPDATE` first: a plain UPDATE of non-key columns would lock `FOR NO KEY
+    // UPDATE`, which passes the fence's `FOR KEY SHARE` (see the module doc). The row is
+    // compared in the lock's query too, so a row changed while it waited (read again once
+    // the lock is granted) is not taken.
     let sql = format!(
-        "UPDATE cluster_lease SET holder = $2, epoch = epoch + 1, beat = 0, released = FALSE, renewed_at = {NOW_MS} \
-         WHERE name = $1 AND epoch = $3 AND beat = $4 AND released = $5 RETURNING epoch"
+        "WITH watched AS (SELECT name FROM cluster_lease \
+         WHERE name = $1 AND epoch = $3 AND beat = $4 AND released = $5 FOR UPDATE) \
+         UPDATE cluster_lease SET holder = $2, epoch = epoch + 1, beat = 0, released = FALSE, renewed_at = {NOW_MS} \
+         FROM watched WHERE cluster_lease.name = watched.name \
+         AND epoch = $3 AND beat = $4 AND released = $5 RETURNING epoch"
     );
     sqlx::query_scalar(sqlx::AssertSqlSafe(sql))
         .bind(name)
@@ -83,10 +124,11 @@ pub async fn release(pool: &PgPool, name: &str, node: &str, epoch: i64) -> Resul
 }
 
 /// Inside a write transaction: whether `epoch` still holds the lease. The row is locked
-/// for share until the transaction ends, so a takeover waits for the commit: a write made
-/// under this check is either committed before the new node starts, or not at all.
+/// `FOR KEY SHARE` until the transaction ends, so a takeover (`FOR UPDATE`) waits for the
+/// commit while a renewal does not: a write made under this check is either committed
+/// before the new node starts, or not at all (the module doc has the argument).
 pub async fn fence(tx: &mut PgConnection, name: &str, epoch: i64) -> Result<bool, sqlx::Error> {
-    let sql = "SELECT epoch FROM cluster_lease WHERE name = $1 AND NOT released FOR SHARE";
+    let sql = "SELECT epoch FROM cluster_lease WHERE name = $1 AND NOT released FOR KEY SHARE";
     let now: Option<i64> = sqlx::query_scalar(sql).bind(name).fetch_optional(tx).await?;
     Ok(now == Some(epoch))
 }

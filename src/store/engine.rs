@@ -335,7 +335,7 @@ impl Engine {
 /// rackd never waits on anything but the database inside a transaction, so such a session
 /// belongs to a node cut off mid-transaction (a partition, a frozen process). Its
 /// transaction then rolls back and its locks go; without this, a dispatch write cut off
-/// under the lease's fence (`store::cluster::fence` locks the lease row for share) would
+/// under the lease's fence (`store::cluster::fence` locks the lease row `FOR KEY SHARE`) would
 /// hold that row until the server's TCP keepalive gave up, hours on a quiet link, and no
 /// standby could take over. The rollback keeps the fence's promise: the write is committed
 /// before the new node starts, or not at all.

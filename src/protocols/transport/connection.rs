@@ -133,11 +133,20 @@ fn not_a(what: &str) -> AttemptError {
 mod tests {
     use super::*;
 
+    /// A socket on the test's device port: `SO_REUSEPORT`, so that the device can listen
+    /// on the port while the test holds it bound (and not listening: connections refused),
+    /// and nothing else takes the port meanwhile.
+    fn shared_port() -> tokio::net::TcpSocket {
+        let socket = tokio::net::TcpSocket::new_v4().unwrap();
+        socket.set_reuseport(true).unwrap();
+        socket
+    }
+
     #[tokio::test]
     async fn failed_opens_back_off_and_a_success_resets_the_wait() {
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let address = listener.local_addr().unwrap().to_string();
-        drop(listener);
+        let held = shared_port();
+        held.bind("127.0.0.1:0".parse().unwrap()).unwrap();
+        let address = held.local_addr().unwrap().to_string();
         let backoff = Backoff { first: Duration::from_millis(100), max: Duration::from_millis(300) };
         let mut conn = Connection::new(Endpoint::Tcp(address.clone()), backoff);
         let timeout = Duration::from_millis(150);
@@ -156,7 +165,9 @@ mod tests {
         assert!(Instant::now() - before < Duration::from_millis(50), "no wait");
         assert_eq!(conn.next_wait, Duration::from_millis(300), "capped at max");
         // The device is back: an open whose wait fits its timeout waits and connects.
-        let listener = tokio::net::TcpListener::bind(address.as_str()).await.unwrap();
+        let device = shared_port();
+        device.bind(held.local_addr().unwrap()).unwrap();
+        let listener = device.listen(16).unwrap();
         assert!(conn.stream(Duration::from_secs(1)).await.is_ok());
         assert_eq!(conn.next_wait, backoff.first, "a success resets the wait");
         drop(listener);

@@ -34,9 +34,12 @@
 //! **What the lease cannot fence** is a device write already past the check when the
 //! process froze (a VM paused, a swap storm) for longer than `margin`: machines take no
 //! fencing token. The database side is fenced, though: every dispatch write of the active
-//! node is committed under [`crate::store::cluster::fence`], which locks the lease row for
-//! share, so a node that lost the lease cannot commit a dispatch, and the new node's
-//! reconciliation (as after a restart) reads every commit the old one made.
+//! node is committed under [`crate::store::cluster::fence`], which locks the lease row `FOR
+//! KEY SHARE` while a takeover locks it `FOR UPDATE`, so a node that lost the lease cannot
+//! commit a dispatch, and the new node's reconciliation (as after a restart) reads every
+//! commit the old one made. The renewal's `UPDATE` does not conflict with that lock, so an
+//! open write transaction never holds a renewal back past the lease (`store::cluster` has
+//! the argument).
 
 pub mod follow;
 pub mod lease;

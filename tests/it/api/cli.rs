@@ -132,11 +132,6 @@ fn check_config_explain_prints_every_value_with_its_origin() {
     assert!(text.contains("[events]") && text.contains("retention_hours = 168"), "{text}");
 }
 
-/// A free port on loopback (bound, then released for the server to take).
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
 /// `rackd serve` in the background, killed when dropped.
 struct Server(std::process::Child);
 
@@ -145,6 +140,16 @@ impl Drop for Server {
         let _ = self.0.kill();
         let _ = self.0.wait();
     }
+}
+
+/// Starts `command`, a `rackd serve` configured to listen on port 0, with its log in
+/// `dir`; the server and the port it says it listens on.
+fn serve(mut command: Command, dir: &std::path::Path) -> (Server, u16) {
+    let log = dir.join("rackd.log");
+    command.env("RACKD_LOG", "info").stderr(std::fs::File::create(&log).unwrap());
+    let mut server = Server(command.spawn().unwrap());
+    let port = crate::support::listening::rackd_blocking(&log, &mut server.0).port();
+    (server, port)
 }
 
 /// The status of `GET path` at `port`, with `headers`; waits up to 20 s for the server.
@@ -163,19 +168,18 @@ fn status(port: u16, path: &str, headers: &str) -> u16 {
 fn the_environment_decides_where_serve_listens_over_the_file() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("site.toml");
-    let (in_file, in_env) = (free_port(), free_port());
+    // The file names a port the test holds without listening: a server that took the
+    // file's address would fail to bind it; the environment's port 0 is the server's choice.
+    let held = crate::support::held::HeldPort::new();
+    let in_file = held.addr();
     let db = dir.path().join("rackd.db");
-    std::fs::write(&file, format!("[server]\nlisten = \"127.0.0.1:{in_file}\"\n[database]\npath = {db:?}\n"))
-        .unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_rackd"))
-        .args(["serve", "--config", file.to_str().unwrap()])
-        .env("RACKD_SERVER__LISTEN", format!("127.0.0.1:{in_env}"))
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let _server = Server(child);
+    std::fs::write(&file, format!("[server]\nlisten = \"{in_file}\"\n[database]\npath = {db:?}\n")).unwrap();
+    let mut command = Command::new(env!("CARGO_BIN_EXE_rackd"));
+    command.args(["serve", "--config", file.to_str().unwrap()]).env("RACKD_SERVER__LISTEN", "127.0.0.1:0");
+    let (_server, in_env) = serve(command, dir.path());
+    assert_ne!(in_env, in_file.port());
     assert_eq!(status(in_env, "/healthz", ""), 200);
-    assert!(std::net::TcpStream::connect(("127.0.0.1", in_file)).is_err(), "the file's port is not used");
+    assert!(std::net::TcpStream::connect(in_file).is_err(), "the file's port is not used");
 }
 
 #[test]
@@ -198,17 +202,12 @@ fn a_keyed_server_takes_its_keys_from_auth_keys_file() {
     std::fs::write(&keys, format!("[[keys]]\nname = \"wms\"\nrole = \"operator\"\nhash = \"{hash}\"\n"))
         .unwrap();
     let file = dir.path().join("site.toml");
-    let port = free_port();
     let db = dir.path().join("rackd.db");
-    std::fs::write(&file, format!("[server]\nlisten = \"127.0.0.1:{port}\"\n[database]\npath = {db:?}\n"))
+    std::fs::write(&file, format!("[server]\nlisten = \"127.0.0.1:0\"\n[database]\npath = {db:?}\n"))
         .unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_rackd"))
-        .args(["serve", "--config", file.to_str().unwrap()])
-        .env("RACKD_AUTH__KEYS_FILE", &keys)
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let _server = Server(child);
+    let mut command = Command::new(env!("CARGO_BIN_EXE_rackd"));
+    command.args(["serve", "--config", file.to_str().unwrap()]).env("RACKD_AUTH__KEYS_FILE", &keys);
+    let (_server, port) = serve(command, dir.path());
     assert_eq!(status(port, "/api/v1/jobs", ""), 401);
     assert_eq!(status(port, "/api/v1/jobs", "authorization: Bearer wrong\r\n"), 401);
     assert_eq!(status(port, "/api/v1/jobs", "authorization: Bearer secret\r\n"), 200);

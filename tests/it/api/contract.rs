@@ -10,7 +10,7 @@
 //! fuzzer itself, not on an answer of ours.
 
 use std::path::PathBuf;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 use crate::support::eventually_blocking;
@@ -33,17 +33,18 @@ fn schemathesis() -> PathBuf {
 fn the_openapi_document_is_what_the_server_answers() {
     let tool = schemathesis();
     let dir = tempfile::tempdir().unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-    let base = format!("http://127.0.0.1:{port}");
+    let log = dir.path().join("rackd.log");
     let mut server = Command::new(env!("CARGO_BIN_EXE_rackd"))
-        .args(["serve", "--listen", &format!("127.0.0.1:{port}")])
+        .args(["serve", "--listen", "127.0.0.1:0"])
         .args(["--database", dir.path().join("rackd.db").to_str().unwrap()])
-        .env("RACKD_LOG", "warn")
-        .stderr(Stdio::null())
+        .env("RACKD_LOG", "warn,rackd::app=info")
+        .stderr(std::fs::File::create(&log).unwrap())
         .spawn()
         .unwrap();
+    let addr = crate::support::listening::rackd_blocking(&log, &mut server);
+    let base = format!("http://{addr}");
     eventually_blocking("the demo server to come up", Duration::from_secs(30), || {
-        std::net::TcpStream::connect(("127.0.0.1", port))
+        std::net::TcpStream::connect(addr)
     });
     let seed = std::env::var("RACKD_SCHEMATHESIS_SEED").unwrap_or_else(|_| "1".into());
     let mut command = Command::new(tool);

@@ -61,8 +61,44 @@ fn device_is(line: &Value, id: &str) -> bool {
     span_field(line, "device", "device").is_some_and(|d| d == id)
 }
 
-fn free_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+/// A `rackd sim ARGS` child listening where it chooses (`--listen 127.0.0.1:0`), and the
+/// address it says it listens on (the first address on its standard output, which is read
+/// to the end meanwhile).
+fn sim(args: &[&str]) -> (Killed, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rackd"))
+        .arg("sim")
+        .args(args)
+        .args(["--listen", "127.0.0.1:0"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let child = Killed(child);
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut said = false;
+        for line in lines.map_while(Result::ok) {
+            let at = line
+                .split_whitespace()
+                .find_map(|w| w.trim_end_matches(':').parse::<std::net::SocketAddr>().ok());
+            if let (false, Some(at)) = (said, at) {
+                said = true;
+                let _ = tx.send(at.to_string());
+            }
+        }
+    });
+    let at = rx
+        .recv_timeout(Duration::from_secs(30))
+        .unwrap_or_else(|e| panic!("rackd sim {args:?} said no address: {e}"));
+    (child, at)
+}
+
+/// Sends `signal` (`-STOP`, `-CONT`) to the process.
+fn signal(child: &Killed, signal: &str) {
+    let pid = child.0.id().to_string();
+    assert!(Command::new("kill").args([signal, &pid]).status().unwrap().success(), "kill {signal} {pid}");
 }
 
 async fn wait_http(base: &str) {
@@ -73,14 +109,18 @@ async fn wait_http(base: &str) {
 #[tokio::test]
 async fn an_offline_device_logs_once_its_return_once_and_requests_one_line_each() {
     let dir = tempfile::tempdir().unwrap();
-    let (http, shelf, crane) = (free_port(), free_port(), free_port());
+    // Every process listens where it chooses and says where. The shelf's PLC is stopped
+    // (SIGSTOP) as soon as it has said: its port held, nothing answering, until it goes on.
+    let (_crane, crane) = sim(&["crane", "--step-ms", "50"]);
+    let (shelf_sim, shelf) = sim(&["shelf", "--protocol", "modbus-udp"]);
+    signal(&shelf_sim, "-STOP");
     let config = dir.path().join("rackd.toml");
     std::fs::write(
         &config,
         format!(
             r#"
 [server]
-listen = "127.0.0.1:{http}"
+listen = "127.0.0.1:0"
 [database]
 path = "{db}"
 [[site.aisles]]
@@ -100,7 +140,7 @@ id = "shelf1"
 kind = "shelf"
 aisles = [1]
 protocol = "modbus-udp"
-address = "127.0.0.1:{shelf}"
+address = "{shelf}"
 timeout_ms = 50
 retries = 0
 poll_ms = 100
@@ -109,23 +149,13 @@ id = "crane1"
 kind = "crane"
 aisles = [2]
 protocol = "mc3e"
-address = "127.0.0.1:{crane}"
+address = "{crane}"
 "#,
             db = dir.path().join("rackd.db").display()
         ),
     )
     .unwrap();
-    let bin = env!("CARGO_BIN_EXE_rackd");
-    let _crane = Killed(
-        Command::new(bin)
-            .args(["sim", "crane", "--listen", &format!("127.0.0.1:{crane}"), "--step-ms", "50"])
-            .stdin(Stdio::piped())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let mut server = Command::new(bin)
+    let mut server = Command::new(env!("CARGO_BIN_EXE_rackd"))
         .args(["serve", "--config", config.to_str().unwrap()])
         .env("RACKD_LOG_FORMAT", "json")
         .env("RACKD_LOG", "info,rackd::devices::crane=debug")
@@ -134,7 +164,9 @@ address = "127.0.0.1:{crane}"
         .unwrap();
     let lines = Lines::follow(&mut server);
     let _server = Killed(server);
-    let base = format!("http://127.0.0.1:{http}");
+    let listening =
+        lines.wait_for("saying where rackd listens", |l| l["fields"]["message"] == "rackd listening").await;
+    let base = format!("http://{}", listening["fields"]["addr"].as_str().unwrap());
     wait_http(&base).await;
 
     // Nothing answers the shelf: ten polls a second fail. Three seconds of it is one line.
@@ -164,16 +196,8 @@ address = "127.0.0.1:{crane}"
         })
         .await;
 
-    // The shelf's PLC comes up: one line says the device works again, with the count.
-    let _sim = Killed(
-        Command::new(bin)
-            .args(["sim", "shelf", "--protocol", "modbus-udp", "--listen", &format!("127.0.0.1:{shelf}")])
-            .stdin(Stdio::piped())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
+    // The shelf's PLC goes on: one line says the device works again, with the count.
+    signal(&shelf_sim, "-CONT");
     let back = lines
         .wait_for("about shelf1 working again", |l| {
             device_is(l, "shelf1")

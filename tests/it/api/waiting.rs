@@ -45,8 +45,10 @@ async fn without_a_device_a_job_says_so_and_the_filter_finds_it(#[case] engine: 
 #[case::postgres(Engine::Postgres)]
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_shelf_that_does_not_answer_holds_its_jobs_offline(#[case] engine: Engine) {
-    // A UDP port nothing listens on.
-    let dead = std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().to_string();
+    // A UDP port nothing answers on, held for the test (let go, another test's simulator
+    // could take it and answer).
+    let silent = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let dead = silent.local_addr().unwrap().to_string();
     let (app, _sims) = demo_app(engine, SLOW_CRANE, |c| {
         let shelf = c.devices.iter_mut().find(|d| d.id() == "shelf1").unwrap();
         shelf.link_mut().address = dead.clone();

@@ -9,7 +9,8 @@
 use rackd::protocols::faults::Faults;
 use serde_json::{Value, json};
 
-use super::{Browser, demo_app, start_again, stop_keeping};
+use super::{Browser, demo_app, demo_app_on, start_again, stop_keeping};
+use crate::support::held::HeldPort;
 use crate::support::{TestApp, loc};
 
 /// A location in the crane's aisle 2.
@@ -230,7 +231,9 @@ async fn the_first_screen_shows_what_needs_attention() {
 #[tokio::test]
 async fn tiles_go_stale_when_the_live_connection_drops() {
     let Some(browser) = Browser::start().await else { return };
-    let (app, sims) = demo_app(|_| {}).await;
+    // The port is held while the server is down, for it to come back where the page is.
+    let port = HeldPort::new();
+    let (app, sims) = demo_app_on(Some(&port), |_| {}).await;
     browser.viewport(1600, 1000).await;
     browser.open(&app.url("/")).await;
     browser.live().await;
@@ -264,7 +267,7 @@ async fn tiles_go_stale_when_the_live_connection_drops() {
         "stale tiles and counters"
     );
     browser.screenshot_viewport("dashboard-stale.png").await;
-    let (app, _dir) = start_again(stopping.await.unwrap(), &sims).await;
+    let (app, _dir) = start_again(stopping.await.unwrap(), &port, &sims).await;
 
     // Back: the page reconnects by itself, asks for what it missed, and is live again.
     let start = browser

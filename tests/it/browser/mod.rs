@@ -1,5 +1,5 @@
 //! The dashboard in a real browser: headless Chromium driven over WebDriver (chromedriver,
-//! started here on a free port) against the real server on 127.0.0.1:0 with a temporary
+//! started here on a port of its choosing) against the real server on 127.0.0.1:0 with a temporary
 //! database and the demo site's simulated shelf PLC, crane and light tower, run fast.
 //!
 //! Needs `chromium` and `chromedriver` (Debian: `apt-get install chromium chromium-driver`),
@@ -21,7 +21,7 @@ mod store;
 mod webhooks;
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::time::Duration;
 
 use fantoccini::{Client, ClientBuilder, Locator};
@@ -33,6 +33,8 @@ use rackd::sim::tower::TowerSim;
 use serde_json::{Value, json};
 
 use crate::support;
+use crate::support::held::HeldPort;
+use crate::support::listening;
 use crate::support::{TestApp, eventually, try_eventually_every};
 
 /// The demo site, fast: a shelf task takes 200 ms, a crane transfer 16 x 40 ms.
@@ -55,16 +57,27 @@ pub struct Sims {
 /// `tower1`) at [`FAST`] pace, with the config changed by `edit`; keep the simulators as long
 /// as the server.
 pub async fn demo_app(edit: impl FnOnce(&mut Config)) -> (TestApp, Sims) {
+    demo_app_on(None, edit).await
+}
+
+/// As [`demo_app`], serving on `port` when given (a port the test holds, to start the
+/// server again there: [`start_again`]).
+pub async fn demo_app_on(port: Option<&HeldPort>, edit: impl FnOnce(&mut Config)) -> (TestApp, Sims) {
     let mut demo_config = Config::demo();
     let (shelf, crane, tower) =
         demo::start_with(&mut demo_config, FAST).await.expect("demo simulators start");
-    let app = support::spawn_with(Engine::Sqlite, |c| {
+    let (db, dir) = support::fresh_database(Engine::Sqlite).await;
+    let edit = |c: &mut Config| {
         c.site = demo_config.site.clone();
         c.devices = demo_config.devices.clone();
         edit(c);
         demo_config.auth = c.auth.clone();
-    })
-    .await;
+    };
+    let mut app = match port {
+        Some(port) => support::spawn_on_port(db, port, edit).await,
+        None => support::spawn_on(db, edit).await,
+    };
+    app.keep(dir);
     (app, Sims { crane, shelf, _tower: tower, config: demo_config })
 }
 
@@ -72,24 +85,26 @@ pub async fn demo_app(edit: impl FnOnce(&mut Config)) -> (TestApp, Sims) {
 pub struct Stopped {
     db: rackd::store::Database,
     dir: Option<tempfile::TempDir>,
-    listen: std::net::SocketAddr,
 }
 
-/// Stops `app` gracefully, keeping its database and its address.
+/// Stops `app` gracefully, keeping its database.
 pub async fn stop_keeping(app: TestApp) -> Stopped {
-    let listen = app.base.trim_start_matches("http://").parse().expect("the server's address");
     let (db, dir) = app.stop().await;
-    Stopped { db, dir, listen }
+    Stopped { db, dir }
 }
 
-/// Starts a stopped server again on its database and address (so a page that was open
-/// reconnects to it), with the same simulators. Keep the directory as long as it runs.
-pub async fn start_again(stopped: Stopped, sims: &Sims) -> (TestApp, Option<tempfile::TempDir>) {
-    let app = support::spawn_on(stopped.db, |c| {
+/// Starts a stopped server again on its database and on the port it served on (held by
+/// the test meanwhile, so a page that was open reconnects to it), with the same
+/// simulators. Keep the directory as long as it runs.
+pub async fn start_again(
+    stopped: Stopped,
+    port: &HeldPort,
+    sims: &Sims,
+) -> (TestApp, Option<tempfile::TempDir>) {
+    let app = support::spawn_on_port(stopped.db, port, |c| {
         c.site = sims.config.site.clone();
         c.devices = sims.config.devices.clone();
         c.auth = sims.config.auth.clone();
-        c.server.listen = stopped.listen;
     })
     .await;
     (app, stopped.dir)
@@ -143,14 +158,21 @@ impl Browser {
             panic!("{what} (or set RACKD_SKIP_BROWSER=1 to skip them)");
         };
         let turn = ONE_AT_A_TIME.lock().await;
-        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-        let log = std::fs::File::create(artefacts().join("chromedriver.log")).unwrap();
+        // Port 0: chromedriver binds a free port and says which (see `support::listening`).
+        let log_path = artefacts().join("chromedriver.log");
+        let log = std::fs::File::create(&log_path).unwrap();
         let mut command = Command::new(&driver_path);
-        command.arg(format!("--port={port}")).stdout(Stdio::null()).stderr(log);
+        command.arg("--port=0").stdout(log.try_clone().unwrap()).stderr(log);
         // Its own process group, so that the browser it starts can be killed with it.
         std::os::unix::process::CommandExt::process_group(&mut command, 0);
-        let driver =
+        let mut driver =
             Driver(command.spawn().unwrap_or_else(|e| panic!("starting {}: {e}", driver_path.display())));
+        let port = listening::announced(&log_path, &mut driver.0, |line| {
+            let port = line.split("started successfully on port ").nth(1)?.trim_end_matches(['.', ' ']);
+            Some(std::net::SocketAddr::from(([127, 0, 0, 1], port.parse().ok()?)))
+        })
+        .await
+        .port();
         let profile = tempfile::tempdir().unwrap();
         let client = connect(port, &chromium, profile.path()).await;
         client.set_window_size(1680, 1400).await.unwrap();

@@ -246,16 +246,20 @@ async fn the_seed_frames_on_the_wire() {
 
 #[tokio::test]
 async fn tcp_reconnects_after_the_server_restarts() {
-    let (server, bank, address) = serve(Transport::Tcp, ServerOptions::default()).await;
+    // The port is held between the two servers, so nothing else takes it meanwhile.
+    let port = crate::support::held::HeldPort::new();
+    let bank = Bank::new();
+    let server = ModbusServer::new(Arc::new(bank.clone()), ServerOptions::default());
+    let server = server.serve_tcp_on(port.listen()).unwrap();
     bank.set_holding(1, &[1]);
-    let plc = client(Transport::Tcp, &address, 500, 3).await;
+    let plc = client(Transport::Tcp, &port.addr().to_string(), 500, 3).await;
     let at = plc.parse_address("4x1").unwrap();
     assert_eq!(plc.read_words(&at, 1).await.unwrap(), vec![1]);
     server.shutdown().await;
     let bank = Bank::new();
     bank.set_holding(1, &[2]);
     let _server =
-        ModbusServer::new(Arc::new(bank), ServerOptions::default()).serve_tcp(&address).await.unwrap();
+        ModbusServer::new(Arc::new(bank), ServerOptions::default()).serve_tcp_on(port.listen()).unwrap();
     assert_eq!(plc.read_words(&at, 1).await.unwrap(), vec![2]);
 }
 

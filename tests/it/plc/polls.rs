@@ -83,8 +83,9 @@ fn errors_say_which_flag_to_try() {
     let (ok, _, err) =
         plc("ppi-tcp", &silent.local_addr().unwrap().to_string(), &["--timeout-ms", "100", "read", "VW0"]);
     assert!(!ok && err.contains("gateway's serial settings (baud rate, parity)"), "{err}");
-    let free = silent.local_addr().unwrap().to_string();
-    drop(silent);
+    // A port held without listening: the connection is refused, and nothing takes the port.
+    let refusing = crate::support::held::HeldPort::new();
+    let free = refusing.addr().to_string();
     let (ok, _, err) = plc("mc3e", &free, &["--timeout-ms", "100", "--retries", "0", "read", "D0"]);
     assert!(!ok && err.contains("nothing listens"), "{err}");
     let (ok, _, err) = plc("mc3e", "127.0.0.1", &["read", "D0"]);

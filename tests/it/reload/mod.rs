@@ -227,7 +227,7 @@ async fn a_server_not_started_from_a_file_has_nothing_to_reload() {
 async fn sighup_reloads_the_file_and_logs_the_outcome() {
     let dir = tempfile::tempdir().unwrap();
     let mut config = Config::demo();
-    config.server.listen = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
+    config.server.listen = "127.0.0.1:0".parse().unwrap();
     config.database.path = dir.path().join("rackd.db");
     let mut node = Node::new(dir.path(), "rackd", &config);
     node.start();

@@ -101,22 +101,24 @@ async fn two_thousand_half_open_connections_leave_healthz_answering_within_a_sec
     const FLOOD: usize = 2000;
     raise_open_files(FLOOD as u64 + 500);
     let dir = tempfile::tempdir().unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-    let addr = format!("127.0.0.1:{port}");
     let file = dir.path().join("rackd.toml");
     let db = dir.path().join("rackd.db");
-    std::fs::write(&file, format!("[server]\nlisten = \"{addr}\"\n[database]\npath = {db:?}\n")).unwrap();
-    let log = std::fs::File::create(dir.path().join("rackd.log")).unwrap();
+    std::fs::write(&file, format!("[server]\nlisten = \"127.0.0.1:0\"\n[database]\npath = {db:?}\n"))
+        .unwrap();
+    let log_path = dir.path().join("rackd.log");
+    let log = std::fs::File::create(&log_path).unwrap();
     // `ulimit -n` sets the soft and the hard limit: rackd cannot raise it.
     let child = Command::new("sh")
         .args(["-c", "ulimit -n 1024 && exec \"$0\" serve --config \"$1\""])
         .arg(env!("CARGO_BIN_EXE_rackd"))
         .arg(&file)
+        .env("RACKD_LOG", "info")
         .stdout(Stdio::null())
         .stderr(log)
         .spawn()
         .unwrap();
-    let child = Child(child);
+    let mut child = Child(child);
+    let addr = crate::support::listening::rackd(&log_path, &mut child.0).await.to_string();
     let pid = child.0.id();
     eventually("rackd to answer /healthz", Duration::from_secs(20), async || {
         let mut s = TcpStream::connect(&addr).await.ok()?;

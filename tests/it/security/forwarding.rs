@@ -114,22 +114,23 @@ async fn a_standby_forwards_past_the_proxy_its_environment_names() {
     // listener that counts who comes.
     let trap = Trap::new().await;
     let dir = tempfile::tempdir().unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     let file = dir.path().join("b.toml");
     let text = format!(
-        "[server]\nlisten = \"127.0.0.1:{port}\"\n[database]\nurl = \"{db}\"\n[cluster]\nnode = \"b\"\n\
+        "[server]\nlisten = \"127.0.0.1:0\"\n[database]\nurl = \"{db}\"\n[cluster]\nnode = \"b\"\n\
          [[auth.keys]]\n{}",
         key_entry()
     );
     std::fs::write(&file, text).unwrap();
     let proxy = format!("http://{}", trap.addr);
+    let log = dir.path().join("b.log");
     let mut command = Command::new(env!("CARGO_BIN_EXE_rackd"));
-    command.args(["serve", "--config", file.to_str().unwrap()]).stdout(Stdio::null()).stderr(Stdio::null());
+    command.args(["serve", "--config", file.to_str().unwrap()]).env("RACKD_LOG", "info");
+    command.stdout(Stdio::null()).stderr(std::fs::File::create(&log).unwrap());
     for var in ["HTTP_PROXY", "http_proxy", "HTTPS_PROXY", "https_proxy", "ALL_PROXY", "all_proxy"] {
         command.env(var, &proxy);
     }
-    let _b = Server(command.env_remove("NO_PROXY").env_remove("no_proxy").spawn().unwrap());
-    let b = format!("http://127.0.0.1:{port}");
+    let mut node_b = Server(command.env_remove("NO_PROXY").env_remove("no_proxy").spawn().unwrap());
+    let b = format!("http://{}", crate::support::listening::rackd(&log, &mut node_b.0).await);
     sees_active(&b).await;
 
     let (status, devices) = get(&b, "/api/v1/devices", Some(KEY)).await;

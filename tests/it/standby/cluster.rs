@@ -17,7 +17,20 @@ use crate::support::proxy::Proxy;
 const TIMING: Timing = Timing { lease: Duration::from_millis(600), margin: Duration::from_millis(150) };
 
 async fn pool(url: &str) -> PgPool {
-    match rackd::store::open(&Database::Postgres(url.to_owned()), Duration::from_secs(5)).await.unwrap() {
+    pool_with(url, Duration::from_secs(5)).await
+}
+
+/// A pool whose sessions the server lets idle in a transaction for a minute
+/// (`idle_in_transaction_session_timeout` is the store's busy timeout), for a test that
+/// holds a fenced transaction open while it watches others wait or not: at the 5 s of
+/// [`pool`], a slow machine could see the server end that transaction, and its locks with
+/// it, in the middle of the test.
+async fn patient_pool(url: &str) -> PgPool {
+    pool_with(url, Duration::from_secs(60)).await
+}
+
+async fn pool_with(url: &str, busy_timeout: Duration) -> PgPool {
+    match rackd::store::open(&Database::Postgres(url.to_owned()), busy_timeout).await.unwrap() {
         Pool::Postgres(p) => p,
         Pool::Sqlite(_) => unreachable!(),
     }
@@ -90,7 +103,7 @@ async fn one_node_is_active_and_a_standby_takes_over_when_it_dies() {
 #[tokio::test]
 async fn a_takeover_waits_for_a_write_committed_under_the_old_epoch() {
     let url = crate::support::postgres::database().await;
-    let db = pool(&url).await;
+    let db = patient_pool(&url).await;
     assert_eq!(cluster::take(&db, LEASE, "a", None).await.unwrap(), Some(1));
     assert_eq!(cluster::take(&db, LEASE, "b", None).await.unwrap(), None, "one first claim only");
     let seen = cluster::read(&db, LEASE).await.unwrap().unwrap();
@@ -102,13 +115,82 @@ async fn a_takeover_waits_for_a_write_committed_under_the_old_epoch() {
         let db = db.clone();
         async move { cluster::take(&db, LEASE, "b", Some(&seen)).await.unwrap() }
     });
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    takeover_waits_on_a_lock(&db).await;
     assert!(!take.is_finished(), "the takeover waits for the fenced transaction");
     tx.commit().await.unwrap();
     assert_eq!(take.await.unwrap(), Some(2));
     // A takeover over a row that has changed since it was watched fails.
     let stale = cluster::LeaseRow { holder: "a".into(), epoch: 1, beat: 0, released: false, renewed_at: 0 };
     assert_eq!(cluster::take(&db, LEASE, "c", Some(&stale)).await.unwrap(), None);
+}
+
+/// Waits until a takeover on this test's database waits for a row lock (the fence of an
+/// open transaction), as the server's own view of its sessions tells.
+async fn takeover_waits_on_a_lock(db: &PgPool) {
+    let sql = "SELECT COUNT(*) FROM pg_stat_activity WHERE datname = current_database() \
+               AND wait_event_type = 'Lock' AND query LIKE '%WITH watched AS%'";
+    crate::support::eventually("the takeover to wait for a row lock", Duration::from_secs(10), async || {
+        let waiting: i64 = sqlx::query_scalar(sql).fetch_one(db).await.unwrap();
+        (waiting == 1).then_some(())
+    })
+    .await;
+}
+
+/// The fence locks the lease row `FOR KEY SHARE` (`store::cluster`'s module doc): an open
+/// fenced write holds back neither the holder's renewals nor its release, while the
+/// takeover after them still waits for it, and a fence after the takeover refuses the old
+/// epoch. (Under `FOR SHARE`, a renewal waited for the writer's transaction, which could
+/// wait on the other node's writer: a loaded failover test saw one renewal take 983 ms of
+/// a 1000 ms lease.)
+#[tokio::test]
+async fn a_renewal_passes_an_open_fenced_write_and_a_takeover_still_waits_for_it() {
+    let url = crate::support::postgres::database().await;
+    let db = patient_pool(&url).await;
+    let soon = Duration::from_secs(5);
+    assert_eq!(cluster::take(&db, LEASE, "a", None).await.unwrap(), Some(1));
+    let mut conn = db.acquire().await.unwrap();
+    let mut tx = conn.begin().await.unwrap();
+    assert!(cluster::fence(&mut tx, LEASE, 1).await.unwrap());
+    for _ in 0..3 {
+        let renewed = tokio::time::timeout(soon, cluster::renew(&db, LEASE, "a", 1)).await;
+        assert!(renewed.expect("a renewal is not held back by an open fenced write").unwrap());
+    }
+    let seen = cluster::read(&db, LEASE).await.unwrap().unwrap();
+    assert_eq!((seen.epoch, seen.beat), (1, 3));
+    // The row a's transaction locked has a new version by now: the takeover, which locks
+    // that newest version, still waits for the transaction.
+    let take = tokio::spawn({
+        let db = db.clone();
+        async move { cluster::take(&db, LEASE, "b", Some(&seen)).await.unwrap() }
+    });
+    takeover_waits_on_a_lock(&db).await;
+    assert!(!take.is_finished(), "the takeover waits for the fenced transaction");
+    tx.commit().await.unwrap();
+    assert_eq!(take.await.unwrap(), Some(2));
+    let mut tx = conn.begin().await.unwrap();
+    assert!(!cluster::fence(&mut tx, LEASE, 1).await.unwrap(), "the old epoch is fenced off");
+    tx.rollback().await.unwrap();
+
+    // A release passes the holder's open fenced write too; the takeover it allows at once
+    // still waits for that write.
+    let mut tx = conn.begin().await.unwrap();
+    assert!(cluster::fence(&mut tx, LEASE, 2).await.unwrap());
+    let released = tokio::time::timeout(soon, cluster::release(&db, LEASE, "b", 2)).await;
+    assert!(released.expect("a release is not held back by an open fenced write").unwrap());
+    let seen = cluster::read(&db, LEASE).await.unwrap().unwrap();
+    assert!(seen.released);
+    let take = tokio::spawn({
+        let db = db.clone();
+        async move { cluster::take(&db, LEASE, "c", Some(&seen)).await.unwrap() }
+    });
+    takeover_waits_on_a_lock(&db).await;
+    assert!(!take.is_finished(), "the takeover of a released lease waits for the fenced transaction");
+    tx.commit().await.unwrap();
+    assert_eq!(take.await.unwrap(), Some(3));
+    let mut tx = conn.begin().await.unwrap();
+    assert!(!cluster::fence(&mut tx, LEASE, 2).await.unwrap(), "the released epoch is fenced off");
+    assert!(cluster::fence(&mut tx, LEASE, 3).await.unwrap());
+    tx.commit().await.unwrap();
 }
 
 /// A node cut off while a dispatch write holds the lease row under the fence (the

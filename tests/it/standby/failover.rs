@@ -58,9 +58,10 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
         .iter()
         .map(|n| Node::new(dir.path(), n, &config(n, &url, &shelf, &crane, &receiver)))
         .collect();
-    let urls: Vec<String> = nodes.iter().map(|n| n.url.clone()).collect();
     let http = reqwest::Client::builder().timeout(Duration::from_secs(5)).build().unwrap();
     nodes.iter_mut().for_each(Node::start);
+    // Where each node listens since its last start (a port of its own choosing each time).
+    let mut urls: Vec<String> = nodes.iter().map(|n| n.url.clone()).collect();
     for node in &nodes {
         healthy(&http, node).await;
     }
@@ -86,6 +87,7 @@ async fn killing_the_active_node_loses_no_job_and_repeats_no_task() {
         nodes[active].kill();
         let killed_at = now_ms(); // nothing it stamped comes after this
         nodes[active].start();
+        urls[active] = nodes[active].url.clone();
         for _ in 0..4 {
             posted.push(mix.post(&http, &urls, 1 - active).await);
         }
@@ -182,8 +184,7 @@ async fn cursor_is_acknowledged(db: &PgPool, receiver: &Receiver) {
 /// a webhook subscription to `receiver`.
 fn config(node: &str, database: &str, shelf: &ShelfSim, crane: &CraneSim, receiver: &Receiver) -> Config {
     let mut config = Config::demo();
-    let free = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    config.server.listen = free.local_addr().unwrap();
+    config.server.listen = "127.0.0.1:0".parse().unwrap();
     config.database.url = Some(database.to_owned());
     config.cluster = Some(ClusterConfig {
         node: node.into(),

@@ -12,6 +12,7 @@ use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 
 use super::eventually;
+use super::held::HeldPort;
 
 /// A running server and a client for it.
 pub struct TestApp {
@@ -68,6 +69,17 @@ pub async fn spawn_on(db: Database, edit: impl FnOnce(&mut Config)) -> TestApp {
     start(&config, db, None).await
 }
 
+/// As [`spawn_on`], serving on `port`, a port the test holds to start a server there again
+/// after this one stops.
+pub async fn spawn_on_port(db: Database, port: &HeldPort, edit: impl FnOnce(&mut Config)) -> TestApp {
+    let mut config = Config::demo();
+    use_database(&mut config, &db);
+    edit(&mut config);
+    config.server.listen = port.addr();
+    let app = Application::build_on(&config, port.listen(), false).await.expect("server starts");
+    run(app, &config, db)
+}
+
 /// Starts a server from a configuration file made of `text` (its listen address and
 /// database set to 127.0.0.1:0 and a fresh SQLite file, and written back), as
 /// `serve --config` does: reloads read the file again. Returns the file.
@@ -102,6 +114,11 @@ async fn start(config: &Config, db: Database, sources: Option<Sources>) -> TestA
     if let Some(sources) = sources {
         app.reload_from(sources);
     }
+    run(app, config, db)
+}
+
+/// Runs `app`, built of `config` on `db`, until stopped.
+fn run(app: Application, config: &Config, db: Database) -> TestApp {
     let scheme = if config.server.tls.is_some() { "https" } else { "http" };
     let base = format!("{scheme}://{}", app.local_addr());
     let reload = app.reload();
@@ -114,6 +131,11 @@ async fn start(config: &Config, db: Database, sources: Option<Sources>) -> TestA
 }
 
 impl TestApp {
+    /// Keeps `dir` (its database's, say) as long as the server.
+    pub fn keep(&mut self, dir: Option<tempfile::TempDir>) {
+        self._dir = dir;
+    }
+
     /// Stops the server gracefully and waits until it has finished; keeps the database.
     pub async fn stop(mut self) -> (Database, Option<tempfile::TempDir>) {
         self.reload = None;

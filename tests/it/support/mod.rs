@@ -1,10 +1,13 @@
 //! What the areas share: a running rackd ([`app`]), waiting with a deadline
 //! ([`eventually`]), the throwaway PostgreSQL cluster ([`postgres`]), a WebSocket client
 //! ([`ws`]), a TCP proxy that can cut a link ([`proxy`]), certificates and an https
-//! front for the TLS tests ([`tls`]), a webhook receiver ([`receiver`]) and the Python
-//! that runs the tests' Python libraries ([`python`]).
+//! front for the TLS tests ([`tls`]), a webhook receiver ([`receiver`]), the Python
+//! that runs the tests' Python libraries ([`python`]), where a child process listens as it
+//! says itself ([`listening`]) and a port held across a server's restarts ([`held`]).
 
 pub mod app;
+pub mod held;
+pub mod listening;
 pub mod machines;
 pub mod node;
 pub mod port;

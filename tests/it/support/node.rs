@@ -2,9 +2,10 @@
 //! again: the failover of `standby::failover`, the webhooks' deliveries of
 //! `webhooks::kills`, the shelf's jobs of `shelf::kills`.
 //!
-//! A node configured to listen on port 0 binds whatever port is free each time it starts,
-//! and [`Node::start`] reads the address from its own "rackd listening" log line, so no
-//! port is picked before the child binds it (another process could take it in between).
+//! A node listens on port 0: it binds whatever port is free each time it starts, and
+//! [`Node::start`] reads the address from its own "rackd listening" log line, so no port is
+//! picked before the child binds it (another process could take it in between), nor kept
+//! for its next start (the same). Its [`Node::url`] changes at each start.
 
 use std::fs::OpenOptions;
 use std::io::Write;
@@ -17,12 +18,11 @@ use rackd::config::Config;
 /// its log printed if the test fails).
 pub struct Node {
     pub name: String,
+    /// Where it listens since its last start (empty before the first).
     pub url: String,
     config: PathBuf,
     log: PathBuf,
     child: Option<Child>,
-    /// Listens on port 0: the address is read from the log at each start.
-    any_port: bool,
 }
 
 impl Node {
@@ -30,9 +30,8 @@ impl Node {
         let name = name.to_owned();
         let path = dir.join(format!("{name}.toml"));
         std::fs::write(&path, toml::to_string(config).unwrap()).unwrap();
-        let url = format!("http://{}", config.server.listen);
-        let any_port = config.server.listen.port() == 0;
-        Node { log: dir.join(format!("{name}.log")), config: path, url, name, child: None, any_port }
+        assert_eq!(config.server.listen.port(), 0, "a node listens on port 0 (see the module doc)");
+        Node { log: dir.join(format!("{name}.log")), config: path, url: String::new(), name, child: None }
     }
 
     pub fn start(&mut self) {
@@ -47,9 +46,7 @@ impl Node {
         command.current_dir(self.config.parent().unwrap()).stdout(log.try_clone().unwrap()).stderr(log);
         let starts = self.log().matches("===== test: starting node").count();
         self.child = Some(command.spawn().unwrap());
-        if self.any_port {
-            self.url = format!("http://{}", self.listening(starts));
-        }
+        self.url = format!("http://{}", self.listening(starts));
     }
 
     /// The address the `start`-th start (counted from 1) says it listens on, read from its
@@ -59,10 +56,8 @@ impl Node {
         loop {
             let log = self.log();
             let this = log.split("===== test: starting node").nth(start).unwrap_or("");
-            if let Some(at) =
-                this.lines().find_map(|l| l.contains("rackd listening").then(|| address(l)).flatten())
-            {
-                return at;
+            if let Some(at) = this.lines().find_map(super::listening::rackd_line) {
+                return at.to_string();
             }
             assert!(self.running(), "node {} stopped before listening:\n{this}", self.name);
             assert!(
@@ -102,12 +97,6 @@ impl Node {
     pub fn running(&mut self) -> bool {
         self.child.as_mut().is_some_and(|c| matches!(c.try_wait(), Ok(None)))
     }
-}
-
-/// The `addr=HOST:PORT` of a log line.
-fn address(line: &str) -> Option<String> {
-    let at = line.split_whitespace().find_map(|w| w.strip_prefix("addr="))?;
-    Some(at.trim_matches('"').to_owned())
 }
 
 impl Drop for Node {

@@ -8,6 +8,8 @@
 //! the tests however they end; its data folder (in the temp folder, `rackd-pg-PID`) is
 //! removed by the next run. Durability settings are off (`fsync=off`) for the tests, which
 //! check behaviour; the benchmarks set [`DURABLE`] and measure with PostgreSQL's defaults.
+//! Its port is below the kernel's range of ephemeral ports, where no other socket of the
+//! tests can take it first (PostgreSQL cannot be given port 0; see [`launch`]).
 //!
 //! A missing PostgreSQL fails the test with the command that installs it; nothing is
 //! skipped.
@@ -197,13 +199,64 @@ fn launch(prefix: &str, tls: Option<&Tls>) -> Result<(PathBuf, u16), String> {
             }
         }
     }
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map_err(|e| e.to_string())?
-        .port();
-    let log = std::fs::File::create(dir.join("server.log")).map_err(|e| e.to_string())?;
+    // PostgreSQL cannot be given port 0 (its `port` runs from 1) to say which port it got,
+    // so the port is picked here, below the kernel's range of ephemeral ports: every other
+    // socket of the tests takes its port from that range (a bind of port 0, an outgoing
+    // connection), so none of them can take the port between the pick and the server's
+    // bind. Something else on the machine can (another run of the tests): the server then
+    // exits saying so, and another port is tried.
+    let mut tried = Vec::new();
+    while tried.len() < PORT_TRIES {
+        let port = outside_ephemeral_range()?;
+        tried.push(port);
+        match serve(&bin, as_root, &dir, &data, tls, port)? {
+            Served::Ready => return Ok((dir, port)),
+            Served::PortTaken => continue,
+        }
+    }
+    Err(format!("every port tried was taken before the server bound it: {tried:?}"))
+}
+
+/// Ports tried for a cluster before giving up.
+const PORT_TRIES: usize = 5;
+
+/// How a start of the server went.
+enum Served {
+    /// It answers.
+    Ready,
+    /// It exited: something else had bound its port.
+    PortTaken,
+}
+
+/// A port below the kernel's range of ephemeral ports (`ip_local_port_range`) that nothing
+/// has bound now.
+fn outside_ephemeral_range() -> Result<u16, String> {
+    let range = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range").unwrap_or_default();
+    let first: u16 = range.split_whitespace().next().and_then(|p| p.parse().ok()).unwrap_or(32768);
+    let low = 10000.min(first / 2);
+    for _ in 0..100 {
+        let port = rand::random_range(low..first);
+        if std::net::TcpListener::bind(("127.0.0.1", port)).is_ok() {
+            return Ok(port);
+        }
+    }
+    Err(format!("no free port found in {low}..{first}"))
+}
+
+/// Starts the server of `data` on `port` and waits until it answers, or until it exits
+/// because the port was taken.
+fn serve(
+    bin: &Path,
+    as_root: bool,
+    dir: &Path,
+    data: &Path,
+    tls: Option<&Tls>,
+    port: u16,
+) -> Result<Served, String> {
+    let log_path = dir.join("server.log");
+    let log = std::fs::File::create(&log_path).map_err(|e| e.to_string())?;
     let mut server = command(&bin.join("postgres"), as_root);
-    server.arg("-D").arg(&data).args(["-p", &port.to_string(), "-k"]).arg(&dir).args([
+    server.arg("-D").arg(data).args(["-p", &port.to_string(), "-k"]).arg(dir).args([
         "-c",
         "listen_addresses=127.0.0.1",
         "-c",
@@ -216,29 +269,43 @@ fn launch(prefix: &str, tls: Option<&Tls>) -> Result<(PathBuf, u16), String> {
         server.args(["-c", "fsync=off", "-c", "synchronous_commit=off", "-c", "full_page_writes=off"]);
     }
     server.stdout(Stdio::null()).stderr(log);
-    // The thread that starts the server never ends, so the parent-death signal fires only
-    // when the whole test process does.
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let child = server.spawn();
-        let _ = tx.send(child.map(|_| ()).map_err(|e| e.to_string()));
-        loop {
-            std::thread::park();
+    // The thread that starts the server waits for it: it ends only if the server does, so
+    // the parent-death signal fires only when the whole test process ends.
+    let (started, spawned) = std::sync::mpsc::channel();
+    let (ended, exited) = std::sync::mpsc::channel();
+    std::thread::spawn(move || match server.spawn() {
+        Ok(mut child) => {
+            let _ = started.send(Ok(()));
+            let _ = ended.send(child.wait().map_err(|e| e.to_string()));
+        }
+        Err(e) => {
+            let _ = started.send(Err(e.to_string()));
         }
     });
-    rx.recv().map_err(|e| e.to_string())?.map_err(|e| format!("postgres: {e}"))?;
+    spawned.recv().map_err(|e| e.to_string())?.map_err(|e| format!("postgres: {e}"))?;
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
+        // Asked over its Unix socket in `dir`, which the server makes only once it has
+        // bound its TCP port: the server that answers is this one, not another on the port.
         let ok = std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
             && Command::new(bin.join("pg_isready"))
-                .args(["-h", "127.0.0.1", "-p", &port.to_string()])
+                .arg("-h")
+                .arg(dir)
+                .args(["-p", &port.to_string()])
                 .output()
                 .is_ok_and(|o| o.status.success());
         if ok {
-            return Ok((dir, port));
+            return Ok(Served::Ready);
+        }
+        if let Ok(status) = exited.try_recv() {
+            let log = std::fs::read_to_string(&log_path).unwrap_or_default();
+            if log.contains("could not bind") || log.contains("Address already in use") {
+                return Ok(Served::PortTaken);
+            }
+            return Err(format!("the server exited ({status:?}):\n{log}"));
         }
         if Instant::now() > deadline {
-            let log = std::fs::read_to_string(dir.join("server.log")).unwrap_or_default();
+            let log = std::fs::read_to_string(&log_path).unwrap_or_default();
             return Err(format!("the server did not start in 60 s:\n{log}"));
         }
         std::thread::sleep(Duration::from_millis(100));

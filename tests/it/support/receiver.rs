@@ -1,8 +1,8 @@
-//! A WMS's webhook receiver for tests: axum on 127.0.0.1:0 that checks every request's
+//! A WMS's webhook receiver for tests: axum on 127.0.0.1 that checks every request's
 //! Standard Webhooks signature and records it, and misbehaves on demand: fails a share of
 //! calls with 500, answers a share too late (after rackd's timeout), answers every call
 //! after a delay, answers 410 Gone, or goes down (new connections refused, open ones cut)
-//! for a while.
+//! for a while, its port held meanwhile ([`HeldPort`]) for it to come back on.
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -16,6 +16,8 @@ use rackd::service::webhooks::sign::verify;
 use serde_json::Value;
 use tokio::net::TcpListener;
 use tokio::task::JoinSet;
+
+use super::held::HeldPort;
 
 /// A test secret, as a WMS would be given it.
 pub const SECRET: &str = "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw";
@@ -63,18 +65,22 @@ struct Shared {
 /// A running receiver.
 pub struct Receiver {
     pub addr: SocketAddr,
+    /// Its port, held while it is down (nothing else can take it meanwhile).
+    port: HeldPort,
     shared: Arc<Mutex<Shared>>,
     server: Option<tokio::task::JoinHandle<()>>,
+    /// The server last stopped, until it has let go of its listener.
+    stopping: Option<tokio::task::JoinHandle<()>>,
 }
 
 impl Receiver {
     /// A receiver on a free port, answering 200 at once.
     pub async fn start() -> Receiver {
-        let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let addr = listener.local_addr().unwrap();
+        let port = HeldPort::new();
+        let addr = port.addr();
         let shared = Arc::new(Mutex::new(Shared::default()));
-        let server = Some(tokio::spawn(serve(listener, shared.clone())));
-        Receiver { addr, shared, server }
+        let server = Some(tokio::spawn(serve(port.listen(), shared.clone())));
+        Receiver { addr, port, shared, server, stopping: None }
     }
 
     /// Its URL.
@@ -91,19 +97,17 @@ impl Receiver {
     pub fn down(&mut self) {
         if let Some(server) = self.server.take() {
             server.abort();
+            self.stopping = Some(server);
         }
     }
 
-    /// Serves again on the same port.
+    /// Serves again on the same port, once the last server has let go of its listener.
     pub async fn up(&mut self) {
         self.down();
-        let listener = loop {
-            match TcpListener::bind(self.addr).await {
-                Ok(listener) => break listener,
-                Err(_) => tokio::time::sleep(Duration::from_millis(20)).await,
-            }
-        };
-        self.server = Some(tokio::spawn(serve(listener, self.shared.clone())));
+        if let Some(stopping) = self.stopping.take() {
+            let _ = stopping.await;
+        }
+        self.server = Some(tokio::spawn(serve(self.port.listen(), self.shared.clone())));
     }
 
     /// Every request so far, in arrival order.

@@ -23,6 +23,9 @@ pub enum Got {
     Closed(u16),
     /// Nothing within the wait.
     Nothing,
+    /// The connection ended without a close frame (a reset, or the server let go of it
+    /// without a word): what the client saw. Only [`Ws::next_or_end`] answers it.
+    Ended(String),
 }
 
 /// The `ws://` URL of `path` on a server at `base` (`http://...`).
@@ -68,14 +71,24 @@ impl Ws {
         Ws { stream }
     }
 
-    /// The next JSON message or close within `wait` (pings are answered and skipped).
+    /// The next JSON message or close within `wait` (pings are answered and skipped); panics
+    /// on a connection that ends without a close.
     pub async fn next(&mut self, wait: Duration) -> Got {
+        match self.next_or_end(wait).await {
+            Got::Ended(e) => panic!("websocket error: {e}"),
+            got => got,
+        }
+    }
+
+    /// As [`Ws::next`], with a connection that ends without a close as [`Got::Ended`], for a
+    /// test that tells an end it caused from one it did not.
+    pub async fn next_or_end(&mut self, wait: Duration) -> Got {
         let deadline = tokio::time::Instant::now() + wait;
         loop {
             match tokio::time::timeout_at(deadline, self.stream.next()).await {
                 Err(_) => return Got::Nothing,
                 Ok(None) => return Got::Closed(1006),
-                Ok(Some(Err(e))) => panic!("websocket error: {e}"),
+                Ok(Some(Err(e))) => return Got::Ended(e.to_string()),
                 Ok(Some(Ok(Message::Text(text)))) => {
                     return Got::Json(serde_json::from_str(&text).expect("messages are JSON"));
                 }

@@ -17,6 +17,7 @@ use rackd::protocols::modbus::server::{Bank, ModbusServer, ServerHandle, ServerO
 use serde_json::{Value, json};
 
 use crate::support::eventually;
+use crate::support::held::HeldPort;
 use crate::support::{TestApp, spawn_with};
 
 /// A tags device entry: fast polling, short timeouts, offline after two failed requests.
@@ -35,14 +36,21 @@ pub fn tags_device(id: &str, protocol: &str, address: &str, tags: &str) -> TagsC
 
 /// A Modbus TCP register bank on a free port.
 pub async fn modbus_sim() -> (Bank, ServerHandle) {
-    modbus_sim_on("127.0.0.1:0").await
+    modbus_sim_at("127.0.0.1:0").await
 }
 
 /// A Modbus TCP register bank on `address`.
-pub async fn modbus_sim_on(address: &str) -> (Bank, ServerHandle) {
+async fn modbus_sim_at(address: &str) -> (Bank, ServerHandle) {
     let bank = Bank::new();
     let server = ModbusServer::new(Arc::new(bank.clone()), ServerOptions::default());
     (bank.clone(), server.serve_tcp(address).await.unwrap())
+}
+
+/// A Modbus TCP register bank on a port the test holds (to start it again there).
+pub fn modbus_sim_on(port: &HeldPort) -> (Bank, ServerHandle) {
+    let bank = Bank::new();
+    let server = ModbusServer::new(Arc::new(bank.clone()), ServerOptions::default());
+    (bank.clone(), server.serve_tcp_on(port.listen()).unwrap())
 }
 
 /// The tags of the Modbus tests: every type, both word orders, bits of words, coils,
@@ -64,7 +72,11 @@ pub const MODBUS_TAGS: &str = r#"
 
 /// A Modbus TCP simulator and a rackd with one tags device `tags1` on it.
 pub async fn modbus_app() -> (TestApp, Bank, ServerHandle) {
-    let (bank, server) = modbus_sim().await;
+    modbus_app_with(modbus_sim().await).await
+}
+
+/// A rackd with one tags device `tags1` on the Modbus TCP simulator `sim`.
+pub async fn modbus_app_with((bank, server): (Bank, ServerHandle)) -> (TestApp, Bank, ServerHandle) {
     let device = tags_device("tags1", "modbus-tcp", &server.local_addr().unwrap().to_string(), MODBUS_TAGS);
     let app = spawn_with(Engine::Sqlite, |c| c.devices = vec![device.into()]).await;
     (app, bank, server)

@@ -124,10 +124,11 @@ async fn writes_land_in_the_plc_in_the_right_word_order() {
 
 #[tokio::test]
 async fn a_stopped_plc_takes_the_device_offline_and_back() {
-    let (app, bank, server) = modbus_app().await;
+    // The PLC's port is held while it is off (connections refused), for it to come back on.
+    let port = HeldPort::new();
+    let (app, bank, server) = modbus_app_with(modbus_sim_on(&port)).await;
     bank.lock().holding_registers[10] = 42;
     wait_tag(&app, "tags1", "plain.u16", |t| t["value"] == 42).await;
-    let address = server.local_addr().unwrap().to_string();
     server.shutdown().await;
 
     let device = wait_device(&app, "tags1", |d| d["online"] == false).await;
@@ -139,7 +140,7 @@ async fn a_stopped_plc_takes_the_device_offline_and_back() {
     support::assert_error(&refused, 503, "device_offline");
 
     // The PLC comes back on the same address.
-    let (bank, _server) = modbus_sim_on(&address).await;
+    let (bank, _server) = modbus_sim_on(&port);
     bank.lock().holding_registers[10] = 9;
     wait_device(&app, "tags1", |d| d["online"] == true).await;
     let t = wait_tag(&app, "tags1", "plain.u16", |t| t["value"] == 9).await;

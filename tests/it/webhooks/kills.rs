@@ -41,7 +41,7 @@ async fn deliveries_survive_sigkills_and_a_receiver_that_fails_and_goes_down() {
     receiver.set(chaos.clone());
     let dir = tempfile::tempdir().unwrap();
     let mut config = Config::demo();
-    config.server.listen = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
+    config.server.listen = "127.0.0.1:0".parse().unwrap();
     config.database.path = dir.path().join("rackd.db");
     let mut shelf1 = demo::shelf_device(&shelf, "shelf1", &shelf.local_addr().unwrap().to_string(), vec![1]);
     shelf1.poll_ms = 50;

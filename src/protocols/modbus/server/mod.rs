@@ -245,7 +245,12 @@ impl ModbusServer {
 
     /// Serves Modbus TCP on `address`.
     pub async fn serve_tcp(self, address: &str) -> std::io::Result<ServerHandle> {
-        let listener = tokio::net::TcpListener::bind(address).await?;
+        self.serve_tcp_on(tokio::net::TcpListener::bind(address).await?)
+    }
+
+    /// Serves Modbus TCP on a `listener` the caller bound (a test that keeps the port
+    /// while the PLC is off, to start it again there).
+    pub fn serve_tcp_on(self, listener: tokio::net::TcpListener) -> std::io::Result<ServerHandle> {
         let local = listener.local_addr()?;
         let task = tokio::spawn(tcp::serve(listener, self.shared.clone(), tcp::Framing::Mbap));
         Ok(ServerHandle { local_addr: Some(local), shared: self.shared, task })
