@@ -124,6 +124,7 @@ pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<
             }
         }),
         webhooks: webhook_samples(&app),
+        certificate: app.metrics.certificate(),
     };
     let body = app.metrics.render(scrape, app.hub.subscribers(), format)?;
     Ok(([(header::CONTENT_TYPE, format.content_type())], body).into_response())

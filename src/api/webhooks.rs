@@ -17,7 +17,7 @@ use crate::config::WebhookConfig;
 use crate::domain::time::{from_ms, now_ms};
 use crate::service::webhooks::{Action, ActionError};
 use crate::store::events;
-use crate::store::webhooks::{self, Row};
+use crate::store::webhooks::{self, PausedBy, Row};
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
@@ -38,8 +38,8 @@ pub struct Webhook {
     pub url: String,
     /// The event types it takes (`job.*`, `alarm.raised`, `*`).
     pub events: Vec<String>,
-    /// `delivering` (events are waiting), `caught_up`, `failing` (the last try failed),
-    /// `paused`.
+    /// `delivering` (events are waiting), `caught_up`, `failing` (the last try failed, or
+    /// the subscription could not start: `last_error` says why), `paused`.
     #[schema(example = "caught_up")]
     pub state: String,
     /// The last event seq it is done with.
@@ -48,6 +48,11 @@ pub struct Webhook {
     pub behind: i64,
     /// Seconds since the oldest event after the cursor was committed (0 when caught up).
     pub behind_secs: f64,
+    /// Who paused it, while it is paused: `admin` (an administrator's pause: no alarm, its
+    /// events not held) or `receiver` (its receiver, or a proxy in front of it, answered 410
+    /// Gone: the `webhook` alarm with code 2, its events held up to
+    /// `events.webhook_hold_hours`).
+    pub paused_by: Option<PausedBy>,
     /// Why it is paused.
     pub paused_reason: Option<String>,
     /// When a delivery last succeeded.
@@ -103,9 +108,12 @@ async fn view(app: &AppState, config: &WebhookConfig, stored: Option<Row>) -> Re
             None => 0.0,
         },
     };
+    // A subscription that could not start on this node delivers nothing: failing, with why
+    // (its `webhook` alarm, code 3, says the same).
+    let unstarted = app.webhooks.get().and_then(|w| w.unstarted(&config.name)).map(str::to_owned);
     let state = if row.paused != 0 {
         "paused"
-    } else if row.failing_since.is_some() {
+    } else if row.failing_since.is_some() || unstarted.is_some() {
         "failing"
     } else if behind > 0 {
         "delivering"
@@ -120,9 +128,10 @@ async fn view(app: &AppState, config: &WebhookConfig, stored: Option<Row>) -> Re
         cursor: row.cursor,
         behind,
         behind_secs,
+        paused_by: row.paused_by(),
         paused_reason: row.paused_reason,
         last_ok_at: row.last_ok_at.map(from_ms),
-        last_error: row.last_error,
+        last_error: unstarted.map(|why| format!("cannot start: {why}")).or(row.last_error),
         last_error_at: row.last_error_at.map(from_ms),
         failing_since: row.failing_since.map(from_ms),
     })
@@ -243,7 +252,8 @@ async fn replay_webhook(
 }
 
 /// Stop delivering to this subscription (a try under way ends first); its events are kept
-/// for it no longer than any others (see `events.retention_hours`). Audited.
+/// for it no longer than any others (see `events.retention_hours`). A subscription its
+/// receiver paused (410 Gone) becomes paused by an administrator: its alarm clears. Audited.
 #[utoipa::path(post, path = "/webhooks/{name}/pause", tag = "webhooks",
     request_body(content = Option<ControlRequest>),
     params(("name" = String, Path, description = "The subscription's name")),
@@ -263,7 +273,7 @@ async fn pause_webhook(
 }
 
 /// Deliver again to a paused subscription (paused by hand or by a 410 Gone), from its
-/// cursor. Audited.
+/// cursor; the alarm of a 410's pause clears. Audited.
 #[utoipa::path(post, path = "/webhooks/{name}/resume", tag = "webhooks",
     request_body(content = Option<ControlRequest>),
     params(("name" = String, Path, description = "The subscription's name")),
@@ -309,6 +319,9 @@ async fn act(
         ActionError::OutOfLog { .. } => ApiError::conflict("not_in_log", e.to_string()),
         ActionError::Write(w) => w.into(),
         ActionError::Read(cause) => ApiError::unavailable(cause),
+        ActionError::NotStarted(_) => {
+            ApiError::new(axum::http::StatusCode::SERVICE_UNAVAILABLE, "not_delivering", e.to_string())
+        }
         ActionError::Stopped => ApiError::new(
             axum::http::StatusCode::SERVICE_UNAVAILABLE,
             "not_delivering",

@@ -62,7 +62,7 @@ pub(super) async fn start(
     };
     let fleet = Fleet::start(&config.devices, parts).await?;
     let parts = webhooks::Parts { pool: pool.clone(), writer: writer.clone(), hub: hub.clone(), gate };
-    let (webhooks, mut tasks) = Webhooks::start(&config.webhooks, parts).await?;
+    let (webhooks, mut tasks) = Webhooks::start(&config.webhooks, parts);
     tasks.push(tokio::spawn(crate::service::dispatch::waiting::watch(queues.clone(), writer.clone())));
     tasks.push(tokio::spawn(retention(pool.clone(), writer.clone(), config.clone())));
     let folder = config.retention.folder(&config.database.path);
@@ -71,8 +71,9 @@ pub(super) async fn start(
 }
 
 /// Deletes events older than the retention from the log, at start and then every tenth of
-/// the retention (at most hourly); those an active webhook subscription has not delivered
-/// yet stay up to `events.webhook_hold_hours` longer (`service::webhooks`).
+/// the retention (at most hourly); those a webhook subscription not paused by an
+/// administrator has not delivered yet stay up to `events.webhook_hold_hours` longer
+/// (`service::webhooks`).
 async fn retention(pool: Pool, writer: Writer, config: Config) {
     let hours = |h: u64| Duration::from_secs(h.saturating_mul(3600));
     let keep = hours(config.events.retention_hours);

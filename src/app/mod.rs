@@ -43,7 +43,8 @@ pub struct Application {
     /// The certificate, when `[server.tls]` is set.
     tls: Option<serve::tls::Certificates>,
     writer_task: JoinHandle<()>,
-    /// Device tasks, the device monitor and retention: stopped before the writer drains.
+    /// Device tasks, the device monitor, retention and the certificate's alarms: stopped
+    /// before the writer drains.
     tasks: drive::Tasks,
     /// This node's part in a cluster.
     cluster: Option<cluster::Clustered>,
@@ -147,6 +148,18 @@ impl Application {
         let reload = Reload::new(config.clone(), parts);
         let webhooks = Arc::new(OnceLock::new());
         let tasks = drive::Tasks::default();
+        // The served certificate's alarms and figures, on every node (each serves its own).
+        if let (Some(tls), Some(files)) = (&tls, &config.server.tls) {
+            let device = serve::certificate::device(config.cluster.as_ref().map(|c| c.node.as_str()));
+            let watch = serve::certificate::watch(
+                tls.served(),
+                files.cert_file.clone(),
+                device,
+                writer.clone(),
+                metrics.clone(),
+            );
+            tasks.lock().unwrap_or_else(|p| p.into_inner()).push(tokio::spawn(watch));
+        }
         let clustered = match leading {
             Some((c, (leadership, timing), pg)) => {
                 let parts = cluster::Parts {

@@ -107,6 +107,10 @@ impl Sources {
         let mut config: Config = figment.extract().map_err(|e| loaded.parse_error(&figment, e))?;
         loaded.add_keys_file(&mut config)?;
         loaded.add_url_file(&mut config)?;
+        // Read once, here: a takeover hours later signs and trusts with what they held now.
+        for webhook in &mut config.webhooks {
+            webhook.resolve();
+        }
         let invalid = |(key, source): (String, Invalid), loaded: &Loaded| ConfigError::Invalid {
             origin: Box::new(loaded.locate(&key)),
             key,

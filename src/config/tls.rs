@@ -22,6 +22,17 @@ use rustls::pki_types::{CertificateDer, PrivateKeyDer};
 use rustls::sign::CertifiedKey;
 use serde::{Deserialize, Serialize};
 
+/// What the `certificate` alarm with code 0 (the certificate served expires within 14 days)
+/// asks.
+pub const EXPIRING_ACTION: &str = "Install a renewed certificate and its key at server.tls.cert_file and \
+     key_file (written beside and renamed into place): rackd serves it to new connections within \
+     seconds, without a restart, and this alarm clears.";
+
+/// What the `certificate` alarm with code 1 (the files changed but do not load) asks.
+pub const REFUSED_ACTION: &str = "Put a certificate chain and its own private key (PEM) at \
+     server.tls.cert_file and key_file, as `rackd check-config` takes them: the next read that loads \
+     is served and clears this alarm. Until then the previous certificate is served.";
+
 /// `[server.tls]`: HTTPS and WSS on `server.listen` (no plain HTTP beside it).
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]

@@ -10,8 +10,18 @@
 //!   an unknown type is refused, so a typo never silently delivers nothing.
 //! - **The secret** as the Standard Webhooks specification writes it: base64, with or
 //!   without the `whsec_` prefix, 16 to 64 bytes once decoded. From the file
-//!   (`secret = "..."`, shown as `***` by `--explain`) or from `secret_file` (one line,
-//!   read at start), never both.
+//!   (`secret = "..."`, shown as `***` by `--explain`) or from `secret_file` (one line),
+//!   never both.
+//! - **`secret_file` and `ca_file` are read once, when the configuration is loaded** (at
+//!   start, and again by each reload), into [`WebhookConfig::material`]: what a node signs
+//!   and trusts with when it starts delivering, at start or when it takes over hours later,
+//!   is what they held then. A file rotated or removed since cannot stop a takeover (a
+//!   standby that read them again would exit with "won the lease but cannot drive", and
+//!   with every node alike none would drive the machines); a reload reads them again, and
+//!   a file that does not read then refuses the reload, as `check-config` would. A
+//!   configuration built in code (tests, the demo) has no material: its deliverer reads the
+//!   files when it starts, and one that cannot is an alarm, never a failed start
+//!   (`service::webhooks`).
 //! - **Outbound calls**: `ca_file` (PEM) replaces the trusted roots when set (a site's own
 //!   CA); otherwise the system's store. No proxy unless `proxy` names one (the environment's
 //!   `HTTP_PROXY` is ignored: a proxy meant for other traffic must not see the events).
@@ -22,7 +32,10 @@
 
 use std::path::PathBuf;
 
+use rustls::pki_types::CertificateDer;
 use serde::{Deserialize, Serialize};
+
+use super::ca::CaError;
 
 /// The event types a subscription may name (a `*` family is a prefix before the dot).
 pub const EVENT_TYPES: [&str; 8] = [
@@ -71,6 +84,28 @@ pub struct WebhookConfig {
     /// Seconds of failures in a row before the `webhook` alarm is raised.
     #[serde(default = "alarm_after_secs")]
     pub alarm_after_secs: u64,
+    /// What the secret and `ca_file` held when the configuration was loaded; None for an
+    /// entry built in code, or one whose files did not read (the check says why). Not a
+    /// key of the file.
+    #[serde(skip)]
+    pub material: Option<Material>,
+}
+
+/// What a subscription signs and trusts with: its secret decoded and `ca_file`'s
+/// certificates, as read when the configuration was loaded. Its `Debug` shows no key.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Material {
+    /// The signing key.
+    pub key: Vec<u8>,
+    /// `ca_file`'s certificates, None without one (the system's store is trusted then).
+    pub roots: Option<Vec<CertificateDer<'static>>>,
+}
+
+impl std::fmt::Debug for Material {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let roots = self.roots.as_ref().map(Vec::len);
+        f.debug_struct("Material").field("key", &"***").field("roots", &roots).finish()
+    }
 }
 
 fn timeout_ms() -> u64 {
@@ -104,6 +139,7 @@ impl WebhookConfig {
             backoff_ms: backoff_ms(),
             max_backoff_ms: max_backoff_ms(),
             alarm_after_secs: alarm_after_secs(),
+            material: None,
         }
     }
 
@@ -112,9 +148,13 @@ impl WebhookConfig {
         self.events.iter().any(|pattern| matches(pattern, kind))
     }
 
-    /// The signing key: the secret (or `secret_file`'s first line) decoded. The error says
-    /// what is wrong, without the secret.
+    /// The signing key: as loaded ([`WebhookConfig::material`]), or else the secret (or
+    /// `secret_file`'s first line) decoded now. The error says what is wrong, without the
+    /// secret.
     pub fn key(&self) -> Result<Vec<u8>, SecretError> {
+        if let Some(material) = &self.material {
+            return Ok(material.key.clone());
+        }
         let text = match (&self.secret, &self.secret_file) {
             (Some(_), Some(_)) => return Err(SecretError::Both),
             (None, None) => return Err(SecretError::Neither),
@@ -123,6 +163,31 @@ impl WebhookConfig {
                 .map_err(|source| SecretError::Read { path: file.clone(), source })?,
         };
         decode_secret(text.trim())
+    }
+
+    /// `ca_file`'s certificates (None without one): as loaded, or else read now.
+    pub fn roots(&self) -> Result<Option<Vec<CertificateDer<'static>>>, CaError> {
+        if let Some(material) = &self.material {
+            return Ok(material.roots.clone());
+        }
+        self.ca_file.as_deref().map(super::ca::read_ca).transpose()
+    }
+
+    /// The key and the CA's certificates, as loaded or else read now.
+    pub fn material(&self) -> Result<Material, WebhookProblem> {
+        if let Some(material) = &self.material {
+            return Ok(material.clone());
+        }
+        let key = self.key().map_err(WebhookProblem::Secret)?;
+        Ok(Material { key, roots: self.roots()? })
+    }
+
+    /// Reads `secret_file` and `ca_file` (or decodes `secret`) into
+    /// [`WebhookConfig::material`], once, as the configuration is loaded; files that do not
+    /// read leave it None, and the check that follows names the key and why.
+    pub fn resolve(&mut self) {
+        self.material = None;
+        self.material = self.material().ok();
     }
 }
 
@@ -278,7 +343,8 @@ fn known_patterns() -> String {
 }
 
 impl WebhookConfig {
-    /// Checks the entry alone, reading `secret_file` and `ca_file` as the start would.
+    /// Checks the entry alone: its material as loaded, or else `secret_file` and `ca_file`
+    /// read now.
     pub fn check(&self) -> Result<(), WebhookConfigError> {
         self.problem().map_or(Ok(()), |problem| Err(WebhookConfigError { name: self.name.clone(), problem }))
     }
@@ -313,7 +379,7 @@ impl WebhookConfig {
         if self.max_backoff_ms < self.backoff_ms {
             return Some(WebhookProblem::Backoff { first: self.backoff_ms, max: self.max_backoff_ms });
         }
-        if let Some(Err(e)) = self.ca_file.as_deref().map(super::ca::read_ca) {
+        if let Err(e) = self.roots() {
             return Some(e.into());
         }
         if let Some(proxy) = &self.proxy

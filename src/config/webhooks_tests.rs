@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use super::webhooks::{SecretError, WebhookProblem, decode_secret};
 use super::*;
 
 const SECRET: &str = "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw";
@@ -25,8 +26,10 @@ fn error(text: &str) -> String {
 fn a_good_entry_loads_with_its_defaults() {
     let config = Config::parse(&entry("wms"), Path::new("x.toml")).unwrap();
     let w = &config.webhooks[0];
-    assert_eq!(w, &WebhookConfig::new("wms", &w.url, &["job.*", "alarm.raised"], SECRET));
+    let written = WebhookConfig { material: None, ..w.clone() };
+    assert_eq!(written, WebhookConfig::new("wms", &w.url, &["job.*", "alarm.raised"], SECRET));
     assert_eq!(w.key().unwrap().len(), 24);
+    assert_eq!(w.material.as_ref().map(|m| m.key.len()), Some(24), "decoded as it loaded");
     assert_eq!(config.events.webhook_hold_hours, 168);
 }
 
@@ -122,4 +125,27 @@ fn explain_shows_the_secret_and_a_url_password_as_stars() {
     assert!(line("proxy = ").contains("http://rackd:***@proxy:3128"), "{out}");
     assert!(line("timeout_ms = 5000").ends_with("# default"), "{out}");
     assert!(!out.contains("MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw") && !out.contains("-pw@"), "{out}");
+}
+
+#[test]
+fn the_secret_file_and_the_ca_file_are_read_once_as_the_configuration_loads() {
+    let dir = tempfile::tempdir().unwrap();
+    let (secret, ca) = (dir.path().join("wms_secret"), dir.path().join("wms-ca.pem"));
+    std::fs::write(&secret, format!("{SECRET}\n")).unwrap();
+    let authority = rcgen::generate_simple_self_signed(vec!["wms-ca".into()]).unwrap();
+    std::fs::write(&ca, authority.cert.pem()).unwrap();
+    let text = entry("wms").replace(&format!("secret = \"{SECRET}\""), &format!("secret_file = {secret:?}"));
+    let config = Config::parse(&format!("{text}ca_file = {ca:?}\n"), Path::new("x.toml")).unwrap();
+    // The site's tooling rotates them away; what was loaded stays what the subscription uses.
+    std::fs::remove_file(&secret).unwrap();
+    std::fs::remove_file(&ca).unwrap();
+    let w = &config.webhooks[0];
+    assert_eq!(w.key().unwrap(), decode_secret(SECRET).unwrap());
+    let roots = w.roots().unwrap().expect("the CA file's certificate");
+    assert_eq!(roots, vec![authority.cert.der().clone()]);
+    assert!(w.check().is_ok(), "checked against what was loaded");
+    assert!(!format!("{w:?}").contains("MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw"));
+    // Built in code, with nothing loaded: read when asked, and so missed.
+    let bare = WebhookConfig { material: None, ..w.clone() };
+    assert!(matches!(bare.material(), Err(WebhookProblem::Secret(SecretError::Read { .. }))));
 }

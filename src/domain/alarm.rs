@@ -62,19 +62,26 @@ pub enum AlarmKind {
     /// that went read-only); nothing was deleted. Cleared by the next archive that works.
     Archive,
     /// A webhook subscription's receiver has failed every delivery for longer than its
-    /// `alarm_after_secs` (code 0), or events were pruned before it got them (code 1);
-    /// device `webhook:NAME`. Cleared by the next success (code 0), or once it has caught
-    /// up (code 1).
+    /// `alarm_after_secs` (code 0), events were pruned before it got them (code 1), its
+    /// receiver paused it with a 410 Gone (code 2), or it could not start (code 3); device
+    /// `webhook:NAME`. Cleared by the next success (code 0), once it has caught up (code
+    /// 1), when it is resumed or an administrator pauses it (code 2), when it starts (code
+    /// 3).
     Webhook,
     /// Nodes of the cluster run different `[site]` or `[[devices]]` (device `cluster`, a
     /// warning raised by the active node): a takeover would change the site. Cleared once
     /// every node seen runs the active node's.
     ConfigDrift,
+    /// The certificate served over HTTPS expires within 14 days or has expired (code 0), or
+    /// its files changed but do not load and the previous one is still served (code 1);
+    /// device `tls` (`tls:NODE` in a cluster). Cleared once a certificate that is good for
+    /// longer is served (code 0), or the files load (code 1).
+    Certificate,
 }
 
 impl AlarmKind {
     /// Every kind.
-    pub const ALL: [AlarmKind; 9] = [
+    pub const ALL: [AlarmKind; 10] = [
         AlarmKind::Device,
         AlarmKind::Link,
         AlarmKind::Heartbeat,
@@ -84,6 +91,7 @@ impl AlarmKind {
         AlarmKind::Archive,
         AlarmKind::Webhook,
         AlarmKind::ConfigDrift,
+        AlarmKind::Certificate,
     ];
 
     /// The kind's name as the API writes it.
@@ -98,6 +106,7 @@ impl AlarmKind {
             AlarmKind::Archive => "archive",
             AlarmKind::Webhook => "webhook",
             AlarmKind::ConfigDrift => "config_drift",
+            AlarmKind::Certificate => "certificate",
         }
     }
 
@@ -113,7 +122,8 @@ impl AlarmKind {
             | AlarmKind::Degraded
             | AlarmKind::Takeover
             | AlarmKind::Webhook
-            | AlarmKind::ConfigDrift => AlarmClass::Link,
+            | AlarmKind::ConfigDrift
+            | AlarmKind::Certificate => AlarmClass::Link,
             AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost | AlarmKind::Archive => {
                 AlarmClass::Hardware
             }

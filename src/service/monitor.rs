@@ -177,8 +177,17 @@ fn action(device: &str, kind: AlarmKind, code: u16) -> String {
         }
         AlarmKind::Takeover => crate::service::cluster::TAKEOVER_ACTION.to_owned(),
         AlarmKind::Archive => crate::config::ARCHIVE_ACTION.to_owned(),
-        AlarmKind::Webhook => crate::service::webhooks::ACTION.to_owned(),
+        AlarmKind::Webhook => match code {
+            2 => crate::service::webhooks::GONE_ACTION
+                .replace("NAME", device.strip_prefix("webhook:").unwrap_or(device)),
+            3 => crate::service::webhooks::START_ACTION.to_owned(),
+            _ => crate::service::webhooks::ACTION.to_owned(),
+        },
         AlarmKind::ConfigDrift => crate::service::cluster::DRIFT_ACTION.to_owned(),
+        AlarmKind::Certificate => match code {
+            1 => crate::config::tls::REFUSED_ACTION.to_owned(),
+            _ => crate::config::tls::EXPIRING_ACTION.to_owned(),
+        },
         AlarmKind::MemoryLost => {
             "Check the locked locations of the lost tasks, correct the inventory, unlock them and retry \
              the failed jobs."

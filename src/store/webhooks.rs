@@ -15,7 +15,8 @@ pub struct Row {
     pub name: String,
     /// The last event seq it is done with: acknowledged with a 2xx, or not of its types.
     pub cursor: i64,
-    /// 1 while paused (by an operator, or by a receiver's 410 Gone).
+    /// 0 while delivering; otherwise who paused it, as [`PausedBy::stored`] writes it (an
+    /// administrator's 1, the receiver's 2).
     pub paused: i64,
     /// Why it is paused.
     pub paused_reason: Option<String>,
@@ -29,6 +30,40 @@ pub struct Row {
     pub failing_since: Option<i64>,
     /// When the row was written.
     pub updated_at: i64,
+}
+
+/// Who paused a subscription.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum PausedBy {
+    /// An administrator (`POST /api/v1/webhooks/{name}/pause`): retention no longer holds
+    /// its events, and no alarm says so.
+    Admin,
+    /// The receiver, or a proxy in front of it, answered 410 Gone: the `webhook` alarm
+    /// (code 2) is raised, and retention goes on holding its events.
+    Receiver,
+}
+
+impl PausedBy {
+    /// Its value in the `paused` column.
+    pub fn stored(self) -> i64 {
+        match self {
+            PausedBy::Admin => 1,
+            PausedBy::Receiver => 2,
+        }
+    }
+}
+
+impl Row {
+    /// Who paused it, if it is paused (a value of another version reads as an
+    /// administrator's pause).
+    pub fn paused_by(&self) -> Option<PausedBy> {
+        match self.paused {
+            0 => None,
+            2 => Some(PausedBy::Receiver),
+            _ => Some(PausedBy::Admin),
+        }
+    }
 }
 
 /// One try to deliver one event.

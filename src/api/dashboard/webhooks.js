@@ -224,7 +224,11 @@ export class Webhooks {
     t.alarm.hidden = !alarmed;
     t.root.classList.toggle('in-alarm', alarmed);
     t.paused.hidden = w.state !== 'paused';
-    setText(t.paused, w.paused_reason ? `Paused: ${w.paused_reason}` : 'Paused: nothing is delivered until it is resumed.');
+    // A receiver's 410 is told from an administrator's pause: its events are held for it.
+    t.root.dataset.pausedBy = w.paused_by || '';
+    const paused =
+      w.paused_by === 'receiver' ? 'Paused by its receiver (its events are held until it is resumed)' : 'Paused';
+    setText(t.paused, w.paused_reason ? `${paused}: ${w.paused_reason}` : `${paused}: nothing is delivered until it is resumed.`);
     t.pause.hidden = w.state === 'paused';
     t.resume.hidden = w.state !== 'paused';
     this.fillTimes(t, w);

@@ -95,6 +95,8 @@ pub struct Metrics {
     started: OffsetDateTime,
     /// Jobs by device and state, active alarms by device and class, as committed.
     counts: std::sync::Mutex<Counts>,
+    /// The certificate served over HTTPS, once told.
+    certificate: std::sync::Mutex<Option<scrape::CertificateSample>>,
     /// Seconds from a submission reaching the writer to its commit.
     pub intake_seconds: Histogram,
 }
@@ -173,6 +175,7 @@ impl Default for Metrics {
             job_seconds,
             started: OffsetDateTime::now_utc(),
             counts: std::sync::Mutex::default(),
+            certificate: std::sync::Mutex::default(),
             intake_seconds,
         }
     }
@@ -206,6 +209,16 @@ impl Metrics {
     /// and on a node of a cluster after each commit it follows).
     pub fn set_counts(&self, counts: Counts) {
         *self.counts.lock().unwrap_or_else(|p| p.into_inner()) = counts;
+    }
+
+    /// The certificate served over HTTPS is `sample` from now on (`app::serve::certificate`).
+    pub fn set_certificate(&self, sample: scrape::CertificateSample) {
+        *self.certificate.lock().unwrap_or_else(|p| p.into_inner()) = Some(sample);
+    }
+
+    /// The certificate served over HTTPS, as last told; None without `[server.tls]`.
+    pub fn certificate(&self) -> Option<scrape::CertificateSample> {
+        *self.certificate.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// The counts of jobs and alarms now.
@@ -312,6 +325,10 @@ mod tests {
             started: now,
             cluster: None,
             webhooks: vec![scrape::WebhookSample { name: "wms".into(), published: 7, live }],
+            certificate: Some(scrape::CertificateSample {
+                expires_at: Some(1_900_000_000),
+                reload_failing: true,
+            }),
         };
         let text = metrics.encode(scrape, 2).unwrap();
         assert!(text.ends_with("# EOF\n"), "{text}");
@@ -337,5 +354,7 @@ mod tests {
         );
         assert!(old.contains("rackd_webhook_retries_total{webhook=\"wms\"} 2\n"), "{old}");
         assert!(old.contains("# TYPE rackd_webhook_events_behind gauge\n"), "{old}");
+        assert!(old.contains("\nrackd_tls_certificate_expiry_timestamp_seconds 1900000000\n"), "{old}");
+        assert!(old.contains("\nrackd_tls_certificate_reload_failing 1\n"), "{old}");
     }
 }

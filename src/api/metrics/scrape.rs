@@ -103,6 +103,18 @@ pub struct Scrape {
     pub cluster: Option<ClusterSample>,
     /// On the node that delivers webhooks, each running subscription; empty elsewhere.
     pub webhooks: Vec<WebhookSample>,
+    /// With `[server.tls]`: the certificate served.
+    pub certificate: Option<CertificateSample>,
+}
+
+/// The certificate served over HTTPS, as the watch of its files tells it
+/// (`app::serve::certificate`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CertificateSample {
+    /// When it expires (its `notAfter`), in Unix seconds; None if that does not read.
+    pub expires_at: Option<i64>,
+    /// Whether the files as they are now do not load (the previous certificate is served).
+    pub reload_failing: bool,
 }
 
 /// A webhook subscription's figures, as its deliverer keeps them.
@@ -158,6 +170,11 @@ fn gauge<L: EncodeLabelSet, V: EncodeGaugeValue>(
         m.encode_family(&labels)?.encode_gauge(&v)?;
     }
     Ok(())
+}
+
+/// A gauge of one sample, without labels.
+fn one(e: &mut DescriptorEncoder, name: &str, help: &str, value: i64) -> Result {
+    e.encode_descriptor(name, help, None, MetricType::Gauge)?.encode_gauge(&value)
 }
 
 fn counter<L: EncodeLabelSet>(
@@ -365,6 +382,14 @@ impl Collector for Scrape {
             let help = "Times this node's process became the active node.";
             counter(&mut e, "cluster_takeovers", help, [(node(), c.takeovers)])?;
         }
+        if let Some(c) = &self.certificate {
+            let help = "When the certificate served over HTTPS expires (its notAfter), in Unix seconds.";
+            if let Some(at) = c.expires_at {
+                one(&mut e, "tls_certificate_expiry_timestamp_seconds", help, at)?;
+            }
+            let help = "1 while the certificate files changed but do not load (the previous certificate is still served).";
+            one(&mut e, "tls_certificate_reload_failing", help, i64::from(c.reload_failing))?;
+        }
         self.webhooks(&mut e)
     }
 }
@@ -382,6 +407,7 @@ mod tests {
             started: now,
             cluster: None,
             webhooks,
+            certificate: None,
         };
         let mut registry = prometheus_client::registry::Registry::with_prefix("rackd");
         registry.register_collector(Box::new(scrape));

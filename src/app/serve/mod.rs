@@ -54,6 +54,7 @@
 //!   them, and is closed then, where `axum::serve` waited for it for ever.
 //! - Every request carries axum's `ConnectInfo<SocketAddr>` with the client's address.
 
+pub(crate) mod certificate;
 mod files;
 mod io;
 mod table;

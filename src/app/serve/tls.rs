@@ -15,8 +15,11 @@
 //!   `rsync -t`) is still seen.
 //! - New files that do not load (a rotation caught between the certificate and its key, a
 //!   truncated file) leave the old certificate in service, with one warning per distinct
-//!   problem; the next read that loads swaps it in. There is no alarm for it: a certificate
-//!   is the site's tooling's to watch, and the log says what happened.
+//!   problem; the next read that loads swaps it in. What is served (its end of validity,
+//!   whether the files as they are now are refused) goes to a `watch` ([`Served`]), from
+//!   which [`super::certificate`] raises the `certificate` alarms and keeps `/metrics`'
+//!   figures: a certificate about to expire, or a renewal that did not load, is seen by
+//!   whoever watches the alarms, not only by whoever reads the log.
 //! - ALPN offers `http/1.1` only, as the plain listener speaks HTTP/1.1 only: a client
 //!   that offers h2 too settles on HTTP/1.1.
 
@@ -24,9 +27,12 @@ use std::sync::{Arc, RwLock};
 
 use rustls::server::{ClientHello, ResolvesServerCert};
 use rustls::sign::CertifiedKey;
+use time::OffsetDateTime;
+use tokio::sync::watch;
 use tokio_rustls::TlsAcceptor;
 use tokio_util::sync::CancellationToken;
 
+use super::certificate::{Served, not_after};
 use crate::config::tls::Pem;
 use crate::config::{TlsConfig, TlsError};
 
@@ -37,6 +43,8 @@ pub(crate) struct Certificates {
     read: Pem,
     current: Arc<Current>,
     acceptor: TlsAcceptor,
+    /// What is served, told as it changes.
+    served: watch::Sender<Served>,
 }
 
 /// The resolver: whatever certificate is current.
@@ -53,6 +61,11 @@ impl Current {
     fn set(&self, key: Arc<CertifiedKey>) {
         *self.0.write().unwrap_or_else(|p| p.into_inner()) = key;
     }
+
+    /// When the certificate being served expires.
+    fn expires(&self) -> Option<OffsetDateTime> {
+        not_after(self.0.read().unwrap_or_else(|p| p.into_inner()).cert.first()?)
+    }
 }
 
 impl Certificates {
@@ -68,7 +81,13 @@ impl Certificates {
             .with_cert_resolver(current.clone());
         server.alpn_protocols = vec![b"http/1.1".to_vec()];
         let acceptor = TlsAcceptor::from(Arc::new(server));
-        Ok(Certificates { config: config.clone(), read, current, acceptor })
+        let served = watch::Sender::new(Served { expires: current.expires(), refused: None });
+        Ok(Certificates { config: config.clone(), read, current, acceptor, served })
+    }
+
+    /// What is served, as it changes (the alarms and `/metrics`).
+    pub(crate) fn served(&self) -> watch::Receiver<Served> {
+        self.served.subscribe()
     }
 
     /// What each connection's handshake runs.
@@ -79,12 +98,7 @@ impl Certificates {
     /// Reads the files every `reload_every` until `stop`, and swaps in a certificate whose
     /// files changed and load.
     pub(super) fn watch(&self, stop: CancellationToken) {
-        let mut reload = Reload {
-            config: self.config.clone(),
-            seen: self.read.clone(),
-            current: self.current.clone(),
-            problem: None,
-        };
+        let mut reload = Reload::new(self);
         tokio::spawn(async move {
             let mut every = tokio::time::interval(reload.config.reload_every);
             every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -107,9 +121,13 @@ struct Reload {
     config: TlsConfig,
     /// The files as last read.
     seen: Pem,
+    /// Why those do not load (None: they are served).
+    seen_problem: Option<TlsError>,
     current: Arc<Current>,
-    /// The last problem logged, so that files that stay bad are logged once.
+    /// Why the files as they are now are not served, while they are not; logged when it
+    /// changes, so that files that stay bad are logged once.
     problem: Option<TlsError>,
+    served: watch::Sender<Served>,
 }
 
 /// What a read of the files did.
@@ -124,33 +142,53 @@ enum Reloaded {
 }
 
 impl Reload {
-    fn take(&mut self, read: Result<Pem, TlsError>) -> Reloaded {
-        let loaded = read.and_then(|pem| {
-            if pem == self.seen {
-                return Ok(None);
-            }
-            self.seen = pem;
-            self.seen.certified_key(&self.config).map(Some)
-        });
-        match loaded {
-            Ok(None) => {
-                self.problem = None;
-                Reloaded::Same
-            }
-            Ok(Some(key)) => {
-                self.current.set(key);
-                self.problem = None;
-                tracing::info!(cert_file = %self.config.cert_file.display(), "TLS certificate reloaded");
-                Reloaded::Swapped
-            }
-            Err(e) => {
-                if self.problem.as_ref() != Some(&e) {
-                    tracing::warn!(error = %e, "the TLS certificate files do not load; still serving the previous certificate");
-                    self.problem = Some(e);
-                }
-                Reloaded::Kept
-            }
+    fn new(certificates: &Certificates) -> Reload {
+        Reload {
+            config: certificates.config.clone(),
+            seen: certificates.read.clone(),
+            seen_problem: None,
+            current: certificates.current.clone(),
+            problem: None,
+            served: certificates.served.clone(),
         }
+    }
+
+    fn take(&mut self, read: Result<Pem, TlsError>) -> Reloaded {
+        let (reloaded, problem) = match read {
+            Err(e) => (Reloaded::Kept, Some(e)),
+            // Tried once: the same files that did not load still do not.
+            Ok(pem) if pem == self.seen => (Reloaded::Same, self.seen_problem.clone()),
+            Ok(pem) => {
+                let loaded = pem.certified_key(&self.config);
+                self.seen = pem;
+                match loaded {
+                    Ok(key) => {
+                        self.current.set(key);
+                        self.seen_problem = None;
+                        tracing::info!(cert_file = %self.config.cert_file.display(), "TLS certificate reloaded");
+                        (Reloaded::Swapped, None)
+                    }
+                    Err(e) => {
+                        self.seen_problem = Some(e.clone());
+                        (Reloaded::Kept, Some(e))
+                    }
+                }
+            }
+        };
+        if problem != self.problem {
+            if let Some(e) = &problem {
+                tracing::warn!(error = %e, "the TLS certificate files do not load; still serving the previous certificate");
+            }
+            self.problem = problem;
+        }
+        let now =
+            Served { expires: self.current.expires(), refused: self.problem.as_ref().map(|e| e.to_string()) };
+        self.served.send_if_modified(|told| {
+            let changed = *told != now;
+            *told = now;
+            changed
+        });
+        reloaded
     }
 }
 
@@ -179,13 +217,10 @@ mod tests {
         write_pair(dir.path(), &first, &first);
         let config = TlsConfig::new(dir.path().join("cert.pem"), dir.path().join("key.pem"));
         let certificates = Certificates::load(&config).unwrap();
-        let mut reload = Reload {
-            config: config.clone(),
-            seen: certificates.read.clone(),
-            current: certificates.current.clone(),
-            problem: None,
-        };
+        let told = certificates.served();
+        let mut reload = Reload::new(&certificates);
         assert_eq!(reload.take(config.read()), Reloaded::Same);
+        assert_eq!(told.borrow().refused, None);
 
         // Half a rotation: the new certificate, the old key.
         std::fs::write(dir.path().join("cert.pem"), second.cert.pem()).unwrap();
@@ -193,6 +228,8 @@ mod tests {
         assert_eq!(served(&certificates.current), first.cert.der().to_vec());
         assert!(matches!(reload.problem, Some(TlsError::Bad { .. })), "{:?}", reload.problem);
         assert_eq!(reload.take(config.read()), Reloaded::Same, "the same bad files are tried once");
+        let refused = told.borrow().refused.clone().unwrap_or_default();
+        assert!(refused.contains("is not the key of"), "told while they stay bad: {refused}");
         // A file gone for a moment.
         std::fs::remove_file(dir.path().join("key.pem")).unwrap();
         assert_eq!(reload.take(config.read()), Reloaded::Kept);
@@ -202,5 +239,13 @@ mod tests {
         assert_eq!(reload.take(config.read()), Reloaded::Swapped);
         assert_eq!(served(&certificates.current), second.cert.der().to_vec());
         assert_eq!(reload.problem, None);
+        assert_eq!(certificates.served().borrow().refused, None);
+
+        // Bad files, then the served ones back as they were: nothing refused any more.
+        std::fs::write(dir.path().join("key.pem"), first.signing_key.serialize_pem()).unwrap();
+        assert_eq!(reload.take(config.read()), Reloaded::Kept);
+        write_pair(dir.path(), &second, &second);
+        assert_eq!(reload.take(config.read()), Reloaded::Swapped, "loaded again");
+        assert_eq!(certificates.served().borrow().refused, None);
     }
 }

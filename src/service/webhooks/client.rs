@@ -4,8 +4,9 @@
 //! Outbound calls from a plant network, so:
 //! - **no proxy** from the environment (`HTTP_PROXY` and the like are ignored); one only
 //!   when the subscription names it (`proxy`);
-//! - **https** trusting the subscription's `ca_file` alone when set, otherwise the system's
-//!   store (`/etc/ssl/certs`, read once at start), where a site installs its own CA; unlike
+//! - **https** trusting the subscription's `ca_file` alone when set (its certificates as
+//!   read when the configuration was loaded: [`Material`]), otherwise the system's store
+//!   (`/etc/ssl/certs`, read when the client is built), where a site installs its own CA; unlike
 //!   the standby's forwarder, which trusts the compiled-in public roots, a WMS is often
 //!   behind a company CA the system already trusts;
 //! - **no redirect** followed: a 3xx is a failed delivery (the events and their signature
@@ -18,12 +19,14 @@
 use std::time::Duration;
 
 use crate::config::WebhookConfig;
+use crate::config::webhooks::Material;
 
 /// The most of an answer's body read.
 pub const BODY_LIMIT: usize = 64 * 1024;
 
-/// The client for subscription `config`; an error says what in its configuration is wrong.
-pub fn client(config: &WebhookConfig) -> anyhow::Result<reqwest::Client> {
+/// The client for subscription `config`, trusting `material`'s roots; an error says what
+/// in its configuration is wrong.
+pub fn client(config: &WebhookConfig, material: &Material) -> anyhow::Result<reqwest::Client> {
     let timeout = Duration::from_millis(config.timeout_ms.max(1));
     let mut builder = reqwest::Client::builder()
         .no_proxy()
@@ -33,11 +36,11 @@ pub fn client(config: &WebhookConfig) -> anyhow::Result<reqwest::Client> {
         .pool_max_idle_per_host(1)
         .user_agent(concat!("rackd/", env!("CARGO_PKG_VERSION")))
         .tls_built_in_webpki_certs(false);
-    match &config.ca_file {
-        Some(path) => {
+    match &material.roots {
+        Some(roots) => {
             builder = builder.tls_built_in_root_certs(false);
-            for cert in crate::config::ca::read_ca(path)? {
-                builder = builder.add_root_certificate(reqwest::Certificate::from_der(&cert)?);
+            for cert in roots {
+                builder = builder.add_root_certificate(reqwest::Certificate::from_der(cert)?);
             }
         }
         None => builder = builder.tls_built_in_native_certs(true),

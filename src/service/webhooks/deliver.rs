@@ -14,7 +14,7 @@ use crate::domain::AlarmKind;
 use crate::domain::time::now_ms;
 use crate::store::alarms::{AlarmFilter, NewAlarm};
 use crate::store::events::{self, StoredEvent};
-use crate::store::webhooks::{Delivery, Progress, Row};
+use crate::store::webhooks::{Delivery, PausedBy, Progress, Row};
 use crate::store::writer::{Record, WriteError};
 
 /// Events read from the log at a time.
@@ -42,8 +42,9 @@ pub(super) struct Deliverer {
     skipped_since: Option<tokio::time::Instant>,
     /// The write in flight.
     writing: Option<JoinHandle<Result<(), WriteError>>>,
-    /// Whether this deliverer raised the alarms of code 0 (failing) and 1 (events lost).
-    alarmed: [bool; 2],
+    /// Whether this deliverer raised the alarms of code 0 (failing), 1 (events lost), 2
+    /// (paused by the receiver) and 3 (could not start).
+    alarmed: [bool; 4],
     /// Set when the cursor moved by command: the events read are stale.
     moved: bool,
 }
@@ -75,15 +76,24 @@ impl Deliverer {
             dirty: false,
             skipped_since: None,
             writing: None,
-            alarmed: [false; 2],
+            alarmed: [false; 4],
             moved: false,
         }
     }
 
-    /// Runs until the writer closes or fences this node out; `stored` is the row in the
-    /// store, if the subscription has one.
-    pub(super) async fn run(mut self, stored: Option<Row>) {
+    /// Runs until the writer closes or fences this node out: from the subscription's row in
+    /// the store, read here (again each second while the store does not answer).
+    pub(super) async fn run(mut self) {
         let name = self.config.name.clone();
+        let stored = loop {
+            match crate::store::webhooks::rows(&self.parts.pool).await {
+                Ok(rows) => break rows.into_iter().find(|r| r.name == name),
+                Err(e) => {
+                    tracing::warn!(webhook = %name, error = %e, "reading the webhook's cursor");
+                    tokio::time::sleep(Duration::from_secs(1)).await;
+                }
+            }
+        };
         self.row = match stored {
             Some(row) => row,
             None => {
@@ -102,7 +112,23 @@ impl Deliverer {
             Vec::new()
         });
         self.alarmed =
-            [0, 1].map(|code| active.iter().any(|a| a.kind == AlarmKind::Webhook && a.code == code));
+            [0, 1, 2, 3].map(|code| active.iter().any(|a| a.kind == AlarmKind::Webhook && a.code == code));
+        // It started: whatever kept it from starting before is over. A receiver's pause is
+        // alarmed while the row says so (and only then).
+        if self.alarmed[3] {
+            self.alarm(3, None).await;
+        }
+        match (self.row.paused_by() == Some(PausedBy::Receiver), self.alarmed[2]) {
+            (true, false) => {
+                let text = format!(
+                    "webhook {name:?} is paused by its receiver ({}); its events are held for it",
+                    self.row.paused_reason.as_deref().unwrap_or("410 Gone")
+                );
+                self.alarm(2, Some(text)).await;
+            }
+            (false, true) => self.alarm(2, None).await,
+            _ => {}
+        }
         self.show(None);
         tracing::info!(webhook = %name, cursor = self.row.cursor, "webhook deliverer started");
         match self.work().await {
@@ -225,10 +251,18 @@ impl Deliverer {
                     return Ok(());
                 }
                 "gone" => {
-                    self.row.paused = 1;
-                    self.row.paused_reason = Some("the receiver answered 410 Gone".into());
-                    tracing::warn!(webhook = %self.config.name, "the receiver answered 410 Gone: paused");
+                    self.row.paused = PausedBy::Receiver.stored();
+                    let why = format!("the receiver answered 410 Gone to event {}", event.seq);
+                    self.row.paused_reason = Some(why.clone());
+                    tracing::warn!(webhook = %self.config.name, seq = event.seq,
+                        "the receiver answered 410 Gone: paused, its events held");
                     self.flush(true).await?;
+                    let text = format!(
+                        "webhook {:?} is paused by its receiver: {why}; its events are held for it up to \
+                         events.webhook_hold_hours",
+                        self.config.name
+                    );
+                    self.alarm(2, Some(text)).await;
                     return Ok(());
                 }
                 _ => {
@@ -273,7 +307,7 @@ impl Deliverer {
         let before = self.row.clone();
         match action {
             Action::Pause => {
-                self.row.paused = 1;
+                self.row.paused = PausedBy::Admin.stored();
                 self.row.paused_reason = Some(match &reason {
                     Some(why) => format!("paused by {}: {why}", who.name),
                     None => format!("paused by {}", who.name),
@@ -311,6 +345,10 @@ impl Deliverer {
         }
         (self.dirty, self.skipped_since) = (false, None);
         self.show(None);
+        // Resumed, or paused by an administrator who has seen it: the receiver's pause is over.
+        if self.alarmed[2] && self.row.paused_by() != Some(PausedBy::Receiver) {
+            self.alarm(2, None).await;
+        }
         Ok(self.row.clone())
     }
 
@@ -365,20 +403,8 @@ impl Deliverer {
 
     /// Raises (`text`) or clears alarm `code` of this subscription.
     async fn alarm(&mut self, code: u16, text: Option<String>) {
-        let device = alarm_device(&self.config.name);
         let raised = text.is_some();
-        let record = match text {
-            Some(text) => Record::AlarmRaised(NewAlarm {
-                device,
-                kind: AlarmKind::Webhook,
-                code,
-                class: AlarmKind::Webhook.class(),
-                text,
-                detail: None,
-                action: Some(super::ACTION.to_owned()),
-            }),
-            None => Record::AlarmCleared { device, key: (AlarmKind::Webhook, code) },
-        };
+        let record = alarm_record(&self.config.name, code, text);
         match self.parts.writer.record(record).await {
             Ok(()) => self.alarmed[usize::from(code)] = raised,
             Err(e) => tracing::warn!(webhook = %self.config.name, error = %e, "recording the webhook alarm"),
@@ -403,6 +429,47 @@ impl Deliverer {
         let mut live = self.live.lock().unwrap_or_else(|p| p.into_inner());
         live.row = self.row.clone();
         live.oldest_pending_at = pending_at;
+    }
+}
+
+/// The record that raises (`text`) or clears alarm `code` of subscription `name`.
+fn alarm_record(name: &str, code: u16, text: Option<String>) -> Record {
+    let device = alarm_device(name);
+    let action = match code {
+        2 => super::GONE_ACTION,
+        3 => super::START_ACTION,
+        _ => super::ACTION,
+    };
+    match text {
+        Some(text) => Record::AlarmRaised(NewAlarm {
+            device,
+            kind: AlarmKind::Webhook,
+            code,
+            class: AlarmKind::Webhook.class(),
+            text,
+            detail: None,
+            action: Some(action.replace("NAME", name)),
+        }),
+        None => Record::AlarmCleared { device, key: (AlarmKind::Webhook, code) },
+    }
+}
+
+/// What runs instead of the deliverer of subscription `name`, which cannot start (`why`):
+/// its `webhook` alarm with code 3, raised once (tried again each second while the store
+/// refuses it).
+pub(super) async fn unstarted(name: String, why: String, parts: Parts) {
+    let text = format!(
+        "webhook {name:?} cannot start: {why}; the machines are driven, its events are not delivered"
+    );
+    loop {
+        match parts.writer.record(alarm_record(&name, 3, Some(text.clone()))).await {
+            Ok(()) => return,
+            Err(WriteError::Closed | WriteError::Fenced(_)) => return,
+            Err(e) => {
+                tracing::warn!(webhook = %name, error = %e, "recording the webhook alarm");
+                tokio::time::sleep(Duration::from_secs(1)).await;
+            }
+        }
     }
 }
 

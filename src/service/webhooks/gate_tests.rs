@@ -38,7 +38,7 @@ async fn a_node_that_may_not_drive_sends_nothing_until_it_may() {
     };
     let config = WebhookConfig::new("wms", &url, &["*"], "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw");
     let parts = Parts { pool: pool.clone(), writer: writer.clone(), hub, gate };
-    let (webhooks, _tasks) = Webhooks::start(&[config], parts).await.unwrap();
+    let (webhooks, _tasks) = Webhooks::start(&[config], parts);
     // Started (a new subscription starts from the newest event when its task first runs).
     for _ in 0..100 {
         if !webhooks.live()[0].1.row.name.is_empty() {

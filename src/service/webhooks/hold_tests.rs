@@ -51,7 +51,7 @@ async fn a_deliverer_held_by_its_receiver_holds_no_commits() {
     tokio::spawn(async move { axum::serve(listener, receiver).await });
     let config = WebhookConfig::new("wms", &url, &["*"], "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw");
     let parts = Parts { pool: pool.clone(), writer: writer.clone(), hub: hub.clone(), gate: None };
-    let (webhooks, _tasks) = Webhooks::start(&[config], parts).await.unwrap();
+    let (webhooks, _tasks) = Webhooks::start(&[config], parts);
     until("the idle deliverer to listen to the hub", || hub.subscribers() == 1).await;
 
     writer.record(Record::Device { status: r#"{"n":0}"#.into() }).await.unwrap();

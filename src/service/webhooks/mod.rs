@@ -25,13 +25,28 @@
 //!   keeps them).
 //! - **Retries** wait `backoff_ms`, doubling each time up to `max_backoff_ms`, with jitter
 //!   (uniformly between half and all of the wait), for as long as it takes: an event is
-//!   never skipped. 410 Gone pauses the subscription (the receiver says it is not coming
-//!   back). Failures in a row for `alarm_after_secs` raise the `webhook` alarm (code 0)
-//!   on device `webhook:NAME`; the next success clears it.
+//!   never skipped. Failures in a row for `alarm_after_secs` raise the `webhook` alarm
+//!   (code 0) on device `webhook:NAME`; the next success clears it.
+//! - **410 Gone pauses, loudly.** The receiver (or a proxy in front of it, which may say
+//!   so for its own reasons) says it is not coming back: the subscription pauses, as
+//!   paused by the receiver ([`PausedBy`](crate::store::webhooks::PausedBy), told apart
+//!   from an administrator's pause in the API, the alarm and the row), raises the
+//!   `webhook` alarm with code 2, and retention goes on holding its events as for a
+//!   subscription that delivers, so the WMS can catch up once it is resumed. A resume
+//!   clears the alarm; an administrator's pause of it makes it theirs (no alarm, nothing
+//!   held). A 410 is not taken as the end of a subscription: that is the configuration's
+//!   to say.
 //! - **Retention waits** for the lowest cursor of the subscriptions that are configured
-//!   and not paused, up to `events.webhook_hold_hours` beyond the log's retention; past
-//!   that, events go all the same, and the subscription that finds the gap raises the
-//!   `webhook` alarm with code 1, saying which events it lost, until it catches up.
+//!   and not paused by an administrator, up to `events.webhook_hold_hours` beyond the log's
+//!   retention; past that, events go all the same, and the subscription that finds the gap
+//!   raises the `webhook` alarm with code 1, saying which events it lost, until it catches
+//!   up.
+//! - **A subscription never stops the machines.** Its secret and CA file are read when
+//!   the configuration is loaded ([`crate::config::webhooks`]); a subscription that cannot
+//!   start all the same (a configuration built in code whose files are gone, a client that
+//!   does not build) raises the `webhook` alarm with code 3 and stays stopped until rackd
+//!   starts again or another node takes over, while everything else starts: the machines
+//!   are driven. Its cursor, read by its own task, is not needed to start the rest.
 //! - **Hot standby**: only the node that drives the machines delivers (its deliverers start
 //!   and stop with the devices), every request first asks the lease's gate (as a device's
 //!   request does), and its writes are fenced: a node that lost its lease sends nothing
@@ -57,7 +72,7 @@ use crate::devices::gate::MayDrive;
 use crate::domain::Who;
 use crate::service::events::Hub;
 use crate::store::Pool;
-use crate::store::webhooks::Row;
+use crate::store::webhooks::{PausedBy, Row};
 use crate::store::writer::{WriteError, Writer};
 
 pub use client::BODY_LIMIT;
@@ -65,6 +80,17 @@ pub use client::BODY_LIMIT;
 /// What a `webhook` alarm asks a person to do.
 pub const ACTION: &str = "Check that the WMS's receiver is up and answers 2xx (its last error is on \
      GET /api/v1/webhooks and the dashboard); rackd keeps every event and retries by itself.";
+
+/// What the `webhook` alarm with code 2 (paused by the receiver's 410 Gone) asks.
+pub const GONE_ACTION: &str = "Ask whoever runs the WMS's receiver (or the proxy in front of it) why it \
+     answered 410 Gone. Once it takes events again, resume the subscription (POST \
+     /api/v1/webhooks/NAME/resume, or the dashboard): it goes on from the event it stopped at, and \
+     rackd holds its events until then, up to events.webhook_hold_hours.";
+
+/// What the `webhook` alarm with code 3 (the subscription cannot start) asks.
+pub const START_ACTION: &str = "Fix what the alarm names (the subscription's secret_file or ca_file), \
+     then restart rackd or let another node take over. The machines are driven meanwhile; the \
+     subscription's cursor stays where it was.";
 
 /// The device the `webhook` alarms of subscription `name` are raised on.
 pub fn alarm_device(name: &str) -> String {
@@ -116,6 +142,9 @@ pub enum ActionError {
     /// The deliverer stopped (the node is shutting down or lost its lease).
     #[error("the subscription's deliverer is not running")]
     Stopped,
+    /// The subscription could not start on this node (its `webhook` alarm, code 3).
+    #[error("the subscription could not start: {0}")]
+    NotStarted(String),
 }
 
 /// A request to a deliverer.
@@ -154,6 +183,8 @@ struct Running {
 #[derive(Clone, Default)]
 pub struct Webhooks {
     running: Arc<BTreeMap<String, Running>>,
+    /// The subscriptions that could not start, and why.
+    unstarted: Arc<BTreeMap<String, String>>,
 }
 
 /// What a subscription's deliverer needs besides its configuration.
@@ -170,31 +201,40 @@ pub struct Parts {
 }
 
 impl Webhooks {
-    /// Starts a deliverer per subscription; their tasks are the caller's to stop. A
-    /// subscription whose client cannot be built (a CA file gone since the check) is an
-    /// error: the start fails.
-    pub async fn start(
-        configs: &[WebhookConfig],
-        parts: Parts,
-    ) -> anyhow::Result<(Webhooks, Vec<JoinHandle<()>>)> {
-        use anyhow::Context;
-        let stored =
-            crate::store::webhooks::rows(&parts.pool).await.context("reading the webhooks' cursors")?;
+    /// Starts a deliverer per subscription; their tasks are the caller's to stop. One that
+    /// cannot start (its secret or CA file unread and unreadable, a client that does not
+    /// build) gets a task that raises its `webhook` alarm instead: it never fails the rest.
+    pub fn start(configs: &[WebhookConfig], parts: Parts) -> (Webhooks, Vec<JoinHandle<()>>) {
         let mut running = BTreeMap::new();
+        let mut unstarted = BTreeMap::new();
         let mut tasks = Vec::new();
         for config in configs {
-            let what = || format!("webhooks {:?}", config.name);
-            let key = config.key().map_err(anyhow::Error::msg).with_context(what)?;
-            let client = client::client(config).with_context(what)?;
-            let row = stored.iter().find(|r| r.name == config.name).cloned();
+            let built = config.material().map_err(|e| e.to_string()).and_then(|material| {
+                let client = client::client(config, &material).map_err(|e| format!("{e:#}"))?;
+                Ok((material.key, client))
+            });
+            let (key, client) = match built {
+                Ok(built) => built,
+                Err(why) => {
+                    tracing::error!(webhook = %config.name, error = %why,
+                        "the webhook subscription cannot start; the machines are driven without it");
+                    tasks.push(tokio::spawn(deliver::unstarted(
+                        config.name.clone(),
+                        why.clone(),
+                        parts.clone(),
+                    )));
+                    unstarted.insert(config.name.clone(), why);
+                    continue;
+                }
+            };
             let live = Arc::new(Mutex::new(Live::default()));
             let (tx, rx) = mpsc::channel(16);
             let deliverer =
                 deliver::Deliverer::new(config.clone(), key, client, parts.clone(), live.clone(), rx);
-            tasks.push(tokio::spawn(deliverer.run(row)));
+            tasks.push(tokio::spawn(deliverer.run()));
             running.insert(config.name.clone(), Running { config: config.clone(), live, commands: tx });
         }
-        Ok((Webhooks { running: Arc::new(running) }, tasks))
+        (Webhooks { running: Arc::new(running), unstarted: Arc::new(unstarted) }, tasks)
     }
 
     /// Asks subscription `name` to do `action`, as `who`; answers with its row after.
@@ -205,11 +245,19 @@ impl Webhooks {
         who: Who,
         reason: Option<String>,
     ) -> Result<Row, ActionError> {
+        if let Some(why) = self.unstarted.get(name) {
+            return Err(ActionError::NotStarted(why.clone()));
+        }
         let running = self.running.get(name).ok_or_else(|| ActionError::Unknown(name.to_owned()))?;
         let (reply, answer) = oneshot::channel();
         let command = Command { action, who, reason, reply };
         running.commands.send(command).await.map_err(|_| ActionError::Stopped)?;
         answer.await.map_err(|_| ActionError::Stopped)?
+    }
+
+    /// Why subscription `name` could not start on this node, if it could not.
+    pub fn unstarted(&self, name: &str) -> Option<&str> {
+        self.unstarted.get(name).map(String::as_str)
     }
 
     /// Each running subscription's configuration and figures, by name.
@@ -220,13 +268,14 @@ impl Webhooks {
 }
 
 /// What the log's retention may delete for the subscriptions: the lowest cursor of those
-/// in `configs` that are not paused (`i64::MAX` when none holds anything). A subscription
+/// in `configs` that an administrator has not paused (`i64::MAX` when none holds
+/// anything): one the receiver paused with a 410 still holds its events. A subscription
 /// never seen (no row yet) starts from the newest event, which is always kept.
 pub fn held_through(configs: &[WebhookConfig], rows: &[Row]) -> i64 {
     configs
         .iter()
         .filter_map(|c| rows.iter().find(|r| r.name == c.name))
-        .filter(|r| r.paused == 0)
+        .filter(|r| r.paused_by() != Some(PausedBy::Admin))
         .map(|r| r.cursor)
         .min()
         .unwrap_or(i64::MAX)
@@ -243,6 +292,8 @@ mod tests {
         let configs = [config("a"), config("b"), config("c")];
         let rows = [row("a", 50, 0), row("b", 20, 1), row("c", 70, 0), row("gone", 1, 0)];
         assert_eq!(held_through(&configs, &rows), 50, "b is paused; `gone` is not configured");
+        let by_receiver = [row("a", 50, 0), row("b", 20, PausedBy::Receiver.stored()), row("c", 70, 0)];
+        assert_eq!(held_through(&configs, &by_receiver), 20, "a 410's pause holds what it needs");
         assert_eq!(held_through(&configs[1..2], &rows), i64::MAX);
         assert_eq!(held_through(&[], &rows), i64::MAX);
     }

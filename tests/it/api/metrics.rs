@@ -34,7 +34,7 @@ print(json.dumps(out))
 "#;
 
 /// The families of `text` as the parser for `format` reads them; fails on a parse error.
-fn parse(text: &str, format: &str) -> BTreeMap<String, Value> {
+pub fn parse(text: &str, format: &str) -> BTreeMap<String, Value> {
     use std::io::Write;
     let mut child = std::process::Command::new(python_with("prometheus_client", "to parse /metrics"))
         .args(["-c", PARSE, format])
@@ -54,7 +54,7 @@ fn parse(text: &str, format: &str) -> BTreeMap<String, Value> {
 }
 
 /// The value of the sample `name` with exactly these labels (plus `le` for buckets).
-fn sample(families: &BTreeMap<String, Value>, name: &str, labels: &[(&str, &str)]) -> Option<f64> {
+pub fn sample(families: &BTreeMap<String, Value>, name: &str, labels: &[(&str, &str)]) -> Option<f64> {
     families.values().flat_map(|f| f["samples"].as_array().unwrap()).find_map(|s| {
         let got = s[1].as_object().unwrap();
         let same = s[0] == name

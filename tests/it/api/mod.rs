@@ -15,7 +15,7 @@ mod inventory;
 mod jobs;
 mod lifecycle;
 mod logs;
-mod metrics;
+pub mod metrics;
 mod openapi;
 mod paging;
 mod stats;

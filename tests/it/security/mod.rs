@@ -4,6 +4,7 @@
 //! the code before its fix.
 
 mod audit;
+mod certificate;
 mod connections;
 mod database_tls;
 mod failed_auth;

@@ -19,7 +19,7 @@ use crate::support::{TestApp, eventually, spawn_with, store};
 
 /// Writes a certificate and key into `dir` as a site's tooling does: a new file renamed
 /// over the old one.
-fn install(dir: &Path, pair: &ServerCert) -> (PathBuf, PathBuf) {
+pub(super) fn install(dir: &Path, pair: &ServerCert) -> (PathBuf, PathBuf) {
     let (cert_file, key_file) = (dir.join("server.crt"), dir.join("server.key"));
     for (path, text) in [(&cert_file, &pair.cert_pem), (&key_file, &pair.key_pem)] {
         let new = path.with_extension("new");
@@ -30,7 +30,7 @@ fn install(dir: &Path, pair: &ServerCert) -> (PathBuf, PathBuf) {
 }
 
 /// A server with `[server.tls]` on the files in `dir`, read again every 50 ms.
-async fn spawn_tls(dir: &Path, pair: &ServerCert) -> TestApp {
+pub(super) async fn spawn_tls(dir: &Path, pair: &ServerCert) -> TestApp {
     let (cert, key) = install(dir, pair);
     let app = spawn_with(Engine::Sqlite, |c| {
         let mut tls = TlsConfig::new(cert, key);
@@ -43,7 +43,7 @@ async fn spawn_tls(dir: &Path, pair: &ServerCert) -> TestApp {
 }
 
 /// An HTTPS client that trusts `ca` alone.
-fn client(ca: &Ca) -> reqwest::Client {
+pub(super) fn client(ca: &Ca) -> reqwest::Client {
     reqwest::Client::builder()
         .tls_built_in_root_certs(false)
         .add_root_certificate(reqwest::Certificate::from_pem(ca.pem.as_bytes()).unwrap())

@@ -47,10 +47,22 @@ impl Ca {
 
     /// A server certificate for `names` (DNS names or IP addresses), signed by this CA.
     pub fn server_for(&self, names: &[&str]) -> ServerCert {
+        self.signed(names, None)
+    }
+
+    /// As [`Ca::server`], valid until `not_after` (rcgen's default is the year 4096).
+    pub fn server_until(&self, not_after: time::OffsetDateTime) -> ServerCert {
+        self.signed(&["localhost", "127.0.0.1"], Some(not_after))
+    }
+
+    fn signed(&self, names: &[&str], not_after: Option<time::OffsetDateTime>) -> ServerCert {
         let key = KeyPair::generate().unwrap();
         let mut params =
             CertificateParams::new(names.iter().map(|n| n.to_string()).collect::<Vec<_>>()).unwrap();
         params.distinguished_name.push(DnType::CommonName, names[0]);
+        if let Some(at) = not_after {
+            params.not_after = at;
+        }
         let cert = params.signed_by(&key, &self.issuer).unwrap();
         ServerCert { cert_pem: cert.pem(), key_pem: key.serialize_pem() }
     }

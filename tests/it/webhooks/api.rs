@@ -35,13 +35,13 @@ async fn job_events(app: &TestApp) -> Vec<i64> {
     events.iter().filter(|e| e.kind.starts_with("job.")).map(|e| e.seq).collect()
 }
 
-async fn webhook(app: &TestApp) -> Value {
+pub async fn webhook(app: &TestApp) -> Value {
     let (status, list) = app.get("/api/v1/webhooks").await;
     assert_eq!(status, 200, "{list}");
     list["webhooks"][0].clone()
 }
 
-async fn caught_up(app: &TestApp) -> Value {
+pub async fn caught_up(app: &TestApp) -> Value {
     eventually("the subscription to catch up", Duration::from_secs(20), async || {
         let w = webhook(app).await;
         if w["state"] == "caught_up" { Ok(w) } else { Err(w) }

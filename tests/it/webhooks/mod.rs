@@ -3,12 +3,15 @@
 //! ([`api`]); verified by a receiver built on the Standard Webhooks library for Python,
 //! with nothing of rackd's ([`python`]); and delivery through SIGKILLs of a `rackd serve`
 //! process driving the shelf and crane simulators ([`kills`]; the two-node failover is
-//! `standby::failover`).
+//! `standby::failover`); a 410 Gone's pause, alarmed and holding its events ([`gone`]); a
+//! subscription that cannot start, alarmed while the machines are driven ([`unstarted`]).
 
 pub mod api;
+mod gone;
 mod kills;
 mod python;
 mod retention;
+mod unstarted;
 
 use crate::support::receiver::Receiver;
 
