@@ -29,7 +29,7 @@
 //!   (code 0) on device `webhook:NAME`; the next success clears it.
 //! - **410 Gone pauses, loudly.** The receiver (or a proxy in front of it, which may say
 //!   so for its own reasons) says it is not coming back: the subscription pauses, as
-//!   paused by the receiver ([`PausedBy`](crate::store::webhooks::PausedBy), told apart
+//!   paused by the receiver ([`PausedBy`], told apart
 //!   from an administrator's pause in the API, the alarm and the row), raises the
 //!   `webhook` alarm with code 2, and retention goes on holding its events as for a
 //!   subscription that delivers, so the WMS can catch up once it is resumed. A resume
