@@ -291,7 +291,19 @@ async fn a_device_holding_a_job_is_not_removed_until_it_ends() {
     let ended = wait_ended(&app, 1, 20).await;
     assert_eq!(ended[0]["state"], "completed", "{:?}", ended);
     assert_eq!(shelf3.received(task_id_for(id)), 1);
-    let body = reload(&app).await;
+    // The job's end is in the store before the dispatcher's queues hear of it (they are
+    // told after the commit): until they do, the reload is refused as before, and applies
+    // nothing.
+    let body = eventually("the reload once the job has ended", Duration::from_secs(10), async || {
+        let post =
+            app.client.post(app.url("/api/v1/config/reload")).header("content-type", "application/json");
+        match split(post.send().await.unwrap()).await {
+            (200, body) => Ok(body),
+            (409, body) if body["error"]["code"] == "device_busy" => Err(body),
+            (status, body) => panic!("{status} {body}"),
+        }
+    })
+    .await;
     assert_eq!(body["devices"], json!([{"id": "shelf-3", "change": "removed"}]));
     let told = ws.events(1).await;
     assert_eq!(told[0]["type"], "config.reloaded", "{told:?}");
