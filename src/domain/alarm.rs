@@ -70,11 +70,15 @@ pub enum AlarmKind {
     /// warning raised by the active node): a takeover would change the site. Cleared once
     /// every node seen runs the active node's.
     ConfigDrift,
+    /// A reload on SIGHUP was refused (device `config`, or `config:NODE` in a cluster): the
+    /// file changed and what runs is not what it says (a revoked key may still be valid).
+    /// Cleared by the next reload that is applied (SIGHUP or the API), or a restart.
+    ConfigReload,
 }
 
 impl AlarmKind {
     /// Every kind.
-    pub const ALL: [AlarmKind; 9] = [
+    pub const ALL: [AlarmKind; 10] = [
         AlarmKind::Device,
         AlarmKind::Link,
         AlarmKind::Heartbeat,
@@ -84,6 +88,7 @@ impl AlarmKind {
         AlarmKind::Archive,
         AlarmKind::Webhook,
         AlarmKind::ConfigDrift,
+        AlarmKind::ConfigReload,
     ];
 
     /// The kind's name as the API writes it.
@@ -98,6 +103,7 @@ impl AlarmKind {
             AlarmKind::Archive => "archive",
             AlarmKind::Webhook => "webhook",
             AlarmKind::ConfigDrift => "config_drift",
+            AlarmKind::ConfigReload => "config_reload",
         }
     }
 
@@ -113,7 +119,8 @@ impl AlarmKind {
             | AlarmKind::Degraded
             | AlarmKind::Takeover
             | AlarmKind::Webhook
-            | AlarmKind::ConfigDrift => AlarmClass::Link,
+            | AlarmKind::ConfigDrift
+            | AlarmKind::ConfigReload => AlarmClass::Link,
             AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost | AlarmKind::Archive => {
                 AlarmClass::Hardware
             }

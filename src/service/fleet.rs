@@ -66,11 +66,13 @@ struct Tasks {
 
 impl Fleet {
     /// Starts every device of `configs`, after clearing the alarms of devices no longer
-    /// configured.
+    /// configured (but a node's `config_reload`: a refused reload of its file, which the
+    /// node clears itself, and which a takeover does not end).
     pub async fn start(configs: &[DeviceConfig], parts: Parts) -> anyhow::Result<Fleet> {
         let ids: BTreeSet<&str> = configs.iter().map(|c| c.id()).collect();
         let mut active = monitor::active(&parts.pool).await;
-        for (device, keys) in active.iter().filter(|(device, _)| !ids.contains(device.as_str())) {
+        for (device, keys) in active.iter_mut().filter(|(device, _)| !ids.contains(device.as_str())) {
+            keys.retain(|(kind, _)| *kind != crate::domain::AlarmKind::ConfigReload);
             monitor::clear(device, keys, &parts.writer).await;
         }
         let fleet = Fleet(Arc::new(Inner { devices: RwLock::default(), tasks: Mutex::default(), parts }));

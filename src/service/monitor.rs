@@ -179,6 +179,7 @@ fn action(device: &str, kind: AlarmKind, code: u16) -> String {
         AlarmKind::Archive => crate::config::ARCHIVE_ACTION.to_owned(),
         AlarmKind::Webhook => crate::service::webhooks::ACTION.to_owned(),
         AlarmKind::ConfigDrift => crate::service::cluster::DRIFT_ACTION.to_owned(),
+        AlarmKind::ConfigReload => crate::config::RELOAD_ACTION.to_owned(),
         AlarmKind::MemoryLost => {
             "Check the locked locations of the lost tasks, correct the inventory, unlock them and retry \
              the failed jobs."
