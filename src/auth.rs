@@ -9,9 +9,15 @@
 //! file of the same `[[keys]]` entries (`name`, `role`, `hash`) for a container secret
 //! (`/run/secrets/rackd_keys`); the configuration merges both, refusing a name or a hash
 //! that appears twice, and a keys file that names no key (most likely the wrong file).
+//!
+//! The [`KeyRing`] is what `[auth]` sets at run time, the keys and the failed-key limit
+//! together: a reload (`service::reload`) builds a new one and swaps it whole, so a request
+//! is checked against one ring from start to end, and a key removed from the file is
+//! refused from the next request on.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
+use std::time::Duration;
 
 use rand::RngCore;
 use serde::{Deserialize, Serialize};
@@ -189,20 +195,36 @@ pub struct Principal {
     pub name: String,
     /// What it may do.
     pub role: Role,
+    /// The key's hash, by which a session opened with it learns that a reload removed it.
+    pub hash: KeyHash,
 }
 
-/// The configured keys, by hash.
-#[derive(Clone, Debug, Default)]
+/// `auth.max_failures` unknown keys per client address within `auth.failure_window_secs`
+/// (`api::failures`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FailureLimit {
+    /// Unknown keys before the address is held off (0: no limit).
+    pub max: u32,
+    /// From the address's first failure.
+    pub window: Duration,
+}
+
+/// The configured keys, by hash, and the failed-key limit: `[auth]` as it runs.
+#[derive(Clone, Debug)]
 pub struct KeyRing {
     keys: HashMap<KeyHash, Principal>,
+    limit: FailureLimit,
 }
 
 impl KeyRing {
-    /// A key ring from the configuration's keys.
-    pub fn new(keys: &[KeyConfig]) -> Self {
-        let keys =
-            keys.iter().map(|k| (k.hash.clone(), Principal { name: k.name.clone(), role: k.role })).collect();
-        KeyRing { keys }
+    /// The key ring `auth` sets (its keys, those of `keys_file` merged in by the loader).
+    pub fn new(auth: &AuthConfig) -> Self {
+        let principal =
+            |k: &KeyConfig| Principal { name: k.name.clone(), role: k.role, hash: k.hash.clone() };
+        let keys = auth.keys.iter().map(|k| (k.hash.clone(), principal(k))).collect();
+        let limit =
+            FailureLimit { max: auth.max_failures, window: Duration::from_secs(auth.failure_window_secs) };
+        KeyRing { keys, limit }
     }
 
     /// Whether no key is configured (then the server only serves loopback, unauthenticated).
@@ -213,6 +235,22 @@ impl KeyRing {
     /// Who holds `key`, if anyone.
     pub fn identify(&self, key: &str) -> Option<&Principal> {
         self.keys.get(&KeyHash::of(key))
+    }
+
+    /// Whether the key of hash `hash` is still one of the ring's.
+    pub fn holds(&self, hash: &KeyHash) -> bool {
+        self.keys.contains_key(hash)
+    }
+
+    /// The failed-key limit.
+    pub fn limit(&self) -> FailureLimit {
+        self.limit
+    }
+}
+
+impl Default for KeyRing {
+    fn default() -> Self {
+        KeyRing::new(&AuthConfig::default())
     }
 }
 

@@ -34,7 +34,7 @@ mod warnings;
 pub mod webhooks;
 
 pub use check::Invalid;
-pub use diff::{Change, Difference, RunningConfig};
+pub use diff::{Change, Difference, RELOAD_ACTION, RunningConfig};
 pub use env::EnvError;
 pub use error::ConfigError;
 pub use events::{EventsConfig, EventsConfigError};

@@ -57,7 +57,11 @@ const ALLOWED: &[(&str, &[&str])] = &[
     // prints it as the store does, without the password.
     ("config", &["auth", "store", "wire", "protocols", "capture", "redact", "domain"]),
     ("devices", &["config", "wire", "protocols", "capture", "domain"]),
-    ("service", &["devices", "config", "store", "wire", "protocols", "capture", "files", "redact", "domain"]),
+    // A reload swaps the key ring that `[auth]` sets (issue 51).
+    (
+        "service",
+        &["devices", "config", "auth", "store", "wire", "protocols", "capture", "files", "redact", "domain"],
+    ),
     (
         "api",
         &[

@@ -150,13 +150,16 @@ pub async fn require_key(
     req: Request,
     next: Next,
 ) -> Result<Response, ApiError> {
-    if app.keys.is_empty() {
+    // One ring for the whole request: a reload swaps it whole.
+    let keys = app.keys();
+    if keys.is_empty() {
         app.hosts.check(&req)?;
         refuse_token(&req)?;
         return Ok(next.run(without_token(req)).await);
     }
+    let limit = keys.limit();
     let peer = peer(req.extensions());
-    if let Some(wait) = peer.and_then(|ip| app.failures.blocked(ip)) {
+    if let Some(wait) = peer.and_then(|ip| app.failures.blocked(ip, limit)) {
         return Err(too_many_failures(wait));
     }
     refuse_token(&req)?;
@@ -168,9 +171,9 @@ pub async fn require_key(
             "an API key is required (Authorization: Bearer KEY)",
         ));
     };
-    let Some(who) = app.keys.identify(&key) else {
+    let Some(who) = keys.identify(&key) else {
         if let Some(ip) = peer {
-            app.failures.failed(ip, super::failures::fingerprint(&key));
+            app.failures.failed(ip, super::failures::fingerprint(&key), limit);
         }
         return Err(ApiError::new(StatusCode::UNAUTHORIZED, "unauthorized", "the API key is not known"));
     };

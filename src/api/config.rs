@@ -7,7 +7,8 @@
 //! Refusals, each with nothing applied: 422 `invalid_config` for a file that
 //! `check-config` refuses (the same `WHERE: KEY: MESSAGE`), or a device that cannot be
 //! built; 409 `fixed_key` for a key that cannot change while rackd runs (any outside
-//! `[[devices]]` and `[site]`), `aisle_in_use` for an aisle removed or shrunk while a box
+//! `[[devices]]`, `[site]` and `[auth]`, and `auth.keys` emptied or given its first key),
+//! `aisle_in_use` for an aisle removed or shrunk while a box
 //! or a job uses a location it would lose, `device_busy` for a device removed while it
 //! holds jobs on the machine (each naming them), `no_config_file` when rackd did not start
 //! from a file.
@@ -46,7 +47,9 @@ pub struct ReloadRequest {
     "loaded_at": "2026-11-27T08:00:00Z",
     "devices": [{"id": "shelf-1", "change": "changed", "keys": ["address", "timeout_ms"]},
         {"id": "crane-3", "change": "added"}],
-    "aisles": {"added": [3], "removed": [], "changed": []}, "fixed": []}))]
+    "aisles": {"added": [3], "removed": [], "changed": []},
+    "auth": {"keys": [{"name": "wms", "change": "removed"}, {"name": "wms-2", "change": "added"}], "settings": []},
+    "fixed": []}))]
 pub struct ReloadView {
     /// Whether nothing was applied (`?dry_run=true`).
     pub dry_run: bool,
@@ -69,7 +72,7 @@ impl From<ReloadError> for ApiError {
             ReloadError::Invalid(_) | ReloadError::Device(..) => {
                 ApiError::invalid("invalid_config", e.to_string())
             }
-            ReloadError::Fixed(_) => ApiError::conflict("fixed_key", e.to_string()),
+            ReloadError::Fixed(_) | ReloadError::Keyless(_) => ApiError::conflict("fixed_key", e.to_string()),
             ReloadError::InUse(_) => ApiError::conflict("aisle_in_use", e.to_string()),
             ReloadError::Busy(_) => ApiError::conflict("device_busy", e.to_string()),
             ReloadError::Task(_) | ReloadError::Store(_) => ApiError::unavailable(e),
@@ -91,11 +94,13 @@ async fn loaded(State(app): State<AppState>) -> Json<RunningConfig> {
 /// Reads the configuration again and applies what changed, or answers it.
 ///
 /// The file and environment are those rackd started with; the configuration is checked
-/// exactly as `rackd check-config` checks it. Devices are matched by id, aisles by number;
-/// only key names are reported, never values. Devices added, removed or changed are
-/// started, stopped or restarted, each at a safe point (never inside a hand-over); the
-/// others run on untouched. Queued jobs of a removed device wait (`no_device`). Audited,
-/// and told as a `config.reloaded` event. All or nothing: a refusal applies nothing.
+/// exactly as `rackd check-config` checks it. Devices are matched by id, aisles by number,
+/// API keys by name; only names are reported, never values. Devices added, removed or
+/// changed are started, stopped or restarted, each at a safe point (never inside a
+/// hand-over); the others run on untouched. Queued jobs of a removed device wait
+/// (`no_device`). `[auth]` applies last: a removed key gets 401 from the next request on,
+/// and its WebSockets are closed. Audited, and told as a `config.reloaded` event. All or
+/// nothing: a refusal applies nothing.
 #[utoipa::path(post, path = "/config/reload", tag = "operations", params(DryRunParams),
     request_body(content = Option<ReloadRequest>),
     responses(
@@ -103,7 +108,7 @@ async fn loaded(State(app): State<AppState>) -> Json<RunningConfig> {
         (status = 401, description = "No key, or an unknown key", body = ErrorBody),
         (status = 403, description = "Not an administrator's key", body = ErrorBody),
         (status = 409, description = "A key that cannot change while rackd runs (`fixed_key`, naming it and \
-where it is set), an aisle removed or shrunk while a box or a job uses a location it would lose (`aisle_in_use`), a \
+where it is set; `auth.keys` may not become empty nor get its first key), an aisle removed or shrunk while a box or a job uses a location it would lose (`aisle_in_use`), a \
 device removed while it holds jobs on the machine (`device_busy`), each naming them, or rackd did not start from a \
 file (`no_config_file`); nothing was applied", body = ErrorBody),
         (status = 422, description = "The configuration does not check (`invalid_config`: WHERE: KEY: MESSAGE, \

@@ -27,6 +27,9 @@
 //!   failing long ago start afresh.
 //! - Without a peer address (a server built without one) nothing is counted.
 //! - Time is tokio's, so tests move it on paused time.
+//! - The limit is the running key ring's ([`FailureLimit`]), passed with each call: a
+//!   reload that changes it holds from the next request on, and the table's counts stay
+//!   (a window of the old length ends at the new length from its first failure).
 
 use std::collections::HashMap;
 use std::net::IpAddr;
@@ -35,15 +38,15 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
+use crate::auth::FailureLimit;
+
 /// The most addresses the table holds. Each takes about 40 bytes and 8 per key counted
 /// (`auth.max_failures` is at most [`crate::auth::MOST_FAILURES`]): at most about 7 MiB.
 pub const MOST: usize = 8192;
 
 /// The failures of each address within its window.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 pub struct Failures {
-    max: u32,
-    window: Duration,
     table: Mutex<HashMap<IpAddr, Window>>,
 }
 
@@ -68,39 +71,35 @@ pub fn fingerprint(key: &str) -> u64 {
 }
 
 impl Failures {
-    /// A limit of `max` failures per `window` (`max` 0: no limit).
-    pub fn new(max: u32, window: Duration) -> Failures {
-        Failures { max, window, table: Mutex::new(HashMap::new()) }
-    }
-
     fn table(&self) -> std::sync::MutexGuard<'_, HashMap<IpAddr, Window>> {
         self.table.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// How long `ip` must still wait, if it has used up its failures.
-    pub fn blocked(&self, ip: IpAddr) -> Option<Duration> {
-        if self.max == 0 {
+    /// How long `ip` must still wait under `limit`, if it has used up its failures.
+    pub fn blocked(&self, ip: IpAddr, limit: FailureLimit) -> Option<Duration> {
+        if limit.max == 0 {
             return None;
         }
         let now = Instant::now();
         let table = self.table();
         let w = table.get(&ip)?;
-        let ends = w.first + self.window;
-        (w.keys.len() >= self.max as usize && now < ends).then(|| ends - now)
+        let ends = w.first + limit.window;
+        (w.keys.len() >= limit.max as usize && now < ends).then(|| ends - now)
     }
 
-    /// Notes that `ip` presented the unknown key of fingerprint `key` ([`fingerprint`]).
-    pub fn failed(&self, ip: IpAddr, key: u64) {
-        if self.max == 0 {
+    /// Notes that `ip` presented the unknown key of fingerprint `key` ([`fingerprint`]),
+    /// under `limit`.
+    pub fn failed(&self, ip: IpAddr, key: u64, limit: FailureLimit) {
+        if limit.max == 0 {
             return;
         }
         let now = Instant::now();
-        let window = self.window;
+        let window = limit.window;
         let mut table = self.table();
         if let Some(w) = table.get_mut(&ip) {
             if now >= w.first + window {
                 *w = Window::new(now, key);
-            } else if !w.keys.contains(&key) && w.keys.len() < self.max as usize {
+            } else if !w.keys.contains(&key) && w.keys.len() < limit.max as usize {
                 w.keys.push(key);
             }
             return;
@@ -138,68 +137,72 @@ mod tests {
     const A: IpAddr = IpAddr::V4(std::net::Ipv4Addr::new(10, 0, 0, 1));
     const B: IpAddr = IpAddr::V4(std::net::Ipv4Addr::new(10, 0, 0, 2));
 
+    fn limit(max: u32, secs: u64) -> FailureLimit {
+        FailureLimit { max, window: Duration::from_secs(secs) }
+    }
+
     #[tokio::test(start_paused = true)]
     async fn an_address_is_held_up_for_the_rest_of_its_window_then_starts_afresh() {
-        let f = Failures::new(3, Duration::from_secs(60));
-        f.failed(A, fingerprint("guess-1"));
-        f.failed(A, fingerprint("guess-2"));
-        assert_eq!(f.blocked(A), None, "two of three");
+        let (f, l) = (Failures::default(), limit(3, 60));
+        f.failed(A, fingerprint("guess-1"), l);
+        f.failed(A, fingerprint("guess-2"), l);
+        assert_eq!(f.blocked(A, l), None, "two of three");
         tokio::time::advance(Duration::from_secs(10)).await;
-        f.failed(A, fingerprint("guess-3"));
-        assert_eq!(f.blocked(A), Some(Duration::from_secs(50)), "the window runs from the first failure");
-        assert_eq!(f.blocked(B), None, "another address is not touched");
+        f.failed(A, fingerprint("guess-3"), l);
+        assert_eq!(f.blocked(A, l), Some(Duration::from_secs(50)), "the window runs from the first failure");
+        assert_eq!(f.blocked(B, l), None, "another address is not touched");
         tokio::time::advance(Duration::from_secs(49)).await;
-        assert_eq!(f.blocked(A), Some(Duration::from_secs(1)));
+        assert_eq!(f.blocked(A, l), Some(Duration::from_secs(1)));
         tokio::time::advance(Duration::from_secs(1)).await;
-        assert_eq!(f.blocked(A), None, "the window has passed");
-        f.failed(A, fingerprint("guess-4"));
-        assert_eq!(f.blocked(A), None, "and the count starts again");
+        assert_eq!(f.blocked(A, l), None, "the window has passed");
+        f.failed(A, fingerprint("guess-4"), l);
+        assert_eq!(f.blocked(A, l), None, "and the count starts again");
     }
 
     #[tokio::test(start_paused = true)]
     async fn the_same_unknown_key_again_counts_once() {
-        let f = Failures::new(3, Duration::from_secs(60));
+        let (f, l) = (Failures::default(), limit(3, 60));
         for _ in 0..50 {
-            f.failed(A, fingerprint("stale"));
+            f.failed(A, fingerprint("stale"), l);
         }
-        assert_eq!(f.blocked(A), None, "a stale key retried is not a guess");
-        f.failed(A, fingerprint("other-1"));
-        f.failed(A, fingerprint("other-2"));
-        assert!(f.blocked(A).is_some());
+        assert_eq!(f.blocked(A, l), None, "a stale key retried is not a guess");
+        f.failed(A, fingerprint("other-1"), l);
+        f.failed(A, fingerprint("other-2"), l);
+        assert!(f.blocked(A, l).is_some());
     }
 
     #[tokio::test(start_paused = true)]
     async fn failures_spread_over_more_than_a_window_never_block() {
-        let f = Failures::new(2, Duration::from_secs(60));
+        let (f, l) = (Failures::default(), limit(2, 60));
         for n in 0..10u64 {
-            f.failed(A, n);
+            f.failed(A, n, l);
             tokio::time::advance(Duration::from_secs(61)).await;
         }
-        assert_eq!(f.blocked(A), None);
+        assert_eq!(f.blocked(A, l), None);
     }
 
     #[tokio::test(start_paused = true)]
     async fn a_flood_of_addresses_keeps_the_table_bounded_and_the_newest() {
-        let f = Failures::new(1, Duration::from_secs(60));
+        let (f, l) = (Failures::default(), limit(1, 60));
         let ip = |i: u32| IpAddr::V4(std::net::Ipv4Addr::from(0x0a00_0000 + i));
         for i in 0..(MOST as u32 * 5) {
-            f.failed(ip(i), 7);
+            f.failed(ip(i), 7, l);
             if i % 1000 == 0 {
                 tokio::time::advance(Duration::from_millis(1)).await;
             }
         }
         assert!(f.len() <= MOST, "{}", f.len());
-        assert!(f.blocked(ip(MOST as u32 * 5 - 1)).is_some(), "the newest address is still held up");
-        assert!(f.blocked(ip(0)).is_none(), "the oldest went first");
+        assert!(f.blocked(ip(MOST as u32 * 5 - 1), l).is_some(), "the newest address is still held up");
+        assert!(f.blocked(ip(0), l).is_none(), "the oldest went first");
     }
 
     #[test]
     fn no_limit_when_max_is_zero() {
-        let f = Failures::new(0, Duration::from_secs(60));
+        let (f, l) = (Failures::default(), limit(0, 60));
         for n in 0..100 {
-            f.failed(A, n);
+            f.failed(A, n, l);
         }
-        assert_eq!(f.blocked(A), None);
+        assert_eq!(f.blocked(A, l), None);
         assert!(f.is_empty());
     }
 }

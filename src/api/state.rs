@@ -33,6 +33,11 @@ impl Shared {
     pub fn rules(&self) -> Arc<Rules> {
         self.reload.rules()
     }
+
+    /// The API keys and the failed-key limit, as the running configuration sets them.
+    pub fn keys(&self) -> Arc<KeyRing> {
+        self.reload.keys()
+    }
 }
 
 impl std::ops::Deref for AppState {
@@ -48,8 +53,6 @@ pub struct Shared {
     pub pool: Pool,
     /// The one writer of jobs.
     pub writer: Writer,
-    /// The API keys.
-    pub keys: Arc<KeyRing>,
     /// Prometheus metrics.
     pub metrics: Arc<Metrics>,
     /// The webhook subscriptions' deliverers, once this node drives the machines.
@@ -77,6 +80,6 @@ pub struct Shared {
     /// The places for device capture builds, `server.capture_downloads` of them
     /// (`api::devices::capture`).
     pub capture_builds: Arc<tokio::sync::Semaphore>,
-    /// Failed authentications per client address.
+    /// Failed authentications per client address (the limit is the key ring's).
     pub failures: super::failures::Failures,
 }

@@ -2,9 +2,10 @@
 //! node's row, the event log followed into the hub (and, on the active node, into the
 //! queues: jobs the standbys took in; on every node, into the counts of jobs and alarms
 //! `/metrics` shows, read again after each batch), and the takeover: driving starts when
-//! the lease is won, exactly as at a restart, and stops the instant it is lost; the process
-//! then ends ([`Clustered::lost`]) so that its supervisor starts it again as a standby,
-//! with nothing of the old term left in memory.
+//! the lease is won, exactly as at a restart (under the reload's lock: a reload waits, so
+//! the node drives the configuration whose hash it reports), and stops the instant it is
+//! lost; the process then ends ([`Clustered::lost`]) so that its supervisor starts it again
+//! as a standby, with nothing of the old term left in memory.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
@@ -158,10 +159,13 @@ async fn takeover(node: Node, parts: Parts, lost: watch::Sender<Option<String>>)
     parts.dispatcher.queues().set_drives(true);
     let fenced = parts.writer.fenced(node.gate.epoch());
     let may = Some(node.gate.may());
-    let config = parts.reload.for_takeover();
-    match drive::start(&config, &parts.pool, &parts.dispatcher, fenced.clone(), &parts.hub, may).await {
+    // No reload between reading the configuration and driving it (`service::reload`): the
+    // node reports the hash of what it drives.
+    let takeover = parts.reload.take_over().await;
+    let config = takeover.config();
+    match drive::start(config, &parts.pool, &parts.dispatcher, fenced.clone(), &parts.hub, may).await {
         Ok(d) => {
-            parts.reload.drive(d.fleet);
+            takeover.drive(d.fleet);
             let _ = parts.webhooks.set(d.webhooks);
             parts.tasks.lock().unwrap_or_else(|p| p.into_inner()).extend(d.tasks);
         }

@@ -73,7 +73,7 @@ impl Application {
         listener: TcpListener,
         insecure: bool,
     ) -> anyhow::Result<Application> {
-        let keys = KeyRing::new(&config.auth.keys);
+        let keys = KeyRing::new(&config.auth);
         let listen = config.server.listen;
         // Before anything starts: a certificate that does not load is a start that fails.
         let tls = match &config.server.tls {
@@ -207,7 +207,6 @@ impl Application {
             reload: reload.clone(),
             pool,
             writer,
-            keys: Arc::new(keys),
             metrics,
             webhooks,
             subscriptions: Arc::new(config.webhooks.clone()),
@@ -222,10 +221,7 @@ impl Application {
             ),
             captures: config.retention.captures(&config.database.path),
             capture_builds: Arc::new(tokio::sync::Semaphore::new(config.server.capture_downloads)),
-            failures: api::failures::Failures::new(
-                config.auth.max_failures,
-                Duration::from_secs(config.auth.failure_window_secs),
-            ),
+            failures: api::failures::Failures::default(),
         });
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);

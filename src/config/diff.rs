@@ -1,24 +1,27 @@
 //! The difference between the running configuration and a new one, as a reload sees it
 //! (issue 43): which devices are added, removed or changed (and in which keys), which
-//! aisles are added, removed or resized, which keys cannot change while rackd runs, and
-//! which other keys changed (none of which may change while rackd runs).
+//! aisles are added, removed or resized, which API keys are added, removed or changed (and
+//! the other `[auth]` keys that changed), and which keys cannot change while rackd runs.
 //!
 //! Decisions:
-//! - Devices are matched by `id` and aisles by their number, not by their place in the
-//!   file: moving an entry, or adding one before it, is no change.
+//! - Devices are matched by `id`, aisles by their number and API keys by their `name`, not
+//!   by their place in the file: moving an entry, or adding one before it, is no change. A
+//!   key renamed is one removed and one added.
 //! - A device's keys are those of its flat form ([`RawDevice`], every key of its kind
 //!   filled in), so a key set to its default in one file and left out in the other is no
 //!   change, and a new default in the code never reads as a change of the file.
-//! - Lists (a device's `aisles`, `quirks`; `auth.keys`, `webhooks`) are compared whole and
-//!   named by their key: "which entry" says less than "this list" to the one reloading.
-//! - Only `[[devices]]` and `[site]` change at run time. Every other key that changed is
+//! - Lists (a device's `aisles`, `quirks`; `webhooks`) are compared whole and named by
+//!   their key: "which entry" says less than "this list" to the one reloading.
+//! - `[[devices]]`, `[site]` and `[auth]` change at run time (`[auth]` since issue 51: a
+//!   leaked key is revoked by a reload, not a restart). Every other key that changed is
 //!   listed in `fixed`, and a reload with any is refused whole: the listen address, the
 //!   database and the cluster node because the process holds them open (a socket, a pool,
-//!   a lease row); the rest (`auth.keys`, `webhooks`, `[events]`, ...) because the parts
-//!   that read them read them once, at start. Restarting is how they change; a takeover
-//!   in a cluster is one.
-//! - Only key names are reported, never values: `database.url` and the keys' hashes are
-//!   secrets, and a name is what the reader looks up in the file.
+//!   a lease row); the rest (`webhooks`, `[events]`, ...) because the parts that read them
+//!   read them once, at start. Restarting is how they change; a takeover in a cluster is
+//!   one.
+//! - Only names are reported, never values: `database.url` and the keys' hashes are
+//!   secrets, and a name is what the reader looks up in the file. An API key is named by
+//!   its `name`, with `role` or `hash` when those changed; never by its hash.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -29,6 +32,11 @@ use utoipa::ToSchema;
 use super::Config;
 use super::devices::RawDevice;
 
+/// What a `config_reload` alarm (a refused reload on SIGHUP) asks a person to do.
+pub const RELOAD_ACTION: &str = "Fix the configuration file (rackd check-config --config FILE says what is \
+     wrong, as the alarm does), then reload again (SIGHUP, or POST /api/v1/config/reload); until then the \
+     configuration that ran before runs on, its API keys included.";
+
 /// What a reload would change.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, ToSchema)]
 pub struct Difference {
@@ -37,9 +45,42 @@ pub struct Difference {
     pub devices: Vec<DeviceChange>,
     /// Aisles of `[site]`.
     pub aisles: AisleChanges,
-    /// Keys outside `[[devices]]` and `[site]` that changed: they cannot change while rackd
-    /// runs, and a reload with any is refused whole.
+    /// `[auth]`: API keys and the failed-key limit.
+    pub auth: AuthChanges,
+    /// Keys outside `[[devices]]`, `[site]` and `[auth]` that changed: they cannot change
+    /// while rackd runs, and a reload with any is refused whole.
     pub fixed: Vec<String>,
+}
+
+/// What changes in `[auth]`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, ToSchema)]
+pub struct AuthChanges {
+    /// API keys added, removed or changed, by name, in the running file's order (then the
+    /// added ones in the new file's order).
+    pub keys: Vec<KeyChange>,
+    /// Other `[auth]` keys that changed (`auth.max_failures`, `auth.failure_window_secs`,
+    /// `auth.keys_file`).
+    pub settings: Vec<String>,
+}
+
+/// One API key's change: its name, never the key or its hash.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, ToSchema)]
+#[schema(example = json!({"name": "wms", "change": "changed", "fields": ["hash"]}))]
+pub struct KeyChange {
+    /// The key's `name`.
+    pub name: String,
+    /// Added (valid from now on), removed (refused from now on) or changed.
+    pub change: Change,
+    /// For a changed key: `role`, `hash` or both.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub fields: Vec<String>,
+}
+
+impl AuthChanges {
+    /// Whether `[auth]` does not change.
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty() && self.settings.is_empty()
+    }
 }
 
 /// One device's change.
@@ -54,15 +95,15 @@ pub struct DeviceChange {
     pub keys: Vec<String>,
 }
 
-/// What happens to a device.
+/// What happens to a device (or an API key).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Change {
-    /// In the new file only: started.
+    /// In the new file only: started (a key: valid).
     Added,
-    /// In the running file only: stopped.
+    /// In the running file only: stopped (a key: refused).
     Removed,
-    /// In both, with other settings: restarted.
+    /// In both, with other settings: restarted (a key: its new role or hash holds).
     Changed,
 }
 
@@ -119,16 +160,18 @@ impl Config {
     pub fn difference(&self, new: &Config) -> Difference {
         let devices = device_changes(self, new);
         let aisles = aisle_changes(self, new);
+        let auth = auth_changes(self, new);
         let (mut old_rest, mut new_rest) = (json(self), json(new));
         for rest in [&mut old_rest, &mut new_rest] {
             if let Value::Object(map) = rest {
                 map.remove("devices");
                 map.remove("site");
+                map.remove("auth");
             }
         }
         let mut fixed = Vec::new();
         leaves("", &old_rest, &new_rest, &mut fixed);
-        Difference { devices, aisles, fixed }
+        Difference { devices, aisles, auth, fixed }
     }
 
     /// The hash of what a reload changes, `[site]` and `[[devices]]` (each device with
@@ -196,6 +239,41 @@ fn device_changes(old: &Config, new: &Config) -> Vec<DeviceChange> {
         changes.push(DeviceChange { id: d.id().to_owned(), change: Change::Added, keys: Vec::new() });
     }
     changes
+}
+
+fn auth_changes(old: &Config, new: &Config) -> AuthChanges {
+    let mut keys = Vec::new();
+    let find = |c: &Config, name: &str| c.auth.keys.iter().find(|k| k.name == name).cloned();
+    for was in &old.auth.keys {
+        let change = match find(new, &was.name) {
+            None => Some((Change::Removed, Vec::new())),
+            Some(now) => {
+                let mut fields = Vec::new();
+                if now.role != was.role {
+                    fields.push("role".to_owned());
+                }
+                if now.hash != was.hash {
+                    fields.push("hash".to_owned());
+                }
+                (!fields.is_empty()).then_some((Change::Changed, fields))
+            }
+        };
+        if let Some((change, fields)) = change {
+            keys.push(KeyChange { name: was.name.clone(), change, fields });
+        }
+    }
+    for k in new.auth.keys.iter().filter(|k| find(old, &k.name).is_none()) {
+        keys.push(KeyChange { name: k.name.clone(), change: Change::Added, fields: Vec::new() });
+    }
+    let (mut before, mut after) = (json(&old.auth), json(&new.auth));
+    for side in [&mut before, &mut after] {
+        if let Value::Object(map) = side {
+            map.remove("keys");
+        }
+    }
+    let mut settings = Vec::new();
+    leaves("auth", &before, &after, &mut settings);
+    AuthChanges { keys, settings }
 }
 
 fn aisle_changes(old: &Config, new: &Config) -> AisleChanges {
@@ -374,8 +452,53 @@ aisles = [2]
             serde_json::json!({
                 "devices": [{"id": "crane-2", "change": "removed"}, {"id": "crane-3", "change": "added"}],
                 "aisles": {"added": [], "removed": [], "changed": []},
+                "auth": {"keys": [], "settings": []},
                 "fixed": [],
             })
         );
+    }
+
+    #[test]
+    fn keys_are_matched_by_name_and_named_never_shown() {
+        use crate::auth::{KeyConfig, KeyHash, Role};
+        let key =
+            |name: &str, role: Role, key: &str| KeyConfig { name: name.into(), role, hash: KeyHash::of(key) };
+        let mut old = parse(BASE);
+        old.auth.keys = vec![
+            key("wms", Role::Operator, "wms-key-1"),
+            key("screen", Role::Viewer, "screen-key"),
+            key("ops", Role::Operator, "ops-key"),
+        ];
+        let mut new = old.clone();
+        new.auth.keys = vec![
+            key("ops", Role::Admin, "ops-key"),
+            key("wms", Role::Operator, "wms-key-2"),
+            key("tablet", Role::Viewer, "tablet-key"),
+        ];
+        new.auth.max_failures += 1;
+        let diff = old.difference(&new);
+        assert!(diff.fixed.is_empty() && diff.devices.is_empty(), "{diff:?}");
+        let change = |name: &str, change, fields: &[&str]| KeyChange {
+            name: name.into(),
+            change,
+            fields: fields.iter().map(|f| f.to_string()).collect(),
+        };
+        assert_eq!(
+            diff.auth,
+            AuthChanges {
+                keys: vec![
+                    change("wms", Change::Changed, &["hash"]),
+                    change("screen", Change::Removed, &[]),
+                    change("ops", Change::Changed, &["role"]),
+                    change("tablet", Change::Added, &[]),
+                ],
+                settings: vec!["auth.max_failures".into()],
+            }
+        );
+        let text = serde_json::to_string(&diff).unwrap();
+        assert!(!text.contains("sha256") && !text.contains("-key"), "{text}");
+        let mut moved = old.clone();
+        moved.auth.keys.reverse();
+        assert!(old.difference(&moved).is_empty(), "a key moved in the file is no change");
     }
 }

@@ -77,11 +77,15 @@ pub enum AlarmKind {
     /// device `tls` (`tls:NODE` in a cluster). Cleared once a certificate that is good for
     /// longer is served (code 0), or the files load (code 1).
     Certificate,
+    /// A reload on SIGHUP was refused (device `config`, or `config:NODE` in a cluster): the
+    /// file changed and what runs is not what it says (a revoked key may still be valid).
+    /// Cleared by the next reload that is applied (SIGHUP or the API), or a restart.
+    ConfigReload,
 }
 
 impl AlarmKind {
     /// Every kind.
-    pub const ALL: [AlarmKind; 10] = [
+    pub const ALL: [AlarmKind; 11] = [
         AlarmKind::Device,
         AlarmKind::Link,
         AlarmKind::Heartbeat,
@@ -92,6 +96,7 @@ impl AlarmKind {
         AlarmKind::Webhook,
         AlarmKind::ConfigDrift,
         AlarmKind::Certificate,
+        AlarmKind::ConfigReload,
     ];
 
     /// The kind's name as the API writes it.
@@ -107,6 +112,7 @@ impl AlarmKind {
             AlarmKind::Webhook => "webhook",
             AlarmKind::ConfigDrift => "config_drift",
             AlarmKind::Certificate => "certificate",
+            AlarmKind::ConfigReload => "config_reload",
         }
     }
 
@@ -124,6 +130,7 @@ impl AlarmKind {
             | AlarmKind::Webhook
             | AlarmKind::ConfigDrift
             | AlarmKind::Certificate => AlarmClass::Link,
+            | AlarmKind::ConfigReload => AlarmClass::Link,
             AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost | AlarmKind::Archive => {
                 AlarmClass::Hardware
             }

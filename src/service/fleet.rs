@@ -68,14 +68,17 @@ impl Fleet {
     /// Starts every device of `configs`, after clearing the alarms of devices no longer
     /// configured. A `certificate` alarm is no device's: it is the alarm of the node that
     /// serves the certificate (device `tls:NODE`, raised before this node drives anything,
-    /// maybe by a standby), which that node's watch clears itself.
+    /// maybe by a standby), which that node's watch clears itself; nor is a node's
+    /// `config_reload` (a refused reload of its file, which the node clears itself, and
+    /// which a takeover does not end).
     pub async fn start(configs: &[DeviceConfig], parts: Parts) -> anyhow::Result<Fleet> {
         let ids: BTreeSet<&str> = configs.iter().map(|c| c.id()).collect();
         let mut active = monitor::active(&parts.pool).await;
         for keys in active.values_mut() {
             keys.retain(|(kind, _)| *kind != crate::domain::AlarmKind::Certificate);
         }
-        for (device, keys) in active.iter().filter(|(device, _)| !ids.contains(device.as_str())) {
+        for (device, keys) in active.iter_mut().filter(|(device, _)| !ids.contains(device.as_str())) {
+            keys.retain(|(kind, _)| *kind != crate::domain::AlarmKind::ConfigReload);
             monitor::clear(device, keys, &parts.writer).await;
         }
         let fleet = Fleet(Arc::new(Inner { devices: RwLock::default(), tasks: Mutex::default(), parts }));

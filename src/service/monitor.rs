@@ -188,6 +188,7 @@ fn action(device: &str, kind: AlarmKind, code: u16) -> String {
             1 => crate::config::tls::REFUSED_ACTION.to_owned(),
             _ => crate::config::tls::EXPIRING_ACTION.to_owned(),
         },
+        AlarmKind::ConfigReload => crate::config::RELOAD_ACTION.to_owned(),
         AlarmKind::MemoryLost => {
             "Check the locked locations of the lost tasks, correct the inventory, unlock them and retry \
              the failed jobs."

@@ -12,7 +12,9 @@
 //!    4000; it reconnects with `?since=SEQ`. Nobody else waits for it.
 //!
 //! The server pings every `events.ping_secs` and drops a client silent for two pings;
-//! clients may ping too. A `since` that is no longer in the log (retention) or beyond its
+//! clients may ping too. A socket opened with a key that a reload removes is closed with
+//! code 1008 (`session::CLOSE_REVOKED`): a revoked key reads nothing more, on a socket
+//! opened before as on a request. A `since` that is no longer in the log (retention) or beyond its
 //! end (another database) starts with a snapshot whose `reason` says so.
 
 mod session;
@@ -105,7 +107,7 @@ fn topics(text: Option<&str>) -> Result<Vec<Topic>, ApiError> {
 /// "time", "type", "data"}` (schema `Event`) in sequence order without gap or duplicate, and
 /// `{"type": "resync", "seq", "reason"}` when the client fell too far behind (the connection
 /// then closes with code 4000; reconnect with `?since=SEQ`). Viewer role; browsers pass the
-/// key as `?token=`.
+/// key as `?token=`. A reload that removes the key closes the socket with code 1008.
 #[utoipa::path(get, path = "/ws", tag = "events", params(WsParams),
     responses(
         (status = 101, description = "Switching to the WebSocket protocol; then messages as described", body = Event),
@@ -114,6 +116,7 @@ fn topics(text: Option<&str>) -> Result<Vec<Topic>, ApiError> {
     ))]
 async fn subscribe(
     State(app): State<AppState>,
+    who: Option<axum::Extension<crate::auth::Principal>>,
     Query(params): Query<WsParams>,
     upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
@@ -129,7 +132,8 @@ async fn subscribe(
     })?;
     // Subscribe before the snapshot or replay is read, so that nothing committed in
     // between can be missed; duplicates are dropped by sequence number.
-    let session = session::Session::new(&app, topics, params.since);
+    let key = who.map(|axum::Extension(p)| p.hash);
+    let session = session::Session::new(&app, topics, params.since, key);
     // Clients send little (pongs, a close), and the read buffer is zero-filled to its size
     // each time the socket is polled for input, which is once per event sent: a small one
     // keeps that from costing more than the send (it cut the CPU per delivery by half).

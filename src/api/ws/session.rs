@@ -1,6 +1,8 @@
 //! One subscriber's connection: start (snapshot or replay), then the live stream, with
-//! pings, a send timeout and resync for a subscriber that falls behind.
+//! pings, a send timeout and resync for a subscriber that falls behind; closed (1008) when
+//! a reload removes the key it was opened with.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use crate::store::Pool;
@@ -8,8 +10,10 @@ use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket};
 use futures::stream::SplitSink;
 use futures::{SinkExt, StreamExt};
 use tokio::sync::broadcast::{Receiver, error::RecvError};
+use tokio::sync::watch;
 
 use crate::api::state::AppState;
+use crate::auth::{KeyHash, KeyRing};
 use crate::devices::Devices;
 use crate::service::dispatch::Queues;
 use crate::service::events::{Commit, PublishedSeq, Topic};
@@ -17,6 +21,10 @@ use crate::store::events;
 
 /// Close code sent with `resync`: the client fell behind and should reconnect with `since`.
 pub const CLOSE_RESYNC: u16 = 4000;
+
+/// Close code sent when a reload removed the key the session was opened with (1008, policy
+/// violation): a revoked key reads nothing more, on a socket opened before as on a request.
+pub const CLOSE_REVOKED: u16 = 1008;
 
 /// Events read from the log per query during a replay.
 const REPLAY_PAGE: u32 = 1000;
@@ -46,13 +54,18 @@ pub struct Session {
     send_timeout: Duration,
     snapshot_jobs: u32,
     metrics: std::sync::Arc<crate::api::metrics::Metrics>,
+    /// The hash of the key the session was opened with (none in keyless mode), and the key
+    /// ring as reloads change it.
+    key: Option<KeyHash>,
+    keys: watch::Receiver<Arc<KeyRing>>,
 }
 
 type Sink = SplitSink<WebSocket, Message>;
 
 impl Session {
-    /// Subscribes to the hub now, so the session misses nothing committed from here on.
-    pub fn new(app: &AppState, topics: Vec<Topic>, since: Option<i64>) -> Session {
+    /// Subscribes to the hub now, so the session misses nothing committed from here on;
+    /// `key` is the hash of the key it was opened with.
+    pub fn new(app: &AppState, topics: Vec<Topic>, since: Option<i64>, key: Option<KeyHash>) -> Session {
         let options = &app.events;
         Session {
             pool: app.pool.clone(),
@@ -66,18 +79,39 @@ impl Session {
             send_timeout: Duration::from_secs(options.send_timeout_secs),
             snapshot_jobs: options.snapshot_jobs,
             metrics: app.metrics.clone(),
+            key,
+            keys: app.reload.watch_keys(),
         }
+    }
+
+    /// Whether a reload removed the session's key (seen now, so a ring swapped between
+    /// the request's check and here counts too).
+    fn revoked(&mut self) -> bool {
+        let keys = self.keys.borrow_and_update();
+        self.key.as_ref().is_some_and(|k| !keys.holds(k))
     }
 
     /// Runs the session until the client leaves, falls behind or the server stops.
     pub async fn run(mut self, socket: WebSocket) {
         let (mut sink, mut stream) = socket.split();
         let result = async {
+            if self.revoked() {
+                return self.close(&mut sink, CLOSE_REVOKED, "the API key was revoked").await;
+            }
             let mut last = self.start(&mut sink).await?;
             let mut ping = tokio::time::interval_at(tokio::time::Instant::now() + self.ping, self.ping);
             let mut heard = true;
+            // Until the ring's sender goes (the server stopping), in sessions opened with a key.
+            let mut watching = self.key.is_some();
             loop {
                 tokio::select! {
+                    changed = self.keys.changed(), if watching => match changed {
+                        Ok(()) if self.revoked() => {
+                            return self.close(&mut sink, CLOSE_REVOKED, "the API key was revoked").await;
+                        }
+                        Ok(()) => {}
+                        Err(_) => watching = false,
+                    },
                     commit = self.events.recv() => match commit {
                         Ok(commit) => {
                             // Queue the commit's events, then write them out together.

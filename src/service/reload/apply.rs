@@ -20,8 +20,9 @@
 //!    again: they wait as `no_device`.
 //! 5. Changed and added devices start; each recovers from its registers before it takes
 //!    work.
-//! 6. The new configuration runs: an audit entry (who, the hash, the difference) and a
-//!    `config.reloaded` event, in one commit.
+//! 6. The new configuration runs, its API keys last (`[auth]`: the key ring swapped whole),
+//!    then an audit entry (who, the hash, the difference, keys by name) and a
+//!    `config.reloaded` event, in one commit; a `config_reload` alarm clears.
 //!
 //! A device whose keys did not change is not touched: its task, its link and its monitor
 //! run on.
@@ -30,6 +31,7 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use super::{Reload, ReloadError, RunningConfig, removed};
+use crate::auth::KeyRing;
 use crate::config::devices::DeviceConfig;
 use crate::config::{Change, Config, Difference};
 use crate::domain::Who;
@@ -60,6 +62,11 @@ impl Reload {
     /// module doc), audited as `who` with `reason`.
     pub async fn apply(&self, who: Who, reason: Option<String>) -> Result<Applied, ReloadError> {
         let _one = self.0.one.lock().await;
+        self.apply_held(who, reason).await
+    }
+
+    /// [`Reload::apply`], its caller holding the reload's lock.
+    pub(super) async fn apply_held(&self, who: Who, reason: Option<String>) -> Result<Applied, ReloadError> {
         let plan = self.plan().await?;
         let (new, difference) = (plan.config, plan.difference);
         let p = &self.0.parts;
@@ -76,8 +83,14 @@ impl Reload {
             }
         };
         let loaded = RunningConfig::now(&new);
+        let keys = (!difference.auth.is_empty()).then(|| KeyRing::new(&new.auth));
         *self.0.running.lock().unwrap_or_else(|e| e.into_inner()) = new;
         self.0.loaded.send_replace(loaded.clone());
+        // Last: everything else is applied, and no request is checked against a ring that
+        // a failed reload left.
+        if let Some(keys) = keys {
+            self.0.keys.send_replace(std::sync::Arc::new(keys));
+        }
         let applied = Applied { by: who.name.clone(), loaded, difference, kept_for_takeover };
         let summary = match &reason {
             Some(r) => format!("{} ({r})", summary(&applied)),
@@ -87,6 +100,7 @@ impl Reload {
         if let Err(e) = p.writer.record_as(Record::Reloaded { data, reason: summary }, who).await {
             tracing::warn!(error = %e, "the reload was applied but could not be audited");
         }
+        self.clear_alarm(false).await;
         Ok(applied)
     }
 
@@ -202,6 +216,17 @@ fn summary(applied: &Applied) -> String {
     }
     for c in &d.aisles.changed {
         parts.push(format!("aisle {} changed ({})", c.aisle, c.keys.join(", ")));
+    }
+    // By name only: never a key, nor its hash.
+    for k in &d.auth.keys {
+        parts.push(match k.change {
+            Change::Added => format!("key {} added", k.name),
+            Change::Removed => format!("key {} removed", k.name),
+            Change::Changed => format!("key {} changed ({})", k.name, k.fields.join(", ")),
+        });
+    }
+    for setting in &d.auth.settings {
+        parts.push(format!("{setting} changed"));
     }
     if parts.is_empty() {
         parts.push("no change".into());

@@ -13,8 +13,17 @@
 //!   start is not taken for a change of the listen address.
 //! - The demo site (no file), and an application built from a configuration in code,
 //!   have no sources: there is nothing to read again, and a reload says so (409).
-//! - Only `[[devices]]` and `[site]` change at run time; any other key that changed
-//!   refuses the whole reload, naming the key and where it is set: all or nothing.
+//! - Only `[[devices]]`, `[site]` and `[auth]` change at run time; any other key that
+//!   changed refuses the whole reload, naming the key and where it is set: all or nothing.
+//! - `[auth]` (the keys, `keys_file`'s too, and the failed-key limit) is one [`KeyRing`],
+//!   swapped whole once the rest of the reload is applied: a key removed from the file is
+//!   refused from the next request on, on every node (a standby serves the API too: its
+//!   keys change at once, not at its takeover), and a WebSocket opened with it is closed
+//!   (`api::ws`). The audit entry and the event name the keys added, removed or changed,
+//!   by name; never a key or its hash.
+//! - A reload may not remove every key nor add the first (409 `fixed_key`): keyless mode
+//!   (no key: every request allowed, loopback only unless `--insecure`) is decided at
+//!   start, and emptying the file must not open the API to everyone.
 //! - An aisle removed or shrunk while something uses one of the locations it loses is
 //!   refused (409 naming what holds them): a box (`occupied`), a job's reservation, or an
 //!   unfinished job the dispatcher holds that touches the location. A standby keeps no
@@ -26,6 +35,13 @@
 //! - One reload at a time: a second waits for the first to end, then reads the file again.
 //! - SIGHUP ([`on_hangups`]) applies as the API does, audited as `rackd`; its outcome is
 //!   logged. It no longer ends the process (its default action), with or without a file.
+//!   A refusal raises the `config_reload` alarm ([`hangups`]), which nobody would see in
+//!   a log: the file says one thing and another runs (a key removed from it still valid).
+//! - A takeover holds the reload's lock ([`Reload::take_over`]) from reading the running
+//!   configuration until the node drives it: a reload on a standby that ran in between
+//!   would change the configuration the node reports (its hash) and not the devices it
+//!   starts, so drift detection would stay quiet and every later reload find no change.
+//!   A reload asked for meanwhile waits, then changes the devices the node drives.
 //! - Each node of a cluster reads its own sources: a reload is not forwarded to the active
 //!   node (`api::forward`). A standby checks against its own running configuration and
 //!   keeps the new one for when it takes over (it runs no device to change).
@@ -33,10 +49,12 @@
 //!   certificates) with the standard library.
 
 mod apply;
+mod hangups;
 
 use std::sync::atomic::AtomicU64;
 use std::sync::{Arc, Mutex, OnceLock, RwLock};
 
+use crate::auth::KeyRing;
 pub use crate::config::RunningConfig;
 use crate::config::{Change, Config, ConfigError, Difference, Origin, Sources};
 use crate::domain::Location;
@@ -47,6 +65,8 @@ use crate::store::writer::Writer;
 use crate::store::{Pool, locations};
 
 pub use apply::Applied;
+#[cfg(unix)]
+pub use hangups::on_hangups;
 
 /// At most this many holders are named in a refusal; the rest are counted.
 const NAMED: usize = 5;
@@ -62,10 +82,14 @@ struct Inner {
     /// Which configuration runs, for whoever tells it (a cluster node's row).
     loaded: tokio::sync::watch::Sender<RunningConfig>,
     rules: RwLock<Arc<Rules>>,
+    /// `[auth]` as it runs, for the API's key check and the sessions opened with a key.
+    keys: tokio::sync::watch::Sender<Arc<KeyRing>>,
     fleet: OnceLock<Fleet>,
     parts: Parts,
     /// One reload at a time.
     one: tokio::sync::Mutex<()>,
+    /// The words of the `config_reload` alarm this process raised, while it is raised.
+    refused: Mutex<Option<String>>,
 }
 
 /// What a reload needs of the rest of rackd.
@@ -103,6 +127,11 @@ pub enum ReloadError {
     /// Keys that cannot change while rackd runs.
     #[error("{}: cannot change while rackd runs (restart rackd to change them); nothing was applied", list(.0))]
     Fixed(Vec<(String, Origin)>),
+    /// The reload would remove every API key (true), or add the first (false).
+    #[error("auth.keys: {}: keyless mode is decided at start (restart rackd for that); nothing was applied",
+        if *.0 { "a reload cannot remove every key (rackd would then allow every request)" }
+        else { "a reload cannot add the first key to a rackd started without any" })]
+    Keyless(bool),
     /// Locations an aisle would lose are in use.
     #[error("site.aisles: {}; nothing was applied", held(.0))]
     InUse(Vec<Held>),
@@ -177,14 +206,17 @@ impl Reload {
     pub fn new(running: Config, parts: Parts) -> Reload {
         let loaded = RunningConfig::now(&running);
         let rules = RwLock::new(Arc::new(Rules::of(&running)));
+        let keys = tokio::sync::watch::Sender::new(Arc::new(KeyRing::new(&running.auth)));
         Reload(Arc::new(Inner {
             sources: OnceLock::new(),
             loaded: tokio::sync::watch::Sender::new(loaded),
             running: Mutex::new(running),
             rules,
+            keys,
             fleet: OnceLock::new(),
             parts,
             one: tokio::sync::Mutex::new(()),
+            refused: Mutex::new(None),
         }))
     }
 
@@ -234,9 +266,28 @@ impl Reload {
         self.0.rules.read().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
+    /// The API keys and the failed-key limit, as the running configuration sets them.
+    pub fn keys(&self) -> Arc<KeyRing> {
+        self.0.keys.borrow().clone()
+    }
+
+    /// The key ring, as reloads change it.
+    pub fn watch_keys(&self) -> tokio::sync::watch::Receiver<Arc<KeyRing>> {
+        self.0.keys.subscribe()
+    }
+
+    /// Begins a takeover: waits for a reload under way to end, then holds the reload's lock
+    /// until [`Takeover::drive`] (or until the takeover is dropped), with the running
+    /// configuration set in the dispatcher's queues.
+    pub async fn take_over(&self) -> Takeover<'_> {
+        let one = self.0.one.lock().await;
+        let config = self.for_takeover();
+        Takeover { reload: self, config, _one: one }
+    }
+
     /// The running configuration for a node that takes over: the dispatcher's devices set
     /// as it says (a standby may have reloaded since it started).
-    pub fn for_takeover(&self) -> Config {
+    fn for_takeover(&self) -> Config {
         let config = self.running();
         let queues = self.0.parts.dispatcher.queues();
         let deep = &self.rules().deep;
@@ -264,10 +315,15 @@ impl Reload {
         let loaded = tokio::task::spawn_blocking(move || sources.load())
             .await
             .map_err(|e| ReloadError::Task(e.to_string()))??;
-        let difference = self.running().difference(&loaded.config);
+        let running = self.running();
+        let difference = running.difference(&loaded.config);
         if !difference.fixed.is_empty() {
             let keys = difference.fixed.iter().map(|k| (k.clone(), loaded.locate(k))).collect();
             return Err(ReloadError::Fixed(keys));
+        }
+        let keyless = loaded.config.auth.keys.is_empty();
+        if running.auth.keys.is_empty() != keyless {
+            return Err(ReloadError::Keyless(keyless));
         }
         let in_use = self.in_use(&difference, &loaded.config).await?;
         if !in_use.is_empty() {
@@ -324,21 +380,23 @@ fn removed(difference: &Difference) -> impl Iterator<Item = &str> {
     difference.devices.iter().filter(|d| d.change == Change::Removed).map(|d| d.id.as_str())
 }
 
-/// On each SIGHUP, the reload of `POST /config/reload`, audited as `rackd`; its outcome
-/// logged: what changed, or why the configuration is refused.
-#[cfg(unix)]
-pub async fn on_hangups(reload: Reload, mut hangups: tokio::signal::unix::Signal) {
-    while hangups.recv().await.is_some() {
-        let who = crate::domain::Who { name: "rackd".into(), client: None };
-        match reload.apply(who, Some("SIGHUP".into())).await {
-            Ok(applied) => {
-                let difference = serde_json::to_string(&applied.difference).unwrap_or_default();
-                tracing::info!(%difference, hash = %applied.loaded.hash, "SIGHUP: the configuration was reloaded");
-            }
-            Err(e) => {
-                tracing::warn!(error = %e, "SIGHUP: the configuration was read again and is refused; nothing was applied")
-            }
-        }
+/// A takeover under way ([`Reload::take_over`]): no reload runs until it drives what it
+/// read, or gives up.
+pub struct Takeover<'a> {
+    reload: &'a Reload,
+    config: Config,
+    _one: tokio::sync::MutexGuard<'a, ()>,
+}
+
+impl Takeover<'_> {
+    /// The configuration to drive: the running one, which no reload changes meanwhile.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The node drives `fleet`, started from [`Takeover::config`]; reloads may run again.
+    pub fn drive(self, fleet: Fleet) {
+        self.reload.drive(fleet);
     }
 }
 

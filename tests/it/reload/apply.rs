@@ -291,16 +291,16 @@ async fn a_device_holding_a_job_is_not_removed_until_it_ends() {
     let ended = wait_ended(&app, 1, 20).await;
     assert_eq!(ended[0]["state"], "completed", "{:?}", ended);
     assert_eq!(shelf3.received(task_id_for(id)), 1);
-    // The dispatcher learns of the end from the writer right after the commit the API
-    // already shows: a reload in between is still refused, and the next one applies.
-    let body = eventually("the removal applied", Duration::from_secs(5), async || {
+    // The job's end is in the store before the dispatcher's queues hear of it (they are
+    // told after the commit): until they do, the reload is refused as before, and applies
+    // nothing.
+    let body = eventually("the reload once the job has ended", Duration::from_secs(10), async || {
         let post =
             app.client.post(app.url("/api/v1/config/reload")).header("content-type", "application/json");
-        let (status, body) = split(post.send().await.unwrap()).await;
-        match status {
-            200 => Ok(body),
-            409 if body["error"]["code"] == "device_busy" => Err(body),
-            _ => panic!("{status}: {body}"),
+        match split(post.send().await.unwrap()).await {
+            (200, body) => Ok(body),
+            (409, body) if body["error"]["code"] == "device_busy" => Err(body),
+            (status, body) => panic!("{status} {body}"),
         }
     })
     .await;

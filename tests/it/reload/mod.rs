@@ -108,7 +108,8 @@ async fn a_dry_run_answers_the_difference_and_applies_nothing() {
         (status, difference(&body)),
         (
             200,
-            json!({"dry_run": true, "devices": [], "aisles": {"added": [], "removed": [], "changed": []}, "fixed": []})
+            json!({"dry_run": true, "devices": [], "aisles": {"added": [], "removed": [], "changed": []},
+                "auth": {"keys": [], "settings": []}, "fixed": []})
         )
     );
     assert_eq!((&body["hash"], &body["loaded_at"]), (&running["hash"], &running["loaded_at"]));
@@ -137,6 +138,7 @@ aisles = [3]
             {"id": "shelf-3", "change": "added"},
         ],
         "aisles": {"added": [3], "removed": [], "changed": []},
+        "auth": {"keys": [], "settings": []},
         "fixed": [],
     });
     let (status, body) = reload(&app, "?dry_run=true", "key-admin").await;

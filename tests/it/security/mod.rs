@@ -13,6 +13,7 @@ mod forwarding;
 mod keyless;
 mod metrics_labels;
 mod query;
+mod revoke;
 mod secrets;
 mod tls;
 mod tls_config;
