@@ -47,6 +47,10 @@ pub(super) struct Deliverer {
     alarmed: [bool; 4],
     /// Set when the cursor moved by command: the events read are stale.
     moved: bool,
+    /// The newest event when the deliverer was made (before rackd serves its API): where a
+    /// subscription new to the store starts, so an event committed after rackd said it was
+    /// ready is never skipped while the task reads its row.
+    newest: i64,
 }
 
 /// Why the deliverer stops.
@@ -64,7 +68,9 @@ impl Deliverer {
         live: Arc<Mutex<Live>>,
         commands: mpsc::Receiver<Command>,
     ) -> Deliverer {
+        let newest = parts.hub.published().get();
         Deliverer {
+            newest,
             config,
             key,
             client,
@@ -97,10 +103,10 @@ impl Deliverer {
         self.row = match stored {
             Some(row) => row,
             None => {
-                // A new subscription starts from the newest event (see the parent module).
-                let newest = self.parts.hub.published().get();
+                // A new subscription starts from the newest event when it was made (see the
+                // parent module).
                 self.dirty = true;
-                Row { name: name.clone(), cursor: newest, updated_at: now_ms(), ..Row::default() }
+                Row { name: name.clone(), cursor: self.newest, updated_at: now_ms(), ..Row::default() }
             }
         };
         // Alarms this subscription left active before a restart (or another node's

@@ -254,6 +254,12 @@ impl CraneSim {
         self.engine().handshake_on = on;
     }
 
+    /// Sets the time of each action state (without a motion model) from the next state on:
+    /// a crane made slow for a while, so a task stays under way long enough to act on it.
+    pub fn set_step(&self, step: Duration) {
+        self.engine().step = step;
+    }
+
     /// Freezes the crane's side of the hand-over at a step (`None`: reacts again, at once).
     pub fn hold(&self, hold: Option<Hold>) {
         self.engine().hold = hold;

@@ -41,9 +41,11 @@ async fn per_device_and_per_aisle_from_the_history(#[case] engine: Engine) {
         let job = wait_job(&app, *id, 30, |j| j["state"] == "completed" || j["state"] == "failed").await;
         assert_eq!(job["state"], "completed", "{job}");
     }
-    // One that fails: a business alarm while the crane runs it.
+    // One that fails: a business alarm while the crane runs it (slow from now on, so the
+    // job is seen running however busy the machine is).
+    sims.crane.set_step(std::time::Duration::from_secs(1));
     let failed = submit(&app, json!({"kind": "store", "barcode": "F1", "to": cloc(2, 9, 1, 1)})).await;
-    wait_job(&app, failed, 10, |j| j["state"] == "running").await;
+    wait_job(&app, failed, 30, |j| j["state"] == "running").await;
     sims.crane.raise_alarm(7069);
     let job = wait_job(&app, failed, 10, |j| j["state"] == "failed").await;
     assert_eq!(job["failure"]["kind"], "alarm");
