@@ -129,7 +129,7 @@ impl AlarmKind {
             | AlarmKind::Takeover
             | AlarmKind::Webhook
             | AlarmKind::ConfigDrift
-            | AlarmKind::Certificate => AlarmClass::Link,
+            | AlarmKind::Certificate
             | AlarmKind::ConfigReload => AlarmClass::Link,
             AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost | AlarmKind::Archive => {
                 AlarmClass::Hardware
