@@ -11,6 +11,7 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use crate::service::dispatch::{BulkError, CancelError, ControlError};
+use crate::store::fault::Cause;
 use crate::store::writer::WriteError;
 
 /// An error answer.
@@ -86,6 +87,29 @@ impl ApiError {
     }
 }
 
+/// Seconds a client is told to wait while the store cannot commit.
+pub const STORE_RETRY_SECS: u64 = 5;
+
+impl ApiError {
+    /// 503 for a request the database failed: `store_full` or `store_unavailable` (with
+    /// `Retry-After`) when the store itself fails ([`crate::store::fault`]), else
+    /// `unavailable`; `e` is logged, never sent.
+    pub fn store(e: &sqlx::Error) -> Self {
+        match Cause::of(e) {
+            Some(cause) => {
+                tracing::error!(cause = %e, store = cause.as_str(), "request failed: the store cannot commit");
+                Self::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    cause.api_code(),
+                    format!("rackd cannot record anything now: {}; retry later", cause.words()),
+                )
+                .retry_after(STORE_RETRY_SECS)
+            }
+            None => Self::unavailable(e),
+        }
+    }
+}
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let body = ErrorBody { error: ErrorDetail { code: self.code.to_owned(), message: self.message } };
@@ -119,7 +143,8 @@ impl From<WriteError> for ApiError {
                 "rackd is taking in more jobs than it can store right now; retry in a second",
             )
             .retry_after(1),
-            WriteError::Closed | WriteError::Database(_) | WriteError::Fenced(_) => Self::unavailable(e),
+            WriteError::Database(cause) => Self::store(&cause),
+            WriteError::Closed | WriteError::Fenced(_) => Self::unavailable(e),
         }
     }
 }
@@ -168,6 +193,6 @@ impl From<BulkError> for ApiError {
 
 impl From<sqlx::Error> for ApiError {
     fn from(e: sqlx::Error) -> Self {
-        Self::unavailable(e)
+        Self::store(&e)
     }
 }

@@ -4,7 +4,9 @@
 //!
 //! `status` is `ok` when the store works and every device is online with no active alarm
 //! and no degraded link; `degraded` when the store works but a device does not (rackd still
-//! takes and keeps jobs); `down` when the store does not, answered with 503.
+//! takes and keeps jobs); `down` when the store does not (it does not answer, its writer
+//! stopped, or its last commit failed for the store's own cause: `store::fault`), answered
+//! with 503.
 
 use axum::extract::State;
 use axum::http::StatusCode;
@@ -67,6 +69,9 @@ pub struct DeviceHealth {
     ))]
 async fn health(State(app): State<AppState>) -> Response {
     let store = match crate::store::ready(&app.pool).await {
+        Ok(()) if let Some(fault) = app.store_fault.current() => {
+            format!("the store cannot commit: {}", fault.cause.words())
+        }
         Ok(()) if app.writer.is_running() => "ok".to_owned(),
         Ok(()) => "the job writer has stopped".to_owned(),
         Err(e) => {

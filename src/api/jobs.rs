@@ -40,7 +40,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         (status = 413, description = "Body too large", body = ErrorBody),
         (status = 415, description = "Not `application/json`", body = ErrorBody),
         (status = 422, description = "Unknown or missing field, wrong type, location outside the layout", body = ErrorBody),
-        (status = 503, description = "`overloaded`: more jobs arrive than rackd can store now; retry after `Retry-After` seconds", body = ErrorBody,
+        (status = 503, description = "`overloaded`: more jobs arrive than rackd can store now; `store_full` or `store_unavailable`: the store cannot commit now (its disk is full, it fails or does not answer); retry after `Retry-After` seconds", body = ErrorBody,
             headers(("Retry-After" = String, description = "Seconds to wait"))),
     ))]
 async fn create_job(
@@ -104,7 +104,7 @@ pub struct BatchResponse {
         (status = 413, description = "Body too large", body = ErrorBody),
         (status = 415, description = "Not `application/json`", body = ErrorBody),
         (status = 422, description = "A job is invalid (its index is named); nothing stored", body = ErrorBody),
-        (status = 503, description = "`overloaded`: more jobs arrive than rackd can store now; retry after `Retry-After` seconds", body = ErrorBody,
+        (status = 503, description = "`overloaded`: more jobs arrive than rackd can store now; `store_full` or `store_unavailable`: the store cannot commit now (its disk is full, it fails or does not answer); retry after `Retry-After` seconds", body = ErrorBody,
             headers(("Retry-After" = String, description = "Seconds to wait"))),
     ))]
 async fn create_batch(

@@ -48,6 +48,14 @@ pub async fn readyz(State(app): State<AppState>) -> Result<Json<Health>, ApiErro
         };
         ApiError::new(axum::http::StatusCode::SERVICE_UNAVAILABLE, "not_ready", message)
     })?;
+    if let Some(fault) = app.store_fault.current() {
+        tracing::error!(store = fault.cause.as_str(), "not ready: the store cannot commit");
+        return Err(ApiError::new(
+            axum::http::StatusCode::SERVICE_UNAVAILABLE,
+            "not_ready",
+            format!("the store cannot commit: {}", fault.cause.words()),
+        ));
+    }
     if !app.writer.is_running() {
         tracing::error!("not ready: the job writer has stopped");
         return Err(ApiError::new(

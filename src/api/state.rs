@@ -82,4 +82,6 @@ pub struct Shared {
     pub capture_builds: Arc<tokio::sync::Semaphore>,
     /// Failed authentications per client address (the limit is the key ring's).
     pub failures: super::failures::Failures,
+    /// Whether the store commits (`store::fault`).
+    pub store_fault: crate::store::fault::StoreFault,
 }

@@ -7,7 +7,8 @@
 //! why a job waits (it retells what it never told). Its hub is fed from the event log,
 //! which every node writes (`app::cluster`), not from its own commits: the same commit
 //! would come twice. For the same reason its counts of jobs and alarms are read again from
-//! the store as it follows the log, not changed by its own commits.
+//! the store as it follows the log, not changed by its own commits. Every node tells its own
+//! store faults (`store::fault`): each has its own writer.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -15,7 +16,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use crate::api::metrics::Metrics;
 use crate::service::dispatch::Queues;
 use crate::service::events::Hub;
-use crate::store::writer::{Hooks, Publish};
+use crate::store::fault::StoreFault;
+use crate::store::writer::{Hooks, Publish, Stored};
 
 /// The writer's hooks; `clustered` when the node is one of a cluster.
 pub(super) fn hooks(
@@ -23,6 +25,7 @@ pub(super) fn hooks(
     hub: &Hub,
     metrics: &Arc<Metrics>,
     commits: &Arc<AtomicU64>,
+    fault: &StoreFault,
     clustered: bool,
 ) -> Hooks {
     // The crane planners' cache of the store counts commits: this node's at once, the
@@ -34,7 +37,15 @@ pub(super) fn hooks(
             hub.publish(events)
         }
     });
+    let (fault, counted) = (fault.clone(), metrics.clone());
+    let stored: Stored = Arc::new(move |outcome| {
+        if let Err(cause) = outcome {
+            counted.count_store_failure(cause);
+        }
+        fault.observe(outcome);
+    });
     Hooks {
+        stored: Some(stored),
         committed: Some(queues.hook()),
         locked: Some(queues.locked_hook()),
         tell: Some(queues.tell_hook()),

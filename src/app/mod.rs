@@ -125,7 +125,8 @@ impl Application {
         // Before the writer starts: from here on its commits change them.
         metrics.set_counts(store::counts::load(&pool).await.context("reading the counts of jobs")?);
         queues.set_drives(on_cluster.is_none());
-        let hooks = hooks::hooks(&queues, &hub, &metrics, &commits, on_cluster.is_some());
+        let store_fault = store::fault::StoreFault::default();
+        let hooks = hooks::hooks(&queues, &hub, &metrics, &commits, &store_fault, on_cluster.is_some());
         let (max_group, queue) = (config.intake.max_group, config.intake.queue);
         let started = match on_cluster {
             Some(_) => Writer::start_shared(&pool, max_group, queue, hooks).await,
@@ -160,6 +161,13 @@ impl Application {
             );
             tasks.lock().unwrap_or_else(|p| p.into_inner()).push(tokio::spawn(watch));
         }
+        // The store's own alarm, on every node (each has its own writer).
+        let watch = crate::service::store_alarm::watch(
+            store_fault.clone(),
+            writer.clone(),
+            crate::service::store_alarm::device(config.cluster.as_ref().map(|c| c.node.as_str())),
+        );
+        tasks.lock().unwrap_or_else(|p| p.into_inner()).push(tokio::spawn(watch));
         let clustered = match leading {
             Some((c, (leadership, timing), pg)) => {
                 let parts = cluster::Parts {
@@ -222,6 +230,7 @@ impl Application {
             captures: config.retention.captures(&config.database.path),
             capture_builds: Arc::new(tokio::sync::Semaphore::new(config.server.capture_downloads)),
             failures: api::failures::Failures::default(),
+            store_fault,
         });
         let timeout = Duration::from_secs(config.server.request_timeout_secs);
         let router = api::router(state, config.server.body_limit_bytes, timeout);

@@ -61,6 +61,10 @@ pub enum AlarmKind {
     /// The retention could not archive ended jobs (device `store`: a full disk, a folder
     /// that went read-only); nothing was deleted. Cleared by the next archive that works.
     Archive,
+    /// The store cannot commit (device `store`, `store:NODE` in a cluster): its disk is
+    /// full (code 0), it takes no writes (1), its disk fails (2) or the database does not
+    /// answer (3); see [`crate::store::fault`]. Cleared once a commit succeeds again.
+    Store,
     /// A webhook subscription's receiver has failed every delivery for longer than its
     /// `alarm_after_secs` (code 0), events were pruned before it got them (code 1), its
     /// receiver paused it with a 410 Gone (code 2), or it could not start (code 3); device
@@ -85,7 +89,7 @@ pub enum AlarmKind {
 
 impl AlarmKind {
     /// Every kind.
-    pub const ALL: [AlarmKind; 11] = [
+    pub const ALL: [AlarmKind; 12] = [
         AlarmKind::Device,
         AlarmKind::Link,
         AlarmKind::Heartbeat,
@@ -93,6 +97,7 @@ impl AlarmKind {
         AlarmKind::MemoryLost,
         AlarmKind::Takeover,
         AlarmKind::Archive,
+        AlarmKind::Store,
         AlarmKind::Webhook,
         AlarmKind::ConfigDrift,
         AlarmKind::Certificate,
@@ -109,6 +114,7 @@ impl AlarmKind {
             AlarmKind::MemoryLost => "memory_lost",
             AlarmKind::Takeover => "takeover",
             AlarmKind::Archive => "archive",
+            AlarmKind::Store => "store",
             AlarmKind::Webhook => "webhook",
             AlarmKind::ConfigDrift => "config_drift",
             AlarmKind::Certificate => "certificate",
@@ -131,9 +137,11 @@ impl AlarmKind {
             | AlarmKind::ConfigDrift
             | AlarmKind::Certificate
             | AlarmKind::ConfigReload => AlarmClass::Link,
-            AlarmKind::Device | AlarmKind::Heartbeat | AlarmKind::MemoryLost | AlarmKind::Archive => {
-                AlarmClass::Hardware
-            }
+            AlarmKind::Device
+            | AlarmKind::Heartbeat
+            | AlarmKind::MemoryLost
+            | AlarmKind::Archive
+            | AlarmKind::Store => AlarmClass::Hardware,
         }
     }
 }

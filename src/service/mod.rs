@@ -11,4 +11,5 @@ pub mod intake;
 pub mod monitor;
 pub mod planner;
 pub mod reload;
+pub mod store_alarm;
 pub mod webhooks;

@@ -177,6 +177,7 @@ fn action(device: &str, kind: AlarmKind, code: u16) -> String {
         }
         AlarmKind::Takeover => crate::service::cluster::TAKEOVER_ACTION.to_owned(),
         AlarmKind::Archive => crate::config::ARCHIVE_ACTION.to_owned(),
+        AlarmKind::Store => crate::service::store_alarm::ACTION.to_owned(),
         AlarmKind::Webhook => match code {
             2 => crate::service::webhooks::GONE_ACTION
                 .replace("NAME", device.strip_prefix("webhook:").unwrap_or(device)),

@@ -32,6 +32,7 @@ pub mod copy;
 pub mod counts;
 pub mod engine;
 pub mod events;
+pub mod fault;
 pub mod import;
 pub mod jobs;
 pub mod locations;

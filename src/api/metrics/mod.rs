@@ -63,6 +63,12 @@ struct EndLabels {
     state: &'static str,
 }
 
+/// Labels of the store's failed commits.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct CauseLabels {
+    cause: &'static str,
+}
+
 /// Labels of the snapshot counter.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 struct ReasonLabels {
@@ -88,6 +94,7 @@ pub struct Metrics {
     subscribers: Gauge,
     ws_resyncs: Counter,
     ws_snapshots: Family<ReasonLabels, Counter>,
+    store_failures: Family<CauseLabels, Counter>,
     group_size: Histogram,
     commit_seconds: Histogram,
     dispatch_seconds: Histograms<KindLabels>,
@@ -139,6 +146,15 @@ impl Default for Metrics {
             "Snapshots sent to WebSocket subscribers, by reason (requested, since_expired, since_unknown)",
             ws_snapshots.clone(),
         );
+        let store_failures = Family::<CauseLabels, Counter>::default();
+        for cause in crate::store::fault::Cause::ALL {
+            store_failures.get_or_create(&CauseLabels { cause: cause.as_str() }).inc_by(0);
+        }
+        r.register(
+            "store_commit_failures",
+            "Groups of the job writer that failed for the store's own cause (full, read_only, io_error, unreachable)",
+            store_failures.clone(),
+        );
         let group_size = Histogram::new(exponential_buckets(1.0, 2.0, 12));
         r.register(
             "writer_group_size",
@@ -169,6 +185,7 @@ impl Default for Metrics {
             subscribers,
             ws_resyncs,
             ws_snapshots,
+            store_failures,
             group_size,
             commit_seconds,
             dispatch_seconds,
@@ -190,6 +207,11 @@ impl Metrics {
     /// Counts a WebSocket subscriber told to resync.
     pub fn count_resync(&self) {
         self.ws_resyncs.inc();
+    }
+
+    /// Counts a group of the writer that failed for the store's own `cause`.
+    pub fn count_store_failure(&self, cause: crate::store::fault::Cause) {
+        self.store_failures.get_or_create(&CauseLabels { cause: cause.as_str() }).inc();
     }
 
     /// Counts a snapshot sent to a WebSocket subscriber, by its `reason`.

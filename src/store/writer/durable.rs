@@ -49,6 +49,7 @@ use super::timing::GroupStats;
 use super::{Command, Hooks, Sent, WriteError};
 use crate::domain::{Location, LocationLock};
 use crate::store::counts::Counts;
+use crate::store::fault::Cause;
 use crate::store::jobs::Job;
 
 /// Makes every commit written so far durable.
@@ -169,6 +170,9 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
             (group.iter().map(|_| Answer::Failed(e.clone())).collect(), Vec::new())
         }
     };
+    if let Some(stored) = &hooks.stored {
+        stored(outcome(&answers));
+    }
     if let Some(committed) = &hooks.committed {
         let jobs: Vec<&Job> = answers.iter().flat_map(Answer::jobs).collect();
         if !jobs.is_empty() {
@@ -180,6 +184,19 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
     }
     for (Sent { cmd, .. }, answer) in group.into_iter().zip(answers) {
         reply(cmd, answer);
+    }
+}
+
+/// How a group went for the store: the cause of the first of its answers that failed for
+/// the store's own reason (the whole group's failure is every answer's), else committed.
+fn outcome(answers: &[Answer]) -> Result<(), Cause> {
+    let cause = |e: &WriteError| match e {
+        WriteError::Database(e) => Cause::of(e),
+        _ => None,
+    };
+    match answers.iter().flat_map(Answer::errors).find_map(cause) {
+        Some(c) => Err(c),
+        None => Ok(()),
     }
 }
 

@@ -33,6 +33,7 @@ pub use timing::{GroupStats, JobTiming, Observe};
 use super::Pool;
 use super::alarms::NewAlarm;
 use super::events::StoredEvent;
+use super::fault::Cause;
 use super::jobs::{Job, NewJob};
 use crate::domain::state::IllegalTransition;
 use crate::domain::{
@@ -325,7 +326,15 @@ pub struct Hooks {
     pub observe: Option<Observe>,
     /// Fills in each job's waiting reason before its event is written.
     pub tell: Option<Tell>,
+    /// How each group went for the store: committed, or failed for a [`Cause`] of the
+    /// store's own (see [`crate::store::fault`]).
+    pub stored: Option<Stored>,
 }
+
+/// Called after each group with `Ok` if it committed, or the [`Cause`] of the store's own
+/// failure that failed it or any of its requests (nothing when it failed for its requests'
+/// own reasons only).
+pub type Stored = Arc<dyn Fn(Result<(), Cause>) + Send + Sync>;
 
 /// What the writer is asked to do. `who` is the API's caller of an audited command: its
 /// audit entry (in the same commit) names them and their address.

@@ -4,6 +4,7 @@
 
 mod archive;
 mod copy;
+mod full;
 mod groups;
 mod import;
 mod pages;

@@ -58,6 +58,19 @@ impl Answer {
             _ => Vec::new(),
         }
     }
+
+    /// The errors this answer carries.
+    pub(super) fn errors(&self) -> Vec<&WriteError> {
+        match self {
+            Answer::Submitted(Err(e))
+            | Answer::Changed(Err(e))
+            | Answer::Bulked(Err(e))
+            | Answer::Refused(e)
+            | Answer::Failed(e) => vec![e],
+            Answer::Reported(jobs) => jobs.iter().filter_map(|r| r.as_ref().err()).collect(),
+            _ => Vec::new(),
+        }
+    }
 }
 
 /// What a group produced besides its answers, handed on after the commit.
