@@ -12,6 +12,7 @@ mod api;
 mod browser;
 mod bulk;
 mod cancels;
+mod clock;
 mod capture;
 mod crane;
 mod docs;
