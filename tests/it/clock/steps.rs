@@ -89,7 +89,14 @@ async fn stepped(engine: Engine) {
     pool.close().await;
     assert!(events.windows(2).all(|w| w[1].seq == w[0].seq + 1), "the log has gaps");
     for w in events.windows(2) {
-        assert!(w[1].at >= w[0].at, "event {} is stamped before event {}: {} < {}", w[1].seq, w[0].seq, w[1].at, w[0].at);
+        assert!(
+            w[1].at >= w[0].at,
+            "event {} is stamped before event {}: {} < {}",
+            w[1].seq,
+            w[0].seq,
+            w[1].at,
+            w[0].at
+        );
     }
     // A job's completion, by the log, is stamped no earlier than any before it.
     let completions: Vec<i64> = events
@@ -130,7 +137,8 @@ async fn stepped(engine: Engine) {
         .unwrap();
     let (status, page) = app.get(&format!("/api/v1/jobs?limit=100&created_to={}", enc(&to))).await;
     assert_eq!(status, 200, "{page}");
-    let before: Vec<i64> = page["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()).collect();
+    let before: Vec<i64> =
+        page["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()).collect();
     assert_eq!(before.len(), want.len() - 1, "every job accepted before the last one: {before:?}");
 
     // No alarm of any kind, ever: neither the heartbeat nor a link.
