@@ -85,7 +85,7 @@ async fn health(State(app): State<AppState>) -> Response {
         }
     };
     let active = alarms::active(&app.pool).await.unwrap_or_default();
-    let now = OffsetDateTime::now_utc();
+    let now = crate::domain::time::now();
     let devices: Vec<DeviceHealth> = all_shown(&app.devices(), app.dispatcher.queues())
         .into_iter()
         .map(|d| DeviceHealth {

@@ -119,7 +119,7 @@ pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<
     let scrape = Scrape {
         devices: crate::service::monitor::all_shown(&app.devices(), app.dispatcher.queues()),
         counts: app.metrics.counts(),
-        now: time::OffsetDateTime::now_utc(),
+        now: crate::domain::time::now(),
         started: app.metrics.started(),
         cluster: app.cluster.as_ref().map(|n| {
             // One read of the role, so that `active` and `epoch` tell of the same moment.

@@ -113,7 +113,7 @@ async fn archive(pool: Pool, writer: Writer, retention: RetentionConfig, folder:
     let mut tick = tokio::time::interval(retention.every);
     loop {
         tick.tick().await;
-        let today = time::OffsetDateTime::now_utc().date();
+        let today = crate::domain::time::now().date();
         let before = today.saturating_sub(time::Duration::days(days.min(36_500) as i64));
         let how = store::archive::Delete::Writer(&writer);
         let record = match store::archive::archive(&pool, before, &folder, how).await {

@@ -240,7 +240,7 @@ fn alarm_changes(status: &DeviceStatus, active: &BTreeSet<Key>) -> (Vec<NewAlarm
     if let Some(crane) = status.crane.as_ref().filter(|c| c.known && answers) {
         known.insert((AlarmKind::Heartbeat, 0));
         if let Some(since) = crane.heartbeat_stalled_since {
-            let seconds = (time::OffsetDateTime::now_utc() - since).as_seconds_f64().max(0.0);
+            let seconds = (crate::domain::time::now() - since).as_seconds_f64().max(0.0);
             let text = format!("the crane's heartbeat (D200) has not changed for {seconds:.1} s");
             want(AlarmKind::Heartbeat, 0, AlarmKind::Heartbeat.class(), text, None);
         }

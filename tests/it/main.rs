@@ -13,6 +13,7 @@ mod browser;
 mod bulk;
 mod cancels;
 mod capture;
+mod clock;
 mod crane;
 mod docs;
 mod events;

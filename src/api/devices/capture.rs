@@ -141,7 +141,7 @@ pub async fn alarm_capture(
 
 /// Now as `20261127T081500Z`, for file names.
 pub fn stamp() -> String {
-    let now = time::OffsetDateTime::now_utc();
+    let now = crate::domain::time::now();
     let format = time::macros::format_description!("[year][month][day]T[hour][minute][second]Z");
     now.format(&format).unwrap_or_default()
 }

@@ -190,7 +190,7 @@ impl Default for Metrics {
             commit_seconds,
             dispatch_seconds,
             job_seconds,
-            started: OffsetDateTime::now_utc(),
+            started: crate::domain::time::now(),
             counts: std::sync::Mutex::default(),
             certificate: std::sync::Mutex::default(),
             intake_seconds,

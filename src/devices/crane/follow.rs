@@ -18,7 +18,7 @@ impl Crane {
         let view = CraneView::parse(&words).ok_or(PlcError::Malformed("short crane block"))?;
         let now = Instant::now();
         if self.view.is_none_or(|v| v.heartbeat != view.heartbeat) {
-            self.heartbeat_moved = wall_now();
+            self.heartbeat_moved = crate::domain::time::now();
         }
         if let Some(word) = self.heartbeat.observe(view.heartbeat, now) {
             self.write(&self.wcs_word(wcs::HEARTBEAT), &[word]).await?;
@@ -153,9 +153,4 @@ impl Crane {
         tracing::info!(task = view.task, stb = word(wcs::STB), ack = view.ack, "crane recovered");
         self.poll().await
     }
-}
-
-/// The wall-clock time now.
-fn wall_now() -> time::OffsetDateTime {
-    crate::domain::time::from_ms(crate::domain::time::now_ms())
 }

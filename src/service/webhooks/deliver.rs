@@ -42,6 +42,10 @@ pub(super) struct Deliverer {
     skipped_since: Option<tokio::time::Instant>,
     /// The write in flight.
     writing: Option<JoinHandle<Result<(), WriteError>>>,
+    /// Since when deliveries have failed, on the monotonic clock, so that a step of the
+    /// wall clock does not raise the failing alarm early (`failing_since`, stored, is for
+    /// display and for a restart, which starts this from it).
+    failing: Option<tokio::time::Instant>,
     /// Whether this deliverer raised the alarms of code 0 (failing), 1 (events lost), 2
     /// (paused by the receiver) and 3 (could not start).
     alarmed: [bool; 4],
@@ -81,6 +85,7 @@ impl Deliverer {
             pending: Vec::new(),
             dirty: false,
             skipped_since: None,
+            failing: None,
             writing: None,
             alarmed: [false; 4],
             moved: false,
@@ -250,6 +255,7 @@ impl Deliverer {
                 "delivered" => {
                     self.row.cursor = event.seq;
                     (self.row.last_ok_at, self.row.failing_since) = (Some(now), None);
+                    self.failing = None;
                     self.flush(false).await?;
                     if self.alarmed[0] {
                         self.alarm(0, None).await;
@@ -273,13 +279,20 @@ impl Deliverer {
                 }
                 _ => {
                     let since = *self.row.failing_since.get_or_insert(now);
-                    let alarm_after = (self.config.alarm_after_secs as i64).saturating_mul(1000);
-                    if now - since >= alarm_after && !self.alarmed[0] {
+                    let failing = *self.failing.get_or_insert_with(|| {
+                        // Failing since before a restart: as long as the stored times say.
+                        let before = Duration::from_millis((now - since).max(0) as u64);
+                        let mono = tokio::time::Instant::now();
+                        mono.checked_sub(before).unwrap_or(mono)
+                    });
+                    let failed_for = failing.elapsed();
+                    let alarm_after = Duration::from_secs(self.config.alarm_after_secs);
+                    if failed_for >= alarm_after && !self.alarmed[0] {
                         let error = self.row.last_error.clone().unwrap_or_default();
                         let text = format!(
                             "webhook {:?} has failed every delivery for {} s: {error}",
                             self.config.name,
-                            (now - since) / 1000
+                            failed_for.as_secs()
                         );
                         self.alarm(0, Some(text)).await;
                     }

@@ -103,7 +103,8 @@ impl Replay {
                 0
             }
             (true, false) => {
-                took = self.on.remove(&job).map(|since| at - since);
+                // Never negative, as in the writer (a clock stepped back while it ran).
+                took = self.on.remove(&job).map(|since| (at - since).max(0));
                 -1
             }
             (false, false) => 0,

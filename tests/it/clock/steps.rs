@@ -1,0 +1,172 @@
+//! One rackd on the demo site's shelf and crane: the wall clock stepped an hour forward
+//! while a batch of jobs runs, an hour back while the next one runs, and a last batch
+//! after. What "the right bucket" means is in `rackd::domain::time`: a job counts in the
+//! bucket of its recorded end, and recorded ends never run backward, so every job is in
+//! the period up to now and a job that ended before the step back is in a bucket no later
+//! than those after it.
+
+use std::time::Duration;
+
+use rackd::domain::time::step_wall_clock;
+use rackd::store::Engine;
+use serde_json::{Value, json};
+
+use super::{HOUR, alone};
+use crate::api::demo::{FAST, cloc, submit, wait_job};
+use crate::api::waiting::wait_for_online;
+use crate::support::machines::each_task_once_and_no_breach;
+use crate::support::{self, loc};
+
+#[test]
+fn on_sqlite() {
+    alone("clock::steps::on_sqlite", async || stepped(Engine::Sqlite).await);
+}
+
+#[test]
+fn on_postgres() {
+    alone("clock::steps::on_postgres", async || stepped(Engine::Postgres).await);
+}
+
+fn ms(v: &Value) -> i64 {
+    let t = time::OffsetDateTime::parse(v.as_str().unwrap(), &time::format_description::well_known::Rfc3339)
+        .unwrap_or_else(|_| panic!("not a time: {v}"));
+    rackd::domain::time::to_ms(t)
+}
+
+/// Submits two jobs to the shelf and two to the crane (`n` tells the batch apart),
+/// answering their ids and aisles.
+async fn batch(app: &support::TestApp, n: u16) -> Vec<(i64, u16)> {
+    let mut posted = Vec::new();
+    for i in 0..2u16 {
+        let bay = n * 2 + i + 1;
+        let shelf = json!({"kind": "store", "barcode": format!("S{bay}"), "to": loc(1, bay, 1, 1)});
+        posted.push((submit(app, shelf).await, 1));
+        let crane = json!({"kind": "store", "barcode": format!("C{bay}"), "to": cloc(1, bay, 1, 1)});
+        posted.push((submit(app, crane).await, 2));
+    }
+    posted
+}
+
+async fn all_completed(app: &support::TestApp, posted: &[(i64, u16)]) -> Vec<Value> {
+    let mut jobs = Vec::new();
+    for (id, _) in posted {
+        let job = wait_job(app, *id, 60, |j| j["state"] == "completed" || j["state"] == "failed").await;
+        assert_eq!(job["state"], "completed", "{job}");
+        jobs.push(job);
+    }
+    jobs
+}
+
+async fn stepped(engine: Engine) {
+    let mut site = rackd::config::Config::demo();
+    let (shelf, crane, _tower) = rackd::cli::demo::start_with(&mut site, FAST).await.unwrap();
+    let app = support::spawn_with(engine, |c| {
+        c.site = site.site.clone();
+        c.devices = site.devices.clone();
+    })
+    .await;
+    wait_for_online(&app, "crane1").await;
+    wait_for_online(&app, "shelf1").await;
+
+    // An hour forward while the first batch runs, an hour back while the second does.
+    let first = batch(&app, 0).await;
+    wait_job(&app, first[1].0, 30, |j| j["state"] == "running").await;
+    step_wall_clock(HOUR);
+    let mut jobs = all_completed(&app, &first).await;
+    let second = batch(&app, 1).await;
+    wait_job(&app, second[1].0, 30, |j| j["state"] == "running").await;
+    let before_back = rackd::domain::time::now_ms();
+    step_wall_clock(-HOUR);
+    jobs.extend(all_completed(&app, &second).await);
+    let third = batch(&app, 2).await;
+    jobs.extend(all_completed(&app, &third).await);
+    let posted: Vec<(i64, u16)> = [first, second, third].concat();
+    each_task_once_and_no_breach(&shelf, &crane, &posted);
+
+    // The event log: numbered without gaps, its times in the same order.
+    let pool = rackd::store::open(&app.db, Duration::from_secs(5)).await.unwrap();
+    let events = rackd::store::events::after(&pool, 0, 100_000).await.unwrap();
+    pool.close().await;
+    assert!(events.windows(2).all(|w| w[1].seq == w[0].seq + 1), "the log has gaps");
+    for w in events.windows(2) {
+        assert!(
+            w[1].at >= w[0].at,
+            "event {} is stamped before event {}: {} < {}",
+            w[1].seq,
+            w[0].seq,
+            w[1].at,
+            w[0].at
+        );
+    }
+    // A job's completion, by the log, is stamped no earlier than any before it.
+    let completions: Vec<i64> = events
+        .iter()
+        .filter(|e| e.kind == "job.updated" && e.data.contains(r#""state":"completed""#))
+        .map(|e| e.at)
+        .collect();
+    assert_eq!(completions.len(), posted.len(), "one completion each");
+    let ends: Vec<i64> = jobs.iter().map(|j| ms(&j["updated_at"])).collect();
+    for (job, end) in jobs.iter().zip(&ends) {
+        assert!(ms(&job["created_at"]) <= *end, "ended before it was accepted: {job}");
+    }
+    for (job, end) in jobs.iter().zip(&ends).skip(first_len(&jobs, &posted)) {
+        assert!(*end >= before_back, "a job that ended after the step back is stamped before it: {job}");
+    }
+
+    // The jobs' pages by period: from the first one's acceptance, every job, each once, in
+    // order; up to the last one's, every other one.
+    let from = jobs.iter().map(|j| j["created_at"].as_str().unwrap().to_owned()).min().unwrap();
+    let last_created = jobs.iter().map(|j| ms(&j["created_at"])).max().unwrap();
+    let mut ids = Vec::new();
+    let mut cursor = String::new();
+    loop {
+        let path = format!("/api/v1/jobs?limit=5&created_from={}{cursor}", enc(&from));
+        let (status, page) = app.get(&path).await;
+        assert_eq!(status, 200, "{page}");
+        ids.extend(page["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()));
+        match page["next_cursor"].as_str() {
+            Some(next) => cursor = format!("&cursor={next}"),
+            None => break,
+        }
+    }
+    let mut want: Vec<i64> = posted.iter().map(|(id, _)| *id).collect();
+    want.sort_unstable();
+    assert_eq!(ids, want, "GET /api/v1/jobs?created_from={from}");
+    let to = rackd::domain::time::from_ms(last_created)
+        .format(&time::format_description::well_known::Rfc3339)
+        .unwrap();
+    let (status, page) = app.get(&format!("/api/v1/jobs?limit=100&created_to={}", enc(&to))).await;
+    assert_eq!(status, 200, "{page}");
+    let before: Vec<i64> =
+        page["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()).collect();
+    assert_eq!(before.len(), want.len() - 1, "every job accepted before the last one: {before:?}");
+
+    // No alarm of any kind, ever: neither the heartbeat nor a link.
+    let (status, alarms) = app.get("/api/v1/alarms?limit=100").await;
+    assert_eq!(status, 200, "{alarms}");
+    assert_eq!(alarms["alarms"], json!([]), "no alarm through the steps");
+
+    // The KPIs of the last hour count every job, and no duration is negative.
+    let (status, stats) = app.get("/api/v1/stats").await;
+    assert_eq!(status, 200, "{stats}");
+    for device in ["shelf1", "crane1"] {
+        let d = stats["devices"].as_array().unwrap().iter().find(|d| d["device"] == device).unwrap();
+        assert_eq!((d["completed"].clone(), d["failed"].clone()), (json!(6), json!(0)), "{device}: {stats}");
+        let u = d["utilisation"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&u), "{stats}");
+        for k in d["durations"].as_array().unwrap() {
+            assert!(k["mean_s"].as_f64().unwrap() >= 0.0 && k["p95_s"].as_f64().unwrap() >= 0.0, "{stats}");
+        }
+    }
+    app.stop().await;
+}
+
+/// How many of `jobs` are of the first batch (those that may end before the step back).
+fn first_len(jobs: &[Value], posted: &[(i64, u16)]) -> usize {
+    jobs.len().min(posted.len()) / 3
+}
+
+/// `text` as a query value.
+fn enc(text: &str) -> String {
+    text.replace('+', "%2B").replace(':', "%3A")
+}
