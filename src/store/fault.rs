@@ -120,10 +120,11 @@ impl Cause {
         }
     }
 
-    /// A database's error code: SQLite's (numeric, primary code in the low byte of an
-    /// extended one) or PostgreSQL's SQLSTATE.
+    /// A database's error code: PostgreSQL's SQLSTATE (always five characters, digits
+    /// alone in many) or SQLite's (a number of at most four digits, the primary code in the
+    /// low byte of an extended one).
     fn of_code(code: &str) -> Option<Cause> {
-        if let Ok(n) = code.parse::<u32>() {
+        if let Some(n) = code.parse::<u32>().ok().filter(|_| code.len() < 5) {
             return match n & 0xff {
                 13 => Some(Cause::Full),
                 8 => Some(Cause::ReadOnly),
