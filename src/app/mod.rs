@@ -102,7 +102,7 @@ impl Application {
         };
         let ca = db.ca_file.as_deref().filter(|_| database.engine() == store::Engine::Postgres);
         let with_ca = ca.map(|p| format!(" with database.ca_file {}", p.display())).unwrap_or_default();
-        let known = store::schema::Known::of(database.engine());
+        let known = store::schema::Known::new(database.engine().migrator());
         let known = match db.known_schema {
             Some(version) => known.up_to(version),
             None => known,

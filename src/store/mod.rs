@@ -201,7 +201,7 @@ pub async fn open_with(
     busy_timeout: Duration,
     ca: Option<&std::path::Path>,
 ) -> Result<Pool, OpenError> {
-    let known = schema::Known::of(database.engine());
+    let known = schema::Known::new(database.engine().migrator());
     Ok(open_known(database, busy_timeout, ca, &known).await?.0)
 }
 

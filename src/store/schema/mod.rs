@@ -41,9 +41,10 @@ pub mod rule;
 use std::collections::HashMap;
 
 use sqlx::Connection;
-use sqlx::migrate::{Migrate, Migration};
+use sqlx::migrate::{Migrate, Migration, Migrator};
 
-use super::{Engine, Pool, on};
+// Not `Engine`: `engine::OpenError` holds this module's error (no cycle).
+use super::{Pool, on};
 
 /// The migrations a node knows: its engine's embedded ones, or (for tests standing in for
 /// another release) fewer or more.
@@ -53,9 +54,10 @@ pub struct Known {
 }
 
 impl Known {
-    /// The migrations compiled into this rackd for `engine`.
-    pub fn of(engine: Engine) -> Known {
-        Known { migrations: engine.migrator().iter().cloned().collect() }
+    /// The migrations of `migrator`: an engine's compiled into this rackd
+    /// (`Engine::migrator`).
+    pub fn new(migrator: &Migrator) -> Known {
+        Known { migrations: migrator.iter().cloned().collect() }
     }
 
     /// Only the migrations up to `version`: a node of an earlier release, for tests
@@ -356,7 +358,7 @@ mod tests {
 
     #[test]
     fn a_limited_node_knows_fewer() {
-        let all = Known::of(Engine::Postgres);
+        let all = Known::new(&crate::store::POSTGRES_MIGRATOR);
         let fewer = all.clone().up_to(all.latest() - 1);
         assert!(fewer.latest() < all.latest());
         assert_eq!(fewer.clone().with(migration(99, "SELECT 1")).latest(), 99);

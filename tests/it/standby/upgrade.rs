@@ -62,7 +62,7 @@ fn is_active(view: &Value) -> bool {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_node_of_the_previous_schema_follows_takes_over_and_hands_back() {
-    let this = Known::of(Engine::Postgres).latest();
+    let this = Known::new(Engine::Postgres.migrator()).latest();
     let versions: Vec<i64> = Engine::Postgres.migrator().iter().map(|m| m.version).collect();
     let previous = versions[versions.len() - 2];
     let version = json!(env!("CARGO_PKG_VERSION"));

@@ -12,7 +12,7 @@ use sqlx::migrate::{Migration, MigrationType};
 
 /// A node of the next release: this one's migrations and one more, `sql`.
 fn newer(sql: &'static str) -> (Known, i64) {
-    let known = Known::of(Engine::Sqlite);
+    let known = Known::new(Engine::Sqlite.migrator());
     let version = known.latest() + 1;
     let extra = Migration::new(
         version,
@@ -42,7 +42,7 @@ async fn applied(pool: &Pool) -> Vec<(i64, Vec<u8>)> {
 async fn a_node_runs_on_a_newer_compatible_schema_and_leaves_it_as_it_is() {
     let dir = tempfile::tempdir().unwrap();
     let db = Database::Sqlite(dir.path().join("rackd.db"));
-    let this = Known::of(Engine::Sqlite).latest();
+    let this = Known::new(Engine::Sqlite.migrator()).latest();
     let (next, version) = newer("-- compatible-from: 11\nALTER TABLE jobs ADD COLUMN note TEXT;");
     assert_eq!(this, 11, "the line above names this release's schema");
     let (pool, found) = open(&db, &next).await.expect("the newer node migrates");
@@ -51,7 +51,8 @@ async fn a_node_runs_on_a_newer_compatible_schema_and_leaves_it_as_it_is() {
     pool.close().await;
 
     // This release's node: it runs, says what it found, and applies nothing.
-    let (pool, found) = open(&db, &Known::of(Engine::Sqlite)).await.expect("a compatible schema opens");
+    let (pool, found) =
+        open(&db, &Known::new(Engine::Sqlite.migrator())).await.expect("a compatible schema opens");
     assert_eq!((found.known, found.database, found.newer.clone()), (this, version, vec![version]));
     assert!(found.applied.is_empty(), "{found:?}");
     assert_eq!(applied(&pool).await, before, "the newer migration is left as it is");
@@ -80,7 +81,9 @@ async fn a_node_refuses_a_newer_schema_marked_incompatible() {
     assert_eq!(version, 12);
     open(&db, &next).await.expect("the newer node migrates").0.close().await;
 
-    let Err(e) = open(&db, &Known::of(Engine::Sqlite)).await else { panic!("an incompatible schema opened") };
+    let Err(e) = open(&db, &Known::new(Engine::Sqlite.migrator())).await else {
+        panic!("an incompatible schema opened")
+    };
     assert!(matches!(e, OpenError::Schema(SchemaError::Incompatible { version: 12, .. })), "{e:?}");
     assert_eq!(
         e.to_string(),
@@ -94,10 +97,12 @@ async fn a_node_refuses_a_newer_schema_marked_incompatible() {
 async fn a_known_migration_with_other_content_is_still_an_error() {
     let dir = tempfile::tempdir().unwrap();
     let db = Database::Sqlite(dir.path().join("rackd.db"));
-    let (pool, _) = open(&db, &Known::of(Engine::Sqlite)).await.unwrap();
+    let (pool, _) = open(&db, &Known::new(Engine::Sqlite.migrator())).await.unwrap();
     let Pool::Sqlite(p) = &pool else { unreachable!() };
     sqlx::query("UPDATE _sqlx_migrations SET checksum = X'00' WHERE version = 4").execute(p).await.unwrap();
     pool.close().await;
-    let Err(e) = open(&db, &Known::of(Engine::Sqlite)).await else { panic!("a changed migration opened") };
+    let Err(e) = open(&db, &Known::new(Engine::Sqlite.migrator())).await else {
+        panic!("a changed migration opened")
+    };
     assert!(matches!(e, OpenError::Schema(SchemaError::Modified(4))), "{e:?}");
 }
