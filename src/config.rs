@@ -140,6 +140,11 @@ pub struct DatabaseConfig {
     pub ca_file: Option<PathBuf>,
     /// How long a statement waits for a lock before failing, in milliseconds.
     pub busy_timeout_ms: u64,
+    /// Tests only, never read from a file: the node knows the migrations up to this
+    /// version only, as a node of an earlier release would (`store::schema::Known::up_to`;
+    /// tests/it/standby/upgrade.rs). The code is still this release's.
+    #[serde(skip)]
+    pub known_schema: Option<i64>,
 }
 
 /// `[intake]`: how job submissions are committed.
@@ -293,6 +298,7 @@ impl Default for DatabaseConfig {
             url_file: None,
             ca_file: None,
             busy_timeout_ms: 5000,
+            known_schema: None,
         }
     }
 }

@@ -1,5 +1,7 @@
 //! `GET /api/v1/cluster`: the nodes of a hot-standby cluster, their roles, the lease's
-//! epoch and age (see `service::cluster`). A node of its own answers 404.
+//! epoch and age (see `service::cluster`), and each node's version and schema (a site
+//! upgrading one node at a time runs two releases; `store::schema`). A node of its own
+//! answers 404.
 
 use axum::extract::State;
 use serde::Serialize;
@@ -21,10 +23,13 @@ pub fn router() -> OpenApiRouter<AppState> {
 #[schema(example = json!({"node": "b", "role": "active", "epoch": 4, "takeovers": 1,
     "lease": {"holder": "b", "epoch": 4, "age_ms": 640, "released": false, "lease_ms": 5000, "margin_ms": 1000},
     "nodes": [{"name": "a", "url": "http://10.0.0.11:8080", "role": "standby", "seen_ms_ago": 900,
-        "started_at": "2026-11-24T07:00:00Z", "config_hash": "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2"},
+        "started_at": "2026-11-24T07:00:00Z", "config_hash": "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2",
+        "version": "0.2.0", "schema": 14},
         {"name": "b", "url": "http://10.0.0.12:8080", "role": "active", "seen_ms_ago": 300,
-        "started_at": "2026-11-20T07:00:00Z", "config_hash": "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2"}],
-    "config_hash": "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2", "config_drift": false}))]
+        "started_at": "2026-11-20T07:00:00Z", "config_hash": "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2",
+        "version": "0.1.0", "schema": 13}],
+    "config_hash": "9f2c4e0d3b8a7f61e5d2c9b0a4f7e3d1c8b6a5f4e3d2c1b0a9f8e7d6c5b4a3f2", "config_drift": false,
+    "version": "0.1.0", "schema": 13, "database_schema": 14}))]
 pub struct ClusterView {
     /// The answering node.
     pub node: String,
@@ -43,6 +48,14 @@ pub struct ClusterView {
     /// Whether a node seen within two leases runs another configuration (the active node
     /// raises `config_drift` then).
     pub config_drift: bool,
+    /// The answering node's version.
+    pub version: &'static str,
+    /// The schema the answering node knows: the newest migration compiled into it.
+    pub schema: i64,
+    /// The newest migration applied in the database. Newer than `schema` while a newer
+    /// node migrated it: this node runs on it because each newer migration is recorded
+    /// compatible with its schema (it refuses to start otherwise).
+    pub database_schema: i64,
 }
 
 /// The lease.
@@ -80,6 +93,11 @@ pub struct NodeView {
     /// The hash of the `[site]` and `[[devices]]` it runs, as it last told (empty: not
     /// told).
     pub config_hash: String,
+    /// Its binary's version, as it last told (empty: not told).
+    pub version: String,
+    /// The schema it knows, the newest migration compiled into it, as it last told (0: not
+    /// told).
+    pub schema: i64,
 }
 
 /// The cluster's nodes, roles, epoch and lease age.
@@ -114,6 +132,8 @@ async fn cluster(State(app): State<AppState>) -> Result<Json<ClusterView>, ApiEr
             seen_ms_ago: (view.now - n.seen_at).max(0),
             started_at: from_ms(n.started_at),
             config_hash: n.config_hash,
+            version: n.version,
+            schema: n.schema_version,
         })
         .collect();
     Ok(Json(ClusterView {
@@ -125,5 +145,8 @@ async fn cluster(State(app): State<AppState>) -> Result<Json<ClusterView>, ApiEr
         nodes,
         config_hash: node.config.borrow().hash.clone(),
         config_drift,
+        version: crate::service::cluster::node::VERSION,
+        schema: node.schema,
+        database_schema: view.schema,
     }))
 }

@@ -51,6 +51,8 @@ pub(super) struct Parts {
     pub listen: std::net::SocketAddr,
     pub pool: Pool,
     pub pg: sqlx::PgPool,
+    /// The schema this node knows (`store::schema::Known::latest`).
+    pub schema: i64,
     pub dispatcher: Dispatcher,
     pub writer: Writer,
     pub hub: Hub,
@@ -87,6 +89,7 @@ pub(super) async fn start(
         takeovers: Arc::new(AtomicU64::new(0)),
         started_at: now_ms(),
         config: parts.reload.watch_loaded(),
+        schema: parts.schema,
     };
     let (_, from) = events::bounds(&parts.pool).await?;
     let (adopt, wanted) = mpsc::unbounded_channel();

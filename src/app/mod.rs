@@ -102,9 +102,15 @@ impl Application {
         };
         let ca = db.ca_file.as_deref().filter(|_| database.engine() == store::Engine::Postgres);
         let with_ca = ca.map(|p| format!(" with database.ca_file {}", p.display())).unwrap_or_default();
-        let pool = store::open_with(&database, Duration::from_millis(db.busy_timeout_ms), ca)
-            .await
-            .with_context(|| format!("opening database {}{with_ca}", database.display()))?;
+        let known = store::schema::Known::new(database.engine().migrator());
+        let known = match db.known_schema {
+            Some(version) => known.up_to(version),
+            None => known,
+        };
+        let (pool, schema) =
+            store::open_known(&database, Duration::from_millis(db.busy_timeout_ms), ca, &known)
+                .await
+                .with_context(|| format!("opening database {}{with_ca}", database.display()))?;
         // The archive's folder takes files, or the start fails (`[retention]`); after the
         // database, whose own problems (its folder, say) say more when both are wrong.
         store::archive::check_folder(&config.retention.folder(&config.database.path))
@@ -175,6 +181,7 @@ impl Application {
                     listen: listener.local_addr().context("the bound address")?,
                     pool: pool.clone(),
                     pg,
+                    schema: schema.known,
                     dispatcher: dispatcher.clone(),
                     writer: writer.clone(),
                     hub: hub.clone(),

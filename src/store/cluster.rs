@@ -148,29 +148,47 @@ pub struct NodeRow {
     pub seen_at: i64,
     /// The hash of the `[site]` and `[[devices]]` it runs (empty: not told).
     pub config_hash: String,
+    /// Its binary's version (empty: a node of a release before it was told).
+    pub version: String,
+    /// The schema it knows: the newest migration compiled into it (0: not told).
+    pub schema_version: i64,
 }
 
-/// Tells the cluster that `node` is alive at `url` in `role` (started at `started_at`),
-/// running the configuration `config_hash`.
+/// What a node tells of itself besides its name.
+#[derive(Clone, Copy, Debug)]
+pub struct Told<'a> {
+    /// Where its API is reached.
+    pub url: &'a str,
+    /// `active` or `standby`.
+    pub role: &'a str,
+    /// When it started, ms since 1970.
+    pub started_at: i64,
+    /// The hash of the configuration it runs.
+    pub config_hash: &'a str,
+}
+
+/// Tells the cluster that `node` is alive, as `told`, running the binary `version.0`
+/// that knows the schema `version.1`.
 pub async fn tell(
     pool: &PgPool,
     node: &str,
-    url: &str,
-    role: &str,
-    started_at: i64,
-    config_hash: &str,
+    told: &Told<'_>,
+    version: (&str, i64),
 ) -> Result<(), sqlx::Error> {
     let sql = format!(
-        "INSERT INTO cluster_nodes (name, url, role, started_at, seen_at, config_hash) \
-         VALUES ($1, $2, $3, $4, {NOW_MS}, $5) \
-         ON CONFLICT (name) DO UPDATE SET url = $2, role = $3, started_at = $4, seen_at = {NOW_MS}, config_hash = $5"
+        "INSERT INTO cluster_nodes (name, url, role, started_at, seen_at, config_hash, version, schema_version) \
+         VALUES ($1, $2, $3, $4, {NOW_MS}, $5, $6, $7) \
+         ON CONFLICT (name) DO UPDATE SET url = $2, role = $3, started_at = $4, seen_at = {NOW_MS}, \
+         config_hash = $5, version = $6, schema_version = $7"
     );
     sqlx::query(sqlx::AssertSqlSafe(sql))
         .bind(node)
-        .bind(url)
-        .bind(role)
-        .bind(started_at)
-        .bind(config_hash)
+        .bind(told.url)
+        .bind(told.role)
+        .bind(told.started_at)
+        .bind(told.config_hash)
+        .bind(version.0)
+        .bind(version.1)
         .execute(pool)
         .await?;
     Ok(())
@@ -179,7 +197,8 @@ pub async fn tell(
 /// Every node that ever told, by name, and the server's clock now (ms).
 pub async fn nodes(pool: &PgPool) -> Result<(Vec<NodeRow>, i64), sqlx::Error> {
     let rows = sqlx::query_as(
-        "SELECT name, url, role, started_at, seen_at, config_hash FROM cluster_nodes ORDER BY name",
+        "SELECT name, url, role, started_at, seen_at, config_hash, version, schema_version FROM cluster_nodes \
+         ORDER BY name",
     )
     .fetch_all(pool)
     .await?;

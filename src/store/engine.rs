@@ -232,9 +232,9 @@ pub enum OpenError {
     /// The folder of the SQLite file cannot be written.
     #[error(transparent)]
     Folder(#[from] std::io::Error),
-    /// A migration failed.
+    /// A migration failed, or the database's schema is not one this rackd runs on.
     #[error("migrating the schema: {0}")]
-    Migrate(#[from] sqlx::migrate::MigrateError),
+    Schema(#[from] super::schema::SchemaError),
     /// TLS with the PostgreSQL server failed: it offers none, or its certificate does not
     /// verify.
     #[error("TLS with the PostgreSQL server failed (sslmode={mode}{ca}): {source}; {hint}")]

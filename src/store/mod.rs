@@ -22,6 +22,11 @@
 //!   with its defaults (`synchronous_commit=on`). Either way nothing is answered before it
 //!   is on disk, so a 201 means the job survives a power cut. Every change goes through
 //!   one writer ([`writer::Writer`]) that commits many requests per transaction.
+//! - Migrations run through [`schema`], not sqlx's migrator: a node runs on a schema newer
+//!   than it knows when each newer migration is recorded compatible with it (each
+//!   migration's `-- compatible-from: N` line, kept in `_rackd_migrations`), which is what
+//!   lets a hot-standby site upgrade one node at a time and roll back. The rule migrations
+//!   follow is [`schema::rule`].
 
 pub mod alarms;
 pub mod archive;
@@ -38,6 +43,7 @@ pub mod jobs;
 pub mod locations;
 pub mod paging;
 pub mod rollups;
+pub mod schema;
 pub mod stats;
 pub mod webhooks;
 pub mod writer;
@@ -184,7 +190,8 @@ impl Pool {
 }
 
 /// Opens (creating a SQLite file if needed) the store and applies pending migrations; a
-/// PostgreSQL server older than [`engine::MIN_POSTGRES`] is refused.
+/// PostgreSQL server older than [`engine::MIN_POSTGRES`] is refused, and so is a schema
+/// newer than this rackd that is not compatible with it ([`schema`]).
 pub async fn open(database: &Database, busy_timeout: Duration) -> Result<Pool, OpenError> {
     open_with(database, busy_timeout, None).await
 }
@@ -195,10 +202,22 @@ pub async fn open_with(
     busy_timeout: Duration,
     ca: Option<&std::path::Path>,
 ) -> Result<Pool, OpenError> {
+    let known = schema::Known::new(database.engine().migrator());
+    Ok(open_known(database, busy_timeout, ca, &known).await?.0)
+}
+
+/// As [`open_with`], for a node that knows the migrations `known` (its engine's, or
+/// another release's in tests); also says what the migration found.
+pub async fn open_known(
+    database: &Database,
+    busy_timeout: Duration,
+    ca: Option<&std::path::Path>,
+    known: &schema::Known,
+) -> Result<(Pool, schema::Found), OpenError> {
     let pool = engine::connect(database, busy_timeout, 8, ca).await?;
-    on!(Pool, &pool, p => pool.migrator().run(p).await)?;
+    let found = schema::migrate(&pool, known).await?;
     rollups::rebuild::fill_once(&pool).await?;
-    Ok(pool)
+    Ok((pool, found))
 }
 
 /// Why the store is not ready.

@@ -2,7 +2,8 @@
 //! reached, its role as the leadership loop changes it, and how often it took over.
 //! [`tell`] keeps the node's row in `cluster_nodes` fresh, for `GET /api/v1/cluster` and
 //! for a standby looking for the active node's API; the row carries the hash of the
-//! configuration the node runs ([`Node::drift`]: which nodes run another one).
+//! configuration the node runs ([`Node::drift`]: which nodes run another one), and the
+//! node's version and schema (a site upgrading one node at a time sees both releases).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -36,7 +37,13 @@ pub struct Node {
     pub started_at: i64,
     /// The configuration it runs (its hash told with its row; a reload changes it).
     pub config: watch::Receiver<crate::config::RunningConfig>,
+    /// The schema it knows: the newest migration compiled in (`store::schema`), told with
+    /// its row beside the binary's version ([`VERSION`]).
+    pub schema: i64,
 }
+
+/// This binary's version, as the nodes tell it.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 
 /// The cluster as one node sees it.
 #[derive(Clone, Debug)]
@@ -47,6 +54,8 @@ pub struct View {
     pub nodes: Vec<NodeRow>,
     /// The database server's clock, ms since 1970 (ages are measured on it).
     pub now: i64,
+    /// The newest migration applied in the database.
+    pub schema: i64,
 }
 
 impl Node {
@@ -72,7 +81,9 @@ impl Node {
     pub async fn view(&self) -> Result<View, sqlx::Error> {
         let lease = cluster::read(&self.pool, LEASE).await?;
         let (nodes, now) = cluster::nodes(&self.pool).await?;
-        Ok(View { lease, nodes, now })
+        let schema =
+            crate::store::schema::database_schema(&crate::store::Pool::Postgres(self.pool.clone())).await?;
+        Ok(View { lease, nodes, now, schema })
     }
 
     /// The nodes seen within two leases whose configuration differs from this node's, as
@@ -104,7 +115,10 @@ pub async fn tell(node: Node) {
     loop {
         let said = node.role_name();
         let hash = node.config.borrow().hash.clone();
-        if let Err(e) = cluster::tell(&node.pool, &node.name, &node.url, said, node.started_at, &hash).await {
+        let told =
+            cluster::Told { url: &node.url, role: said, started_at: node.started_at, config_hash: &hash };
+        let version = (VERSION, node.schema);
+        if let Err(e) = cluster::tell(&node.pool, &node.name, &told, version).await {
             tracing::warn!(error = %e, "cluster: cannot tell the other nodes of this one");
         }
         tokio::select! {

@@ -11,6 +11,7 @@ mod pages;
 mod plans;
 mod retention;
 mod rollups;
+mod schema;
 
 use std::time::Duration;
 
