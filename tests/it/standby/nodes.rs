@@ -114,8 +114,11 @@ async fn a_standby_serves_forwards_and_takes_over_when_the_active_node_lets_go()
     // a stops cleanly: it lets go, and b takes over without waiting out the lease.
     let let_go = Instant::now();
     a.stop().await;
-    let view = until(&b, "/api/v1/cluster", 10, |c| c["role"] == "active").await;
+    // The role reads active once the lease is won; the takeover is counted once the node
+    // drives (it reads its configuration and starts its devices in between).
+    until(&b, "/api/v1/cluster", 10, |c| c["role"] == "active").await;
     assert!(let_go.elapsed() < Duration::from_millis(2500), "took {:?}", let_go.elapsed());
+    let view = until(&b, "/api/v1/cluster", 10, |c| c["takeovers"] == 1).await;
     assert_eq!((view["epoch"].clone(), view["takeovers"].clone()), (json!(2), json!(1)), "{view}");
     let alarms = until(&b, "/api/v1/alarms?active=true", 10, |a| {
         a["alarms"].as_array().is_some_and(|l| l.iter().any(|x| x["kind"] == "takeover"))
