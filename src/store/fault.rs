@@ -128,8 +128,7 @@ impl Cause {
             return match n & 0xff {
                 13 => Some(Cause::Full),
                 8 => Some(Cause::ReadOnly),
-                10 | 11 | 26 => Some(Cause::Io),
-                14 => Some(Cause::Io),
+                10 | 11 | 14 | 26 => Some(Cause::Io),
                 _ => None,
             };
         }

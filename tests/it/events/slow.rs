@@ -24,6 +24,15 @@ use crate::support::{TestApp, eventually, spawn_with};
 const BATCHES: usize = 200;
 const PER_BATCH: usize = 200;
 
+/// Two subscribers to jobs, the second with a small receive buffer, each past its hello.
+async fn fast_and_slow(app: &TestApp) -> (Ws, Ws) {
+    let mut fast = Ws::connect(&app.base, "?topics=jobs").await;
+    let mut slow = Ws::connect_small_buffer(&app.base, "?topics=jobs").await;
+    assert_eq!(fast.json().await["seq"], 0);
+    assert_eq!(slow.json().await["seq"], 0);
+    (fast, slow)
+}
+
 /// Posts [`BATCHES`] batches of [`PER_BATCH`] jobs, one after the other, in a task.
 fn produce(app: &TestApp) -> tokio::task::JoinHandle<()> {
     let base = app.base.clone();
@@ -57,10 +66,7 @@ async fn a_slow_subscriber_is_told_to_resync_and_others_miss_nothing() {
         c.events.ping_secs = 3600;
     })
     .await;
-    let mut fast = Ws::connect(&app.base, "?topics=jobs").await;
-    let mut slow = Ws::connect_small_buffer(&app.base, "?topics=jobs").await;
-    assert_eq!(fast.json().await["seq"], 0);
-    assert_eq!(slow.json().await["seq"], 0);
+    let (mut fast, mut slow) = fast_and_slow(&app).await;
 
     // The slow one reads nothing while the events go by.
     let producer = produce(&app);
@@ -114,10 +120,7 @@ async fn a_subscriber_stuck_for_the_send_timeout_is_let_go_and_others_miss_nothi
         c.events.ping_secs = 3600;
     })
     .await;
-    let mut fast = Ws::connect(&app.base, "?topics=jobs").await;
-    let mut slow = Ws::connect_small_buffer(&app.base, "?topics=jobs").await;
-    assert_eq!(fast.json().await["seq"], 0);
-    assert_eq!(slow.json().await["seq"], 0);
+    let (mut fast, mut slow) = fast_and_slow(&app).await;
     let stopped_reading = Instant::now();
     let with_both = subscribers(&app).await;
 
