@@ -125,7 +125,9 @@ async fn stepped(engine: Engine) {
 
     // The jobs' pages by period: from the first one's acceptance, every job, each once, in
     // order; up to the last one's, every other one.
-    let from = jobs.iter().map(|j| j["created_at"].as_str().unwrap().to_owned()).min().unwrap();
+    // The earliest by time, not by text: "…03.55Z" is 550 ms and sorts after "…03.554Z".
+    let first = jobs.iter().min_by_key(|j| ms(&j["created_at"])).unwrap();
+    let from = first["created_at"].as_str().unwrap().to_owned();
     let last_created = jobs.iter().map(|j| ms(&j["created_at"])).max().unwrap();
     let mut ids = Vec::new();
     let mut cursor = String::new();
