@@ -138,6 +138,11 @@ pub struct DatabaseConfig {
     /// `sslmode=verify-ca` and `verify-full` (`store::engine` says how the mode is chosen).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ca_file: Option<PathBuf>,
+    /// The SQLite VFS the file is opened through, by the name it is registered under in
+    /// the process; SQLite's default when not set (`store::engine::Settings::vfs`). For
+    /// a program that runs rackd's library with a VFS of its own, as the fault tests do.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sqlite_vfs: Option<String>,
     /// How long a statement waits for a lock before failing, in milliseconds.
     pub busy_timeout_ms: u64,
     /// Tests only, never read from a file: the node knows the migrations up to this
@@ -297,6 +302,7 @@ impl Default for DatabaseConfig {
             url: None,
             url_file: None,
             ca_file: None,
+            sqlite_vfs: None,
             busy_timeout_ms: 5000,
             known_schema: None,
         }

@@ -100,7 +100,9 @@ impl Application {
             Some(url) => store::Database::Postgres(url),
             None => store::Database::Sqlite(db.path.clone()),
         };
-        let ca = db.ca_file.as_deref().filter(|_| database.engine() == store::Engine::Postgres);
+        let postgres = database.engine() == store::Engine::Postgres;
+        let ca = db.ca_file.as_deref().filter(|_| postgres);
+        let settings = store::Settings { ca, vfs: db.sqlite_vfs.as_deref().filter(|_| !postgres) };
         let with_ca = ca.map(|p| format!(" with database.ca_file {}", p.display())).unwrap_or_default();
         let known = store::schema::Known::new(database.engine().migrator());
         let known = match db.known_schema {
@@ -108,7 +110,7 @@ impl Application {
             None => known,
         };
         let (pool, schema) =
-            store::open_known(&database, Duration::from_millis(db.busy_timeout_ms), ca, &known)
+            store::open_known(&database, Duration::from_millis(db.busy_timeout_ms), settings, &known)
                 .await
                 .with_context(|| format!("opening database {}{with_ca}", database.display()))?;
         // The archive's folder takes files, or the start fails (`[retention]`); after the

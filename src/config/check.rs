@@ -55,6 +55,9 @@ pub enum Invalid {
     /// A `database.url` that is not a PostgreSQL URL.
     #[error("{0}")]
     DatabaseUrl(String),
+    /// `database.sqlite_vfs` that names nothing, or beside a PostgreSQL `database.url`.
+    #[error("{0}")]
+    SqliteVfs(&'static str),
     /// `[cluster]` without a PostgreSQL `database.url`, or with a bad value.
     #[error("{0}")]
     Cluster(&'static str),
@@ -273,9 +276,20 @@ impl Config {
 }
 
 impl Config {
-    /// `[database]`: the URL (printed without its password), its TLS mode and the CA files.
+    /// `[database]`: the URL (printed without its password), its TLS mode, the CA files and
+    /// the SQLite VFS.
     fn check_database(&self) -> Result<(), Flaw> {
         let db = &self.database;
+        let vfs_flaw = |why| Err(("database.sqlite_vfs".to_owned(), Invalid::SqliteVfs(why)));
+        match (db.sqlite_vfs.as_deref(), &db.url) {
+            (Some(_), Some(_)) => {
+                return vfs_flaw(
+                    "is for the SQLite file, and database.url names a PostgreSQL server: keep one",
+                );
+            }
+            (Some(""), None) => return vfs_flaw("names no VFS: leave it out for SQLite's default"),
+            _ => {}
+        }
         let url_flaw = |why: String| ("database.url".to_owned(), Invalid::DatabaseUrl(why));
         let tls_flaw = |key: &str, why: String| (key.to_owned(), Invalid::Tls(why));
         let Some(url) = &db.url else {

@@ -218,6 +218,16 @@ fn a_database_url_must_be_postgres_and_may_come_from_the_environment() {
 }
 
 #[test]
+fn a_sqlite_vfs_is_for_the_sqlite_file_only() {
+    let env = load(FILE, &[("RACKD_DATABASE__SQLITE_VFS", "unix-excl")]).unwrap();
+    assert_eq!(env.config.database.sqlite_vfs.as_deref(), Some("unix-excl"));
+    let err = error("[database]\nurl = \"postgres://h/db\"\nsqlite_vfs = \"unix\"\n");
+    assert!(err.contains("x.toml:3:1: database.sqlite_vfs: is for the SQLite file"), "{err}");
+    let err = error("[database]\nsqlite_vfs = \"\"\n");
+    assert!(err.contains("database.sqlite_vfs: names no VFS"), "{err}");
+}
+
+#[test]
 fn allowed_hosts_from_the_file_or_the_environment_and_the_failure_limit_are_checked() {
     let hosts = |l: &Loaded| l.config.server.allowed_hosts.iter().map(|h| h.to_string()).collect::<Vec<_>>();
     let file = load("[server]\nallowed_hosts = [\"WCS.plant.local\", \"10.1.2.3:8080\"]\n", &[]).unwrap();

@@ -214,6 +214,22 @@ pub fn mode_name(mode: PgSslMode) -> &'static str {
     }
 }
 
+/// What `[database]` sets beside where the store is, each for one engine; the other's is
+/// not used.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Settings<'a> {
+    /// A PostgreSQL server's CA file (`database.ca_file`), for `verify-ca` and
+    /// `verify-full`; the URL's own `sslrootcert` is used when it is `None`. How the TLS
+    /// mode is chosen is in the module documentation.
+    pub ca: Option<&'a Path>,
+    /// The SQLite VFS the file is opened through (`database.sqlite_vfs`), by the name it is
+    /// registered under in the process; SQLite's default (`unix`) when `None`. rackd
+    /// registers none of its own: the test suite registers one that fails writes on command
+    /// (tests/it/support/faulty_vfs.rs), and SQLite refuses a name it does not know
+    /// (`no such vfs`).
+    pub vfs: Option<&'a str>,
+}
+
 /// One of the two engines.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Engine {
@@ -340,14 +356,12 @@ impl Engine {
 /// standby could take over. The rollback keeps the fence's promise: the write is committed
 /// before the new node starts, or not at all.
 ///
-/// `ca` is a PostgreSQL server's CA file (`database.ca_file`), for `verify-ca` and
-/// `verify-full`; the URL's own `sslrootcert` is used when it is `None`. How the TLS mode
-/// is chosen is in the module documentation.
+/// `settings` are the engine's own (a PostgreSQL server's CA, a SQLite VFS).
 pub async fn connect(
     database: &Database,
     busy_timeout: Duration,
     max: u32,
-    ca: Option<&Path>,
+    settings: Settings<'_>,
 ) -> Result<Pool, OpenError> {
     match database {
         Database::Sqlite(path) => {
@@ -358,10 +372,11 @@ pub async fn connect(
                 Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => return Err(e.into()),
                 _ => {}
             }
-            let options = sqlite_options(path, busy_timeout)?;
+            let options = sqlite_options(path, busy_timeout, settings.vfs)?;
             Ok(Pool::Sqlite(SqlitePoolOptions::new().max_connections(max).connect_with(options).await?))
         }
         Database::Postgres(url) => {
+            let ca = settings.ca;
             let idle = busy_timeout.max(Duration::from_secs(1)).as_millis();
             let tls = PgTls::of(url);
             let mut options = PgConnectOptions::from_str(url)?
@@ -464,8 +479,18 @@ fn supported(version_num: &str) -> bool {
 ///
 /// A new database gets pages of [`SQLITE_PAGE_SIZE`] bytes, twice SQLite's default. How
 /// SQLite itself is compiled (without memory statistics) is set in `.cargo/config.toml`.
-fn sqlite_options(path: &Path, busy_timeout: Duration) -> Result<SqliteConnectOptions, sqlx::Error> {
-    Ok(SqliteConnectOptions::from_str("sqlite:")?
+/// `vfs` is [`Settings::vfs`].
+fn sqlite_options(
+    path: &Path,
+    busy_timeout: Duration,
+    vfs: Option<&str>,
+) -> Result<SqliteConnectOptions, sqlx::Error> {
+    let options = SqliteConnectOptions::from_str("sqlite:")?;
+    let options = match vfs {
+        Some(name) => options.vfs(name.to_owned()),
+        None => options,
+    };
+    Ok(options
         .filename(path)
         .create_if_missing(true)
         .page_size(SQLITE_PAGE_SIZE)

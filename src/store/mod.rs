@@ -52,7 +52,9 @@ use std::time::Duration;
 
 use sqlx::{PgPool, SqlitePool};
 
-pub use engine::{Database, DatabaseError, Engine, OpenError, PgTls, SQLITE_PAGE_SIZE, SslModeError};
+pub use engine::{
+    Database, DatabaseError, Engine, OpenError, PgTls, SQLITE_PAGE_SIZE, Settings, SslModeError,
+};
 pub use jobs::{Job, JobEvent, JobFilter};
 
 /// The migrations of each engine, embedded in the binary.
@@ -193,17 +195,17 @@ impl Pool {
 /// PostgreSQL server older than [`engine::MIN_POSTGRES`] is refused, and so is a schema
 /// newer than this rackd that is not compatible with it ([`schema`]).
 pub async fn open(database: &Database, busy_timeout: Duration) -> Result<Pool, OpenError> {
-    open_with(database, busy_timeout, None).await
+    open_with(database, busy_timeout, Settings::default()).await
 }
 
-/// As [`open`], with a PostgreSQL server's CA file (`database.ca_file`).
+/// As [`open`], with the engine's own settings (a PostgreSQL server's CA file, a SQLite VFS).
 pub async fn open_with(
     database: &Database,
     busy_timeout: Duration,
-    ca: Option<&std::path::Path>,
+    settings: Settings<'_>,
 ) -> Result<Pool, OpenError> {
     let known = schema::Known::new(database.engine().migrator());
-    Ok(open_known(database, busy_timeout, ca, &known).await?.0)
+    Ok(open_known(database, busy_timeout, settings, &known).await?.0)
 }
 
 /// As [`open_with`], for a node that knows the migrations `known` (its engine's, or
@@ -211,10 +213,10 @@ pub async fn open_with(
 pub async fn open_known(
     database: &Database,
     busy_timeout: Duration,
-    ca: Option<&std::path::Path>,
+    settings: Settings<'_>,
     known: &schema::Known,
 ) -> Result<(Pool, schema::Found), OpenError> {
-    let pool = engine::connect(database, busy_timeout, 8, ca).await?;
+    let pool = engine::connect(database, busy_timeout, 8, settings).await?;
     let found = schema::migrate(&pool, known).await?;
     rollups::rebuild::fill_once(&pool).await?;
     Ok((pool, found))

@@ -26,7 +26,7 @@ fn newer(sql: &'static str) -> (Known, i64) {
 
 /// Opens `db` as a node knowing `known` would.
 async fn open(db: &Database, known: &Known) -> Result<(Pool, store::schema::Found), OpenError> {
-    store::open_known(db, Duration::from_secs(5), None, known).await
+    store::open_known(db, Duration::from_secs(5), Default::default(), known).await
 }
 
 /// What `_sqlx_migrations` holds: (version, checksum), in order.
