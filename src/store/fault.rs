@@ -3,7 +3,7 @@
 //!
 //! The job writer tells [`StoreFault`] how each group went ([`StoreFault::observe`]): a
 //! group that failed for one of these [`Cause`]s (as a whole, or any of its requests) sets
-//! the fault, the first group that commits again clears it. Everyone reads it from there:
+//! the fault, the first group that commits something again clears it. Everyone reads it from there:
 //! `/readyz` and `GET /api/v1/health` (not ready, `store` names the cause), the API's 503s
 //! (`store_full` or `store_unavailable`, with `Retry-After`), `/metrics` (failed commits by
 //! cause), and the `store` alarm, which `service::store_alarm` records on device `store`.
@@ -22,7 +22,10 @@
 //!   fsync stops PostgreSQL, since the kernel may have dropped what it could not write).
 //! - **Cleared by a commit, not by time.** A disk that has room again says nothing until
 //!   the next commit; the writer commits the moment anything is sent to it, and the alarm's
-//!   own record is one such commit.
+//!   own record is one such commit. Only a commit that wrote something counts: a group whose
+//!   requests were all refused for their own reasons (a 404, a 409) commits nothing, and
+//!   SQLite's `COMMIT` of nothing never touches the disk, so it says nothing of it
+//!   (`writer`'s `durable::outcome`).
 
 use std::sync::Arc;
 

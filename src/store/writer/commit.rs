@@ -206,6 +206,7 @@ async fn one_by_one(
                 out.timings.extend(applied.out.timings);
                 out.counts.add(&applied.out.counts);
                 out.statements += applied.out.statements + 2;
+                out.writes += applied.out.writes;
                 answers.push(answer.remove(0));
             }
             Err(e) => {
@@ -242,16 +243,17 @@ async fn apply(
         group.audit_submissions();
         group.counted();
         save::save(db, &group, written, &mut count).await?;
-        group.out.statements = count;
+        (group.out.statements, group.out.writes) = (count, count);
         return Ok((answers, group));
     }
     let loaded = load::load(db, cmds, read, &mut count).await?;
+    let reads = count;
     let mut group = Group::new(loaded, next, now_ms(), tell.cloned(), cmds, spare);
     let answers = cmds.iter().map(|cmd| group.command(cmd)).collect();
     group.audit_submissions();
     group.counted();
     save::save(db, &group, save::Written::default(), &mut count).await?;
-    group.out.statements = count;
+    (group.out.statements, group.out.writes) = (count, count - reads);
     Ok((answers, group))
 }
 

@@ -146,6 +146,7 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
         (Ok(ok), None) => Ok(ok),
         (Err(e), _) => Err(WriteError::Database(Arc::new(e))),
     };
+    let wrote = result.as_ref().is_ok_and(|(_, out)| out.writes > 0);
     let timings = result.as_ref().map(|(_, out)| out.timings.as_slice()).unwrap_or_default();
     let statements = result.as_ref().map_or(0, |(_, out)| out.statements);
     let none = Counts::default();
@@ -170,8 +171,10 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
             (group.iter().map(|_| Answer::Failed(e.clone())).collect(), Vec::new())
         }
     };
-    if let Some(stored) = &hooks.stored {
-        stored(outcome(&answers));
+    if let Some(stored) = &hooks.stored
+        && let Some(outcome) = outcome(&answers, wrote)
+    {
+        stored(outcome);
     }
     if let Some(committed) = &hooks.committed {
         let jobs: Vec<&Job> = answers.iter().flat_map(Answer::jobs).collect();
@@ -188,15 +191,18 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
 }
 
 /// How a group went for the store: the cause of the first of its answers that failed for
-/// the store's own reason (the whole group's failure is every answer's), else committed.
-fn outcome(answers: &[Answer]) -> Result<(), Cause> {
+/// the store's own reason (the whole group's failure is every answer's); else committed, if
+/// it `wrote`. A group that wrote nothing (its requests refused for their own reasons, or
+/// with nothing to change) tells nothing: its `COMMIT` never reached the disk, so it is no
+/// sign that the store commits again, and the store stays faulted while every write fails.
+fn outcome(answers: &[Answer], wrote: bool) -> Option<Result<(), Cause>> {
     let cause = |e: &WriteError| match e {
         WriteError::Database(e) => Cause::of(e),
         _ => None,
     };
     match answers.iter().flat_map(Answer::errors).find_map(cause) {
-        Some(c) => Err(c),
-        None => Ok(()),
+        Some(c) => Some(Err(c)),
+        None => wrote.then_some(Ok(())),
     }
 }
 
@@ -332,6 +338,16 @@ mod tests {
         syncer.finish();
         assert!(matches!(b_rx.try_recv(), Ok(Ok(()))) && matches!(c_rx.try_recv(), Ok(Ok(()))));
         assert_eq!(*syncs.lock().unwrap(), 2, "b and c share one sync");
+    }
+
+    #[test]
+    fn only_a_group_that_wrote_tells_that_the_store_commits() {
+        let io = WriteError::Database(Arc::new(sqlx::Error::Io(std::io::Error::other("EIO"))));
+        let refused = || Answer::Failed(WriteError::NotFound(7));
+        assert_eq!(outcome(&[Answer::Recorded], true), Some(Ok(())));
+        assert_eq!(outcome(&[refused()], false), None, "a commit of nothing is no sign");
+        assert_eq!(outcome(&[refused(), Answer::Recorded], true), Some(Ok(())));
+        assert_eq!(outcome(&[refused(), Answer::Failed(io)], false), Some(Err(Cause::Io)));
     }
 
     #[test]

@@ -331,9 +331,9 @@ pub struct Hooks {
     pub stored: Option<Stored>,
 }
 
-/// Called after each group with `Ok` if it committed, or the [`Cause`] of the store's own
-/// failure that failed it or any of its requests (nothing when it failed for its requests'
-/// own reasons only).
+/// Called after each group with `Ok` if it committed something, or the [`Cause`] of the
+/// store's own failure that failed it or any of its requests (not called for a group that
+/// wrote nothing and failed for its requests' own reasons only: see `durable::outcome`).
 pub type Stored = Arc<dyn Fn(Result<(), Cause>) + Send + Sync>;
 
 /// What the writer is asked to do. `who` is the API's caller of an audited command: its

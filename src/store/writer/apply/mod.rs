@@ -84,6 +84,10 @@ pub(super) struct Out {
     pub(super) timings: Vec<JobTiming>,
     /// Statements the group's transaction ran, `BEGIN` and `COMMIT` included.
     pub(super) statements: usize,
+    /// Of `statements`, those that wrote (every one of `save` and `stream`: they run only
+    /// with rows to write). A group without any changed nothing, so its `COMMIT` did not
+    /// reach the disk (SQLite writes nothing to the WAL for it).
+    pub(super) writes: usize,
     /// What it changed in the counts of jobs and active alarms (see [`Group::counted`]).
     pub(super) counts: Counts,
     /// What its transitions add to the rollups (see [`crate::store::rollups`]).
