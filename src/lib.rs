@@ -12,6 +12,10 @@
 //! talk to PLCs, over one transport layer) and [`domain`] (the validated words every layer
 //! shares). [`auth`], [`protocols`] and [`domain`] use no other layer, nor do [`files`] (how
 //! rackd creates a file of its own) and [`redact`] (secrets out of the URLs it prints).
+//!
+//! No `unsafe` (Cargo.toml only denies it, for one module of the tests).
+
+#![forbid(unsafe_code)]
 
 pub mod api;
 pub mod app;

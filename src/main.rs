@@ -1,5 +1,7 @@
 //! The `rackd` binary: parse the command line, start logging, hand over to the library.
 
+#![forbid(unsafe_code)]
+
 use std::io::IsTerminal;
 use std::process::ExitCode;
 

@@ -18,9 +18,10 @@ use rackd::config::Config;
 use rackd::store::Database;
 use serde_json::{Value, json};
 
+use super::failed_commits;
 use crate::api::demo::cloc;
 use crate::api::waiting::wait_for_online;
-use crate::support::{TestApp, all_jobs, eventually, loc, spawn_on, split, wait_ended};
+use crate::support::{all_jobs, eventually, loc, spawn_on, split, wait_ended};
 
 /// A tmpfs of its own, unmounted (lazily) when dropped.
 struct Tmpfs {
@@ -68,16 +69,6 @@ fn fill(path: &Path) {
         }
     }
     let _ = file.sync_all();
-}
-
-/// The value of `rackd_store_commit_failures_total{cause="full"}`.
-async fn failed_commits(app: &TestApp) -> u64 {
-    let text = app.client.get(app.url("/metrics")).send().await.unwrap().text().await.unwrap();
-    let line = text
-        .lines()
-        .find(|l| l.starts_with("rackd_store_commit_failures_total{cause=\"full\"}"))
-        .unwrap_or_else(|| panic!("no failed commits by cause in {text}"));
-    line.rsplit(' ').next().unwrap().parse::<f64>().unwrap() as u64
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -165,7 +156,7 @@ async fn a_full_disk_is_told_everywhere_holds_the_machines_and_loses_nothing() {
         }
     })
     .await;
-    assert!(failed_commits(&app).await >= 1);
+    assert!(failed_commits(&app, "full").await >= 1);
 
     // The machines finish what they had; what they report is recorded only if its commit
     // goes through, and nothing acts on it before (checked below: every job completes, each
@@ -212,7 +203,7 @@ async fn a_full_disk_is_told_everywhere_holds_the_machines_and_loses_nothing() {
             "job {id}'s task reached the shelf more than once"
         );
     }
-    assert!(failed_commits(&app).await >= 1);
+    assert!(failed_commits(&app, "full").await >= 1);
     app.stop().await;
 
     let pool = rackd::store::open(&Database::Sqlite(path), Duration::from_secs(5)).await.unwrap();

@@ -7,6 +7,7 @@ mod copy;
 mod full;
 mod groups;
 mod import;
+mod io_error;
 mod pages;
 mod plans;
 mod retention;
@@ -43,6 +44,17 @@ where
         Pool::Sqlite(p) => sqlx::query_as(sql).fetch_all(p).await.unwrap(),
         Pool::Postgres(p) => sqlx::query_as(sql).fetch_all(p).await.unwrap(),
     }
+}
+
+/// The value of `rackd_store_commit_failures_total{cause="CAUSE"}` of a running server.
+pub async fn failed_commits(app: &crate::support::TestApp, cause: &str) -> u64 {
+    let text = app.client.get(app.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    let start = format!("rackd_store_commit_failures_total{{cause=\"{cause}\"}} ");
+    let line = text
+        .lines()
+        .find(|l| l.starts_with(&start))
+        .unwrap_or_else(|| panic!("no failed commits for {cause} in {text}"));
+    line.rsplit(' ').next().unwrap().parse::<f64>().unwrap() as u64
 }
 
 /// A light job with this reference.

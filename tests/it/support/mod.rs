@@ -3,9 +3,11 @@
 //! ([`ws`]), a TCP proxy that can cut a link ([`proxy`]), certificates and an https
 //! front for the TLS tests ([`tls`]), a webhook receiver ([`receiver`]), the Python
 //! that runs the tests' Python libraries ([`python`]), where a child process listens as it
-//! says itself ([`listening`]) and a port held across a server's restarts ([`held`]).
+//! says itself ([`listening`]), a port held across a server's restarts ([`held`]) and a
+//! SQLite VFS that fails the WAL's writes on command ([`faulty_vfs`]).
 
 pub mod app;
+pub mod faulty_vfs;
 pub mod held;
 pub mod listening;
 pub mod machines;
