@@ -409,6 +409,11 @@ impl Writer {
         if let Conn::Postgres(c) = &mut conn {
             unsure::prune(c).await?;
         }
+        // A process started after the wall clock stepped back stamps on from the store's
+        // newest stamp, not before it (see `domain::time`).
+        if let Some(newest) = load::newest_stamp(&mut conn).await? {
+            crate::domain::time::not_before(newest);
+        }
         let (tx, rx) = mpsc::channel(queue);
         let mut sync = match pool {
             Pool::Sqlite(p) => Some(durable::wal(p.connect_options().get_filename())),

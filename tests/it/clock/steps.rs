@@ -176,3 +176,53 @@ async fn stepped(engine: Engine) {
 fn enc(text: &str) -> String {
     text.replace('+', "%2B").replace(':', "%3A")
 }
+
+#[test]
+fn a_restart_after_a_step_back() {
+    alone("clock::steps::a_restart_after_a_step_back", async || restarted().await);
+}
+
+/// rackd stopped, the wall clock stepped an hour back, rackd started again (a new process
+/// remembers no stamp: [`rackd::domain::time::forget_stamps`]): what it stamps after the
+/// restart is no earlier than what the store held. Before, the new jobs were stamped an
+/// hour before the old ones.
+async fn restarted() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = rackd::store::Database::Sqlite(dir.path().join("rackd.db"));
+    let job = |bay: u16| json!({"kind": "store", "barcode": format!("R{bay}"), "to": loc(1, bay, 1, 1)});
+    let no_devices = |c: &mut rackd::config::Config| c.devices.clear();
+    let app = support::spawn_on(db.clone(), no_devices).await;
+    let mut before = Vec::new();
+    for bay in 1..=3 {
+        before.push(submit(&app, job(bay)).await);
+    }
+    let (_, last) = app.get(&format!("/api/v1/jobs/{}", before[2])).await;
+    app.stop().await;
+
+    step_wall_clock(-HOUR);
+    rackd::domain::time::forget_stamps();
+    let app = support::spawn_on(db.clone(), no_devices).await;
+    for bay in 4..=6 {
+        let id = submit(&app, job(bay)).await;
+        let (_, after) = app.get(&format!("/api/v1/jobs/{id}")).await;
+        assert!(
+            ms(&after["created_at"]) >= ms(&last["created_at"]),
+            "stamped before the store's last: {after} after {last}"
+        );
+    }
+    app.stop().await;
+
+    let pool = rackd::store::open(&db, Duration::from_secs(5)).await.unwrap();
+    let events = rackd::store::events::after(&pool, 0, 100_000).await.unwrap();
+    pool.close().await;
+    for w in events.windows(2) {
+        assert!(
+            w[1].at >= w[0].at,
+            "event {} is stamped before event {}: {} < {}",
+            w[1].seq,
+            w[0].seq,
+            w[1].at,
+            w[0].at
+        );
+    }
+}
