@@ -332,7 +332,13 @@ pub struct Hooks {
     pub stored: Option<Stored>,
     /// Whether each group whose `COMMIT` failed on PostgreSQL landed (see [`unsure`]).
     pub unsure: Option<Settled>,
+    /// A group has waited for the database for a second (see `STALL`); its outcome is
+    /// told through [`Hooks::stored`] when it comes.
+    pub stalled: Option<Stalled>,
 }
+
+/// Called when a group has waited for the database for a second.
+pub type Stalled = Arc<dyn Fn() + Send + Sync>;
 
 /// Called with whether a group whose `COMMIT` failed landed, once read.
 pub type Settled = Arc<dyn Fn(bool) + Send + Sync>;
@@ -629,6 +635,28 @@ async fn write(
     commit::commit(conn, group, carry, tell, shared).await
 }
 
+/// How long a group (with its reconnection and, on PostgreSQL, the reading of an unsure
+/// commit) may take before the store is told stalled: a database that does not answer (a
+/// partition, a server restarting) then shows at once in `/readyz`, the health and the
+/// WebSocket's `store` message, rather than when the TCP connection gives up. Groups take
+/// milliseconds; a second is far beyond a healthy one's worst (a SQLite checkpoint of a
+/// large WAL is a few hundred ms on a slow disk).
+const STALL: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// Runs `work`, telling `stalled` once if it is not done within [`STALL`]; the work goes on.
+async fn watched<T>(work: impl std::future::Future<Output = T>, stalled: Option<&Stalled>) -> T {
+    tokio::pin!(work);
+    tokio::select! {
+        out = &mut work => return out,
+        _ = tokio::time::sleep(STALL) => {}
+    }
+    tracing::warn!("a group of the job writer has waited for the database for a second");
+    if let Some(stalled) = stalled {
+        stalled();
+    }
+    work.await
+}
+
 /// The writer: take what waits, commit it, hand it to the [`durable::Syncer`] (which
 /// answers once it is on disk), repeat until every handle is gone.
 ///
@@ -663,39 +691,42 @@ async fn run(
             break;
         }
         let started = std::time::Instant::now();
-        if db.is_none() {
-            db = Conn::acquire(&pool)
-                .await
-                .inspect_err(|e| tracing::error!(error = %e, "the job writer cannot reconnect"))
-                .ok();
-        }
-        if shared {
-            carry.next = None;
-        }
-        let result = match db.as_mut() {
-            Some(conn) => {
-                write(conn, checkpoints.as_mut(), &group, &mut carry, hooks.tell.as_ref(), shared).await
+        let work = async {
+            if db.is_none() {
+                db = Conn::acquire(&pool)
+                    .await
+                    .inspect_err(|e| tracing::error!(error = %e, "the job writer cannot reconnect"))
+                    .ok();
             }
-            None => Err(sqlx::Error::PoolTimedOut.into()),
-        };
-        let result = match result {
-            Ok(done) => Ok(done),
-            Err(commit::Failed::Sure(e)) => Err(e),
-            Err(commit::Failed::Unsure(unsure)) => {
-                let landed = unsure::landed(&pool, &unsure, || rx.is_closed()).await;
-                if let (Some(landed), Some(told)) = (landed, hooks.unsure.as_ref()) {
-                    told(landed);
+            if shared {
+                carry.next = None;
+            }
+            let result = match db.as_mut() {
+                Some(conn) => {
+                    write(conn, checkpoints.as_mut(), &group, &mut carry, hooks.tell.as_ref(), shared).await
                 }
-                match landed {
-                    Some(true) => {
-                        carry.landed(&unsure);
-                        db = None;
-                        Ok((unsure.answers, unsure.out))
+                None => Err(sqlx::Error::PoolTimedOut.into()),
+            };
+            match result {
+                Ok(done) => Ok(done),
+                Err(commit::Failed::Sure(e)) => Err(e),
+                Err(commit::Failed::Unsure(unsure)) => {
+                    let landed = unsure::landed(&pool, &unsure, || rx.is_closed()).await;
+                    if let (Some(landed), Some(told)) = (landed, hooks.unsure.as_ref()) {
+                        told(landed);
                     }
-                    _ => Err(unsure.error),
+                    match landed {
+                        Some(true) => {
+                            carry.landed(&unsure);
+                            db = None;
+                            Ok((unsure.answers, unsure.out))
+                        }
+                        _ => Err(unsure.error),
+                    }
                 }
             }
         };
+        let result = watched(work, hooks.stalled.as_ref()).await;
         if result.is_err() || db.is_none() {
             db = None;
             carry.lost(result.is_err());

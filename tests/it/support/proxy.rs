@@ -71,6 +71,11 @@ impl Proxy {
         self.state.blocked.store(true, Ordering::SeqCst);
     }
 
+    /// Forwards again what waited and what comes.
+    pub fn unblock(&self) {
+        self.state.blocked.store(false, Ordering::SeqCst);
+    }
+
     /// Cuts the next `count` connections on which a client sends bytes holding `needle`:
     /// those bytes are forwarded if `deliver` (the server acts on them) or dropped, and no
     /// answer reaches the client; both sockets are closed.
