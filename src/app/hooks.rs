@@ -44,8 +44,10 @@ pub(super) fn hooks(
         }
         fault.observe(outcome);
     });
+    let counted = metrics.clone();
     Hooks {
         stored: Some(stored),
+        unsure: Some(Arc::new(move |landed| counted.count_unsure_commit(landed))),
         committed: Some(queues.hook()),
         locked: Some(queues.locked_hook()),
         tell: Some(queues.tell_hook()),

@@ -21,6 +21,7 @@ mod load;
 mod save;
 mod stream;
 mod timing;
+mod unsure;
 
 use std::sync::Arc;
 
@@ -329,7 +330,12 @@ pub struct Hooks {
     /// How each group went for the store: committed, or failed for a [`Cause`] of the
     /// store's own (see [`crate::store::fault`]).
     pub stored: Option<Stored>,
+    /// Whether each group whose `COMMIT` failed on PostgreSQL landed (see [`unsure`]).
+    pub unsure: Option<Settled>,
 }
+
+/// Called with whether a group whose `COMMIT` failed landed, once read.
+pub type Settled = Arc<dyn Fn(bool) + Send + Sync>;
 
 /// Called after each group with `Ok` if it committed, or the [`Cause`] of the store's own
 /// failure that failed it or any of its requests (nothing when it failed for its requests'
@@ -399,7 +405,10 @@ impl Writer {
         hooks: Hooks,
         shared: bool,
     ) -> Result<(Writer, JoinHandle<()>), sqlx::Error> {
-        let conn = Conn::acquire(pool).await?;
+        let mut conn = Conn::acquire(pool).await?;
+        if let Conn::Postgres(c) = &mut conn {
+            unsure::prune(c).await?;
+        }
         let (tx, rx) = mpsc::channel(queue);
         let mut sync = match pool {
             Pool::Sqlite(p) => Some(durable::wal(p.connect_options().get_filename())),
@@ -608,7 +617,7 @@ async fn write(
     carry: &mut commit::Carry,
     tell: Option<&Tell>,
     shared: bool,
-) -> Result<(Vec<apply::Answer>, apply::Out), sqlx::Error> {
+) -> Result<(Vec<apply::Answer>, apply::Out), commit::Failed> {
     if let (Conn::Sqlite(c), Some(checkpoints)) = (&mut *conn, checkpoints) {
         checkpoints.before(c, group.iter().map(|s| s.cmd.jobs()).sum()).await?;
     }
@@ -628,7 +637,8 @@ async fn write(
 ///
 /// After a failed group the connection is replaced by a fresh one from the pool, so a
 /// database server that restarted (or a connection that broke) costs the groups in flight,
-/// not every group after them.
+/// not every group after them. A group whose `COMMIT` failed on PostgreSQL is first settled
+/// by reading whether it landed (see [`unsure`]).
 async fn run(
     pool: Pool,
     db: Conn,
@@ -661,10 +671,29 @@ async fn run(
             Some(conn) => {
                 write(conn, checkpoints.as_mut(), &group, &mut carry, hooks.tell.as_ref(), shared).await
             }
-            None => Err(sqlx::Error::PoolTimedOut),
+            None => Err(sqlx::Error::PoolTimedOut.into()),
         };
-        if result.is_err() {
-            (db, carry.next) = (None, None);
+        let result = match result {
+            Ok(done) => Ok(done),
+            Err(commit::Failed::Sure(e)) => Err(e),
+            Err(commit::Failed::Unsure(unsure)) => {
+                let landed = unsure::landed(&pool, &unsure, || rx.is_closed()).await;
+                if let (Some(landed), Some(told)) = (landed, hooks.unsure.as_ref()) {
+                    told(landed);
+                }
+                match landed {
+                    Some(true) => {
+                        carry.landed(&unsure);
+                        db = None;
+                        Ok((unsure.answers, unsure.out))
+                    }
+                    _ => Err(unsure.error),
+                }
+            }
+        };
+        if result.is_err() || db.is_none() {
+            db = None;
+            carry.lost(result.is_err());
         }
         if let Some(checkpoints) = checkpoints.as_mut() {
             checkpoints.after(result.is_ok());

@@ -4,6 +4,7 @@
 
 mod archive;
 mod copy;
+mod cut;
 mod full;
 mod groups;
 mod import;
