@@ -126,7 +126,7 @@ struct Mix {
 impl Mix {
     fn next(&mut self) -> (u16, Value) {
         self.n += 1;
-        let aisle: u16 = if self.n % 4 == 0 { 2 } else { 1 };
+        let aisle: u16 = if self.n.is_multiple_of(4) { 2 } else { 1 };
         let a = usize::from(aisle - 1);
         let k = self.k[a];
         self.k[a] += 1;
@@ -141,7 +141,7 @@ impl Mix {
                 json!({"kind": "store", "barcode": format!("BOX-{}", self.n), "to": to})
             }
             1 if aisle == 1 => {
-                json!({"kind": "light", "location": at(6), "color": "green", "on": k % 2 == 0})
+                json!({"kind": "light", "location": at(6), "color": "green", "on": k.is_multiple_of(2)})
             }
             1 => json!({"kind": "travel", "to": at(8)}),
             _ => json!({"kind": "retrieve", "from": stored.pop_front().expect("stored two jobs ago")}),
