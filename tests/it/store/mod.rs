@@ -9,6 +9,8 @@ mod full;
 mod groups;
 mod import;
 mod pages;
+mod pg_failover;
+mod pg_restart;
 mod plans;
 mod retention;
 mod rollups;
