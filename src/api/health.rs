@@ -62,9 +62,13 @@ pub struct DeviceHealth {
 }
 
 /// How long `/readyz` and the health wait for the database before they say it does not
-/// answer: a server that went away holds a connection's open for the pool's whole wait
-/// (5 s and more), and the dashboard must learn why within a second.
-pub const READ_WAIT: std::time::Duration = std::time::Duration::from_millis(500);
+/// answer: a server that went away would hold them for the pool's whole wait (5 s and
+/// more). Two seconds, not less: a healthy store under load (a busy pool on a loaded
+/// machine) must not be reported down. What must be told faster is: the writer tells a
+/// failed commit at once and a commit that waits a second (`store::writer`'s stall), these
+/// answer from that memory without waiting, and the dashboard hears it over the
+/// WebSocket (`{"type": "store"}`).
+pub const READ_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// [`crate::store::ready`] within [`READ_WAIT`].
 pub async fn ready_within(pool: &crate::store::Pool) -> Result<(), crate::store::NotReady> {
