@@ -61,6 +61,22 @@ pub struct DeviceHealth {
     pub seconds_since_contact: Option<f64>,
 }
 
+/// How long `/readyz` and the health wait for the database before they say it does not
+/// answer: a server that went away would hold them for the pool's whole wait (5 s and
+/// more). Two seconds, not less: a healthy store under load (a busy pool on a loaded
+/// machine) must not be reported down. What must be told faster is: the writer tells a
+/// failed commit at once and a commit that waits a second (`store::writer`'s stall), these
+/// answer from that memory without waiting, and the dashboard hears it over the
+/// WebSocket (`{"type": "store"}`).
+pub const READ_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// [`crate::store::ready`] within [`READ_WAIT`].
+pub async fn ready_within(pool: &crate::store::Pool) -> Result<(), crate::store::NotReady> {
+    tokio::time::timeout(READ_WAIT, crate::store::ready(pool))
+        .await
+        .unwrap_or(Err(crate::store::NotReady::Unreachable(sqlx::Error::PoolTimedOut)))
+}
+
 /// The site at a glance: the store and each device; 503 when the store is down.
 #[utoipa::path(get, path = "/health", tag = "operations",
     responses(
@@ -68,10 +84,17 @@ pub struct DeviceHealth {
         (status = 503, description = "The store is down (`status`: `down`)", body = SiteHealth),
     ))]
 async fn health(State(app): State<AppState>) -> Response {
-    let store = match crate::store::ready(&app.pool).await {
-        Ok(()) if let Some(fault) = app.store_fault.current() => {
-            format!("the store cannot commit: {}", fault.cause.words())
-        }
+    // While the store cannot commit, the answer comes from memory at once (the devices'
+    // active alarms uncounted): a database that does not answer would otherwise hold it
+    // for the pool's connection wait, twice, and the dashboard would learn why seconds
+    // late. Otherwise each read waits at most `READ_WAIT`.
+    let fault = app.store_fault.current();
+    let ready = match fault {
+        Some(_) => Ok(()),
+        None => ready_within(&app.pool).await,
+    };
+    let store = match ready {
+        Ok(()) if let Some(fault) = fault => format!("the store cannot commit: {}", fault.cause.words()),
         Ok(()) if app.writer.is_running() => "ok".to_owned(),
         Ok(()) => "the job writer has stopped".to_owned(),
         Err(e) => {
@@ -84,7 +107,16 @@ async fn health(State(app): State<AppState>) -> Response {
             }
         }
     };
-    let active = alarms::active(&app.pool).await.unwrap_or_default();
+    // Not waited for again when the store is down already.
+    let active = match fault {
+        Some(_) => Vec::new(),
+        None if store != "ok" => Vec::new(),
+        None => tokio::time::timeout(READ_WAIT, alarms::active(&app.pool))
+            .await
+            .ok()
+            .and_then(Result::ok)
+            .unwrap_or_default(),
+    };
     let now = crate::domain::time::now();
     let devices: Vec<DeviceHealth> = all_shown(&app.devices(), app.dispatcher.queues())
         .into_iter()

@@ -87,7 +87,7 @@ snapshot and the events. Browsers pass the key as `?token=`."),
 in order; each subscription's state, its delivery log, pause, resume and replay (administrators)"),
         (name = "operations", description = "Health, readiness, metrics and the audit log of operator actions"),
     ),
-    components(schemas(ws::Snapshot, ws::SnapshotData, ws::Resync, crate::service::reload::Applied)),
+    components(schemas(ws::Snapshot, ws::SnapshotData, ws::Resync, ws::StoreState, crate::service::reload::Applied)),
     modifiers(&Security),
 )]
 struct ApiDoc;

@@ -39,15 +39,8 @@ pub async fn healthz() -> Json<Health> {
         (status = 503, description = "Not ready, with the reason", body = ErrorBody),
     ))]
 pub async fn readyz(State(app): State<AppState>) -> Result<Json<Health>, ApiError> {
-    crate::store::ready(&app.pool).await.map_err(|e| {
-        // The cause goes to the log; the answer names no driver text.
-        tracing::error!(error = %e, "not ready");
-        let message = match e {
-            crate::store::NotReady::Unreachable(_) => "the database does not answer",
-            crate::store::NotReady::Migration { .. } => "the database schema is not up to date",
-        };
-        ApiError::new(axum::http::StatusCode::SERVICE_UNAVAILABLE, "not_ready", message)
-    })?;
+    // A store that cannot commit is told from memory first, without waiting for a
+    // database that may not answer; the read after it waits at most `READ_WAIT`.
     if let Some(fault) = app.store_fault.current() {
         tracing::error!(store = fault.cause.as_str(), "not ready: the store cannot commit");
         return Err(ApiError::new(
@@ -56,6 +49,15 @@ pub async fn readyz(State(app): State<AppState>) -> Result<Json<Health>, ApiErro
             format!("the store cannot commit: {}", fault.cause.words()),
         ));
     }
+    super::health::ready_within(&app.pool).await.map_err(|e| {
+        // The cause goes to the log; the answer names no driver text.
+        tracing::error!(error = %e, "not ready");
+        let message = match e {
+            crate::store::NotReady::Unreachable(_) => "the database does not answer",
+            crate::store::NotReady::Migration { .. } => "the database schema is not up to date",
+        };
+        ApiError::new(axum::http::StatusCode::SERVICE_UNAVAILABLE, "not_ready", message)
+    })?;
     if !app.writer.is_running() {
         tracing::error!("not ready: the job writer has stopped");
         return Err(ApiError::new(

@@ -37,6 +37,7 @@ pub(super) fn hooks(
             hub.publish(events)
         }
     });
+    let stalled = fault.clone();
     let (fault, counted) = (fault.clone(), metrics.clone());
     let stored: Stored = Arc::new(move |outcome| {
         if let Err(cause) = outcome {
@@ -44,8 +45,11 @@ pub(super) fn hooks(
         }
         fault.observe(outcome);
     });
+    let counted = metrics.clone();
     Hooks {
+        stalled: Some(Arc::new(move || stalled.observe(Err(crate::store::fault::Cause::Unreachable)))),
         stored: Some(stored),
+        unsure: Some(Arc::new(move |landed| counted.count_unsure_commit(landed))),
         committed: Some(queues.hook()),
         locked: Some(queues.locked_hook()),
         tell: Some(queues.tell_hook()),

@@ -309,8 +309,9 @@ impl Config {
         }
         let tls = PgTls::of(url);
         tls.check().map_err(|e| url_flaw(e.to_string()))?;
-        if let Err(e) = <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url) {
-            return Err(url_flaw(format!("not a PostgreSQL URL: {e}")));
+        // One host or several (libpq's `HOST1:PORT1,HOST2:PORT2`), each read by the driver.
+        if let Err(e) = crate::store::hosts::Hosts::parse(url) {
+            return Err(url_flaw(e.to_string()));
         }
         if let Some(root) = &tls.root_cert {
             read_ca(root).map_err(|e| url_flaw(format!("sslrootcert: {e}")))?;

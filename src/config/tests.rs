@@ -225,3 +225,15 @@ fn no_result_in_the_configuration_has_a_string_error() {
     }
     assert!(stringly.is_empty(), "Result<_, String> in the configuration:\n{}", stringly.join("\n"));
 }
+
+#[test]
+fn database_url_may_list_several_hosts_as_libpq_does() {
+    let parse = |url: &str| Config::parse(&format!("[database]\nurl = \"{url}\"\n"), Path::new("x.toml"));
+    parse("postgres://rackd@db1:5432,db2:5433/rackd?sslmode=disable").unwrap();
+    parse("postgres://rackd@db1,db2/rackd?target_session_attrs=read-write&sslmode=disable").unwrap();
+    parse("postgres://rackd@db1,db2/rackd?target_session_attrs=primary&sslmode=disable").unwrap();
+    let e = parse("postgres://rackd@db1,db2/rackd?target_session_attrs=standby").unwrap_err().to_string();
+    assert!(e.starts_with("x.toml:2:1: database.url: ") && e.contains("standby"), "{e}");
+    let e = parse("postgres://rackd@/rackd?host=db1,db2").unwrap_err().to_string();
+    assert!(e.contains("database.url: ") && e.contains("HOST1:PORT1,HOST2:PORT2"), "{e}");
+}

@@ -49,6 +49,14 @@
 //! across a step back, up to a tenth shorter. The smear is per process: two cluster nodes
 //! stamp with their own clocks, as they always did.
 //!
+//! # Across a restart
+//!
+//! The last stamp is kept in memory, so a process started after the wall clock stepped
+//! back (rackd restarted, or the machine rebooted, during the hour NTP took back) would
+//! stamp from the wall clock again, before what the store already holds. So the job writer
+//! reads the newest stamp in the store when it starts and calls [`not_before`]: the stamp
+//! then smears on from there, as in a process that never stopped.
+//!
 //! # The seam
 //!
 //! [`step_wall_clock`] moves this process's wall clock as NTP would, for tests: everything
@@ -56,7 +64,8 @@
 //! certificate's expiry and capture files' age (the system's own clock is the one that
 //! counts there), and `rackd plc poll`'s printed times (a command line tool, no store).
 //! The seam is process-wide: a test that steps it runs in a process of its own
-//! (`tests/it/clock`).
+//! (`tests/it/clock`). [`forget_stamps`] forgets the last stamp, as a new process starts
+//! without it, for a test of a restart in one process.
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicI64, Ordering};
@@ -92,6 +101,22 @@ pub fn wall_ms() -> i64 {
 /// For tests: nothing in rackd calls it.
 pub fn step_wall_clock(ms: i64) {
     STEPPED.fetch_add(ms, Ordering::Relaxed);
+}
+
+/// Stamps from now on are no earlier than `ms` (the newest stamp in the store, read as the
+/// writer starts; see "Across a restart" in the module doc).
+pub fn not_before(ms: i64) {
+    let mut stamp = STAMP.lock().unwrap_or_else(|p| p.into_inner());
+    if stamp.last < ms {
+        stamp.last = ms;
+        stamp.smear = None;
+    }
+}
+
+/// Forgets the last stamp, as a process starts without it: for tests of a restart in one
+/// process (see the module doc's seam).
+pub fn forget_stamps() {
+    *STAMP.lock().unwrap_or_else(|p| p.into_inner()) = Stamp { last: i64::MIN, smear: None };
 }
 
 /// A stored time as a date-time; out-of-range values clamp to the epoch.

@@ -29,6 +29,7 @@ use sqlx::postgres::{PgConnectOptions, PgPoolOptions, PgSslMode};
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 
 use super::Pool;
+use super::hosts::{self, Fresh, Hosts, SessionAttrs};
 
 /// The oldest PostgreSQL server rackd runs on (`server_version_num`): 14, the oldest
 /// release its community still supported when this was written.
@@ -51,7 +52,7 @@ impl Database {
     pub fn parse(text: &str) -> Result<Database, DatabaseError> {
         if text.starts_with("postgres://") || text.starts_with("postgresql://") {
             PgTls::of(text).check()?;
-            PgConnectOptions::from_str(text).map_err(|e| DatabaseError::Postgres(e.to_string()))?;
+            super::hosts::Hosts::parse(text)?;
             Ok(Database::Postgres(text.to_owned()))
         } else if let Some(path) = text.strip_prefix("sqlite:") {
             let path = path.strip_prefix("//").unwrap_or(path);
@@ -105,9 +106,10 @@ pub enum DatabaseError {
     /// `sqlite:` (or nothing) without a path.
     #[error("a SQLite store needs a file's path (data/rackd.db, or sqlite:data/rackd.db)")]
     NoPath,
-    /// A `postgres://` URL the driver does not read, in its words.
-    #[error("not a PostgreSQL URL: {0}")]
-    Postgres(String),
+    /// A `postgres://` URL the driver does not read (in its words), or whose list of
+    /// hosts rackd does not take.
+    #[error(transparent)]
+    Postgres(#[from] super::hosts::HostsError),
     /// A `sslmode` rackd does not take.
     #[error(transparent)]
     SslMode(#[from] SslModeError),
@@ -264,6 +266,15 @@ pub enum OpenError {
         /// The driver's error.
         source: sqlx::Error,
     },
+    /// No host of a `database.url` that lists several (or asks for `target_session_attrs`)
+    /// fits, within the time a connection is waited for.
+    #[error("no host of database.url is {attrs} (target_session_attrs): {said}")]
+    NoHost {
+        /// What was asked of a host.
+        attrs: &'static str,
+        /// What each host said, the last time they were tried.
+        said: String,
+    },
     /// The PostgreSQL server is too old.
     #[error(
         "PostgreSQL {found} is not supported: rackd needs PostgreSQL 14 or newer (server_version_num {MIN_POSTGRES} and up)"
@@ -356,7 +367,11 @@ impl Engine {
 /// standby could take over. The rollback keeps the fence's promise: the write is committed
 /// before the new node starts, or not at all.
 ///
-/// `settings` are the engine's own (a PostgreSQL server's CA, a SQLite VFS).
+/// `settings` are the engine's own: a PostgreSQL server's CA (see [`Settings::ca`]), a
+/// SQLite VFS.
+///
+/// A URL that lists several hosts (or says `target_session_attrs`) starts on the first host
+/// that fits, and a task follows the one that takes writes through a failover (`hosts`).
 pub async fn connect(
     database: &Database,
     busy_timeout: Duration,
@@ -377,33 +392,118 @@ pub async fn connect(
         }
         Database::Postgres(url) => {
             let ca = settings.ca;
-            let idle = busy_timeout.max(Duration::from_secs(1)).as_millis();
-            let tls = PgTls::of(url);
-            let mut options = PgConnectOptions::from_str(url)?
-                .application_name("rackd")
-                .options([("idle_in_transaction_session_timeout", format!("{idle}ms"))]);
-            if let Some(ca) = ca {
-                options = options.ssl_root_cert(ca);
+            let hosts =
+                Hosts::parse(url).map_err(|e| OpenError::Database(sqlx::Error::Configuration(e.into())))?;
+            let idle = busy_timeout.max(Duration::from_secs(1));
+            let wait = busy_timeout.max(Duration::from_secs(5));
+            let each: Vec<PgHost> =
+                hosts.urls.iter().map(|u| PgHost::of(u, idle, ca)).collect::<Result<_, sqlx::Error>>()?;
+            let options: Vec<PgConnectOptions> = each.iter().map(|h| h.options.clone()).collect();
+            let several = each.len() > 1;
+            // The host to start on, and the finder's first connection to it: the first
+            // that fits (see `hosts`); one host that need not be checked is connected to
+            // as it always was.
+            let (start, watch) = if several || hosts.attrs != SessionAttrs::Any {
+                let (i, conn) = first_fitting(&options, &hosts, wait).await?;
+                (i, Some(conn))
+            } else {
+                (0, None)
+            };
+            let host = &each[start];
+            let fresh = Fresh::new();
+            let mut pool = PgPoolOptions::new().max_connections(max).acquire_timeout(wait);
+            let attrs = hosts.attrs;
+            if attrs != SessionAttrs::Any {
+                pool = pool.after_connect(move |conn, _| {
+                    Box::pin(async move {
+                        match attrs.check(conn).await? {
+                            true => Ok(()),
+                            false => Err(sqlx::Error::Protocol(format!(
+                                "the server is not {} (target_session_attrs)",
+                                attrs.as_str()
+                            ))),
+                        }
+                    })
+                });
             }
-            let from_env = std::env::var("PGSSLMODE").ok().map(|_| options.get_ssl_mode());
-            let ca_file = ca.map(Path::to_owned).or_else(|| tls.root_cert.clone());
-            let mode = tls.effective(ca_file.is_some(), from_env);
-            let options = options.ssl_mode(mode);
-            let pool = PgPoolOptions::new()
-                .max_connections(max)
-                .acquire_timeout(busy_timeout.max(Duration::from_secs(5)))
-                .connect_with(options)
+            if several {
+                let fresh = fresh.clone();
+                pool = pool.before_acquire(move |_, meta| {
+                    let keep = fresh.keeps(meta.age);
+                    Box::pin(async move { Ok(keep) })
+                });
+            }
+            let pool = pool
+                .connect_with(host.options.clone())
                 .await
-                .map_err(|e| tls_failure(e, mode, ca_file.as_deref(), tls.mode.is_none()))?;
+                .map_err(|e| tls_failure(e, host.mode, host.ca_file.as_deref(), host.tls.mode.is_none()))?;
             let version: String = sqlx::query_scalar("SHOW server_version_num").fetch_one(&pool).await?;
             if !supported(&version) {
                 let found =
                     sqlx::query_scalar("SHOW server_version").fetch_one(&pool).await.unwrap_or(version);
                 return Err(OpenError::Version { found });
             }
-            log_link(&pool, mode, tls.loopback).await;
+            log_link(&pool, host.mode, host.tls.loopback).await;
+            if several {
+                tracing::info!(
+                    host = %hosts.labels[start],
+                    hosts = hosts.labels.len(),
+                    target_session_attrs = attrs.as_str(),
+                    "database.url lists several hosts: connected to the first that fits, following it through failovers"
+                );
+                tokio::spawn(hosts::find(pool.clone(), options, hosts.labels, attrs, start, watch, fresh));
+            }
             Ok(Pool::Postgres(pool))
         }
+    }
+}
+
+/// One host of a `database.url`: its connect options with every setting of rackd's, and
+/// the TLS mode they were given.
+struct PgHost {
+    options: PgConnectOptions,
+    mode: PgSslMode,
+    tls: PgTls,
+    ca_file: Option<PathBuf>,
+}
+
+impl PgHost {
+    /// The options of `url` (one host), sessions ending a transaction idle for `idle`, and
+    /// the CA `ca` if given.
+    fn of(url: &str, idle: Duration, ca: Option<&Path>) -> Result<PgHost, sqlx::Error> {
+        let tls = PgTls::of(url);
+        let mut options = PgConnectOptions::from_str(url)?
+            .application_name("rackd")
+            .options([("idle_in_transaction_session_timeout", format!("{}ms", idle.as_millis()))]);
+        if let Some(ca) = ca {
+            options = options.ssl_root_cert(ca);
+        }
+        let from_env = std::env::var("PGSSLMODE").ok().map(|_| options.get_ssl_mode());
+        let ca_file = ca.map(Path::to_owned).or_else(|| tls.root_cert.clone());
+        let mode = tls.effective(ca_file.is_some(), from_env);
+        Ok(PgHost { options: options.ssl_mode(mode), mode, tls, ca_file })
+    }
+}
+
+/// The first host (in the order listed) that fits the URL's `target_session_attrs`, tried
+/// in rounds for at most `wait`.
+async fn first_fitting(
+    options: &[PgConnectOptions],
+    hosts: &Hosts,
+    wait: Duration,
+) -> Result<(usize, sqlx::PgConnection), OpenError> {
+    let deadline = tokio::time::Instant::now() + wait;
+    let mut backoff = Duration::from_millis(50);
+    loop {
+        match hosts::first_passing(options, &hosts.labels, hosts.attrs).await {
+            Ok(found) => return Ok(found),
+            Err(said) if tokio::time::Instant::now() + backoff >= deadline => {
+                return Err(OpenError::NoHost { attrs: hosts.attrs.as_str(), said: said.join("; ") });
+            }
+            Err(_) => {}
+        }
+        tokio::time::sleep(backoff).await;
+        backoff = (backoff * 2).min(hosts::MAX_BACKOFF);
     }
 }
 

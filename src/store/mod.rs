@@ -38,6 +38,7 @@ pub mod counts;
 pub mod engine;
 pub mod events;
 pub mod fault;
+pub mod hosts;
 pub mod import;
 pub mod jobs;
 pub mod locations;

@@ -92,6 +92,21 @@ function askServer() {
   alarms.findExport();
 }
 
+/**
+ * The banner saying the store cannot commit (`fault`: the server's `store` message), or
+ * none. While it shows, nothing moves: the machines are held until their reports are
+ * recorded, and the API answers 503.
+ */
+function showStore(fault) {
+  const banner = $('store-down');
+  banner.hidden = fault === null;
+  if (fault === null) return;
+  const since = fault.since ? ` since ${clock(fault.since)}` : '';
+  banner.textContent =
+    `The store cannot commit${since}: ${fault.message}. The machines are held until what they ` +
+    'report is recorded; new jobs are refused (503) until then.';
+}
+
 model.subscribe((kind, item) => {
   switch (kind) {
     case 'snapshot':
@@ -114,6 +129,9 @@ model.subscribe((kind, item) => {
     case 'location':
       racks.update(item);
       mark('cranes');
+      break;
+    case 'store':
+      showStore(item);
       break;
     case 'config':
       config.show(item);

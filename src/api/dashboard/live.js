@@ -49,6 +49,8 @@ export class Live {
       opened = true;
       this.failures = 0;
       this.lastStart = this.model.seq === null ? 'snapshot' : 'replay';
+      // The server tells a store fault right after the start: until then, none is known.
+      this.model.applyStore({ ok: true });
       this.onState('live');
     });
     socket.addEventListener('message', (event) => {
@@ -81,6 +83,8 @@ export class Live {
         return;
       }
       this.model.applyEvent(message);
+    } else if (message.type === 'store') {
+      this.model.applyStore(message);
     }
     // `resync` needs nothing: the server closes with 4000 next and the reconnect asks for
     // what follows the last event applied.

@@ -23,10 +23,15 @@ export class Model {
     this.locations = new Map();
     /** The server had more active jobs than its snapshot holds. */
     this.jobsTruncated = false;
+    /** Why the store cannot commit (the server's `store` message), or null. */
+    this.storeFault = null;
     this.listeners = [];
   }
 
-  /** `listener(kind, item)` with kind `snapshot`, `job`, `device`, `alarm` or `location`. */
+  /**
+   * `listener(kind, item)` with kind `snapshot`, `job`, `device`, `alarm`, `location`,
+   * `config` or `store`.
+   */
   subscribe(listener) {
     this.listeners.push(listener);
   }
@@ -102,6 +107,14 @@ export class Model {
       default:
         break;
     }
+  }
+
+  /** The server's `store` message: whether the store commits, and if not why. */
+  applyStore(state) {
+    const fault = state.ok ? null : state;
+    if (fault === null && this.storeFault === null) return;
+    this.storeFault = fault;
+    this.emit('store', fault);
   }
 
   /** A location's state from an event or from a lock/unlock answer. */

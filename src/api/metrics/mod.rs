@@ -69,6 +69,12 @@ struct CauseLabels {
     cause: &'static str,
 }
 
+/// Labels of the settled commits whose answer was lost.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct LandedLabels {
+    landed: &'static str,
+}
+
 /// Labels of the snapshot counter.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 struct ReasonLabels {
@@ -95,6 +101,7 @@ pub struct Metrics {
     ws_resyncs: Counter,
     ws_snapshots: Family<ReasonLabels, Counter>,
     store_failures: Family<CauseLabels, Counter>,
+    unsure_commits: Family<LandedLabels, Counter>,
     group_size: Histogram,
     commit_seconds: Histogram,
     dispatch_seconds: Histograms<KindLabels>,
@@ -155,6 +162,15 @@ impl Default for Metrics {
             "Groups of the job writer that failed for the store's own cause (full, read_only, io_error, unreachable)",
             store_failures.clone(),
         );
+        let unsure_commits = Family::<LandedLabels, Counter>::default();
+        for landed in ["true", "false"] {
+            unsure_commits.get_or_create(&LandedLabels { landed }).inc_by(0);
+        }
+        r.register(
+            "store_unsure_commits",
+            "Groups whose COMMIT's answer was lost (PostgreSQL), by whether the database then showed them landed",
+            unsure_commits.clone(),
+        );
         let group_size = Histogram::new(exponential_buckets(1.0, 2.0, 12));
         r.register(
             "writer_group_size",
@@ -186,6 +202,7 @@ impl Default for Metrics {
             ws_resyncs,
             ws_snapshots,
             store_failures,
+            unsure_commits,
             group_size,
             commit_seconds,
             dispatch_seconds,
@@ -212,6 +229,12 @@ impl Metrics {
     /// Counts a group of the writer that failed for the store's own `cause`.
     pub fn count_store_failure(&self, cause: crate::store::fault::Cause) {
         self.store_failures.get_or_create(&CauseLabels { cause: cause.as_str() }).inc();
+    }
+
+    /// Counts a group whose `COMMIT`'s answer was lost, by whether it `landed`.
+    pub fn count_unsure_commit(&self, landed: bool) {
+        let landed = if landed { "true" } else { "false" };
+        self.unsure_commits.get_or_create(&LandedLabels { landed }).inc();
     }
 
     /// Counts a snapshot sent to a WebSocket subscriber, by its `reason`.

@@ -10,6 +10,11 @@
 //! 3. a client that falls `events.buffer` commits behind gets `{"type": "resync", "seq",
 //!    "reason"}` (seq = the last event it was sent) and the connection is closed with code
 //!    4000; it reconnects with `?since=SEQ`. Nobody else waits for it.
+//! 4. **the store's state** `{"type": "store", "ok", "cause", "message", "since"}` whenever
+//!    the store stops or starts committing again (`store::fault`), and right after the start
+//!    while it cannot. It is not an event of the log (the log cannot record anything then)
+//!    and has no `seq`; it comes within a moment of the first failed commit, so a dashboard
+//!    says why nothing moves while the machines are held.
 //!
 //! The server pings every `events.ping_secs` and drops a client silent for two pings;
 //! clients may ping too. A socket opened with a key that a reload removes is closed with
@@ -47,6 +52,40 @@ pub struct Resync {
     pub seq: i64,
     /// Why, in words.
     pub reason: String,
+}
+
+/// Whether the store commits: sent when that changes, and after the start while it cannot.
+#[derive(Debug, serde::Serialize, ToSchema)]
+#[schema(example = json!({"type": "store", "ok": false, "cause": "full",
+    "message": "the disk that holds the database is full", "since": "2026-11-29T12:00:00Z"}))]
+pub struct StoreState {
+    /// Always `store`.
+    #[serde(rename = "type")]
+    #[schema(rename = "type")]
+    pub kind: &'static str,
+    /// Whether the store commits.
+    pub ok: bool,
+    /// Why not: `full`, `read_only`, `io_error` or `unreachable` (null when ok).
+    pub cause: Option<&'static str>,
+    /// Why not, in words (null when ok).
+    pub message: Option<&'static str>,
+    /// Since when it cannot (null when ok).
+    #[serde(with = "time::serde::rfc3339::option")]
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub since: Option<time::OffsetDateTime>,
+}
+
+impl StoreState {
+    /// The message for `fault` (None: the store commits).
+    pub fn of(fault: Option<crate::store::fault::Fault>) -> StoreState {
+        StoreState {
+            kind: "store",
+            ok: fault.is_none(),
+            cause: fault.map(|f| f.cause.as_str()),
+            message: fault.map(|f| f.cause.words()),
+            since: fault.map(|f| crate::domain::time::from_ms(f.since_ms)),
+        }
+    }
 }
 
 /// The routes of this resource.
@@ -106,7 +145,9 @@ fn topics(text: Option<&str>) -> Result<Vec<Topic>, ApiError> {
 /// {"jobs", "jobs_truncated", "devices", "alarms", "locations"}}`, then events `{"seq",
 /// "time", "type", "data"}` (schema `Event`) in sequence order without gap or duplicate, and
 /// `{"type": "resync", "seq", "reason"}` when the client fell too far behind (the connection
-/// then closes with code 4000; reconnect with `?since=SEQ`). Viewer role; browsers pass the
+/// then closes with code 4000; reconnect with `?since=SEQ`), and `{"type": "store", "ok",
+/// "cause", "message", "since"}` (schema `StoreState`) when the store stops or starts
+/// committing again, and after the start while it cannot. Viewer role; browsers pass the
 /// key as `?token=`. A reload that removes the key closes the socket with code 1008.
 #[utoipa::path(get, path = "/ws", tag = "events", params(WsParams),
     responses(

@@ -58,6 +58,8 @@ pub struct Session {
     /// ring as reloads change it.
     key: Option<KeyHash>,
     keys: watch::Receiver<Arc<KeyRing>>,
+    /// Whether the store commits (`store::fault`).
+    store: watch::Receiver<Option<crate::store::fault::Fault>>,
 }
 
 type Sink = SplitSink<WebSocket, Message>;
@@ -81,6 +83,7 @@ impl Session {
             metrics: app.metrics.clone(),
             key,
             keys: app.reload.watch_keys(),
+            store: app.store_fault.subscribe(),
         }
     }
 
@@ -98,7 +101,14 @@ impl Session {
             if self.revoked() {
                 return self.close(&mut sink, CLOSE_REVOKED, "the API key was revoked").await;
             }
+            // The store's state is told after the start, then as it changes; a fault under way
+            // is told at once.
+            let faulted = self.store.borrow_and_update().is_some();
             let mut last = self.start(&mut sink).await?;
+            if faulted || self.store.has_changed().unwrap_or(false) {
+                self.tell_store(&mut sink).await?;
+            }
+            let mut store_watching = true;
             let mut ping = tokio::time::interval_at(tokio::time::Instant::now() + self.ping, self.ping);
             let mut heard = true;
             // Until the ring's sender goes (the server stopping), in sessions opened with a key.
@@ -111,6 +121,10 @@ impl Session {
                         }
                         Ok(()) => {}
                         Err(_) => watching = false,
+                    },
+                    changed = self.store.changed(), if store_watching => match changed {
+                        Ok(()) => self.tell_store(&mut sink).await?,
+                        Err(_) => store_watching = false,
                     },
                     commit = self.events.recv() => match commit {
                         Ok(commit) => {
@@ -156,6 +170,13 @@ impl Session {
         if let Err(e) = result {
             tracing::debug!(error = %e, "websocket session ended");
         }
+    }
+
+    /// Sends the store's state as it is now.
+    async fn tell_store(&mut self, sink: &mut Sink) -> Result<(), End> {
+        let state = super::StoreState::of(*self.store.borrow_and_update());
+        let text = serde_json::to_string(&state).unwrap_or_default();
+        self.send(sink, Message::Text(text.into())).await
     }
 
     fn wants(&self, topic: Option<Topic>) -> bool {

@@ -15,6 +15,7 @@
 //! conflict). Only what was committed is answered: the attempt rolled back leaves nothing.
 
 use super::apply::{Answer, Group, Loaded, Next, Out, Spare};
+use super::unsure::{self, Session, Token, Unsure};
 use super::{Command, Conn, Sent, Tell, WriteError, load, save, stream};
 use crate::domain::time::now_ms;
 use crate::store::cluster::{self, LEASE};
@@ -27,14 +28,20 @@ use crate::store::on;
 /// refuses one, the group is rolled back and applied again, reading them. Returns the
 /// answers, and the events and lock changes of the group. A command sent fenced whose epoch
 /// no longer holds the cluster's lease is answered [`WriteError::Fenced`] and left out; the
-/// check locks the lease row until the commit.
+/// check locks the lease row until the commit. A failed `COMMIT` on PostgreSQL is
+/// [`Failed::Unsure`], to be settled by reading what landed (see [`unsure`]).
 pub(super) async fn commit(
     db: &mut Conn,
     group: &[Sent],
     carry: &mut Carry,
     tell: Option<&Tell>,
     shared: bool,
-) -> Result<(Vec<Answer>, Out), sqlx::Error> {
+) -> Result<(Vec<Answer>, Out), Failed> {
+    if let Conn::Postgres(c) = &mut *db
+        && carry.session.is_none()
+    {
+        carry.session = Some(unsure::session(c).await?);
+    }
     let mut read = carry.references.read();
     loop {
         begin(db, shared).await?;
@@ -42,7 +49,7 @@ pub(super) async fn commit(
             Ok(held) => held,
             Err(e) => {
                 rollback(db).await;
-                return Err(e);
+                return Err(e.into());
             }
         };
         let kept: Vec<&Command> = group.iter().zip(&held).filter(|(_, h)| **h).map(|(s, _)| &s.cmd).collect();
@@ -51,16 +58,27 @@ pub(super) async fn commit(
                 carry.references.committed(stored);
                 return Ok((merge(group, &held, answers), out));
             }
+            Attempt::Unsure(mut unsure) => {
+                unsure.answers = merge(group, &held, std::mem::take(&mut unsure.answers));
+                return Err(Failed::Unsure(unsure));
+            }
             Attempt::Stored => {
                 carry.references.stored();
                 read = true;
             }
             Attempt::Refused => {
                 let result = one_by_one(db, &kept, carry, tell, shared, group, &held).await;
-                if result.is_err() {
+                if let Err(Failed::Sure(_)) = result {
                     rollback(db).await;
                 }
-                return result.map(|(answers, out)| (merge(group, &held, answers), out));
+                return match result {
+                    Ok((answers, out)) => Ok((merge(group, &held, answers), out)),
+                    Err(Failed::Unsure(mut unsure)) => {
+                        unsure.answers = merge(group, &held, std::mem::take(&mut unsure.answers));
+                        Err(Failed::Unsure(unsure))
+                    }
+                    Err(e) => Err(e),
+                };
             }
         }
     }
@@ -75,6 +93,43 @@ pub(super) struct Carry {
     references: load::References,
     /// Memory a group leaves to the next.
     spare: Spare,
+    /// The mark each group leaves on PostgreSQL (see [`unsure`]).
+    token: Token,
+    /// The writer's session on PostgreSQL, read on its first group.
+    session: Option<Session>,
+}
+
+impl Carry {
+    /// The writer's connection broke: its session is another from now on, and after a
+    /// failed group its numbering is read again.
+    pub(super) fn lost(&mut self, failed: bool) {
+        self.session = None;
+        if failed {
+            self.next = None;
+        }
+    }
+
+    /// An unsure group landed: carry on from it.
+    pub(super) fn landed(&mut self, unsure: &Unsure) {
+        self.next = Some(unsure.next);
+        if let Some(stored) = unsure.stored {
+            self.references.committed(stored);
+        }
+    }
+}
+
+/// How a group failed.
+pub(super) enum Failed {
+    /// Nothing of it was written.
+    Sure(sqlx::Error),
+    /// Its `COMMIT` failed on PostgreSQL: it may have landed (see [`unsure`]).
+    Unsure(Box<Unsure>),
+}
+
+impl From<sqlx::Error> for Failed {
+    fn from(e: sqlx::Error) -> Failed {
+        Failed::Sure(e)
+    }
 }
 
 /// How the attempt to commit a group's kept commands in one transaction went (rolled back
@@ -87,6 +142,8 @@ enum Attempt {
     Stored,
     /// Refused by the database: to be replayed request by request.
     Refused,
+    /// Its `COMMIT` failed on PostgreSQL.
+    Unsure(Box<Unsure>),
 }
 
 /// Whether each command of `group` may be committed: unfenced, or fenced under the epoch
@@ -142,16 +199,31 @@ async fn kept_in_one(
     .await;
     match attempt {
         Ok((answers, mut applied)) => {
-            if let Err(e) = run(db, finish(db.engine(), shared)).await {
-                rollback(db).await;
-                return Err(e);
-            }
+            let token = carry.token.next();
+            let committed = finish(db, shared, &token.1).await;
             applied.recycle(&mut carry.spare);
-            carry.next = Some(applied.next);
             let stored = applied.read_stored();
             let mut out = applied.out;
             out.statements += 2 + usize::from(start_read);
-            Ok(Attempt::Committed(answers, out, stored))
+            match committed {
+                Ok(()) => {
+                    carry.next = Some(applied.next);
+                    Ok(Attempt::Committed(answers, out, stored))
+                }
+                Err(error) if db.engine() == Engine::Postgres => Ok(Attempt::Unsure(Box::new(Unsure {
+                    answers,
+                    out,
+                    next: applied.next,
+                    stored: Some(stored),
+                    token: carry.token,
+                    session: carry.session.clone(),
+                    error,
+                }))),
+                Err(e) => {
+                    rollback(db).await;
+                    Err(e)
+                }
+            }
         }
         Err(e) if !read && e.as_database_error().is_some_and(|d| d.is_unique_violation()) => {
             tracing::debug!(error = %e, "a reference of the group is stored already; applying it again, reading them");
@@ -183,10 +255,10 @@ async fn one_by_one(
     shared: bool,
     group: &[Sent],
     held: &[bool],
-) -> Result<(Vec<Answer>, Out), sqlx::Error> {
+) -> Result<(Vec<Answer>, Out), Failed> {
     begin(db, shared).await?;
     if fences(db, group).await? != held {
-        return Err(sqlx::Error::Protocol("the cluster lease moved during the group".into()));
+        return Err(sqlx::Error::Protocol("the cluster lease moved during the group".into()).into());
     }
     let mut numbers = match carry.next {
         Some(n) => n,
@@ -218,9 +290,23 @@ async fn one_by_one(
             }
         }
     }
-    run(db, finish(db.engine(), shared)).await?;
-    carry.next = Some(numbers);
-    Ok((answers, out))
+    let token = carry.token.next();
+    match finish(db, shared, &token.1).await {
+        Ok(()) => {
+            carry.next = Some(numbers);
+            Ok((answers, out))
+        }
+        Err(error) if db.engine() == Engine::Postgres => Err(Failed::Unsure(Box::new(Unsure {
+            answers,
+            out,
+            next: numbers,
+            stored: None,
+            token: carry.token,
+            session: carry.session.clone(),
+            error,
+        }))),
+        Err(e) => Err(e.into()),
+    }
 }
 
 /// Reads (their references if `read`), applies and writes `cmds` inside the open transaction.
@@ -269,13 +355,16 @@ async fn begin(db: &mut Conn, shared: bool) -> Result<(), sqlx::Error> {
     run(db, sql).await
 }
 
-/// Commits. A `shared` writer on PostgreSQL first notifies [`NOTIFY_CHANNEL`] (sent by the
-/// server at the commit, and only if it commits), so the other nodes read the new events.
-fn finish(engine: Engine, shared: bool) -> &'static str {
-    match (engine, shared) {
-        (Engine::Postgres, true) => "NOTIFY rackd_commits; COMMIT",
-        _ => "COMMIT",
-    }
+/// Commits. On PostgreSQL the group's mark (`mark`, see [`unsure`]) goes in the same
+/// message, and a `shared` writer notifies [`NOTIFY_CHANNEL`] there too (sent by the server
+/// at the commit, and only if it commits), so the other nodes read the new events.
+async fn finish(db: &mut Conn, shared: bool, mark: &str) -> Result<(), sqlx::Error> {
+    let sql = match (db.engine(), shared) {
+        (Engine::Sqlite, _) => return run(db, "COMMIT").await,
+        (Engine::Postgres, true) => format!("{mark}; NOTIFY rackd_commits; COMMIT"),
+        (Engine::Postgres, false) => format!("{mark}; COMMIT"),
+    };
+    on!(Conn, db, c => sqlx::raw_sql(sqlx::AssertSqlSafe(sql)).execute(&mut *c).await.map(drop))
 }
 
 /// The channel a shared writer notifies at each commit (see [`finish`]).

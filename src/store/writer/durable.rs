@@ -195,6 +195,8 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
 /// it `wrote`. A group that wrote nothing (its requests refused for their own reasons, or
 /// with nothing to change) tells nothing: its `COMMIT` never reached the disk, so it is no
 /// sign that the store commits again, and the store stays faulted while every write fails.
+/// A stall told meanwhile (see `STALL`) is ended by the next group that writes, the `store`
+/// alarm's own record at the latest.
 fn outcome(answers: &[Answer], wrote: bool) -> Option<Result<(), Cause>> {
     let cause = |e: &WriteError| match e {
         WriteError::Database(e) => Cause::of(e),

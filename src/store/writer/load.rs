@@ -115,6 +115,13 @@ pub(super) async fn next(db: &mut Conn) -> Result<Next, sqlx::Error> {
     Ok(Next { job, seq, audit, alarm })
 }
 
+/// The newest stamp the store holds (its newest event's time), if any: stamps of this
+/// process go on from there (`domain::time::not_before`).
+pub(super) async fn newest_stamp(db: &mut Conn) -> Result<Option<i64>, sqlx::Error> {
+    let sql = "SELECT MAX(at) FROM events";
+    on!(Conn, db, c => sqlx::query_scalar(sql).fetch_one(&mut *c).await)
+}
+
 /// Reads what `group` needs: the jobs its submissions' references (if `read_references`) and its
 /// changes name, the locations those jobs and its locks touch, when each of those jobs last
 /// started, and the active alarms if it raises or clears one.

@@ -21,6 +21,7 @@ mod load;
 mod save;
 mod stream;
 mod timing;
+mod unsure;
 
 use std::sync::Arc;
 
@@ -329,7 +330,18 @@ pub struct Hooks {
     /// How each group went for the store: committed, or failed for a [`Cause`] of the
     /// store's own (see [`crate::store::fault`]).
     pub stored: Option<Stored>,
+    /// Whether each group whose `COMMIT` failed on PostgreSQL landed (see [`unsure`]).
+    pub unsure: Option<Settled>,
+    /// A group has waited for the database for a second (see `STALL`); its outcome is
+    /// told through [`Hooks::stored`] when it comes.
+    pub stalled: Option<Stalled>,
 }
+
+/// Called when a group has waited for the database for a second.
+pub type Stalled = Arc<dyn Fn() + Send + Sync>;
+
+/// Called with whether a group whose `COMMIT` failed landed, once read.
+pub type Settled = Arc<dyn Fn(bool) + Send + Sync>;
 
 /// Called after each group with `Ok` if it committed something, or the [`Cause`] of the
 /// store's own failure that failed it or any of its requests (not called for a group that
@@ -399,7 +411,15 @@ impl Writer {
         hooks: Hooks,
         shared: bool,
     ) -> Result<(Writer, JoinHandle<()>), sqlx::Error> {
-        let conn = Conn::acquire(pool).await?;
+        let mut conn = Conn::acquire(pool).await?;
+        if let Conn::Postgres(c) = &mut conn {
+            unsure::prune(c).await?;
+        }
+        // A process started after the wall clock stepped back stamps on from the store's
+        // newest stamp, not before it (see `domain::time`).
+        if let Some(newest) = load::newest_stamp(&mut conn).await? {
+            crate::domain::time::not_before(newest);
+        }
         let (tx, rx) = mpsc::channel(queue);
         let mut sync = match pool {
             Pool::Sqlite(p) => Some(durable::wal(p.connect_options().get_filename())),
@@ -608,11 +628,33 @@ async fn write(
     carry: &mut commit::Carry,
     tell: Option<&Tell>,
     shared: bool,
-) -> Result<(Vec<apply::Answer>, apply::Out), sqlx::Error> {
+) -> Result<(Vec<apply::Answer>, apply::Out), commit::Failed> {
     if let (Conn::Sqlite(c), Some(checkpoints)) = (&mut *conn, checkpoints) {
         checkpoints.before(c, group.iter().map(|s| s.cmd.jobs()).sum()).await?;
     }
     commit::commit(conn, group, carry, tell, shared).await
+}
+
+/// How long a group (with its reconnection and, on PostgreSQL, the reading of an unsure
+/// commit) may take before the store is told stalled: a database that does not answer (a
+/// partition, a server restarting) then shows at once in `/readyz`, the health and the
+/// WebSocket's `store` message, rather than when the TCP connection gives up. Groups take
+/// milliseconds; a second is far beyond a healthy one's worst (a SQLite checkpoint of a
+/// large WAL is a few hundred ms on a slow disk).
+const STALL: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// Runs `work`, telling `stalled` once if it is not done within [`STALL`]; the work goes on.
+async fn watched<T>(work: impl std::future::Future<Output = T>, stalled: Option<&Stalled>) -> T {
+    tokio::pin!(work);
+    tokio::select! {
+        out = &mut work => return out,
+        _ = tokio::time::sleep(STALL) => {}
+    }
+    tracing::warn!("a group of the job writer has waited for the database for a second");
+    if let Some(stalled) = stalled {
+        stalled();
+    }
+    work.await
 }
 
 /// The writer: take what waits, commit it, hand it to the [`durable::Syncer`] (which
@@ -628,7 +670,8 @@ async fn write(
 ///
 /// After a failed group the connection is replaced by a fresh one from the pool, so a
 /// database server that restarted (or a connection that broke) costs the groups in flight,
-/// not every group after them.
+/// not every group after them. A group whose `COMMIT` failed on PostgreSQL is first settled
+/// by reading whether it landed (see [`unsure`]).
 async fn run(
     pool: Pool,
     db: Conn,
@@ -648,23 +691,45 @@ async fn run(
             break;
         }
         let started = std::time::Instant::now();
-        if db.is_none() {
-            db = Conn::acquire(&pool)
-                .await
-                .inspect_err(|e| tracing::error!(error = %e, "the job writer cannot reconnect"))
-                .ok();
-        }
-        if shared {
-            carry.next = None;
-        }
-        let result = match db.as_mut() {
-            Some(conn) => {
-                write(conn, checkpoints.as_mut(), &group, &mut carry, hooks.tell.as_ref(), shared).await
+        let work = async {
+            if db.is_none() {
+                db = Conn::acquire(&pool)
+                    .await
+                    .inspect_err(|e| tracing::error!(error = %e, "the job writer cannot reconnect"))
+                    .ok();
             }
-            None => Err(sqlx::Error::PoolTimedOut),
+            if shared {
+                carry.next = None;
+            }
+            let result = match db.as_mut() {
+                Some(conn) => {
+                    write(conn, checkpoints.as_mut(), &group, &mut carry, hooks.tell.as_ref(), shared).await
+                }
+                None => Err(sqlx::Error::PoolTimedOut.into()),
+            };
+            match result {
+                Ok(done) => Ok(done),
+                Err(commit::Failed::Sure(e)) => Err(e),
+                Err(commit::Failed::Unsure(unsure)) => {
+                    let landed = unsure::landed(&pool, &unsure, || rx.is_closed()).await;
+                    if let (Some(landed), Some(told)) = (landed, hooks.unsure.as_ref()) {
+                        told(landed);
+                    }
+                    match landed {
+                        Some(true) => {
+                            carry.landed(&unsure);
+                            db = None;
+                            Ok((unsure.answers, unsure.out))
+                        }
+                        _ => Err(unsure.error),
+                    }
+                }
+            }
         };
-        if result.is_err() {
-            (db, carry.next) = (None, None);
+        let result = watched(work, hooks.stalled.as_ref()).await;
+        if result.is_err() || db.is_none() {
+            db = None;
+            carry.lost(result.is_err());
         }
         if let Some(checkpoints) = checkpoints.as_mut() {
             checkpoints.after(result.is_ok());

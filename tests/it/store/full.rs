@@ -18,10 +18,11 @@ use rackd::config::Config;
 use rackd::store::Database;
 use serde_json::{Value, json};
 
-use super::failed_commits;
-use crate::api::demo::cloc;
+use super::{Told, failed_commits, follow_store};
+use crate::api::demo::{cloc, wait_job};
 use crate::api::waiting::wait_for_online;
-use crate::support::{all_jobs, eventually, loc, spawn_on, split, wait_ended};
+use crate::support::ws::Ws;
+use crate::support::{all_jobs, eventually, loc, spawn_on, split};
 
 /// A tmpfs of its own, unmounted (lazily) when dropped.
 struct Tmpfs {
@@ -102,6 +103,10 @@ async fn a_full_disk_is_told_everywhere_holds_the_machines_and_loses_nothing() {
         if running("shelf1") && running("crane1") { Ok(()) } else { Err(jobs) }
     })
     .await;
+    // A dashboard's subscriber, told of the store's state as it changes.
+    let told = Told::default();
+    let follower = follow_store(Ws::connect(&app.base, "?topics=alarms").await, told.clone());
+
     // New work stays queued from here (so the filler below never runs).
     let (status, body) = app.post("/api/v1/aisles/1/pause", &json!({"reason": "filler"})).await;
     assert_eq!(status, 200, "{body}");
@@ -112,6 +117,7 @@ async fn a_full_disk_is_told_everywhere_holds_the_machines_and_loses_nothing() {
     fill(&fs.path().join("ballast"));
     let light = |i: usize| json!({"kind": "light", "location": loc(1 + (i / 60 % 2) as u16, 1 + (i % 10) as u16, 1 + (i / 10 % 6) as u16, 1), "color": "green", "on": true});
     let refusals = std::cell::Cell::new(0);
+    let first_refusal = std::cell::Cell::new(None);
     let refused = eventually("the store refusing three jobs in a row", Duration::from_secs(60), async || {
         let r = match refusals.get() {
             0 => {
@@ -124,6 +130,7 @@ async fn a_full_disk_is_told_everywhere_holds_the_machines_and_loses_nothing() {
         let retry = r.headers().get("retry-after").map(|v| v.to_str().unwrap().to_owned());
         match split(r).await {
             (503, body) if body["error"]["code"] == "store_full" => {
+                first_refusal.set(first_refusal.get().or(Some(tokio::time::Instant::now())));
                 refusals.set(refusals.get() + 1);
                 if refusals.get() >= 3 { Ok((body, retry)) } else { Err("refused".to_owned()) }
             }
@@ -136,6 +143,17 @@ async fn a_full_disk_is_told_everywhere_holds_the_machines_and_loses_nothing() {
     })
     .await;
     assert_eq!(refused.1.as_deref(), Some("5"), "{:?}", refused.0);
+    // The subscriber was told within a second of the first refusal (the writer tells the
+    // fault as the commit fails, before the API answers).
+    let first_refusal = first_refusal.get().unwrap();
+    let down = eventually("the subscriber told the store is down", Duration::from_secs(2), async || {
+        let told = told.lock().unwrap();
+        told.iter().find(|(_, ok)| !ok).map(|(at, _)| *at).ok_or_else(|| told.clone())
+    })
+    .await;
+    let late = down.saturating_duration_since(first_refusal);
+    println!("the dashboard's subscriber told {late:?} after the first refusal");
+    assert!(late < Duration::from_secs(1), "told {late:?} after the first refusal");
     let message = refused.0["error"]["message"].as_str().unwrap();
     assert!(message.contains("full") && !message.contains("SQLITE"), "{message}");
 
@@ -169,14 +187,26 @@ async fn a_full_disk_is_told_everywhere_holds_the_machines_and_loses_nothing() {
 
     // Room again: the next commit (the alarm's own) goes through, and everything follows.
     std::fs::remove_file(fs.path().join("ballast")).unwrap();
+    let room = tokio::time::Instant::now();
+    eventually("a job taken again", Duration::from_secs(10), async || {
+        match app.post("/api/v1/jobs", &light(0)).await {
+            (201, _) => Ok(()),
+            other => Err(other),
+        }
+    })
+    .await;
+    let back = room.elapsed();
+    println!("back to work {back:?} after the disk had room again");
+    // The goal is 2 s (tens of ms here); the bound leaves room for a loaded CI machine.
+    assert!(back < Duration::from_secs(5), "back to work {back:?} after the disk had room again");
     eventually("ready again", Duration::from_secs(20), async || {
         let (status, body) = app.get("/readyz").await;
         if status == 200 { Ok(()) } else { Err(body) }
     })
     .await;
-    let (status, body) = app.post("/api/v1/aisles/1/resume", &json!({})).await;
-    assert_eq!(status, 200, "{body}");
     let (status, body) = app.post("/api/v1/jobs/cancel", &json!({"aisle": 1, "reason": "filler"})).await;
+    assert_eq!(status, 200, "{body}");
+    let (status, body) = app.post("/api/v1/aisles/1/resume", &json!({})).await;
     assert_eq!(status, 200, "{body}");
     let alarm = eventually("the store alarm raised and cleared", Duration::from_secs(20), async || {
         let (_, page) = app.get("/api/v1/alarms?device=store").await;
@@ -188,11 +218,16 @@ async fn a_full_disk_is_told_everywhere_holds_the_machines_and_loses_nothing() {
     })
     .await;
     assert_eq!(alarm["code"], 0, "{alarm}");
+    let told = told.lock().unwrap().iter().map(|(at, ok)| (at.elapsed(), *ok)).collect::<Vec<_>>();
+    assert_eq!(told.last().map(|(_, ok)| *ok), Some(true), "the subscriber told the store is back: {told:?}");
+    follower.abort();
     assert!(alarm["text"].as_str().unwrap().contains("full"), "{alarm}");
 
-    let jobs = wait_ended(&app, ids.len(), 60).await;
     for id in &ids {
-        let job = jobs.iter().find(|j| j["id"] == *id).unwrap();
+        let job = wait_job(&app, *id, 60, |j| {
+            ["completed", "failed", "cancelled"].contains(&j["state"].as_str().unwrap())
+        })
+        .await;
         assert_eq!(job["state"], "completed", "{job}");
     }
     assert_eq!((shelf.violations(), crane.violations()), (0, 0), "{:?}", crane.violation_log());

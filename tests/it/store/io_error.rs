@@ -25,9 +25,10 @@ use rackd::store::Database;
 use rackd::wire::task_id_for;
 use serde_json::{Value, json};
 
-use super::failed_commits;
+use super::{Told, failed_commits, follow_store};
 use crate::api::demo::cloc;
 use crate::api::waiting::wait_for_online;
+use crate::support::ws::Ws;
 use crate::support::{TestApp, eventually, faulty_vfs, loc, spawn_on, split, wait_ended};
 
 /// The spells of failing writes.
@@ -86,9 +87,19 @@ impl Posted {
     }
 }
 
+/// What a spell works on: rackd, its file's switch, the machines, and a dashboard's
+/// subscriber's `store` messages.
+struct Site<'a> {
+    app: &'a TestApp,
+    wal: &'a faulty_vfs::Switch,
+    shelf: &'a ShelfSim,
+    crane: &'a CraneSim,
+    told: &'a Told,
+}
+
 /// Tasks the machines have ended, and whether one of them has a task it has not ended yet
 /// (handed over, so it ends it by itself, whatever rackd can record).
-fn machines(shelf: &ShelfSim, crane: &CraneSim, posted: &Posted) -> (u64, bool) {
+fn machines(Site { shelf, crane, .. }: &Site, posted: &Posted) -> (u64, bool) {
     let (completed, failed) = shelf.finished();
     let stats = crane.stats();
     let crane_ended = u64::from(stats.cycles + stats.cancelled + stats.forced);
@@ -101,7 +112,7 @@ fn machines(shelf: &ShelfSim, crane: &CraneSim, posted: &Posted) -> (u64, bool) 
 }
 
 /// Whether `/readyz` and the health say that the disk fails.
-async fn told(app: &TestApp) -> Result<(), (u16, Value, u16, Value)> {
+async fn disk_fails(app: &TestApp) -> Result<(), (u16, Value, u16, Value)> {
     let ((ready, r), (status, h)) = (app.get("/readyz").await, app.get("/api/v1/health").await);
     let io = |v: &Value| v.as_str().is_some_and(|t| t.contains("fails to read or write"));
     match (ready, status) {
@@ -119,25 +130,21 @@ async fn store_alarms(app: &TestApp) -> Vec<Value> {
 
 /// Spell `spell` of failing writes, with work under way (see the module doc); answers how
 /// long after the writes work again the store took a job and was ready, the later of the two.
-async fn fail_writes(
-    spell: usize,
-    app: &TestApp,
-    wal: &faulty_vfs::Switch,
-    (shelf, crane): (&ShelfSim, &CraneSim),
-    posted: &mut Posted,
-) -> Duration {
+async fn fail_writes(spell: usize, site: &Site<'_>, posted: &mut Posted) -> Duration {
+    let Site { app, wal, told, .. } = *site;
     // Work on both machines, and a task under way on one of them when the writes fail.
     posted.take(app, Machine::Shelf).await;
     posted.take(app, Machine::Crane).await;
     let ended =
         eventually("a task under way on a machine", Duration::from_secs(20), async || {
-            match machines(shelf, crane, posted) {
+            match machines(site, posted) {
                 (ended, true) => Ok(ended),
                 (ended, false) => Err(ended),
             }
         })
         .await;
 
+    let messages = told.lock().unwrap().len();
     wal.arm();
     let machine = if spell.is_multiple_of(2) { Machine::Crane } else { Machine::Shelf };
     let (status, body, retry) = posted.post(app, machine).await;
@@ -145,20 +152,27 @@ async fn fail_writes(
     assert_eq!(retry.as_deref(), Some("5"), "{body}");
     let message = body["error"]["message"].as_str().unwrap();
     assert!(!message.contains("SQLITE") && !message.contains("disk I/O"), "{message}");
-    eventually("readyz and health telling the disk fails", Duration::from_secs(10), async || told(app).await)
-        .await;
+    eventually("readyz and health telling the disk fails", Duration::from_secs(10), async || {
+        disk_fails(app).await
+    })
+    .await;
+    eventually("the subscriber told the store is down", Duration::from_secs(2), async || {
+        let told = told.lock().unwrap();
+        told[messages..].iter().any(|(_, ok)| !ok).then_some(()).ok_or_else(|| told.clone())
+    })
+    .await;
     // A request refused for its own reason (only a failed job is retried) commits
     // nothing, so it says nothing about the disk: still told.
     let first = posted.taken[0].0;
     let (status, body) = app.post(&format!("/api/v1/jobs/{first}/retry"), &json!({})).await;
     assert!(matches!(status, 409 | 503), "{status} {body}");
-    if let Err(seen) = told(app).await {
+    if let Err(seen) = disk_fails(app).await {
         panic!("ready again after a request that wrote nothing, while every write fails: {seen:?}");
     }
     // A machine ends its task meanwhile, and rackd is refused a commit after that (the
     // report, held until it can be recorded: checked below, each task ran once).
     eventually("a machine ending a task while writes fail", Duration::from_secs(20), async || {
-        let now = machines(shelf, crane, posted).0;
+        let now = machines(site, posted).0;
         if now > ended { Ok(()) } else { Err(now) }
     })
     .await;
@@ -177,6 +191,11 @@ async fn fail_writes(
     let ready = eventually("ready again", BACK_WITHIN * 5, async || {
         let (status, body) = app.get("/readyz").await;
         if status == 200 { Ok(cleared.elapsed()) } else { Err(body) }
+    })
+    .await;
+    eventually("the subscriber told the store is back", Duration::from_secs(2), async || {
+        let told = told.lock().unwrap();
+        told.last().is_some_and(|(_, ok)| *ok).then_some(()).ok_or_else(|| told.clone())
     })
     .await;
     println!(
@@ -208,12 +227,16 @@ async fn io_errors_at_commit_are_told_lose_nothing_and_rackd_goes_on() {
     .await;
     wait_for_online(&app, "shelf1").await;
     wait_for_online(&app, "crane1").await;
+    let told = Told::default();
+    let follower = follow_store(Ws::connect(&app.base, "?topics=alarms").await, told.clone());
 
+    let site = Site { app: &app, wal: &wal, shelf: &shelf, crane: &crane, told: &told };
     let mut posted = Posted::default();
     let mut back = Vec::new();
     for spell in 1..=SPELLS {
-        back.push(fail_writes(spell, &app, &wal, (&shelf, &crane), &mut posted).await);
+        back.push(fail_writes(spell, &site, &mut posted).await);
     }
+    follower.abort();
     let slowest = back.iter().max().unwrap();
     println!(
         "I/O errors at commit: back to work within {slowest:?} of the writes working again (goal {BACK_WITHIN:?})"

@@ -4,11 +4,14 @@
 
 mod archive;
 mod copy;
+mod cut;
 mod full;
 mod groups;
 mod import;
 mod io_error;
 mod pages;
+mod pg_failover;
+mod pg_restart;
 mod plans;
 mod retention;
 mod rollups;
@@ -44,6 +47,25 @@ where
         Pool::Sqlite(p) => sqlx::query_as(sql).fetch_all(p).await.unwrap(),
         Pool::Postgres(p) => sqlx::query_as(sql).fetch_all(p).await.unwrap(),
     }
+}
+
+/// The `store` messages a WebSocket subscriber got: when, and whether the store was ok.
+pub type Told = std::sync::Arc<std::sync::Mutex<Vec<(tokio::time::Instant, bool)>>>;
+
+/// Follows a subscriber's `store` messages into `told`.
+pub fn follow_store(mut ws: crate::support::ws::Ws, told: Told) -> tokio::task::JoinHandle<()> {
+    use crate::support::ws::Got;
+    tokio::spawn(async move {
+        loop {
+            match ws.next(Duration::from_secs(60)).await {
+                Got::Json(m) if m["type"] == "store" => {
+                    told.lock().unwrap().push((tokio::time::Instant::now(), m["ok"] == true));
+                }
+                Got::Json(_) => {}
+                _ => return,
+            }
+        }
+    })
 }
 
 /// The value of `rackd_store_commit_failures_total{cause="CAUSE"}` of a running server.

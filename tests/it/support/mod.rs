@@ -1,5 +1,6 @@
 //! What the areas share: a running rackd ([`app`]), waiting with a deadline
-//! ([`eventually`]), the throwaway PostgreSQL cluster ([`postgres`]), a WebSocket client
+//! ([`eventually`]), a WMS that keeps posting through faults ([`flow`]), the throwaway PostgreSQL cluster ([`postgres`]) and
+//! servers a test owns to crash and fail over ([`pg_owned`]), a WebSocket client
 //! ([`ws`]), a TCP proxy that can cut a link ([`proxy`]), certificates and an https
 //! front for the TLS tests ([`tls`]), a webhook receiver ([`receiver`]), the Python
 //! that runs the tests' Python libraries ([`python`]), where a child process listens as it
@@ -8,10 +9,12 @@
 
 pub mod app;
 pub mod faulty_vfs;
+pub mod flow;
 pub mod held;
 pub mod listening;
 pub mod machines;
 pub mod node;
+pub mod pg_owned;
 pub mod port;
 pub mod postgres;
 pub mod proxy;

@@ -29,7 +29,7 @@ use std::time::{Duration, Instant};
 use sqlx::Connection;
 
 /// How to install what these tests need.
-const INSTALL: &str =
+pub(super) const INSTALL: &str =
     "apt-get update && apt-get install -y postgresql (or run `cargo xtask test`, which installs it)";
 
 /// The running cluster: the URL of its maintenance database, without the database name.
@@ -95,7 +95,7 @@ pub async fn tls_database() -> (String, &'static TlsCluster) {
 }
 
 /// The newest PostgreSQL's binaries.
-fn binaries() -> Result<PathBuf, String> {
+pub(super) fn binaries() -> Result<PathBuf, String> {
     if let Ok(dir) = std::env::var("RACKD_PG_BIN") {
         return Ok(PathBuf::from(dir));
     }
@@ -116,7 +116,7 @@ fn binaries() -> Result<PathBuf, String> {
 }
 
 /// Runs `program` as the user PostgreSQL may run as (`postgres` when we are root).
-fn command(program: &Path, as_root: bool) -> Command {
+pub(super) fn command(program: &Path, as_root: bool) -> Command {
     if as_root {
         let mut c = Command::new("setpriv");
         c.args(["--reuid=postgres", "--regid=postgres", "--init-groups", "--pdeathsig=KILL", "--"])
@@ -147,41 +147,18 @@ fn start_tls() -> Result<TlsCluster, String> {
 }
 
 /// What a TLS-only cluster is given.
-struct Tls {
+pub(super) struct Tls {
     cert: super::tls::ServerCert,
 }
 
 /// Makes and starts a cluster in the temp folder's `PREFIX-PID`; answers its folder (the
 /// Unix socket's too) and its port.
 fn launch(prefix: &str, tls: Option<&Tls>) -> Result<(PathBuf, u16), String> {
-    let bin = binaries()?;
-    let as_root = rustix::process::geteuid().is_root();
-    if as_root
-        && !Command::new("id").arg("postgres").stdout(Stdio::null()).status().is_ok_and(|s| s.success())
-    {
-        return Err(format!(
-            "running as root needs the `postgres` user, which the package creates: {INSTALL}"
-        ));
-    }
+    let (bin, as_root) = (binaries()?, as_root()?);
     remove_stale(prefix);
-    let dir = std::env::temp_dir().join(format!("{prefix}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    if as_root {
-        let status = Command::new("chown").args(["postgres:postgres"]).arg(&dir).status();
-        if !status.is_ok_and(|s| s.success()) {
-            return Err(format!("cannot give {} to the postgres user", dir.display()));
-        }
-    }
+    let dir = folder(&std::env::temp_dir().join(format!("{prefix}-{}", std::process::id())), as_root)?;
     let data = dir.join("data");
-    let out = command(&bin.join("initdb"), as_root)
-        .args(["-A", "trust", "-U", "postgres", "-N", "-E", "UTF8", "--locale=C", "-D"])
-        .arg(&data)
-        .output()
-        .map_err(|e| format!("initdb: {e}"))?;
-    if !out.status.success() {
-        return Err(format!("initdb failed: {}", String::from_utf8_lossy(&out.stderr)));
-    }
+    initdb(&bin, as_root, &data)?;
     if let Some(tls) = tls {
         // The server's certificate and key, readable by the server alone, and only TLS
         // connections over TCP (the Unix socket stays open for making databases).
@@ -209,28 +186,67 @@ fn launch(prefix: &str, tls: Option<&Tls>) -> Result<(PathBuf, u16), String> {
     while tried.len() < PORT_TRIES {
         let port = outside_ephemeral_range()?;
         tried.push(port);
-        match serve(&bin, as_root, &dir, &data, tls, port)? {
-            Served::Ready => return Ok((dir, port)),
+        match serve(&bin, as_root, &dir, &data, tls, port, &[])? {
+            Served::Ready(_) => return Ok((dir, port)),
             Served::PortTaken => continue,
         }
     }
     Err(format!("every port tried was taken before the server bound it: {tried:?}"))
 }
 
+/// Whether the tests run as root (the server then runs as `postgres`, which must exist).
+pub(super) fn as_root() -> Result<bool, String> {
+    let as_root = rustix::process::geteuid().is_root();
+    if as_root
+        && !Command::new("id").arg("postgres").stdout(Stdio::null()).status().is_ok_and(|s| s.success())
+    {
+        return Err(format!(
+            "running as root needs the `postgres` user, which the package creates: {INSTALL}"
+        ));
+    }
+    Ok(as_root)
+}
+
+/// A new, empty folder `dir`, the server's user's.
+pub(super) fn folder(dir: &Path, as_root: bool) -> Result<PathBuf, String> {
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    if as_root {
+        let status = Command::new("chown").args(["postgres:postgres"]).arg(dir).status();
+        if !status.is_ok_and(|s| s.success()) {
+            return Err(format!("cannot give {} to the postgres user", dir.display()));
+        }
+    }
+    Ok(dir.to_owned())
+}
+
+/// A new cluster's data folder at `data` (its parent the server's user's).
+pub(super) fn initdb(bin: &Path, as_root: bool, data: &Path) -> Result<(), String> {
+    let out = command(&bin.join("initdb"), as_root)
+        .args(["-A", "trust", "-U", "postgres", "-N", "-E", "UTF8", "--locale=C", "-D"])
+        .arg(data)
+        .output()
+        .map_err(|e| format!("initdb: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("initdb failed: {}", String::from_utf8_lossy(&out.stderr)));
+    }
+    Ok(())
+}
+
 /// Ports tried for a cluster before giving up.
 const PORT_TRIES: usize = 5;
 
 /// How a start of the server went.
-enum Served {
+pub(super) enum Served {
     /// It answers.
-    Ready,
+    Ready(Running),
     /// It exited: something else had bound its port.
     PortTaken,
 }
 
 /// A port below the kernel's range of ephemeral ports (`ip_local_port_range`) that nothing
 /// has bound now.
-fn outside_ephemeral_range() -> Result<u16, String> {
+pub(super) fn outside_ephemeral_range() -> Result<u16, String> {
     let range = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range").unwrap_or_default();
     let first: u16 = range.split_whitespace().next().and_then(|p| p.parse().ok()).unwrap_or(32768);
     let low = 10000.min(first / 2);
@@ -243,15 +259,25 @@ fn outside_ephemeral_range() -> Result<u16, String> {
     Err(format!("no free port found in {low}..{first}"))
 }
 
-/// Starts the server of `data` on `port` and waits until it answers, or until it exits
-/// because the port was taken.
-fn serve(
+/// A server started by [`serve`]: its postmaster's pid, and word of its exit.
+pub(super) struct Running {
+    /// The postmaster (`setpriv` runs it in its own process).
+    pub(super) pid: u32,
+    /// Sent once when the server has exited.
+    pub(super) exited: std::sync::mpsc::Receiver<Result<std::process::ExitStatus, String>>,
+}
+
+/// Starts the server of `data` on `port` with the settings `extra` (`name=value`, after the
+/// tests' own, so they win) and waits until it answers, or until it exits because the port
+/// was taken.
+pub(super) fn serve(
     bin: &Path,
     as_root: bool,
     dir: &Path,
     data: &Path,
     tls: Option<&Tls>,
     port: u16,
+    extra: &[&str],
 ) -> Result<Served, String> {
     let log_path = dir.join("server.log");
     let log = std::fs::File::create(&log_path).map_err(|e| e.to_string())?;
@@ -268,6 +294,9 @@ fn serve(
     if !DURABLE.load(Ordering::Relaxed) {
         server.args(["-c", "fsync=off", "-c", "synchronous_commit=off", "-c", "full_page_writes=off"]);
     }
+    for setting in extra {
+        server.args(["-c", setting]);
+    }
     server.stdout(Stdio::null()).stderr(log);
     // The thread that starts the server waits for it: it ends only if the server does, so
     // the parent-death signal fires only when the whole test process ends.
@@ -275,14 +304,14 @@ fn serve(
     let (ended, exited) = std::sync::mpsc::channel();
     std::thread::spawn(move || match server.spawn() {
         Ok(mut child) => {
-            let _ = started.send(Ok(()));
+            let _ = started.send(Ok(child.id()));
             let _ = ended.send(child.wait().map_err(|e| e.to_string()));
         }
         Err(e) => {
             let _ = started.send(Err(e.to_string()));
         }
     });
-    spawned.recv().map_err(|e| e.to_string())?.map_err(|e| format!("postgres: {e}"))?;
+    let pid = spawned.recv().map_err(|e| e.to_string())?.map_err(|e| format!("postgres: {e}"))?;
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
         // Asked over its Unix socket in `dir`, which the server makes only once it has
@@ -295,7 +324,7 @@ fn serve(
                 .output()
                 .is_ok_and(|o| o.status.success());
         if ok {
-            return Ok(Served::Ready);
+            return Ok(Served::Ready(Running { pid, exited }));
         }
         if let Ok(status) = exited.try_recv() {
             let log = std::fs::read_to_string(&log_path).unwrap_or_default();
@@ -308,12 +337,13 @@ fn serve(
             let log = std::fs::read_to_string(&log_path).unwrap_or_default();
             return Err(format!("the server did not start in 60 s:\n{log}"));
         }
-        std::thread::sleep(Duration::from_millis(100));
+        // Often: the tests that restart a server of their own time it from here.
+        std::thread::sleep(Duration::from_millis(20));
     }
 }
 
 /// Removes the data folders (`PREFIX-PID`) of earlier runs whose process is gone.
-fn remove_stale(prefix: &str) {
+pub(super) fn remove_stale(prefix: &str) {
     let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return };
     for e in entries.flatten() {
         let name = e.file_name();
