@@ -20,6 +20,7 @@ use super::extract::Json;
 use super::state::AppState;
 use crate::service::monitor::all_shown;
 use crate::store::alarms;
+use crate::store::fault::Fault;
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
@@ -70,11 +71,22 @@ pub struct DeviceHealth {
 /// WebSocket (`{"type": "store"}`).
 pub const READ_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
 
-/// [`crate::store::ready`] within [`READ_WAIT`].
-pub async fn ready_within(pool: &crate::store::Pool) -> Result<(), crate::store::NotReady> {
-    tokio::time::timeout(READ_WAIT, crate::store::ready(pool))
-        .await
-        .unwrap_or(Err(crate::store::NotReady::Unreachable(sqlx::Error::PoolTimedOut)))
+/// The store's readiness now: the writer's fault from memory if it has one (also when it
+/// meets one while this waits), else [`crate::store::ready`] within [`READ_WAIT`]. `Ok`
+/// with a fault: the database reads but the store cannot commit.
+pub async fn store_now(app: &AppState) -> (Result<(), crate::store::NotReady>, Option<Fault>) {
+    if let Some(fault) = app.store_fault.current() {
+        return (Ok(()), Some(fault));
+    }
+    let mut told = app.store_fault.subscribe();
+    let met = async move { told.wait_for(Option::is_some).await.map(|f| *f) };
+    tokio::select! {
+        read = tokio::time::timeout(READ_WAIT, crate::store::ready(&app.pool)) => {
+            let read = read.unwrap_or(Err(crate::store::NotReady::Unreachable(sqlx::Error::PoolTimedOut)));
+            (read, app.store_fault.current())
+        }
+        Ok(Some(fault)) = met => (Ok(()), Some(fault)),
+    }
 }
 
 /// The site at a glance: the store and each device; 503 when the store is down.
@@ -88,11 +100,7 @@ async fn health(State(app): State<AppState>) -> Response {
     // active alarms uncounted): a database that does not answer would otherwise hold it
     // for the pool's connection wait, twice, and the dashboard would learn why seconds
     // late. Otherwise each read waits at most `READ_WAIT`.
-    let fault = app.store_fault.current();
-    let ready = match fault {
-        Some(_) => Ok(()),
-        None => ready_within(&app.pool).await,
-    };
+    let (ready, fault) = store_now(&app).await;
     let store = match ready {
         Ok(()) if let Some(fault) = fault => format!("the store cannot commit: {}", fault.cause.words()),
         Ok(()) if app.writer.is_running() => "ok".to_owned(),
