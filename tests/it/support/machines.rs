@@ -18,16 +18,19 @@ pub fn each_task_once_and_no_breach(shelf: &ShelfSim, crane: &CraneSim, posted: 
     assert_eq!(crane.refused(), 0, "tasks handed to a busy crane");
 }
 
+/// The endings in the jobs' history: (job, state, how many), on either engine.
+pub const ENDINGS: &str = "SELECT job_id, state, COUNT(*) FROM job_history \
+     WHERE state IN ('completed', 'failed', 'cancelled') GROUP BY job_id, state ORDER BY job_id";
+
 /// Each of the `jobs` jobs of the PostgreSQL store `db` has one ending in its history,
 /// `completed`, and none other (no `failed`, no `cancelled`, no second `completed`).
 pub async fn one_completed_ending_each(db: &sqlx::PgPool, jobs: usize) {
-    let ends: Vec<(i64, String, i64)> = sqlx::query_as(
-        "SELECT job_id, state, COUNT(*) FROM job_history WHERE state IN ('completed', 'failed', 'cancelled') \
-         GROUP BY job_id, state ORDER BY job_id",
-    )
-    .fetch_all(db)
-    .await
-    .unwrap();
+    let ends: Vec<(i64, String, i64)> = sqlx::query_as(ENDINGS).fetch_all(db).await.unwrap();
+    one_completed_each(&ends, jobs);
+}
+
+/// Of `ends` ([`ENDINGS`]'s rows), each of `jobs` jobs has one, `completed`.
+pub fn one_completed_each(ends: &[(i64, String, i64)], jobs: usize) {
     let odd: Vec<_> = ends.iter().filter(|(_, state, n)| state != "completed" || *n != 1).collect();
     assert!(odd.is_empty(), "job endings other than one `completed`: {odd:?}");
     assert_eq!(ends.len(), jobs, "every job has its `completed` entry");
