@@ -3,10 +3,11 @@
 //!
 //! The job writer tells [`StoreFault`] how each group went ([`StoreFault::observe`]): a
 //! group that failed for one of these [`Cause`]s (as a whole, or any of its requests) sets
-//! the fault, the first group that commits something again clears it. Everyone reads it from there:
-//! `/readyz` and `GET /api/v1/health` (not ready, `store` names the cause), the API's 503s
-//! (`store_full` or `store_unavailable`, with `Retry-After`), `/metrics` (failed commits by
-//! cause), and the `store` alarm, which `service::store_alarm` records on device `store`.
+//! the fault, the first group that commits something again clears it. Everyone reads it
+//! from there: `/readyz` and `GET /api/v1/health` (not ready, `store` names the cause), the
+//! API's 503s (`store_full` or `store_unavailable`, with `Retry-After`), `/metrics` (failed
+//! commits by cause), and the `store` alarm, which `service::store_alarm` records on device
+//! `store`.
 //!
 //! Decisions:
 //! - **What counts.** Only what the database says about itself: SQLite's `SQLITE_FULL`,
