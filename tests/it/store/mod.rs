@@ -10,7 +10,7 @@ mod groups;
 mod import;
 mod pages;
 mod pg_failover;
-mod pg_restart;
+pub(crate) mod pg_restart;
 mod plans;
 mod retention;
 mod rollups;
