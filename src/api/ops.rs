@@ -39,9 +39,10 @@ pub async fn healthz() -> Json<Health> {
         (status = 503, description = "Not ready, with the reason", body = ErrorBody),
     ))]
 pub async fn readyz(State(app): State<AppState>) -> Result<Json<Health>, ApiError> {
-    // A store that cannot commit is told from memory first, without waiting for a
-    // database that may not answer; the read after it waits at most `READ_WAIT`.
-    if let Some(fault) = app.store_fault.current() {
+    // A store that cannot commit is told from memory, without waiting for a database that
+    // may not answer (see `store_now`).
+    let (ready, fault) = super::health::store_now(&app).await;
+    if let Some(fault) = fault {
         tracing::error!(store = fault.cause.as_str(), "not ready: the store cannot commit");
         return Err(ApiError::new(
             axum::http::StatusCode::SERVICE_UNAVAILABLE,
@@ -49,7 +50,7 @@ pub async fn readyz(State(app): State<AppState>) -> Result<Json<Health>, ApiErro
             format!("the store cannot commit: {}", fault.cause.words()),
         ));
     }
-    super::health::ready_within(&app.pool).await.map_err(|e| {
+    ready.map_err(|e| {
         // The cause goes to the log; the answer names no driver text.
         tracing::error!(error = %e, "not ready");
         let message = match e {

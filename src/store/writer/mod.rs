@@ -332,8 +332,9 @@ pub struct Hooks {
     pub stored: Option<Stored>,
     /// Whether each group whose `COMMIT` failed on PostgreSQL landed (see [`unsure`]).
     pub unsure: Option<Settled>,
-    /// A group has waited for the database for a second (see `STALL`); its outcome is
-    /// told through [`Hooks::stored`] when it comes.
+    /// A group has waited for the database for a second (see `STALL`), or the reading of
+    /// an unsure commit cannot reach it; its outcome is told through [`Hooks::stored`]
+    /// when it comes.
     pub stalled: Option<Stalled>,
 }
 
@@ -711,7 +712,8 @@ async fn run(
                 Ok(done) => Ok(done),
                 Err(commit::Failed::Sure(e)) => Err(e),
                 Err(commit::Failed::Unsure(unsure)) => {
-                    let landed = unsure::landed(&pool, &unsure, || rx.is_closed()).await;
+                    let unreachable = || hooks.stalled.as_ref().map_or((), |stalled| stalled());
+                    let landed = unsure::landed(&pool, &unsure, || rx.is_closed(), unreachable).await;
                     if let (Some(landed), Some(told)) = (landed, hooks.unsure.as_ref()) {
                         told(landed);
                     }

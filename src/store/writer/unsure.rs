@@ -114,10 +114,18 @@ pub(super) struct Unsure {
 }
 
 /// Whether `unsure` landed, read from the database (see the module doc); `None` when every
-/// handle of the writer is gone (`closed`) before it could be told.
-pub(super) async fn landed(pool: &Pool, unsure: &Unsure, closed: impl Fn() -> bool) -> Option<bool> {
+/// handle of the writer is gone (`closed`) before it could be told. `unreachable` is called
+/// once if a try cannot reach the database: the store is down, and everyone is to know it
+/// now rather than when it is settled.
+pub(super) async fn landed(
+    pool: &Pool,
+    unsure: &Unsure,
+    closed: impl Fn() -> bool,
+    unreachable: impl Fn(),
+) -> Option<bool> {
     let Pool::Postgres(pool) = pool else { return Some(false) };
     let mut wait = Duration::from_millis(50);
+    let mut told = false;
     loop {
         match look(pool, unsure).await {
             Ok(landed) => {
@@ -129,7 +137,10 @@ pub(super) async fn landed(pool: &Pool, unsure: &Unsure, closed: impl Fn() -> bo
                 return Some(landed);
             }
             Err(e) => {
-                tracing::warn!(error = %e, "cannot yet read whether a commit whose answer was lost landed")
+                tracing::warn!(error = %e, "cannot yet read whether a commit whose answer was lost landed");
+                if !std::mem::replace(&mut told, true) {
+                    unreachable();
+                }
             }
         }
         if closed() {

@@ -318,14 +318,5 @@ async fn every_job_completed_once(db: &PgPool, posted: usize) {
     assert_eq!(jobs.len(), posted, "only the posted jobs exist");
     let not_completed: Vec<_> = jobs.iter().filter(|(_, state, _)| state != "completed").collect();
     assert!(not_completed.is_empty(), "jobs that did not complete: {not_completed:?}");
-    let ends: Vec<(i64, String, i64)> = sqlx::query_as(
-        "SELECT job_id, state, COUNT(*) FROM job_history WHERE state IN ('completed', 'failed', 'cancelled') \
-         GROUP BY job_id, state ORDER BY job_id",
-    )
-    .fetch_all(db)
-    .await
-    .unwrap();
-    let odd: Vec<_> = ends.iter().filter(|(_, state, n)| state != "completed" || *n != 1).collect();
-    assert!(odd.is_empty(), "job endings other than one `completed`: {odd:?}");
-    assert_eq!(ends.len(), posted, "every job has its `completed` entry");
+    crate::support::machines::one_completed_ending_each(db, posted).await;
 }

@@ -21,7 +21,7 @@ use rackd::config::Config;
 use rackd::store::Database;
 use sqlx::PgPool;
 
-use super::pg_restart::{Figure, every_job_completed_once, report, store_alarms_cleared};
+use super::pg_restart::{Figure, health_tells_down, nothing_lost_nor_twice};
 use crate::api::waiting::wait_for_online;
 use crate::support::flow::Flow;
 use crate::support::pg_owned::Owned;
@@ -62,17 +62,7 @@ async fn three_failovers_to_a_promoted_replica_lose_nothing_and_run_nothing_twic
         let (old, new) = pair(&mut servers, primary);
         old.crash().await;
         let crashed = Instant::now();
-        let told =
-            eventually("health to tell the store does not answer", Duration::from_secs(10), async || {
-                let (status, health) = app.get("/api/v1/health").await;
-                let said = health["store"].as_str().unwrap_or_default().to_owned();
-                if status == 503 && said.contains("does not answer") {
-                    Ok(crashed.elapsed())
-                } else {
-                    Err(health)
-                }
-            })
-            .await;
+        let told = health_tells_down(&app, crashed).await;
         new.promote().await;
         let up = Instant::now();
         let back = eventually("a job accepted after the promotion", Duration::from_secs(10), async || {
@@ -91,15 +81,7 @@ async fn three_failovers_to_a_promoted_replica_lose_nothing_and_run_nothing_twic
     let accepted = flow.stop().await;
 
     let db = PgPool::connect(&servers[primary].url("rackd")).await.unwrap();
-    every_job_completed_once(&db, &accepted).await;
-    let posted: Vec<(i64, u16)> = accepted.iter().map(|a| (a.id, a.aisle)).collect();
-    crate::support::machines::each_task_once_and_no_breach(&shelf, &crane, &posted);
-    let alarms = store_alarms_cleared(&app).await;
-    report(&figures, &accepted, alarms);
-    for f in &figures {
-        assert!(f.told < Duration::from_secs(1), "health told the fault {:?} after the crash", f.told);
-        assert!(f.back < Duration::from_secs(2), "back to work {:?} after the promotion", f.back);
-    }
+    nothing_lost_nor_twice(&db, &accepted, (&shelf, &crane), &app, &figures).await;
     app.stop().await;
 }
 

@@ -17,3 +17,18 @@ pub fn each_task_once_and_no_breach(shelf: &ShelfSim, crane: &CraneSim, posted: 
     assert_eq!(crane.violations(), 0, "the crane saw breaches: {:#?}", crane.violation_log());
     assert_eq!(crane.refused(), 0, "tasks handed to a busy crane");
 }
+
+/// Each of the `jobs` jobs of the PostgreSQL store `db` has one ending in its history,
+/// `completed`, and none other (no `failed`, no `cancelled`, no second `completed`).
+pub async fn one_completed_ending_each(db: &sqlx::PgPool, jobs: usize) {
+    let ends: Vec<(i64, String, i64)> = sqlx::query_as(
+        "SELECT job_id, state, COUNT(*) FROM job_history WHERE state IN ('completed', 'failed', 'cancelled') \
+         GROUP BY job_id, state ORDER BY job_id",
+    )
+    .fetch_all(db)
+    .await
+    .unwrap();
+    let odd: Vec<_> = ends.iter().filter(|(_, state, n)| state != "completed" || *n != 1).collect();
+    assert!(odd.is_empty(), "job endings other than one `completed`: {odd:?}");
+    assert_eq!(ends.len(), jobs, "every job has its `completed` entry");
+}
