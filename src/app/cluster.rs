@@ -129,9 +129,9 @@ pub(super) async fn start(
 /// Hands the jobs other nodes took in to this node's queues, through its writer (so they
 /// come in its commit order; see `Writer::adopt`).
 ///
-/// A batch the writer could not read (the database failing over, say) is tried again, with
-/// a pause, until it is read, and before any later batch: the follower has moved past its
-/// events and never hands them on again. It was once dropped with an error logged, and a job
+/// A batch the writer could not read (the database failing over, say, or the writer's
+/// queue full) is tried again, with a pause, until it is read, and before any later batch:
+/// the follower has moved past its events and never hands them on again. It was once dropped with an error logged, and a job
 /// a standby took in just before a database failover then waited in the store, unseen by the
 /// active node's queues, until the next takeover, while the jobs after it ran
 /// (`tests/it/standby/database_failover.rs` found it: a retrieve ran before the store it
@@ -144,6 +144,11 @@ async fn adopter(writer: Writer, mut wanted: mpsc::UnboundedReceiver<Vec<i64>>) 
             match writer.adopt(ids.clone()).await {
                 Ok(_) => break,
                 Err(WriteError::Closed) => return,
+                // Not the store's trouble: trying again would give the same answer.
+                Err(e) if !matches!(e, WriteError::Database(_) | WriteError::Overloaded) => {
+                    tracing::error!(error = %e, jobs = ids.len(), "cluster: jobs of another node could not be taken in");
+                    break;
+                }
                 Err(e) => {
                     tracing::warn!(error = %e, jobs = ids.len(), "cluster: jobs of another node could not be taken in yet");
                     tokio::time::sleep(pause).await;
