@@ -9,6 +9,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
+use std::time::Duration;
 
 use tokio::sync::{Notify, mpsc, watch};
 use tokio::task::JoinHandle;
@@ -26,7 +27,7 @@ use crate::service::events::Hub;
 use crate::service::reload::Reload;
 use crate::service::webhooks::Webhooks;
 use crate::store::alarms::NewAlarm;
-use crate::store::writer::{Record, Writer};
+use crate::store::writer::{Record, WriteError, Writer};
 use crate::store::{Pool, events};
 
 /// The device of the `takeover` alarm.
@@ -127,13 +128,39 @@ pub(super) async fn start(
 
 /// Hands the jobs other nodes took in to this node's queues, through its writer (so they
 /// come in its commit order; see `Writer::adopt`).
+///
+/// A batch the writer could not read (the database failing over, say, or the writer's
+/// queue full) is tried again, with a pause, until it is read, and before any later batch:
+/// the follower has moved past its events and never hands them on again. It was once dropped with an error logged, and a job
+/// a standby took in just before a database failover then waited in the store, unseen by the
+/// active node's queues, until the next takeover, while the jobs after it ran
+/// (`tests/it/standby/database_failover.rs` found it: a retrieve ran before the store it
+/// depended on, and failed). Reading a job again is harmless: the queues take each job as
+/// it stands.
 async fn adopter(writer: Writer, mut wanted: mpsc::UnboundedReceiver<Vec<i64>>) {
     while let Some(ids) = wanted.recv().await {
-        if let Err(e) = writer.adopt(ids).await {
-            tracing::error!(error = %e, "cluster: jobs of another node could not be taken in");
+        let mut pause = ADOPT_PAUSE.0;
+        loop {
+            match writer.adopt(ids.clone()).await {
+                Ok(_) => break,
+                Err(WriteError::Closed) => return,
+                // Not the store's trouble: trying again would give the same answer.
+                Err(e) if !matches!(e, WriteError::Database(_) | WriteError::Overloaded) => {
+                    tracing::error!(error = %e, jobs = ids.len(), "cluster: jobs of another node could not be taken in");
+                    break;
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, jobs = ids.len(), "cluster: jobs of another node could not be taken in yet");
+                    tokio::time::sleep(pause).await;
+                    pause = (pause * 2).min(ADOPT_PAUSE.1);
+                }
+            }
         }
     }
 }
+
+/// The adopter's first and longest pause between two tries.
+const ADOPT_PAUSE: (Duration, Duration) = (Duration::from_millis(50), Duration::from_secs(1));
 
 /// Reads the counts of jobs and alarms again each time the follower hands on a batch (every
 /// node commits, so this node's writer alone would miss some; see `store::counts`): one

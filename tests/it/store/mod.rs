@@ -11,7 +11,7 @@ mod import;
 mod io_error;
 mod pages;
 mod pg_failover;
-mod pg_restart;
+pub(crate) mod pg_restart;
 mod plans;
 mod retention;
 mod rollups;

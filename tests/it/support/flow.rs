@@ -2,7 +2,9 @@
 //! restarts and failovers): [`Flow`] posts one job at a time, each with a reference, and
 //! retries it every 20 ms while rackd answers 503 or cannot be reached, as a WMS would;
 //! the reference makes a retry of a job already taken answer that job. It notes when
-//! each job was accepted, which the tests time recovery with.
+//! each job was accepted, which the tests time recovery with. Given several rackd nodes
+//! (a cluster), it posts to each in turn, and to the next when one cannot be reached; a
+//! node restarted on another port is pointed at again ([`Flow::point`]).
 //!
 //! The jobs go to the demo site's two machines in turn (three shelf jobs, then a crane
 //! job): on each aisle a store into a place of its own, a light (shelf) or an empty travel
@@ -34,19 +36,29 @@ pub struct Accepted {
 
 /// The poster, running until [`Flow::stop`].
 pub struct Flow {
+    urls: Arc<Mutex<Vec<String>>>,
     accepted: Arc<Mutex<Vec<Accepted>>>,
     stop: Arc<AtomicBool>,
     task: JoinHandle<()>,
 }
 
 impl Flow {
-    /// Posts to the rackd nodes at `urls` (the next one when one does not answer), a job
-    /// every `pace` once the last was accepted, references starting with `prefix`.
+    /// Posts to the rackd nodes at `urls` in turn (the next one also when one does not
+    /// answer), a job every `pace` once the last was accepted, references starting with
+    /// `prefix`.
     pub fn start(urls: Vec<String>, pace: Duration, prefix: &str) -> Flow {
+        let urls = Arc::new(Mutex::new(urls));
         let accepted = Arc::new(Mutex::new(Vec::new()));
         let stop = Arc::new(AtomicBool::new(false));
-        let task = tokio::spawn(post_all(urls, pace, prefix.to_owned(), accepted.clone(), stop.clone()));
-        Flow { accepted, stop, task }
+        let task =
+            tokio::spawn(post_all(urls.clone(), pace, prefix.to_owned(), accepted.clone(), stop.clone()));
+        Flow { urls, accepted, stop, task }
+    }
+
+    /// From now on posts to `url` in place of the `i`-th URL (a node started again, on a
+    /// port of its own choosing).
+    pub fn point(&self, i: usize, url: &str) {
+        self.urls.lock().unwrap()[i] = url.to_owned();
     }
 
     /// How many were accepted so far.
@@ -71,7 +83,7 @@ impl Flow {
 /// The poster's loop. Not `eventually`: a spawned future that calls an async closure
 /// through `AsyncFnMut` is not known to be `Send`.
 async fn post_all(
-    urls: Vec<String>,
+    urls: Arc<Mutex<Vec<String>>>,
     pace: Duration,
     prefix: String,
     accepted: Arc<Mutex<Vec<Accepted>>>,
@@ -87,7 +99,10 @@ async fn post_all(
         let deadline = Instant::now() + Duration::from_secs(30);
         let mut tries = 0;
         let id = loop {
-            let url = &urls[turn % urls.len()];
+            let url = {
+                let urls = urls.lock().unwrap();
+                urls[turn % urls.len()].clone()
+            };
             tries += 1;
             let answer = http.post(format!("{url}/api/v1/jobs")).json(&job).send().await;
             let last = match answer {
@@ -110,6 +125,7 @@ async fn post_all(
             tokio::time::sleep(Duration::from_millis(20)).await;
         };
         let at = Instant::now();
+        turn += 1;
         accepted.lock().unwrap().push(Accepted { reference, id, aisle, at, retried: tries > 1 });
         tokio::time::sleep(pace).await;
     }
