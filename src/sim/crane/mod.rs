@@ -31,13 +31,15 @@
 //! [`CraneSim::set_inventory`], the commands `put`/`take`/`inventory`) the crane refuses the
 //! impossible with the business alarms 7069/7070 and 7091..7098 ([`inventory`]); without one
 //! it tracks nothing and never raises them. [`CraneSim::stats`] counts cycles, busy time,
-//! distances and business alarms ([`stats`]).
+//! distances and business alarms ([`stats`]); [`CraneSim::record_tasks`] keeps each task's
+//! instants as well ([`timeline`]).
 
 mod commands;
 pub mod engine;
 pub mod inventory;
 mod link;
 pub mod stats;
+pub mod timeline;
 
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
@@ -55,6 +57,7 @@ use engine::Engine;
 pub use engine::Hold;
 use inventory::{Cell, Inventory};
 pub use stats::{CraneStats, Pair, Runs, TaskKind};
+pub use timeline::TaskTimes;
 
 /// Whether a code is a business alarm of the catalogue.
 pub fn is_business(code: u16) -> bool {
@@ -237,6 +240,16 @@ impl CraneSim {
     /// The counters since start (see [`stats`]).
     pub fn stats(&self) -> CraneStats {
         self.engine().stats.clone()
+    }
+
+    /// Records each task's instants from now on ([`timeline`]).
+    pub fn record_tasks(&self) {
+        self.engine().timeline.get_or_insert_with(timeline::Timeline::default);
+    }
+
+    /// The tasks recorded since [`CraneSim::record_tasks`], in order (empty if never asked).
+    pub fn tasks(&self) -> Vec<TaskTimes> {
+        self.engine().timeline.as_ref().map_or_else(Vec::new, |t| t.tasks().to_vec())
     }
 
     /// Clears the alarm (a person reset the crane).

@@ -21,8 +21,11 @@ impl Engine {
     /// Mode 3: a task under way (or halted by an alarm) ends in state 40; the alarm clears.
     /// A load on the platform goes back where it was picked (the inventory is as before
     /// the task); a load already lowered at the put stays there.
-    pub(super) fn cancel(&mut self, bank: &mut Bank, _now: Instant) {
+    pub(super) fn cancel(&mut self, bank: &mut Bank, now: Instant) {
         if let Some(run) = self.run.take() {
+            if let Some(t) = self.timeline.as_mut() {
+                t.ended(d(bank, 208), now, 40);
+            }
             if run.picked
                 && !run.put
                 && let Some(inv) = self.inventory.as_mut()

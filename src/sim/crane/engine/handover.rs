@@ -76,6 +76,9 @@ impl Engine {
                     Taken::Refused
                 } else {
                     *self.received.entry(words[0]).or_default() += 1;
+                    if let Some(t) = self.timeline.as_mut() {
+                        t.received(words[0], now);
+                    }
                     if !self.late_start {
                         echo(bank, &words);
                     }

@@ -37,6 +37,7 @@ use tokio::time::Instant;
 
 use super::inventory::{Cell, Inventory};
 use super::stats::{CraneStats, TaskKind};
+use super::timeline::Timeline;
 use crate::protocols::mc3e::{Bank, Device};
 use crate::wire::motion::{Motion, Spot};
 use ending::Homing;
@@ -102,6 +103,8 @@ pub struct Engine {
     pub inventory: Option<Inventory>,
     /// Counters for a benchmark.
     pub stats: CraneStats,
+    /// Each task's instants, when recorded (None: not recorded).
+    pub timeline: Option<Timeline>,
     /// The kind of the last task started, for the stats' pairs.
     last_kind: Option<TaskKind>,
     /// Tasks received (mode 1 or 2 hand-overs) per task number.
@@ -139,6 +142,7 @@ impl Engine {
             pos: (0.0, 0.0),
             inventory: None,
             stats: CraneStats::default(),
+            timeline: None,
             last_kind: None,
             received: HashMap::new(),
             cancels: 0,

@@ -238,3 +238,26 @@ fn empty_runs_are_counted_by_the_pair_of_tasks_they_join() {
     let json = serde_json::to_value(&rig.e.stats).unwrap();
     assert_eq!(json["empty_by_pair"]["first store"]["tasks"], 1, "{json}");
 }
+
+#[test]
+fn the_timeline_dates_a_completion_to_the_moment_its_time_ran_out() {
+    let m = Motion::default();
+    let mut rig = Rig::new(100.0, None);
+    assert_eq!(rig.transfer(STATION_IN, [1, 10, 5, 2]), 0);
+    assert!(rig.e.timeline.is_none(), "not recorded unless asked");
+    rig.acknowledge();
+    rig.e.timeline = Some(Default::default());
+    let start = rig.now;
+    rig.hand_over(2, [1, 10, 5, 2], STATION_OUT);
+    // Ticks far coarser than the scaled cycle's end would need.
+    rig.until_done(Duration::from_millis(7));
+    let tasks = rig.e.timeline.as_ref().unwrap().tasks().to_vec();
+    assert_eq!(tasks.len(), 1, "{tasks:?}");
+    let t = tasks[0];
+    assert_eq!((t.number, t.received, t.started), (rig.task, start, Some(start)));
+    let (ended, state) = t.ended.unwrap();
+    let cycle = m.fork_time(2) + m.move_time(Spot { bay: 10, level: 5 }, HOME) + m.fork_time(1);
+    let real = (ended - start).as_secs_f64();
+    assert!((real * 100.0 - cycle).abs() < 1e-3, "{real} s real for a {cycle} s cycle at x100");
+    assert!(ended < rig.now && state == 20, "before the tick that saw it");
+}

@@ -73,6 +73,9 @@ impl Engine {
         let from = [word(210), word(211), word(212), word(213)];
         let to = [word(214), word(215), word(216), word(217)];
         let travel = word(209) == 1;
+        if let Some(t) = self.timeline.as_mut() {
+            t.started(word(208), now);
+        }
         let states: &'static [u16] = if travel { &TRAVEL } else { &TRANSFER };
         set(bank, 203, states[0]);
         let next = TaskKind::of(from, to, travel);
@@ -101,7 +104,7 @@ impl Engine {
         run.clock = now;
         if d(bank, 205) == 0 {
             run.elapsed += dt;
-            if !self.advance(bank, &mut run) {
+            if !self.advance(bank, &mut run, now) {
                 return;
             }
         }
@@ -111,7 +114,7 @@ impl Engine {
 
     /// Goes through the states whose time is up (one per tick without a motion model, as
     /// the crane always did); false once the task completed.
-    fn advance(&mut self, bank: &mut Bank, run: &mut Run) -> bool {
+    fn advance(&mut self, bank: &mut Bank, run: &mut Run, now: Instant) -> bool {
         loop {
             let length = self.length(run);
             if run.elapsed < length {
@@ -126,7 +129,9 @@ impl Engine {
             run.elapsed = if self.model.is_some() { run.elapsed - length } else { Duration::ZERO };
             run.index += 1;
             let Some(&state) = run.states.get(run.index) else {
-                self.complete(bank, run);
+                // The time left over went past the end: the task ended that much earlier.
+                let ended = now.checked_sub(run.elapsed.div_f64(self.time_scale)).unwrap_or(now);
+                self.complete(bank, run, ended);
                 return false;
             };
             set(bank, 203, state);
@@ -187,8 +192,11 @@ impl Engine {
         }
     }
 
-    fn complete(&mut self, bank: &mut Bank, run: &mut Run) {
+    fn complete(&mut self, bank: &mut Bank, run: &mut Run, at: Instant) {
         self.arrive(bank, run);
+        if let Some(t) = self.timeline.as_mut() {
+            t.ended(d(bank, 208), at, 20);
+        }
         if self.model.is_none() {
             place(bank, run.to);
         }
