@@ -38,7 +38,7 @@ use rackd::wire::motion::Motion;
 
 use crate::served::Served;
 
-mod bound;
+pub(crate) mod bound;
 
 /// `bench crane`'s options.
 #[derive(clap::Args, Debug, Clone)]
@@ -208,17 +208,17 @@ pub async fn run(args: CraneArgs) -> anyhow::Result<()> {
 }
 
 /// A job of the workload, as the WMS means it: boxes by barcode.
-enum Order {
+pub(crate) enum Order {
     /// Bring out this box, wherever rackd says it is when the order is sent.
     Retrieve(String),
     /// Put this box here (or, for a `--putaway` share, anywhere in aisle 2).
     Store { cell: [u16; 4], barcode: String, putaway: bool },
 }
 
-/// The boxes at the start and the orders.
-struct Workload {
-    stock: Vec<([u16; 4], String)>,
-    jobs: Vec<Order>,
+/// The boxes at the start and the orders (`bench site` makes one per aisle for the bound).
+pub(crate) struct Workload {
+    pub(crate) stock: Vec<([u16; 4], String)>,
+    pub(crate) jobs: Vec<Order>,
 }
 
 impl Workload {
@@ -277,11 +277,11 @@ fn all_cells(args: &CraneArgs) -> impl Iterator<Item = [u16; 4]> + use<> {
 }
 
 /// A seeded generator (SplitMix64), so that both planners get the same workload; the
-/// benchmark needs no more than this of a random-number crate.
-struct SplitMix(u64);
+/// benchmark needs no more than this of a random-number crate (`bench site` draws with it too).
+pub(crate) struct SplitMix(pub(crate) u64);
 
 impl SplitMix {
-    fn next(&mut self) -> u64 {
+    pub(crate) fn next(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -289,11 +289,11 @@ impl SplitMix {
         z ^ (z >> 31)
     }
 
-    fn unit(&mut self) -> f64 {
+    pub(crate) fn unit(&mut self) -> f64 {
         (self.next() >> 11) as f64 / (1u64 << 53) as f64
     }
 
-    fn below(&mut self, n: usize) -> usize {
+    pub(crate) fn below(&mut self, n: usize) -> usize {
         (self.next() % n as u64) as usize
     }
 }

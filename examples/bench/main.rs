@@ -9,6 +9,8 @@
 //! cargo run --release --example bench -- fleet  [--devices 500] [--tags 30] [--poll-ms 500] [--seconds 20] [--changing 0.1]
 //!                                               [--capture on|off|both [--rounds 3]]
 //! cargo run --release --example bench -- crane  [--jobs 200] [--backlog 30] [--fill 0.5] [--time-scale 200] [--seed 7]
+//! cargo run --release --example bench -- site   [--aisles 1,10,40] [--jobs 30] [--backlog 8] [--time-scale 20] [--seed 7]
+//!                                               [--slack 2] [--tight 0.2] [--deadlines 0.4] [--sequenced 0.5] [--poll-ms 200]
 //! cargo run --release --example bench -- history [--jobs 10000000] [--days 365] [--database sqlite|postgres|URL]
 //! cargo run --release --example bench -- webhooks [--rate 200] [--seconds 5] [--backlog 20000] [--round-trips 10000]
 //! cargo run --release --example bench -- capture [--downloads 50] [--ring-mib 64]
@@ -42,6 +44,7 @@ mod postgres;
 mod retention;
 mod served;
 mod shelf;
+mod site;
 #[allow(dead_code)]
 #[path = "../../tests/it/support/tls.rs"]
 mod tls;
@@ -133,6 +136,9 @@ enum Bench {
     Fleet(fleet::FleetArgs),
     /// The crane planner: fifo against travel on one workload, against the simulated crane.
     Crane(crane::CraneArgs),
+    /// A site: N crane aisles, sequences to stations and deadlines; throughput, inversions,
+    /// missed deadlines, travel, rackd's CPU and dispatch latency.
+    Site(site::SiteArgs),
     /// A year of history: the reads, start-up, memory and size on N ended jobs against an
     /// empty store.
     History(history::HistoryArgs),
@@ -187,6 +193,7 @@ fn main() -> ExitCode {
             Bench::Ws { subscribers, events, rate } => ws::run(subscribers, events, rate).await,
             Bench::Fleet(args) => fleet::run(args).await,
             Bench::Crane(args) => crane::run(args).await,
+            Bench::Site(args) => site::run(args).await,
             Bench::History(args) => history::run(args).await,
             Bench::Retention(args) => retention::run(args).await,
             Bench::Webhooks(args) => webhooks::run(args).await,

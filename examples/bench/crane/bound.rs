@@ -33,7 +33,7 @@ use super::{Order, Workload};
 
 /// Where the crane picks up and drops at the station (bay 0, level 1: both stations of
 /// the crane's spec lie there, inbound on row 2 and outbound on row 1).
-const STATION: Spot = Spot { bay: 0, level: 1 };
+pub(crate) const STATION: Spot = Spot { bay: 0, level: 1 };
 
 /// The least seconds of a workload, in three parts.
 pub struct Bound {
@@ -70,11 +70,11 @@ impl Bound {
 }
 
 /// One job as the crane runs it: where it begins, where it ends and its own seconds.
-#[derive(Clone, Copy)]
-struct Leg {
-    start: Spot,
-    end: Spot,
-    own_secs: f64,
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Leg {
+    pub(crate) start: Spot,
+    pub(crate) end: Spot,
+    pub(crate) own_secs: f64,
 }
 
 fn spot([_, bay, level, _]: [u16; 4]) -> Spot {
@@ -82,7 +82,7 @@ fn spot([_, bay, level, _]: [u16; 4]) -> Spot {
 }
 
 /// Each job's leg, the boxes followed from the starting stock through the stores.
-fn legs(workload: &Workload, motion: &Motion) -> Vec<Leg> {
+pub(crate) fn legs(workload: &Workload, motion: &Motion) -> Vec<Leg> {
     let near = motion.fork_near;
     // Where each box is; None for a box a putaway store brought in.
     let mut cells: HashMap<&str, Option<[u16; 4]>> =
