@@ -464,6 +464,7 @@ mod tests {
             barcode: None,
             device: None,
             serves: None,
+            terms: Default::default(),
         };
         let jobs: Vec<Job> = (1..=3).map(|id| new.accepted(id, 1_700_000_000_123)).collect();
         let json: Vec<String> = jobs.iter().map(|j| serde_json::to_string(j).unwrap()).collect();

@@ -144,7 +144,7 @@ impl Rules {
             check_reference(r)?;
         }
         let device = self.route(&spec, req.device)?;
-        Ok(NewJob { spec, reference: req.reference, priority, barcode, device, serves: None })
+        Ok(NewJob { spec, reference: req.reference, priority, barcode, device, serves: None, terms: Default::default() })
     }
 
     /// A store left to rackd, from `aisle`, `zones` and `class` (none of which any other

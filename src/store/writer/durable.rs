@@ -413,6 +413,7 @@ mod tests {
             barcode: None,
             device: None,
             serves: None,
+            terms: Default::default(),
         }
         .accepted(1, 0);
         let (reply, _answer) = oneshot::channel();
