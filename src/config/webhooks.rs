@@ -38,8 +38,10 @@ use serde::{Deserialize, Serialize};
 use super::ca::CaError;
 
 /// The event types a subscription may name (a `*` family is a prefix before the dot).
-pub const EVENT_TYPES: [&str; 8] = [
+pub const EVENT_TYPES: [&str; 10] = [
     "job.updated",
+    "job.late",
+    "sequence.updated",
     "device.updated",
     "alarm.raised",
     "alarm.updated",

@@ -255,6 +255,15 @@ pub struct Job {
 }
 
 impl Job {
+    /// Whole seconds the job is past its deadline at `now_ms` (when it ended, for an ended
+    /// job), rounded up; None when it has no deadline or is not late.
+    pub fn late_at(&self, now_ms: i64) -> Option<i64> {
+        let deadline = super::time::to_ms(self.deadline?);
+        let end = if self.state.is_terminal() { super::time::to_ms(self.updated_at) } else { now_ms };
+        let late = end - deadline;
+        (late > 0).then(|| (late + 999) / 1000)
+    }
+
     /// The job's kind-specific fields.
     pub fn spec(&self) -> Option<JobSpec> {
         Some(match self.kind {

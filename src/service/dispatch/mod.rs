@@ -14,6 +14,7 @@
 pub mod bulk;
 pub mod cancel;
 pub mod control;
+pub mod gate;
 pub mod order;
 mod plan;
 pub mod queues;

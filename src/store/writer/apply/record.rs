@@ -141,6 +141,7 @@ impl Group {
                 }
                 self.webhooks.push(progress.clone());
             }
+            Record::Sequence { name, cancel } => self.sequence(name, *cancel, who)?,
             Record::Archived { jobs } => {
                 for id in jobs {
                     if self.jobs.get(id).is_some_and(|j| j.state.is_terminal())

@@ -1,0 +1,24 @@
+-- compatible-from: 12
+-- Sequences (issue 52, `src/service/dispatch/gate.rs`): the jobs of one sequence reach
+-- their destination in position order. A sequence's row is written with its first member;
+-- `station` is the `[[site.stations]]` id its first member named (NULL: none), `last` the
+-- last position once the sequence is complete (NULL: open), `cancelled_at` when the WMS
+-- cancelled it as a whole. Each member's position is in `sequence_members`, written in the
+-- same commit as the member's job (the job's own `spec` keeps its name and position too).
+CREATE TABLE sequences (
+    name TEXT PRIMARY KEY,
+    station INTEGER,
+    last INTEGER,
+    cancelled_at INTEGER,
+    created_at INTEGER NOT NULL,
+    updated_at INTEGER NOT NULL
+);
+
+CREATE TABLE sequence_members (
+    name TEXT NOT NULL,
+    position INTEGER NOT NULL,
+    job INTEGER NOT NULL,
+    PRIMARY KEY (name, position)
+);
+
+CREATE INDEX sequence_members_job ON sequence_members (job);
