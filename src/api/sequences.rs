@@ -29,11 +29,12 @@ pub fn router() -> OpenApiRouter<AppState> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum SequenceState {
-    /// Members may still join.
+    /// Members may still join, at any position.
     Open,
-    /// No member may join; some have not ended.
+    /// Its last position is known (a member posted as the last), or the WMS completed it
+    /// (no member may join any more); some position is still due.
     Complete,
-    /// Complete, and every member ended.
+    /// Complete, and every position delivered or passed.
     Done,
     /// Cancelled as a whole.
     Cancelled,
@@ -56,7 +57,7 @@ pub struct SequenceMember {
 
 /// A sequence: the jobs that reach their destination in `position` order.
 #[derive(Debug, Serialize, ToSchema)]
-#[schema(example = json!({"name": "ORD-77", "station": 3, "state": "open", "complete": false,
+#[schema(example = json!({"name": "ORD-77", "station": 3, "state": "open", "complete": false, "last": null,
     "next_position": 2, "members": [
         {"position": 1, "job": 41, "reference": "ORD-77-01", "state": "completed", "late_by_s": null},
         {"position": 2, "job": 42, "reference": "ORD-77-02", "state": "queued", "late_by_s": null}],
@@ -69,8 +70,10 @@ pub struct Sequence {
     pub station: Option<u16>,
     /// Where it is in its life.
     pub state: SequenceState,
-    /// No member may join it any more.
+    /// Its last position is known, or the WMS completed it.
     pub complete: bool,
+    /// Its last position, once known.
+    pub last: Option<u32>,
     /// The lowest position neither delivered (completed) nor passed (cancelled, or never
     /// posted in a complete sequence); null when every one is.
     pub next_position: Option<u32>,
@@ -102,7 +105,8 @@ async fn read(app: &AppState, name: &str) -> Result<Sequence, ApiError> {
         app.dispatcher.queues().show(job);
     }
     let last = stored.row.last.and_then(|l| u32::try_from(l).ok());
-    let next = next_due(stored.members.values().filter_map(|m| Some((m.position, m.state?))), last);
+    let closed = stored.row.completed_at.is_some();
+    let next = next_due(stored.members.values().filter_map(|m| Some((m.position, m.state?))), last, closed);
     let job_of = |id: i64| found.iter().find(|j| j.id == id);
     let holding = next.and_then(|p| match stored.members.get(&p) {
         None => Some(Waiting::new(WaitingReason::Sequence, format!("position {p} is not posted yet"))),
@@ -132,18 +136,19 @@ async fn read(app: &AppState, name: &str) -> Result<Sequence, ApiError> {
             late_by_s: job_of(m.job).and_then(|j| j.late_by_s),
         })
         .collect();
-    let ended = members.iter().all(|m| m.state.is_none_or(JobState::is_terminal));
-    let state = match (stored.row.cancelled_at, last) {
+    let complete = closed || last.is_some();
+    let state = match (stored.row.cancelled_at, complete) {
         (Some(_), _) => SequenceState::Cancelled,
-        (None, Some(_)) if ended => SequenceState::Done,
-        (None, Some(_)) => SequenceState::Complete,
-        (None, None) => SequenceState::Open,
+        (None, true) if next.is_none() => SequenceState::Done,
+        (None, true) => SequenceState::Complete,
+        (None, false) => SequenceState::Open,
     };
     Ok(Sequence {
         name: stored.row.name,
         station: stored.row.station.and_then(|s| u16::try_from(s).ok()),
         state,
-        complete: last.is_some(),
+        complete,
+        last,
         next_position: next,
         members,
         holding: holding.filter(|_| state != SequenceState::Cancelled),

@@ -40,8 +40,6 @@ use super::ca::CaError;
 /// The event types a subscription may name (a `*` family is a prefix before the dot).
 pub const EVENT_TYPES: [&str; 10] = [
     "job.updated",
-    "job.late",
-    "sequence.updated",
     "device.updated",
     "alarm.raised",
     "alarm.updated",
@@ -49,6 +47,8 @@ pub const EVENT_TYPES: [&str; 10] = [
     "location.updated",
     "audit.recorded",
     "config.reloaded",
+    "job.late",
+    "sequence.updated",
 ];
 
 /// One `[[webhooks]]` entry.

@@ -18,8 +18,12 @@ pub struct Row {
     pub name: String,
     /// The station its members go to, if its first member named one.
     pub station: Option<i64>,
-    /// The last position, once the sequence is complete.
+    /// The last position, once known (a member posted as the last, or the sequence
+    /// completed).
     pub last: Option<i64>,
+    /// When the WMS completed it: no member may join any more, positions never posted are
+    /// passed (Unix ms).
+    pub completed_at: Option<i64>,
     /// When the WMS cancelled it as a whole (Unix ms).
     pub cancelled_at: Option<i64>,
     /// When its first member was accepted (Unix ms).
@@ -29,7 +33,7 @@ pub struct Row {
 }
 
 /// The columns of [`Row`], in a SELECT list.
-pub const COLUMNS: &str = "name, station, last, cancelled_at, created_at, updated_at";
+pub const COLUMNS: &str = "name, station, last, completed_at, cancelled_at, created_at, updated_at";
 
 /// One member as stored: its position, its job, the job's state and when the job last
 /// changed (Unix ms; for an ended member, when it ended), and the aisle its job ran in.

@@ -7,8 +7,10 @@
 //! out, and only once the member before it has completed: a crane's cycle has no upper
 //! bound (an alarm can stop it for an hour), so nothing can be promised about a box still
 //! in the rack. Decisions where the issue left them open:
-//! - a missing position holds the later ones while the sequence is open (the WMS may still
-//!   post it); once the WMS says the sequence is complete, it is passed;
+//! - a missing position holds the later ones (the WMS may still post it, and a member posted
+//!   as the `last` only says where the sequence ends); once the WMS completes the sequence
+//!   (`POST /api/v1/sequences/{name}/complete`: no member will join any more), it is
+//!   passed;
 //! - a failed member holds the sequence (`sequence`, naming it) until an operator retries it
 //!   and it completes, or the WMS cancels the sequence: a tote missing from a pick order is
 //!   the picker's business, not something to skip silently (openTCS's `failureFatal` would
@@ -35,7 +37,7 @@
 //! it has not seen (at start, or a sequence whose members all ended long ago) is read from
 //! the store by [`resolve`] before the job may go: until then it waits.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 
 use crate::config::StationConfig;
 use crate::domain::{Job, JobState, Waiting, WaitingReason};
@@ -77,6 +79,29 @@ pub struct Book {
     waiters: HashMap<String, BTreeSet<i64>>,
     /// The stations, by id.
     stations: HashMap<u16, StationConfig>,
+    /// Every unfinished job with a deadline: (deadline in Unix ms, job).
+    deadlines: BTreeSet<(i64, i64)>,
+    /// Unfinished jobs told late (a `job.late` event committed or asked for).
+    late: HashSet<i64>,
+    /// Jobs that ended after their deadline, since the start.
+    pub ended_late: u64,
+    /// Members delivered out of order since the start, by station (0: none): completed
+    /// while an earlier position was neither delivered nor passed, or due at the station
+    /// (its end plus its aisle's transit) before the member ahead of it.
+    pub inversions: BTreeMap<u16, u64>,
+}
+
+/// Deadlines and sequences as `/metrics` shows them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Orders {
+    /// Unfinished jobs past their deadline.
+    pub late: usize,
+    /// Jobs that ended after their deadline, since the start.
+    pub ended_late: u64,
+    /// Seconds to the nearest deadline of an unfinished job (negative once passed).
+    pub slack: Option<f64>,
+    /// Sequence members delivered out of order, by station (0: none), since the start.
+    pub inversions: BTreeMap<u16, u64>,
 }
 
 /// What [`resolve`] must read: sequences and references the book has not seen.
@@ -113,15 +138,27 @@ impl Book {
             if job.sequence.is_some() || !job.after.is_empty() {
                 changed = true;
             }
+            if let Some(deadline) = job.deadline.map(crate::domain::time::to_ms) {
+                changed = true;
+                if job.state.is_terminal() {
+                    self.deadlines.remove(&(deadline, job.id));
+                    self.late.remove(&job.id);
+                    if job.late_at(0).is_some() {
+                        self.ended_late += 1;
+                    }
+                } else {
+                    self.deadlines.insert((deadline, job.id));
+                }
+            }
             if let Some(m) = &job.sequence {
-                let seq = self.sequences.entry(m.name.clone()).or_default();
                 let member = Member {
                     job: job.id,
                     state: job.state,
                     aisle: aisle_of(job),
                     at: crate::domain::time::to_ms(job.updated_at),
                 };
-                seq.members.insert(m.position, member);
+                self.delivered(&m.name, m.position, member);
+                self.sequences.entry(m.name.clone()).or_default().members.insert(m.position, member);
             }
             if let Some(r) = &job.reference
                 && let Some(dep) = self.refs.get_mut(r)
@@ -181,6 +218,57 @@ impl Book {
                 *dep = Some(Dep { job, state });
             }
         }
+    }
+
+    /// Counts an inversion if `member`, which completes now, should not have: a position
+    /// before it is neither delivered nor passed, or its box reaches the station before the
+    /// box of the member ahead of it.
+    fn delivered(&mut self, name: &str, position: u32, member: Member) {
+        let Some(seq) = self.sequences.get(name) else { return };
+        let was = seq.members.get(&position).map(|m| m.state);
+        if member.state != JobState::Completed || was == Some(JobState::Completed) || seq.row.is_none() {
+            return;
+        }
+        let row = seq.row.as_ref();
+        let station = row.and_then(|r| r.station).and_then(|s| u16::try_from(s).ok());
+        let transit = |a: Option<u16>| match (station.and_then(|s| self.stations.get(&s)), a) {
+            (Some(s), Some(a)) => s.transit_s(a),
+            _ => 0.0,
+        };
+        let early = match due(seq) {
+            Due::Position(p) => p != position,
+            Due::Done => false,
+        };
+        let ahead = seq.members.range(..position).rev().find(|(_, b)| b.state == JobState::Completed);
+        let overtakes = ahead.is_some_and(|(_, b)| {
+            member.at as f64 + transit(member.aisle) * 1000.0 < b.at as f64 + transit(b.aisle) * 1000.0
+        });
+        if early || overtakes {
+            tracing::warn!(sequence = name, position, "a sequence member was delivered out of order");
+            *self.inversions.entry(station.unwrap_or(0)).or_default() += 1;
+        }
+    }
+
+    /// The unfinished jobs whose deadline passed by `now` and that were not told late yet,
+    /// now noted as told.
+    pub fn newly_late(&mut self, now: i64) -> Vec<i64> {
+        let late: Vec<i64> =
+            self.deadlines.range(..(now, i64::MAX)).map(|&(_, id)| id).filter(|id| !self.late.contains(id)).collect();
+        self.late.extend(late.iter().copied());
+        late
+    }
+
+    /// The next deadline after `now`, if any.
+    pub fn next_deadline(&self, now: i64) -> Option<i64> {
+        self.deadlines.range((now, i64::MAX)..).next().map(|&(d, _)| d)
+    }
+
+    /// Unfinished jobs past their deadline at `now`, and the seconds to the nearest
+    /// deadline of an unfinished job (negative once passed), if any has one.
+    pub fn lateness(&self, now: i64) -> (usize, Option<f64>) {
+        let late = self.deadlines.range(..(now, i64::MAX)).count();
+        let slack = self.deadlines.first().map(|&(d, _)| (d - now) as f64 / 1000.0);
+        (late, slack)
     }
 
     /// Drops what no unfinished job needs any more.
@@ -301,20 +389,23 @@ enum Due {
 }
 
 fn due(seq: &Seq) -> Due {
-    let last = seq.row.as_ref().and_then(|r| r.last).and_then(|l| u32::try_from(l).ok());
-    match next_due(seq.members.iter().map(|(&p, m)| (p, m.state)), last) {
+    let row = seq.row.as_ref();
+    let last = row.and_then(|r| r.last).and_then(|l| u32::try_from(l).ok());
+    let closed = row.is_some_and(|r| r.completed_at.is_some());
+    match next_due(seq.members.iter().map(|(&p, m)| (p, m.state)), last, closed) {
         Some(p) => Due::Position(p),
         None => Due::Done,
     }
 }
 
-/// The position due of a sequence whose members are `members` (by position, in order) and
-/// whose last position is `last` once complete: the lowest neither delivered (completed) nor
-/// passed (cancelled, or, once complete, never posted); None when every one is.
-pub fn next_due(members: impl IntoIterator<Item = (u32, JobState)>, last: Option<u32>) -> Option<u32> {
+/// The position due of a sequence whose members are `members` (by position, in order),
+/// whose last position is `last` once known, and that is `closed` once the WMS completed
+/// it: the lowest neither delivered (completed) nor passed (cancelled, or never posted in
+/// a closed sequence); None when every one is.
+pub fn next_due(members: impl IntoIterator<Item = (u32, JobState)>, last: Option<u32>, closed: bool) -> Option<u32> {
     let mut expect = 1u32;
     for (p, state) in members {
-        if p > expect && last.is_none() {
+        if p > expect && !closed {
             return Some(expect);
         }
         match state {
@@ -323,43 +414,9 @@ pub fn next_due(members: impl IntoIterator<Item = (u32, JobState)>, last: Option
         }
     }
     match last {
-        Some(_) => None,
-        None => Some(expect),
-    }
-}
-
-/// Keeps the book read and wakes the devices when a member is released: reads what the
-/// book has not seen (after a commit names it; again every second while the store cannot be
-/// read), and sleeps until the next release or the next change. Runs until the process ends.
-pub async fn watch(queues: super::Queues, pool: crate::store::Pool) {
-    loop {
-        let unknown = queues.book().unknown();
-        let mut retry = false;
-        if !unknown.is_empty() {
-            match resolve(&pool, &unknown).await {
-                Ok(read) => {
-                    queues.book().read(read.sequences, read.refs);
-                    queues.wake_all();
-                }
-                Err(e) => {
-                    tracing::warn!(error = %e, "reading the sequences and dependencies jobs wait for");
-                    retry = true;
-                }
-            }
-        }
-        let now = crate::domain::time::now_ms();
-        let release = queues.book().next_release(now);
-        let still = !queues.book().unknown().is_empty();
-        let wait = match (release, retry || still) {
-            (_, true) => std::time::Duration::from_secs(1),
-            (Some(at), false) => std::time::Duration::from_millis(u64::try_from(at - now).unwrap_or(0)),
-            (None, false) => std::time::Duration::from_secs(3600),
-        };
-        let changed = queues.0.book_changed.notified();
-        tokio::select! {
-            () = changed => {}
-            () = tokio::time::sleep(wait) => queues.wake_all(),
-        }
+        _ if closed => None,
+        Some(l) if expect > l => None,
+        _ => Some(expect),
     }
 }
 

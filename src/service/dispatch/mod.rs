@@ -18,6 +18,7 @@ pub mod gate;
 pub mod order;
 mod plan;
 pub mod queues;
+pub mod release;
 pub mod waiting;
 pub mod withhold;
 

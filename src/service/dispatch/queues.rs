@@ -216,6 +216,21 @@ impl Queues {
         })
     }
 
+    /// Deadlines and sequences for `/metrics`; None on a node that does not drive.
+    pub fn orders(&self) -> Option<super::gate::Orders> {
+        if !self.drives() {
+            return None;
+        }
+        let book = self.book();
+        let (late, slack) = book.lateness(crate::domain::time::now_ms());
+        Some(super::gate::Orders {
+            late,
+            ended_late: book.ended_late,
+            slack,
+            inversions: book.inversions.clone(),
+        })
+    }
+
     /// Sets the stations sequences are released by (at start, and on a reload).
     pub fn set_stations(&self, stations: &[crate::config::StationConfig]) {
         self.book().set_stations(stations);
@@ -243,7 +258,9 @@ impl Queues {
         if !self.drives() {
             return;
         }
-        let terms = jobs.iter().any(|j| !j.after.is_empty() || j.sequence.is_some() || j.reference.is_some());
+        let terms = jobs
+            .iter()
+            .any(|j| !j.after.is_empty() || j.sequence.is_some() || j.reference.is_some() || j.deadline.is_some());
         if terms && self.book().committed(jobs) {
             for lane in self.lanes().values() {
                 lane.wake.notify_one();
@@ -282,7 +299,8 @@ impl Queues {
             }
             fresh
         };
-        let termed: Vec<&Job> = fresh.iter().filter(|j| j.sequence.is_some() || !j.after.is_empty()).collect();
+        let termed: Vec<&Job> =
+            fresh.iter().filter(|j| j.sequence.is_some() || !j.after.is_empty() || j.deadline.is_some()).collect();
         if !termed.is_empty() && self.book().committed(&termed) {
             self.0.book_changed.notify_one();
         }

@@ -148,7 +148,8 @@ pub(super) async fn load(
             }
         }
         match cmd {
-            Command::Submit { jobs, .. } if read_references => {
+            // Terms are checked against what a repeated request would find: read them.
+            Command::Submit { jobs, .. } if read_references || jobs.iter().any(|j| !j.terms.is_plain()) => {
                 references.extend(jobs.iter().filter_map(|j| j.reference.as_deref()))
             }
             Command::Submit { .. } => {}
@@ -173,7 +174,9 @@ pub(super) async fn load(
                 Record::Acknowledge { alarm, .. } => {
                     acknowledged.insert(*alarm);
                 }
-                Record::Retell { jobs } | Record::Archived { jobs } => ids.extend(jobs.iter().copied()),
+                Record::Retell { jobs } | Record::Archived { jobs } | Record::Late { jobs } => {
+                    ids.extend(jobs.iter().copied())
+                }
                 Record::Sequence { name, .. } => drop(sequences.insert(name.clone())),
                 Record::Device { .. }
                 | Record::Pause { .. }

@@ -210,6 +210,11 @@ pub enum Record {
         /// The audit entry's words: the hash and the difference.
         reason: String,
     },
+    /// These jobs just passed their deadline: a `job.late` event for each one not ended.
+    Late {
+        /// The jobs.
+        jobs: Vec<i64>,
+    },
     /// A sequence is complete (no member may join it any more; the last position is the
     /// highest posted), and with `cancel` cancelled as a whole by `by` (audited); refused
     /// with [`WriteError::Sequence`] for a sequence that does not exist.

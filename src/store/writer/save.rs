@@ -534,8 +534,12 @@ async fn save_sequences(db: &mut Conn, count: &mut usize, group: &Group) -> Resu
             // `WHERE TRUE` lets SQLite tell the upsert's ON CONFLICT from a join's ON.
             format!(
                 "{} WHERE TRUE ON CONFLICT (name) DO UPDATE SET station = excluded.station, last = excluded.last, \
-                 cancelled_at = excluded.cancelled_at, updated_at = excluded.updated_at",
-                e.insert_json("sequences", &["name", "station", "last", "cancelled_at", "created_at", "updated_at"])
+                 completed_at = excluded.completed_at, cancelled_at = excluded.cancelled_at, \
+                 updated_at = excluded.updated_at",
+                e.insert_json(
+                    "sequences",
+                    &["name", "station", "last", "completed_at", "cancelled_at", "created_at", "updated_at"],
+                )
             )
         })
     });

@@ -1,6 +1,7 @@
 //! A submission's terms checked against what is stored, in the group's transaction: the
 //! jobs `after` names exist and wait for no cycle, and each sequence member fits its
-//! sequence (position free, sequence neither complete nor cancelled, one station). And the
+//! sequence (position free and not after the last, sequence neither complete nor
+//! cancelled, one station). And the
 //! record that completes or cancels a sequence.
 //!
 //! The writer is the one place these can be checked without a race: two requests for one
@@ -36,6 +37,7 @@ impl Group {
                             name: name.clone(),
                             station: jobs[i].terms.station.map(i64::from),
                             last: None,
+                            completed_at: None,
                             cancelled_at: None,
                             created_at: self.now,
                             updated_at: self.now,
@@ -49,8 +51,11 @@ impl Group {
             if seq.row.cancelled_at.is_some() {
                 return refuse("it was cancelled: no member may join it".into());
             }
-            if let Some(last) = seq.row.last {
-                return refuse(format!("it is complete (its last position is {last}): no member may join it"));
+            if seq.row.completed_at.is_some() {
+                return refuse("it is complete: no member may join it".into());
+            }
+            if let Some(last) = seq.row.last.filter(|&l| i64::from(position) > l) {
+                return refuse(format!("its last position is {last}: position {position} cannot join it"));
             }
             if let Some(station) = jobs[i].terms.station.map(i64::from)
                 && seq.row.station != Some(station)
@@ -64,6 +69,9 @@ impl Group {
             if jobs[i].terms.last {
                 if let Some((&after, _)) = seq.members.range(position..).next() {
                     return refuse(format!("position {position} cannot be the last: position {after} is posted"));
+                }
+                if let Some(last) = seq.row.last.filter(|&l| l != i64::from(position)) {
+                    return refuse(format!("its last position is {last}, not {position}"));
                 }
                 seq.row.last = Some(i64::from(position));
             }
@@ -139,8 +147,11 @@ impl Group {
             return Err(WriteError::Sequence(format!("sequence {name:?} does not exist")));
         };
         let mut changed = false;
-        if seq.row.last.is_none() {
-            seq.row.last = Some(seq.members.keys().next_back().map_or(0, |&p| i64::from(p)));
+        if seq.row.completed_at.is_none() {
+            seq.row.completed_at = Some(now);
+            if seq.row.last.is_none() {
+                seq.row.last = Some(seq.members.keys().next_back().map_or(0, |&p| i64::from(p)));
+            }
             changed = true;
         }
         if cancel && seq.row.cancelled_at.is_none() {
