@@ -210,6 +210,42 @@ impl ClusterConfig {
 pub struct SiteConfig {
     /// One `[[site.aisles]]` entry per aisle.
     pub aisles: Vec<AisleConfig>,
+    /// One `[[site.stations]]` entry per station sequences go to: how long a box takes from
+    /// each aisle's exit to it (see `service::dispatch::gate`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stations: Vec<StationConfig>,
+}
+
+/// One `[[site.stations]]` entry: a station the members of a sequence reach in order.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct StationConfig {
+    /// The station's number, from 1, as a sequence's `station` names it.
+    pub id: u16,
+    /// What people call it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Seconds a box takes from each aisle's exit (where its crane or shelf hands it out) to
+    /// the station; an aisle not listed takes 0.
+    #[serde(default)]
+    pub transit: Vec<Transit>,
+}
+
+/// One aisle's transit time to a station.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Transit {
+    /// The aisle.
+    pub aisle: u16,
+    /// Seconds from its exit to the station.
+    pub seconds: f64,
+}
+
+impl StationConfig {
+    /// Seconds from `aisle`'s exit to the station (0 for an aisle not listed).
+    pub fn transit_s(&self, aisle: u16) -> f64 {
+        self.transit.iter().find(|t| t.aisle == aisle).map_or(0.0, |t| t.seconds)
+    }
 }
 
 /// One `[[site.aisles]]` entry.
@@ -319,6 +355,7 @@ impl Default for SiteConfig {
     fn default() -> Self {
         SiteConfig {
             aisles: vec![AisleConfig { aisle: 1, rows: 2, bays: 10, levels: 6, positions: 4, depth: 1 }],
+            stations: Vec::new(),
         }
     }
 }

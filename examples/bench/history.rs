@@ -288,6 +288,7 @@ pub(crate) fn job(rng: &mut StdRng, id: i64, created: i64) -> Ended {
         barcode: None,
         device: None,
         serves: None,
+        terms: Default::default(),
     };
     let mut job = new.accepted(id, created);
     let dispatched = created + rng.random_range(100..30_000);

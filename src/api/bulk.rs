@@ -141,7 +141,7 @@ impl BulkAnswer {
             .jobs
             .into_iter()
             .map(|mut job| {
-                job.waiting = app.dispatcher.queues().waiting(&job);
+                app.dispatcher.queues().show(&mut job);
                 job
             })
             .collect();

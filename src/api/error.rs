@@ -137,6 +137,9 @@ impl From<WriteError> for ApiError {
                 Self::conflict("invalid_state", e.to_string())
             }
             WriteError::Refused(_) => Self::conflict("bulk_refused", e.to_string()),
+            WriteError::Sequence(_) => Self::conflict("sequence_conflict", e.to_string()),
+            WriteError::UnknownDependency(_) => Self::invalid("unknown_dependency", e.to_string()),
+            WriteError::DependencyCycle(_) => Self::invalid("dependency_cycle", e.to_string()),
             WriteError::Overloaded => Self::new(
                 StatusCode::SERVICE_UNAVAILABLE,
                 "overloaded",

@@ -65,6 +65,7 @@ pub fn only_active(method: &Method, path: &str) -> bool {
         || (method != Method::GET && p.starts_with("jobs/") && p != "jobs/batch")
         || (method != Method::GET && under("locations"))
         || (method != Method::GET && under("webhooks"))
+        || (method != Method::GET && under("sequences"))
 }
 
 /// Middleware: forwards what only the active node does, on a standby.

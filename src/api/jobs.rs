@@ -65,7 +65,7 @@ async fn create_job(
             (StatusCode::CREATED, headers, json).into_response()
         }
         Some(Outcome::Existing(mut job)) => {
-            job.waiting = app.dispatcher.queues().waiting(&job);
+            app.dispatcher.queues().show(&mut job);
             (StatusCode::OK, Json(job)).into_response()
         }
         None => return Err(ApiError::unavailable("writer returned no outcome")),
@@ -138,7 +138,7 @@ async fn create_batch(
         .map(|o| match o {
             Outcome::Created { json, .. } => json,
             Outcome::Existing(mut j) => {
-                j.waiting = app.dispatcher.queues().waiting(&j);
+                app.dispatcher.queues().show(&mut j);
                 serde_json::to_string(&j).unwrap_or_else(|_| "null".into())
             }
         })
@@ -222,6 +222,10 @@ pub enum WaitingFilter {
     NoDevice,
     /// See [`WaitingReason::NoPlace`].
     NoPlace,
+    /// See [`WaitingReason::Dependency`].
+    Dependency,
+    /// See [`WaitingReason::Sequence`].
+    Sequence,
 }
 
 impl WaitingFilter {
@@ -243,6 +247,8 @@ impl WaitingFilter {
             WaitingFilter::SlotsBusy => WaitingReason::SlotsBusy.as_str(),
             WaitingFilter::NoDevice => WaitingReason::NoDevice.as_str(),
             WaitingFilter::NoPlace => WaitingReason::NoPlace.as_str(),
+            WaitingFilter::Dependency => WaitingReason::Dependency.as_str(),
+            WaitingFilter::Sequence => WaitingReason::Sequence.as_str(),
         }
     }
 }
@@ -286,7 +292,7 @@ async fn list_jobs(
     }
     let mut jobs = jobs::list(&app.pool, &filter).await?;
     for job in &mut jobs {
-        job.waiting = app.dispatcher.queues().waiting(job);
+        app.dispatcher.queues().show(job);
     }
     let next_cursor = (jobs.len() == limit as usize).then(|| jobs.last().map(|j| j.id.to_string())).flatten();
     Ok(Json(JobPage { jobs, next_cursor }))
@@ -312,7 +318,7 @@ async fn waiting_page(
         let read = batch.len();
         for mut job in batch {
             filter.after_id = Some(job.id);
-            job.waiting = app.dispatcher.queues().waiting(&job);
+            app.dispatcher.queues().show(&mut job);
             if waiting.passes(job.waiting.as_ref()) {
                 kept.push(job);
                 if kept.len() == limit {
@@ -338,7 +344,7 @@ async fn get_job(State(app): State<AppState>, Path(id): Path<i64>) -> Result<Jso
     let mut job = jobs::get(&app.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found(format!("job {id} does not exist")))?;
-    job.waiting = app.dispatcher.queues().waiting(&job);
+    app.dispatcher.queues().show(&mut job);
     Ok(Json(job))
 }
 
@@ -420,7 +426,7 @@ async fn retry_job(
     tracing::info!(job = id, by = %by.name, "retried through the API");
     let actor = Actor { by: by.name, client: by.client, reason: None };
     let mut job = app.dispatcher.retry(id, &actor).await?;
-    job.waiting = app.dispatcher.queues().waiting(&job);
+    app.dispatcher.queues().show(&mut job);
     Ok(Json(job))
 }
 
@@ -464,6 +470,7 @@ mod tests {
             barcode: None,
             device: None,
             serves: None,
+            terms: Default::default(),
         };
         let jobs: Vec<Job> = (1..=3).map(|id| new.accepted(id, 1_700_000_000_123)).collect();
         let json: Vec<String> = jobs.iter().map(|j| serde_json::to_string(j).unwrap()).collect();

@@ -29,6 +29,7 @@ pub mod metrics;
 pub mod ops;
 pub mod peer;
 pub mod query;
+pub mod sequences;
 pub mod state;
 pub mod stats;
 pub mod webhooks;
@@ -68,6 +69,8 @@ also submits and changes jobs, `admin` may do everything. A `201` means the job 
     servers((url = "/", description = "This server")),
     tags(
         (name = "jobs", description = "Submit and follow jobs"),
+        (name = "sequences", description = "Jobs that reach their destination in order (a pick order's totes): \
+read one, complete it, cancel it, re-prioritise it; members join through `POST /api/v1/jobs` with `sequence`"),
         (name = "devices", description = "The machines: status, pause and resume (of a device or a whole aisle, kept \
 across restarts and audited); tags of tag I/O devices"),
         (name = "locations", description = "What rackd knows of each location; location locks"),
@@ -76,6 +79,8 @@ detail; acknowledge; export as CSV"),
         (name = "events", description = "Live events over WebSocket (`GET /api/v1/ws`). A subscriber first gets a \
 `Snapshot` (or, with `?since=SEQ`, the replay of every later event), then every `Event` as it is committed, in \
 `seq` order with no gap and no duplicate. Event types and their `data`: `job.updated` (a `Job`), \
+`job.late` (a `Job` that has just passed its `deadline`, once), `sequence.updated` (a sequence's row: \
+`name`, `station`, `last`, `cancelled_at`, `created_at`, `updated_at`, in Unix ms; with the `jobs` topic), \
 `device.updated` (a `DeviceStatus`), `alarm.raised`, `alarm.cleared` and `alarm.updated` (an `Alarm`; \
 updated when acknowledged), `location.updated` (a `LocationState`, with its lock), `audit.recorded` (an \
 `AuditEntry`: every audited change but a submission, whose jobs' `job.updated` tell of it), `config.reloaded` (an `Applied`: \
@@ -143,6 +148,7 @@ fn protected_routes() -> OpenApiRouter<AppState> {
         .merge(config::router())
         .merge(stats::router())
         .merge(webhooks::router())
+        .merge(sequences::router())
         .merge(whoami::router())
         .merge(ws::router());
     OpenApiRouter::with_openapi(ApiDoc::openapi()).nest("/api/v1", v1).routes(routes!(metrics_route))

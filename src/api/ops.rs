@@ -135,6 +135,7 @@ pub async fn metrics(State(app): State<AppState>, headers: HeaderMap) -> Result<
             }
         }),
         webhooks: webhook_samples(&app),
+        orders: app.dispatcher.queues().orders(),
         certificate: app.metrics.certificate(),
     };
     let body = app.metrics.render(scrape, app.hub.subscribers(), format)?;

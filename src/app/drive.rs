@@ -45,6 +45,7 @@ pub(super) async fn start(
 ) -> anyhow::Result<Drive> {
     let queues: &Queues = dispatcher.queues();
     let ids: Vec<String> = config.devices.iter().map(|d| d.id().to_owned()).collect();
+    queues.set_stations(&config.site.stations);
     dispatcher.load(ids.iter().map(String::as_str)).await.context("loading the queues")?;
     dispatcher.restore().await.context("restoring pauses and location locks")?;
     let parts = fleet::Parts {
@@ -64,6 +65,7 @@ pub(super) async fn start(
     let parts = webhooks::Parts { pool: pool.clone(), writer: writer.clone(), hub: hub.clone(), gate };
     let (webhooks, mut tasks) = Webhooks::start(&config.webhooks, parts);
     tasks.push(tokio::spawn(crate::service::dispatch::waiting::watch(queues.clone(), writer.clone())));
+    tasks.push(tokio::spawn(crate::service::dispatch::release::watch(queues.clone(), pool.clone(), writer.clone())));
     tasks.push(tokio::spawn(retention(pool.clone(), writer.clone(), config.clone())));
     let folder = config.retention.folder(&config.database.path);
     tasks.push(tokio::spawn(archive(pool.clone(), writer, config.retention.clone(), folder)));

@@ -51,6 +51,7 @@ pub(super) fn hooks(
         stored: Some(stored),
         unsure: Some(Arc::new(move |landed| counted.count_unsure_commit(landed))),
         committed: Some(queues.hook()),
+        sequenced: Some(queues.sequenced_hook()),
         locked: Some(queues.locked_hook()),
         tell: Some(queues.tell_hook()),
         publish: Some(publish),

@@ -28,6 +28,18 @@ pub enum Invalid {
         "site.aisles: aisle {0}: depth is 1 or 2, and 2 needs positions = 2 and no device but a crane serving the aisle"
     )]
     Depth(u16),
+    /// A station number that is 0 or appears twice.
+    #[error("site.stations: station {0} is zero or listed twice")]
+    StationId(u16),
+    /// A station's transit from an aisle the site does not have, listed twice, or not a
+    /// number of seconds from 0 to a day.
+    #[error("site.stations: station {station}: transit from aisle {aisle} needs an aisle of site.aisles, once, and 0..=86400 seconds")]
+    Transit {
+        /// The station.
+        station: u16,
+        /// The aisle.
+        aisle: u16,
+    },
     /// A device entry.
     #[error(transparent)]
     Device(#[from] DeviceConfigError),
@@ -139,6 +151,20 @@ impl Config {
         }
         if self.site.aisles.is_empty() {
             return Err(("site.aisles".into(), Invalid::NoAisles));
+        }
+        let mut stations = BTreeSet::new();
+        for (i, s) in self.site.stations.iter().enumerate() {
+            if s.id == 0 || !stations.insert(s.id) {
+                return Err((format!("site.stations[{i}].id"), Invalid::StationId(s.id)));
+            }
+            let mut from = BTreeSet::new();
+            for (j, t) in s.transit.iter().enumerate() {
+                let ok = seen.contains(&t.aisle) && from.insert(t.aisle) && (0.0..=86400.0).contains(&t.seconds);
+                if !ok {
+                    let key = format!("site.stations[{i}].transit[{j}]");
+                    return Err((key, Invalid::Transit { station: s.id, aisle: t.aisle }));
+                }
+            }
         }
         let mut ids = BTreeSet::new();
         let mut served = BTreeMap::new();

@@ -38,7 +38,7 @@ use serde::{Deserialize, Serialize};
 use super::ca::CaError;
 
 /// The event types a subscription may name (a `*` family is a prefix before the dot).
-pub const EVENT_TYPES: [&str; 8] = [
+pub const EVENT_TYPES: [&str; 10] = [
     "job.updated",
     "device.updated",
     "alarm.raised",
@@ -47,6 +47,8 @@ pub const EVENT_TYPES: [&str; 8] = [
     "location.updated",
     "audit.recorded",
     "config.reloaded",
+    "job.late",
+    "sequence.updated",
 ];
 
 /// One `[[webhooks]]` entry.

@@ -180,6 +180,7 @@ mod tests {
     "state": "queued", "forced": false, "failure": null, "attempt": 1,
     "waiting": {"reason": "slots_busy", "text": "every slot of shelf1 is busy with other jobs", "device": "shelf1",
         "code": null, "job": null, "by": null},
+    "sequence": null, "deadline": null, "late_by_s": null, "after": [],
     "created_at": "2026-11-21T08:00:00.000Z", "updated_at": "2026-11-21T08:00:00.000Z"}))]
 pub struct Job {
     /// rackd's id for the job.
@@ -229,8 +230,20 @@ pub struct Job {
     pub attempt: u32,
     /// Why a queued job is not handed out now (its device offline, paused or in alarm, an
     /// aisle paused, a location locked, an older job on the same location, every slot busy,
-    /// no device); null while the job moves (running, ended, or about to be handed out).
+    /// no device, an earlier member of its sequence, a job it depends on); null while the
+    /// job moves (running, ended, or about to be handed out).
     pub waiting: Option<super::Waiting>,
+    /// The sequence the job is a member of, and its place in it (retrieve, move, travel).
+    pub sequence: Option<Member>,
+    /// When the job should have ended, if the WMS said.
+    #[serde(with = "time::serde::rfc3339::option")]
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub deadline: Option<OffsetDateTime>,
+    /// Whole seconds the job is past its deadline: now for an unfinished job, when it ended
+    /// for an ended one; null when it is not late or has no deadline.
+    pub late_by_s: Option<i64>,
+    /// The references of the jobs that must complete before this one starts.
+    pub after: Vec<String>,
     /// When rackd accepted the job.
     #[serde(with = "time::serde::rfc3339")]
     #[schema(value_type = String, format = DateTime)]
@@ -242,6 +255,15 @@ pub struct Job {
 }
 
 impl Job {
+    /// Whole seconds the job is past its deadline at `now_ms` (when it ended, for an ended
+    /// job), rounded up; None when it has no deadline or is not late.
+    pub fn late_at(&self, now_ms: i64) -> Option<i64> {
+        let deadline = super::time::to_ms(self.deadline?);
+        let end = if self.state.is_terminal() { super::time::to_ms(self.updated_at) } else { now_ms };
+        let late = end - deadline;
+        (late > 0).then(|| (late + 999) / 1000)
+    }
+
     /// The job's kind-specific fields.
     pub fn spec(&self) -> Option<JobSpec> {
         Some(match self.kind {
@@ -255,6 +277,45 @@ impl Job {
             JobKind::Light => JobSpec::Light { location: self.location?, color: self.color?, on: self.on? },
             JobKind::Travel => JobSpec::Travel { to: self.to? },
         })
+    }
+}
+
+/// A member's place in its sequence: the jobs of one sequence reach their destination in
+/// `position` order (see `service::dispatch::gate`).
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
+#[schema(example = json!({"name": "ORD-77", "position": 1}))]
+pub struct Member {
+    /// The sequence's name (the WMS's, e.g. its order number).
+    pub name: String,
+    /// 1, 2, 3...: the order in which members reach the destination.
+    pub position: u32,
+}
+
+/// What a job asks of its place among other jobs: its sequence, its deadline, the jobs it
+/// waits for. All empty for a plain job.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Terms {
+    /// The sequence it joins, and where.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sequence: Option<Member>,
+    /// The sequence's station (a `[[site.stations]]` id), if the request named it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub station: Option<u16>,
+    /// This member is the sequence's last: the sequence is complete.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub last: bool,
+    /// When it should have ended (Unix ms).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub deadline: Option<i64>,
+    /// The references of the jobs it waits for.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub after: Vec<String>,
+}
+
+impl Terms {
+    /// Whether the job asks nothing of its place (the common case, kept cheap).
+    pub fn is_plain(&self) -> bool {
+        self.sequence.is_none() && self.deadline.is_none() && self.after.is_empty()
     }
 }
 
@@ -273,10 +334,13 @@ pub struct NewJob {
     pub device: Option<String>,
     /// The job this one clears the way for (a relocation rackd made), if any.
     pub serves: Option<i64>,
+    /// Its sequence, deadline and dependencies.
+    pub terms: Terms,
 }
 
 impl NewJob {
     /// The canonical form of the request, compared on a repeated POST with the same reference.
+    /// A plain job's is what it was before terms existed (stored requests compare equal).
     pub fn canonical(&self) -> String {
         #[derive(Serialize)]
         struct Canonical<'a> {
@@ -285,6 +349,8 @@ impl NewJob {
             priority: Priority,
             barcode: &'a Option<Barcode>,
             device: &'a Option<String>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            terms: Option<&'a Terms>,
         }
         let c = Canonical {
             spec: &self.spec,
@@ -292,6 +358,7 @@ impl NewJob {
             priority: self.priority,
             barcode: &self.barcode,
             device: &self.device,
+            terms: (!self.terms.is_plain()).then_some(&self.terms),
         };
         serde_json::to_string(&c).unwrap_or_default()
     }
@@ -319,6 +386,10 @@ impl NewJob {
             failure: None,
             attempt: 1,
             waiting: None,
+            sequence: self.terms.sequence.clone(),
+            deadline: self.terms.deadline.map(from_ms),
+            late_by_s: None,
+            after: self.terms.after.clone(),
             created_at: at,
             updated_at: at,
         };

@@ -16,7 +16,7 @@ pub mod waiting;
 
 pub use alarm::{AlarmClass, AlarmKind};
 pub use control::{LocationLock, Pause, Target, Who};
-pub use job::{Job, JobKind, JobSpec, LightColor, NewJob};
+pub use job::{Job, JobKind, JobSpec, LightColor, Member, NewJob, Terms};
 pub use location::{AisleLayout, Layout, Location};
 pub use putaway::{Class, Zone};
 pub use report::{Report, Reported};

@@ -30,11 +30,16 @@ pub enum WaitingReason {
     /// Its crane's planner finds no free location for it: a store left to rackd whose
     /// zones are full, or a relocation it needs with nowhere to go.
     NoPlace,
+    /// A job its `after` names has not completed (`job`).
+    Dependency,
+    /// An earlier member of its sequence goes first (`job`, when posted), or its box would
+    /// reach the station before the one ahead of it.
+    Sequence,
 }
 
 impl WaitingReason {
     /// Every reason.
-    pub const ALL: [WaitingReason; 9] = [
+    pub const ALL: [WaitingReason; 11] = [
         WaitingReason::DeviceOffline,
         WaitingReason::DevicePaused,
         WaitingReason::AislePaused,
@@ -44,6 +49,8 @@ impl WaitingReason {
         WaitingReason::SlotsBusy,
         WaitingReason::NoDevice,
         WaitingReason::NoPlace,
+        WaitingReason::Dependency,
+        WaitingReason::Sequence,
     ];
 
     /// The reason's name as the API writes it.
@@ -58,6 +65,8 @@ impl WaitingReason {
             WaitingReason::SlotsBusy => "slots_busy",
             WaitingReason::NoDevice => "no_device",
             WaitingReason::NoPlace => "no_place",
+            WaitingReason::Dependency => "dependency",
+            WaitingReason::Sequence => "sequence",
         }
     }
 

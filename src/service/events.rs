@@ -49,7 +49,8 @@ impl Topic {
     /// The topic of an event type.
     pub fn of(kind: &str) -> Option<Topic> {
         match kind.split('.').next()? {
-            "job" => Some(Topic::Jobs),
+            // A sequence is jobs in an order: its changes go with the jobs.
+            "job" | "sequence" => Some(Topic::Jobs),
             "device" => Some(Topic::Devices),
             "alarm" => Some(Topic::Alarms),
             "location" => Some(Topic::Locations),

@@ -10,7 +10,7 @@ use serde::Deserialize;
 use utoipa::ToSchema;
 
 use crate::domain::{
-    Barcode, Class, Invalid, JobKind, JobSpec, Layout, LightColor, Location, Priority, Zone,
+    Barcode, Class, Invalid, JobKind, JobSpec, Layout, LightColor, Location, Member, Priority, Terms, Zone,
 };
 use crate::store::jobs::NewJob;
 
@@ -19,6 +19,12 @@ pub const MAX_REFERENCE_LEN: usize = 100;
 
 /// Most jobs in one batch.
 pub const MAX_BATCH: usize = 1000;
+
+/// The highest position in a sequence.
+pub const MAX_POSITION: u32 = 1_000_000;
+
+/// Most references one job's `after` names.
+pub const MAX_AFTER: usize = 100;
 
 /// A job as the WMS posts it.
 #[derive(Clone, Debug, Deserialize, ToSchema)]
@@ -59,6 +65,36 @@ pub struct JobRequest {
     /// A store left to rackd: the box's velocity class (A: the nearest third of the aisle by
     /// the crane's travel time, B the middle, C the farthest).
     pub class: Option<Class>,
+    /// A retrieve, move or travel that is a member of a sequence: the members of one sequence
+    /// reach their destination in `position` order.
+    pub sequence: Option<SequenceRequest>,
+    /// When the job should have ended (RFC 3339, e.g. `2026-11-29T14:00:00Z`). A job past
+    /// its deadline is not failed: it is told late, and the crane planner runs a job whose
+    /// deadline is at risk first.
+    #[schema(value_type = Option<String>, format = DateTime)]
+    pub deadline: Option<String>,
+    /// References of jobs (stored, or in the same batch) that must complete before this one
+    /// starts; at most 100.
+    pub after: Option<Vec<String>>,
+}
+
+/// A job's place in a sequence, as the WMS posts it.
+#[derive(Clone, Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[schema(example = json!({"name": "ORD-77", "position": 1, "station": 3}))]
+pub struct SequenceRequest {
+    /// The sequence's name: 1..=100 printable characters (the WMS's order, say).
+    pub name: String,
+    /// 1..=1000000: members reach the destination in this order, 1 first.
+    #[schema(minimum = 1, maximum = 1000000)]
+    pub position: i64,
+    /// The station the sequence goes to (a `[[site.stations]]` id), which sets the transit
+    /// times rackd releases members across aisles by; named by the first member, repeated
+    /// or left out by the others.
+    pub station: Option<u16>,
+    /// True on the last member: the sequence is then complete, no member may follow.
+    #[serde(default)]
+    pub last: bool,
 }
 
 /// What intake checks requests against.
@@ -74,6 +110,8 @@ pub struct Rules {
     pub deep: BTreeSet<u16>,
     /// The aisles a crane serves: where a store may leave its location to rackd.
     pub crane_aisles: BTreeSet<u16>,
+    /// The configured stations (`[[site.stations]]`).
+    pub stations: BTreeSet<u16>,
 }
 
 impl Rules {
@@ -91,6 +129,7 @@ impl Rules {
                 .collect(),
             devices: devices.iter().map(|d| (d.id().to_owned(), d.kind().job_kinds())).collect(),
             routes: devices.iter().flat_map(|d| d.aisles().iter().map(|&a| (a, d.id().to_owned()))).collect(),
+            stations: config.site.stations.iter().map(|s| s.id).collect(),
         }
     }
 
@@ -144,7 +183,61 @@ impl Rules {
             check_reference(r)?;
         }
         let device = self.route(&spec, req.device)?;
-        Ok(NewJob { spec, reference: req.reference, priority, barcode, device, serves: None })
+        let terms = self.terms(kind, req.sequence, req.deadline, req.after)?;
+        Ok(NewJob { spec, reference: req.reference, priority, barcode, device, serves: None, terms })
+    }
+
+    /// A job's terms: its sequence (retrieve, move, travel only), deadline and the references
+    /// it waits for, each checked.
+    fn terms(
+        &self,
+        kind: JobKind,
+        sequence: Option<SequenceRequest>,
+        deadline: Option<String>,
+        after: Option<Vec<String>>,
+    ) -> Result<Terms, Invalid> {
+        let mut terms = Terms::default();
+        if let Some(s) = sequence {
+            if !matches!(kind, JobKind::Retrieve | JobKind::Move | JobKind::Travel) {
+                return Err(Invalid(format!(
+                    "a {} job takes no `sequence`: sequences order retrieve, move and travel jobs",
+                    kind.as_str()
+                )));
+            }
+            check_text("sequence.name", &s.name)?;
+            let position = u32::try_from(s.position)
+                .ok()
+                .filter(|p| (1..=MAX_POSITION).contains(p))
+                .ok_or_else(|| Invalid(format!("sequence.position must be 1..={MAX_POSITION}")))?;
+            if let Some(station) = s.station
+                && !self.stations.contains(&station)
+            {
+                let known: Vec<String> = self.stations.iter().map(u16::to_string).collect();
+                return Err(Invalid(format!(
+                    "sequence.station {station} is not configured (site.stations: [{}])",
+                    known.join(", ")
+                )));
+            }
+            terms.sequence = Some(Member { name: s.name, position });
+            (terms.station, terms.last) = (s.station, s.last);
+        }
+        if let Some(text) = deadline {
+            let at = time::OffsetDateTime::parse(&text, &time::format_description::well_known::Rfc3339)
+                .map_err(|_| Invalid(format!("deadline {text:?} is not an RFC 3339 time (e.g. 2026-11-29T14:00:00Z)")))?;
+            terms.deadline = Some(crate::domain::time::to_ms(at));
+        }
+        if let Some(after) = after {
+            if after.len() > MAX_AFTER {
+                return Err(Invalid(format!("`after` names at most {MAX_AFTER} jobs")));
+            }
+            for r in &after {
+                check_text("after", r)?;
+                if !terms.after.contains(r) {
+                    terms.after.push(r.clone());
+                }
+            }
+        }
+        Ok(terms)
     }
 
     /// A store left to rackd, from `aisle`, `zones` and `class` (none of which any other
@@ -231,11 +324,14 @@ impl Rules {
 }
 
 fn check_reference(r: &str) -> Result<(), Invalid> {
+    check_text("reference", r)
+}
+
+/// A WMS's name for something (a reference, a sequence): 1..=100 printable characters.
+fn check_text(what: &str, r: &str) -> Result<(), Invalid> {
     let printable = r.chars().all(|c| !c.is_control());
     if r.trim().is_empty() || r.chars().count() > MAX_REFERENCE_LEN || !printable {
-        return Err(Invalid(format!(
-            "reference must be 1..={MAX_REFERENCE_LEN} printable characters, not blank"
-        )));
+        return Err(Invalid(format!("{what} must be 1..={MAX_REFERENCE_LEN} printable characters, not blank")));
     }
     Ok(())
 }

@@ -8,7 +8,7 @@ use utoipa::ToSchema;
 use super::paging::Query;
 use super::{Reader, read};
 use crate::domain::time::from_ms;
-use crate::domain::{Class, Failure, FailureKind, JobKind, JobSpec, JobState, Priority, Zone};
+use crate::domain::{Class, Failure, FailureKind, JobKind, JobSpec, JobState, Member, Priority, Terms, Zone};
 pub use crate::domain::{Job, NewJob};
 
 /// One entry of a job's history.
@@ -80,6 +80,7 @@ pub(crate) struct StoredSpec {
     pub(crate) spec: JobSpec,
     pub(crate) serves: Option<i64>,
     pub(crate) putaway: Option<Putaway>,
+    pub(crate) terms: Terms,
 }
 
 /// Where a store left to rackd may go, once its location is chosen.
@@ -90,14 +91,25 @@ pub(crate) struct Putaway {
     class: Option<Class>,
 }
 
-/// The planner's keys of the column.
+/// The keys of the column beside the spec's: the planner's, and the job's terms (its
+/// sequence, deadline in Unix ms, and the references it waits for; a sequence's station and
+/// completeness are the sequence's, in `sequences`).
 #[derive(Serialize, serde::Deserialize)]
 struct Planned {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     serves: Option<i64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     putaway: Option<Putaway>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    sequence: Option<Member>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    deadline: Option<i64>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    after: Vec<String>,
 }
+
+/// Keys only [`Planned`] writes: a column without any is a spec alone.
+const PLANNED_KEYS: [&str; 5] = ["\"serves\"", "\"putaway\"", "\"sequence\"", "\"deadline\"", "\"after\""];
 
 impl StoredSpec {
     /// The column's text for `job` (`null` for a job whose fields make no spec, which
@@ -110,10 +122,18 @@ impl StoredSpec {
             _ => None,
         };
         let plain = serde_json::to_string(&spec).unwrap_or_default();
-        if job.serves.is_none() && putaway.is_none() {
+        let plain_terms = job.sequence.is_none() && job.deadline.is_none() && job.after.is_empty();
+        if job.serves.is_none() && putaway.is_none() && plain_terms {
             return plain;
         }
-        let extra = serde_json::to_string(&Planned { serves: job.serves, putaway }).unwrap_or_default();
+        let planned = Planned {
+            serves: job.serves,
+            putaway,
+            sequence: job.sequence.clone(),
+            deadline: job.deadline.map(crate::domain::time::to_ms),
+            after: job.after.clone(),
+        };
+        let extra = serde_json::to_string(&planned).unwrap_or_default();
         // Two JSON objects, each with at least one key: one object with the keys of both.
         match (plain.strip_suffix('}'), extra.strip_prefix('{')) {
             (Some(head), Some(tail)) => format!("{head},{tail}"),
@@ -124,12 +144,18 @@ impl StoredSpec {
     /// Reads the column.
     pub(crate) fn parse(text: &str) -> Result<StoredSpec, serde_json::Error> {
         let spec: JobSpec = serde_json::from_str(text)?;
-        let planned = if text.contains("\"serves\"") || text.contains("\"putaway\"") {
+        let planned = if PLANNED_KEYS.iter().any(|k| text.contains(k)) {
             serde_json::from_str::<Planned>(text)?
         } else {
-            Planned { serves: None, putaway: None }
+            Planned { serves: None, putaway: None, sequence: None, deadline: None, after: Vec::new() }
         };
-        Ok(StoredSpec { spec, serves: planned.serves, putaway: planned.putaway })
+        let terms = Terms {
+            sequence: planned.sequence,
+            deadline: planned.deadline,
+            after: planned.after,
+            ..Terms::default()
+        };
+        Ok(StoredSpec { spec, serves: planned.serves, putaway: planned.putaway, terms })
     }
 }
 
@@ -159,6 +185,7 @@ impl TryFrom<JobRow> for Job {
             barcode: None,
             device: row.device,
             serves: stored.serves,
+            terms: stored.terms,
         };
         let mut job = new.accepted(row.id, row.created_at);
         job.barcode = row.barcode;
@@ -380,6 +407,7 @@ mod tests {
             barcode: None,
             device: None,
             serves: None,
+            terms: Default::default(),
         };
         let (text, back) = round_trip(plain.clone(), None);
         assert_eq!(text, serde_json::to_string(&plain.spec).unwrap(), "a plain job is its spec alone");

@@ -45,6 +45,7 @@ pub mod locations;
 pub mod paging;
 pub mod rollups;
 pub mod schema;
+pub mod sequences;
 pub mod stats;
 pub mod webhooks;
 pub mod writer;

@@ -20,6 +20,7 @@ mod events;
 mod mc3e;
 mod mewtocol;
 mod modbus;
+mod orders;
 mod plc;
 mod ppi;
 mod reload;

@@ -374,6 +374,12 @@ mod tests {
                 expires_at: Some(1_900_000_000),
                 reload_failing: true,
             }),
+            orders: Some(crate::service::dispatch::gate::Orders {
+                late: 2,
+                ended_late: 5,
+                slack: Some(-12.5),
+                inversions: [(3, 1)].into(),
+            }),
         };
         let text = metrics.encode(scrape, 2).unwrap();
         assert!(text.ends_with("# EOF\n"), "{text}");
@@ -401,5 +407,9 @@ mod tests {
         assert!(old.contains("# TYPE rackd_webhook_events_behind gauge\n"), "{old}");
         assert!(old.contains("\nrackd_tls_certificate_expiry_timestamp_seconds 1900000000\n"), "{old}");
         assert!(old.contains("\nrackd_tls_certificate_reload_failing 1\n"), "{old}");
+        assert!(old.contains("\nrackd_jobs_late 2\n"), "{old}");
+        assert!(old.contains("\nrackd_jobs_ended_late_total 5\n"), "{old}");
+        assert!(old.contains("\nrackd_deadline_slack_seconds -12.5\n"), "{old}");
+        assert!(old.contains("rackd_sequence_inversions_total{station=\"0\"} 0\nrackd_sequence_inversions_total{station=\"3\"} 1\n"), "{old}");
     }
 }

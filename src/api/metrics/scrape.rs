@@ -105,6 +105,13 @@ pub struct Scrape {
     pub webhooks: Vec<WebhookSample>,
     /// With `[server.tls]`: the certificate served.
     pub certificate: Option<CertificateSample>,
+    /// On the node that drives the machines: deadlines and sequences.
+    pub orders: Option<crate::service::dispatch::gate::Orders>,
+}
+
+#[derive(EncodeLabelSet, Debug, Clone, PartialEq, Eq, Hash)]
+struct StationLabel {
+    station: u16,
 }
 
 /// The certificate served over HTTPS, as the watch of its files tells it
@@ -390,6 +397,21 @@ impl Collector for Scrape {
             let help = "1 while the certificate files changed but do not load (the previous certificate is still served).";
             one(&mut e, "tls_certificate_reload_failing", help, i64::from(c.reload_failing))?;
         }
+        if let Some(o) = &self.orders {
+            one(&mut e, "jobs_late", "Unfinished jobs past their deadline.", o.late as i64)?;
+            let help = "Jobs that ended after their deadline, since rackd started.";
+            e.encode_descriptor("jobs_ended_late", help, None, MetricType::Counter)?
+                .encode_counter::<NoLabelSet, _, u64>(&o.ended_late, None)?;
+            if let Some(slack) = o.slack {
+                let help = "Seconds to the nearest deadline of an unfinished job (negative once passed).";
+                e.encode_descriptor("deadline_slack_seconds", help, None, MetricType::Gauge)?.encode_gauge(&slack)?;
+            }
+            let help = "Sequence members delivered out of order (a position ahead of an earlier one, or due at \
+                        the station before it), by station (0: a sequence without one), since rackd started.";
+            let mut inversions = o.inversions.clone();
+            inversions.entry(0).or_default();
+            counter(&mut e, "sequence_inversions", help, inversions.into_iter().map(|(s, n)| (StationLabel { station: s }, n)))?;
+        }
         self.webhooks(&mut e)
     }
 }
@@ -408,6 +430,7 @@ mod tests {
             cluster: None,
             webhooks,
             certificate: None,
+            orders: None,
         };
         let mut registry = prometheus_client::registry::Registry::with_prefix("rackd");
         registry.register_collector(Box::new(scrape));

@@ -83,7 +83,7 @@ pub async fn read(
         data.jobs_truncated = Some(active.len() > job_limit as usize);
         active.truncate(job_limit as usize);
         for job in &mut active {
-            job.waiting = devices.1.waiting(job);
+            devices.1.show(job);
         }
         data.jobs = Some(active);
     }

@@ -14,9 +14,11 @@
 pub mod bulk;
 pub mod cancel;
 pub mod control;
+pub mod gate;
 pub mod order;
 mod plan;
 pub mod queues;
+pub mod release;
 pub mod waiting;
 pub mod withhold;
 

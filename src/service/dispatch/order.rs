@@ -51,6 +51,7 @@ mod tests {
             barcode: None,
             device: None,
             serves: None,
+            terms: Default::default(),
         };
         let mut j = new.accepted(id, 0);
         j.state = state;

@@ -64,6 +64,7 @@ pub(super) async fn next_task(
                     barcode: None,
                     device: Some(device.to_owned()),
                     serves: Some(serves),
+                    terms: Default::default(),
                 };
                 let outcome = writer.submit(vec![relocation]).await.map_err(report_error)?;
                 return Ok(outcome.into_iter().find_map(|o| match o {

@@ -23,6 +23,7 @@ use tokio::sync::{Notify, watch};
 
 use std::sync::atomic::AtomicU64;
 
+use super::gate::Book;
 use super::order::next_jobs;
 use super::report_error;
 use crate::config::devices::DeviceConfig;
@@ -126,6 +127,10 @@ pub(super) struct Inner {
     pub(super) withheld: Mutex<HashMap<i64, usize>>,
     /// Whether this node drives the machines (always, but on a standby of a cluster).
     drives: std::sync::atomic::AtomicBool,
+    /// The sequences and dependencies of unfinished jobs ([`super::gate`]).
+    pub(super) book: Mutex<Book>,
+    /// Wakes the gate's task: something it must read, or a new release time.
+    pub(super) book_changed: Notify,
 }
 
 /// A device as the dispatcher sees it: its id, its dispatch window, the aisles it serves
@@ -179,6 +184,8 @@ impl Queues {
             changed: Notify::new(),
             withheld: Mutex::default(),
             drives: std::sync::atomic::AtomicBool::new(true),
+            book: Mutex::default(),
+            book_changed: Notify::new(),
         }))
     }
 
@@ -192,6 +199,42 @@ impl Queues {
     /// once it becomes the active one).
     pub fn set_drives(&self, drives: bool) {
         self.0.drives.store(drives, std::sync::atomic::Ordering::Release);
+    }
+
+    pub(super) fn book(&self) -> MutexGuard<'_, Book> {
+        self.0.book.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The writer hook for sequences: their rows as committed.
+    pub fn sequenced_hook(&self) -> crate::store::writer::Sequenced {
+        let queues = self.clone();
+        Arc::new(move |rows: &[crate::store::sequences::Row]| {
+            if queues.drives() {
+                queues.book().sequenced(rows);
+                queues.0.book_changed.notify_one();
+            }
+        })
+    }
+
+    /// Deadlines and sequences for `/metrics`; None on a node that does not drive.
+    pub fn orders(&self) -> Option<super::gate::Orders> {
+        if !self.drives() {
+            return None;
+        }
+        let book = self.book();
+        let (late, slack) = book.lateness(crate::domain::time::now_ms());
+        Some(super::gate::Orders {
+            late,
+            ended_late: book.ended_late,
+            slack,
+            inversions: book.inversions.clone(),
+        })
+    }
+
+    /// Sets the stations sequences are released by (at start, and on a reload).
+    pub fn set_stations(&self, stations: &[crate::config::StationConfig]) {
+        self.book().set_stations(stations);
+        self.0.book_changed.notify_one();
     }
 
     pub(super) fn holds(&self) -> MutexGuard<'_, Holds> {
@@ -209,10 +252,20 @@ impl Queues {
     }
 
     /// Takes in committed jobs: new and changed ones go to their device's queue, ended ones
-    /// leave it; the device is woken. A node that does not drive takes in nothing.
+    /// leave it; the device is woken. A node that does not drive takes in nothing. A job
+    /// ended that others may wait for (a sequence's member, a dependency) wakes every device.
     pub fn committed(&self, jobs: &[&Job]) {
         if !self.drives() {
             return;
+        }
+        let terms = jobs
+            .iter()
+            .any(|j| !j.after.is_empty() || j.sequence.is_some() || j.reference.is_some() || j.deadline.is_some());
+        if terms && self.book().committed(jobs) {
+            for lane in self.lanes().values() {
+                lane.wake.notify_one();
+            }
+            self.0.book_changed.notify_one();
         }
         let mut woken: Vec<&str> = Vec::new();
         {
@@ -234,14 +287,31 @@ impl Queues {
     /// Loads what the store holds (at start, before any device runs); jobs the writer
     /// already handed over are newer and kept.
     pub fn load(&self, device: &str, jobs: Vec<Job>) {
-        let mut queues = self.lock();
-        if let Some(queue) = queues.get_mut(device) {
-            for job in jobs {
-                if !queue.active.contains_key(&job.id) && !queue.queued.contains_key(&job.id) {
-                    queue.put(&job);
-                }
+        let fresh: Vec<Job> = {
+            let mut queues = self.lock();
+            let Some(queue) = queues.get_mut(device) else { return };
+            let fresh: Vec<Job> = jobs
+                .into_iter()
+                .filter(|job| !queue.active.contains_key(&job.id) && !queue.queued.contains_key(&job.id))
+                .collect();
+            for job in &fresh {
+                queue.put(job);
             }
+            fresh
+        };
+        let termed: Vec<&Job> =
+            fresh.iter().filter(|j| j.sequence.is_some() || !j.after.is_empty() || j.deadline.is_some()).collect();
+        if !termed.is_empty() && self.book().committed(&termed) {
+            self.0.book_changed.notify_one();
         }
+    }
+
+    /// Wakes every device's task, and the waiting watcher.
+    pub(super) fn wake_all(&self) {
+        for lane in self.lanes().values() {
+            lane.wake.notify_one();
+        }
+        self.0.changed.notify_one();
     }
 
     /// Wakes `device`'s task, and the waiting watcher.
@@ -539,6 +609,12 @@ impl DevicePort {
                 let waiting = window.iter().filter(|j| j.state == JobState::Queued && holds.why(j).is_some());
                 held.extend(waiting.map(|j| j.id));
             }
+        }
+        let mut termed = window.iter().filter(|j| j.state == JobState::Queued && (j.sequence.is_some() || !j.after.is_empty())).peekable();
+        if termed.peek().is_some() {
+            let book = self.queues.book();
+            let now = crate::domain::time::now_ms();
+            held.extend(termed.filter(|j| book.why(j, now).is_some()).map(|j| j.id));
         }
         next_jobs(window, &held, free).into_iter().cloned().collect()
     }

@@ -14,6 +14,8 @@
 //! 5. `location_locked`, then `aisle_paused`: as the dispatcher holds such jobs back;
 //! 6. `behind_job`: an older unfinished job on the same device touches one of its
 //!    locations (the job named is the nearest one ahead, the one it waits for directly);
+//!    then `dependency` (a job its `after` names has not completed) and `sequence` (an
+//!    earlier member of its sequence goes first), as [`super::gate`] holds such jobs back;
 //! 7. what the crane planner's last decision left it waiting for: `behind_job` (the job that
 //!    takes the box in front of its far location, or fills the far place behind its near
 //!    one, first) or `no_place` (no free location for it or for the box in its way);
@@ -88,6 +90,13 @@ impl Queues {
         self.reason(job, queue, &holds, status.as_ref())
     }
 
+    /// Fills in what a job read from the store shows as of now: why it waits, how late it
+    /// is.
+    pub fn show(&self, job: &mut Job) {
+        job.waiting = self.waiting(job);
+        job.late_by_s = job.late_at(crate::domain::time::now_ms());
+    }
+
     fn status(&self, device: &str) -> Option<DeviceStatus> {
         self.statuses().get(device).map(|w| w.status.borrow().clone())
     }
@@ -153,6 +162,11 @@ impl Queues {
             let mut w = Waiting::new(WaitingReason::BehindJob, text).on(device);
             w.job = Some(id);
             return Some(w);
+        }
+        if (job.sequence.is_some() || !job.after.is_empty())
+            && let Some(w) = self.book().why(job, crate::domain::time::now_ms())
+        {
+            return Some(w.on(device));
         }
         if let Some(w) = self.planned(job, device) {
             return Some(w);

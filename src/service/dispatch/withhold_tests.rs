@@ -59,6 +59,7 @@ async fn site() -> Site {
         barcode: None,
         device: Some("shelf1".into()),
         serves: None,
+        terms: Default::default(),
     };
     let Outcome::Created { job, .. } = writer.submit(vec![new]).await.unwrap().remove(0) else {
         panic!("a new job")

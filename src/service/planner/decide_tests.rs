@@ -20,6 +20,7 @@ fn job(id: i64, priority: u8, spec: JobSpec) -> Job {
         barcode: None,
         device: Some("crane1".into()),
         serves: None,
+        terms: Default::default(),
     };
     new.accepted(id, 0)
 }

@@ -164,6 +164,7 @@ impl Reload {
                 queues.load(c.id(), std::mem::take(unfinished));
             }
         }
+        queues.set_stations(&new.site.stations);
         let layout = rules.layout.clone();
         *self.0.rules.write().unwrap_or_else(|e| e.into_inner()) = std::sync::Arc::new(rules);
         // Nothing uses them (checked), and no job can name them any more.

@@ -277,6 +277,7 @@ async fn one_by_one(
                 out.locks.extend(applied.out.locks);
                 out.timings.extend(applied.out.timings);
                 out.counts.add(&applied.out.counts);
+                out.sequences.extend(applied.out.sequences);
                 out.statements += applied.out.statements + 2;
                 out.writes += applied.out.writes;
                 answers.push(answer.remove(0));

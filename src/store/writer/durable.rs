@@ -155,7 +155,7 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
         let took = started.elapsed();
         observe(&GroupStats { commands: group.len(), statements, took, jobs: timings, counts });
     }
-    let (answers, unlocks) = match result {
+    let (answers, unlocks, sequences) = match result {
         Ok((answers, out)) => {
             let (locks, unlocks) = locks_and_unlocks(out.locks);
             if let Some(locked) = hooks.locked.as_ref().filter(|_| !locks.is_empty()) {
@@ -164,17 +164,20 @@ fn deliver(hooks: &Hooks, done: Done, error: Option<&WriteError>) {
             if let Some(publish) = hooks.publish.as_ref().filter(|_| !out.events.is_empty()) {
                 publish(out.events);
             }
-            (answers, unlocks)
+            (answers, unlocks, out.sequences)
         }
         Err(e) => {
             tracing::error!(error = %e, requests = group.len(), "group commit failed");
-            (group.iter().map(|_| Answer::Failed(e.clone())).collect(), Vec::new())
+            (group.iter().map(|_| Answer::Failed(e.clone())).collect(), Vec::new(), Vec::new())
         }
     };
     if let Some(stored) = &hooks.stored
         && let Some(outcome) = outcome(&answers, wrote)
     {
         stored(outcome);
+    }
+    if let Some(sequenced) = hooks.sequenced.as_ref().filter(|_| !sequences.is_empty()) {
+        sequenced(&sequences);
     }
     if let Some(committed) = &hooks.committed {
         let jobs: Vec<&Job> = answers.iter().flat_map(Answer::jobs).collect();
@@ -413,6 +416,7 @@ mod tests {
             barcode: None,
             device: None,
             serves: None,
+            terms: Default::default(),
         }
         .accepted(1, 0);
         let (reply, _answer) = oneshot::channel();

@@ -138,9 +138,18 @@ pub(super) async fn load(
     let mut places = BTreeSet::new();
     let mut alarms = false;
     let mut acknowledged = BTreeSet::new();
+    let mut sequences: BTreeSet<String> = BTreeSet::new();
+    let mut after: BTreeSet<&str> = BTreeSet::new();
     for cmd in group {
+        if let Command::Submit { jobs, .. } = cmd {
+            for j in jobs.iter().filter(|j| !j.terms.is_plain()) {
+                sequences.extend(j.terms.sequence.as_ref().map(|m| m.name.clone()));
+                after.extend(j.terms.after.iter().map(String::as_str));
+            }
+        }
         match cmd {
-            Command::Submit { jobs, .. } if read_references => {
+            // Terms are checked against what a repeated request would find: read them.
+            Command::Submit { jobs, .. } if read_references || jobs.iter().any(|j| !j.terms.is_plain()) => {
                 references.extend(jobs.iter().filter_map(|j| j.reference.as_deref()))
             }
             Command::Submit { .. } => {}
@@ -165,7 +174,10 @@ pub(super) async fn load(
                 Record::Acknowledge { alarm, .. } => {
                     acknowledged.insert(*alarm);
                 }
-                Record::Retell { jobs } | Record::Archived { jobs } => ids.extend(jobs.iter().copied()),
+                Record::Retell { jobs } | Record::Archived { jobs } | Record::Late { jobs } => {
+                    ids.extend(jobs.iter().copied())
+                }
+                Record::Sequence { name, .. } => drop(sequences.insert(name.clone())),
                 Record::Device { .. }
                 | Record::Pause { .. }
                 | Record::Audit { .. }
@@ -191,6 +203,32 @@ pub(super) async fn load(
                 loaded.by_reference.insert(r, (request, job));
             }
         }
+    }
+    if !after.is_empty() {
+        // The jobs `after` names, read whatever `read_references` says: no index refuses
+        // a reference that names nothing.
+        let keys: Vec<_> = after.iter().map(|r| serde_json::json!({ "reference": r })).collect();
+        let json = serde_json::to_string(&keys).unwrap_or_default();
+        *count += 1;
+        let rows: Vec<Stored> = on!(Conn, db, c => {
+            sqlx::query_as::<_, Stored>(sql.by_reference.as_str()).bind(json).fetch_all(&mut *c).await
+        })?;
+        for s in rows {
+            let job = Job::try_from(s.row).map_err(decode)?;
+            if let Some(r) = job.reference.clone() {
+                loaded.after.insert(r, job);
+            }
+        }
+    }
+    if !sequences.is_empty() {
+        let (rows, members) = crate::store::sequences::statements(db.engine());
+        let json = crate::store::sequences::keys(&sequences);
+        *count += 2;
+        let rows: Vec<crate::store::sequences::Row> =
+            on!(Conn, db, c => sqlx::query_as(rows).bind(&json).fetch_all(&mut *c).await)?;
+        let members: Vec<crate::store::sequences::MemberRow> =
+            on!(Conn, db, c => sqlx::query_as(members).bind(&json).fetch_all(&mut *c).await)?;
+        loaded.sequences = crate::store::sequences::assemble(rows, members);
     }
     if !ids.is_empty() {
         let keys: Vec<_> = ids.iter().map(|id| serde_json::json!({ "id": id })).collect();

@@ -210,6 +210,21 @@ pub enum Record {
         /// The audit entry's words: the hash and the difference.
         reason: String,
     },
+    /// These jobs just passed their deadline: a `job.late` event for each one not ended.
+    Late {
+        /// The jobs.
+        jobs: Vec<i64>,
+    },
+    /// A sequence is complete (no member may join it any more; the last position is the
+    /// highest posted), and with `cancel` cancelled as a whole by `by` (audited); refused
+    /// with [`WriteError::Sequence`] for a sequence that does not exist.
+    Sequence {
+        /// The sequence.
+        name: String,
+        /// Cancelled as a whole (its queued members are cancelled apart, through the
+        /// dispatcher).
+        cancel: bool,
+    },
     /// Retention: these jobs are in the archive (written and synced, `store::archive`):
     /// delete them and their history, and take them off the counts, in this commit. A job
     /// that is not ended (retried since it was read) stays; one the group's later commands
@@ -288,6 +303,16 @@ pub enum WriteError {
     /// Items of a bulk action cannot be done as asked: nothing of it was written.
     #[error("{}", bulk::describe(.0))]
     Refused(Vec<Refusal>),
+    /// A sequence member that cannot join its sequence as asked (its position is taken, the
+    /// sequence is complete or cancelled, or names another station): nothing was written.
+    #[error("{0}")]
+    Sequence(String),
+    /// An `after` reference that names no job stored or in the same submission.
+    #[error("{0}")]
+    UnknownDependency(String),
+    /// Jobs of one submission that wait for each other.
+    #[error("{0}")]
+    DependencyCycle(String),
     /// Sent through a fenced handle ([`Writer::fenced`]) of a node that does not hold the
     /// cluster's lease (any more): nothing was written.
     #[error("this node does not hold the cluster lease (epoch {0:?}): nothing was written")]
@@ -300,6 +325,9 @@ pub enum WriteError {
 /// Called after each commit with every job the commit created or changed, as committed (the
 /// dispatcher keeps its queues with it, so devices never read the database for work).
 pub type Committed = Arc<dyn Fn(&[&Job]) + Send + Sync>;
+
+/// Called after each commit with the sequences it created or changed, as committed.
+pub type Sequenced = Arc<dyn Fn(&[crate::store::sequences::Row]) + Send + Sync>;
 
 /// Called after each commit with the events it appended, in sequence order (the event hub
 /// forwards them to subscribers). Only committed events are passed on.
@@ -321,6 +349,8 @@ pub struct Hooks {
     pub locked: Option<Locked>,
     /// Hands every committed job to the dispatcher.
     pub committed: Option<Committed>,
+    /// Hands the dispatcher every sequence a commit created or changed, before its jobs.
+    pub sequenced: Option<Sequenced>,
     /// Publishes the committed events.
     pub publish: Option<Publish>,
     /// Tells `/metrics` about each group (size, commit time, timed transitions).

@@ -502,6 +502,7 @@ pub(super) async fn save(
         on!(Conn, db, c => sqlx::query(sql).bind(before).execute(&mut *c).await.map(drop))?;
     }
     save_webhooks(db, count, &group.webhooks).await?;
+    save_sequences(db, count, group).await?;
     if !group.archived.is_empty() {
         // Ids are our own integers: written into the text, as a list.
         let ids: Vec<String> = group.archived.iter().map(|(id, _, _)| id.to_string()).collect();
@@ -524,6 +525,39 @@ pub(super) async fn save(
     };
     *count += crate::store::rollups::write::save(&mut rollups, &group.out.moves).await?;
     Ok(())
+}
+
+/// The sequences the group created or changed, and the members it added.
+async fn save_sequences(db: &mut Conn, count: &mut usize, group: &Group) -> Result<(), sqlx::Error> {
+    static ROWS: LazyLock<[String; 2]> = LazyLock::new(|| {
+        [Engine::Sqlite, Engine::Postgres].map(|e| {
+            // `WHERE TRUE` lets SQLite tell the upsert's ON CONFLICT from a join's ON.
+            format!(
+                "{} WHERE TRUE ON CONFLICT (name) DO UPDATE SET station = excluded.station, last = excluded.last, \
+                 completed_at = excluded.completed_at, cancelled_at = excluded.cancelled_at, \
+                 updated_at = excluded.updated_at",
+                e.insert_json(
+                    "sequences",
+                    &["name", "station", "last", "completed_at", "cancelled_at", "created_at", "updated_at"],
+                )
+            )
+        })
+    });
+    static MEMBERS: LazyLock<[String; 2]> = LazyLock::new(|| {
+        [Engine::Sqlite, Engine::Postgres].map(|e| e.insert_json("sequence_members", &["name", "position", "job"]))
+    });
+    #[derive(Serialize)]
+    struct MemberOut<'a> {
+        name: &'a str,
+        position: u32,
+        job: i64,
+    }
+    let at = usize::from(db.engine() == Engine::Postgres);
+    let rows: Vec<_> = group.sequences_changed.iter().filter_map(|n| group.sequences.get(n)).map(|s| &s.row).collect();
+    write(db, count, &ROWS[at], &rows).await?;
+    let members: Vec<MemberOut> =
+        group.new_members.iter().map(|(name, position, job)| MemberOut { name, position: *position, job: *job }).collect();
+    write(db, count, &MEMBERS[at], &members).await
 }
 
 /// Webhook subscriptions' rows (the last of each name in the group) and their deliveries.

@@ -35,7 +35,8 @@ pub(super) fn fits(cmds: &[&Command]) -> bool {
     let mut jobs = 0;
     for cmd in cmds {
         match cmd {
-            Command::Submit { jobs: new, .. } => jobs += new.len(),
+            // Terms are checked against what is stored: read first.
+            Command::Submit { jobs: new, .. } if new.iter().all(|j| j.terms.is_plain()) => jobs += new.len(),
             _ => return false,
         }
     }

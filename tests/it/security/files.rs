@@ -60,6 +60,7 @@ async fn store_with_ended_jobs(dir: &Path) -> String {
                 barcode: None,
                 device: None,
                 serves: None,
+                terms: Default::default(),
             };
             let end = DAY0 + 43_200_000 + id;
             let mut job = new.accepted(id, end - 60_000);

@@ -37,6 +37,7 @@ async fn with_a_failed_job() -> (TestApp, Option<tempfile::TempDir>) {
         barcode: None,
         device: None,
         serves: None,
+        terms: Default::default(),
     };
     let at = rackd::domain::time::now_ms() - 60_000;
     let mut job = new.accepted(1, at);

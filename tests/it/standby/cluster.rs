@@ -270,6 +270,7 @@ fn travel(reference: String, n: u16) -> rackd::domain::NewJob {
         barcode: None,
         device: None,
         serves: None,
+        terms: Default::default(),
     }
 }
 

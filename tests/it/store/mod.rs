@@ -92,5 +92,6 @@ pub fn light(reference: &str, bay: u16) -> NewJob {
         barcode: None,
         device: None,
         serves: None,
+        terms: Default::default(),
     }
 }

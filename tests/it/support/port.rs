@@ -77,6 +77,7 @@ impl TestPort {
             barcode: None,
             device: None,
             serves: None,
+            terms: Default::default(),
         };
         jobs.insert(id, new.accepted(id, rackd::domain::time::now_ms()));
         drop(jobs);

@@ -140,6 +140,7 @@ mod tests {
                 barcode: None,
                 device: Some("shelf1".into()),
                 serves: None,
+                terms: Default::default(),
             };
             let mut job = new.accepted(id, 0);
             if id < 3 {

@@ -7,6 +7,7 @@
 
 mod bulk;
 mod record;
+mod terms;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::net::IpAddr;
@@ -17,6 +18,7 @@ use crate::domain::report::path;
 use crate::domain::time::{from_ms, to_ms};
 use crate::domain::{Failure, JobState, LightColor, Location, LocationLock, Pause, Transition, Who};
 use crate::store::alarms;
+use crate::store::sequences;
 use crate::store::controls::AuditEntry;
 use crate::store::counts::Counts;
 use crate::store::events::StoredEvent;
@@ -92,6 +94,8 @@ pub(super) struct Out {
     pub(super) counts: Counts,
     /// What its transitions add to the rollups (see [`crate::store::rollups`]).
     pub(super) moves: Vec<rollups::Move>,
+    /// The sequences it created or changed, as they end up.
+    pub(super) sequences: Vec<sequences::Row>,
 }
 
 /// The next id of each numbered table, allocated here (one writer: no gaps, no races).
@@ -117,6 +121,10 @@ pub(super) struct Loaded {
     /// Every active alarm (only when the group raises or clears one), and the alarms its
     /// acknowledgements name, by id.
     pub(super) alarms: BTreeMap<i64, alarms::Row>,
+    /// Stored jobs the group's submissions name in `after`, by reference.
+    pub(super) after: HashMap<String, Job>,
+    /// The sequences the group's submissions and records name, with their members.
+    pub(super) sequences: BTreeMap<String, sequences::Stored>,
 }
 
 /// One history entry to write.
@@ -189,6 +197,14 @@ pub(super) struct Group {
     pub(super) webhooks: Vec<crate::store::webhooks::Progress>,
     /// Retention: jobs moved to the archive, deleted with this group (id, device, state).
     pub(super) archived: Vec<(i64, Option<String>, JobState)>,
+    /// Stored jobs the group's submissions name in `after`, by reference.
+    after: HashMap<String, Job>,
+    /// The sequences loaded, and those this group created, as they now are.
+    pub(super) sequences: BTreeMap<String, sequences::Stored>,
+    /// Sequences this group created or changed.
+    pub(super) sequences_changed: BTreeSet<String>,
+    /// Members this group added: sequence, position, job.
+    pub(super) new_members: Vec<(String, u32, i64)>,
     pub(super) out: Out,
 }
 
@@ -238,6 +254,10 @@ impl Group {
             prune: None,
             webhooks: Vec::new(),
             archived: Vec::new(),
+            after: loaded.after,
+            sequences: loaded.sequences,
+            sequences_changed: BTreeSet::new(),
+            new_members: Vec::new(),
             out: Out { events: Vec::with_capacity(new), ..Out::default() },
         }
     }
@@ -258,6 +278,8 @@ impl Group {
     /// and into the one it ends in, each alarm it raised and left active, and each stored
     /// active alarm it cleared. Called once the group's commands are applied.
     pub(super) fn counted(&mut self) {
+        self.out.sequences =
+            self.sequences_changed.iter().filter_map(|n| Some(self.sequences.get(n)?.row.clone())).collect();
         let mut counts = Counts::default();
         for job in self.created.keys().filter_map(|id| self.jobs.get(id)) {
             counts.job(job.device.as_deref(), job.state, 1);
@@ -316,8 +338,9 @@ impl Group {
         }
     }
 
-    /// Fills in why `job` waits, if the dispatcher says.
+    /// Fills in how late `job` is, and why it waits, if the dispatcher says.
     fn tell(&self, job: &mut Job) {
+        job.late_by_s = job.late_at(self.now);
         if let Some(tell) = &self.tell {
             tell(job);
         }
@@ -332,7 +355,10 @@ impl Group {
         let mut outcomes = Vec::with_capacity(jobs.len());
         let mut created: Vec<(String, Job, String)> = Vec::with_capacity(jobs.len());
         let mut local: HashMap<&str, usize> = HashMap::with_capacity(jobs.len());
-        for new in jobs {
+        // Which request each created job comes from, when any request has terms.
+        let terms = jobs.iter().any(|j| !j.terms.is_plain());
+        let mut index: Vec<usize> = Vec::new();
+        for (i, new) in jobs.iter().enumerate() {
             let request = new.canonical();
             if let Some(reference) = new.reference.as_deref() {
                 let seen = match local.get(reference) {
@@ -354,6 +380,14 @@ impl Group {
             let json = to_json(&job);
             outcomes.push(Outcome::Created { job: job.clone(), json: json.clone() });
             created.push((request, job, json));
+            if terms {
+                index.push(i);
+            }
+        }
+        if terms {
+            let new: Vec<(usize, &Job)> = index.iter().copied().zip(created.iter().map(|c| &c.1)).collect();
+            let staged = self.check_terms(jobs, &new)?;
+            self.stage(staged);
         }
         let ids = created.first().zip(created.last()).map(|(a, b)| (a.1.id, b.1.id));
         self.next.job += created.len() as i64;

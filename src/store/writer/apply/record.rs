@@ -141,6 +141,15 @@ impl Group {
                 }
                 self.webhooks.push(progress.clone());
             }
+            Record::Sequence { name, cancel } => self.sequence(name, *cancel, who)?,
+            Record::Late { jobs } => {
+                for id in jobs {
+                    if let Some(mut job) = self.jobs.get(id).filter(|j| !j.state.is_terminal()).cloned() {
+                        self.tell(&mut job);
+                        self.event("job.late", &job);
+                    }
+                }
+            }
             Record::Archived { jobs } => {
                 for id in jobs {
                     if self.jobs.get(id).is_some_and(|j| j.state.is_terminal())

@@ -10,6 +10,7 @@ fn submit(references: std::ops::Range<u32>) -> Command {
             barcode: None,
             device: None,
             serves: None,
+            terms: Default::default(),
         })
         .collect();
     Command::Submit { jobs, who: None, reply: tokio::sync::oneshot::channel().0 }
