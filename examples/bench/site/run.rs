@@ -10,7 +10,7 @@ use time::OffsetDateTime;
 use tokio::runtime::Runtime;
 
 use rackd::config::devices::CraneConfig;
-use rackd::config::{AisleConfig, Config};
+use rackd::config::{AisleConfig, Config, StationConfig, Transit};
 use rackd::protocols::mc3e::TransportKind;
 use rackd::sim::crane::{CraneSim, CraneSimOptions, CraneStats, TaskTimes};
 use rackd::wire::motion::{Axis, Motion};
@@ -145,14 +145,24 @@ pub async fn one(
     Ok(Run { mode, fields, clock, wall, jobs, cranes, idle, cpu, refused, violations })
 }
 
-/// rackd's configuration: the aisles, one crane each, every timer of rackd's divided by
-/// the time scale (see the module doc of `site.rs`), and the motion it plans with in
-/// wall-clock seconds.
+/// rackd's configuration: the aisles, one crane each, the stations and their transit
+/// times, every time of rackd's divided by the time scale (see the module doc of
+/// `site.rs`), and the motion it plans with in wall-clock seconds.
 fn config(workload: &Workload, args: &SiteArgs, sims: &[CraneSim], dir: &std::path::Path) -> anyhow::Result<Config> {
     let scale = args.time_scale;
     let mut config = Config::default();
     config.site.aisles = (1..=workload.aisles)
         .map(|aisle| AisleConfig { aisle, rows: 2, bays: args.bays, levels: args.levels, positions: 1, depth: 1 })
+        .collect();
+    // rackd holds a member back by the transit difference on the wall clock.
+    config.site.stations = workload
+        .stations
+        .iter()
+        .map(|s| StationConfig {
+            id: s.id,
+            name: None,
+            transit: (1..=workload.aisles).map(|aisle| Transit { aisle, seconds: s.transit(aisle) / scale }).collect(),
+        })
         .collect();
     config.server.listen = "127.0.0.1:0".parse()?;
     config.database.path = dir.join("bench.db");
