@@ -3,6 +3,9 @@
 //! A request is a flat object (`kind` plus the fields that kind needs); each kind takes
 //! exactly its own fields, so a `store` with a `from` is an error, not a silently ignored
 //! field. Locations are checked against the site layout, and a named device must exist.
+//! A job's terms (`sequence`, `deadline`, `after`) are checked for form here; whether they
+//! fit what is stored (a position free, the jobs `after` names existing, no circle) is the
+//! job writer's to check, in the transaction that stores the job (`store::writer::apply`).
 
 use std::collections::{BTreeMap, BTreeSet};
 
