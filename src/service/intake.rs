@@ -226,7 +226,9 @@ impl Rules {
         }
         if let Some(text) = deadline {
             let at = time::OffsetDateTime::parse(&text, &time::format_description::well_known::Rfc3339)
-                .map_err(|_| Invalid(format!("deadline {text:?} is not an RFC 3339 time (e.g. 2026-11-29T14:00:00Z)")))?;
+                .map_err(|_| {
+                    Invalid(format!("deadline {text:?} is not an RFC 3339 time (e.g. 2026-11-29T14:00:00Z)"))
+                })?;
             terms.deadline = Some(crate::domain::time::to_ms(at));
         }
         if let Some(after) = after {
@@ -334,7 +336,9 @@ fn check_reference(r: &str) -> Result<(), Invalid> {
 fn check_text(what: &str, r: &str) -> Result<(), Invalid> {
     let printable = r.chars().all(|c| !c.is_control());
     if r.trim().is_empty() || r.chars().count() > MAX_REFERENCE_LEN || !printable {
-        return Err(Invalid(format!("{what} must be 1..={MAX_REFERENCE_LEN} printable characters, not blank")));
+        return Err(Invalid(format!(
+            "{what} must be 1..={MAX_REFERENCE_LEN} printable characters, not blank"
+        )));
     }
     Ok(())
 }

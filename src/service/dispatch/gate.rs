@@ -195,7 +195,11 @@ impl Book {
     /// Takes in what [`resolve`] read: sequence rows with their ended members, and what
     /// became of references (a reference no job has is left unknown: the job keeps
     /// waiting, as it would for a job never posted).
-    pub fn read(&mut self, sequences: Vec<crate::store::sequences::Stored>, refs: Vec<(String, i64, JobState)>) {
+    pub fn read(
+        &mut self,
+        sequences: Vec<crate::store::sequences::Stored>,
+        refs: Vec<(String, i64, JobState)>,
+    ) {
         for stored in sequences {
             let seq = self.sequences.entry(stored.row.name.clone()).or_default();
             for (position, m) in stored.members {
@@ -252,8 +256,12 @@ impl Book {
     /// The unfinished jobs whose deadline passed by `now` and that were not told late yet,
     /// now noted as told.
     pub fn newly_late(&mut self, now: i64) -> Vec<i64> {
-        let late: Vec<i64> =
-            self.deadlines.range(..(now, i64::MAX)).map(|&(_, id)| id).filter(|id| !self.late.contains(id)).collect();
+        let late: Vec<i64> = self
+            .deadlines
+            .range(..(now, i64::MAX))
+            .map(|&(_, id)| id)
+            .filter(|id| !self.late.contains(id))
+            .collect();
         self.late.extend(late.iter().copied());
         late
     }
@@ -282,7 +290,12 @@ impl Book {
     /// What the book has not read yet.
     pub fn unknown(&self) -> Unknown {
         Unknown {
-            sequences: self.sequences.iter().filter(|(_, s)| s.row.is_none()).map(|(n, _)| n.clone()).collect(),
+            sequences: self
+                .sequences
+                .iter()
+                .filter(|(_, s)| s.row.is_none())
+                .map(|(n, _)| n.clone())
+                .collect(),
             refs: self.refs.iter().filter(|(_, d)| d.is_none()).map(|(r, _)| r.clone()).collect(),
         }
     }
@@ -331,7 +344,9 @@ impl Book {
                         format!("position {p} (job {}) failed: retry it, or cancel the sequence", other.job),
                         Some(other.job),
                     ),
-                    Some(other) => hold(format!("position {p} (job {}) goes first", other.job), Some(other.job)),
+                    Some(other) => {
+                        hold(format!("position {p} (job {}) goes first", other.job), Some(other.job))
+                    }
                     None => hold(format!("position {p} is not posted yet"), None),
                 };
             }
@@ -364,12 +379,14 @@ impl Book {
             let Some(row) = &seq.row else { continue };
             let Due::Position(p) = due(seq) else { continue };
             let Some(member) = seq.members.get(&p) else { continue };
-            let Some((_, b)) = seq.members.range(..p).rev().find(|(_, b)| b.state == JobState::Completed) else {
+            let Some((_, b)) = seq.members.range(..p).rev().find(|(_, b)| b.state == JobState::Completed)
+            else {
                 continue;
             };
             let station = row.station.and_then(|s| self.stations.get(&u16::try_from(s).ok()?));
             let Some(station) = station else { continue };
-            let lead = b.aisle.map_or(0.0, |a| station.transit_s(a)) - member.aisle.map_or(0.0, |a| station.transit_s(a));
+            let lead = b.aisle.map_or(0.0, |a| station.transit_s(a))
+                - member.aisle.map_or(0.0, |a| station.transit_s(a));
             let release = b.at + (lead * 1000.0).ceil() as i64;
             if release > now {
                 next = Some(next.map_or(release, |n: i64| n.min(release)));
@@ -402,7 +419,11 @@ fn due(seq: &Seq) -> Due {
 /// whose last position is `last` once known, and that is `closed` once the WMS completed
 /// it: the lowest neither delivered (completed) nor passed (cancelled, or never posted in
 /// a closed sequence); None when every one is.
-pub fn next_due(members: impl IntoIterator<Item = (u32, JobState)>, last: Option<u32>, closed: bool) -> Option<u32> {
+pub fn next_due(
+    members: impl IntoIterator<Item = (u32, JobState)>,
+    last: Option<u32>,
+    closed: bool,
+) -> Option<u32> {
     let mut expect = 1u32;
     for (p, state) in members {
         if p > expect && !closed {

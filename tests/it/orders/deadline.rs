@@ -23,7 +23,8 @@ async fn a_deadline_at_risk_goes_before_the_near_jobs() {
     ]});
     let (status, posted) = app.post("/api/v1/jobs/batch", &batch).await;
     assert_eq!(status, 201, "{posted}");
-    let ids: Vec<i64> = posted["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()).collect();
+    let ids: Vec<i64> =
+        posted["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()).collect();
     assert_eq!(app.post("/api/v1/devices/crane1/resume", &json!({})).await.0, 200);
     for &id in &ids {
         assert_eq!(wait_job(&app, id, &["completed", "failed"], 30).await["state"], "completed");
@@ -32,7 +33,10 @@ async fn a_deadline_at_risk_goes_before_the_near_jobs() {
     for &id in &ids {
         started.push(entered(&app, id, "dispatched").await.unwrap());
     }
-    assert!(started[2] < started[0] && started[2] < started[1], "the far job due soon went first: {started:?}");
+    assert!(
+        started[2] < started[0] && started[2] < started[1],
+        "the far job due soon went first: {started:?}"
+    );
     assert!(started[0] < started[1], "then by travel, the nearest first: {started:?}");
     let (_, far) = app.get(&format!("/api/v1/jobs/{}", ids[2])).await;
     assert_eq!(far["late_by_s"], json!(null), "{far}");
