@@ -239,7 +239,8 @@ impl Book {
             Due::Done => false,
         };
         // Its box reaches the station before the box ahead of it: it ended before its release.
-        let overtakes = self.release(seq, position, member.aisle).is_some_and(|(release, _, _)| member.at < release);
+        let overtakes =
+            self.release(seq, position, member.aisle).is_some_and(|(release, _, _)| member.at < release);
         if early || overtakes {
             tracing::warn!(sequence = name, position, "a sequence member was delivered out of order");
             *self.inversions.entry(station.unwrap_or(0)).or_default() += 1;
@@ -369,7 +370,8 @@ impl Book {
     /// nearest member ahead of it that completed: that one's end plus the difference of
     /// their transits. With the position and job of that member; None without one.
     fn release(&self, seq: &Seq, position: u32, aisle: Option<u16>) -> Option<(i64, u32, i64)> {
-        let (&p, ahead) = seq.members.range(..position).rev().find(|(_, b)| b.state == JobState::Completed)?;
+        let (&p, ahead) =
+            seq.members.range(..position).rev().find(|(_, b)| b.state == JobState::Completed)?;
         let lead = self.transit(seq, ahead.aisle) - self.transit(seq, aisle);
         Some((ahead.at + (lead * 1000.0).ceil() as i64, p, ahead.job))
     }
@@ -470,7 +472,11 @@ mod tests {
         let due = |m: &[(u32, JobState)], last, closed| next_due(m.iter().copied(), last, closed);
         assert_eq!(due(&[], None, false), Some(1));
         assert_eq!(due(&[(1, Completed), (3, Queued)], None, false), Some(2), "a gap holds");
-        assert_eq!(due(&[(1, Completed), (3, Queued)], Some(3), false), Some(2), "also once the last is known");
+        assert_eq!(
+            due(&[(1, Completed), (3, Queued)], Some(3), false),
+            Some(2),
+            "also once the last is known"
+        );
         assert_eq!(due(&[(1, Completed), (3, Queued)], Some(3), true), Some(3), "closed: the gap is passed");
         assert_eq!(due(&[(1, Cancelled), (2, Failed), (3, Queued)], None, false), Some(2), "a failure holds");
         assert_eq!(due(&[(1, Completed), (2, Completed)], Some(2), false), None);
