@@ -2,7 +2,8 @@
 //! with its members as chips, the position due and why it waits, and moves on when the due
 //! member is passed; a sequence missing its first position and a job waiting for another
 //! show the `sequence` and `dependency` reasons; jobs past their deadline carry a late badge
-//! that grows by the page's clock, and count in the header.
+//! that grows by the page's clock, and count in the header. On a tablet the panel fits the
+//! screen.
 
 use serde_json::{Value, json};
 use time::format_description::well_known::Rfc3339;
@@ -175,6 +176,14 @@ async fn the_page_shows_sequences_and_late_jobs() {
     browser.js("const s = document.getElementById('filter-state'); s.value = ''; s.dispatchEvent(new Event('change'));").await;
 
     browser.screenshot_viewport("dashboard-orders.png").await;
+
+    // On a tablet the panel is one column among the others, and nothing scrolls sideways.
+    browser.viewport(800, 1200).await;
+    let script = "return !document.getElementById('sequences-panel').hidden
+        && document.documentElement.scrollWidth <= window.innerWidth";
+    browser.wait("the tablet layout with the panel", script, 10).await;
+    browser.js("document.getElementById('sequences-panel').scrollIntoView({ block: 'center' })").await;
+    browser.screenshot_viewport("dashboard-orders-tablet.png").await;
     let toasts = browser.js("return [...document.querySelectorAll('.toast')].map(t => t.textContent)").await;
     assert_eq!(toasts, json!([]), "no error was shown on the page");
     browser.close().await;
