@@ -6,7 +6,7 @@
 //! found on the PATH or at `$CHROMIUM` and `$CHROMEDRIVER`; without them the tests fail,
 //! unless `RACKD_SKIP_BROWSER=1` is set, which skips them loudly. Screenshots are kept in
 //! `target/artefacts/` (`dashboard.png` from the main test, `first-screen-*.png`,
-//! `dashboard-tablet.png`, `dashboard-stale.png`, ...).
+//! `dashboard-tablet.png`, `dashboard-stale.png`, `dashboard-orders.png`, ...).
 //!
 //! `control.rs` covers what the page shows of issue 14's API (waiting reasons, KPIs,
 //! acknowledging alarms, `whoami`): it passes once that API is served.
@@ -16,6 +16,7 @@ mod actions;
 mod control;
 mod keys;
 mod layout;
+mod orders;
 mod reload;
 mod store;
 mod webhooks;
