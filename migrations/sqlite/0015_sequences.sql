@@ -1,4 +1,4 @@
--- compatible-from: 12
+-- compatible-from: 11
 -- Sequences (issue 52, `src/service/dispatch/gate.rs`): the jobs of one sequence reach
 -- their destination in position order. A sequence's row is written with its first member;
 -- `station` is the `[[site.stations]]` id its first member named (NULL: none), `last` the

@@ -162,7 +162,10 @@ async fn read(app: &AppState, name: &str) -> Result<Sequence, ApiError> {
         (status = 200, description = "The sequence", body = Sequence),
         (status = 404, description = "No such sequence", body = ErrorBody),
     ))]
-async fn get_sequence(State(app): State<AppState>, Path(name): Path<String>) -> Result<Json<Sequence>, ApiError> {
+async fn get_sequence(
+    State(app): State<AppState>,
+    Path(name): Path<String>,
+) -> Result<Json<Sequence>, ApiError> {
     Ok(Json(read(&app, &name).await?))
 }
 

@@ -65,7 +65,11 @@ pub(super) async fn start(
     let parts = webhooks::Parts { pool: pool.clone(), writer: writer.clone(), hub: hub.clone(), gate };
     let (webhooks, mut tasks) = Webhooks::start(&config.webhooks, parts);
     tasks.push(tokio::spawn(crate::service::dispatch::waiting::watch(queues.clone(), writer.clone())));
-    tasks.push(tokio::spawn(crate::service::dispatch::release::watch(queues.clone(), pool.clone(), writer.clone())));
+    tasks.push(tokio::spawn(crate::service::dispatch::release::watch(
+        queues.clone(),
+        pool.clone(),
+        writer.clone(),
+    )));
     tasks.push(tokio::spawn(retention(pool.clone(), writer.clone(), config.clone())));
     let folder = config.retention.folder(&config.database.path);
     tasks.push(tokio::spawn(archive(pool.clone(), writer, config.retention.clone(), folder)));

@@ -33,7 +33,9 @@ pub enum Invalid {
     StationId(u16),
     /// A station's transit from an aisle the site does not have, listed twice, or not a
     /// number of seconds from 0 to a day.
-    #[error("site.stations: station {station}: transit from aisle {aisle} needs an aisle of site.aisles, once, and 0..=86400 seconds")]
+    #[error(
+        "site.stations: station {station}: transit from aisle {aisle} needs an aisle of site.aisles, once, and 0..=86400 seconds"
+    )]
     Transit {
         /// The station.
         station: u16,
@@ -159,7 +161,8 @@ impl Config {
             }
             let mut from = BTreeSet::new();
             for (j, t) in s.transit.iter().enumerate() {
-                let ok = seen.contains(&t.aisle) && from.insert(t.aisle) && (0.0..=86400.0).contains(&t.seconds);
+                let ok =
+                    seen.contains(&t.aisle) && from.insert(t.aisle) && (0.0..=86400.0).contains(&t.seconds);
                 if !ok {
                     let key = format!("site.stations[{i}].transit[{j}]");
                     return Err((key, Invalid::Transit { station: s.id, aisle: t.aisle }));

@@ -3,6 +3,9 @@
 //! A request is a flat object (`kind` plus the fields that kind needs); each kind takes
 //! exactly its own fields, so a `store` with a `from` is an error, not a silently ignored
 //! field. Locations are checked against the site layout, and a named device must exist.
+//! A job's terms (`sequence`, `deadline`, `after`) are checked for form here; whether they
+//! fit what is stored (a position free, the jobs `after` names existing, no circle) is the
+//! job writer's to check, in the transaction that stores the job (`store::writer::apply`).
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -223,7 +226,9 @@ impl Rules {
         }
         if let Some(text) = deadline {
             let at = time::OffsetDateTime::parse(&text, &time::format_description::well_known::Rfc3339)
-                .map_err(|_| Invalid(format!("deadline {text:?} is not an RFC 3339 time (e.g. 2026-11-29T14:00:00Z)")))?;
+                .map_err(|_| {
+                    Invalid(format!("deadline {text:?} is not an RFC 3339 time (e.g. 2026-11-29T14:00:00Z)"))
+                })?;
             terms.deadline = Some(crate::domain::time::to_ms(at));
         }
         if let Some(after) = after {
@@ -331,7 +336,9 @@ fn check_reference(r: &str) -> Result<(), Invalid> {
 fn check_text(what: &str, r: &str) -> Result<(), Invalid> {
     let printable = r.chars().all(|c| !c.is_control());
     if r.trim().is_empty() || r.chars().count() > MAX_REFERENCE_LEN || !printable {
-        return Err(Invalid(format!("{what} must be 1..={MAX_REFERENCE_LEN} printable characters, not blank")));
+        return Err(Invalid(format!(
+            "{what} must be 1..={MAX_REFERENCE_LEN} printable characters, not blank"
+        )));
     }
     Ok(())
 }

@@ -138,8 +138,14 @@ pub(crate) fn assemble(rows: Vec<Row>, members: Vec<MemberRow>) -> BTreeMap<Stri
             .as_deref()
             .and_then(|t| crate::store::jobs::StoredSpec::parse(t).ok())
             .and_then(|s| s.spec.locations().first().map(|l| l.aisle));
-        let member =
-            StoredMember { position, job: m.job, reference: m.reference, state, updated_at: m.updated_at, aisle };
+        let member = StoredMember {
+            position,
+            job: m.job,
+            reference: m.reference,
+            state,
+            updated_at: m.updated_at,
+            aisle,
+        };
         s.members.insert(position, member);
     }
     found

@@ -2,7 +2,7 @@
 // first), running on a device in alarm, then waiting (in queue order, oldest first), each
 // as a card with its reference, where it goes, why, and Cancel or Retry for operators.
 // Above them, one chip per reason with its count: fourteen jobs behind one offline shelf
-// read as one line.
+// read as one line. A card of a job past its deadline says how late it is.
 //
 // Cards are kept per job and refilled only when the job or its reason changed, so an armed
 // Cancel survives the redraws of a busy store. At most MAX_SHOWN cards are drawn; the
@@ -10,6 +10,7 @@
 
 import { JobActions } from './actions.js';
 import { clock, el, jobWhere, setText } from './dom.js';
+import { lateBadge, setJobLate } from './late.js';
 import { REASONS, attention } from './reasons.js';
 
 /** How many cards the list draws at most. */
@@ -97,12 +98,13 @@ export class Attention {
     c.title = el('span', { class: 'att-title' });
     c.state = el('span', { class: 'state' });
     c.where = el('span', { class: 'att-where' });
+    c.late = lateBadge();
     c.why = el('div', { class: 'att-why' });
     c.buttons = { root: el('span', { class: 'att-actions' }), cancel: null, retry: null };
     c.li = el(
       'li',
       { class: 'att-item', dataset: { jobId: id } },
-      el('div', { class: 'att-head' }, c.title, c.state, c.where),
+      el('div', { class: 'att-head' }, c.title, c.state, c.late, c.where),
       el('div', { class: 'att-foot' }, c.why, c.buttons.root),
     );
     return c;
@@ -116,6 +118,7 @@ export class Attention {
     setText(c.title, `${job.id}${job.reference ? ` · ${job.reference}` : ''} · ${job.kind}`);
     setText(c.state, job.state);
     c.state.className = `state state-${job.state}`;
+    setJobLate(c.late, job);
     setText(c.where, `${jobWhere(job)}${job.device ? ` on ${job.device}` : ''}`);
     setText(c.why, `${why.text} · since ${clock(job.updated_at)}`);
     this.actions.update(c.buttons, job);

@@ -1,5 +1,6 @@
 // The header's counters, readable across a control room: active alarms by class, devices
-// offline, degraded and paused, jobs queued, running and failed in the last hour.
+// offline, degraded and paused, jobs queued, running, late (unfinished and past their
+// deadline, by the page's clock: `render` runs every second) and failed in the last hour.
 //
 // All but one come from what the page already holds. Failed in the last hour is counted
 // from the jobs the page holds (the last hour's are read at start) and from
@@ -7,6 +8,7 @@
 // only its newest 500 jobs.
 
 import { el, ms, setText } from './dom.js';
+import { TERMINAL, lateBy } from './model.js';
 import { FAILED_WINDOW_MS } from './reasons.js';
 
 /** The counters: id (`data-counter`), group, label. */
@@ -19,11 +21,12 @@ const COUNTERS = [
   ['devices-paused', 'Devices', 'paused'],
   ['jobs-queued', 'Jobs', 'queued'],
   ['jobs-running', 'Jobs', 'running'],
+  ['jobs-late', 'Jobs', 'late'],
   ['jobs-failed', 'Jobs', 'failed 1 h'],
 ];
 
 /** Counters that are bad news when not zero. */
-const BAD = new Set(['alarms-hardware', 'alarms-link', 'devices-offline', 'jobs-failed']);
+const BAD = new Set(['alarms-hardware', 'alarms-link', 'devices-offline', 'jobs-late', 'jobs-failed']);
 const WARN = new Set(['alarms-business', 'devices-degraded', 'devices-paused']);
 
 export class Counters {
@@ -64,6 +67,7 @@ export class Counters {
       if (j.state === 'queued') c['jobs-queued'] += 1;
       else if (['dispatched', 'running', 'cancelling'].includes(j.state)) c['jobs-running'] += 1;
       else if (j.state === 'failed' && now - ms(j.updated_at) <= FAILED_WINDOW_MS) c['jobs-failed'] += 1;
+      if (!TERMINAL.has(j.state) && lateBy(j, now) !== null) c['jobs-late'] += 1;
     }
     if (this.statsFailed !== null) c['jobs-failed'] = Math.max(c['jobs-failed'], this.statsFailed);
     return c;
@@ -72,7 +76,7 @@ export class Counters {
   render() {
     const c = this.counts();
     for (const [id, value] of this.values) {
-      const more = this.model.jobsTruncated && (id === 'jobs-queued' || id === 'jobs-running') ? '+' : '';
+      const more = this.model.jobsTruncated && ['jobs-queued', 'jobs-running', 'jobs-late'].includes(id) ? '+' : '';
       setText(value, `${c[id]}${more}`);
       const counter = value.parentElement;
       counter.classList.toggle('bad', c[id] > 0 && BAD.has(id));

@@ -3,11 +3,11 @@
 // A crane reports its axes in its own units (D220/D221), which say nothing about bays, so
 // the crane is drawn where its work puts it: by its action state, at the pick or put
 // location of the task it holds once there (with an arrow to it while travelling); idle,
-// where it last stopped, or at the station end when both axes read zero (home). Its label
-// sits on a track of its own under the bay numbers (never covering them); it starts at
-// its bay's left edge in the left half of the aisle and ends at its bay's right edge in
-// the right half, so it never runs past the aisle's end. The raw axis values are written
-// under the aisle.
+// at the put location of its last job if that completed, else where it last stopped, or at
+// the station end when both axes read zero (home). Its label sits on a track of its own
+// under the bay numbers (never covering them); it starts at its bay's left edge in the left
+// half of the aisle and ends at its bay's right edge in the right half, so it never runs
+// past the aisle's end. The raw axis values are written under the aisle.
 
 import { ms, setText } from './dom.js';
 import { TERMINAL } from './model.js';
@@ -95,18 +95,20 @@ export class Cranes {
   }
 
   /**
-   * An idle crane: home when both axes read zero; else where it was last seen working,
-   * or, after a reload, where its last completed job put the load.
+   * An idle crane: home when both axes read zero; else where its last job put the load if
+   * that job completed, whether or not the page saw it there (it draws once per frame from
+   * the newest status the server sent, and a loaded server or browser can skip the whole
+   * put); else (a job cancelled or failed on the way) where it was last seen working.
    */
   idlePlace(device, known) {
     const c = device.crane;
     if (c.travel_position === 0 && c.lift_position === 0) return HOME;
-    if (known && known !== HOME) return known;
     let last = null;
     for (const j of this.model.jobs.values()) {
       if (j.device === device.id && TERMINAL.has(j.state) && (!last || ms(j.updated_at) > ms(last.updated_at))) last = j;
     }
-    return last && last.state === 'completed' ? ends(last).put : null;
+    if (last && last.state === 'completed') return ends(last).put;
+    return known && known !== HOME ? known : null;
   }
 }
 

@@ -14,11 +14,13 @@ import { Devices } from './dashboard/devices.js';
 import { clock, el, throttle } from './dashboard/dom.js';
 import { Jobs } from './dashboard/jobs.js';
 import { Kpi } from './dashboard/kpi.js';
+import { tickLate } from './dashboard/late.js';
 import { Live } from './dashboard/live.js';
 import { LocationDialog } from './dashboard/locations.js';
 import { Model } from './dashboard/model.js';
 import { Racks } from './dashboard/racks.js';
 import { Who } from './dashboard/roles.js';
+import { Sequences } from './dashboard/sequences.js';
 import { Webhooks } from './dashboard/webhooks.js';
 
 const $ = (id) => document.getElementById(id);
@@ -41,6 +43,7 @@ const locationDialog = new LocationDialog($('location-dialog'), model, notify);
 const racks = new Racks($('racks'), model, (l) => locationDialog.open(l), notify);
 const devices = new Devices($('devices'), model, notify);
 const jobs = new Jobs($('jobs'), model, notify);
+const sequences = new Sequences($('sequences-panel'), $('sequences'), model);
 const alarms = new Alarms($('alarms'), model, notify);
 const attention = new Attention($('attention'), model, notify);
 const counters = new Counters($('counters'), model);
@@ -54,7 +57,10 @@ const who = new Who((w) => {
 // and the attention list follow jobs, devices and alarms alike.
 const dirty = { jobs: false, devices: false, alarms: false, cranes: false };
 const render = throttle(() => {
-  if (dirty.jobs) jobs.render();
+  if (dirty.jobs) {
+    jobs.render();
+    sequences.render();
+  }
   if (dirty.devices) devices.render();
   if (dirty.alarms) {
     alarms.render();
@@ -299,6 +305,9 @@ setInterval(() => {
   $('clock').textContent = clock(new Date().toISOString());
   devices.tick();
   webhooks.tick();
+  // Lateness grows without events: the late badges and the late counter follow the clock.
+  tickLate(document.body);
+  counters.render();
   // Failed jobs leave the attention list and the counter an hour after they failed.
   ticks += 1;
   if (ticks % 10 === 0) mark('jobs');

@@ -1,12 +1,14 @@
-// The live job table: newest first, filtered by state, kind, device and why a job waits,
-// with Cancel (jobs not ended) and Retry (failed jobs) for operators. Rows are kept per job
+// The live job table: newest first, filtered by state (or late), kind, device and why a job
+// waits, with Cancel (jobs not ended) and Retry (failed jobs) for operators; a job past its
+// deadline has a late badge beside its state. Rows are kept per job
 // and only refilled when the job changed, so a busy store does not rebuild the table every
 // event. On a tablet the stylesheet turns each row into a card; every cell carries its
 // heading (`data-label`) for that.
 
 import { JobActions } from './actions.js';
 import { clock, el, jobWhere, setText } from './dom.js';
-import { MAX_JOBS, TERMINAL } from './model.js';
+import { lateBadge, setJobLate } from './late.js';
+import { MAX_JOBS, TERMINAL, lateBy } from './model.js';
 import { REASONS, waiting } from './reasons.js';
 
 const STATES = ['queued', 'dispatched', 'running', 'cancelling', 'completed', 'failed', 'cancelled'];
@@ -33,7 +35,12 @@ export class Jobs {
     this.model = model;
     this.actions = new JobActions(model, notify);
     this.rows = new Map();
-    this.state = this.select('state', [['', 'all states'], ['active', 'active'], ...STATES.map((s) => [s, s])]);
+    this.state = this.select('state', [
+      ['', 'all states'],
+      ['active', 'active'],
+      ['late', 'late (not ended)'],
+      ...STATES.map((s) => [s, s]),
+    ]);
     this.kind = this.select('kind', [['', 'all kinds'], ...KINDS.map((k) => [k, k])]);
     this.device = this.select('device', [['', 'all devices']]);
     this.why = this.select('waiting', [['', 'waiting or not'], ['any', 'waiting: any reason'],
@@ -65,7 +72,8 @@ export class Jobs {
   matches(job) {
     const state = this.state.value;
     if (state === 'active' && TERMINAL.has(job.state)) return false;
-    if (state && state !== 'active' && job.state !== state) return false;
+    if (state === 'late' && (TERMINAL.has(job.state) || lateBy(job) === null)) return false;
+    if (state && state !== 'active' && state !== 'late' && job.state !== state) return false;
     if (this.kind.value && job.kind !== this.kind.value) return false;
     if (this.device.value && job.device !== this.device.value) return false;
     if (this.why.value) {
@@ -130,8 +138,9 @@ export class Jobs {
       cells[name] = el('td', { class: `c-${name}`, dataset: { label: title } });
       tr.append(cells[name]);
     }
-    cells.state.append(el('span', { class: 'state' }));
-    return { tr, cells, job: null, buttons: { root: cells.action, cancel: null, retry: null } };
+    const late = lateBadge();
+    cells.state.append(el('span', { class: 'state' }), late);
+    return { tr, cells, late, job: null, buttons: { root: cells.action, cancel: null, retry: null } };
   }
 
   fill(row, job) {
@@ -148,6 +157,7 @@ export class Jobs {
     setText(badge, job.forced ? `${job.state} (forced)` : job.state);
     badge.className = `state state-${job.state}`;
     row.tr.className = `job-${job.state}`;
+    setJobLate(row.late, job);
     const f = job.failure;
     const w = waiting(job);
     const detail = w ? w.text : f ? `${f.kind}${f.code !== null && f.code !== undefined ? ` ${f.code}` : ''}: ${f.text}` : '';

@@ -11,8 +11,9 @@
 //! need a person), `alarms.js` (with `recovery.js`, a memory loss's Unlock and retry),
 //! `devices.js`, `racks.js` (with `crane.js`, where a crane is
 //! drawn, and `locations.js`, a location's dialog), `kpi.js` (the KPIs, as SVG charts drawn by the page), `jobs.js` (with
-//! `actions.js`, the job buttons), `webhooks.js` (the webhook subscriptions, their lag,
-//! last error and delivery log); `reasons.js` says why a job waits, `config.js` which configuration runs, `cluster.js` which node
+//! `actions.js`, the job buttons), `sequences.js` (the sequences under way, from the jobs
+//! held), `webhooks.js` (the webhook subscriptions, their lag,
+//! last error and delivery log); `reasons.js` says why a job waits, `late.js` how late it is, `config.js` which configuration runs, `cluster.js` which node
 //! of a cluster the page talks to, and `roles.js` which
 //! buttons the key may use. The style is `dashboard.css` (the page, its header and panels)
 //! with `racks.css` and `jobs.css` (the job table, its cards on a tablet, the KPIs).
@@ -55,6 +56,8 @@ const FILES: &[(&str, &str, &str)] = &[
     ("/dashboard/kpi.js", JS, include_str!("kpi.js")),
     ("/dashboard/locations.js", JS, include_str!("locations.js")),
     ("/dashboard/reasons.js", JS, include_str!("reasons.js")),
+    ("/dashboard/sequences.js", JS, include_str!("sequences.js")),
+    ("/dashboard/late.js", JS, include_str!("late.js")),
     ("/dashboard/roles.js", JS, include_str!("roles.js")),
     ("/dashboard/cluster.js", JS, include_str!("cluster.js")),
     ("/dashboard/config.js", JS, include_str!("config.js")),

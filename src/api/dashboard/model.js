@@ -1,6 +1,7 @@
 // What the page knows, built from the snapshot and the events (and, for what the snapshot
 // leaves out, recent history read over HTTP): jobs, devices, alarms and locations by id.
-// Views subscribe and redraw what changed.
+// Views subscribe and redraw what changed. What follows from the jobs (the sequences under
+// way, how late a job is now) is derived here too, from the jobs held.
 
 import { locKey, ms } from './dom.js';
 
@@ -81,6 +82,8 @@ export class Model {
     const data = event.data;
     switch (event.type) {
       case 'job.updated':
+      case 'job.late':
+        // `job.late` carries the job as it was when it passed its deadline.
         if (this.mergeJob(data, true)) this.emit('job', this.jobs.get(data.id));
         break;
       case 'device.updated':
@@ -191,6 +194,27 @@ export class Model {
     for (const alarm of cleared.slice(0, this.alarms.size - MAX_ALARMS)) this.alarms.delete(alarm.id);
   }
 
+  /**
+   * The sequences under way: each sequence with an unfinished member among the jobs held,
+   * as `{name, members, due, dueJob, oldest, deadline, late}` (see `sequenceOf`), those held
+   * by a failed member first, then the oldest.
+   */
+  sequences(now = Date.now()) {
+    const groups = new Map();
+    for (const job of this.jobs.values()) {
+      const name = job.sequence && job.sequence.name;
+      if (!name) continue;
+      if (!groups.has(name)) groups.set(name, []);
+      groups.get(name).push(job);
+    }
+    const found = [];
+    for (const [name, members] of groups) {
+      if (members.some((j) => !TERMINAL.has(j.state))) found.push(sequenceOf(name, members, now));
+    }
+    const held = (s) => Number(!(s.dueJob && s.dueJob.state === 'failed'));
+    return found.sort((a, b) => held(a) - held(b) || a.oldest - b.oldest);
+  }
+
   /** The job a crane holds as its task number (task numbers come from job ids). */
   craneJob(device) {
     const task = device.crane ? device.crane.task : 0;
@@ -200,4 +224,75 @@ export class Model {
     }
     return null;
   }
+}
+
+/**
+ * Whole seconds `job` is past its deadline, or null when it is not late (or has none): from
+ * `now` (Unix ms) for an unfinished job, since the server's `late_by_s` changes only with
+ * the job's events; as the server said for an ended job (how late it ended).
+ */
+export function lateBy(job, now = Date.now()) {
+  if (TERMINAL.has(job.state)) return job.late_by_s || null;
+  const deadline = ms(job.deadline);
+  if (Number.isNaN(deadline) || now <= deadline) return null;
+  return Math.ceil((now - deadline) / 1000);
+}
+
+/**
+ * One sequence from the members the page holds (`jobs`, at least one unfinished):
+ *
+ * - `members`: by position, each `{position, job, status}`, status `delivered` (completed),
+ *   `passed` (cancelled), `failed`, `due` or `waiting`; plus `{position, job: null, status:
+ *   'missing'}` for a due position not posted yet;
+ * - `due`: the position due, as the server reckons it: the lowest position neither
+ *   delivered nor passed. The page may not hold every member (one that ended before the
+ *   page's history began), so a position it does not hold counts as due only when the
+ *   lowest member it holds waits for a position not posted (`waiting.reason` `sequence`
+ *   without a `job`);
+ * - `dueJob`: the due member's job, or null when it is not posted;
+ * - `oldest`: the id of its oldest unfinished member (for the order);
+ * - `deadline`: the earliest deadline (Unix ms) of its unfinished members, or null;
+ *   `late`: how late its latest unfinished member is now, in whole seconds, or null.
+ */
+function sequenceOf(name, jobs, now) {
+  const byPosition = new Map();
+  for (const job of jobs) {
+    const known = byPosition.get(job.sequence.position);
+    // Two jobs at one position should not happen; the newer one is the one that counts.
+    if (!known || job.id > known.id) byPosition.set(job.sequence.position, job);
+  }
+  const positions = [...byPosition.keys()].sort((a, b) => a - b);
+  const ended = (job) => job.state === 'completed' || job.state === 'cancelled';
+  const open = positions.find((p) => !ended(byPosition.get(p)));
+  let due = open;
+  const w = open === undefined ? null : byPosition.get(open).waiting;
+  if (w && typeof w === 'object' && w.reason === 'sequence' && !w.job) {
+    for (let p = 1; p < open; p += 1) {
+      if (!byPosition.has(p)) {
+        due = p;
+        break;
+      }
+    }
+  }
+  const STATUS = { completed: 'delivered', cancelled: 'passed', failed: 'failed' };
+  const members = positions.map((position) => {
+    const job = byPosition.get(position);
+    return { position, job, status: STATUS[job.state] || (position === due ? 'due' : 'waiting') };
+  });
+  if (due !== undefined && !byPosition.has(due)) {
+    const at = members.findIndex((m) => m.position > due);
+    members.splice(at < 0 ? members.length : at, 0, { position: due, job: null, status: 'missing' });
+  }
+  const unfinished = jobs.filter((j) => !TERMINAL.has(j.state));
+  const deadlines = unfinished.map((j) => ms(j.deadline)).filter((d) => !Number.isNaN(d));
+  const late = Math.max(0, ...unfinished.map((j) => lateBy(j, now) || 0));
+  return {
+    name,
+    members,
+    due: due === undefined ? null : due,
+    dueJob: byPosition.get(due) || null,
+    oldest: Math.min(...unfinished.map((j) => j.id)),
+    deadline: deadlines.length ? Math.min(...deadlines) : null,
+    late: late || null,
+  };
 }

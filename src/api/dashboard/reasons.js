@@ -19,6 +19,8 @@ export const REASONS = {
   slots_busy: 'all slots busy',
   no_device: 'no device serves the aisle',
   no_place: 'no free location',
+  dependency: 'after another job',
+  sequence: 'sequence order',
 };
 
 /** How long a failed job stays among those that need attention (as the header counts it). */
@@ -46,6 +48,10 @@ function describe(w) {
       return 'no device serves its aisle';
     case 'no_place':
       return 'no free location for it';
+    case 'dependency':
+      return w.job ? `waits for job ${w.job} to complete` : 'waits for another job to complete';
+    case 'sequence':
+      return w.job ? `job ${w.job} goes first in its sequence` : 'an earlier member of its sequence goes first';
     default:
       return 'waiting';
   }

@@ -404,13 +404,19 @@ impl Collector for Scrape {
                 .encode_counter::<NoLabelSet, _, u64>(&o.ended_late, None)?;
             if let Some(slack) = o.slack {
                 let help = "Seconds to the nearest deadline of an unfinished job (negative once passed).";
-                e.encode_descriptor("deadline_slack_seconds", help, None, MetricType::Gauge)?.encode_gauge(&slack)?;
+                e.encode_descriptor("deadline_slack_seconds", help, None, MetricType::Gauge)?
+                    .encode_gauge(&slack)?;
             }
             let help = "Sequence members delivered out of order (a position ahead of an earlier one, or due at \
                         the station before it), by station (0: a sequence without one), since rackd started.";
             let mut inversions = o.inversions.clone();
             inversions.entry(0).or_default();
-            counter(&mut e, "sequence_inversions", help, inversions.into_iter().map(|(s, n)| (StationLabel { station: s }, n)))?;
+            counter(
+                &mut e,
+                "sequence_inversions",
+                help,
+                inversions.into_iter().map(|(s, n)| (StationLabel { station: s }, n)),
+            )?;
         }
         self.webhooks(&mut e)
     }

@@ -30,9 +30,10 @@ pub enum Ack {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Planner {
-    /// Priority, then age.
+    /// Priority, then age (deadlines not weighed).
     Fifo,
-    /// Priority, then the least empty travel from where the crane stands, with aging.
+    /// Priority, then the least empty travel from where the crane stands, with aging,
+    /// unless a deadline is at risk.
     #[default]
     Travel,
 }
@@ -106,6 +107,9 @@ pub struct CraneConfig {
     /// Times a queued job may be passed over by younger ones of its priority (travel
     /// planner) before it goes next.
     pub max_overtaken: u32,
+    /// Seconds before its deadline by which the travel planner wants a job ended (0: by the
+    /// deadline itself); a job that would end later goes before the travel choice.
+    pub deadline_margin_s: u32,
     /// How the crane moves: what the travel planner weighs and putaway ranks by.
     pub motion: Motion,
 }
@@ -146,6 +150,7 @@ impl CraneConfig {
             ack: Ack::Handshake,
             planner: Planner::Travel,
             max_overtaken: 30,
+            deadline_margin_s: 30,
             motion: Motion::default(),
         }
     }
@@ -156,7 +161,8 @@ impl CraneConfig {
     }
 
     /// Checks the timeouts, and that the register blocks are words of the protocol (rackd
-    /// writes its own block and only reads the crane's).
+    /// writes its own block and only reads the crane's). `deadline_margin_s` takes any
+    /// value: 0 weighs a deadline itself, and a large margin only puts deadlines first sooner.
     pub fn check(&self) -> Result<(), CraneConfigError> {
         if self.heartbeat_timeout_ms == 0 {
             return Err(CraneConfigError::Zero("heartbeat_timeout_ms"));
@@ -198,6 +204,7 @@ mod tests {
         assert_eq!((c.link.protocol, c.link.timeout), (Protocol::Mc3e, Duration::from_millis(1500)));
         assert!(c.auto_cancel);
         assert_eq!(c.ack, Ack::Handshake);
+        assert_eq!((c.max_overtaken, c.deadline_margin_s), (30, 30));
         c.check().unwrap();
         let mut bad = c;
         bad.handshake_timeout_ms = 0;

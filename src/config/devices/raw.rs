@@ -102,6 +102,8 @@ pub struct RawDevice {
     #[serde(skip_serializing_if = "Option::is_none")]
     max_overtaken: Option<u32>,
     #[serde(skip_serializing_if = "Option::is_none")]
+    deadline_margin_s: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     motion: Option<Motion>,
     // Tags.
     #[serde(serialize_with = "tag_map")]
@@ -136,6 +138,7 @@ impl RawDevice {
             ("ack", self.ack.is_some()),
             ("planner", self.planner.is_some()),
             ("max_overtaken", self.max_overtaken.is_some()),
+            ("deadline_margin_s", self.deadline_margin_s.is_some()),
             ("motion", self.motion.is_some()),
         ];
         let mut set = Vec::new();
@@ -238,6 +241,7 @@ impl TryFrom<RawDevice> for DeviceConfig {
                 c.ack = raw.ack.unwrap_or(c.ack);
                 c.planner = raw.planner.unwrap_or(c.planner);
                 c.max_overtaken = raw.max_overtaken.unwrap_or(c.max_overtaken);
+                c.deadline_margin_s = raw.deadline_margin_s.unwrap_or(c.deadline_margin_s);
                 c.motion = raw.motion.unwrap_or(c.motion);
                 DeviceConfig::Crane(c)
             }
@@ -291,6 +295,7 @@ impl RawDevice {
             ack: None,
             planner: None,
             max_overtaken: None,
+            deadline_margin_s: None,
             motion: None,
             tags: None,
         }
@@ -320,6 +325,7 @@ impl From<&DeviceConfig> for RawDevice {
                 (raw.auto_cancel, raw.ack) = (Some(c.auto_cancel), Some(c.ack));
                 (raw.planner, raw.max_overtaken, raw.motion) =
                     (Some(c.planner), Some(c.max_overtaken), Some(c.motion));
+                raw.deadline_margin_s = Some(c.deadline_margin_s);
             }
             DeviceConfig::Tags(c) => {
                 (raw.poll_ms, raw.offline_after) = (Some(c.poll_ms), Some(c.offline_after));

@@ -195,7 +195,11 @@ impl Book {
     /// Takes in what [`resolve`] read: sequence rows with their ended members, and what
     /// became of references (a reference no job has is left unknown: the job keeps
     /// waiting, as it would for a job never posted).
-    pub fn read(&mut self, sequences: Vec<crate::store::sequences::Stored>, refs: Vec<(String, i64, JobState)>) {
+    pub fn read(
+        &mut self,
+        sequences: Vec<crate::store::sequences::Stored>,
+        refs: Vec<(String, i64, JobState)>,
+    ) {
         for stored in sequences {
             let seq = self.sequences.entry(stored.row.name.clone()).or_default();
             for (position, m) in stored.members {
@@ -229,20 +233,14 @@ impl Book {
         if member.state != JobState::Completed || was == Some(JobState::Completed) || seq.row.is_none() {
             return;
         }
-        let row = seq.row.as_ref();
-        let station = row.and_then(|r| r.station).and_then(|s| u16::try_from(s).ok());
-        let transit = |a: Option<u16>| match (station.and_then(|s| self.stations.get(&s)), a) {
-            (Some(s), Some(a)) => s.transit_s(a),
-            _ => 0.0,
-        };
+        let station = seq.row.as_ref().and_then(|r| r.station).and_then(|s| u16::try_from(s).ok());
         let early = match due(seq) {
             Due::Position(p) => p != position,
             Due::Done => false,
         };
-        let ahead = seq.members.range(..position).rev().find(|(_, b)| b.state == JobState::Completed);
-        let overtakes = ahead.is_some_and(|(_, b)| {
-            member.at as f64 + transit(member.aisle) * 1000.0 < b.at as f64 + transit(b.aisle) * 1000.0
-        });
+        // Its box reaches the station before the box ahead of it: it ended before its release.
+        let overtakes =
+            self.release(seq, position, member.aisle).is_some_and(|(release, _, _)| member.at < release);
         if early || overtakes {
             tracing::warn!(sequence = name, position, "a sequence member was delivered out of order");
             *self.inversions.entry(station.unwrap_or(0)).or_default() += 1;
@@ -252,8 +250,12 @@ impl Book {
     /// The unfinished jobs whose deadline passed by `now` and that were not told late yet,
     /// now noted as told.
     pub fn newly_late(&mut self, now: i64) -> Vec<i64> {
-        let late: Vec<i64> =
-            self.deadlines.range(..(now, i64::MAX)).map(|&(_, id)| id).filter(|id| !self.late.contains(id)).collect();
+        let late: Vec<i64> = self
+            .deadlines
+            .range(..(now, i64::MAX))
+            .map(|&(_, id)| id)
+            .filter(|id| !self.late.contains(id))
+            .collect();
         self.late.extend(late.iter().copied());
         late
     }
@@ -282,7 +284,12 @@ impl Book {
     /// What the book has not read yet.
     pub fn unknown(&self) -> Unknown {
         Unknown {
-            sequences: self.sequences.iter().filter(|(_, s)| s.row.is_none()).map(|(n, _)| n.clone()).collect(),
+            sequences: self
+                .sequences
+                .iter()
+                .filter(|(_, s)| s.row.is_none())
+                .map(|(n, _)| n.clone())
+                .collect(),
             refs: self.refs.iter().filter(|(_, d)| d.is_none()).map(|(r, _)| r.clone()).collect(),
         }
     }
@@ -331,51 +338,57 @@ impl Book {
                         format!("position {p} (job {}) failed: retry it, or cancel the sequence", other.job),
                         Some(other.job),
                     ),
-                    Some(other) => hold(format!("position {p} (job {}) goes first", other.job), Some(other.job)),
+                    Some(other) => {
+                        hold(format!("position {p} (job {}) goes first", other.job), Some(other.job))
+                    }
                     None => hold(format!("position {p} is not posted yet"), None),
                 };
             }
             Due::Done => return None,
         }
         // The due member: released once its predecessor's box is far enough ahead.
-        let before = seq.members.range(..m.position).rev().find(|(_, b)| b.state == JobState::Completed);
-        if let Some((&p, b)) = before {
-            let station = row.station.and_then(|s| self.stations.get(&u16::try_from(s).ok()?));
-            let transit = |a: Option<u16>| match (station, a) {
-                (Some(s), Some(a)) => s.transit_s(a),
-                _ => 0.0,
-            };
-            let lead = transit(b.aisle) - transit(aisle_of(job));
-            let release = b.at + (lead * 1000.0).ceil() as i64;
-            if now < release {
-                let secs = (release - now + 999) / 1000;
-                let text = format!("released in {secs} s, so that it reaches the station after position {p}");
-                return hold(text, Some(b.job));
-            }
+        if let Some((release, p, ahead)) = self.release(seq, m.position, aisle_of(job))
+            && now < release
+        {
+            let secs = (release - now + 999) / 1000;
+            let text = format!("released in {secs} s, so that it reaches the station after position {p}");
+            return hold(text, Some(ahead));
         }
         None
+    }
+
+    /// Seconds from `aisle`'s exit to the station of `seq` (0 without either).
+    fn transit(&self, seq: &Seq, aisle: Option<u16>) -> f64 {
+        let station = seq.row.as_ref().and_then(|r| r.station).and_then(|s| u16::try_from(s).ok());
+        match (station.and_then(|s| self.stations.get(&s)), aisle) {
+            (Some(s), Some(a)) => s.transit_s(a),
+            _ => 0.0,
+        }
+    }
+
+    /// When the member at `position` of `seq`, from `aisle`, may go (Unix ms), after the
+    /// nearest member ahead of it that completed: that one's end plus the difference of
+    /// their transits. With the position and job of that member; None without one.
+    fn release(&self, seq: &Seq, position: u32, aisle: Option<u16>) -> Option<(i64, u32, i64)> {
+        let (&p, ahead) =
+            seq.members.range(..position).rev().find(|(_, b)| b.state == JobState::Completed)?;
+        let lead = self.transit(seq, ahead.aisle) - self.transit(seq, aisle);
+        Some((ahead.at + (lead * 1000.0).ceil() as i64, p, ahead.job))
     }
 
     /// The earliest time (Unix ms) after `now` at which a member held for transit alone is
     /// released, if any: the dispatcher wakes then.
     pub fn next_release(&self, now: i64) -> Option<i64> {
-        let mut next: Option<i64> = None;
-        for seq in self.sequences.values() {
-            let Some(row) = &seq.row else { continue };
-            let Due::Position(p) = due(seq) else { continue };
-            let Some(member) = seq.members.get(&p) else { continue };
-            let Some((_, b)) = seq.members.range(..p).rev().find(|(_, b)| b.state == JobState::Completed) else {
-                continue;
-            };
-            let station = row.station.and_then(|s| self.stations.get(&u16::try_from(s).ok()?));
-            let Some(station) = station else { continue };
-            let lead = b.aisle.map_or(0.0, |a| station.transit_s(a)) - member.aisle.map_or(0.0, |a| station.transit_s(a));
-            let release = b.at + (lead * 1000.0).ceil() as i64;
-            if release > now {
-                next = Some(next.map_or(release, |n: i64| n.min(release)));
-            }
-        }
-        next
+        self.sequences
+            .values()
+            .filter(|seq| seq.row.is_some())
+            .filter_map(|seq| {
+                let Due::Position(p) = due(seq) else { return None };
+                let member = seq.members.get(&p)?;
+                Some(self.release(seq, p, member.aisle)?.0)
+            })
+            .filter(|&release| release > now)
+            .min()
     }
 }
 
@@ -402,7 +415,11 @@ fn due(seq: &Seq) -> Due {
 /// whose last position is `last` once known, and that is `closed` once the WMS completed
 /// it: the lowest neither delivered (completed) nor passed (cancelled, or never posted in
 /// a closed sequence); None when every one is.
-pub fn next_due(members: impl IntoIterator<Item = (u32, JobState)>, last: Option<u32>, closed: bool) -> Option<u32> {
+pub fn next_due(
+    members: impl IntoIterator<Item = (u32, JobState)>,
+    last: Option<u32>,
+    closed: bool,
+) -> Option<u32> {
     let mut expect = 1u32;
     for (p, state) in members {
         if p > expect && !closed {
@@ -440,4 +457,94 @@ pub struct ReadBack {
     pub sequences: Vec<crate::store::sequences::Stored>,
     /// Each reference found: its job and state.
     pub refs: Vec<(String, i64, JobState)>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Transit;
+    use crate::domain::{JobSpec, Location, Member as Place, NewJob, Priority, Terms};
+    use crate::store::sequences::Stored;
+    use JobState::*;
+
+    #[test]
+    fn the_position_due_passes_only_what_was_delivered_cancelled_or_never_posted_once_closed() {
+        let due = |m: &[(u32, JobState)], last, closed| next_due(m.iter().copied(), last, closed);
+        assert_eq!(due(&[], None, false), Some(1));
+        assert_eq!(due(&[(1, Completed), (3, Queued)], None, false), Some(2), "a gap holds");
+        assert_eq!(
+            due(&[(1, Completed), (3, Queued)], Some(3), false),
+            Some(2),
+            "also once the last is known"
+        );
+        assert_eq!(due(&[(1, Completed), (3, Queued)], Some(3), true), Some(3), "closed: the gap is passed");
+        assert_eq!(due(&[(1, Cancelled), (2, Failed), (3, Queued)], None, false), Some(2), "a failure holds");
+        assert_eq!(due(&[(1, Completed), (2, Completed)], Some(2), false), None);
+        assert_eq!(due(&[(1, Completed)], Some(2), false), Some(2));
+        assert_eq!(due(&[(1, Completed)], None, true), None);
+    }
+
+    fn member(id: i64, aisle: u16, position: u32, state: JobState, at: i64) -> Job {
+        let from = Location { aisle, row: 1, bay: 1, level: 1, position: 1 };
+        let terms = Terms { sequence: Some(Place { name: "S".into(), position }), ..Terms::default() };
+        let new = NewJob {
+            spec: JobSpec::Retrieve { from },
+            reference: None,
+            priority: Priority::DEFAULT,
+            barcode: None,
+            device: None,
+            serves: None,
+            terms,
+        };
+        let mut job = new.accepted(id, at);
+        job.state = state;
+        job
+    }
+
+    fn row(station: Option<i64>) -> Row {
+        Row {
+            name: "S".into(),
+            station,
+            last: None,
+            completed_at: None,
+            cancelled_at: None,
+            created_at: 0,
+            updated_at: 0,
+        }
+    }
+
+    #[test]
+    fn a_member_from_a_nearer_aisle_waits_out_the_transit_of_the_one_ahead() {
+        let mut book = Book::default();
+        let transit = vec![Transit { aisle: 2, seconds: 40.0 }, Transit { aisle: 3, seconds: 10.0 }];
+        book.set_stations(&[StationConfig { id: 1, name: None, transit }]);
+        let (one, two) = (member(1, 2, 1, Completed, 100_000), member(2, 3, 2, Queued, 90_000));
+        book.committed(&[&one, &two]);
+        assert!(book.why(&two, 200_000).unwrap().text.contains("reading"), "not read yet: it waits");
+        book.read(vec![Stored { row: row(Some(1)), members: Default::default() }], Vec::new());
+        // Aisle 2's box needs 40 s to the station, aisle 3's 10 s: position 2 goes 30 s later.
+        let held = book.why(&two, 129_000).expect("held for the transit");
+        assert_eq!((held.reason, held.job), (WaitingReason::Sequence, Some(1)), "{held:?}");
+        assert_eq!(book.next_release(129_000), Some(130_000));
+        assert_eq!(book.why(&two, 130_000), None);
+        // Without a station, it goes once the one ahead completed.
+        let mut other = Book::default();
+        other.committed(&[&one, &two]);
+        other.read(vec![Stored { row: row(None), members: Default::default() }], Vec::new());
+        assert_eq!(other.why(&two, 100_000), None);
+    }
+
+    #[test]
+    fn a_member_completed_out_of_turn_is_counted_an_inversion() {
+        let mut book = Book::default();
+        let (one, two) = (member(1, 2, 1, Queued, 0), member(2, 2, 2, Queued, 0));
+        book.committed(&[&one, &two]);
+        book.read(vec![Stored { row: row(None), members: Default::default() }], Vec::new());
+        let two_done = member(2, 2, 2, Completed, 1000);
+        book.committed(&[&two_done]);
+        assert_eq!(book.inversions.get(&0), Some(&1));
+        let one_done = member(1, 2, 1, Completed, 2000);
+        book.committed(&[&one_done]);
+        assert_eq!(book.inversions.get(&0), Some(&1), "position 1 was due: in turn");
+    }
 }

@@ -258,9 +258,9 @@ impl Queues {
         if !self.drives() {
             return;
         }
-        let terms = jobs
-            .iter()
-            .any(|j| !j.after.is_empty() || j.sequence.is_some() || j.reference.is_some() || j.deadline.is_some());
+        let terms = jobs.iter().any(|j| {
+            !j.after.is_empty() || j.sequence.is_some() || j.reference.is_some() || j.deadline.is_some()
+        });
         if terms && self.book().committed(jobs) {
             for lane in self.lanes().values() {
                 lane.wake.notify_one();
@@ -299,8 +299,10 @@ impl Queues {
             }
             fresh
         };
-        let termed: Vec<&Job> =
-            fresh.iter().filter(|j| j.sequence.is_some() || !j.after.is_empty() || j.deadline.is_some()).collect();
+        let termed: Vec<&Job> = fresh
+            .iter()
+            .filter(|j| j.sequence.is_some() || !j.after.is_empty() || j.deadline.is_some())
+            .collect();
         if !termed.is_empty() && self.book().committed(&termed) {
             self.0.book_changed.notify_one();
         }
@@ -610,7 +612,10 @@ impl DevicePort {
                 held.extend(waiting.map(|j| j.id));
             }
         }
-        let mut termed = window.iter().filter(|j| j.state == JobState::Queued && (j.sequence.is_some() || !j.after.is_empty())).peekable();
+        let mut termed = window
+            .iter()
+            .filter(|j| j.state == JobState::Queued && (j.sequence.is_some() || !j.after.is_empty()))
+            .peekable();
         if termed.peek().is_some() {
             let book = self.queues.book();
             let now = crate::domain::time::now_ms();

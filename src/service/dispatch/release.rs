@@ -49,4 +49,3 @@ pub async fn watch(queues: Queues, pool: crate::store::Pool, writer: crate::stor
         }
     }
 }
-

@@ -30,6 +30,23 @@
 //! relocation serves is held the same way: it goes right after the relocation (unless a job
 //! of a better priority came meanwhile), from beside its location, and not after a job far
 //! away that the relocation's own turn left starved.
+//!
+//! Deadlines weigh in `travel` only (`fifo` stays priority, then age), within the best
+//! priority: a priority never yields to a deadline. The choice above (at priority 0: the
+//! oldest) stands if, once it has run, every candidate of the group with a deadline still
+//! ends by its deadline less `deadline_margin_s`, run in earliest-deadline order, each
+//! taking its estimated crane seconds (`Travel::estimate`: the motion model's empty run
+//! from where the crane will stand, a relocation it needs, its own loaded run and fork
+//! cycles). Otherwise the candidate with the earliest deadline goes: a deadline at risk
+//! outranks a starved job and the job held for the next decision (which then competes
+//! again), since aging only bounds how long travel may pass a job over, and a deadline says
+//! how long it may take. A job with slack costs no travel: when no deadline is at risk the
+//! decision is the one above, memory and all. A job already late is always at risk, so the
+//! group runs in deadline order until none is; jobs without a deadline wait meanwhile.
+//! The estimate leaves out what the motion model does not know: the hand-over and the
+//! acknowledgement (STB/ACK, the polls between), a station slow to clear, relocations a
+//! later job will need, jobs that are not candidates now (behind another, a sequence member
+//! not yet due, a worse priority) and jobs yet to come. The margin is there for those.
 
 use std::collections::{HashMap, HashSet};
 
@@ -37,6 +54,7 @@ use super::putaway::{self, Want, spot};
 use super::rack::Rack;
 use super::refusal::picks_from;
 use crate::config::devices::{Planner, Station};
+use crate::domain::time::to_ms;
 use crate::domain::{Class, Job, JobSpec, Location, Zone};
 use crate::wire::motion::{Motion, Spot};
 
@@ -53,6 +71,8 @@ pub struct Plan {
     pub outbound: Station,
     /// Times a job may be passed over by younger ones before it goes next.
     pub max_overtaken: u32,
+    /// Seconds before its deadline by which the travel planner wants a job ended.
+    pub deadline_margin_s: u32,
 }
 
 /// What the planner remembers between decisions.
@@ -185,15 +205,18 @@ fn ends(spec: &JobSpec) -> (Option<Location>, Option<Location>) {
 }
 
 /// Chooses among `candidates` (the order rules' eligible jobs, best first) for the idle
-/// crane; `unfinished` is every job of the crane not ended; `memory` is updated.
+/// crane; `unfinished` is every job of the crane not ended; `memory` is updated; `now_ms`
+/// is the time (Unix ms) deadlines are weighed against, passed in so that the decision
+/// stays pure.
 pub fn decide(
     plan: &Plan,
     memory: &mut Memory,
     candidates: &[&Job],
     unfinished: &[&Job],
     rack: &Rack,
+    now_ms: i64,
 ) -> Decision {
-    let mut open: Vec<(&Job, Option<Location>)> = Vec::new();
+    let mut open: Vec<Candidate> = Vec::new();
     memory.waits.clear();
     for job in candidates {
         match check(job, rack, unfinished) {
@@ -225,7 +248,7 @@ pub fn decide(
         }
         placed
     });
-    let Some(&(job, near)) = pick(plan, memory, &open, &places) else { return Decision::Wait };
+    let Some(&(job, near)) = pick(plan, memory, &open, &places, now_ms) else { return Decision::Wait };
     if memory.due == Some(job.id) {
         memory.due = None;
     }
@@ -258,49 +281,75 @@ pub fn decide(
     }
 }
 
+/// A candidate: the job, and the near box to relocate first, if any.
+type Candidate<'a> = (&'a Job, Option<Location>);
+
 fn pick<'a>(
     plan: &Plan,
     memory: &mut Memory,
-    open: &'a [(&'a Job, Option<Location>)],
+    open: &'a [Candidate<'a>],
     places: &HashMap<i64, Location>,
-) -> Option<&'a (&'a Job, Option<Location>)> {
+    now_ms: i64,
+) -> Option<&'a Candidate<'a>> {
     let best = open.iter().map(|(j, _)| j.priority).min()?;
-    let group = open.iter().filter(|(j, _)| j.priority == best);
-    if plan.strategy == Planner::Fifo || best == 0 {
-        return group.min_by_key(|(j, _)| j.id);
-    }
-    if let Some(due) = memory.due.take().and_then(|id| group.clone().find(|(j, _)| j.id == id)) {
-        return Some(due);
+    let group: Vec<&Candidate> = open.iter().filter(|(j, _)| j.priority == best).collect();
+    let oldest = group.iter().copied().min_by_key(|(j, _)| j.id)?;
+    if plan.strategy == Planner::Fifo {
+        return Some(oldest);
     }
     let from = memory.at.unwrap_or(station_spot(plan.outbound));
-    let station = station_spot(plan.inbound);
     let travel = Travel { plan, places, from };
-    let starved = group
-        .clone()
-        .filter(|(j, _)| memory.overtaken.get(&j.id).copied().unwrap_or(0) >= plan.max_overtaken);
+    // Priority 0 goes by age and leaves a job due for later, as it always did.
+    let (choice, due) = if best == 0 {
+        (oldest, memory.due)
+    } else {
+        let due = memory.due.take();
+        by_travel(&travel, &memory.overtaken, &group, open, due)?
+    };
+    // A deadline at risk outranks the travel choice and the job it would have held for
+    // next (a starved one, or the one a relocation serves, then competes again).
+    if let Some(head) = at_risk(&travel, &group, choice, now_ms) {
+        return Some(head);
+    }
+    memory.due = due;
+    Some(choice)
+}
+
+/// The travel planner's choice among `group` (one priority), and the job it holds to go
+/// at the next decision, if any; `due` is the job the last decision held.
+fn by_travel<'a>(
+    travel: &Travel,
+    overtaken: &HashMap<i64, u32>,
+    group: &[&'a Candidate<'a>],
+    open: &'a [Candidate<'a>],
+    due: Option<i64>,
+) -> Option<(&'a Candidate<'a>, Option<i64>)> {
+    let plan = travel.plan;
+    if let Some(due) = due.and_then(|id| group.iter().find(|(j, _)| j.id == id)) {
+        return Some((due, None));
+    }
+    let station = station_spot(plan.inbound);
+    let starved =
+        group.iter().filter(|(j, _)| overtaken.get(&j.id).copied().unwrap_or(0) >= plan.max_overtaken);
     if let Some(oldest) = starved.min_by_key(|(j, _)| j.id) {
         // It goes next, or right after the one job that brings the crane nearer to it than
         // it stands now (a store whose put lies near a starved retrieve: a dual cycle).
         let target = travel.first(oldest);
-        let via = |c: &(&Job, Option<Location>)| {
-            travel.end(c).map(|e| travel.empty(c) + plan.motion.move_time(e, target))
-        };
+        let via = |c: &Candidate| travel.end(c).map(|e| travel.empty(c) + plan.motion.move_time(e, target));
         let lead = group
+            .iter()
             .filter(|c| c.0.id != oldest.0.id && c.1.is_none())
-            .filter_map(|c| Some((c, via(c)?)))
+            .filter_map(|c| Some((*c, via(c)?)))
             .min_by(|a, b| a.1.total_cmp(&b.1));
         return match lead {
-            Some((lead, cost)) if cost < travel.empty(oldest) => {
-                memory.due = Some(oldest.0.id);
-                Some(lead)
-            }
-            _ => Some(oldest),
+            Some((lead, cost)) if cost < travel.empty(oldest) => Some((lead, Some(oldest.0.id))),
+            _ => Some((oldest, None)),
         };
     }
     // The picks in the rack the open jobs will need (retrieves, moves, relocations).
     let picks: Vec<(i64, Spot)> =
         open.iter().map(|c| (c.0.id, travel.first(c))).filter(|(_, p)| *p != station).collect();
-    let cost = |c: &(&Job, Option<Location>)| {
+    let cost = |c: &Candidate| {
         // A job that ends in the rack (a store) also weighs the empty run from its end to
         // the nearest pick it leaves for next: that is what pairs a store with a retrieve.
         let end = travel.end(c);
@@ -315,7 +364,38 @@ fn pick<'a>(
             if next.is_finite() { next } else { plan.motion.move_time(end.unwrap_or(station), station) };
         travel.empty(c) + next
     };
-    group.min_by(|a, b| cost(a).total_cmp(&cost(b)).then(a.0.id.cmp(&b.0.id)))
+    let choice = group.iter().min_by(|a, b| cost(a).total_cmp(&cost(b)).then(a.0.id.cmp(&b.0.id)))?;
+    Some((choice, None))
+}
+
+/// The earliest-deadline candidate of `group`, if running `choice` first and then every
+/// candidate with a deadline in earliest-deadline order (each taking its [`Travel::estimate`],
+/// from `now_ms`) leaves one ending later than its deadline less the margin; None when the
+/// choice stands.
+fn at_risk<'a>(
+    travel: &Travel,
+    group: &[&'a Candidate<'a>],
+    choice: &'a Candidate<'a>,
+    now_ms: i64,
+) -> Option<&'a Candidate<'a>> {
+    let mut edf: Vec<(&Candidate, i64)> =
+        group.iter().filter_map(|c| Some((*c, to_ms(c.0.deadline?)))).collect();
+    edf.sort_by_key(|(c, deadline)| (*deadline, c.0.id));
+    let head = edf.first()?.0;
+    if head.0.id == choice.0.id {
+        return None;
+    }
+    let margin_ms = i64::from(travel.plan.deadline_margin_s) * 1000;
+    let rest = edf.iter().filter(|(c, _)| c.0.id != choice.0.id).map(|&(c, d)| (c, Some(d)));
+    let (mut at, mut ends_ms) = (travel.from, now_ms as f64);
+    for (c, deadline) in std::iter::once((choice, choice.0.deadline.map(to_ms))).chain(rest) {
+        let (secs, end) = travel.estimate(c, at);
+        (at, ends_ms) = (end, ends_ms + secs * 1000.0);
+        if deadline.is_some_and(|d| ends_ms > (d - margin_ms) as f64) {
+            return Some(head);
+        }
+    }
+    None
 }
 
 /// The crane's empty runs, from where it stands, for the travel planner.
@@ -327,7 +407,7 @@ struct Travel<'a> {
 
 impl Travel<'_> {
     /// Where the crane first goes for a candidate.
-    fn first(&self, (job, near): &(&Job, Option<Location>)) -> Spot {
+    fn first(&self, (job, near): &Candidate) -> Spot {
         pick_spot(self.plan, job, *near)
     }
 
@@ -335,7 +415,7 @@ impl Travel<'_> {
     /// the empty run from where the relocation puts the box back to its own pick; the
     /// relocation's fork cycles and loaded run are not counted, since they are the same
     /// whenever it runs.
-    fn empty(&self, c: &(&Job, Option<Location>)) -> f64 {
+    fn empty(&self, c: &Candidate) -> f64 {
         let motion = &self.plan.motion;
         let back = match (c.1, self.places.get(&c.0.id)) {
             (Some(_), Some(put)) => motion.move_time(spot(*put), pick_spot(self.plan, c.0, None)),
@@ -346,12 +426,47 @@ impl Travel<'_> {
 
     /// Where the crane stands once a candidate ends (None for one that needs a relocation
     /// first: the decision is the relocation).
-    fn end(&self, (job, near): &(&Job, Option<Location>)) -> Option<Spot> {
+    fn end(&self, (job, near): &Candidate) -> Option<Spot> {
         match (near, self.places.get(&job.id)) {
             (Some(_), _) => None,
             (None, Some(place)) => Some(spot(*place)),
             (None, None) => job.spec().map(|s| end_spot(self.plan, &s)),
         }
+    }
+
+    /// The crane seconds a candidate is estimated to take when it starts at `at`, and where
+    /// the crane then stands: its empty runs ([`Travel::empty`]), then a relocation's loaded
+    /// run and fork cycles if it needs one, then its own loaded run and a fork cycle at each
+    /// end (none for a travel). What the motion model says and nothing else: no hand-over
+    /// (STB/ACK, the polls between), no acknowledgement, no wait for a station to clear, no
+    /// relocation a later job will need, no job not among the candidates now.
+    fn estimate(&self, c: &Candidate, at: Spot) -> (f64, Spot) {
+        let (plan, motion) = (self.plan, &self.plan.motion);
+        let place = self.places.get(&c.0.id).copied();
+        let mut secs = Travel { from: at, ..*self }.empty(c);
+        if let (Some(near), Some(to)) = (c.1, place) {
+            secs += motion.move_time(spot(near), spot(to))
+                + motion.fork_time(near.position)
+                + motion.fork_time(to.position);
+        }
+        // A store left to rackd goes where it was placed (it never needs a relocation).
+        let spec = match (c.0.spec(), place) {
+            (Some(JobSpec::Putaway { .. }), Some(to)) => Some(JobSpec::Store { to }),
+            (spec, _) => spec,
+        };
+        let Some(spec) = spec else { return (secs, at) };
+        let station = |s: Station| (station_spot(s), 0);
+        let stock = |l: Location| (spot(l), l.position);
+        let transfer = match spec {
+            JobSpec::Store { to } => Some((station(plan.inbound), stock(to))),
+            JobSpec::Retrieve { from } => Some((stock(from), station(plan.outbound))),
+            JobSpec::Move { from, to } => Some((stock(from), stock(to))),
+            _ => None,
+        };
+        if let Some(((p, p_at), (q, q_at))) = transfer {
+            secs += motion.move_time(p, q) + motion.fork_time(p_at) + motion.fork_time(q_at);
+        }
+        (secs, end_spot(plan, &spec))
     }
 }
 

@@ -5,6 +5,7 @@ use std::collections::BTreeSet;
 use super::decide::{Decision, Memory, Plan, Verdict, check, decide};
 use super::rack::{Cell, Rack};
 use crate::config::devices::{Planner, Station};
+use crate::domain::time::from_ms;
 use crate::domain::{Job, JobSpec, Location, NewJob, Priority};
 use crate::wire::motion::{Motion, Spot};
 
@@ -46,12 +47,22 @@ fn plan(strategy: Planner) -> Plan {
         inbound: Station { row: 2, bay: 0, level: 1, side: 1 },
         outbound: Station { row: 1, bay: 0, level: 1, side: 1 },
         max_overtaken: 3,
+        deadline_margin_s: 30,
     }
 }
 
+/// When the tests decide (Unix ms).
+const NOW: i64 = 1_800_000_000_000;
+
 fn run(plan: &Plan, memory: &mut Memory, jobs: &[Job], rack: &Rack) -> Decision {
     let all: Vec<&Job> = jobs.iter().collect();
-    decide(plan, memory, &all, &all, rack)
+    decide(plan, memory, &all, &all, rack, NOW)
+}
+
+/// `job`, due `secs` seconds after [`NOW`].
+fn due(mut job: Job, secs: i64) -> Job {
+    job.deadline = Some(from_ms(NOW + secs * 1000));
+    job
 }
 
 #[test]
@@ -271,4 +282,150 @@ fn a_relocation_weighs_its_empty_runs_not_its_fork_cycles() {
         .collect();
     let mut memory = Memory { at: Some(from), ..Memory::default() };
     assert_eq!(run(&p, &mut memory, &jobs, &rack(&full)), Decision::Run(1));
+}
+
+/// Retrieve 1 (bay 3) is the travel choice of a crane at bay 2; retrieve 2 (bay 20, level 4)
+/// would end about 42 s from now if it went first, 64 s if it went after retrieve 1 (the
+/// motion model's defaults).
+fn near_and_far(far_due_s: i64) -> (Rack, [Job; 2], Memory) {
+    let r = rack(&[at(3, 1, 1), at(20, 4, 1)]);
+    let jobs = [
+        job(1, 10, JobSpec::Retrieve { from: at(3, 1, 1) }),
+        due(job(2, 10, JobSpec::Retrieve { from: at(20, 4, 1) }), far_due_s),
+    ];
+    (r, jobs, Memory { at: Some(Spot { bay: 2, level: 1 }), ..Memory::default() })
+}
+
+#[test]
+fn a_far_job_whose_deadline_is_at_risk_goes_before_a_near_one() {
+    let p = plan(Planner::Travel);
+    // Due in 85 s, less the 30 s margin: 55 s, and after retrieve 1 it would end at 64 s.
+    let (r, jobs, mut memory) = near_and_far(85);
+    assert_eq!(run(&p, &mut memory, &jobs, &r), Decision::Run(2));
+    assert_eq!(memory.at, Some(Spot { bay: 0, level: 1 }));
+    // Due in 120 s it has slack, and costs no travel: the near job goes first.
+    let (r, jobs, mut memory) = near_and_far(120);
+    assert_eq!(run(&p, &mut memory, &jobs, &r), Decision::Run(1));
+}
+
+#[test]
+fn the_deadline_margin_is_honoured() {
+    // Retrieve 2 due in 85 s would end at 64 s after retrieve 1: at risk only when the
+    // margin is more than 21 s.
+    for (margin, first) in [(0, 1), (15, 1), (25, 2), (30, 2)] {
+        let p = Plan { deadline_margin_s: margin, ..plan(Planner::Travel) };
+        let (r, jobs, mut memory) = near_and_far(85);
+        assert_eq!(run(&p, &mut memory, &jobs, &r), Decision::Run(first), "margin {margin} s");
+    }
+}
+
+#[test]
+fn slack_deadlines_leave_the_travel_decisions_as_they_were() {
+    // A stream of stores and retrieves (near positions, so the rack never holds one back),
+    // decided to the end twice: without deadlines, and with deadlines a day away in the
+    // opposite of the jobs' order. Every decision and what the planner remembers match.
+    let mut seed = 7_u32;
+    let mut draw = |n: u32| {
+        seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+        (seed >> 16) % n
+    };
+    let mut places: Vec<(u16, u16)> = (1..=20).flat_map(|b| (1..=4).map(move |l| (b, l))).collect();
+    let mut full = Vec::new();
+    let mut specs = Vec::new();
+    for i in 0..30 {
+        let (bay, level) = places.swap_remove(draw(places.len() as u32) as usize);
+        let l = at(bay, level, 1);
+        if i % 3 == 0 {
+            specs.push(JobSpec::Store { to: l });
+        } else {
+            full.push(l);
+            specs.push(JobSpec::Retrieve { from: l });
+        }
+    }
+    let r = rack(&full);
+    let p = plan(Planner::Travel);
+    let decisions = |deadlines: bool| {
+        let mut memory = Memory { at: Some(Spot { bay: 0, level: 1 }), ..Memory::default() };
+        let (mut queue, mut seen) = (Vec::new(), Vec::new());
+        let mut arrivals = (1..).zip(&specs);
+        loop {
+            // A queue of eight, topped up after each decision, then drained.
+            while queue.len() < 8
+                && let Some((id, spec)) = arrivals.next()
+            {
+                let new = job(id, 10, spec.clone());
+                queue.push(if deadlines { due(new, 86_400 - id) } else { new });
+            }
+            if queue.is_empty() {
+                return seen;
+            }
+            let Decision::Run(chosen) = run(&p, &mut memory, &queue, &r) else { panic!() };
+            queue.retain(|j| j.id != chosen);
+            let mut overtaken: Vec<(i64, u32)> = memory.overtaken.clone().into_iter().collect();
+            overtaken.sort();
+            seen.push((chosen, memory.at, memory.due, overtaken));
+        }
+    };
+    let plain = decisions(false);
+    assert_eq!(plain.len(), specs.len());
+    assert_eq!(decisions(true), plain);
+}
+
+#[test]
+fn jobs_at_risk_go_in_deadline_order() {
+    // None of them can make it; the one already late goes first, then the others by
+    // deadline, then the nearest job, which has none.
+    let r = rack(&[at(3, 1, 1), at(10, 1, 1), at(14, 2, 1), at(18, 3, 1), at(20, 4, 1)]);
+    let mut queue = vec![
+        job(1, 10, JobSpec::Retrieve { from: at(3, 1, 1) }),
+        due(job(2, 10, JobSpec::Retrieve { from: at(18, 3, 1) }), 60),
+        due(job(3, 10, JobSpec::Retrieve { from: at(10, 1, 1) }), 40),
+        due(job(4, 10, JobSpec::Retrieve { from: at(14, 2, 1) }), 50),
+        due(job(5, 10, JobSpec::Retrieve { from: at(20, 4, 1) }), -10),
+    ];
+    let p = plan(Planner::Travel);
+    let mut memory = Memory { at: Some(Spot { bay: 2, level: 1 }), ..Memory::default() };
+    let mut ran = Vec::new();
+    while !queue.is_empty() {
+        let Decision::Run(chosen) = run(&p, &mut memory, &queue, &r) else { panic!() };
+        queue.retain(|j| j.id != chosen);
+        ran.push(chosen);
+    }
+    assert_eq!(ran, [5, 3, 4, 2, 1]);
+}
+
+#[test]
+fn priority_outranks_a_deadline() {
+    // Retrieve 2 is late, and nearer, but retrieve 1 has the better priority.
+    let r = rack(&[at(18, 1, 1), at(2, 1, 1)]);
+    let jobs = [
+        job(1, 5, JobSpec::Retrieve { from: at(18, 1, 1) }),
+        due(job(2, 10, JobSpec::Retrieve { from: at(2, 1, 1) }), -60),
+    ];
+    let mut memory = Memory { at: Some(Spot { bay: 2, level: 1 }), ..Memory::default() };
+    assert_eq!(run(&plan(Planner::Travel), &mut memory, &jobs, &r), Decision::Run(1));
+}
+
+#[test]
+fn a_deadline_at_risk_outranks_a_starved_job_but_not_fifo() {
+    // Retrieve 1 is starved. Retrieve 2, due in 80 s less 30, ends 27 s from now if it goes
+    // first, 70 s after retrieve 1: it goes first.
+    let r = rack(&[at(20, 4, 1), at(5, 1, 1), at(2, 1, 1)]);
+    let jobs = [
+        job(1, 10, JobSpec::Retrieve { from: at(20, 4, 1) }),
+        due(job(2, 10, JobSpec::Retrieve { from: at(5, 1, 1) }), 80),
+        job(3, 10, JobSpec::Retrieve { from: at(2, 1, 1) }),
+    ];
+    let start = || {
+        let overtaken = [(1, 3)].into_iter().collect();
+        Memory { at: Some(Spot { bay: 0, level: 1 }), overtaken, ..Memory::default() }
+    };
+    let mut memory = start();
+    assert_eq!(run(&plan(Planner::Travel), &mut memory, &jobs, &r), Decision::Run(2));
+    assert_eq!(memory.due, None);
+    // Due in 120 s it has slack: the starved job goes. Fifo weighs no deadline: the oldest.
+    let mut slack = jobs.clone();
+    slack[1] = due(slack[1].clone(), 120);
+    assert_eq!(run(&plan(Planner::Travel), &mut start(), &slack, &r), Decision::Run(1));
+    assert_eq!(run(&plan(Planner::Fifo), &mut start(), &jobs, &r), Decision::Run(1));
 }

@@ -11,6 +11,12 @@
 //! - **Sequencing** ([`decide::decide`]): `planner = "travel"` (the default) takes, among
 //!   the jobs of the best priority, the one the crane reaches with the least empty travel
 //!   (dual command cycles), with aging; `"fifo"` keeps priority then age.
+//! - **Deadlines** (`travel` only, within the best priority): the travel choice stands
+//!   while every job with a deadline can still end by it less `deadline_margin_s`, run
+//!   earliest deadline first after it, each at its cycle as the motion model estimates it
+//!   (no hand-over, no station waits, no jobs yet to come); otherwise the earliest deadline
+//!   goes first, before a starved job. With slack, deadlines cost no travel. "Now" is the
+//!   clock the writer stamps with, read here and passed to the pure decision.
 //!
 //! The rack it reads is rackd's location model (occupancy and reservations), read afresh
 //! for each decision: a crane decides once a cycle, so a read of its aisles is cheap next
@@ -34,7 +40,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use crate::config::devices::CraneConfig;
-use crate::domain::Job;
+use crate::domain::{Job, time};
 use crate::store::{Pool, locations};
 use decide::Memory;
 pub use decide::{Decision, Plan, Wait};
@@ -68,6 +74,7 @@ impl CranePlanner {
             inbound: crane.inbound_station,
             outbound: crane.outbound_station,
             max_overtaken: crane.max_overtaken,
+            deadline_margin_s: crane.deadline_margin_s,
         };
         let deep = deep.iter().copied().filter(|a| crane.aisles.contains(a)).collect();
         let memory = Mutex::default();
@@ -107,10 +114,12 @@ impl CranePlanner {
     }
 
     /// What the idle crane does next, of `candidates` (the order rules' eligible jobs,
-    /// best first) given every unfinished job of the crane and the rack.
+    /// best first) given every unfinished job of the crane and the rack; deadlines are
+    /// weighed against now on the clock the writer stamps with ([`time::now_ms`]).
     pub fn decide(&self, candidates: &[&Job], unfinished: &[&Job], rack: &Rack) -> Decision {
+        let now_ms = time::now_ms();
         let mut memory = self.memory.lock().unwrap_or_else(|p| p.into_inner());
-        decide::decide(&self.plan, &mut memory, candidates, unfinished, rack)
+        decide::decide(&self.plan, &mut memory, candidates, unfinished, rack, now_ms)
     }
 
     /// Why the last decision left `job` waiting, if it did.

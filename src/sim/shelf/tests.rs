@@ -179,7 +179,7 @@ async fn link_faults_apply_from_the_start_and_change_at_run_time() {
         o.faults.drop_rate = 1.0;
         let sim = ShelfSim::start("127.0.0.1:0", o).await.unwrap();
         let mut device = sim.link(&sim.local_addr().unwrap().to_string());
-        (device.timeout, device.retries) = (Duration::from_millis(50), 0);
+        (device.timeout, device.retries) = (Duration::from_millis(400), 0);
         let plc = link::connect(&device).await.unwrap();
         let base = plc.parse_address(sim.base()).unwrap();
         assert!(matches!(plc.read_words(&base, 1).await, Err(PlcError::Timeout { .. })), "{protocol}");

@@ -134,6 +134,9 @@ impl From<sqlx::Error> for Failed {
 
 /// How the attempt to commit a group's kept commands in one transaction went (rolled back
 /// unless committed).
+// One a group, alive until the group is answered: its size does not matter, and boxing what
+// the group did would cost an allocation per commit.
+#[allow(clippy::large_enum_variant)]
 enum Attempt {
     /// Committed: their answers, what the group did, and whether it read a reference stored
     /// already.

@@ -544,7 +544,8 @@ async fn save_sequences(db: &mut Conn, count: &mut usize, group: &Group) -> Resu
         })
     });
     static MEMBERS: LazyLock<[String; 2]> = LazyLock::new(|| {
-        [Engine::Sqlite, Engine::Postgres].map(|e| e.insert_json("sequence_members", &["name", "position", "job"]))
+        [Engine::Sqlite, Engine::Postgres]
+            .map(|e| e.insert_json("sequence_members", &["name", "position", "job"]))
     });
     #[derive(Serialize)]
     struct MemberOut<'a> {
@@ -553,10 +554,14 @@ async fn save_sequences(db: &mut Conn, count: &mut usize, group: &Group) -> Resu
         job: i64,
     }
     let at = usize::from(db.engine() == Engine::Postgres);
-    let rows: Vec<_> = group.sequences_changed.iter().filter_map(|n| group.sequences.get(n)).map(|s| &s.row).collect();
+    let rows: Vec<_> =
+        group.sequences_changed.iter().filter_map(|n| group.sequences.get(n)).map(|s| &s.row).collect();
     write(db, count, &ROWS[at], &rows).await?;
-    let members: Vec<MemberOut> =
-        group.new_members.iter().map(|(name, position, job)| MemberOut { name, position: *position, job: *job }).collect();
+    let members: Vec<MemberOut> = group
+        .new_members
+        .iter()
+        .map(|(name, position, job)| MemberOut { name, position: *position, job: *job })
+        .collect();
     write(db, count, &MEMBERS[at], &members).await
 }
 

@@ -32,6 +32,11 @@ async fn every_request_example_is_accepted_by_the_demo_site() {
         app.get("/api/v1/devices/tower1").await.1["online"] == true
     })
     .await;
+    // `{name}` is `wms`: the webhook's, and a sequence's.
+    let member = serde_json::json!({"kind": "travel", "to": {"aisle": 1, "row": 1, "bay": 1, "level": 1, "position": 1},
+        "sequence": {"name": "wms", "position": 1}});
+    let (status, joined) = app.post("/api/v1/jobs", &member).await;
+    assert_eq!(status, 201, "{joined}");
     let doc: serde_json::Value = serde_json::from_str(&rackd::api::openapi().to_json().unwrap()).unwrap();
     let mut tried = 0;
     for (path, item) in doc["paths"].as_object().unwrap() {

@@ -161,6 +161,36 @@ async fn the_first_screen_shows_what_needs_attention() {
                 over19: m.left <= bay19.right && m.right >= bay19.left};";
     let marker = browser.js(script).await;
     assert_eq!(marker, json!({"inside": true, "covered": 0, "over19": true}), "the crane's label at bay 19");
+    // Also when the page never saw the crane at the put: it draws once per frame from the
+    // newest status, and a loaded machine can skip the whole put (the crane goes from
+    // travelling there to idle, its job completed).
+    let script = "const done = arguments[arguments.length - 1];
+        Promise.all([import('/dashboard/model.js'), import('/dashboard/crane.js')]).then(([{ Model }, { Cranes }]) => {
+            const model = new Model();
+            const cranes = new Cranes(model);
+            const div = () => document.createElement('div');
+            const lane = {marker: div(), track: div(), mast: div(), info: div(), bays: 20};
+            lane.marker.append(document.createElement('span'));
+            const to = {aisle: 2, row: 1, bay: 19, level: 4, position: 1};
+            const job = (seq, state) => model.applyEvent({seq, type: 'job.updated', data: {id: 1, kind: 'store', device: 'c1', state, to, updated_at: new Date(seq * 1000).toISOString()}});
+            const crane = (action_state, task, travel) => ({id: 'c1', online: true, crane: {action_state, action: '', task, travel_position: travel, lift_position: travel / 10, load: false}});
+            const seen = [];
+            job(1, 'running');
+            for (const state of [2, 5, 12]) {
+                cranes.draw(lane, crane(state, 1, 0));
+                seen.push(lane.marker.textContent);
+            }
+            job(2, 'completed');
+            cranes.draw(lane, crane(0, 0, 19000));
+            seen.push(lane.marker.textContent);
+            done(seen);
+        });";
+    let seen = browser.client.execute_async(script, vec![]).await.unwrap();
+    assert_eq!(
+        seen,
+        json!(["c1 · P&D", "c1 · P&D", "c1 · P&D → bay 19 L4", "c1 · bay 19 L4"]),
+        "an idle crane is drawn where its completed job put the load"
+    );
     browser
         .js("document.querySelector('[data-aisle=\"2\"] .lane-wrap').scrollIntoView({block: 'center'})")
         .await;

@@ -6,7 +6,7 @@
 //! found on the PATH or at `$CHROMIUM` and `$CHROMEDRIVER`; without them the tests fail,
 //! unless `RACKD_SKIP_BROWSER=1` is set, which skips them loudly. Screenshots are kept in
 //! `target/artefacts/` (`dashboard.png` from the main test, `first-screen-*.png`,
-//! `dashboard-tablet.png`, `dashboard-stale.png`, ...).
+//! `dashboard-tablet.png`, `dashboard-stale.png`, `dashboard-orders.png`, ...).
 //!
 //! `control.rs` covers what the page shows of issue 14's API (waiting reasons, KPIs,
 //! acknowledging alarms, `whoami`): it passes once that API is served.
@@ -16,6 +16,7 @@ mod actions;
 mod control;
 mod keys;
 mod layout;
+mod orders;
 mod reload;
 mod store;
 mod webhooks;
@@ -34,7 +35,6 @@ use serde_json::{Value, json};
 
 use crate::support;
 use crate::support::held::HeldPort;
-use crate::support::listening;
 use crate::support::{TestApp, eventually, try_eventually_every};
 
 /// The demo site, fast: a shelf task takes 200 ms, a crane transfer 16 x 40 ms.
@@ -158,21 +158,7 @@ impl Browser {
             panic!("{what} (or set RACKD_SKIP_BROWSER=1 to skip them)");
         };
         let turn = ONE_AT_A_TIME.lock().await;
-        // Port 0: chromedriver binds a free port and says which (see `support::listening`).
-        let log_path = artefacts().join("chromedriver.log");
-        let log = std::fs::File::create(&log_path).unwrap();
-        let mut command = Command::new(&driver_path);
-        command.arg("--port=0").stdout(log.try_clone().unwrap()).stderr(log);
-        // Its own process group, so that the browser it starts can be killed with it.
-        std::os::unix::process::CommandExt::process_group(&mut command, 0);
-        let mut driver =
-            Driver(command.spawn().unwrap_or_else(|e| panic!("starting {}: {e}", driver_path.display())));
-        let port = listening::announced(&log_path, &mut driver.0, |line| {
-            let port = line.split("started successfully on port ").nth(1)?.trim_end_matches(['.', ' ']);
-            Some(std::net::SocketAddr::from(([127, 0, 0, 1], port.parse().ok()?)))
-        })
-        .await
-        .port();
+        let (driver, port) = start_driver(&driver_path).await;
         let profile = tempfile::tempdir().unwrap();
         let client = connect(port, &chromium, profile.path()).await;
         client.set_window_size(1680, 1400).await.unwrap();
@@ -338,6 +324,49 @@ impl Drop for Driver {
         let _ = self.0.kill();
         let _ = self.0.wait();
     }
+}
+
+/// Starts chromedriver on a free port it chooses and says (see `support::listening`). Port
+/// 0 gives it a free IPv6 port, which it then binds on IPv4 too: when another process holds
+/// that number on IPv4 it exits ("IPv4 port not available"), and it is started again.
+async fn start_driver(driver_path: &std::path::Path) -> (Driver, u16) {
+    let log_path = artefacts().join("chromedriver.log");
+    for _ in 0..5 {
+        let log = std::fs::File::create(&log_path).unwrap();
+        let mut command = Command::new(driver_path);
+        command.arg("--port=0").stdout(log.try_clone().unwrap()).stderr(log);
+        // Its own process group, so that the browser it starts can be killed with it.
+        std::os::unix::process::CommandExt::process_group(&mut command, 0);
+        let mut driver =
+            Driver(command.spawn().unwrap_or_else(|e| panic!("starting {}: {e}", driver_path.display())));
+        let said = crate::support::eventually(
+            "chromedriver to say where it listens",
+            Duration::from_secs(20),
+            async || {
+                let text = std::fs::read_to_string(&log_path).unwrap_or_default();
+                let port = text.lines().find_map(|line| {
+                    line.split("started successfully on port ")
+                        .nth(1)?
+                        .trim_end_matches(['.', ' '])
+                        .parse::<u16>()
+                        .ok()
+                });
+                match (port, driver.0.try_wait()) {
+                    (Some(port), _) => Ok(Some(port)),
+                    (None, Ok(Some(_))) if text.contains("port not available") => Ok(None),
+                    (None, Ok(Some(status))) => {
+                        panic!("chromedriver ended ({status}) before it listened; its log:\n{text}")
+                    }
+                    (None, _) => Err(text),
+                }
+            },
+        )
+        .await;
+        if let Some(port) = said {
+            return (driver, port);
+        }
+    }
+    panic!("chromedriver found no free port in 5 starts; see {}", log_path.display())
 }
 
 /// Waits for chromedriver to listen, then opens a session with a headless, offline Chromium.

@@ -1,6 +1,7 @@
 //! Orders end to end (issue 52): sequences, deadlines and dependencies, over the real crane
 //! simulators, and the API's refusals on both engines.
 
+mod deadline;
 mod dependency;
 mod refusals;
 mod sequence;

@@ -43,8 +43,8 @@ async fn a_node_runs_on_a_newer_compatible_schema_and_leaves_it_as_it_is() {
     let dir = tempfile::tempdir().unwrap();
     let db = Database::Sqlite(dir.path().join("rackd.db"));
     let this = Known::new(Engine::Sqlite.migrator()).latest();
-    let (next, version) = newer("-- compatible-from: 11\nALTER TABLE jobs ADD COLUMN note TEXT;");
-    assert_eq!(this, 11, "the line above names this release's schema");
+    let (next, version) = newer("-- compatible-from: 15\nALTER TABLE jobs ADD COLUMN note TEXT;");
+    assert_eq!(this, 15, "the line above names this release's schema");
     let (pool, found) = open(&db, &next).await.expect("the newer node migrates");
     assert_eq!(found.applied.last(), Some(&version));
     let before = applied(&pool).await;
@@ -77,19 +77,19 @@ async fn a_node_refuses_a_newer_schema_marked_incompatible() {
     let dir = tempfile::tempdir().unwrap();
     let db = Database::Sqlite(dir.path().join("rackd.db"));
     // A newer migration that says only nodes knowing it may run on it.
-    let (next, version) = newer("-- compatible-from: 12\nALTER TABLE jobs RENAME COLUMN barcode TO box;");
-    assert_eq!(version, 12);
+    let (next, version) = newer("-- compatible-from: 16\nALTER TABLE jobs RENAME COLUMN barcode TO box;");
+    assert_eq!(version, 16);
     open(&db, &next).await.expect("the newer node migrates").0.close().await;
 
     let Err(e) = open(&db, &Known::new(Engine::Sqlite.migrator())).await else {
         panic!("an incompatible schema opened")
     };
-    assert!(matches!(e, OpenError::Schema(SchemaError::Incompatible { version: 12, .. })), "{e:?}");
+    assert!(matches!(e, OpenError::Schema(SchemaError::Incompatible { version: 16, .. })), "{e:?}");
     assert_eq!(
         e.to_string(),
-        "migrating the schema: the database holds migration 12 (notes on jobs), newer than this rackd knows \
-         (schema 11), and it says nodes run on it from schema 12 on: upgrade this node to a release that knows \
-         migration 12"
+        "migrating the schema: the database holds migration 16 (notes on jobs), newer than this rackd knows \
+         (schema 15), and it says nodes run on it from schema 16 on: upgrade this node to a release that knows \
+         migration 16"
     );
 }
 

@@ -18,13 +18,13 @@ use crate::domain::report::path;
 use crate::domain::time::{from_ms, to_ms};
 use crate::domain::{Failure, JobState, LightColor, Location, LocationLock, Pause, Transition, Who};
 use crate::store::alarms;
-use crate::store::sequences;
 use crate::store::controls::AuditEntry;
 use crate::store::counts::Counts;
 use crate::store::events::StoredEvent;
 use crate::store::jobs::{Job, NewJob};
 use crate::store::locations::{self, LocationState};
 use crate::store::rollups::{self, fold::End};
+use crate::store::sequences;
 
 /// What the writer answers for one command.
 // One answer per command of a group, alive until it is sent: their size does not matter,

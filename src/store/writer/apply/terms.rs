@@ -23,7 +23,11 @@ pub(super) struct Staged {
 impl Group {
     /// Checks the terms of a submission's new jobs (`created`, with their requests' index in
     /// `jobs`): nothing is changed until every one is good.
-    pub(super) fn check_terms(&self, jobs: &[NewJob], created: &[(usize, &Job)]) -> Result<Staged, WriteError> {
+    pub(super) fn check_terms(
+        &self,
+        jobs: &[NewJob],
+        created: &[(usize, &Job)],
+    ) -> Result<Staged, WriteError> {
         self.check_after(jobs, created)?;
         let mut staged: BTreeMap<String, Stored> = BTreeMap::new();
         for &(i, job) in created {
@@ -68,7 +72,9 @@ impl Group {
             }
             if jobs[i].terms.last {
                 if let Some((&after, _)) = seq.members.range(position..).next() {
-                    return refuse(format!("position {position} cannot be the last: position {after} is posted"));
+                    return refuse(format!(
+                        "position {position} cannot be the last: position {after} is posted"
+                    ));
                 }
                 if let Some(last) = seq.row.last.filter(|&l| l != i64::from(position)) {
                     return refuse(format!("its last position is {last}, not {position}"));
@@ -113,8 +119,10 @@ impl Group {
         for &(start, _) in created {
             let mut path: Vec<usize> = Vec::new();
             if let Some(cycle) = cycle_from(start, jobs, &here, &mut path, &mut done) {
-                let names: Vec<String> =
-                    cycle.iter().map(|&i| format!("{:?}", jobs[i].reference.as_deref().unwrap_or("?"))).collect();
+                let names: Vec<String> = cycle
+                    .iter()
+                    .map(|&i| format!("{:?}", jobs[i].reference.as_deref().unwrap_or("?")))
+                    .collect();
                 return Err(WriteError::DependencyCycle(format!(
                     "jobs wait for each other in a circle: {}",
                     names.join(" -> ")
