@@ -10,7 +10,7 @@
 //!                                               [--capture on|off|both [--rounds 3]]
 //! cargo run --release --example bench -- crane  [--jobs 200] [--backlog 30] [--fill 0.5] [--time-scale 200] [--seed 7]
 //! cargo run --release --example bench -- site   [--aisles 1,10,40] [--jobs 30] [--backlog 8] [--time-scale 20] [--seed 7]
-//!                                               [--slack 2] [--tight 0.2] [--deadlines 0.4] [--sequenced 0.5] [--poll-ms 200]
+//!                                               [--slack 40] [--tight 0.2] [--deadlines 0.4] [--sequenced 0.5] [--poll-ms 200]
 //! cargo run --release --example bench -- history [--jobs 10000000] [--days 365] [--database sqlite|postgres|URL]
 //! cargo run --release --example bench -- webhooks [--rate 200] [--seconds 5] [--backlog 20000] [--round-trips 10000]
 //! cargo run --release --example bench -- capture [--downloads 50] [--ring-mib 64]

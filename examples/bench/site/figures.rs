@@ -241,7 +241,7 @@ fn latency(run: &Run, timeline: &Timeline, workload: &Workload) -> Histogram<u64
 
 /// When a sequence member may go by the rule across aisles, in a run that posts sequences.
 fn released_after(run: &Run, timeline: &Timeline, workload: &Workload, j: usize) -> Option<Instant> {
-    let member = workload.jobs[j].member.filter(|m| run.mode == Mode::Orders && run.fields && m.position > 1)?;
+    let member = workload.jobs[j].member.filter(|m| run.mode == Mode::Orders && m.position > 1)?;
     let sequence = &workload.sequences[member.sequence];
     let before = sequence.members[member.position as usize - 2];
     let station = workload.station(sequence.station);

@@ -11,8 +11,8 @@ use super::SiteArgs;
 /// The runs of one aisle count, in [`Mode::ALL`]'s order.
 type Runs = Vec<(Run, Figures)>;
 
-/// The machine and what rackd takes.
-pub fn machine(args: &SiteArgs, fields: bool) {
+/// The machine and the time scale.
+pub fn machine(args: &SiteArgs) {
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     let load: Vec<&str> = load.split_whitespace().take(3).collect();
     println!(
@@ -24,11 +24,6 @@ pub fn machine(args: &SiteArgs, fields: bool) {
         args.poll_ms as f64 / args.time_scale,
         500.0 / args.time_scale,
     );
-    if !fields {
-        println!(
-            "rackd takes no `sequence` or `deadline` yet: every run posts plain jobs, so all three are the travel planner alone"
-        );
-    }
 }
 
 /// One aisle count's workload and the machines' bound.

@@ -63,8 +63,6 @@ pub struct Crane {
 pub struct Run {
     /// The mode.
     pub mode: Mode,
-    /// Whether the sequences and deadlines were posted (rackd takes them).
-    pub fields: bool,
     /// The clock of the run.
     pub clock: Clock,
     /// From the first post to the last job's end.
@@ -87,7 +85,6 @@ pub struct Run {
 pub async fn one(
     workload: &Arc<Workload>,
     mode: Mode,
-    fields: bool,
     args: &SiteArgs,
     runtimes: &Runtimes,
 ) -> anyhow::Result<Run> {
@@ -129,7 +126,7 @@ pub async fn one(
     let before = Cpu::now()?;
     let stream = {
         let (base, backlog, workload) = (base.clone(), args.backlog, workload.clone());
-        runtimes.wms.spawn(async move { wms::run(base, &workload, mode, fields, backlog, clock).await })
+        runtimes.wms.spawn(async move { wms::run(base, &workload, mode, backlog, clock).await })
     };
     let jobs = stream.await?;
     let wall = clock.start.elapsed();
@@ -142,7 +139,7 @@ pub async fn one(
     for sim in sims {
         runtimes.sims.spawn(sim.shutdown()).await?;
     }
-    Ok(Run { mode, fields, clock, wall, jobs, cranes, idle, cpu, refused, violations })
+    Ok(Run { mode, clock, wall, jobs, cranes, idle, cpu, refused, violations })
 }
 
 /// rackd's configuration: the aisles, one crane each, the stations and their transit
@@ -173,6 +170,8 @@ fn config(workload: &Workload, args: &SiteArgs, sims: &[CraneSim], dir: &std::pa
             let mut crane = CraneConfig::new(&format!("crane{aisle}"), &sim.local_addr().to_string(), vec![aisle]);
             (crane.poll_ms, crane.heartbeat_ms) = (scaled(args.poll_ms), scaled(crane.heartbeat_ms));
             crane.motion = faster(Motion::default(), scale);
+            // Whole seconds: 30 s at the site's pace is 1.5 s at x20, taken as 2 (40 s simulated).
+            crane.deadline_margin_s = (f64::from(crane.deadline_margin_s) / scale).round() as u32;
             crane.into()
         })
         .collect();

@@ -65,7 +65,6 @@ pub async fn run(
     base: String,
     workload: &Workload,
     mode: Mode,
-    fields: bool,
     backlog: usize,
     clock: Clock,
 ) -> anyhow::Result<Vec<Posted>> {
@@ -107,7 +106,7 @@ pub async fn run(
         let deadline = |j: &Job| j.deadline.map(|d| clock.sim(sent) + d.allowance);
         let bodies: Vec<Value> = members
             .iter()
-            .map(|&j| request(workload, j, mode, fields, deadline(&workload.jobs[j]).map(|s| clock.wall_at(s))))
+            .map(|&j| request(workload, j, mode, deadline(&workload.jobs[j]).map(|s| clock.wall_at(s))))
             .collect();
         let ids = if let [body] = bodies.as_slice() {
             let r = client.post(format!("{base}/api/v1/jobs")).json(body).send().await?;
@@ -161,8 +160,8 @@ async fn next_end(
 }
 
 /// Job `j` as the WMS posts it in `mode`: with its sequence and deadline when the mode
-/// posts them and rackd takes them (`fields`).
-fn request(workload: &Workload, j: usize, mode: Mode, fields: bool, deadline: Option<OffsetDateTime>) -> Value {
+/// posts them.
+fn request(workload: &Workload, j: usize, mode: Mode, deadline: Option<OffsetDateTime>) -> Value {
     let job = &workload.jobs[j];
     let at = |[row, bay, level, side]: [u16; 4]| {
         json!({"aisle": job.aisle, "row": row, "bay": bay, "level": level, "position": side})
@@ -173,9 +172,6 @@ fn request(workload: &Workload, j: usize, mode: Mode, fields: bool, deadline: Op
     };
     body["reference"] = json!(format!("J{j}"));
     body["barcode"] = json!(job.barcode);
-    if !fields {
-        return body;
-    }
     if let (Some(d), Some(at)) = (job.deadline, deadline)
         && mode.posts(&d)
     {

@@ -27,8 +27,9 @@ const AISLE_PITCH_M: f64 = 3.5;
 const TRANSIT_FIXED_S: f64 = 15.0;
 /// The front conveyor's speed, m/s.
 const CONVEYOR_M_S: f64 = 0.5;
-/// A tight deadline leaves this many mean cycles beside the job's own seconds: enough to
-/// finish the task under way and run this one next, not enough to wait its turn.
+/// A tight deadline leaves this many mean jobs' time (the bound's seconds per job) beside
+/// the job's own seconds: enough to finish the task under way and run this one next, not
+/// enough to wait its turn.
 pub const TIGHT_CYCLES: f64 = 2.0;
 
 /// A pick station on the front conveyor, `x` metres from aisle 1's end of it.
@@ -62,8 +63,8 @@ pub enum Kind {
 pub struct Deadline {
     /// Simulated seconds from the post to the deadline.
     pub allowance: f64,
-    /// Tight ([`TIGHT_CYCLES`] mean cycles beside its own seconds), or with slack
-    /// (`--slack` times the time the crane takes to run its backlog).
+    /// Tight ([`TIGHT_CYCLES`] mean jobs' time beside its own seconds), or with slack
+    /// (`--slack` mean jobs' time).
     pub tight: bool,
 }
 
@@ -199,7 +200,7 @@ impl Workload {
                 continue;
             }
             let tight = rng.unit() < args.tight;
-            let beside = if tight { TIGHT_CYCLES * cycle } else { args.slack * args.backlog as f64 * cycle };
+            let beside = if tight { TIGHT_CYCLES * cycle } else { args.slack * cycle };
             job.deadline = Some(Deadline { allowance: job.leg.own_secs + beside, tight });
         }
     }
