@@ -208,8 +208,14 @@ impl Mode {
 /// Runs every aisle count of `--aisles` in every mode, and prints the figures and goals.
 pub async fn run(args: SiteArgs) -> anyhow::Result<()> {
     ensure!((0.0..=1.0).contains(&args.fill), "--fill is a share, 0..=1");
-    ensure!(args.backlog > 0 && args.time_scale > 0.0 && args.jobs > 1, "--backlog, --time-scale and --jobs must be above 0 (jobs above 1)");
-    ensure!(!args.aisles.is_empty() && args.aisles.iter().all(|&n| n > 0), "--aisles: one count or more, each above 0");
+    ensure!(
+        args.backlog > 0 && args.time_scale > 0.0 && args.jobs > 1,
+        "--backlog, --time-scale and --jobs must be above 0 (jobs above 1)"
+    );
+    ensure!(
+        !args.aisles.is_empty() && args.aisles.iter().all(|&n| n > 0),
+        "--aisles: one count or more, each above 0"
+    );
     let motion = Motion::default();
     report::machine(&args);
     let runtimes = Runtimes::new()?;

@@ -43,7 +43,8 @@ impl Cpu {
             else {
                 continue;
             };
-            let secs = stat.split_whitespace().next().and_then(|ns| ns.parse::<f64>().ok()).unwrap_or(0.0) / 1e9;
+            let secs =
+                stat.split_whitespace().next().and_then(|ns| ns.parse::<f64>().ok()).unwrap_or(0.0) / 1e9;
             if name.starts_with(SIMS) {
                 sims += secs;
             } else if name.starts_with(WMS) {
@@ -60,6 +61,10 @@ impl Cpu {
 
     /// What was used since `before`.
     pub fn since(&self, before: &Cpu) -> Cpu {
-        Cpu { process: self.process - before.process, sims: self.sims - before.sims, wms: self.wms - before.wms }
+        Cpu {
+            process: self.process - before.process,
+            sims: self.sims - before.sims,
+            wms: self.wms - before.wms,
+        }
     }
 }

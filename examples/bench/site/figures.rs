@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
 use hdrhistogram::Histogram;
-use rackd::sim::crane::TaskTimes;
+use rackd::sim::crane::{Pair, TaskKind, TaskTimes};
 use rackd::wire::motion::Motion;
 use rackd::wire::task_id_for;
 
@@ -42,6 +42,8 @@ pub struct Deadlines {
     pub at_least: usize,
     /// Missed by rackd, met by the offline schedule.
     pub offline_met: usize,
+    /// How late each missed deadline ended, simulated seconds (infinite: not completed).
+    pub late_by: Vec<f64>,
 }
 
 /// What one run comes to.
@@ -58,6 +60,9 @@ pub struct Figures {
     pub dispatch: f64,
     /// Metres of empty travel, over the site.
     pub empty_m: f64,
+    /// Of the stores, the share a retrieve followed (a dual cycle: the crane goes from the
+    /// put to the next pick instead of back to the station empty).
+    pub dual: f64,
     /// Inversions at the stations.
     pub inversions: Inversions,
     /// Deadlines.
@@ -105,6 +110,7 @@ impl Figures {
             busy: busy / f64::max(span, f64::EPSILON),
             dispatch: waited / 1e6 * run.clock.scale / f64::max(span, f64::EPSILON),
             empty_m: run.cranes.iter().map(|c| c.stats.travel_empty_m).sum(),
+            dual: dual_share(run),
             inversions: inversions(&timeline, workload),
             deadlines: deadlines(run, &timeline, workload, motion),
             latency,
@@ -156,32 +162,40 @@ fn inversions(timeline: &Timeline, workload: &Workload) -> Inversions {
                 (aisle, timeline.completed(j).unwrap_or(f64::INFINITY) + station.transit(aisle))
             })
             .collect();
+        let one = Inversions::of(&arrivals);
         let counts = found.by_station.entry(sequence.station).or_default();
-        for (p, &(aisle_p, at_p)) in arrivals.iter().enumerate() {
-            for &(aisle_q, at_q) in &arrivals[p + 1..] {
-                let within = aisle_p == aisle_q;
-                if within {
-                    found.pairs.0 += 1;
-                } else {
-                    found.pairs.1 += 1;
-                }
-                if at_q < at_p {
-                    if within {
-                        (found.within, counts.0) = (found.within + 1, counts.0 + 1);
-                    } else {
-                        (found.across, counts.1) = (found.across + 1, counts.1 + 1);
-                    }
-                }
-            }
-        }
+        (counts.0, counts.1) = (counts.0 + one.within, counts.1 + one.across);
+        (found.within, found.across) = (found.within + one.within, found.across + one.across);
+        found.pairs = (found.pairs.0 + one.pairs.0, found.pairs.1 + one.pairs.1);
     }
     found
+}
+
+impl Inversions {
+    /// The inversions of one sequence whose members, position 1 first, come from these
+    /// aisles at these instants.
+    fn of(arrivals: &[(u16, f64)]) -> Inversions {
+        let mut found = Inversions::default();
+        for (p, &(aisle_p, at_p)) in arrivals.iter().enumerate() {
+            for &(aisle_q, at_q) in &arrivals[p + 1..] {
+                let (pairs, inverted) = if aisle_p == aisle_q {
+                    (&mut found.pairs.0, &mut found.within)
+                } else {
+                    (&mut found.pairs.1, &mut found.across)
+                };
+                *pairs += 1;
+                *inverted += usize::from(at_q < at_p);
+            }
+        }
+        found
+    }
 }
 
 fn deadlines(run: &Run, timeline: &Timeline, workload: &Workload, motion: &Motion) -> Deadlines {
     let mut found = Deadlines::default();
     for aisle in 1..=workload.aisles {
-        let mine: Vec<usize> = (0..workload.jobs.len()).filter(|&j| workload.jobs[j].aisle == aisle).collect();
+        let mine: Vec<usize> =
+            (0..workload.jobs.len()).filter(|&j| workload.jobs[j].aisle == aisle).collect();
         let with: Vec<(usize, f64)> =
             mine.iter().filter_map(|&j| run.jobs[j].deadline.map(|d| (j, d))).collect();
         let due: Vec<Due> = with
@@ -189,8 +203,10 @@ fn deadlines(run: &Run, timeline: &Timeline, workload: &Workload, motion: &Motio
             .map(|&(j, deadline)| {
                 let leg = &workload.jobs[j].leg;
                 let ends = mine.iter().filter(|&&k| k != j).map(|&k| workload.jobs[k].leg.end);
-                let empty =
-                    ends.chain([STATION]).map(|end| motion.move_time(end, leg.start)).fold(f64::INFINITY, f64::min);
+                let empty = ends
+                    .chain([STATION])
+                    .map(|end| motion.move_time(end, leg.start))
+                    .fold(f64::INFINITY, f64::min);
                 Due { release: run.clock.sim(run.jobs[j].answered), deadline, work: leg.own_secs + empty }
             })
             .collect();
@@ -200,8 +216,9 @@ fn deadlines(run: &Run, timeline: &Timeline, workload: &Workload, motion: &Motio
         for (&(j, deadline), offline_missed) in with.iter().zip(&offline.missed) {
             let tight = workload.jobs[j].deadline.is_some_and(|d| d.tight);
             found.jobs = (found.jobs.0 + 1, found.jobs.1 + usize::from(tight));
-            let missed = timeline.completed(j).is_none_or(|end| end > deadline);
-            if missed {
+            let late_by = timeline.completed(j).map_or(f64::INFINITY, |end| end - deadline);
+            if late_by > 0.0 {
+                found.late_by.push(late_by);
                 if tight {
                     found.missed.0 += 1;
                 } else {
@@ -248,4 +265,34 @@ fn released_after(run: &Run, timeline: &Timeline, workload: &Workload, j: usize)
     let gap = station.transit(workload.jobs[before].aisle) - station.transit(workload.jobs[j].aisle);
     let at = timeline.completed_at(before)?;
     Some(at + std::time::Duration::from_secs_f64(gap.max(0.0) / run.clock.scale))
+}
+
+/// Stores followed by a retrieve, over all stores, on every crane.
+fn dual_share(run: &Run) -> f64 {
+    let (mut dual, mut stores) = (0, 0);
+    for crane in &run.cranes {
+        for (pair, runs) in &crane.stats.empty_by_pair {
+            if pair.before == Some(TaskKind::Store) {
+                stores += runs.tasks;
+                dual += runs.tasks
+                    * u32::from(*pair == Pair { before: Some(TaskKind::Store), next: TaskKind::Retrieve });
+            }
+        }
+    }
+    f64::from(dual) / f64::from(stores.max(1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_inversion_is_a_pair_whose_higher_position_arrives_first() {
+        // Positions 1..4: aisle 1 at 100, aisle 2 at 90 (before 1: across), aisle 1 at 95
+        // (before 1: within; after 2), aisle 3 at 200.
+        let found = Inversions::of(&[(1, 100.0), (2, 90.0), (1, 95.0), (3, 200.0)]);
+        assert_eq!((found.within, found.across, found.pairs), (1, 1, (1, 5)));
+        let none = Inversions::of(&[(1, 10.0), (2, 10.0), (1, 11.0)]);
+        assert_eq!((none.within, none.across), (0, 0), "arriving together is in order");
+    }
 }

@@ -69,7 +69,8 @@ fn edf(jobs: &[Due]) -> Vec<bool> {
             ready.push(by_release[next]);
             next += 1;
         }
-        let Some(k) = (0..ready.len()).min_by(|&a, &b| jobs[ready[a]].deadline.total_cmp(&jobs[ready[b]].deadline))
+        let Some(k) =
+            (0..ready.len()).min_by(|&a, &b| jobs[ready[a]].deadline.total_cmp(&jobs[ready[b]].deadline))
         else {
             match by_release.get(next) {
                 Some(&j) => {
@@ -155,7 +156,8 @@ mod tests {
 
     #[test]
     fn an_overloaded_window_drops_its_largest_jobs() {
-        let jobs = [due(0.0, 60.0, 30.0), due(0.0, 60.0, 30.0), due(0.0, 60.0, 25.0), due(100.0, 120.0, 30.0)];
+        let jobs =
+            [due(0.0, 60.0, 30.0), due(0.0, 60.0, 30.0), due(0.0, 60.0, 25.0), due(100.0, 120.0, 30.0)];
         let o = Offline::of(&jobs);
         assert_eq!(o.at_least, 2, "one of 0..60 and the last, alone");
         assert_eq!(o.misses(), 2);
@@ -189,7 +191,12 @@ mod tests {
                 .collect();
             let o = Offline::of(&jobs);
             let least = least(&jobs);
-            assert!(o.at_least <= least && least <= o.misses(), "{} <= {least} <= {}", o.at_least, o.misses());
+            assert!(
+                o.at_least <= least && least <= o.misses(),
+                "{} <= {least} <= {}",
+                o.at_least,
+                o.misses()
+            );
             tight.0 += usize::from(o.at_least == least);
             tight.1 += usize::from(o.misses() == least);
         }

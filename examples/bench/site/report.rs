@@ -3,10 +3,10 @@
 
 use std::sync::Arc;
 
+use super::SiteArgs;
 use super::figures::Figures;
 use super::run::Run;
 use super::workload::Workload;
-use super::SiteArgs;
 
 /// The runs of one aisle count, in [`Mode::ALL`]'s order.
 type Runs = Vec<(Run, Figures)>;
@@ -109,9 +109,12 @@ pub fn compare(runs: &Runs, w: &Workload, args: &SiteArgs) {
     let [(_, plain), (_, slack), (orders_run, orders)] = runs.as_slice() else { return };
     let ratio = |a: f64, b: f64| a / b.max(f64::EPSILON);
     println!(
-        "empty travel against travel only: slack only {:.3}x, orders {:.3}x",
+        "empty travel against travel only: slack only {:.3}x, orders {:.3}x; dual cycles (a retrieve after a store): {:.0}%, {:.0}%, {:.0}% of the stores",
         ratio(slack.empty_m, plain.empty_m),
-        ratio(orders.empty_m, plain.empty_m)
+        ratio(orders.empty_m, plain.empty_m),
+        100.0 * plain.dual,
+        100.0 * slack.dual,
+        100.0 * orders.dual,
     );
     for (name, f) in [("travel only", plain), ("orders", orders)] {
         let stations: Vec<String> = f
@@ -129,8 +132,14 @@ pub fn compare(runs: &Runs, w: &Workload, args: &SiteArgs) {
     }
     for (name, f) in [("travel only", plain), ("slack only", slack), ("orders", orders)] {
         let d = &f.deadlines;
+        let mut late = d.late_by.clone();
+        late.sort_by(f64::total_cmp);
+        let by = match late.as_slice() {
+            [] => String::new(),
+            l => format!(", late by {:.0} s (median) to {:.0} s", l[l.len() / 2], l[l.len() - 1]),
+        };
         println!(
-            "deadlines ({name}): {} of {} missed ({} of {} tight); offline schedule {} (no schedule fewer than {}); missed by rackd, met offline: {}",
+            "deadlines ({name}): {} of {} missed ({} of {} tight{by}); offline schedule {} (no schedule fewer than {}); missed by rackd, met offline: {}",
             d.missed.0 + d.missed.1,
             d.jobs.0,
             d.missed.0,
@@ -169,7 +178,10 @@ pub fn compare(runs: &Runs, w: &Workload, args: &SiteArgs) {
 /// The goals, each with its bound, over every aisle count run.
 pub fn goals(all: &[(Arc<Workload>, Runs)], args: &SiteArgs) {
     println!();
-    println!("rackd by the number of aisles (orders runs; CPU at x{}, and at the site's own pace):", args.time_scale);
+    println!(
+        "rackd by the number of aisles (orders runs; CPU at x{}, and at the site's own pace):",
+        args.time_scale
+    );
     println!(
         "{:>6} {:>10} {:>10} {:>10} {:>12} {:>22} {:>14}",
         "aisles", "CPU", "idle", "site pace", "CPU per job", "dispatch p50/p99 ms", "simulated s"

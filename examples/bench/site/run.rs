@@ -114,7 +114,11 @@ pub async fn one(
                     "occupied": true, "barcode": barcode})
             })
             .collect();
-        let r = client.put(format!("{base}/api/v1/locations")).json(&json!({"locations": locations})).send().await?;
+        let r = client
+            .put(format!("{base}/api/v1/locations"))
+            .json(&json!({"locations": locations}))
+            .send()
+            .await?;
         ensure!(r.status() == 200, "inventory of aisle {aisle}: {} {}", r.status(), r.text().await?);
     }
     online(&client, &base, sims.len()).await?;
@@ -145,11 +149,23 @@ pub async fn one(
 /// rackd's configuration: the aisles, one crane each, the stations and their transit
 /// times, every time of rackd's divided by the time scale (see the module doc of
 /// `site.rs`), and the motion it plans with in wall-clock seconds.
-fn config(workload: &Workload, args: &SiteArgs, sims: &[CraneSim], dir: &std::path::Path) -> anyhow::Result<Config> {
+fn config(
+    workload: &Workload,
+    args: &SiteArgs,
+    sims: &[CraneSim],
+    dir: &std::path::Path,
+) -> anyhow::Result<Config> {
     let scale = args.time_scale;
     let mut config = Config::default();
     config.site.aisles = (1..=workload.aisles)
-        .map(|aisle| AisleConfig { aisle, rows: 2, bays: args.bays, levels: args.levels, positions: 1, depth: 1 })
+        .map(|aisle| AisleConfig {
+            aisle,
+            rows: 2,
+            bays: args.bays,
+            levels: args.levels,
+            positions: 1,
+            depth: 1,
+        })
         .collect();
     // rackd holds a member back by the transit difference on the wall clock.
     config.site.stations = workload
@@ -158,7 +174,9 @@ fn config(workload: &Workload, args: &SiteArgs, sims: &[CraneSim], dir: &std::pa
         .map(|s| StationConfig {
             id: s.id,
             name: None,
-            transit: (1..=workload.aisles).map(|aisle| Transit { aisle, seconds: s.transit(aisle) / scale }).collect(),
+            transit: (1..=workload.aisles)
+                .map(|aisle| Transit { aisle, seconds: s.transit(aisle) / scale })
+                .collect(),
         })
         .collect();
     config.server.listen = "127.0.0.1:0".parse()?;
@@ -167,7 +185,8 @@ fn config(workload: &Workload, args: &SiteArgs, sims: &[CraneSim], dir: &std::pa
     config.devices = (1..)
         .zip(sims)
         .map(|(aisle, sim)| {
-            let mut crane = CraneConfig::new(&format!("crane{aisle}"), &sim.local_addr().to_string(), vec![aisle]);
+            let mut crane =
+                CraneConfig::new(&format!("crane{aisle}"), &sim.local_addr().to_string(), vec![aisle]);
             (crane.poll_ms, crane.heartbeat_ms) = (scaled(args.poll_ms), scaled(crane.heartbeat_ms));
             crane.motion = faster(Motion::default(), scale);
             // Whole seconds: 30 s at the site's pace is 1.5 s at x20, taken as 2 (40 s simulated).

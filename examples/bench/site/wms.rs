@@ -113,7 +113,11 @@ pub async fn run(
             ensure!(r.status() == 201, "POST {body}: {} {}", r.status(), r.text().await?);
             vec![r.json::<Value>().await?["id"].as_i64().context("a job id")?]
         } else {
-            let r = client.post(format!("{base}/api/v1/jobs/batch")).json(&json!({"jobs": bodies})).send().await?;
+            let r = client
+                .post(format!("{base}/api/v1/jobs/batch"))
+                .json(&json!({"jobs": bodies}))
+                .send()
+                .await?;
             ensure!(r.status() == 201, "POST batch {bodies:?}: {} {}", r.status(), r.text().await?);
             let answer: Value = r.json().await?;
             let jobs = answer["jobs"].as_array().context("a batch's jobs")?;
@@ -163,9 +167,7 @@ async fn next_end(
 /// posts them.
 fn request(workload: &Workload, j: usize, mode: Mode, deadline: Option<OffsetDateTime>) -> Value {
     let job = &workload.jobs[j];
-    let at = |[row, bay, level, side]: [u16; 4]| {
-        json!({"aisle": job.aisle, "row": row, "bay": bay, "level": level, "position": side})
-    };
+    let at = |[row, bay, level, side]: [u16; 4]| json!({"aisle": job.aisle, "row": row, "bay": bay, "level": level, "position": side});
     let mut body = match job.kind {
         Kind::Store(cell) => json!({"kind": "store", "to": at(cell)}),
         Kind::Retrieve(cell) => json!({"kind": "retrieve", "from": at(cell)}),

@@ -9,8 +9,9 @@
 //!   stores to places empty at the start: no place is named twice, so any order the
 //!   planner picks is possible.
 //! - **Sequences**: a `--sequenced` share of the retrieves, shuffled across the site and
-//!   cut into sequences of 2 to 6 members, each to one station; so a sequence's members
-//!   sit in several aisles whenever there are several.
+//!   cut into sequences of 2 to 6 members (the last takes what is left, up to 7), each
+//!   to one station; so most sequences have
+//!   members in several aisles when there are several.
 //! - **Deadlines** on a `--deadlines` share of the other jobs, set as the WMS posts the job
 //!   (see [`Deadline`]).
 //! - **Stations** along the front of the aisles (see [`Station`]).
@@ -149,7 +150,9 @@ impl Workload {
                 jobs: mine
                     .iter()
                     .map(|(kind, barcode)| match kind {
-                        Kind::Store(cell) => Order::Store { cell: *cell, barcode: barcode.clone(), putaway: false },
+                        Kind::Store(cell) => {
+                            Order::Store { cell: *cell, barcode: barcode.clone(), putaway: false }
+                        }
                         Kind::Retrieve(_) => Order::Retrieve(barcode.clone()),
                     })
                     .collect(),
@@ -177,7 +180,11 @@ impl Workload {
         shuffle(&mut sequenced, rng);
         let mut rest = sequenced.as_slice();
         while !rest.is_empty() {
-            let size = (2 + rng.below(5)).min(rest.len());
+            // The last takes what is left rather than leave one member alone.
+            let mut size = (2 + rng.below(5)).min(rest.len());
+            if rest.len() - size < 2 {
+                size = rest.len();
+            }
             let (members, tail) = rest.split_at(size);
             rest = tail;
             let sequence = self.sequences.len();
@@ -261,11 +268,99 @@ fn draw_aisle(
 /// Every place of an aisle: `[row, bay, level, 1]`.
 pub fn cells(args: &SiteArgs) -> impl Iterator<Item = [u16; 4]> + use<> {
     let (bays, levels) = (args.bays, args.levels);
-    (1..=2).flat_map(move |row| (1..=bays).flat_map(move |bay| (1..=levels).map(move |level| [row, bay, level, 1])))
+    (1..=2).flat_map(move |row| {
+        (1..=bays).flat_map(move |bay| (1..=levels).map(move |level| [row, bay, level, 1]))
+    })
 }
 
 fn shuffle<T>(items: &mut [T], rng: &mut SplitMix) {
     for i in (1..items.len()).rev() {
         items.swap(i, rng.below(i + 1));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::HashSet;
+
+    use super::*;
+    use crate::site::SiteArgs;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        site: SiteArgs,
+    }
+
+    fn args(extra: &[&str]) -> SiteArgs {
+        Cli::parse_from(["site"].iter().chain(extra)).site
+    }
+
+    #[test]
+    fn each_job_names_its_own_place_and_each_is_posted_once() {
+        let args = args(&["--jobs", "40", "--bays", "20", "--levels", "6"]);
+        let w = Workload::draw(&args, 10, &Motion::default());
+        assert_eq!((w.jobs.len(), w.stations.len()), (400, 1));
+        for aisle in 1..=10u16 {
+            let stock: HashSet<[u16; 4]> = w.stock[usize::from(aisle) - 1].iter().map(|(c, _)| *c).collect();
+            let mut named = HashSet::new();
+            for job in w.jobs.iter().filter(|j| j.aisle == aisle) {
+                let (cell, full) = match job.kind {
+                    Kind::Retrieve(cell) => (cell, true),
+                    Kind::Store(cell) => (cell, false),
+                };
+                assert_eq!(stock.contains(&cell), full, "a retrieve takes stock, a store an empty place");
+                assert!(named.insert(cell), "{cell:?} named twice in aisle {aisle}");
+            }
+        }
+        let mut posted = vec![0; w.jobs.len()];
+        for post in &w.posts {
+            match *post {
+                Post::Job(j) => posted[j] += 1,
+                Post::Sequence(s) => w.sequences[s].members.iter().for_each(|&j| posted[j] += 1),
+            }
+        }
+        assert!(posted.iter().all(|&n| n == 1));
+    }
+
+    #[test]
+    fn sequences_are_retrieves_over_several_aisles_and_deadlines_fall_outside_them() {
+        let w = Workload::draw(&args(&[]), 10, &Motion::default());
+        let (deadlines, tight, members) = w.counts();
+        assert!(members > 50 && deadlines > 50 && tight > 5, "{members} {deadlines} {tight}");
+        let mut spread = 0;
+        for s in &w.sequences {
+            let aisles: HashSet<u16> = s.members.iter().map(|&j| w.jobs[j].aisle).collect();
+            assert!((2..=7).contains(&s.members.len()), "{s:?}");
+            spread += usize::from(aisles.len() > 1);
+            for (k, &j) in s.members.iter().enumerate() {
+                let job = &w.jobs[j];
+                assert!(matches!(job.kind, Kind::Retrieve(_)) && job.deadline.is_none());
+                assert_eq!(job.member.map(|m| m.position), Some(k as u32 + 1));
+            }
+        }
+        assert!(
+            spread * 10 >= w.sequences.len() * 8,
+            "{spread} of {} over several aisles",
+            w.sequences.len()
+        );
+        let cycle = w.mean_cycle();
+        for job in w.jobs.iter().filter(|j| j.deadline.is_some()) {
+            let d = job.deadline.unwrap();
+            let beside = d.allowance - job.leg.own_secs;
+            let want = if d.tight { TIGHT_CYCLES * cycle } else { 40.0 * cycle };
+            assert!((beside - want).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn the_transit_grows_with_the_distance_along_the_front() {
+        let w = Workload::draw(&args(&["--jobs", "4"]), 40, &Motion::default());
+        assert_eq!(w.stations.len(), 4);
+        let s = &w.stations[0];
+        let near = (1..=40).min_by(|&a, &b| s.transit(a).total_cmp(&s.transit(b))).unwrap();
+        assert!(near <= 10 && s.transit(40) > s.transit(20), "station 1 sits by the first ten aisles");
+        assert!((s.transit(near + 1) - s.transit(near)).abs() <= AISLE_PITCH_M / CONVEYOR_M_S + 1e-9);
     }
 }
