@@ -45,7 +45,9 @@
 //!   the crane taking it (the dispatch latency, below, summed). The rest they waited for
 //!   work: nothing posted yet for the aisle, or only sequence members held back;
 //! - **empty m**: metres travelled with an empty platform, over the site (the simulators'
-//!   counters), printed after the table as each run's ratio to travel only;
+//!   counters), printed after the table as each run's ratio to travel only, beside the
+//!   share of stores a retrieve followed (dual cycles: from the put straight to the next
+//!   pick, rather than back to the station empty);
 //! - **inversions**: a retrieve of a sequence reaches its station at its crane's
 //!   completion plus its aisle's transit (`workload.rs`: 15 s, plus the distance along the
 //!   front, aisles 3.5 m apart, at 0.5 m/s). An inversion is a pair of members of one
@@ -53,9 +55,10 @@
 //!   one aisle) and across aisles, and by station;
 //! - **late (t/s)**: the deadlines missed, tight and with slack, of those the workload gives
 //!   (the same jobs in every run, posted or not): a job is late when its crane completes it
-//!   after its deadline. After the table, the offline schedule's (`site/offline.rs`), which
-//!   knows every job's post and deadline in advance: its misses, a lower bound on any
-//!   schedule's, and the jobs rackd missed that it meets;
+//!   after its deadline. After the table: how late they ended (median and most), and the
+//!   offline schedule's (`site/offline.rs`), which knows every job's post and deadline in
+//!   advance: its misses, a lower bound on any schedule's, and the jobs rackd missed that
+//!   it meets;
 //! - **latency**: the dispatch latency, in wall-clock milliseconds (p50/p99), from the
 //!   moment a job could have gone to its crane (posted, the crane done with the task
 //!   before, and in a run with sequences the member before it delivered and the transit
@@ -67,43 +70,49 @@
 //!   post), and at the site's own pace: the share divided by the scale, since each of
 //!   rackd's periods and jobs comes that many times as often.
 //!
-//! **Bounds, worked out first** (2 shared cores; release build; the costs measured by a
-//! first run at 1, 10 and 40 aisles with 6 jobs each, load average 12):
+//! **Bounds, worked out first** (2 shared cores, release build; the costs from a first run
+//! at 1, 10 and 40 aisles of 6 jobs each, load average 12):
 //! - *Can 40 simulators and rackd run on 2 cores, and at which scale?* A simulator ticks
-//!   every 20 ms / scale, at least every 1 ms, idle or not: at x20 and above, 1000 ticks a
-//!   second; 40 idle simulators took 6% of a core (1.5 µs a tick). rackd polls each crane
-//!   every `poll-ms / scale` and writes its heartbeat every 500 ms / scale: at x20, 100
+//!   every 20 ms / scale, at least every 1 ms, idle or not: 1000 ticks a second at x20 and
+//!   above; 40 idle simulators took 6% of a core (1.5 µs a tick). rackd polls each crane
+//!   every `--poll-ms` / scale and writes its heartbeat every 500 ms / scale: at x20, 100
 //!   reads and 40 writes a second per crane; idle, 1.0% of a core plus 0.12% per crane
-//!   (9 µs a request), 5.8% at 40. Running, 40 cranes complete 40 x 20 / 33 s = 24 jobs a
-//!   wall second at x20, and rackd spent 17 ms of CPU per job beyond its idle share (most of
-//!   it the cranes' status: each poll of a moving crane shows a new position, which is a
-//!   `device.updated` event and a commit): 5.8% + 24 x 1.7% = 47% of a core, 32% measured.
-//!   With the simulators' 7% and the WMS's, under half a core of two. At x100, rackd's
-//!   share would be five times that, over two cores: x20 it is, which also keeps a run of
-//!   30 jobs an aisle near a minute.
+//!   (9 µs a request): 5.8% at 40. At work, 40 cranes end 40 x 20 / 34 s = 24 jobs a wall
+//!   second at x20, and rackd spent 17 ms of CPU per job beyond its idle share. Most of it
+//!   is the cranes' status: each poll of a moving crane shows a new position, which is a
+//!   `device.updated` event and a commit (123 such events per job in a 2-aisle run, against
+//!   7 `job.updated`). So 5.8% + 24 x 1.7% = 47% of a core for rackd, 7% for the
+//!   simulators, and the WMS's little: half a core of two, room left for a loaded machine.
+//!   At x100, rackd's share would be five times that, more than both cores: x20 it is, which
+//!   also keeps a run of 30 jobs an aisle near a minute of wall time.
 //! - *Which scale keeps rackd's hand-over latency under 5% of a job?* A crane waits for
 //!   rackd from its completion to its next task: the poll that sees the completion (half a
 //!   poll on average), the commit of the outcome (its sync), the acknowledgement and the
 //!   poll that sees it cleared (one poll), the planner and the four-step hand-over (five
-//!   round trips): 1.5 polls + some 5 ms. A job takes 33 to 38 s here, 5% of it 1.7 s
-//!   simulated. At the site's pace (200 ms polls): 0.3 s + 5 ms, 1%. At x20 the polls
-//!   shrink with the scale but the 5 ms (and any scheduling delay) grow twentyfold: 0.3 s +
-//!   0.1 s, about 1.2%; it reaches 5% at 85 ms of wall time, which the loaded machine's p99
-//!   exceeds (hundreds of ms at load 12): the throughput figure carries that tail.
-//! - *Throughput >= 95% of the machines' bound at 40 aisles* lies beyond reach, whatever
-//!   rackd's latency: the ratio is the busy share times the planner's share of perfect
-//!   foresight, and the travel planner reaches 94-95% of foresight in `bench crane` (a
-//!   backlog of 30), less with this backlog of 8 and with sequences fixing part of the
-//!   order. The busy and hand-over shares say how much of the loss is rackd's.
-//! - *Zero inversions across aisles* is in reach at any transit times: rackd releases a
-//!   member only once the member before it completed and the transit difference passed
-//!   (`service::dispatch::gate`), which serialises a sequence (at the cost of waiting, in the
-//!   busy share). *No deadline missed that the offline schedule meets* compares against a
-//!   schedule that relaxes a crane (see `site/offline.rs`): a tight deadline it meets
-//!   may still be out of reach for a real crane by a few seconds of empty travel or
-//!   hand-over.
-//! - *rackd's CPU under 10% of one core at 40 aisles*: at the site's own pace it is the
-//!   x20 figure over 20, 1.6% in that first run; at x20 itself, 32%.
+//!   round trips): 1.5 polls and some 5 ms. A job takes 34 to 35 s here; 5% of it is 1.7 s.
+//!   At the site's pace (200 ms polls): 0.3 s + 5 ms, 0.9%. At x20 the polls shrink with
+//!   the scale but the 5 ms, and any delay of the scheduler, grow twentyfold: 0.3 s + 0.1 s,
+//!   1.2%. It reaches 5% at 85 ms of wall time, 43 ms at x40, 17 ms at x100 (below the
+//!   first run's p50 of 25 to 40 ms, and its p99 of hundreds of ms at load 12).
+//! - *Throughput >= 95% of the machines' bound at 40 aisles* lies beyond the bound on
+//!   this workload, whatever rackd's latency: the ratio is the busy share times the
+//!   planner's share of perfect foresight, and hand-overs take 1.2 to 1.5% of a crane's
+//!   time at x20 (0.9% at the site's pace), so the goal needs the planner at 96.5% of
+//!   foresight or more. The travel planner reaches 94 to 96% in `bench crane` (a backlog of
+//!   30), 95% here; sequences, which fix part of the order and hold members back, leave
+//!   less. The busy and hand-over shares say how much of the loss is rackd's own.
+//! - *Zero inversions, within an aisle and across aisles*, is in reach at any transit
+//!   times: rackd releases a member only once the member before it completed and the
+//!   transit difference passed (`service::dispatch::gate`), which serialises a sequence at
+//!   the cost of cranes waiting (the busy share) and of fewer jobs to pair (the travel).
+//! - *No deadline missed that the offline schedule meets* compares with a schedule that
+//!   relaxes a crane (see `site/offline.rs`: preemptive, no empty travel beyond the least,
+//!   no hand-over). A tight deadline it meets can lie out of a real crane's reach by a job
+//!   under way that cannot be stopped, or by a second tight job on the same crane: the
+//!   misses this goal counts are an upper bound on rackd's own.
+//! - *rackd's CPU under 10% of one core at 40 aisles* is the x20 figure over 20 at the
+//!   site's own pace (2.5% by the arithmetic above); at x20 itself it is near half a core,
+//!   which no goal asks of it.
 
 use std::sync::Arc;
 
