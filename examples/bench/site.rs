@@ -6,11 +6,11 @@
 //! drawn from `--seed` (`site/workload.rs`): N single-deep aisles of 2 rows x `--bays` x
 //! `--levels`, `--fill` full; `--jobs` jobs per aisle, half retrieves of the stock, half
 //! stores to empty places; a `--sequenced` share of the retrieves cut into sequences of 2
-//! to 6 members, each to one station; deadlines on a `--deadlines` share of the other jobs,
-//! a `--tight` share of them tight. It runs three times, each against N fresh crane
-//! simulators (the motion model, `--time-scale` times faster than the wall clock) and a
-//! fresh rackd served in this process (one crane device per aisle, the stations in
-//! `[[site.stations]]`, SQLite in a temporary folder):
+//! to 6 members (the last up to 7), each to one station; deadlines on a `--deadlines` share
+//! of the other jobs, a `--tight` share of them tight. It runs three times, each against N
+//! fresh crane simulators (the motion model, `--time-scale` times faster than the wall
+//! clock) and a fresh rackd served in this process (one crane device per aisle, the
+//! stations in `[[site.stations]]`, SQLite in a temporary folder):
 //! - **travel only**: plain jobs, as before issue 52: the travel planner alone;
 //! - **slack only**: the deadlines with slack posted, nothing else;
 //! - **orders**: every sequence and every deadline posted.
@@ -26,10 +26,10 @@
 //! simulator's, every time divided by the scale, so its estimates are wall-clock seconds)
 //! and the margin it keeps before a deadline (`deadline_margin_s`, 30; whole seconds, so 2 at
 //! x20, 40 s simulated); the transit times of `[[site.stations]]`; a deadline, which is the
-//! post's wall-clock time plus its allowance divided by the scale. What does not shrink: the disk's sync of each
-//! commit, the round trips to the cranes and the scheduler's delays on a loaded machine,
-//! all multiplied by the scale in simulated time. The run is harder on rackd's latency than
-//! the site itself would be.
+//! post's wall-clock time plus its allowance divided by the scale. What does not shrink:
+//! the disk's sync of each commit, the round trips to the cranes and the scheduler's delays
+//! on a loaded machine, all multiplied by the scale in simulated time. The run is harder on
+//! rackd's latency than the site itself would be.
 //!
 //! Figures (simulated time unless said otherwise):
 //! - **jobs/h**: for each crane, its jobs over the time from the first post to its last
@@ -92,8 +92,8 @@
 //!   round trips): 1.5 polls and some 5 ms. A job takes 34 to 35 s here; 5% of it is 1.7 s.
 //!   At the site's pace (200 ms polls): 0.3 s + 5 ms, 0.9%. At x20 the polls shrink with
 //!   the scale but the 5 ms, and any delay of the scheduler, grow twentyfold: 0.3 s + 0.1 s,
-//!   1.2%. It reaches 5% at 85 ms of wall time, 43 ms at x40, 17 ms at x100 (below the
-//!   first run's p50 of 25 to 40 ms, and its p99 of hundreds of ms at load 12).
+//!   1.2%. It reaches 5% at 85 ms of wall time; at x40 at 43 ms; at x100 at 17 ms, less
+//!   than the first run's p50 of 25 to 40 ms (its p99 was hundreds of ms, at load 12).
 //! - *Throughput >= 95% of the machines' bound at 40 aisles* lies beyond the bound on
 //!   this workload, whatever rackd's latency: the ratio is the busy share times the
 //!   planner's share of perfect foresight, and hand-overs take 1.2 to 1.5% of a crane's
@@ -108,8 +108,8 @@
 //! - *No deadline missed that the offline schedule meets* compares with a schedule that
 //!   relaxes a crane (see `site/offline.rs`: preemptive, no empty travel beyond the least,
 //!   no hand-over). A tight deadline it meets can lie out of a real crane's reach by a job
-//!   under way that cannot be stopped, or by a second tight job on the same crane: the
-//!   misses this goal counts are an upper bound on rackd's own.
+//!   under way that cannot be stopped, or by a second tight job on the same crane: this
+//!   goal's count is an upper bound on the misses rackd could have avoided.
 //! - *rackd's CPU under 10% of one core at 40 aisles* is the x20 figure over 20 at the
 //!   site's own pace (2.5% by the arithmetic above); at x20 itself it is near half a core,
 //!   which no goal asks of it.
